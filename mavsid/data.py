@@ -1,0 +1,265 @@
+"""Frozen data types that flow between the stages.
+
+``RawLog`` (readers) -> ``FlightData`` (align) -> ``Segment`` (segment) -> estimators.
+Arrays are samples-first; every table carries its time in seconds and its units.
+
+Examples
+--------
+>>> import numpy as np
+>>> t = MessageTable("ATT", {"Roll": np.array([1.0, 2.0])}, time_s=np.array([0.0, 0.1]),
+...                  units={"Roll": "deg"})
+>>> len(t), t["Roll"].tolist(), t.unit("Roll")
+(2, [1.0, 2.0], 'deg')
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mavsid.errors import MissingMessageError
+
+__all__ = [
+    "FlightData",
+    "MessageTable",
+    "ModeChange",
+    "RawLog",
+    "Segment",
+    "SourceInfo",
+    "TextMessage",
+]
+
+
+@dataclass(frozen=True)
+class MessageTable:
+    """All samples of one message type, one array per field.
+
+    Parameters
+    ----------
+    name : str
+        Message (DataFlash, MAVLink) or topic (ULog) name.
+    columns : Mapping[str, numpy.ndarray]
+        Field name -> array with one row per sample (2-D for array fields). Strings are
+        object arrays of ``str``.
+    time_s : numpy.ndarray
+        Sample time in seconds on the vehicle's own clock (float64), one per row.
+    units : Mapping[str, str]
+        Field name -> unit symbol as the log declares it (missing: unknown).
+    multipliers : Mapping[str, float]
+        Field name -> multiplier the log declares (DataFlash FMTU) but which is *not*
+        applied to ``columns``; alignment applies it.
+    """
+
+    name: str
+    columns: Mapping[str, np.ndarray]
+    time_s: np.ndarray
+    units: Mapping[str, str] = field(default_factory=dict)
+    multipliers: Mapping[str, float] = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return int(self.time_s.shape[0])
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        try:
+            return self.columns[name]
+        except KeyError:
+            raise MissingMessageError(
+                f"{self.name}.{name}", available=self.columns, what="field"
+            ) from None
+
+    def __contains__(self, name: object) -> bool:
+        return name in self.columns
+
+    @property
+    def fields(self) -> tuple[str, ...]:
+        """Field names in log order."""
+        return tuple(self.columns)
+
+    def unit(self, name: str) -> str | None:
+        """The declared unit of field ``name``, or None when the log declares none."""
+        return self.units.get(name)
+
+
+@dataclass(frozen=True)
+class TextMessage:
+    """A text message from the log (DataFlash MSG, MAVLink STATUSTEXT, ULog logging)."""
+
+    time_s: float
+    text: str
+    severity: int | None = None
+
+
+@dataclass(frozen=True)
+class ModeChange:
+    """A flight-mode change: the mode number and, where known, its name."""
+
+    time_s: float
+    mode: int
+    name: str | None = None
+
+
+@dataclass(frozen=True)
+class SourceInfo:
+    """Where data came from and what the reader had to skip.
+
+    Parameters
+    ----------
+    path : str
+        The file as given.
+    format : str
+        ``"dataflash"``, ``"dataflash-text"``, ``"tlog"`` or ``"ulog"``.
+    size_bytes : int
+        File size.
+    skipped_bytes : int
+        Bytes that could not be decoded and were skipped.
+    notes : tuple of str
+        Data-quality notes (discontinuities, dropouts, corrections applied).
+    """
+
+    path: str
+    format: str
+    size_bytes: int
+    skipped_bytes: int = 0
+    notes: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class RawLog:
+    """Everything a reader decoded from one log file.
+
+    Examples
+    --------
+    >>> log = RawLog(SourceInfo("x.bin", "dataflash", 0), messages={})
+    >>> log["ATT"]
+    Traceback (most recent call last):
+    ...
+    mavsid.errors.MissingMessageError: log has no message 'ATT'
+    """
+
+    source: SourceInfo
+    messages: Mapping[str, MessageTable]
+    params: Mapping[str, float] = field(default_factory=dict)
+    texts: tuple[TextMessage, ...] = ()
+    modes: tuple[ModeChange, ...] = ()
+    autopilot: str = "unknown"
+    vehicle: str | None = None
+    firmware: str | None = None
+
+    def __getitem__(self, name: str) -> MessageTable:
+        try:
+            return self.messages[name]
+        except KeyError:
+            raise MissingMessageError(name, available=self.messages) from None
+
+    def __contains__(self, name: object) -> bool:
+        return name in self.messages
+
+    @property
+    def duration_s(self) -> float:
+        """Span of the sample times over all messages (0 for an empty log)."""
+        lo, hi = np.inf, -np.inf
+        for table in self.messages.values():
+            t = table.time_s[np.isfinite(table.time_s)] if len(table) else table.time_s
+            if t.size:
+                lo, hi = min(lo, float(t.min())), max(hi, float(t.max()))
+        return float(hi - lo) if hi >= lo else 0.0
+
+
+@dataclass(frozen=True)
+class FlightData:
+    """States and inputs of one flight on one uniform time grid, in SI units.
+
+    Parameters
+    ----------
+    time_s : numpy.ndarray, shape (n,)
+        Sample times (log clock, seconds); uniform with step ``dt`` inside each block.
+    states : numpy.ndarray, shape (n, nx)
+        Interpolated states (rad, rad/s).
+    inputs : numpy.ndarray, shape (n, nu)
+        Zero-order-held inputs (normalised controller outputs).
+    state_names, input_names : tuple of str
+    state_units, input_units : tuple of str
+    dt : float
+        Grid step in seconds.
+    blocks : numpy.ndarray, shape (k, 2)
+        ``[start, stop)`` index ranges of contiguous data; data is never interpolated across
+        a gap, so a gap starts a new block.
+    flags : Mapping[str, numpy.ndarray]
+        Per-sample flags such as ``armed``, ``airborne`` (bool) and ``mode`` (int).
+    source : SourceInfo
+    preset : str
+        Name of the channel preset used.
+    params : Mapping[str, float]
+        The log's parameters (needed for filters, SYSTEMID settings).
+    meta : Mapping[str, object]
+        Anything else alignment found (e.g. SYSTEMID runs).
+    """
+
+    time_s: np.ndarray
+    states: np.ndarray
+    inputs: np.ndarray
+    state_names: tuple[str, ...]
+    input_names: tuple[str, ...]
+    state_units: tuple[str, ...]
+    input_units: tuple[str, ...]
+    dt: float
+    blocks: np.ndarray
+    flags: Mapping[str, np.ndarray]
+    source: SourceInfo
+    preset: str
+    params: Mapping[str, float] = field(default_factory=dict)
+    meta: Mapping[str, object] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Segment:
+    """A contiguous, uniformly sampled window chosen for identification.
+
+    Parameters
+    ----------
+    time_s : numpy.ndarray, shape (n,)
+    states : numpy.ndarray, shape (n, nx)
+    inputs : numpy.ndarray, shape (n, nu)
+    state_names, input_names : tuple of str
+    dt : float
+    axis : str
+        ``"roll"``, ``"pitch"``, ``"yaw"`` (or ``"all"``).
+    source : str
+        ``"sysid"`` (an ArduPilot SYSTEMID run) or ``"scan"`` (found by scoring windows).
+    score : float
+        Excitation score (higher is better).
+    log : str
+        Path of the log the segment came from.
+    reasons : tuple of str
+        Why it was kept.
+    meta : Mapping[str, object]
+        Extras, e.g. SYSTEMID settings of the run.
+    """
+
+    time_s: np.ndarray
+    states: np.ndarray
+    inputs: np.ndarray
+    state_names: tuple[str, ...]
+    input_names: tuple[str, ...]
+    dt: float
+    axis: str
+    source: str
+    score: float = float("nan")
+    log: str = ""
+    reasons: tuple[str, ...] = ()
+    meta: Mapping[str, object] = field(default_factory=dict)
+
+    @property
+    def start_s(self) -> float:
+        """Time of the first sample."""
+        return float(self.time_s[0])
+
+    @property
+    def stop_s(self) -> float:
+        """Time of the last sample."""
+        return float(self.time_s[-1])
+
+    def __len__(self) -> int:
+        return int(self.time_s.shape[0])

@@ -1,0 +1,99 @@
+"""Errors and warnings raised by mavsid.
+
+Every error a user can provoke with bad input is a :class:`MavsidError`; the command line
+prints it as one line and exits with code 1. The subclasses also derive from the builtin
+exception a Python caller would expect (``ValueError``, ``KeyError`` ...), in the manner of
+scikit-learn's ``NotFittedError``.
+
+Examples
+--------
+>>> err = LogFormatError("no DataFlash records found", path="flight.bin", offset=0)
+>>> str(err)
+'flight.bin: no DataFlash records found (at byte 0)'
+>>> isinstance(err, ValueError) and isinstance(err, MavsidError)
+True
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+__all__ = [
+    "ConfigError",
+    "DataQualityWarning",
+    "LogFormatError",
+    "MavsidError",
+    "MavsidWarning",
+    "MissingMessageError",
+    "NoExcitationError",
+    "SolverError",
+]
+
+
+class MavsidError(Exception):
+    """Base class of every error mavsid raises on purpose."""
+
+
+class LogFormatError(MavsidError, ValueError):
+    """A file is not a log mavsid can read, or nothing decodable is in it.
+
+    Parameters
+    ----------
+    message : str
+        What is wrong, without the file name.
+    path : str, optional
+        The file; prefixed to the message.
+    offset : int, optional
+        Byte offset where the problem was found.
+    """
+
+    def __init__(self, message: str, path: object = None, offset: int | None = None) -> None:
+        self.path = None if path is None else str(path)
+        self.offset = offset
+        self.reason = message
+        text = message if self.path is None else f"{self.path}: {message}"
+        if offset is not None:
+            text += f" (at byte {offset})"
+        super().__init__(text)
+
+
+class MissingMessageError(MavsidError, KeyError):
+    """A message type (or field) was asked for that the log does not have.
+
+    Examples
+    --------
+    >>> str(MissingMessageError("RATE", available=["ATT", "IMU"]))
+    "log has no message 'RATE' (it has: ATT, IMU)"
+    """
+
+    def __init__(self, name: str, available: Iterable[str] = (), what: str = "message") -> None:
+        self.name = name
+        self.available = sorted(available)
+        shown = ", ".join(self.available[:40])
+        if len(self.available) > 40:
+            shown += f", ... ({len(self.available)} in all)"
+        self.text = f"log has no {what} {name!r}" + (f" (it has: {shown})" if shown else "")
+        super().__init__(self.text)
+
+    def __str__(self) -> str:  # KeyError would quote the whole message
+        return self.text
+
+
+class NoExcitationError(MavsidError, ValueError):
+    """The data cannot identify what was asked: no excitation, or unidentifiable parameters."""
+
+
+class ConfigError(MavsidError, ValueError):
+    """A configuration file, preset or option is invalid."""
+
+
+class SolverError(MavsidError, RuntimeError):
+    """A numerical solver failed to produce a usable result."""
+
+
+class MavsidWarning(UserWarning):
+    """Base class of mavsid's warnings."""
+
+
+class DataQualityWarning(MavsidWarning):
+    """Data was skipped, repaired or is of doubtful use (corrupt bytes, low rates, gaps)."""

@@ -1,0 +1,120 @@
+"""Readers: one module per log format, chosen by the file's content, never its suffix.
+
+Each reader module exposes ``read(path, messages=None, start=None, stop=None, **options)
+-> RawLog``. :func:`read_log` sniffs the format and dispatches.
+
+Examples
+--------
+>>> import tempfile, os
+>>> with tempfile.NamedTemporaryFile(suffix=".bin", delete=False) as f:
+...     _ = f.write(b"ULog\\x01\\x12\\x35\\x01" + bytes(8))
+>>> sniff_format(f.name)
+'ulog'
+>>> os.unlink(f.name)
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+from collections.abc import Sequence
+from typing import Any
+
+from mavsid.data import RawLog
+from mavsid.errors import LogFormatError
+
+__all__ = ["READERS", "read_log", "sniff_format"]
+
+#: format name -> module implementing ``read``
+READERS: dict[str, str] = {
+    "dataflash": "mavsid.readers.dataflash",
+    "dataflash-text": "mavsid.readers.dftext",
+    "tlog": "mavsid.readers.tlog",
+    "ulog": "mavsid.readers.ulog",
+}
+
+_ULOG_MAGIC = b"ULog\x01\x12\x35"
+_DF_HEAD = b"\xa3\x95"
+_SNIFF_BYTES = 64 * 1024
+
+
+def _looks_like_tlog(head: bytes) -> bool:
+    """True when the first records are 8-byte timestamps each followed by a MAVLink frame."""
+    pos, frames = 0, 0
+    while pos + 10 <= len(head) and frames < 3:
+        magic = head[pos + 8]
+        if magic == 0xFE:
+            length = 8 + head[pos + 9] + 8  # timestamp + header(6) + payload + crc(2)
+        elif magic == 0xFD:
+            if pos + 11 > len(head):
+                break
+            signed = head[pos + 10] & 0x01
+            length = 8 + 10 + head[pos + 9] + 2 + (13 if signed else 0)
+        else:
+            return False
+        pos += length
+        frames += 1
+    return frames >= 1 and (frames >= 3 or pos >= len(head))
+
+
+def sniff_format(path: str | os.PathLike[str]) -> str:
+    """Return the log format of ``path`` from its first bytes.
+
+    Raises
+    ------
+    LogFormatError
+        The file is empty, unreadable or of no known format.
+    """
+    try:
+        with open(path, "rb") as f:
+            head = f.read(_SNIFF_BYTES)
+    except OSError as exc:
+        raise LogFormatError(f"cannot open: {exc.strerror or exc}", path=path) from None
+    if not head:
+        raise LogFormatError("empty file", path=path)
+    if head.startswith(_ULOG_MAGIC):
+        return "ulog"
+    if head.startswith(_DF_HEAD):
+        return "dataflash"
+    if _looks_like_tlog(head):
+        return "tlog"
+    text = head.lstrip(b"\xef\xbb\xbf \t\r\n")
+    if text.startswith(b"FMT,") or b"\nFMT," in text[:4096]:
+        return "dataflash-text"
+    # a DataFlash log whose first bytes are damaged: look for an FMT record further on
+    if _DF_HEAD + b"\x80" in head:
+        return "dataflash"
+    raise LogFormatError(
+        "not a DataFlash .bin/.log, MAVLink .tlog or ULog .ulg file", path=path
+    )
+
+
+def read_log(
+    path: str | os.PathLike[str],
+    messages: Sequence[str] | None = None,
+    start: float | None = None,
+    stop: float | None = None,
+    **options: Any,
+) -> RawLog:
+    """Read any supported log into a :class:`~mavsid.data.RawLog`.
+
+    Parameters
+    ----------
+    path : path-like
+        The log file; its format is found from its content.
+    messages : sequence of str, optional
+        Decode only these message types (topics for ULog); default all.
+    start, stop : float, optional
+        Keep only samples with ``start <= time_s <= stop`` (seconds, log clock).
+    **options
+        Passed to the format's reader (e.g. ``dialect`` for .tlog).
+
+    Raises
+    ------
+    LogFormatError
+        Unknown format, or nothing decodable in the file.
+    """
+    fmt = sniff_format(path)
+    module = importlib.import_module(READERS[fmt])
+    result: RawLog = module.read(path, messages=messages, start=start, stop=stop, **options)
+    return result

@@ -1,0 +1,49 @@
+"""Shared test helpers (import as ``helpers``): the ``../shared`` logs, skipped when absent unless CI
+requires them."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SHARED = ROOT.parent / "shared"
+LOGS = SHARED / "logs"
+FIXTURES = ROOT / "fixtures"
+REQUIRE_SHARED = os.environ.get("MAVSID_REQUIRE_SHARED") == "1"
+
+
+def shared_path(*parts: str) -> Path:
+    """Path below ``../shared/logs``; skips the test when absent (fails under CI)."""
+    path = LOGS.joinpath(*parts)
+    if not path.exists():
+        if REQUIRE_SHARED:
+            pytest.fail(f"{path} missing and MAVSID_REQUIRE_SHARED=1")
+        pytest.skip(f"{path} not present (clone the steering repo's shared/ beside this one)")
+    return path
+
+
+def shared_logs(*suffixes: str) -> list[Path]:
+    """Every shared log whose (lower-case) suffix is in ``suffixes``; [] when absent.
+
+    Use with :func:`require_shared` in a parametrised test so that an absent folder skips
+    (or fails under CI) instead of silently collecting nothing.
+    """
+    if not LOGS.exists():
+        return []
+    return sorted(p for p in LOGS.rglob("*") if p.is_file() and p.suffix.lower() in suffixes)
+
+
+def require_shared() -> None:
+    """Skip (or fail under CI) when ``../shared/logs`` is missing."""
+    if not LOGS.exists():
+        if REQUIRE_SHARED:
+            pytest.fail(f"{LOGS} missing and MAVSID_REQUIRE_SHARED=1")
+        pytest.skip(f"{LOGS} not present")
+
+
+def ids(paths: list[Path]) -> list[str]:
+    """Readable test ids for shared logs."""
+    return [str(p.relative_to(LOGS)) if LOGS in p.parents else p.name for p in paths]

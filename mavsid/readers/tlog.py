@@ -1,0 +1,729 @@
+"""Read MAVLink telemetry logs (``.tlog``) into a :class:`~mavsid.data.RawLog`, vectorised.
+
+A ``.tlog`` is what a ground station (Mission Planner, QGroundControl, MAVProxy) records: each
+record is an 8-byte big-endian receive time in microseconds (the ground station's wall clock)
+followed by one MAVLink frame as it came off the link:
+
+- v1: ``0xFE len seq sysid compid msgid payload crc(2)``
+- v2: ``0xFD len incompat compat seq sysid compid msgid(3) payload crc(2) [signature(13)]``;
+  the payload's trailing zero bytes are truncated on the wire.
+
+Message definitions (ids, field names, wire order, array lengths, CRC_EXTRA) come from a
+pymavlink dialect (``ardupilotmega`` by default). Decoding never builds one Python object per
+frame: every byte offset where a record could start is a candidate (its magic byte 8 bytes
+on); candidates are checked by length, flags, a known message id and the X.25 CRC seeded
+with the message's CRC_EXTRA, all as numpy operations grouped by frame length; overlapping
+survivors are resolved in file order, preferring frames that chain into the next record.
+Each message id's frames are then viewed through a structured dtype in wire order (short v2
+payloads zero-padded, as MAVLink specifies) and split into columns by field name.
+
+Every table has the fields of the message (2-D arrays for array fields, ``str`` for char
+arrays, decoded as pymavlink does) plus ``_sysid``, ``_compid`` and ``_recv_time_s`` (the
+receive time, s). ``MessageTable.time_s`` is the vehicle's clock:
+
+- ``time_boot_ms`` × 1e-3 or ``time_usec`` × 1e-6 when the message has such a field (a
+  ``time_usec`` whose median is over 1e15 µs is a UNIX time, not a boot time, and is not
+  used);
+- otherwise the receive time moved onto the vehicle's clock by the median offset between the
+  two clocks over all time-stamped messages of the same system id, NaN when that system sends
+  none. These times carry the link's latency and jitter: alignment should prefer messages
+  with their own clock.
+
+``PARAM_VALUE`` gives ``params``, ``STATUSTEXT`` the text messages, the ``HEARTBEAT``'s
+``custom_mode`` the mode changes (names from pymavlink's ArduPilot and PX4 mode tables) and
+``autopilot`` — all of the main vehicle (the first system whose heartbeat is neither a ground
+station nor ``MAV_AUTOPILOT_INVALID``), as pymavlink picks it.
+
+Bytes that form no valid frame (garbage, bad CRC, truncated records), frames of message ids
+the dialect does not define and receive times that run backwards or jump by more than an hour
+are counted: one :class:`~mavsid.errors.DataQualityWarning` and ``SourceInfo.notes``. A file
+without a single valid frame raises :class:`~mavsid.errors.LogFormatError`.
+
+Examples
+--------
+A one-record log: a MAVLink 2 HEARTBEAT (its payload's trailing zero truncated on the wire)
+from an ArduCopter quadrotor:
+
+>>> import os, struct, tempfile
+>>> from pymavlink.dialects.v20 import ardupilotmega as mavlink
+>>> mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+>>> frame = mav.heartbeat_encode(type=2, autopilot=3, base_mode=81, custom_mode=0,
+...                              system_status=4).pack(mav)
+>>> with tempfile.NamedTemporaryFile(suffix=".tlog", delete=False) as f:
+...     _ = f.write(struct.pack(">Q", 1_700_000_000_000_000) + frame)
+>>> log = read(f.name)
+>>> hb = log["HEARTBEAT"]
+>>> hb["type"].tolist(), hb["custom_mode"].tolist(), hb["_sysid"].tolist(), log.autopilot
+([2], [0], [1], 'ardupilot')
+>>> log.modes
+(ModeChange(time_s=nan, mode=0, name='STABILIZE'),)
+>>> os.unlink(f.name)
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib
+import os
+import re
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+from numpy.typing import NDArray
+
+from mavsid.data import MessageTable, ModeChange, RawLog, SourceInfo, TextMessage
+from mavsid.errors import ConfigError, DataQualityWarning, LogFormatError
+
+__all__ = ["MessageDef", "load_dialect", "read"]
+
+_PREFIX = 8  # receive-time bytes before every frame
+_PAD = 512  # zero bytes after the file's end, so that fixed-width windows never overrun
+_MAGIC_V1, _MAGIC_V2 = 0xFE, 0xFD
+_IFLAG_SIGNED = 0x01
+_SIGNATURE_LEN = 13
+_TIME_JUMP_S = 3600.0  # a forward step in receive time larger than this counts as a jump
+_UNIX_USEC = 1e15  # a time_usec above this (31 years) is a UNIX time, not time since boot
+_MAV_AUTOPILOT = {3: "ardupilot", 12: "px4"}
+_MAV_AUTOPILOT_INVALID, _MAV_TYPE_GCS = 8, 6
+
+_STRUCT_TO_NUMPY = {
+    "c": "S1", "b": "i1", "B": "u1", "h": "<i2", "H": "<u2", "i": "<i4", "I": "<u4",
+    "q": "<i8", "Q": "<u8", "f": "<f4", "d": "<f8",
+}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class MessageDef:
+    """How one MAVLink message is laid out on the wire (from a pymavlink dialect class).
+
+    Parameters
+    ----------
+    msgid : int
+    name : str
+        e.g. ``"ATTITUDE"``.
+    crc_extra : int
+        Seed byte appended to the CRC, a hash of the message's definition.
+    dtype : numpy.dtype
+        Structured, little-endian, fields in wire order (sorted by size), itemsize equal to
+        the full payload length.
+    fields : tuple of str
+        Field names in definition order (the column order).
+    strings : frozenset of str
+        Char-array fields, given as ``str``.
+    time_field : str or None
+        ``"time_boot_ms"`` or ``"time_usec"`` when the message carries the vehicle's clock.
+    """
+
+    msgid: int
+    name: str
+    crc_extra: int
+    dtype: np.dtype[Any]
+    fields: tuple[str, ...]
+    strings: frozenset[str]
+    time_field: str | None
+
+
+@functools.lru_cache(maxsize=8)
+def load_dialect(dialect: str = "ardupilotmega") -> dict[int, MessageDef]:
+    """Message id -> :class:`MessageDef` for a pymavlink MAVLink 2 dialect.
+
+    Parameters
+    ----------
+    dialect : str
+        Module name under ``pymavlink.dialects.v20`` (``ardupilotmega``, ``common``,
+        ``development`` ...).
+
+    Raises
+    ------
+    ConfigError
+        No such dialect.
+
+    Examples
+    --------
+    >>> att = load_dialect()[30]
+    >>> att.name, att.dtype.itemsize, att.fields[:2], att.time_field
+    ('ATTITUDE', 28, ('time_boot_ms', 'roll'), 'time_boot_ms')
+    """
+    if not re.fullmatch(r"[A-Za-z0-9_]+", dialect):
+        raise ConfigError(f"dialect {dialect!r}: not a pymavlink dialect name")
+    try:
+        module = importlib.import_module(f"pymavlink.dialects.v20.{dialect}")
+    except ImportError:
+        raise ConfigError(f"dialect {dialect!r}: no such pymavlink dialect") from None
+    defs = {}
+    for msgid, cls in module.mavlink_map.items():
+        defs[int(msgid)] = _message_def(int(msgid), cls)
+    return defs
+
+
+def _message_def(msgid: int, cls: Any) -> MessageDef:
+    """Build the wire dtype of one pymavlink message class from its struct format."""
+    tokens = re.findall(r"(\d*)([a-zA-Z])", cls.unpacker.format.lstrip("<"))
+    names = list(cls.ordered_fieldnames)
+    if len(tokens) != len(names):
+        raise ConfigError(f"{cls.msgname}: struct format does not match its fields")
+    spec: list[tuple[Any, ...]] = []
+    strings = set()
+    for name, (count, code), array_len in zip(names, tokens, cls.array_lengths, strict=True):
+        if code == "s" or code == "c":
+            spec.append((name, f"S{int(count or 1)}"))
+            strings.add(name)
+        elif array_len:
+            spec.append((name, _STRUCT_TO_NUMPY[code], (int(array_len),)))
+        else:
+            spec.append((name, _STRUCT_TO_NUMPY[code]))
+    dtype = np.dtype(spec)
+    if dtype.itemsize != cls.unpacker.size:
+        raise ConfigError(f"{cls.msgname}: payload size mismatch")
+    fields = tuple(cls.fieldnames)
+    time_field = next((f for f in ("time_boot_ms", "time_usec") if f in fields), None)
+    return MessageDef(
+        msgid, cls.msgname, int(cls.crc_extra), dtype, fields, frozenset(strings), time_field
+    )
+
+
+# ----------------------------------------------------------------------------- CRC
+
+
+def _crc_tables() -> tuple[NDArray[np.uint16], NDArray[np.uint16]]:
+    """Lookup tables of the X.25 CRC (CRC-16/MCRF4XX, reflected polynomial 0x8408).
+
+    The first advances the CRC by one byte: ``crc = (crc >> 8) ^ T1[(crc ^ byte) & 0xFF]``;
+    the second by two bytes at once: ``crc = T2[crc ^ (byte0 | byte1 << 8)]``.
+    """
+    one = np.arange(256, dtype=np.uint32)
+    for _ in range(8):
+        one = np.where(one & 1, (one >> 1) ^ 0x8408, one >> 1)
+    v = np.arange(65536, dtype=np.uint32)
+    first = one[v & 0xFF]
+    two = (first >> 8) ^ one[((v >> 8) ^ first) & 0xFF]
+    return one.astype(np.uint16), two.astype(np.uint16)
+
+
+_CRC_BYTE, _CRC_WORD = _crc_tables()
+
+
+def _x25(rows: NDArray[np.uint8], extra: NDArray[np.uint8]) -> NDArray[np.uint16]:
+    """X.25 CRC of each row of ``rows`` followed by its ``extra`` byte (one per row)."""
+    data = np.column_stack([rows, extra])
+    odd = data.shape[1] % 2
+    words = np.ascontiguousarray(data[:, : data.shape[1] - odd]).view("<u2").T.copy()
+    crc = np.full(data.shape[0], 0xFFFF, dtype=np.uint16)
+    index = np.empty_like(crc)
+    for word in words:
+        np.bitwise_xor(crc, word, out=index)
+        _CRC_WORD.take(index, out=crc)
+    if odd:
+        last = _CRC_BYTE.take((crc ^ data[:, -1]) & 0xFF)
+        np.bitwise_xor(crc >> 8, last, out=crc)
+    return crc
+
+
+# ----------------------------------------------------------------------------- framing
+
+
+@dataclass(frozen=True)
+class _Frames:
+    """Valid frames in file order and what had to be skipped around them."""
+
+    start: NDArray[np.int64]  # record start (receive time)
+    payload: NDArray[np.int64]  # payload start
+    length: NDArray[np.int64]  # payload bytes on the wire
+    msgid: NDArray[np.int64]
+    sysid: NDArray[np.int64]
+    compid: NDArray[np.int64]
+    recv_s: NDArray[np.float64]
+    skipped_bytes: int
+    gaps: int
+    unknown: int  # well-formed frames of ids the dialect does not define
+
+
+def _windows(buf: NDArray[np.uint8], at: NDArray[np.int64], width: int) -> NDArray[np.uint8]:
+    """Copy of ``buf[a:a+width]`` for every ``a`` in ``at``, one row each."""
+    return sliding_window_view(buf, width)[at]
+
+
+def _scan(buf: NDArray[np.uint8], size: int, defs: dict[int, MessageDef]) -> _Frames:
+    """Find every valid record in ``buf[:size]`` (``buf`` is zero-padded beyond ``size``)."""
+    magic = buf[_PREFIX:size]
+    s = np.flatnonzero((magic == _MAGIC_V1) | (magic == _MAGIC_V2)).astype(np.int64)
+    head = _windows(buf, s + _PREFIX, 10)
+    v2 = head[:, 0] == _MAGIC_V2
+    mlen = head[:, 1].astype(np.int64)
+    incompat = np.where(v2, head[:, 2], 0).astype(np.int64)
+    hdr = np.where(v2, 10, 6)
+    end = s + _PREFIX + hdr + mlen + 2 + np.where(incompat & _IFLAG_SIGNED, _SIGNATURE_LEN, 0)
+    msgid = np.where(
+        v2,
+        head[:, 7].astype(np.int64) | (head[:, 8].astype(np.int64) << 8)
+        | (head[:, 9].astype(np.int64) << 16),
+        head[:, 5],
+    )
+    ids = np.array(sorted(defs), dtype=np.int64)
+    extras = np.array([defs[i].crc_extra for i in ids.tolist()], dtype=np.uint8)
+    pos = np.minimum(np.searchsorted(ids, msgid), ids.size - 1)
+    known = ids[pos] == msgid
+    well_formed = (end <= size) & ((incompat & ~_IFLAG_SIGNED) == 0)
+
+    # CRC first of the candidates that chain into another candidate (or the file's end),
+    # then of the others that do not lie inside a frame found valid by then
+    plausible = well_formed & known
+    chained = (end == size) | _member(end, s)
+    crc_extra = extras[pos]
+    ok = np.zeros(s.size, dtype=bool)
+    ok[plausible & chained] = _crc_ok(buf, s, hdr, mlen, crc_extra, plausible & chained)
+    rest = plausible & ~chained & ~_inside(s, s[ok], end[ok])
+    ok[rest] = _crc_ok(buf, s, hdr, mlen, crc_extra, rest)
+    cand = np.flatnonzero(ok)
+    valid = cand[_resolve_overlaps(s[cand], end[cand], size)]
+
+    first, last = s[valid], end[valid]
+    odd = well_formed & ~known
+    unknown = _count_unknown(s[odd], end[odd], first, last, size)
+    recv_us = _windows(buf, first, _PREFIX).copy().view(">u8")[:, 0]
+    gaps = int(np.count_nonzero(first[1:] != last[:-1])) if first.size else 0
+    if first.size:
+        gaps += int(first[0] != 0) + int(last[-1] != size)
+    return _Frames(
+        start=first,
+        payload=first + _PREFIX + hdr[valid],
+        length=mlen[valid],
+        msgid=msgid[valid],
+        sysid=np.where(v2, head[:, 5], head[:, 3])[valid].astype(np.int64),
+        compid=np.where(v2, head[:, 6], head[:, 4])[valid].astype(np.int64),
+        recv_s=recv_us.astype(np.float64) * 1e-6,
+        skipped_bytes=int(size - (last - first).sum()),
+        gaps=gaps,
+        unknown=unknown,
+    )
+
+
+def _crc_ok(
+    buf: NDArray[np.uint8],
+    s: NDArray[np.int64],
+    hdr: NDArray[np.int64],
+    mlen: NDArray[np.int64],
+    crc_extra: NDArray[np.uint8],
+    pick: NDArray[np.bool_],
+) -> NDArray[np.bool_]:
+    """Whether the picked candidates' CRC (after the magic byte to the payload's end, then
+    CRC_EXTRA) matches the two bytes after the payload; grouped by CRC length."""
+    check = np.flatnonzero(pick)
+    crc_len = (hdr - 1 + mlen)[check]
+    order = np.argsort(crc_len, kind="stable")
+    counts = np.bincount(crc_len)
+    ok = np.zeros(check.size, dtype=bool)
+    for width, part in enumerate(np.split(order, np.cumsum(counts)[:-1])):
+        if not part.size:
+            continue
+        rows = check[part]
+        body = s[rows] + _PREFIX + 1
+        got = _x25(_windows(buf, body, width), crc_extra[rows])
+        tail = _windows(buf, body + width, 2).astype(np.uint16)
+        ok[part] = got == (tail[:, 0] | (tail[:, 1] << 8))
+    return ok
+
+
+def _member(x: NDArray[np.int64], ordered: NDArray[np.int64]) -> NDArray[np.bool_]:
+    """Whether each ``x`` is in the sorted array ``ordered``."""
+    if not ordered.size:
+        return np.zeros(x.shape, dtype=bool)
+    return ordered[np.minimum(np.searchsorted(ordered, x), ordered.size - 1)] == x
+
+
+def _inside(
+    x: NDArray[np.int64], start: NDArray[np.int64], end: NDArray[np.int64]
+) -> NDArray[np.bool_]:
+    """Whether each ``x`` lies inside one of the records ``[start, end)`` (sorted by start)."""
+    i = np.searchsorted(start, x, side="right") - 1
+    return (i >= 0) & (end[np.maximum(i, 0)] > x) if start.size else np.zeros(x.size, bool)
+
+
+def _resolve_overlaps(
+    start: NDArray[np.int64], end: NDArray[np.int64], size: int
+) -> NDArray[np.bool_]:
+    """Which of these CRC-valid records (sorted by start) to keep so that none overlap.
+
+    In a clean file records tile it exactly, and a chance CRC match can only start inside a
+    real record, which comes first: keeping records in file order keeps the real ones. Where
+    candidates overlap, those that chain (end where another candidate starts, or at the end
+    of the file) are preferred, then the others in file order.
+    """
+    keep = np.ones(start.size, dtype=bool)
+    if start.size < 2:
+        return keep
+    reach = np.maximum.accumulate(end)
+    fresh = np.ones(start.size, dtype=bool)
+    fresh[1:] = start[1:] >= reach[:-1]
+    if fresh.all():
+        return keep
+    bounds = np.append(np.flatnonzero(fresh), start.size)
+    chained = _member(end, start) | (end == size)
+    for c in np.flatnonzero(np.diff(bounds) > 1).tolist():
+        lo, hi = int(bounds[c]), int(bounds[c + 1])
+        chosen: list[int] = []
+        for preferred in (True, False):
+            for k in range(lo, hi):
+                if bool(chained[k]) == preferred and all(
+                    end[k] <= start[j] or start[k] >= end[j] for j in chosen
+                ):
+                    chosen.append(k)
+        keep[lo:hi] = False
+        keep[chosen] = True
+    return keep
+
+
+def _count_unknown(
+    start: NDArray[np.int64],
+    end: NDArray[np.int64],
+    good_start: NDArray[np.int64],
+    good_end: NDArray[np.int64],
+    size: int,
+) -> int:
+    """Well-formed frames of unknown message id lying between valid records and chaining on."""
+    if not start.size:
+        return 0
+    i = np.searchsorted(good_start, start, side="right") - 1
+    after_prev = (i < 0) | (good_end[np.maximum(i, 0)] <= start)
+    nxt = np.append(good_start, size)[i + 1]
+    fits = np.flatnonzero(after_prev & (end <= nxt))
+    tail = end[fits]
+    chained = _member(tail, good_start) | (tail == size) | _member(tail, start)
+    return int(np.count_nonzero(chained))
+
+
+# ----------------------------------------------------------------------------- decoding
+
+
+def _payloads(
+    buf: NDArray[np.uint8], frames: _Frames, rows: NDArray[np.int64], width: int, at: int = 0
+) -> NDArray[np.uint8]:
+    """``width`` payload bytes from offset ``at`` of the given frames, zeros past their end."""
+    raw = _windows(buf, frames.payload[rows] + at, width)
+    length = frames.length[rows] - at
+    short = np.flatnonzero(length < width)
+    if short.size:
+        cut = np.arange(width)[None, :] >= length[short, None]
+        raw[short] = np.where(cut, 0, raw[short])
+    return raw
+
+
+def _own_time(
+    buf: NDArray[np.uint8], frames: _Frames, rows: NDArray[np.int64], mdef: MessageDef
+) -> NDArray[np.float64] | None:
+    """The message's own clock in seconds, or None when it has none (or a UNIX time)."""
+    if mdef.time_field is None:
+        return None
+    base, offset = mdef.dtype.fields[mdef.time_field][:2]  # type: ignore[index]
+    raw = _payloads(buf, frames, rows, base.itemsize, offset)
+    value = np.ascontiguousarray(raw).view(base)[:, 0].astype(np.float64)
+    if mdef.time_field == "time_boot_ms":
+        return value * 1e-3
+    if value.size and float(np.median(value)) > _UNIX_USEC:
+        return None
+    return value * 1e-6
+
+
+def _strings(column: NDArray[Any]) -> NDArray[np.object_]:
+    """Char arrays as ``str``: up to the first NUL, ASCII, undecodable bytes replaced."""
+    uniq, inverse = np.unique(column, return_inverse=True)
+    text = [b.split(b"\0", 1)[0].decode("ascii", errors="replace") for b in uniq.tolist()]
+    out = np.empty(len(text), dtype=object)
+    out[:] = text
+    return out[inverse.ravel()]
+
+
+def _table(
+    buf: NDArray[np.uint8],
+    frames: _Frames,
+    rows: NDArray[np.int64],
+    mdef: MessageDef,
+    time_s: NDArray[np.float64],
+    units: dict[str, str],
+) -> MessageTable:
+    """Decode one message type's frames into a table."""
+    raw = _payloads(buf, frames, rows, mdef.dtype.itemsize)
+    rec = np.ascontiguousarray(raw).view(mdef.dtype)[:, 0]
+    columns: dict[str, NDArray[Any]] = {}
+    for name in mdef.fields:
+        columns[name] = _strings(rec[name]) if name in mdef.strings else rec[name].copy()
+    columns["_sysid"] = frames.sysid[rows].astype(np.uint8)
+    columns["_compid"] = frames.compid[rows].astype(np.uint8)
+    columns["_recv_time_s"] = frames.recv_s[rows]
+    return MessageTable(mdef.name, columns, time_s, units={**units, "_recv_time_s": "s"})
+
+
+# ----------------------------------------------------------------------------- reading
+
+
+def _load(path: str | os.PathLike[str]) -> tuple[NDArray[np.uint8], int]:
+    """The file's bytes followed by ``_PAD`` zeros, and its size."""
+    try:
+        size = os.path.getsize(path)
+        buf = np.zeros(size + _PAD, dtype=np.uint8)
+        with open(path, "rb") as f:
+            got = f.readinto(buf[:size].data)
+    except OSError as exc:
+        raise LogFormatError(f"cannot read: {exc.strerror or exc}", path=path) from None
+    if got != size:
+        raise LogFormatError("file changed while reading", path=path)
+    return buf, size
+
+
+def _main_vehicle(hb: MessageTable | None) -> tuple[int, int, int, int] | None:
+    """(sysid, compid, autopilot, type) of the first heartbeat that is probably a vehicle."""
+    if hb is None:
+        return None
+    vehicle = (
+        (hb["_compid"] != _MAV_COMP_ID_GIMBAL)
+        & ~np.isin(hb["type"], _NOT_VEHICLE_TYPES)
+        & (hb["autopilot"] != _MAV_AUTOPILOT_INVALID)
+    )
+    first = np.flatnonzero(vehicle)
+    if not first.size:
+        return None
+    k = int(first[0])
+    return (int(hb["_sysid"][k]), int(hb["_compid"][k]), int(hb["autopilot"][k]),
+            int(hb["type"][k]))
+
+
+_MAV_COMP_ID_GIMBAL = 154
+_NOT_VEHICLE_TYPES = (_MAV_TYPE_GCS, 18, 26, 27)  # GCS, onboard controller, gimbal, ADSB
+
+
+def _of(table: MessageTable | None, sysid: int, compid: int) -> NDArray[np.bool_] | None:
+    """Rows of ``table`` sent by one component (None when there is no table)."""
+    if table is None:
+        return None
+    return (table["_sysid"] == sysid) & (table["_compid"] == compid)
+
+
+def _params(table: MessageTable | None, vehicle: tuple[int, int, int, int]) -> dict[str, float]:
+    """PARAM_VALUE of the main vehicle, the last value of each name.
+
+    PX4 sends integer parameters byte-wise in the float (MAVLink's PARAM_ENCODE_BYTEWISE):
+    for it, ``MAV_PARAM_TYPE_UINT32``/``INT32`` values are reinterpreted as integers.
+    """
+    rows = _of(table, *vehicle[:2])
+    if table is None or rows is None:
+        return {}
+    names = table["param_id"][rows]
+    value = table["param_value"][rows].astype(np.float32)
+    kind = table["param_type"][rows]
+    out = value.astype(np.float64)
+    if vehicle[2] == 12:
+        for code, as_int in ((5, np.uint32), (6, np.int32)):
+            pick = kind == code
+            out[pick] = value[pick].view(as_int).astype(np.float64)
+    return dict(zip(names.tolist(), out.tolist(), strict=True))
+
+
+def _texts(table: MessageTable | None) -> tuple[TextMessage, ...]:
+    """STATUSTEXT messages; chunked ones (``id`` != 0) joined in order."""
+    if table is None:
+        return ()
+    out: list[TextMessage] = []
+    pending: dict[tuple[int, int], int] = {}  # (sysid, id) -> index in out
+    has_id = "id" in table
+    for k in range(len(table)):
+        text, sev = str(table["text"][k]), int(table["severity"][k])
+        key = (int(table["_sysid"][k]), int(table["id"][k]) if has_id else 0)
+        if key[1] and key in pending and int(table["chunk_seq"][k]) > 0:
+            i = pending[key]
+            out[i] = TextMessage(out[i].time_s, out[i].text + text, out[i].severity)
+            continue
+        if key[1]:
+            pending[key] = len(out)
+        out.append(TextMessage(float(table.time_s[k]), text, sev))
+    return tuple(out)
+
+
+def _modes(hb: MessageTable | None, vehicle: tuple[int, int, int, int]) -> tuple[ModeChange, ...]:
+    """A ModeChange each time the main vehicle's heartbeat ``custom_mode`` changes."""
+    rows = _of(hb, *vehicle[:2])
+    if hb is None or rows is None:
+        return ()
+    mode = hb["custom_mode"][rows].astype(np.int64)
+    time_s = hb.time_s[rows]
+    change = np.flatnonzero(np.diff(mode, prepend=-1) != 0)
+    names = _mode_names(vehicle[2], vehicle[3])
+    return tuple(
+        ModeChange(float(time_s[k]), int(mode[k]), names(int(mode[k]))) for k in change.tolist()
+    )
+
+
+def _mode_names(autopilot: int, mav_type: int) -> Any:
+    """mode number -> name (or None), from pymavlink's ArduPilot and PX4 mode tables."""
+    from pymavlink import mavutil
+
+    if autopilot == 12:
+        return lambda mode: mavutil.interpret_px4_mode(0, mode)
+    table = mavutil.mode_mapping_bynumber(mav_type) if autopilot == 3 else None
+    return lambda mode: table.get(mode) if table else None
+
+
+def _vehicle_name(dialect: str, mav_type: int) -> str | None:
+    """MAV_TYPE as a lower-case word, e.g. ``"quadrotor"``."""
+    module = importlib.import_module(f"pymavlink.dialects.v20.{dialect}")
+    entry = module.enums.get("MAV_TYPE", {}).get(mav_type)
+    return entry.name.removeprefix("MAV_TYPE_").lower() if entry is not None else None
+
+
+_FIRMWARE = re.compile(r"^(Ardu\w+|APM:\w+|PX4\w*|Rover|AntennaTracker|Blimp)\s+V?\d")
+
+
+def _groups(keys: NDArray[np.int64]) -> dict[int, NDArray[np.int64]]:
+    """key -> indices of ``keys`` equal to it, in their original order."""
+    order = np.argsort(keys, kind="stable")
+    ordered = keys[order]
+    cut = np.flatnonzero(ordered[1:] != ordered[:-1]) + 1
+    firsts = np.concatenate([[0], cut]) if keys.size else cut
+    return dict(zip(ordered[firsts].tolist(), np.split(order, cut), strict=True))
+
+
+def _clock_offsets(
+    pieces: list[tuple[NDArray[np.int64], NDArray[np.float64]]],
+) -> NDArray[np.float64]:
+    """Per system id: median of (vehicle clock - receive time) over time-stamped frames."""
+    offsets = np.full(256, np.nan)
+    if not pieces:
+        return offsets
+    diff = np.concatenate([p[1] for p in pieces])
+    for sid, rows in _groups(np.concatenate([p[0] for p in pieces])).items():
+        finite = diff[rows][np.isfinite(diff[rows])]
+        if finite.size:
+            offsets[sid] = float(np.median(finite))
+    return offsets
+
+
+def read(
+    path: str | os.PathLike[str],
+    messages: Sequence[str] | None = None,
+    start: float | None = None,
+    stop: float | None = None,
+    dialect: str = "ardupilotmega",
+) -> RawLog:
+    """Read a MAVLink ``.tlog`` into a :class:`~mavsid.data.RawLog`.
+
+    Parameters
+    ----------
+    path : path-like
+        The ``.tlog`` file.
+    messages : sequence of str, optional
+        Message names to give tables for (default all); params, texts and modes are always
+        read.
+    start, stop : float, optional
+        Keep only samples (and texts, mode changes) with ``start <= time_s <= stop``
+        (seconds on the vehicle's clock).
+    dialect : str
+        pymavlink dialect (module under ``pymavlink.dialects.v20``).
+
+    Raises
+    ------
+    LogFormatError
+        Empty or unreadable file, or no valid MAVLink frame in it.
+    ConfigError
+        Unknown dialect.
+
+    Warns
+    -----
+    DataQualityWarning
+        Bytes skipped (garbage, bad CRC, truncation), frames of message ids the dialect does
+        not define, receive times running backwards or jumping.
+    """
+    defs = load_dialect(dialect)
+    buf, size = _load(path)
+    if size == 0:
+        raise LogFormatError("empty file", path=path)
+    frames = _scan(buf, size, defs)
+    if not frames.start.size:
+        raise LogFormatError("no valid MAVLink frame found (not a .tlog?)", path=path)
+
+    groups = _groups(frames.msgid)
+    own = {i: _own_time(buf, frames, rows, defs[i]) for i, rows in groups.items()}
+    offsets = _clock_offsets(
+        [(frames.sysid[groups[i]], t - frames.recv_s[groups[i]])
+         for i, t in own.items() if t is not None]
+    )
+
+    wanted = None if messages is None else set(messages)
+    always = {"HEARTBEAT", "PARAM_VALUE", "STATUSTEXT"}
+    tables: dict[str, MessageTable] = {}
+    for i, rows in groups.items():
+        mdef = defs[i]
+        if wanted is not None and mdef.name not in wanted | always:
+            continue
+        t = own[i]
+        time_s = t if t is not None else frames.recv_s[rows] + offsets[frames.sysid[rows]]
+        tables[mdef.name] = _table(buf, frames, rows, mdef, time_s, _units(dialect, i))
+
+    hb, pv, st = (tables.get(n) for n in ("HEARTBEAT", "PARAM_VALUE", "STATUSTEXT"))
+    vehicle = _main_vehicle(hb)
+    texts = _texts(st)
+    firmware = next((m.text for m in texts if _FIRMWARE.match(m.text)), None)
+    params = _params(pv, vehicle) if vehicle else {}
+    modes = _modes(hb, vehicle) if vehicle else ()
+    if start is not None or stop is not None:
+        lo = -np.inf if start is None else start
+        hi = np.inf if stop is None else stop
+        tables = {n: _window(t, lo, hi) for n, t in tables.items()}
+        texts = tuple(m for m in texts if lo <= m.time_s <= hi)
+        modes = tuple(m for m in modes if lo <= m.time_s <= hi)
+    if wanted is not None:
+        tables = {n: t for n, t in tables.items() if n in wanted}
+
+    notes = _quality_notes(frames, dialect)
+    if notes:
+        warnings.warn(f"{path}: " + "; ".join(notes), DataQualityWarning, stacklevel=2)
+    autopilot = _MAV_AUTOPILOT.get(vehicle[2], "unknown") if vehicle else "unknown"
+    vehicle_name = firmware.split()[0] if firmware and autopilot == "ardupilot" else None
+    if vehicle_name is None and vehicle:
+        vehicle_name = _vehicle_name(dialect, vehicle[3])
+    return RawLog(
+        source=SourceInfo(str(path), "tlog", size, frames.skipped_bytes, tuple(notes)),
+        messages=tables,
+        params=params,
+        texts=texts,
+        modes=modes,
+        autopilot=autopilot,
+        vehicle=vehicle_name,
+        firmware=firmware,
+    )
+
+
+@functools.lru_cache(maxsize=1024)
+def _units(dialect: str, msgid: int) -> dict[str, str]:
+    """Field units the dialect declares for one message."""
+    module = importlib.import_module(f"pymavlink.dialects.v20.{dialect}")
+    return dict(getattr(module.mavlink_map[msgid], "fieldunits_by_name", {}) or {})
+
+
+def _window(table: MessageTable, lo: float, hi: float) -> MessageTable:
+    """Rows of ``table`` with ``lo <= time_s <= hi``."""
+    keep = (table.time_s >= lo) & (table.time_s <= hi)
+    columns = {n: c[keep] for n, c in table.columns.items()}
+    return MessageTable(table.name, columns, table.time_s[keep], table.units)
+
+
+def _quality_notes(frames: _Frames, dialect: str) -> list[str]:
+    """Counts of what was skipped or suspicious, one phrase each."""
+    notes = []
+    if frames.skipped_bytes:
+        notes.append(
+            f"skipped {frames.skipped_bytes} bytes in {frames.gaps} places "
+            "(garbage, bad CRC or truncated frames)"
+        )
+    if frames.unknown:
+        notes.append(f"{frames.unknown} frames of message ids unknown to dialect {dialect!r}")
+    step = np.diff(frames.recv_s)
+    back, jump = int(np.count_nonzero(step < 0)), int(np.count_nonzero(step > _TIME_JUMP_S))
+    if back or jump:
+        notes.append(
+            f"receive time runs backwards {back} times and jumps forward by more than "
+            f"{_TIME_JUMP_S:.0f} s {jump} times"
+        )
+    return notes

@@ -1,0 +1,761 @@
+"""Channel presets: which message field is which state and input, per autopilot and log format.
+
+A :class:`Preset` names, for each canonical state (``roll pitch yaw`` in rad, ``p q r`` in
+rad/s) and input (``u_roll u_pitch u_yaw`` normalised, ``u_thrust`` 0..1), the message and
+field it comes from and the unit the field is in. :func:`choose_preset` picks the first
+built-in preset whose messages the log has (most informative first); :func:`load_presets`
+reads more from a TOML file. Alignment (:mod:`mavsid.align`) does the conversion.
+
+Field expressions (``Channel.field``) are tiny:
+
+- ``"ROut"`` a column; ``"xyz[1]"`` element 1 of an array field (``xyz[1]`` column or the
+  second column of a 2-D ``xyz``);
+- ``"P+I+D"`` the sum of several columns;
+- ``"C1|Chan1"`` alternatives: the first one the log has (field names change between
+  firmware versions).
+
+Built-in presets (in the order they are tried):
+
+============================  ==========  =================================================
+preset                        format      states / inputs
+============================  ==========  =================================================
+``ardupilot-rate``            DataFlash   ATT Roll/Pitch/Yaw (deg), RATE R/P/Y (deg/s);
+                                          RATE ROut/POut/YOut/AOut
+``ardupilot-pid``             DataFlash   ATT, IMU GyrX/Y/Z (rad/s); PIDR/PIDP/PIDY P+I+D+FF
+``ardupilot-rcou``            DataFlash   ATT (+ IMU gyro); RCOU motor PWM through the mixer
+``ardupilot-mot``             DataFlash   ATT; MOT Mot1..n PWM (ArduCopter 3.1) via mixer
+``ardupilot-att``             DataFlash   ATT only: no inputs (nothing to identify)
+``mavlink-servo``             tlog        ATTITUDE (rad, rad/s); SERVO_OUTPUT_RAW PWM, mixer
+``mavlink-att``               tlog        ATTITUDE only
+``px4-torque``                ULog        vehicle_attitude.q, vehicle_angular_velocity.xyz;
+                                          vehicle_torque_setpoint.xyz, -thrust_setpoint.xyz[2]
+``px4-actuator-controls``     ULog        vehicle_attitude.q, vehicle_angular_velocity.xyz;
+                                          actuator_controls_0.control[0..3]
+``px4-legacy``                ULog        vehicle_attitude.q and .rollspeed/...;
+                                          actuator_controls_0.control[0..3]
+``px4-att``                   ULog        vehicle_attitude.q only
+============================  ==========  =================================================
+
+Mixers
+------
+Logs that only carry motor PWMs (``.tlog`` SERVO_OUTPUT_RAW, old RCOU/MOT) give inputs by
+inverting the vehicle's motor mixer, as ArduPilot's ``AP_MotorsMatrix`` defines it. Motor
+``i`` sits at ``angle_deg[i]`` from the nose (positive to the right) and spins with
+``yaw[i]`` (+1 counter-clockwise, -1 clockwise); its roll factor is ``cos(angle + 90°)``,
+pitch factor ``cos(angle)``, yaw factor ``yaw[i]``; roll and pitch factors are scaled so
+the largest is 0.5, yaw factors likewise. The firmware sets each motor's thrust to
+``u_thrust + u_roll·roll_i + u_pitch·pitch_i + u_yaw·yaw_i``; mavsid turns PWM back into
+thrust (``MOT_PWM_MIN/MAX``, ``MOT_SPIN_MIN/MAX`` and the ``MOT_THST_EXPO`` thrust curve
+from the log's parameters, ArduPilot defaults otherwise) and solves that linear system in
+the least-squares sense, so ``u_roll`` etc. are on the scale of RATE.ROut. The frame comes
+from ``FRAME_CLASS``/``FRAME_TYPE`` when the log has them, quad-X otherwise.
+
+TOML presets
+------------
+::
+
+    [preset.my-quad]
+    formats = ["dataflash"]          # optional: formats it applies to
+    requires = ["ATT", "RATE"]       # optional: default, every message used below
+    mixer = "quad-x"                 # only for PWM inputs (``motors``)
+    [preset.my-quad.states]
+    roll = { message = "ATT", field = "Roll", unit = "deg" }
+    p = { message = "RATE", field = "R", unit = "deg/s" }
+    [preset.my-quad.inputs]
+    u_roll = { message = "RATE", field = "ROut", scale = 1.0 }
+
+    [mixer.my-hexa]                  # angle_deg and yaw (+1 CCW, -1 CW) per motor
+    angle_deg = [90, -90, -30, 150, 30, -150]
+    yaw = [-1, 1, -1, 1, 1, -1]
+
+Examples
+--------
+>>> import numpy as np
+>>> from mavsid.data import MessageTable, RawLog, SourceInfo
+>>> att = MessageTable("ATTITUDE", {"roll": np.zeros(3)}, time_s=np.arange(3.0))
+>>> servo = MessageTable("SERVO_OUTPUT_RAW", {"servo1_raw": np.zeros(3)}, time_s=np.arange(3.0))
+>>> log = RawLog(SourceInfo("x.tlog", "tlog", 0), {"ATTITUDE": att, "SERVO_OUTPUT_RAW": servo})
+>>> choose_preset(log).name
+'mavlink-servo'
+>>> m = MIXERS["quad-x"]
+>>> np.round(m.factors(), 3).tolist()[0]  # motor 1, front right: roll, pitch, yaw factors
+[-0.5, 0.5, 0.5]
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import sys
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from mavsid.data import MessageTable, RawLog
+from mavsid.errors import ConfigError, MissingMessageError
+
+__all__ = [
+    "INPUT_NAMES",
+    "MIXERS",
+    "PRESETS",
+    "STATE_NAMES",
+    "Channel",
+    "Mixer",
+    "Preset",
+    "choose_preset",
+    "evaluate",
+    "get_preset",
+    "load_presets",
+    "mixer_for",
+    "preset_messages",
+    "pwm_to_thrust",
+    "to_si",
+]
+
+#: canonical state names, in FlightData column order, and their SI units
+STATE_NAMES: tuple[str, ...] = ("roll", "pitch", "yaw", "p", "q", "r")
+STATE_UNITS: dict[str, str] = {
+    "roll": "rad", "pitch": "rad", "yaw": "rad", "p": "rad/s", "q": "rad/s", "r": "rad/s"
+}
+#: canonical input names, in FlightData column order (all dimensionless)
+INPUT_NAMES: tuple[str, ...] = ("u_roll", "u_pitch", "u_yaw", "u_thrust")
+
+# unit symbol as logs spell it -> factor to SI (rad, rad/s, dimensionless)
+_UNIT_TO_SI: dict[str, float] = {
+    "rad": 1.0, "rad/s": 1.0, "deg": math.pi / 180, "degrees": math.pi / 180,
+    "°": math.pi / 180, "deg/s": math.pi / 180, "degrees/s": math.pi / 180,
+    "°/s": math.pi / 180, "cdeg": math.pi / 18000, "centidegrees": math.pi / 18000,
+    "cdeg/s": math.pi / 18000, "mrad/s": 1e-3, "1": 1.0, "": 1.0, "%": 0.01,
+}
+
+
+@dataclass(frozen=True)
+class Channel:
+    """One canonical signal: where it is in the log and in what unit.
+
+    Parameters
+    ----------
+    message : str
+        Message (topic) name.
+    field : str
+        Field expression (see the module docstring): ``"R"``, ``"xyz[0]"``, ``"P+I+D"``,
+        ``"C1|Chan1"``. For quaternion channels (``transform``), the 4-element field ``q``.
+    unit : str
+        Unit of the field when the log does not declare one (``deg``, ``deg/s``, ``rad``,
+        ``rad/s``, ``cdeg``, ``1`` ...). A unit the log declares wins.
+    scale : float
+        Extra factor applied after the unit conversion (e.g. -1 for PX4 thrust along -z).
+    transform : str
+        ``""``, or ``"quat_roll"``/``"quat_pitch"``/``"quat_yaw"``: the Euler angle
+        (ZYX, rad) of a Hamilton quaternion ``w x y z``.
+    optional : bool
+        The preset still applies when this channel is missing.
+    """
+
+    message: str
+    field: str
+    unit: str = "1"
+    scale: float = 1.0
+    transform: str = ""
+    optional: bool = False
+
+
+@dataclass(frozen=True)
+class Mixer:
+    """A multirotor's motor geometry, as ArduPilot's motor matrix defines it.
+
+    Parameters
+    ----------
+    name : str
+    angle_deg : tuple of float
+        Each motor's direction from the nose, degrees, positive to the right (motor 1 first).
+    yaw : tuple of float
+        Each motor's yaw factor: +1 counter-clockwise propeller, -1 clockwise.
+    """
+
+    name: str
+    angle_deg: tuple[float, ...]
+    yaw: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        if len(self.angle_deg) != len(self.yaw) or len(self.yaw) < 3:
+            raise ConfigError(
+                f"mixer {self.name!r}: need the same number (>= 3) of angle_deg and yaw"
+            )
+
+    @property
+    def n_motors(self) -> int:
+        """Number of motors."""
+        return len(self.yaw)
+
+    def factors(self) -> np.ndarray:
+        """Roll, pitch and yaw factor of each motor, shape ``(n_motors, 3)``, max |f| = 0.5."""
+        a = np.deg2rad(np.asarray(self.angle_deg, dtype=float))
+        roll, pitch = np.cos(a + np.pi / 2), np.cos(a)
+        roll[np.abs(roll) < 1e-9] = 0.0
+        pitch[np.abs(pitch) < 1e-9] = 0.0
+        rp_max = max(np.abs(roll).max(), np.abs(pitch).max())
+        yaw = np.asarray(self.yaw, dtype=float)
+        yaw_max = np.abs(yaw).max() or 1.0
+        return np.column_stack([0.5 * roll / rp_max, 0.5 * pitch / rp_max, 0.5 * yaw / yaw_max])
+
+    def unmix(self, thrust: np.ndarray) -> np.ndarray:
+        """Motor thrusts ``(n, n_motors)`` (0..1) -> ``(n, 4)`` u_roll, u_pitch, u_yaw, u_thrust.
+
+        Least-squares inverse of ``thrust_i = u_thrust + f_i · (u_roll, u_pitch, u_yaw)``.
+
+        Examples
+        --------
+        >>> m = MIXERS["quad-plus"]
+        >>> u = np.array([[0.1, -0.05, 0.02, 0.4]])
+        >>> motors = u[:, 3:] + u[:, :3] @ m.factors().T
+        >>> np.allclose(m.unmix(motors), u)
+        True
+        """
+        mix = np.column_stack([self.factors(), np.ones(self.n_motors)])
+        return np.asarray(thrust, dtype=float) @ np.linalg.pinv(mix).T
+
+
+#: built-in mixers, motor order as ArduPilot's AP_MotorsMatrix numbers the outputs
+MIXERS: dict[str, Mixer] = {
+    m.name: m
+    for m in (
+        Mixer("quad-x", (45, -135, -45, 135), (1, 1, -1, -1)),
+        Mixer("quad-plus", (90, -90, 0, 180), (1, 1, -1, -1)),
+        Mixer("hexa-plus", (0, 180, -120, 60, -60, 120), (-1, 1, -1, 1, 1, -1)),
+        Mixer("hexa-x", (90, -90, -30, 150, 30, -150), (-1, 1, -1, 1, 1, -1)),
+        Mixer(
+            "octa-plus", (0, 180, 45, 135, -45, -135, -90, 90), (-1, -1, 1, 1, 1, 1, -1, -1)
+        ),
+        Mixer(
+            "octa-x",
+            (22.5, -157.5, 67.5, 157.5, -22.5, -112.5, -67.5, 112.5),
+            (-1, -1, 1, 1, 1, 1, -1, -1),
+        ),
+    )
+}
+
+# ArduPilot FRAME_CLASS, FRAME_TYPE -> mixer name
+_AP_FRAMES: dict[tuple[int, int], str] = {
+    (1, 0): "quad-plus", (1, 1): "quad-x", (2, 0): "hexa-plus", (2, 1): "hexa-x",
+    (3, 0): "octa-plus", (3, 1): "octa-x",
+}
+
+
+@dataclass(frozen=True)
+class Preset:
+    """Where a log keeps the states and inputs.
+
+    Parameters
+    ----------
+    name : str
+    formats : tuple of str
+        Log formats it applies to (``dataflash``, ``dataflash-text``, ``tlog``, ``ulog``).
+    states : Mapping[str, Channel]
+        Canonical state name -> channel.
+    inputs : Mapping[str, Channel]
+        Canonical input name -> channel (empty for attitude-only presets).
+    motors : Channel, optional
+        PWM outputs: ``field`` is a template with ``{i}`` for the motor number (1-based),
+        e.g. ``servo{i}_raw``; inputs are then computed through ``mixer``.
+    mixer : str
+        Mixer name, or ``"auto"``: from FRAME_CLASS/FRAME_TYPE, quad-X by default.
+    requires : tuple of str
+        Messages the log must have (with samples) for the preset to be chosen; default
+        every non-optional channel's message.
+    description : str
+    """
+
+    name: str
+    formats: tuple[str, ...]
+    states: Mapping[str, Channel]
+    inputs: Mapping[str, Channel] = field(default_factory=dict)
+    motors: Channel | None = None
+    mixer: str = "auto"
+    requires: tuple[str, ...] = ()
+    description: str = ""
+
+    def __post_init__(self) -> None:
+        for name in self.states:
+            if name not in STATE_NAMES:
+                raise ConfigError(f"preset {self.name!r}: unknown state {name!r}")
+        for name in self.inputs:
+            if name not in INPUT_NAMES:
+                raise ConfigError(f"preset {self.name!r}: unknown input {name!r}")
+        if not self.states:
+            raise ConfigError(f"preset {self.name!r} defines no states")
+        if not self.requires:
+            chans = [c for c in (*self.states.values(), *self.inputs.values()) if not c.optional]
+            if self.motors is not None:
+                chans.append(self.motors)
+            object.__setattr__(self, "requires", tuple(dict.fromkeys(c.message for c in chans)))
+
+    @property
+    def messages(self) -> tuple[str, ...]:
+        """Every message the preset may read."""
+        chans = [*self.states.values(), *self.inputs.values()]
+        if self.motors is not None:
+            chans.append(self.motors)
+        return tuple(dict.fromkeys([*self.requires, *(c.message for c in chans)]))
+
+    def applies_to(self, raw: RawLog) -> bool:
+        """True when the log's format fits and it has samples of every required message."""
+        if self.formats and raw.source.format not in self.formats:
+            return False
+        return all(m in raw.messages and len(raw.messages[m]) > 0 for m in self.requires)
+
+
+def _ch(message: str, fld: str, unit: str = "1", **kw: Any) -> Channel:
+    return Channel(message, fld, unit, **kw)
+
+
+_DF = ("dataflash", "dataflash-text")
+_ATT = {
+    "roll": _ch("ATT", "Roll", "deg"),
+    "pitch": _ch("ATT", "Pitch", "deg"),
+    "yaw": _ch("ATT", "Yaw", "deg"),
+}
+_IMU_GYRO = {
+    "p": _ch("IMU", "GyrX", "rad/s", optional=True),
+    "q": _ch("IMU", "GyrY", "rad/s", optional=True),
+    "r": _ch("IMU", "GyrZ", "rad/s", optional=True),
+}
+_MAV_ATT = {
+    "roll": _ch("ATTITUDE", "roll", "rad"),
+    "pitch": _ch("ATTITUDE", "pitch", "rad"),
+    "yaw": _ch("ATTITUDE", "yaw", "rad"),
+    "p": _ch("ATTITUDE", "rollspeed", "rad/s"),
+    "q": _ch("ATTITUDE", "pitchspeed", "rad/s"),
+    "r": _ch("ATTITUDE", "yawspeed", "rad/s"),
+}
+_PX4_Q = {
+    "roll": _ch("vehicle_attitude", "q", "1", transform="quat_roll"),
+    "pitch": _ch("vehicle_attitude", "q", "1", transform="quat_pitch"),
+    "yaw": _ch("vehicle_attitude", "q", "1", transform="quat_yaw"),
+}
+_PX4_AV = {k: _ch("vehicle_angular_velocity", f"xyz[{i}]", "rad/s") for i, k in enumerate("pqr")}
+_PX4_AC0 = {
+    "u_roll": _ch("actuator_controls_0", "control[0]"),
+    "u_pitch": _ch("actuator_controls_0", "control[1]"),
+    "u_yaw": _ch("actuator_controls_0", "control[2]"),
+    "u_thrust": _ch("actuator_controls_0", "control[3]", optional=True),
+}
+
+#: built-in presets, most informative first (the order :func:`choose_preset` tries them)
+PRESETS: dict[str, Preset] = {
+    p.name: p
+    for p in (
+        Preset(
+            "ardupilot-rate", _DF,
+            states={
+                **_ATT,
+                "p": _ch("RATE", "R", "deg/s"),
+                "q": _ch("RATE", "P", "deg/s"),
+                "r": _ch("RATE", "Y", "deg/s"),
+            },
+            inputs={
+                "u_roll": _ch("RATE", "ROut"),
+                "u_pitch": _ch("RATE", "POut"),
+                "u_yaw": _ch("RATE", "YOut"),
+                "u_thrust": _ch("RATE", "AOut", optional=True),
+            },
+            description="ArduCopter: ATT angles, RATE gyro rates and rate-controller outputs",
+        ),
+        Preset(
+            "ardupilot-pid", _DF,
+            states={**_ATT, **{k: replace(c, optional=False) for k, c in _IMU_GYRO.items()}},
+            inputs={
+                "u_roll": _ch("PIDR", "P+I+D+FF|P+I+D"),
+                "u_pitch": _ch("PIDP", "P+I+D+FF|P+I+D"),
+                "u_yaw": _ch("PIDY", "P+I+D+FF|P+I+D"),
+            },
+            description="older ArduPilot: ATT, IMU gyro, PID term sums as controller outputs",
+        ),
+        Preset(
+            "ardupilot-rcou", _DF,
+            states={**_ATT, **_IMU_GYRO},
+            motors=_ch("RCOU", "C{i}|Chan{i}", "pwm"),
+            description="ArduPilot: ATT (+ IMU gyro); RCOU motor PWMs through the frame mixer",
+        ),
+        Preset(
+            "ardupilot-mot", _DF,
+            states={**_ATT, **_IMU_GYRO},
+            motors=_ch("MOT", "Mot{i}", "pwm"),
+            description="ArduCopter 3.1: ATT; MOT motor PWMs through the frame mixer",
+        ),
+        Preset(
+            "ardupilot-att", _DF,
+            states={**_ATT, **_IMU_GYRO},
+            description="ArduPilot attitude only: no controller outputs logged",
+        ),
+        Preset(
+            "mavlink-servo", ("tlog",),
+            states=_MAV_ATT,
+            motors=_ch("SERVO_OUTPUT_RAW", "servo{i}_raw", "pwm"),
+            description="MAVLink: ATTITUDE; SERVO_OUTPUT_RAW motor PWMs through the mixer",
+        ),
+        Preset("mavlink-att", ("tlog",), states=_MAV_ATT, description="MAVLink ATTITUDE only"),
+        Preset(
+            "px4-torque", ("ulog",),
+            states={**_PX4_Q, **_PX4_AV},
+            inputs={
+                "u_roll": _ch("vehicle_torque_setpoint", "xyz[0]"),
+                "u_pitch": _ch("vehicle_torque_setpoint", "xyz[1]"),
+                "u_yaw": _ch("vehicle_torque_setpoint", "xyz[2]"),
+                "u_thrust": _ch("vehicle_thrust_setpoint", "xyz[2]", scale=-1.0, optional=True),
+            },
+            description="PX4 >= 1.14: attitude quaternion, angular velocity, torque setpoint",
+        ),
+        Preset(
+            "px4-actuator-controls", ("ulog",),
+            states={**_PX4_Q, **_PX4_AV},
+            inputs=_PX4_AC0,
+            description="PX4 1.10-1.13: angular velocity, actuator_controls_0",
+        ),
+        Preset(
+            "px4-legacy", ("ulog",),
+            states={
+                **_PX4_Q,
+                "p": _ch("vehicle_attitude", "rollspeed", "rad/s"),
+                "q": _ch("vehicle_attitude", "pitchspeed", "rad/s"),
+                "r": _ch("vehicle_attitude", "yawspeed", "rad/s"),
+            },
+            inputs=_PX4_AC0,
+            description="PX4 < 1.10: vehicle_attitude rates, actuator_controls_0",
+        ),
+        Preset(
+            "px4-att", ("ulog",),
+            states={**_PX4_Q, **{k: replace(c, optional=True) for k, c in _PX4_AV.items()}},
+            description="PX4 attitude only: no controller outputs logged",
+        ),
+    )
+}
+
+
+# --------------------------------------------------------------------------- choosing
+
+
+def choose_preset(raw: RawLog, presets: Mapping[str, Preset] | None = None) -> Preset:
+    """The first preset (user presets first, then built-ins) that applies to ``raw``.
+
+    Raises
+    ------
+    MissingMessageError
+        No preset fits: the log has no attitude messages mavsid knows.
+    """
+    candidates = [*(presets or {}).values(), *PRESETS.values()]
+    for preset in candidates:
+        if preset.applies_to(raw):
+            return preset
+    wanted = sorted({p.states["roll"].message for p in candidates if "roll" in p.states})
+    raise MissingMessageError(
+        " or ".join(wanted) + f" (no channel preset fits this {raw.source.format} log)",
+        available=raw.messages,
+    )
+
+
+def get_preset(name: str, presets: Mapping[str, Preset] | None = None) -> Preset:
+    """A preset by name from ``presets`` or the built-ins.
+
+    Raises
+    ------
+    ConfigError
+        Unknown name.
+    """
+    table = {**PRESETS, **(presets or {})}
+    try:
+        return table[name]
+    except KeyError:
+        raise ConfigError(
+            f"unknown channel preset {name!r} (known: {', '.join(sorted(table))})"
+        ) from None
+
+
+def preset_messages(fmt: str | None = None, presets: Iterable[Preset] = ()) -> tuple[str, ...]:
+    """Every message any preset for format ``fmt`` (all formats when None) may read.
+
+    Examples
+    --------
+    >>> "RATE" in preset_messages("dataflash"), "RATE" in preset_messages("ulog")
+    (True, False)
+    """
+    out: dict[str, None] = {}
+    for p in (*presets, *PRESETS.values()):
+        if fmt is None or not p.formats or fmt in p.formats:
+            out.update(dict.fromkeys(p.messages))
+    return tuple(out)
+
+
+def mixer_for(preset: Preset, params: Mapping[str, float], mixers: Mapping[str, Mixer] = MIXERS
+              ) -> Mixer:
+    """The mixer a preset uses: its own, else from FRAME_CLASS/FRAME_TYPE, else quad-X.
+
+    Examples
+    --------
+    >>> mixer_for(PRESETS["mavlink-servo"], {"FRAME_CLASS": 1, "FRAME_TYPE": 0}).name
+    'quad-plus'
+    """
+    name = preset.mixer
+    if name == "auto":
+        key = (int(params.get("FRAME_CLASS", 1)), int(params.get("FRAME_TYPE", 1)))
+        name = _AP_FRAMES.get(key, "quad-x")
+    try:
+        return mixers[name]
+    except KeyError:
+        raise ConfigError(
+            f"preset {preset.name!r}: unknown mixer {name!r} (known: {', '.join(sorted(mixers))})"
+        ) from None
+
+
+# --------------------------------------------------------------------------- evaluation
+
+_INDEXED = re.compile(r"^(\w+)\[(\d+)\]$")
+
+
+def _column(table: MessageTable, name: str) -> np.ndarray | None:
+    """One column (``name`` or ``name[i]``) as float64, scaled by the declared multiplier."""
+    if name in table.columns:
+        col = np.asarray(table.columns[name])
+        mult = table.multipliers.get(name, 1.0)
+    else:
+        m = _INDEXED.match(name)
+        if not m or m.group(1) not in table.columns:
+            return None
+        col = np.asarray(table.columns[m.group(1)])
+        if col.ndim != 2 or int(m.group(2)) >= col.shape[1]:
+            return None
+        col = col[:, int(m.group(2))]
+        mult = table.multipliers.get(m.group(1), 1.0)
+    if col.dtype.kind not in "biuf":
+        return None
+    out = col.astype(np.float64)
+    return out * mult if mult not in (None, 1.0) else out
+
+
+def _resolve(table: MessageTable, expr: str) -> tuple[np.ndarray, str] | None:
+    """Evaluate a field expression; returns the values and the first column's name."""
+    for alternative in expr.split("|"):
+        parts = [p.strip() for p in alternative.split("+")]
+        cols = [c for c in (_column(table, p) for p in parts) if c is not None]
+        if len(cols) == len(parts):
+            return np.sum(cols, axis=0), parts[0]
+    return None
+
+
+def _quaternion(table: MessageTable, fld: str) -> np.ndarray | None:
+    col = table.columns.get(fld)
+    if col is not None and np.ndim(col) == 2 and np.shape(col)[1] == 4:
+        return np.asarray(col, dtype=np.float64)
+    parts = [_column(table, f"{fld}[{i}]") for i in range(4)]
+    if any(p is None for p in parts):
+        return None
+    return np.column_stack(parts)  # type: ignore[arg-type]
+
+
+def quat_to_euler(q: np.ndarray) -> np.ndarray:
+    """Hamilton quaternions ``(n, 4)`` (w, x, y, z) -> ZYX Euler angles ``(n, 3)`` in rad.
+
+    Examples
+    --------
+    >>> a = 0.3
+    >>> quat_to_euler(np.array([[np.cos(a / 2), np.sin(a / 2), 0, 0]])).round(6).tolist()
+    [[0.3, 0.0, 0.0]]
+    """
+    q = np.asarray(q, dtype=np.float64)
+    q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    w, x, y, z = q.T
+    roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0))
+    yaw = np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return np.column_stack([roll, pitch, yaw])
+
+
+def to_si(values: np.ndarray, unit: str, what: str = "") -> np.ndarray:
+    """Convert ``values`` in ``unit`` (as a log spells it) to rad, rad/s or dimensionless.
+
+    Raises
+    ------
+    ConfigError
+        Unknown unit.
+
+    Examples
+    --------
+    >>> to_si(np.array([180.0]), "deg").tolist()
+    [3.141592653589793]
+    """
+    try:
+        return values * _UNIT_TO_SI[unit.strip()]
+    except KeyError:
+        raise ConfigError(f"{what or 'channel'}: unknown unit {unit!r}") from None
+
+
+def evaluate(raw: RawLog, channel: Channel, what: str = "") -> tuple[np.ndarray, np.ndarray]:
+    """A channel's samples in SI units: ``(time_s, values)``, sorted by time, NaN-free.
+
+    The unit the log declares for the field wins over ``channel.unit``.
+
+    Raises
+    ------
+    MissingMessageError
+        The message or field is absent.
+    """
+    table = raw[channel.message]
+    if channel.transform.startswith("quat_"):
+        q = _quaternion(table, channel.field)
+        if q is None:
+            raise MissingMessageError(f"{channel.message}.{channel.field}", table.columns, "field")
+        axis = {"quat_roll": 0, "quat_pitch": 1, "quat_yaw": 2}[channel.transform]
+        values = quat_to_euler(q)[:, axis]
+    else:
+        got = _resolve(table, channel.field)
+        if got is None:
+            raise MissingMessageError(
+                f"{channel.message}.{channel.field}", available=table.columns, what="field"
+            )
+        values, first = got
+        declared = table.unit(first)
+        unit = declared if declared is not None and declared.strip() in _UNIT_TO_SI else None
+        values = to_si(values, unit if unit is not None else channel.unit, what)
+    values = values * channel.scale
+    t = np.asarray(table.time_s, dtype=np.float64)
+    ok = np.isfinite(t) & np.isfinite(values)
+    t, values = t[ok], values[ok]
+    if t.size > 1 and np.any(np.diff(t) < 0):
+        order = np.argsort(t, kind="stable")
+        t, values = t[order], values[order]
+    return t, values
+
+
+def pwm_to_thrust(pwm: np.ndarray, params: Mapping[str, float]) -> np.ndarray:
+    """Motor PWM (µs) -> normalised thrust 0..1 through ArduPilot's output and thrust curve.
+
+    ``actuator = (pwm - MOT_PWM_MIN) / (MOT_PWM_MAX - MOT_PWM_MIN)``, then the spin range
+    ``r = (actuator - MOT_SPIN_MIN) / (MOT_SPIN_MAX - MOT_SPIN_MIN)`` and the thrust curve
+    ``thrust = (1 - MOT_THST_EXPO)·r + MOT_THST_EXPO·r²`` (battery scaling ignored). A PWM
+    range of 0 (ArduPilot's "use RC3 range") falls back to 1000..2000 µs.
+
+    Examples
+    --------
+    >>> pwm_to_thrust(np.array([1000.0, 2000.0]), {"MOT_SPIN_MIN": 0, "MOT_SPIN_MAX": 1}).tolist()
+    [0.0, 1.0]
+    """
+    lo, hi = params.get("MOT_PWM_MIN", 0.0), params.get("MOT_PWM_MAX", 0.0)
+    if not hi > lo > 0:
+        lo, hi = 1000.0, 2000.0
+    spin_min = params.get("MOT_SPIN_MIN", 0.15)
+    spin_max = params.get("MOT_SPIN_MAX", 0.95)
+    expo = params.get("MOT_THST_EXPO", 0.65)
+    actuator = (np.asarray(pwm, dtype=float) - lo) / (hi - lo)
+    r = np.clip((actuator - spin_min) / max(spin_max - spin_min, 1e-6), 0.0, 1.0)
+    return (1.0 - expo) * r + expo * r * r
+
+
+def motor_thrusts(raw: RawLog, preset: Preset, mixer: Mixer) -> tuple[np.ndarray, np.ndarray]:
+    """``(time_s, thrust)`` of each motor, shape ``(n, n_motors)``, from the PWM channel."""
+    assert preset.motors is not None
+    ch = preset.motors
+    table = raw[ch.message]
+    cols = []
+    for i in range(1, mixer.n_motors + 1):
+        got = _resolve(table, ch.field.replace("{i}", str(i)))
+        if got is None:
+            raise MissingMessageError(
+                f"{ch.message}.{ch.field.replace('{i}', str(i))} (motor {i} of {mixer.name})",
+                available=table.columns, what="field",
+            )
+        cols.append(got[0])
+    pwm = np.column_stack(cols)
+    t = np.asarray(table.time_s, dtype=np.float64)
+    ok = np.isfinite(t) & np.all(np.isfinite(pwm), axis=1)
+    t, pwm = t[ok], pwm[ok]
+    order = np.argsort(t, kind="stable")
+    return t[order], pwm_to_thrust(pwm[order], raw.params)
+
+
+# --------------------------------------------------------------------------- TOML
+
+
+def _read_toml(path: str | os.PathLike[str]) -> dict[str, Any]:
+    if sys.version_info >= (3, 11):
+        import tomllib
+    else:  # pragma: no cover
+        import tomli as tomllib
+    try:
+        with open(path, "rb") as f:
+            return tomllib.load(f)
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot open: {exc.strerror or exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+
+
+def _channel_from(spec: Any, where: str) -> Channel:
+    if not isinstance(spec, Mapping) or "message" not in spec or "field" not in spec:
+        raise ConfigError(f"{where}: needs a table with 'message' and 'field'")
+    unknown = set(spec) - {"message", "field", "unit", "scale", "transform", "optional"}
+    if unknown:
+        raise ConfigError(f"{where}: unknown key(s) {', '.join(sorted(unknown))}")
+    unit = str(spec.get("unit", "1"))
+    if unit not in _UNIT_TO_SI and unit != "pwm":
+        raise ConfigError(f"{where}: unknown unit {unit!r}")
+    return Channel(
+        str(spec["message"]), str(spec["field"]), unit, float(spec.get("scale", 1.0)),
+        str(spec.get("transform", "")), bool(spec.get("optional", False)),
+    )
+
+
+def load_presets(path: str | os.PathLike[str]) -> tuple[dict[str, Preset], dict[str, Mixer]]:
+    """Read user presets and mixers from a TOML file (format in the module docstring).
+
+    Returns
+    -------
+    presets, mixers : dict
+        By name; pass ``presets`` to :func:`choose_preset` / :func:`mavsid.align.align`.
+
+    Raises
+    ------
+    ConfigError
+        Unreadable file, invalid TOML, unknown keys, names or units.
+    """
+    doc = _read_toml(path)
+    unknown = set(doc) - {"preset", "mixer"}
+    if unknown:
+        raise ConfigError(f"{path}: unknown table(s) {', '.join(sorted(unknown))}")
+    mixers: dict[str, Mixer] = {}
+    for name, spec in doc.get("mixer", {}).items():
+        try:
+            mixers[name] = Mixer(
+                name, tuple(float(a) for a in spec["angle_deg"]),
+                tuple(float(y) for y in spec["yaw"]),
+            )
+        except (KeyError, TypeError, ValueError):
+            raise ConfigError(f"{path}: mixer {name!r} needs numeric angle_deg and yaw") from None
+    presets: dict[str, Preset] = {}
+    for name, spec in doc.get("preset", {}).items():
+        where = f"{path}: preset {name!r}"
+        if not isinstance(spec, Mapping):
+            raise ConfigError(f"{where}: must be a table")
+        unknown = set(spec) - {
+            "formats", "states", "inputs", "motors", "mixer", "requires", "description"
+        }
+        if unknown:
+            raise ConfigError(f"{where}: unknown key(s) {', '.join(sorted(unknown))}")
+        states = {k: _channel_from(v, f"{where} state {k}") for k, v in
+                  spec.get("states", {}).items()}
+        inputs = {k: _channel_from(v, f"{where} input {k}") for k, v in
+                  spec.get("inputs", {}).items()}
+        motors = _channel_from(spec["motors"], f"{where} motors") if "motors" in spec else None
+        mixer = str(spec.get("mixer", "auto"))
+        if mixer != "auto" and mixer not in mixers and mixer not in MIXERS:
+            raise ConfigError(f"{where}: unknown mixer {mixer!r}")
+        try:
+            presets[name] = Preset(
+                name, tuple(spec.get("formats", ())), states, inputs, motors, mixer,
+                tuple(spec.get("requires", ())), str(spec.get("description", "")),
+            )
+        except ConfigError as exc:
+            raise ConfigError(f"{path}: {exc}") from None
+    return presets, mixers

@@ -1,0 +1,149 @@
+"""Validation by rollout, against a known first-order plant and hand-computed measures."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from toy_plants import DiagonalPlant, chirp, run_plant
+
+from mavsid.errors import ConfigError, NoExcitationError
+from mavsid.validation import fit_percent, residual_test, rmse, validate
+
+DT = 0.0025
+PLANT = DiagonalPlant(a=(0.98,), b=(0.6,), c=(0.001,), dt=DT, delay=2)
+
+
+def _noise_input(n: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    # piecewise-constant random steps: broadband but not white
+    return np.repeat(rng.uniform(-0.1, 0.1, n // 20 + 1), 20)[:n]
+
+
+def test_fit_percent_by_hand() -> None:
+    y = np.array([1.0, 3.0, 2.0, 6.0])  # mean 3, deviations -2 0 -1 3 -> 14
+    yhat = np.array([1.0, 2.0, 2.0, 5.0])  # errors 0 1 0 1 -> 2
+    assert float(fit_percent(y, yhat)) == pytest.approx(100 * (1 - np.sqrt(2 / 14)))
+    two = fit_percent(np.c_[y, y], np.c_[yhat, y])
+    assert two.shape == (2,) and two[1] == 100.0
+    # NaN predictions are left out, and the mean is of the rows kept
+    assert float(fit_percent(np.r_[y, 50.0], np.r_[yhat, np.nan])) == pytest.approx(
+        100 * (1 - np.sqrt(2 / 14))
+    )
+    assert np.isnan(fit_percent(np.ones(4), np.zeros(4)))
+    assert float(rmse(y, yhat)) == pytest.approx(np.sqrt(0.5))
+
+
+def test_true_model_on_noiseless_data_is_perfect() -> None:
+    segs = [run_plant(PLANT, _noise_input(4000, s), seed=s, t0=10.0 * s) for s in range(2)]
+    v = validate(PLANT, segs, horizons_s=(0.01, 0.5, 2.0))
+    assert v.horizons.tolist() == [1, 4, 200, 800]
+    assert np.allclose(v.fit_vs_horizon, 100.0, atol=1e-6)
+    assert np.allclose(v.fit_free_run, 100.0, atol=1e-6)
+    assert v.rmse_free_run[0] < 1e-9
+    assert v.fit_summary("p") == pytest.approx(
+        {"one_step": 100.0, "0.5s": 100.0, "free_run": 100.0}, abs=1e-6
+    )
+    assert [s.start_s for s in v.segments] == [0.0, 10.0]
+
+
+def test_pooled_fit_matches_hand_formula() -> None:
+    wrong = dataclasses.replace(PLANT, a=(0.97,))
+    segs = [run_plant(PLANT, _noise_input(3000, s), seed=s, noise=1e-3) for s in (3, 4)]
+    v = validate(wrong, segs, horizons_s=())
+    err = norm = 0.0
+    for seg in segs:
+        y = seg.states[:, 0]
+        # the wrong model's free run, written out independently of the plant class
+        yh = np.empty_like(y)
+        yh[0] = y[0]
+        u = seg.inputs[:, 0]
+        for k in range(len(y) - 1):
+            yh[k + 1] = 0.97 * yh[k] + (0.6 * u[k - 2] if k >= 2 else 0.0) + 0.001
+        err += np.sum((y - yh) ** 2)
+        norm += np.sum((y - y.mean()) ** 2)
+    assert v.fit_free_run[0] == pytest.approx(100 * (1 - np.sqrt(err / norm)), rel=1e-9)
+    # errors compound: the wrong model's free run is worse than its one-step prediction
+    assert v.fit_free_run[0] < v.fit_one_step[0] - 10
+
+
+def test_fit_falls_with_horizon_for_a_wrong_model() -> None:
+    wrong = dataclasses.replace(PLANT, b=(0.5,))
+    seg = run_plant(PLANT, _noise_input(8000, 1), noise=2e-3)
+    v = validate(wrong, [seg])
+    fits = v.fit_vs_horizon[:, 0]
+    assert v.horizons.tolist() == [1, 4, 8, 20, 40, 80, 200, 400, 800]
+    # the plant forgets its past in ~50 samples: fit falls until then, then levels off
+    assert np.all(np.diff(fits[:6]) < 0)
+    assert np.allclose(fits[6:], v.fit_free_run[0], atol=0.5)
+    assert v.fit_free_run[0] < fits[0] - 10
+
+
+def test_residuals_white_for_true_model_not_for_wrong() -> None:
+    segs = [run_plant(PLANT, _noise_input(6000, s), noise=2e-3, seed=s) for s in (5, 6)]
+    good = validate(PLANT, segs, max_lag=30).residuals
+    assert good.n == 12000 - 2 * 3  # the delay and one step of history are unpredictable
+    assert good.autocorr[0, 0] == pytest.approx(1.0)
+    assert good.band == pytest.approx(2.5758 / np.sqrt(good.n), rel=1e-3)
+    assert good.autocorr_outside[0] <= 0.1
+    assert good.crosscorr_outside[0, 0] <= 0.1
+    bad = validate(dataclasses.replace(PLANT, a=(0.95,), b=(0.3,)), segs, max_lag=30).residuals
+    assert bad.autocorr_outside[0] > 0.5
+    assert bad.crosscorr_outside[0, 0] > 0.5
+
+
+def test_residual_correlation_never_pairs_segments() -> None:
+    # two segments of constant, opposite residuals: pooled lag-1 autocorrelation is 1
+    # within each; pairing across the boundary would lower it
+    e = [np.r_[np.ones(50), -np.ones(50)][:, None], np.r_[-np.ones(50), np.ones(50)][:, None]]
+    u = [np.arange(100.0)[:, None]] * 2
+    t = residual_test(e, u, max_lag=1)
+    assert t.autocorr[1, 0] == pytest.approx((98 - 2) / 100 * 1.0 - 0.0, abs=0.02)
+
+
+def test_eigenvalues_and_stability() -> None:
+    seg = run_plant(PLANT, _noise_input(1000, 0))
+    v = validate(PLANT, [seg], horizons_s=())
+    assert v.eigenvalues is not None and np.allclose(v.eigenvalues, [0.98])
+    assert v.stable is True
+    unstable = dataclasses.replace(PLANT, a=(1.01,))
+    assert validate(unstable, [seg], horizons_s=()).stable is False
+    hidden = dataclasses.replace(PLANT, expose_a=False)
+    v2 = validate(hidden, [seg], horizons_s=())
+    assert v2.eigenvalues is None and v2.stable is None
+
+
+def test_chirp_frequency_response_matches_true_plant() -> None:
+    n = round(60 / DT)
+    meta = {"f_start_hz": 0.5, "f_stop_hz": 20.0}
+    seg = run_plant(PLANT, chirp(n, DT), source="sysid", meta=meta)
+    v = validate(PLANT, [seg], horizons_s=())
+    (fr,) = v.frequency
+    assert (fr.input_name, fr.output_name, fr.band_hz) == ("u_roll", "p", (0.5, 20.0))
+    band = (fr.freq_hz >= 1.0) & (fr.freq_hz <= 15.0)
+    truth = PLANT.response(fr.freq_hz[band])
+    assert np.all(fr.coherence[band] > 0.95)
+    assert np.allclose(fr.measured[band], truth, rtol=0.03)
+    assert np.allclose(fr.model[band], truth, rtol=0.03)
+    # a model with 20 % more gain shows it in its response, measured stays the truth
+    fr_big = validate(dataclasses.replace(PLANT, b=(0.72,)), [seg], horizons_s=()).frequency[0]
+    ratio = np.abs(fr_big.model[band]) / np.abs(truth)
+    assert np.allclose(ratio, 1.2, rtol=0.03)
+    assert np.allclose(fr_big.measured[band], truth, rtol=0.03)
+
+
+def test_no_frequency_response_without_chirp() -> None:
+    seg = run_plant(PLANT, _noise_input(2000, 0))
+    assert validate(PLANT, [seg], horizons_s=()).frequency == ()
+
+
+def test_bad_input_raises_typed_errors() -> None:
+    seg = run_plant(PLANT, _noise_input(500, 0))
+    with pytest.raises(NoExcitationError):
+        validate(PLANT, [])
+    other = dataclasses.replace(PLANT, state_names=("q",))
+    with pytest.raises(ConfigError, match="no state q"):
+        validate(other, [seg])
+    with pytest.raises(ConfigError, match="dt"):
+        validate(dataclasses.replace(PLANT, dt=0.01), [seg])

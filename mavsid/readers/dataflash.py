@@ -1,0 +1,882 @@
+"""ArduPilot DataFlash binary logs (``.bin``): columnar, vectorised decoding.
+
+A DataFlash log is a sequence of records ``0xA3 0x95 <type> <payload>``. FMT records (type 128,
+89 bytes) declare each type's length, name, format characters and column names. This reader
+
+1. memory-maps the file and finds every ``0xA3 0x95`` pair with numpy (the *candidates*);
+2. reads the FMT definitions (a type may be redefined later in the log, e.g. in concatenated
+   logs: each record uses the definition in force at its position, or the type's first one);
+3. frames the log: a candidate is a record when its type is defined and either the next
+   record's header follows exactly where it ends (forward evidence) or the record before it
+   ends exactly where it starts (backward evidence; a record with only backward evidence may
+   not swallow a record with forward evidence); from the first such record, each record is
+   followed by the next one at or after its end, so garbage is skipped and reading resumes on
+   the next valid record;
+4. gathers each type's records into one structured numpy array through an overlapping view
+   of the file (one fancy-indexing call per type) and converts every field to a column.
+
+Values are those pymavlink presents: format characters ``c C e E`` are divided by 100 and ``L``
+by 1e7 (as pymavlink does it: ``value / (1 / multiplier)``), ``a`` is an ``int16[32]`` row,
+``n N Z`` are ``str`` (UTF-8, else Latin-1, cut at the first NUL; ``FILE.Data`` stays raw
+``bytes``), ``g`` is a half float (given as float32), ``M`` the raw mode number. FMTU/UNIT/MULT
+give per-field units and multipliers as metadata; the multipliers are *not* applied, and none
+is given for fields the format character already scales.
+
+Time: ``time_s`` is ``TimeUS * 1e-6`` (old logs: ``TimeMS * 1e-3``, except GPS messages, whose
+``TimeMS`` is GPS time of week). A message without such a field gets the time of the latest
+timestamped record before it in the file (NaN before the first one); the choice is a hold, not
+an interpolation, so that a parameter or text is never stamped with a time it was not yet
+written at. Times are kept as logged: after a reboot or in concatenated logs they go backwards;
+the reader notes where (``SourceInfo.notes``) and warns.
+
+Examples
+--------
+>>> import os, tempfile
+>>> from mavsid.readers.dataflash import build_record, build_fmt
+>>> data = build_fmt(0x81, "TST", "Qc", "TimeUS,Val") + build_record(0x81, "Qc", 1_500_000, -1234)
+>>> with tempfile.NamedTemporaryFile(suffix=".bin", delete=False) as f:
+...     _ = f.write(data)
+>>> log = read(f.name)
+>>> log["TST"]["Val"].tolist(), log["TST"].time_s.tolist()
+([-12.34], [1.5])
+>>> os.unlink(f.name)
+"""
+
+from __future__ import annotations
+
+import mmap
+import os
+import re
+import struct
+import warnings
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+
+from mavsid.data import MessageTable, ModeChange, RawLog, SourceInfo, TextMessage
+from mavsid.errors import DataQualityWarning, LogFormatError
+
+__all__ = [
+    "FORMAT_CHARS",
+    "Definition",
+    "assemble",
+    "build_fmt",
+    "build_record",
+    "read",
+]
+
+_HEAD1, _HEAD2 = 0xA3, 0x95
+_HEAD_U16 = _HEAD1 | (_HEAD2 << 8)
+_FMT_TYPE = 0x80
+_FMT_LEN = 89
+_CHUNK = 1 << 23  # bytes scanned per step when looking for headers
+_BACKWARDS_S = 0.5  # a time step back larger than this is a discontinuity
+_PRUNE_ROUNDS = 32  # vectorised chain rounds before falling back to a plain walk
+
+
+@dataclass(frozen=True)
+class _Char:
+    """How one DataFlash format character is stored and presented."""
+
+    dtype: str  # numpy dtype of the stored value (little-endian)
+    kind: str  # "int", "float", "str" or "array"
+    multiplier: float | None = None  # scaling pymavlink applies (c C e E L)
+
+
+#: format character -> storage and presentation
+FORMAT_CHARS: Mapping[str, _Char] = {
+    "a": _Char("(32,)<i2", "array"),
+    "b": _Char("<i1", "int"),
+    "B": _Char("<u1", "int"),
+    "g": _Char("<f2", "float"),
+    "h": _Char("<i2", "int"),
+    "H": _Char("<u2", "int"),
+    "i": _Char("<i4", "int"),
+    "I": _Char("<u4", "int"),
+    "f": _Char("<f4", "float"),
+    "d": _Char("<f8", "float"),
+    "n": _Char("S4", "str"),
+    "N": _Char("S16", "str"),
+    "Z": _Char("S64", "str"),
+    "c": _Char("<i2", "float", 0.01),
+    "C": _Char("<u2", "float", 0.01),
+    "e": _Char("<i4", "float", 0.01),
+    "E": _Char("<u4", "float", 0.01),
+    "L": _Char("<i4", "float", 1.0e-7),
+    "M": _Char("<i1", "int"),
+    "q": _Char("<i8", "int"),
+    "Q": _Char("<u8", "int"),
+}
+
+_STRUCT_CHARS = {"a": "64s", "g": "e", "n": "4s", "N": "16s", "Z": "64s", "c": "h",
+                 "C": "H", "e": "i", "E": "I", "L": "i", "M": "b"}
+
+_META_NAMES = ("FMT", "FMTU", "UNIT", "MULT", "PARM", "MSG", "MODE")
+_FORMAT_ONLY = frozenset({"FMT", "FMTU", "UNIT", "MULT"})
+
+
+@dataclass(frozen=True)
+class Definition:
+    """One message type as an FMT record defines it.
+
+    Examples
+    --------
+    >>> d = Definition(0x81, "ATT", 3 + 8 + 4, "Qf", ("TimeUS", "Roll"))
+    >>> d.payload_dtype.itemsize, d.fields
+    (12, (('TimeUS', 0), ('Roll', 1)))
+    """
+
+    type: int
+    name: str
+    length: int  # bytes, header included
+    format: str
+    columns: tuple[str, ...]
+
+    @cached_property
+    def fields(self) -> tuple[tuple[str, int], ...]:
+        """``(column name, index into format)`` in log order; a repeated name keeps its last
+        position (as pymavlink does); columns beyond the format are ignored."""
+        last: dict[str, int] = {}
+        for i, name in enumerate(self.columns[: len(self.format)]):
+            if name:
+                last[name] = i
+        seen: set[str] = set()
+        out = []
+        for name in self.columns[: len(self.format)]:
+            if name and name not in seen:
+                seen.add(name)
+                out.append((name, last[name]))
+        return tuple(out)
+
+    @cached_property
+    def payload_dtype(self) -> np.dtype:
+        """Packed structured dtype of the payload, fields named ``f0, f1, ...``."""
+        names, formats, offsets, ofs = [], [], [], 0
+        for i, ch in enumerate(self.format):
+            dt = np.dtype(FORMAT_CHARS[ch].dtype)
+            names.append(f"f{i}")
+            formats.append(dt)
+            offsets.append(ofs)
+            ofs += dt.itemsize
+        return np.dtype({"names": names, "formats": formats, "offsets": offsets,
+                         "itemsize": ofs})
+
+    def problem(self) -> str | None:
+        """Why this definition cannot be used, or None."""
+        bad = sorted({c for c in self.format if c not in FORMAT_CHARS})
+        if bad:
+            return f"unknown format character(s) {''.join(bad)!r}"
+        size = 3 + self.payload_dtype.itemsize
+        if size != self.length:
+            return f"declared length {self.length} but format {self.format!r} needs {size}"
+        return None
+
+    def time_field(self) -> tuple[int, float] | None:
+        """``(format index, seconds per count)`` of the field giving boot time, if any."""
+        index = dict(self.fields)
+        if "TimeUS" in index and self.format[index["TimeUS"]] in "QqIi":
+            return index["TimeUS"], 1e-6
+        if ("TimeMS" in index and not self.name.startswith("GPS")
+                and self.format[index["TimeMS"]] in "QqIi"):
+            return index["TimeMS"], 1e-3
+        return None
+
+
+_FMT_DEF = Definition(_FMT_TYPE, "FMT", _FMT_LEN, "BBnNZ",
+                      ("Type", "Length", "Name", "Format", "Columns"))
+
+
+# --------------------------------------------------------------------------- writing helpers
+def build_record(msg_type: int, fmt: str, *values: object) -> bytes:
+    """One binary record (header + packed payload), for tests and synthetic logs.
+
+    Scaled characters take the *raw* stored integer (e.g. centidegrees for ``c``).
+
+    Examples
+    --------
+    >>> build_record(0x81, "Bh", 1, -2).hex()
+    'a3958101feff'
+    """
+    packed = []
+    for ch, v in zip(fmt, values, strict=True):
+        if isinstance(v, str):
+            v = v.encode()
+        if ch == "a" and not isinstance(v, bytes):
+            v = np.asarray(v, "<i2").tobytes()
+        packed.append(v)
+    spec = "<" + "".join(_STRUCT_CHARS.get(c, c) for c in fmt)
+    return bytes((_HEAD1, _HEAD2, msg_type)) + struct.pack(spec, *packed)
+
+
+def build_fmt(msg_type: int, name: str, fmt: str, columns: str) -> bytes:
+    """The FMT record that defines ``msg_type``.
+
+    Examples
+    --------
+    >>> len(build_fmt(0x81, "TST", "Qf", "TimeUS,X"))
+    89
+    """
+    length = 3 + struct.calcsize("<" + "".join(_STRUCT_CHARS.get(c, c) for c in fmt))
+    return build_record(_FMT_TYPE, "BBnNZ", msg_type, length, name, fmt, columns)
+
+
+# --------------------------------------------------------------------------- framing
+def _find_headers(a: np.ndarray) -> np.ndarray:
+    """Offsets of every ``0xA3 0x95`` byte pair, ascending (int64)."""
+    n = a.size
+    found = []
+    for start in range(0, max(n - 1, 0), _CHUNK):
+        seg = a[start : min(n, start + _CHUNK + 1)]
+        for parity in (0, 1):
+            sub = seg[parity:]
+            sub = sub[: sub.size - sub.size % 2]
+            hits = np.flatnonzero(sub.view("<u2") == _HEAD_U16)
+            found.append(hits * 2 + (start + parity))
+    if not found:
+        return np.zeros(0, np.int64)
+    pos = np.concatenate(found).astype(np.int64, copy=False)
+    pos.sort(kind="stable")
+    return pos
+
+
+def _decode_text(raw: bytes) -> str:
+    """Bytes as pymavlink presents them: UTF-8, else Latin-1, cut at the first NUL."""
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError:
+        text = raw.decode("iso-8859-1")
+    cut = text.find("\0")
+    return text if cut < 0 else text[:cut]
+
+
+def _strings(raw: np.ndarray) -> np.ndarray:
+    """``S`` array -> object array of ``str`` (each distinct value decoded once)."""
+    if raw.size == 0:
+        return np.zeros(raw.shape, dtype=object)
+    uniq, inverse = np.unique(raw, return_inverse=True)
+    table = np.empty(len(uniq), dtype=object)
+    table[:] = [_decode_text(b) for b in uniq.tolist()]
+    return table[inverse.reshape(raw.shape)]
+
+
+@dataclass
+class _Definitions:
+    """Every usable definition and, per type, where each takes effect."""
+
+    defs: list[Definition] = field(default_factory=list)
+    # type -> [(file offset of the FMT record, index into defs)], by offset
+    by_type: dict[int, list[tuple[int, int]]] = field(default_factory=dict)
+    problems: list[str] = field(default_factory=list)
+    # offsets of FMT records whose text fields are plausible (evidence of a record there)
+    plausible: list[int] = field(default_factory=list)
+
+
+def _read_definitions(a: np.ndarray, fmt_pos: np.ndarray) -> _Definitions:
+    """Parse the FMT records at ``fmt_pos`` (already known to be complete)."""
+    out = _Definitions()
+    out.defs.append(_FMT_DEF)
+    out.by_type[_FMT_TYPE] = [(-1, 0)]
+    if fmt_pos.size == 0:
+        return out
+    recs = _records(a, _FMT_DEF.payload_dtype, fmt_pos + 3)
+    index: dict[Definition, int] = {_FMT_DEF: 0}
+    bad: dict[int, str] = {}
+    for pos, (mtype, length, name, fmt, cols) in zip(fmt_pos.tolist(), recs.tolist(), strict=True):
+        if mtype == _FMT_TYPE:
+            continue
+        try:
+            sname = name.split(b"\0", 1)[0].decode("ascii")
+            sfmt = fmt.split(b"\0", 1)[0].decode("ascii")
+        except UnicodeDecodeError:
+            continue
+        if not sname.isprintable() or not sname.strip():
+            continue
+        out.plausible.append(pos)
+        columns = tuple(_decode_text(cols).split(",")) if cols else ()
+        d = Definition(int(mtype), sname, int(length), sfmt, columns)
+        problem = d.problem()
+        if problem is not None:
+            bad[d.type] = f"type {d.type} ({d.name}): {problem}"
+            continue
+        if d not in index:
+            index[d] = len(out.defs)
+            out.defs.append(d)
+        entries = out.by_type.setdefault(d.type, [])
+        if not entries or entries[-1][1] != index[d]:
+            entries.append((pos, index[d]))
+    out.problems = [msg for t, msg in sorted(bad.items()) if t not in out.by_type]
+    return out
+
+
+def _record_view(a: np.ndarray, dtype: np.dtype) -> np.ndarray:
+    """Overlapping view: element ``k`` is ``dtype`` read at byte ``k`` of the file."""
+    count = a.size - dtype.itemsize + 1
+    if count <= 0:
+        return np.zeros(0, dtype)
+    return np.ndarray((count,), dtype=dtype, buffer=a, offset=0, strides=(1,))
+
+
+def _records(a: np.ndarray, dtype: np.dtype, offsets: np.ndarray) -> np.ndarray:
+    """Copy the ``dtype`` items starting at ``offsets`` (one plain-bytes gather)."""
+    raw = _record_view(a, np.dtype((np.void, dtype.itemsize)))[offsets]
+    return raw.view(dtype)
+
+
+def _assign_definitions(
+    pos: np.ndarray, types: np.ndarray, table: _Definitions
+) -> np.ndarray:
+    """Index into ``table.defs`` for each candidate (-1: type undefined)."""
+    first = np.full(256, -1, np.int64)
+    for t, entries in table.by_type.items():
+        first[t] = entries[0][1]
+    defid = first[types]
+    multi = {t: e for t, e in table.by_type.items() if len(e) > 1}
+    if multi:
+        order = np.argsort(types, kind="stable")
+        bounds = np.concatenate([[0], np.cumsum(np.bincount(types, minlength=256))])
+        for t, entries in multi.items():
+            sel = order[bounds[t] : bounds[t + 1]]
+            starts = np.array([p for p, _ in entries], np.int64)
+            ids = np.array([i for _, i in entries], np.int64)
+            k = np.searchsorted(starts, pos[sel], side="right") - 1
+            defid[sel] = ids[np.maximum(k, 0)]
+    return defid
+
+
+def _successors(pos: np.ndarray, end: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """Index of the first of ``pos`` at or after each ``end`` (``pos.size`` when none).
+
+    Only entries with ``ok`` are computed (others: ``pos.size``); the common case, the very
+    next entry, is checked first so that only the rest needs a binary search.
+    """
+    m = pos.size
+    nxt = np.full(m, m, np.int64)
+    if m == 0:
+        return nxt
+    direct = np.zeros(m, bool)
+    direct[:-1] = ok[:-1] & (pos[1:] == end[:-1])
+    k = np.flatnonzero(direct)
+    nxt[k] = k + 1
+    rest = np.flatnonzero(ok & ~direct)
+    nxt[rest] = np.searchsorted(pos, end[rest], side="left")
+    return nxt
+
+
+def _chain(pos: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """Greedy chain from the first node: indices of the nodes it visits.
+
+    Each node is followed by the first node at or after its end. Nodes off the chain are
+    removed by repeatedly dropping nodes nothing alive points to (vectorised); a plain walk
+    takes over if that has not settled after a few rounds (adversarial input).
+    """
+    m = pos.size
+    if m <= 1 or np.array_equal(end[:-1], pos[1:]):
+        return np.arange(m)
+    nxt = _successors(pos, end, np.ones(m, bool))
+    alive = np.ones(m, bool)
+    for _ in range(_PRUNE_ROUNDS):
+        hit = np.zeros(m + 1, bool)
+        hit[nxt[alive]] = True
+        new = alive & hit[:m]
+        new[0] = True
+        if np.array_equal(new, alive):
+            return np.flatnonzero(alive)
+        alive = new
+    visited = []
+    i = 0
+    nxt_list = nxt.tolist()
+    while i < m:  # strictly increasing: always progresses
+        visited.append(i)
+        i = nxt_list[i]
+    return np.array(visited, np.int64)
+
+
+@dataclass
+class _Framing:
+    pos: np.ndarray  # offsets of accepted records, ascending
+    defid: np.ndarray  # their definition index
+    end: np.ndarray  # offsets just past each record
+
+
+def _frame(a: np.ndarray, cand: np.ndarray, table: _Definitions) -> _Framing:
+    """The accepted records among the header candidates ``cand`` (see the module doc)."""
+    n = a.size
+    types = a[cand + 2]
+    defid = _assign_definitions(cand, types, table)
+    lengths = np.array([d.length for d in table.defs] + [0], np.int64)
+    end = cand + lengths[defid]  # undefined (-1) -> the sentinel 0
+    complete = (end > cand) & (end <= n)
+    m = cand.size
+    j = _successors(cand, end, complete)
+    found = j < m
+    fwd = complete & found
+    fwd[found] &= (cand[j[found]] == end[found]) & complete[j[found]]
+    has_in = np.zeros(m + 1, bool)
+    has_in[j[fwd]] = True
+    node = complete & (fwd | has_in[:m])
+    node[np.searchsorted(cand, np.array(table.plausible, np.int64))] = True
+    back_only = np.flatnonzero(node & ~fwd)
+    fpos = cand[fwd]
+    if back_only.size and fpos.size:
+        k = np.searchsorted(fpos, cand[back_only], side="right")
+        swallows = (k < fpos.size) & (fpos[np.minimum(k, fpos.size - 1)] < end[back_only])
+        node[back_only[swallows]] = False
+    nodes = np.flatnonzero(node)
+    keep = nodes[_chain(cand[nodes], end[nodes])]
+    return _Framing(cand[keep], defid[keep], end[keep])
+
+
+# --------------------------------------------------------------------------- decoding
+def _column(raw: np.ndarray, ch: str, message: str) -> np.ndarray:
+    """One field of a structured gather, as pymavlink presents it."""
+    spec = FORMAT_CHARS[ch]
+    if spec.kind == "str":
+        if message == "FILE" and ch == "Z":
+            rows = np.ascontiguousarray(raw).view(np.uint8).reshape(raw.shape[0], -1)
+            out = np.empty(raw.shape[0], dtype=object)
+            out[:] = [r.tobytes() for r in rows]
+            return out
+        return _strings(raw)
+    if spec.multiplier is not None:
+        divisor = 1 / spec.multiplier  # pymavlink divides by this for accuracy
+        return raw.astype(np.float64) / divisor
+    if ch == "g":
+        return raw.astype(np.float32)
+    return np.ascontiguousarray(raw).astype(raw.dtype.newbyteorder("="), copy=False)
+
+
+def _gather(a: np.ndarray, d: Definition, pos: np.ndarray) -> dict[str, np.ndarray]:
+    """Decode the records of definition ``d`` at offsets ``pos``."""
+    recs = _records(a, d.payload_dtype, pos + 3)
+    return {name: _column(recs[f"f{i}"], d.format[i], d.name) for name, i in d.fields}
+
+
+def _gather_times(a: np.ndarray, d: Definition, pos: np.ndarray) -> np.ndarray | None:
+    """Boot time (s) of the records of ``d`` at ``pos``, or None when ``d`` has none."""
+    tf = d.time_field()
+    if tf is None:
+        return None
+    i, scale = tf
+    dt = np.dtype(FORMAT_CHARS[d.format[i]].dtype)
+    ofs = sum(np.dtype(FORMAT_CHARS[c].dtype).itemsize for c in d.format[:i])
+    return _records(a, dt, pos + 3 + ofs).astype(np.float64) * scale
+
+
+# --------------------------------------------------------------------------- metadata
+def _units(
+    tables: Mapping[str, Mapping[str, np.ndarray]], defs_by_name: Mapping[str, Definition]
+) -> tuple[dict[str, dict[str, str]], dict[str, dict[str, float]]]:
+    """Per-message field units and multipliers from FMTU/UNIT/MULT."""
+    unit_of: dict[str, str] = {}
+    mult_of: dict[str, float] = {}
+    if "UNIT" in tables and {"Id", "Label"} <= set(tables["UNIT"]):
+        for i, label in zip(tables["UNIT"]["Id"].tolist(), tables["UNIT"]["Label"].tolist(),
+                            strict=True):
+            unit_of[chr(int(i) % 256)] = str(label)
+    if "MULT" in tables and {"Id", "Mult"} <= set(tables["MULT"]):
+        for i, mult in zip(tables["MULT"]["Id"].tolist(), tables["MULT"]["Mult"].tolist(),
+                           strict=True):
+            mult_of[chr(int(i) % 256)] = float(f"{float(mult):.7g}")
+    units: dict[str, dict[str, str]] = {}
+    mults: dict[str, dict[str, float]] = {}
+    fmtu = tables.get("FMTU", {})
+    if not {"FmtType", "UnitIds"} <= set(fmtu):
+        return units, mults
+    type_names: dict[int, str] = {}
+    for name, d in defs_by_name.items():
+        type_names.setdefault(d.type, name)
+    mult_ids = fmtu.get("MultIds")
+    for k, (ftype, uids) in enumerate(zip(fmtu["FmtType"].tolist(), fmtu["UnitIds"].tolist(),
+                                          strict=True)):
+        target = type_names.get(int(ftype))
+        if target is None:
+            continue
+        d = defs_by_name[target]
+        mids = str(mult_ids[k]) if mult_ids is not None else ""
+        u, mm = units.setdefault(target, {}), mults.setdefault(target, {})
+        for col, i in d.fields:
+            if i < len(uids) and unit_of.get(uids[i]):
+                u[col] = unit_of[uids[i]]
+            ch = d.format[i]
+            if (i < len(mids) and FORMAT_CHARS[ch].multiplier is None
+                    and FORMAT_CHARS[ch].kind in ("int", "float")):
+                mult = mult_of.get(mids[i])
+                if mult:
+                    mm[col] = mult
+    return units, mults
+
+
+_VEHICLES = (("ArduCopter", "copter"), ("ArduPlane", "plane"), ("ArduRover", "rover"),
+             ("Rover", "rover"), ("ArduSub", "sub"), ("AntennaTracker", "tracker"),
+             ("Blimp", "blimp"), ("Heli", "heli"), ("Copter", "copter"), ("Plane", "plane"))
+_FIRMWARE_RE = re.compile(r"^(?:Ardu\w+|APM:\w+|Rover|Blimp|AntennaTracker)\b.*?\d+\.\d+")
+# VER.BU build type -> vehicle
+_BUILD_TYPES = {1: "rover", 2: "copter", 3: "plane", 4: "tracker", 7: "sub", 12: "blimp",
+                13: "heli"}
+
+
+def _vehicle_and_firmware(
+    texts: Sequence[TextMessage], tables: Mapping[str, Mapping[str, np.ndarray]]
+) -> tuple[str | None, str | None]:
+    firmware = next((t.text for t in texts if _FIRMWARE_RE.match(t.text)), None)
+    ver = tables.get("VER", {})
+    if firmware is None and "FWS" in ver and len(ver["FWS"]):
+        firmware = str(ver["FWS"][0]) or None
+    vehicle = None
+    if "BU" in ver and len(ver["BU"]):
+        vehicle = _BUILD_TYPES.get(int(ver["BU"][0]))
+    if vehicle is None and firmware:
+        vehicle = next((v for key, v in _VEHICLES if key in firmware), None)
+    frame = next((t.text.split(":", 1)[1].strip() for t in texts
+                  if t.text.startswith("Frame:")), None)
+    if vehicle and frame:
+        vehicle = f"{vehicle} {frame}"
+    return vehicle, firmware
+
+
+def _mode_names(vehicle: str | None) -> dict[int, str]:
+    """Mode number -> name for the vehicle type (pymavlink's tables)."""
+    if not vehicle:
+        return {}
+    from pymavlink import mavutil  # lazy: slow to import
+
+    mav = mavutil.mavlink
+    kind = vehicle.split()[0]
+    mav_type = {"copter": mav.MAV_TYPE_QUADROTOR, "heli": mav.MAV_TYPE_HELICOPTER,
+                "plane": mav.MAV_TYPE_FIXED_WING, "rover": mav.MAV_TYPE_GROUND_ROVER,
+                "sub": mav.MAV_TYPE_SUBMARINE, "tracker": mav.MAV_TYPE_ANTENNA_TRACKER,
+                "blimp": mav.MAV_TYPE_AIRSHIP}.get(kind)
+    mapping = mavutil.mode_mapping_bynumber(mav_type) if mav_type is not None else None
+    return dict(mapping or {})
+
+
+def _modes(table: Mapping[str, np.ndarray] | None, time_s: np.ndarray | None,
+           vehicle: str | None) -> tuple[ModeChange, ...]:
+    if not table or time_s is None:
+        return ()
+    names = _mode_names(vehicle)
+    by_name = {v.upper(): k for k, v in names.items()}
+    out = []
+    num = table.get("ModeNum", table.get("Mode"))
+    if num is None:
+        return ()
+    for t, m in zip(time_s.tolist(), num.tolist(), strict=True):
+        if isinstance(m, str):  # text logs print the mode name
+            out.append(ModeChange(float(t), by_name.get(m.upper(), -1), m.upper()))
+        else:
+            out.append(ModeChange(float(t), int(m), names.get(int(m))))
+    return tuple(out)
+
+
+def assemble(
+    source: SourceInfo,
+    columns: Mapping[str, Mapping[str, np.ndarray]],
+    times: Mapping[str, np.ndarray],
+    defs_by_name: Mapping[str, Definition],
+    wanted: Iterable[str] | None,
+    meta_columns: Mapping[str, Mapping[str, np.ndarray]] | None = None,
+    meta_times: Mapping[str, np.ndarray] | None = None,
+) -> RawLog:
+    """Build the :class:`RawLog` from decoded columns (shared by the binary and text readers).
+
+    ``columns``/``times`` hold the messages to return; ``meta_*`` the full-log PARM, MSG,
+    MODE, VER and FMTU/UNIT/MULT tables used for parameters, texts, modes and units.
+    """
+    meta_columns = meta_columns if meta_columns is not None else columns
+    meta_times = meta_times if meta_times is not None else times
+    units, mults = _units(meta_columns, defs_by_name)
+    messages = {
+        name: MessageTable(name, dict(cols), times[name], units.get(name, {}),
+                           mults.get(name, {}))
+        for name, cols in columns.items()
+        if wanted is None or name in wanted
+    }
+    params: dict[str, float] = {}
+    parm = meta_columns.get("PARM", {})
+    if "Name" in parm and "Value" in parm:
+        for name, value in zip(parm["Name"].tolist(), parm["Value"].tolist(), strict=True):
+            params[str(name)] = float(value)
+    texts: tuple[TextMessage, ...] = ()
+    msg = meta_columns.get("MSG", {})
+    if "Message" in msg:
+        texts = tuple(TextMessage(float(t), str(s)) for t, s in
+                      zip(meta_times["MSG"].tolist(), msg["Message"].tolist(), strict=True))
+    vehicle, firmware = _vehicle_and_firmware(texts, meta_columns)
+    modes = _modes(meta_columns.get("MODE"), meta_times.get("MODE"), vehicle)
+    return RawLog(source, messages, params=params, texts=texts, modes=modes,
+                  autopilot="ardupilot", vehicle=vehicle, firmware=firmware)
+
+
+def backwards_steps(time_s: np.ndarray, where: np.ndarray) -> list[tuple[int, float, float]]:
+    """``(where, from_s, to_s)`` for each step back in time of more than 0.5 s (NaN ignored).
+
+    Examples
+    --------
+    >>> backwards_steps(np.array([1.0, 2.0, np.nan, 0.1, 0.2]), np.arange(5))
+    [(3, 2.0, 0.1)]
+    """
+    ok = np.flatnonzero(np.isfinite(time_s))
+    t = time_s[ok]
+    k = np.flatnonzero(np.diff(t) < -_BACKWARDS_S)
+    return [(int(where[ok[i + 1]]), float(t[i]), float(t[i + 1])) for i in k.tolist()]
+
+
+def _skipped_regions(n: int, pos: np.ndarray, end: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Offsets and sizes of the byte ranges not covered by accepted records."""
+    starts = np.concatenate([[0], end])
+    stops = np.concatenate([pos, [n]])
+    gap = stops - starts
+    k = np.flatnonzero(gap > 0)
+    return starts[k], gap[k]
+
+
+# --------------------------------------------------------------------------- entry point
+def read(
+    path: str | os.PathLike[str],
+    messages: Sequence[str] | None = None,
+    start: float | None = None,
+    stop: float | None = None,
+) -> RawLog:
+    """Read a DataFlash ``.bin`` log.
+
+    Parameters
+    ----------
+    path : path-like
+        The log.
+    messages : sequence of str, optional
+        Return only these message types (names absent from the log are ignored; asking
+        ``RawLog`` for one raises :class:`~mavsid.errors.MissingMessageError`). Parameters,
+        texts and modes are always read.
+    start, stop : float, optional
+        Keep only records with ``start <= time_s <= stop`` (seconds of ``TimeUS``); records
+        without a time are then dropped.
+
+    Returns
+    -------
+    RawLog
+
+    Raises
+    ------
+    LogFormatError
+        The file cannot be opened or holds no decodable record.
+
+    Warns
+    -----
+    DataQualityWarning
+        Once, when bytes were skipped, definitions were unusable, time went backwards or the
+        log holds only format definitions.
+    """
+    spath = os.fspath(path)
+    try:
+        with open(spath, "rb") as f:
+            size = os.fstat(f.fileno()).st_size
+            if size == 0:
+                raise LogFormatError("empty file", path=spath)
+            buf: mmap.mmap | bytes = (
+                mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) if size >= 1 << 16
+                else f.read()
+            )
+    except OSError as exc:
+        raise LogFormatError(f"cannot open: {exc.strerror or exc}", path=spath) from None
+    try:
+        return _read_buffer(spath, np.frombuffer(buf, dtype=np.uint8), messages, start, stop)
+    finally:
+        if isinstance(buf, mmap.mmap):
+            try:
+                buf.close()
+            except BufferError:  # a view is still referenced somewhere: leave it to the GC
+                pass
+
+
+def _read_buffer(
+    path: str,
+    a: np.ndarray,
+    messages: Sequence[str] | None,
+    start: float | None,
+    stop: float | None,
+) -> RawLog:
+    n = a.size
+    notes: list[str] = []
+    cand = _find_headers(a)
+    cand = cand[cand + 2 < n]
+    fmt_pos = cand[(cand + _FMT_LEN <= n)]
+    fmt_pos = fmt_pos[a[fmt_pos + 2] == _FMT_TYPE]
+    table = _read_definitions(a, fmt_pos)
+    framing = _frame(a, cand, table)
+    # definitions only from FMT records that are part of the log (rarely differs)
+    fmt_kept = framing.pos[framing.defid == 0]
+    if not np.isin(np.array(table.plausible, np.int64), fmt_kept).all():
+        table = _read_definitions(a, fmt_kept)
+        framing = _frame(a, cand, table)
+    if framing.pos.size == 0:
+        raise LogFormatError("no DataFlash records found", path=path)
+    notes.extend(table.problems)
+
+    # accepted records grouped by definition (radix sort on small integers)
+    ndefs = len(table.defs)
+    defid = framing.defid.astype(np.int16 if ndefs < 1 << 15 else np.int32)
+    order = np.argsort(defid, kind="stable")
+    bounds = np.concatenate([[0], np.cumsum(np.bincount(defid, minlength=ndefs))])
+    rows = {i: order[bounds[i] : bounds[i + 1]] for i in range(ndefs) if bounds[i + 1] > bounds[i]}
+    by_name: dict[str, list[int]] = {}
+    for i in sorted(rows, key=lambda i: int(rows[i][0])):
+        by_name.setdefault(table.defs[i].name, []).append(i)
+
+    wanted = None if messages is None else set(messages)
+    decode = set(by_name) if wanted is None else (wanted | set(_META_NAMES) | {"VER"})
+    times = _record_times(a, framing, table, rows, {i for nm in decode if nm in by_name
+                                                    for i in by_name[nm]})
+    steps = backwards_steps(times, framing.pos)
+    if steps:
+        shown = ", ".join(f"byte {w} ({t0:.3f} s -> {t1:.3f} s)" for w, t0, t1 in steps[:5])
+        notes.append(f"time goes backwards {len(steps)} time(s) (reboot or concatenated logs): "
+                     f"{shown}")
+
+    columns: dict[str, dict[str, np.ndarray]] = {}
+    time_s: dict[str, np.ndarray] = {}
+    meta_columns: dict[str, dict[str, np.ndarray]] = {}
+    meta_times: dict[str, np.ndarray] = {}
+    defs_by_name: dict[str, Definition] = {}
+    for name, ids in by_name.items():
+        if name not in decode:
+            continue
+        parts = [(table.defs[i], rows[i]) for i in ids]
+        defs_by_name[name] = parts[-1][0]
+        is_meta = name in _META_NAMES or name == "VER"
+        if wanted is not None and name not in wanted and not is_meta:
+            continue
+        if is_meta or (start is None and stop is None):
+            cols, t = _merge(a, framing.pos, times, parts)
+            if is_meta:
+                meta_columns[name], meta_times[name] = cols, t
+            if wanted is None or name in wanted:
+                keep = _window(t, start, stop)
+                columns[name] = cols if keep is None else {k: v[keep] for k, v in cols.items()}
+                time_s[name] = t if keep is None else t[keep]
+            continue
+        # windowed: decode only the records inside the window
+        parts = [(d, r[_window(times[r], start, stop)]) for d, r in parts]
+        columns[name], time_s[name] = _merge(a, framing.pos, times, parts)
+
+    skip_at, skip_len = _skipped_regions(n, framing.pos, framing.end)
+    skipped = int(skip_len.sum())
+    if skipped:
+        inside = np.searchsorted(cand, skip_at)
+        inside = inside[inside < cand.size]
+        unknown = sorted({int(t) for t in a[cand[inside] + 2] if int(t) not in table.by_type})
+        shown = ", ".join(f"{int(o)}+{int(k)}" for o, k in zip(skip_at[:5], skip_len[:5],
+                                                              strict=True))
+        notes.insert(0, f"skipped {skipped} undecodable byte(s) in {skip_at.size} region(s) "
+                     f"(offset+size: {shown}{', ...' if skip_at.size > 5 else ''})"
+                     + (f"; undefined type id(s) {unknown[:10]}" if unknown else ""))
+    if not set(by_name) - _FORMAT_ONLY:
+        notes.append("log holds only format definitions, no data records")
+    source = SourceInfo(path, "dataflash", n, skipped_bytes=skipped, notes=tuple(notes))
+    if notes:
+        warnings.warn(f"{path}: " + "; ".join(notes), DataQualityWarning, stacklevel=3)
+    return assemble(source, columns, time_s, defs_by_name, wanted, meta_columns, meta_times)
+
+
+def _window(t: np.ndarray, start: float | None, stop: float | None) -> np.ndarray | None:
+    """Boolean mask of ``start <= t <= stop`` (None when no bound is given)."""
+    if start is None and stop is None:
+        return None
+    keep = np.isfinite(t)
+    if start is not None:
+        keep &= t >= start
+    if stop is not None:
+        keep &= t <= stop
+    return keep
+
+
+def _record_times(
+    a: np.ndarray,
+    framing: _Framing,
+    table: _Definitions,
+    rows: Mapping[int, np.ndarray],
+    decoded: set[int],
+) -> np.ndarray:
+    """Time (s) of each accepted record, in file order.
+
+    Records of the ``decoded`` definitions get their own time, or, without a time field, the
+    time of the nearest earlier record that has one (NaN before the first). Other records'
+    entries are NaN except where needed for that hold.
+    """
+    times = np.full(framing.pos.size, np.nan)
+    timed = np.array([d.time_field() is not None for d in table.defs])
+    untimed_rows = []
+    for i in decoded:
+        if i not in rows:
+            continue
+        if timed[i]:
+            t = _gather_times(a, table.defs[i], framing.pos[rows[i]])
+            assert t is not None
+            times[rows[i]] = t
+        else:
+            untimed_rows.append(rows[i])
+    if untimed_rows:
+        r = np.concatenate(untimed_rows)
+        is_timed = timed[framing.defid]
+        prev = np.where(is_timed, np.arange(is_timed.size), -1)
+        np.maximum.accumulate(prev, out=prev)
+        src = prev[r]
+        need = np.unique(src[(src >= 0)])
+        need = need[np.isnan(times[need])]
+        for i in np.unique(framing.defid[need]).tolist():
+            k = need[framing.defid[need] == i]
+            t = _gather_times(a, table.defs[i], framing.pos[k])
+            assert t is not None
+            times[k] = t
+        times[r] = np.where(src >= 0, times[np.maximum(src, 0)], np.nan)
+    return times
+
+
+def _merge(
+    a: np.ndarray,
+    all_pos: np.ndarray,
+    time_s: np.ndarray,
+    parts: list[tuple[Definition, np.ndarray]],
+) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """Decode one message name whose records may use several definitions (log order).
+
+    ``parts`` holds ``(definition, rows)``; rows index ``all_pos`` and ``time_s``.
+    """
+    if len(parts) == 1:
+        d, r = parts[0]
+        return _gather(a, d, all_pos[r]), time_s[r]
+    # several layouts: decode each, then interleave by file position
+    rows = np.concatenate([r for _, r in parts])
+    order = np.argsort(rows, kind="stable")
+    decoded = [_gather(a, d, all_pos[r]) for d, r in parts]
+    names: list[str] = []
+    for cols in decoded:
+        names.extend(c for c in cols if c not in names)
+    merged: dict[str, np.ndarray] = {}
+    for c in names:
+        pieces = []
+        for (_, r), cols in zip(parts, decoded, strict=True):
+            if c in cols:
+                pieces.append(cols[c])
+            else:
+                like = next(x[c] for x in decoded if c in x)
+                pieces.append(_missing(like, r.size))
+        kinds = {p.dtype.kind for p in pieces}
+        if "O" in kinds:
+            pieces = [p.astype(object) for p in pieces]
+        elif any(p.shape[1:] != pieces[0].shape[1:] for p in pieces):
+            pieces = [_missing(pieces[0][:0].astype(np.float64), r.size) if p.shape[1:]
+                      != pieces[0].shape[1:] else p for p, (_, r) in zip(pieces, parts,
+                                                                         strict=True)]
+        merged[c] = np.concatenate(pieces)[order]
+    return merged, time_s[rows[order]]
+
+
+def _missing(like: np.ndarray, n: int) -> np.ndarray:
+    """Filler for a column one layout lacks: NaN (float) or empty string."""
+    if like.dtype.kind == "O":
+        out = np.empty((n, *like.shape[1:]), dtype=object)
+        out[...] = ""
+        return out
+    return np.full((n, *like.shape[1:]), np.nan)

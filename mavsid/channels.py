@@ -126,7 +126,8 @@ INPUT_NAMES: tuple[str, ...] = ("u_roll", "u_pitch", "u_yaw", "u_thrust")
 # unit symbol as logs spell it -> factor to SI (rad, rad/s, dimensionless)
 _UNIT_TO_SI: dict[str, float] = {
     "rad": 1.0, "rad/s": 1.0, "deg": math.pi / 180, "degrees": math.pi / 180,
-    "°": math.pi / 180, "deg/s": math.pi / 180, "degrees/s": math.pi / 180,
+    "°": math.pi / 180, "degheading": math.pi / 180, "deg/s": math.pi / 180,
+    "degrees/s": math.pi / 180,
     "°/s": math.pi / 180, "cdeg": math.pi / 18000, "centidegrees": math.pi / 18000,
     "cdeg/s": math.pi / 18000, "mrad/s": 1e-3, "1": 1.0, "": 1.0, "%": 0.01,
 }

@@ -1,0 +1,520 @@
+"""RawLog -> FlightData: every state and input on one uniform time grid, in SI units.
+
+:func:`align` takes the channels a :class:`~mavsid.channels.Preset` names (chosen from the
+log's content unless given) and
+
+- converts them to rad, rad/s and normalised inputs (motor PWMs through the frame's mixer);
+- unwraps yaw;
+- builds one grid with step ``1 / rate_hz`` (default: the mean sample interval of the
+  body-rate channel, or of the attitude when the log has no rates), anchored at the first
+  instant every channel has data;
+- interpolates states linearly and holds inputs (zero-order hold: each grid point gets the
+  latest input sample at or before it, never a value in between);
+- splits the grid into blocks wherever any channel pauses for more than ``max_gap``
+  of its own sample intervals: nothing is interpolated or held across a gap;
+- carries per-sample flags ``armed`` and ``airborne`` (bool) and ``mode`` (int, -1 before
+  the first mode message), from the log's events (DataFlash EV/ARM, MAVLink HEARTBEAT and
+  EXTENDED_SYS_STATE, PX4 actuator_armed / vehicle_land_detected);
+- warns (:class:`~mavsid.errors.DataQualityWarning`) when an input is logged too slowly
+  for attitude dynamics (below ``min_input_rate_hz``, e.g. 10 Hz RCOU).
+
+``FlightData.meta`` holds the native rate of every channel, the mixer used, and the
+ArduPilot SYSTEMID runs (``meta["sysid_runs"]``, from SIDS/SIDD or, in a .tlog, from the
+SYSTEMID mode and the SID_* parameter values sent before it).
+
+Examples
+--------
+>>> import numpy as np
+>>> from mavsid.data import MessageTable, RawLog, SourceInfo
+>>> t = np.arange(0.0, 1.0, 0.01)
+>>> att = MessageTable("ATTITUDE", {c: np.zeros_like(t) for c in
+...     ("roll", "pitch", "yaw", "rollspeed", "pitchspeed", "yawspeed")}, time_s=t)
+>>> log = RawLog(SourceInfo("x.tlog", "tlog", 0), {"ATTITUDE": att})
+>>> fd = align(log)
+>>> fd.preset, fd.state_names, round(fd.dt, 6), fd.blocks.tolist()
+('mavlink-att', ('roll', 'pitch', 'yaw', 'p', 'q', 'r'), 0.01, [[0, 100]])
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from mavsid.channels import (
+    INPUT_NAMES,
+    MIXERS,
+    STATE_NAMES,
+    STATE_UNITS,
+    Mixer,
+    Preset,
+    choose_preset,
+    evaluate,
+    get_preset,
+    mixer_for,
+    motor_thrusts,
+)
+from mavsid.data import FlightData, RawLog
+from mavsid.errors import ConfigError, DataQualityWarning, MavsidError, NoExcitationError
+
+__all__ = ["align", "sysid_runs"]
+
+#: a channel pausing longer than this many of its own median sample intervals is a gap
+MAX_GAP_SAMPLES = 4.0
+#: inputs logged slower than this cannot show attitude dynamics (a 10 Hz input sees < 5 Hz)
+MIN_INPUT_RATE_HZ = 20.0
+
+
+@dataclass(frozen=True)
+class _Series:
+    """One channel's native samples (sorted, finite) in SI units."""
+
+    name: str
+    source: str  # "MESSAGE.field" for messages and warnings
+    t: np.ndarray
+    v: np.ndarray
+
+    @property
+    def median_dt(self) -> float:
+        d = np.diff(self.t)
+        d = d[d > 0]
+        return float(np.median(d)) if d.size else float("nan")
+
+
+def _dedupe(t: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Keep the first of samples sharing a timestamp (interpolation needs increasing time)."""
+    if t.size < 2:
+        return t, v
+    keep = np.concatenate([[True], np.diff(t) > 0])
+    return t[keep], v[keep]
+
+
+def _resolve_preset(raw: RawLog, preset: Preset | str | None,
+                    presets: Mapping[str, Preset] | None) -> Preset:
+    if isinstance(preset, Preset):
+        return preset
+    if isinstance(preset, str):
+        return get_preset(preset, presets)
+    return choose_preset(raw, presets)
+
+
+def _collect(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer]
+             ) -> tuple[list[_Series], list[_Series], str | None]:
+    """States and inputs of the preset, as native series in canonical order."""
+    states: list[_Series] = []
+    for name in STATE_NAMES:
+        ch = preset.states.get(name)
+        if ch is None:
+            continue
+        try:
+            t, v = evaluate(raw, ch, f"{preset.name}:{name}")
+        except MavsidError:
+            if ch.optional:
+                continue
+            raise
+        if name == "yaw":
+            v = np.unwrap(v)
+        if t.size >= 2:
+            states.append(_Series(name, f"{ch.message}.{ch.field}", *_dedupe(t, v)))
+        elif not ch.optional:
+            raise NoExcitationError(f"{raw.source.path}: {ch.message} has fewer than 2 samples")
+    inputs: list[_Series] = []
+    mixer_name = None
+    if preset.motors is not None:
+        mixer = mixer_for(preset, raw.params, {**MIXERS, **mixers})
+        mixer_name = mixer.name
+        t, thrust = motor_thrusts(raw, preset, mixer)
+        u = mixer.unmix(thrust)
+        t, keep = _dedupe(t, np.arange(t.size))
+        for j, name in enumerate(INPUT_NAMES):
+            inputs.append(_Series(name, f"{preset.motors.message} ({mixer.name} mixer)", t,
+                                  u[keep, j]))
+    else:
+        for name in INPUT_NAMES:
+            ch = preset.inputs.get(name)
+            if ch is None:
+                continue
+            try:
+                t, v = evaluate(raw, ch, f"{preset.name}:{name}")
+            except MavsidError:
+                if ch.optional:
+                    continue
+                raise
+            if t.size >= 2:
+                inputs.append(_Series(name, f"{ch.message}.{ch.field}", *_dedupe(t, v)))
+    return states, inputs, mixer_name
+
+
+def _gaps(series: list[_Series], max_gap: float) -> np.ndarray:
+    """Union of every channel's gaps as sorted, disjoint open intervals ``(k, 2)``."""
+    spans = []
+    for s in series:
+        d = np.diff(s.t)
+        i = np.flatnonzero(d > max_gap * s.median_dt)
+        spans.append(np.column_stack([s.t[i], s.t[i + 1]]))
+    if not spans:
+        return np.empty((0, 2))
+    g = np.concatenate(spans)
+    if not g.size:
+        return np.empty((0, 2))
+    g = g[np.argsort(g[:, 0])]
+    merged = [g[0].copy()]
+    for a, b in g[1:]:
+        if a <= merged[-1][1]:
+            merged[-1][1] = max(merged[-1][1], b)
+        else:
+            merged.append(np.array([a, b]))
+    return np.asarray(merged)
+
+
+def _grid(series: list[_Series], ref: _Series, rate_hz: float | None, max_gap: float
+          ) -> tuple[np.ndarray, np.ndarray, float]:
+    """Uniform grid times, ``[start, stop)`` blocks and the step."""
+    gaps = _gaps(series, max_gap)
+    if rate_hz is None:
+        d = np.diff(ref.t)
+        ok = d <= max_gap * ref.median_dt
+        dt = float(d[ok].mean()) if ok.any() else float("nan")
+    else:
+        if not rate_hz > 0:
+            raise ConfigError(f"rate_hz must be positive, got {rate_hz}")
+        dt = 1.0 / float(rate_hz)
+    start = max(float(s.t[0]) for s in series)
+    stop = min(float(s.t[-1]) for s in series)
+    if not np.isfinite(dt) or dt <= 0 or stop - start < dt:
+        return np.empty(0), np.empty((0, 2), dtype=np.int64), dt
+    n = int(np.floor((stop - start) / dt + 1e-9)) + 1
+    t = start + dt * np.arange(n)
+    t = t[t <= stop]
+    # index of the first gap starting at or after each time; inside a gap when that gap's
+    # predecessor has not ended yet
+    before = np.searchsorted(gaps[:, 0], t, side="left")  # gaps starting strictly before t
+    inside = np.zeros(t.size, dtype=bool)
+    has_prev = before > 0
+    inside[has_prev] = t[has_prev] < gaps[before[has_prev] - 1, 1]
+    # t exactly at a gap start is fine; t strictly between start and end is not
+    keep = ~inside
+    t, before = t[keep], before[keep]
+    if not t.size:
+        return t, np.empty((0, 2), dtype=np.int64), dt
+    # a new block wherever a gap starts between two kept grid points
+    idx = np.arange(t.size)
+    cut = np.flatnonzero(np.diff(before) > 0) + 1
+    edges = np.concatenate([[0], cut, [t.size]])
+    blocks = np.column_stack([edges[:-1], edges[1:]])
+    blocks = blocks[blocks[:, 1] - blocks[:, 0] >= 2]
+    if not blocks.size:
+        return np.empty(0), np.empty((0, 2), dtype=np.int64), dt
+    sel = np.concatenate([idx[a:b] for a, b in blocks])
+    lengths = blocks[:, 1] - blocks[:, 0]
+    new_edges = np.concatenate([[0], np.cumsum(lengths)])
+    return t[sel], np.column_stack([new_edges[:-1], new_edges[1:]]).astype(np.int64), dt
+
+
+def _hold(s: _Series, t: np.ndarray) -> np.ndarray:
+    """Zero-order hold: the latest native sample at or before each time."""
+    i = np.searchsorted(s.t, t, side="right") - 1
+    return s.v[np.clip(i, 0, None)]
+
+
+# --------------------------------------------------------------------------- flags
+
+
+def _events_to_flag(events: list[tuple[float, bool]], t: np.ndarray, default: bool
+                    ) -> np.ndarray:
+    """Hold on/off events onto ``t``; before the first event, the opposite of it."""
+    if not events:
+        return np.full(t.shape, default)
+    events.sort(key=lambda e: e[0])
+    et = np.array([e[0] for e in events])
+    ev = np.array([e[1] for e in events])
+    i = np.searchsorted(et, t, side="right") - 1
+    out = np.where(i >= 0, ev[np.clip(i, 0, None)], not ev[0])
+    return out.astype(bool)
+
+
+def _col(raw: RawLog, msg: str, fld: str) -> tuple[np.ndarray, np.ndarray] | None:
+    if msg not in raw.messages or fld not in raw.messages[msg].columns:
+        return None
+    tab = raw.messages[msg]
+    return np.asarray(tab.time_s, dtype=float), np.asarray(tab.columns[fld])
+
+
+def _main_sysid(raw: RawLog) -> int | None:
+    got = _col(raw, "ATTITUDE", "_sysid")
+    if got is None or not got[1].size:
+        return None
+    ids, counts = np.unique(got[1], return_counts=True)
+    return int(ids[np.argmax(counts)])
+
+
+def _armed_events(raw: RawLog) -> list[tuple[float, bool]]:
+    ev: list[tuple[float, bool]] = []
+    got = _col(raw, "EV", "Id")
+    if got is not None:
+        ev += [(float(t), i == 10) for t, i in zip(*got, strict=True) if i in (10, 11)]
+    got = _col(raw, "ARM", "ArmState")
+    if got is not None:
+        ev += [(float(t), bool(a)) for t, a in zip(*got, strict=True)]
+    got = _col(raw, "HEARTBEAT", "base_mode")
+    if got is not None:
+        sysid = _main_sysid(raw)
+        ids = raw.messages["HEARTBEAT"].columns.get("_sysid")
+        mask = np.ones(got[0].size, bool) if ids is None or sysid is None else ids == sysid
+        pairs = zip(got[0][mask], got[1][mask], strict=True)
+        ev += [(float(t), bool(int(b) & 128)) for t, b in pairs]
+    got = _col(raw, "actuator_armed", "armed")
+    if got is not None:
+        ev += [(float(t), bool(a)) for t, a in zip(*got, strict=True)]
+    got = _col(raw, "vehicle_status", "arming_state")
+    if got is not None and not ev and np.any(got[1] > 0):  # all 0 (INIT): never set
+        ev += [(float(t), int(a) == 2) for t, a in zip(*got, strict=True)]
+    if not ev:
+        for m in raw.texts:
+            if m.text.startswith("Arming motors"):
+                ev.append((m.time_s, True))
+            elif m.text.startswith("Disarming motors"):
+                ev.append((m.time_s, False))
+    return ev
+
+
+def _airborne_events(raw: RawLog) -> list[tuple[float, bool]]:
+    ev: list[tuple[float, bool]] = []
+    got = _col(raw, "EV", "Id")
+    if got is not None:
+        ev += [(float(t), i == 28) for t, i in zip(*got, strict=True) if i in (18, 28)]
+    got = _col(raw, "EXTENDED_SYS_STATE", "landed_state")
+    if got is not None:
+        ev += [(float(t), int(s) in (2, 3, 4)) for t, s in zip(*got, strict=True) if int(s) != 0]
+    got = _col(raw, "vehicle_land_detected", "landed")
+    if got is not None:
+        ev += [(float(t), not bool(s)) for t, s in zip(*got, strict=True)]
+    return ev
+
+
+def _flags(raw: RawLog, t: np.ndarray, inputs: np.ndarray, input_names: tuple[str, ...]
+           ) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    notes: dict[str, str] = {}
+    arm_ev = _armed_events(raw)
+    armed = _events_to_flag(arm_ev, t, True)
+    if not arm_ev:
+        notes["armed"] = "no arming events in the log: assumed armed throughout"
+    air_ev = _airborne_events(raw)
+    if air_ev:
+        airborne = _events_to_flag(air_ev, t, True) & armed
+    elif "u_thrust" in input_names and np.ptp(inputs[:, input_names.index("u_thrust")]) > 0.05:
+        thr = inputs[:, input_names.index("u_thrust")]
+        on = thr[armed & (thr > 0.05)]
+        level = 0.6 * float(np.median(on)) if on.size else np.inf
+        airborne = armed & (thr > level)
+        notes["airborne"] = (
+            f"no landing events in the log: airborne where armed and u_thrust > {level:.3g} "
+            "(60 % of its armed median)"
+        )
+    else:
+        airborne = armed.copy()
+        notes["airborne"] = "no landing events or thrust in the log: airborne assumed when armed"
+    mode = np.full(t.shape, -1, dtype=np.int64)
+    if raw.modes:
+        mt = np.array([m.time_s for m in raw.modes])
+        mv = np.array([m.mode for m in raw.modes], dtype=np.int64)
+        order = np.argsort(mt, kind="stable")
+        mt, mv = mt[order], mv[order]
+        i = np.searchsorted(mt, t, side="right") - 1
+        mode = np.where(i >= 0, mv[np.clip(i, 0, None)], -1)
+    return {"armed": armed, "airborne": airborne, "mode": mode}, notes
+
+
+# --------------------------------------------------------------------------- SYSTEMID
+
+_SIDS_FIELDS = {
+    "Ax": "axis", "Mag": "magnitude", "FSt": "f_start_hz", "FSp": "f_stop_hz",
+    "TFin": "t_fade_in_s", "TC": "t_const_freq_s", "TR": "t_record_s", "TFout": "t_fade_out_s",
+}
+_SID_PARAMS = {
+    "SID_AXIS": "axis", "SID_MAGNITUDE": "magnitude", "SID_F_START_HZ": "f_start_hz",
+    "SID_F_STOP_HZ": "f_stop_hz", "SID_T_FADE_IN": "t_fade_in_s", "SID_T_REC": "t_record_s",
+    "SID_T_FADE_OUT": "t_fade_out_s",
+}
+
+
+def _mode_spans(raw: RawLog, name: str) -> list[tuple[float, float]]:
+    """[entry, exit) times of every stay in the mode called ``name``."""
+    modes = sorted(raw.modes, key=lambda m: m.time_s)
+    spans = []
+    for i, m in enumerate(modes):
+        if (m.name or "").upper() == name and (i == 0 or modes[i - 1].name != m.name):
+            nxt = next((n.time_s for n in modes[i + 1:] if n.name != m.name), np.inf)
+            spans.append((m.time_s, nxt))
+    return spans
+
+
+def sysid_runs(raw: RawLog) -> list[dict[str, float]]:
+    """ArduPilot SYSTEMID runs: settings and the span of the injected waveform.
+
+    From DataFlash: one per SIDS record, with SIDS's settings; the span is the SIDD samples
+    after it (or up to leaving SYSTEMID mode when SIDD was not logged). From a .tlog: one
+    per stay in SYSTEMID mode, the settings being the last SID_* PARAM_VALUE before it.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mavsid.data import MessageTable, ModeChange, RawLog, SourceInfo
+    >>> sids = MessageTable("SIDS", {"Ax": np.array([10]), "Mag": np.array([0.05])},
+    ...                     time_s=np.array([5.0]))
+    >>> sidd = MessageTable("SIDD", {"F": np.ones(3)}, time_s=np.array([5.1, 6.0, 9.0]))
+    >>> log = RawLog(SourceInfo("x.bin", "dataflash", 0), {"SIDS": sids, "SIDD": sidd},
+    ...              modes=(ModeChange(5.0, 25, "SYSTEMID"), ModeChange(9.5, 0, "STABILIZE")))
+    >>> sysid_runs(log)
+    [{'start_s': 5.1, 'stop_s': 9.0, 'axis': 10, 'magnitude': 0.05}]
+    """
+    runs: list[dict[str, float]] = []
+    spans = _mode_spans(raw, "SYSTEMID")
+    if "SIDS" in raw.messages and len(raw.messages["SIDS"]):
+        sids = raw.messages["SIDS"]
+        ts = np.asarray(sids.time_s, dtype=float)
+        sidd_t = (np.sort(np.asarray(raw.messages["SIDD"].time_s, dtype=float))
+                  if "SIDD" in raw.messages else np.empty(0))
+        for k, t0 in enumerate(ts):
+            t_next = ts[k + 1] if k + 1 < ts.size else np.inf
+            mode_end = next((b for a, b in spans if a <= t0 + 0.5 < b), np.inf)
+            end = min(t_next, mode_end)
+            inside = sidd_t[(sidd_t >= t0) & (sidd_t < end)]
+            if inside.size >= 2:
+                start, stop = float(inside[0]), float(inside[-1])
+            elif np.isfinite(mode_end):
+                start, stop = float(t0), float(mode_end)
+            else:
+                continue
+            run: dict[str, float] = {"start_s": start, "stop_s": stop}
+            for f, key in _SIDS_FIELDS.items():
+                if f in sids.columns:
+                    val = float(np.asarray(sids.columns[f])[k])
+                    run[key] = int(val) if key == "axis" else val
+            runs.append(run)
+        return runs
+    if not spans or "PARAM_VALUE" not in raw.messages:
+        return runs
+    pv = raw.messages["PARAM_VALUE"]
+    names = np.asarray(pv.columns.get("param_id", []), dtype=object)
+    values = np.asarray(pv.columns.get("param_value", []), dtype=float)
+    times = np.asarray(pv.time_s, dtype=float)
+    for a, b in spans:
+        if not np.isfinite(b):
+            continue
+        run = {"start_s": float(a), "stop_s": float(b)}
+        for pname, key in _SID_PARAMS.items():
+            sel = np.flatnonzero((names == pname) & ~(times > a))
+            if sel.size:
+                val = float(values[sel[np.argmax(times[sel])]])
+            elif pname in raw.params:
+                val = float(raw.params[pname])
+            else:
+                continue
+            run[key] = int(val) if key == "axis" else val
+        if "axis" in run:
+            runs.append(run)
+    return runs
+
+
+# --------------------------------------------------------------------------- align
+
+
+def align(
+    raw: RawLog,
+    preset: Preset | str | None = None,
+    rate_hz: float | None = None,
+    *,
+    presets: Mapping[str, Preset] | None = None,
+    mixers: Mapping[str, Mixer] | None = None,
+    max_gap: float = MAX_GAP_SAMPLES,
+    min_input_rate_hz: float = MIN_INPUT_RATE_HZ,
+) -> FlightData:
+    """Put a log's states and inputs on one uniform grid (see the module docstring).
+
+    Parameters
+    ----------
+    raw : RawLog
+        A reader's output.
+    preset : Preset or str, optional
+        Channel preset or its name; default: chosen from the log's content.
+    rate_hz : float, optional
+        Grid rate, Hz; default the body-rate (else attitude) channel's own rate.
+    presets, mixers : Mapping, optional
+        User presets and mixers (:func:`mavsid.channels.load_presets`), tried first.
+    max_gap : float
+        A pause longer than this many of a channel's median sample intervals splits blocks.
+    min_input_rate_hz : float
+        Inputs logged slower than this raise a :class:`DataQualityWarning`.
+
+    Raises
+    ------
+    MissingMessageError
+        No preset fits, or a required message or field is absent.
+    NoExcitationError
+        The channels never overlap in time (nothing to align).
+    """
+    preset = _resolve_preset(raw, preset, presets)
+    states, inputs, mixer = _collect(raw, preset, mixers or {})
+    if not states:
+        raise NoExcitationError(f"{raw.source.path}: no state samples for preset {preset.name}")
+    by_name = {s.name: s for s in states}
+    ref = next(by_name[n] for n in ("p", "q", "r", "roll", "pitch", "yaw") if n in by_name)
+    series = states + inputs
+    t, blocks, dt = _grid(series, ref, rate_hz, max_gap)
+    if not t.size:
+        raise NoExcitationError(
+            f"{raw.source.path}: the channels of preset {preset.name} "
+            f"({', '.join(sorted({s.source for s in series}))}) never overlap for two samples"
+        )
+    x = np.empty((t.size, len(states)))
+    for j, s in enumerate(states):
+        x[:, j] = np.interp(t, s.t, s.v)
+    u = np.empty((t.size, len(inputs)))
+    for j, s in enumerate(inputs):
+        u[:, j] = _hold(s, t)
+    rates = {s.name: (1.0 / s.median_dt if s.median_dt > 0 else 0.0) for s in series}
+    warned = set()
+    for s in inputs:
+        msg = s.source.split(".")[0].split(" ")[0]
+        if rates[s.name] < min_input_rate_hz and msg not in warned:
+            warned.add(msg)
+            warnings.warn(
+                f"{raw.source.path}: inputs from {msg} are logged at {rates[s.name]:.1f} Hz "
+                f"(below {min_input_rate_hz:g} Hz): dynamics above {rates[s.name] / 2:.1f} Hz "
+                "cannot be identified from them",
+                DataQualityWarning,
+                stacklevel=2,
+            )
+    input_names = tuple(s.name for s in inputs)
+    flags, flag_notes = _flags(raw, t, u, input_names)
+    meta: dict[str, object] = {
+        "preset_description": preset.description,
+        "native_rate_hz": {s.name: round(rates[s.name], 3) for s in series},
+        "sources": {s.name: s.source for s in series},
+        "sysid_runs": sysid_runs(raw),
+        "mode_names": {m.mode: m.name for m in raw.modes if m.name},
+        "flag_notes": flag_notes,
+        "vehicle": raw.vehicle,
+        "autopilot": raw.autopilot,
+    }
+    if mixer is not None:
+        meta["mixer"] = mixer
+    return FlightData(
+        time_s=t,
+        states=x,
+        inputs=u,
+        state_names=tuple(s.name for s in states),
+        input_names=input_names,
+        state_units=tuple(STATE_UNITS[s.name] for s in states),
+        input_units=tuple("1" for _ in inputs),
+        dt=float(dt),
+        blocks=blocks,
+        flags=flags,
+        source=raw.source,
+        preset=preset.name,
+        params=dict(raw.params),
+        meta=meta,
+    )

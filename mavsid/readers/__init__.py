@@ -39,22 +39,30 @@ _SNIFF_BYTES = 64 * 1024
 
 
 def _looks_like_tlog(head: bytes) -> bool:
-    """True when the first records are 8-byte timestamps each followed by a MAVLink frame."""
-    pos, frames = 0, 0
-    while pos + 10 <= len(head) and frames < 3:
-        magic = head[pos + 8]
-        if magic == 0xFE:
-            length = 8 + head[pos + 9] + 8  # timestamp + header(6) + payload + crc(2)
-        elif magic == 0xFD:
-            if pos + 11 > len(head):
-                break
-            signed = head[pos + 10] & 0x01
-            length = 8 + 10 + head[pos + 9] + 2 + (13 if signed else 0)
+    """True when the first records are 8-byte timestamps each followed by a MAVLink frame, or,
+    after some garbage within the first 4 KiB, three such records whose timestamps agree in
+    their first three bytes."""
+    starts, end = _tlog_chain(head, 0)
+    if len(starts) >= 3 or (starts and end >= len(head)):
+        return True
+    for pos in range(1, min(4096, len(head) - 11)):
+        if head[pos + 8] in (0xFE, 0xFD):
+            starts, _ = _tlog_chain(head, pos)
+            if len(starts) == 3 and len({head[p : p + 3] for p in starts}) == 1:
+                return True
+    return False
+
+
+def _tlog_chain(head: bytes, pos: int) -> tuple[list[int], int]:
+    """Starts of up to three .tlog records chained from ``pos``, and where the chain ends."""
+    starts: list[int] = []
+    while len(starts) < 3 and pos + 11 <= len(head) and head[pos + 8] in (0xFE, 0xFD):
+        starts.append(pos)
+        if head[pos + 8] == 0xFE:
+            pos += 8 + head[pos + 9] + 8  # timestamp + header(6) + payload + crc(2)
         else:
-            return False
-        pos += length
-        frames += 1
-    return frames >= 1 and (frames >= 3 or pos >= len(head))
+            pos += 8 + 10 + head[pos + 9] + 2 + (13 if head[pos + 10] & 0x01 else 0)
+    return starts, pos
 
 
 def sniff_format(path: str | os.PathLike[str]) -> str:

@@ -78,7 +78,7 @@ from numpy.typing import NDArray
 from mavsid.data import MessageTable, ModeChange, RawLog, SourceInfo, TextMessage
 from mavsid.errors import ConfigError, DataQualityWarning, LogFormatError
 
-__all__ = ["MessageDef", "load_dialect", "read"]
+__all__ = ["MessageDef", "load_dialect", "read", "vehicle_class"]
 
 _PREFIX = 8  # receive-time bytes before every frame
 _PAD = 512  # zero bytes after the file's end, so that fixed-width windows never overrun
@@ -566,14 +566,28 @@ def _mode_names(autopilot: int, mav_type: int) -> Any:
     return lambda mode: table.get(mode) if table else None
 
 
-def _vehicle_name(dialect: str, mav_type: int) -> str | None:
-    """MAV_TYPE as a lower-case word, e.g. ``"quadrotor"``."""
-    module = importlib.import_module(f"pymavlink.dialects.v20.{dialect}")
-    entry = module.enums.get("MAV_TYPE", {}).get(mav_type)
-    return entry.name.removeprefix("MAV_TYPE_").lower() if entry is not None else None
+#: MAV_TYPE -> vehicle class (the words the DataFlash reader uses)
+_VEHICLE_CLASSES = {
+    1: "plane", 2: "copter", 3: "copter", 4: "heli", 5: "tracker", 7: "blimp", 10: "rover",
+    11: "rover", 12: "sub", 13: "copter", 14: "copter", 15: "copter", 19: "plane",
+    20: "plane", 21: "plane", 22: "plane", 23: "plane", 24: "plane", 25: "plane",
+    29: "copter", 35: "copter",
+}  # fmt: skip
+
+
+def vehicle_class(mav_type: int) -> str | None:
+    """The vehicle class of a MAVLink ``MAV_TYPE`` (also PX4's ``MAV_TYPE`` parameter).
+
+    Examples
+    --------
+    >>> vehicle_class(2), vehicle_class(22), vehicle_class(11), vehicle_class(6)
+    ('copter', 'plane', 'rover', None)
+    """
+    return _VEHICLE_CLASSES.get(int(mav_type))
 
 
 _FIRMWARE = re.compile(r"^(Ardu\w+|APM:\w+|PX4\w*|Rover|AntennaTracker|Blimp)\s+V?\d")
+_FRAME = "Frame:"
 
 
 def _groups(keys: NDArray[np.int64]) -> dict[int, NDArray[np.int64]]:
@@ -680,9 +694,10 @@ def read(
     if notes:
         warnings.warn(f"{path}: " + "; ".join(notes), DataQualityWarning, stacklevel=2)
     autopilot = _MAV_AUTOPILOT.get(vehicle[2], "unknown") if vehicle else "unknown"
-    vehicle_name = firmware.split()[0] if firmware and autopilot == "ardupilot" else None
-    if vehicle_name is None and vehicle:
-        vehicle_name = _vehicle_name(dialect, vehicle[3])
+    vehicle_name = vehicle_class(vehicle[3]) if vehicle else None
+    frame = next((m.text[len(_FRAME):].strip() for m in texts if m.text.startswith(_FRAME)), "")
+    if vehicle_name and frame:
+        vehicle_name = f"{vehicle_name} {frame}"
     return RawLog(
         source=SourceInfo(str(path), "tlog", size, frames.skipped_bytes, tuple(notes)),
         messages=tables,

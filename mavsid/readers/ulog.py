@@ -46,6 +46,7 @@ from numpy.typing import NDArray
 
 from mavsid.data import MessageTable, ModeChange, RawLog, SourceInfo, TextMessage
 from mavsid.errors import DataQualityWarning, LogFormatError
+from mavsid.readers.tlog import vehicle_class
 
 __all__ = ["NAV_STATES", "read", "table_name"]
 
@@ -133,14 +134,15 @@ def _params(ulog: Any) -> tuple[dict[str, float], int]:
 
 
 def _firmware(info: dict[str, Any]) -> str | None:
-    """``PX4 v1.14.0`` from ``ver_sw_release`` (0xMMmmpptt), else the git hash."""
+    """``PX4 v1.14.0 (board)`` from ``ver_sw_release`` (0xMMmmpptt), else the git hash."""
     name = str(info.get("sys_name", "PX4"))
+    board = f" ({info['ver_hw']})" if info.get("ver_hw") else ""
     release = info.get("ver_sw_release")
     if isinstance(release, int) and release > 0 and (release >> 24) > 0:
         major, minor, patch = release >> 24, (release >> 16) & 0xFF, (release >> 8) & 0xFF
-        return f"{name} v{major}.{minor}.{patch}"
+        return f"{name} v{major}.{minor}.{patch}{board}"
     sw = info.get("ver_sw")
-    return f"{name} {sw}" if sw else None
+    return f"{name} {sw}{board}" if sw else None
 
 
 def _window(table: MessageTable, lo: float, hi: float) -> MessageTable:
@@ -235,7 +237,7 @@ def read(
         texts=tuple(texts),
         modes=tuple(modes),
         autopilot="px4",
-        vehicle=str(info["ver_hw"]) if "ver_hw" in info else None,
+        vehicle=vehicle_class(int(params["MAV_TYPE"])) if "MAV_TYPE" in params else None,
         firmware=_firmware(info),
     )
 

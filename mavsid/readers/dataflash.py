@@ -44,6 +44,7 @@ Examples
 
 from __future__ import annotations
 
+import bisect
 import mmap
 import os
 import re
@@ -62,9 +63,13 @@ __all__ = [
     "FORMAT_CHARS",
     "Definition",
     "assemble",
+    "backwards_steps",
     "build_fmt",
     "build_record",
+    "hold_forward",
     "read",
+    "vehicle_and_firmware",
+    "window_mask",
 ]
 
 _HEAD1, _HEAD2 = 0xA3, 0x95
@@ -73,7 +78,6 @@ _FMT_TYPE = 0x80
 _FMT_LEN = 89
 _CHUNK = 1 << 23  # bytes scanned per step when looking for headers
 _BACKWARDS_S = 0.5  # a time step back larger than this is a discontinuity
-_PRUNE_ROUNDS = 32  # vectorised chain rounds before falling back to a plain walk
 
 
 @dataclass(frozen=True)
@@ -113,7 +117,8 @@ FORMAT_CHARS: Mapping[str, _Char] = {
 _STRUCT_CHARS = {"a": "64s", "g": "e", "n": "4s", "N": "16s", "Z": "64s", "c": "h",
                  "C": "H", "e": "i", "E": "I", "L": "i", "M": "b"}
 
-_META_NAMES = ("FMT", "FMTU", "UNIT", "MULT", "PARM", "MSG", "MODE")
+# always decoded: parameters, texts, modes, units, firmware
+_META_NAMES = frozenset({"FMTU", "UNIT", "MULT", "PARM", "MSG", "MODE", "VER"})
 _FORMAT_ONLY = frozenset({"FMT", "FMTU", "UNIT", "MULT"})
 
 
@@ -173,14 +178,15 @@ class Definition:
             return f"declared length {self.length} but format {self.format!r} needs {size}"
         return None
 
-    def time_field(self) -> tuple[int, float] | None:
-        """``(format index, seconds per count)`` of the field giving boot time, if any."""
+    @cached_property
+    def time_field(self) -> tuple[str, int, float] | None:
+        """``(column, format index, seconds per count)`` of the boot-time field, if any."""
         index = dict(self.fields)
         if "TimeUS" in index and self.format[index["TimeUS"]] in "QqIi":
-            return index["TimeUS"], 1e-6
+            return "TimeUS", index["TimeUS"], 1e-6
         if ("TimeMS" in index and not self.name.startswith("GPS")
                 and self.format[index["TimeMS"]] in "QqIi"):
-            return index["TimeMS"], 1e-3
+            return "TimeMS", index["TimeMS"], 1e-3
         return None
 
 
@@ -367,30 +373,22 @@ def _successors(pos: np.ndarray, end: np.ndarray, ok: np.ndarray) -> np.ndarray:
 def _chain(pos: np.ndarray, end: np.ndarray) -> np.ndarray:
     """Greedy chain from the first node: indices of the nodes it visits.
 
-    Each node is followed by the first node at or after its end. Nodes off the chain are
-    removed by repeatedly dropping nodes nothing alive points to (vectorised); a plain walk
-    takes over if that has not settled after a few rounds (adversarial input).
+    Each node is followed by the first node at or after its end. Runs of nodes that end
+    exactly where the next one starts are taken whole; only at the (few) other nodes does
+    the walk look up its successor, so the loop runs once per irregular link at most.
     """
     m = pos.size
-    if m <= 1 or np.array_equal(end[:-1], pos[1:]):
+    irregular = np.flatnonzero(end[:-1] != pos[1:]).tolist()
+    if not irregular:
         return np.arange(m)
-    nxt = _successors(pos, end, np.ones(m, bool))
-    alive = np.ones(m, bool)
-    for _ in range(_PRUNE_ROUNDS):
-        hit = np.zeros(m + 1, bool)
-        hit[nxt[alive]] = True
-        new = alive & hit[:m]
-        new[0] = True
-        if np.array_equal(new, alive):
-            return np.flatnonzero(alive)
-        alive = new
-    visited = []
-    i = 0
-    nxt_list = nxt.tolist()
-    while i < m:  # strictly increasing: always progresses
-        visited.append(i)
-        i = nxt_list[i]
-    return np.array(visited, np.int64)
+    runs = []
+    c, k = 0, 0
+    while c < m:  # c strictly increases: always progresses
+        k = bisect.bisect_left(irregular, c, k)
+        r = irregular[k] if k < len(irregular) else m - 1
+        runs.append(np.arange(c, r + 1))
+        c = int(np.searchsorted(pos, end[r], side="left"))
+    return np.concatenate(runs)
 
 
 @dataclass
@@ -455,10 +453,10 @@ def _gather(a: np.ndarray, d: Definition, pos: np.ndarray) -> dict[str, np.ndarr
 
 def _gather_times(a: np.ndarray, d: Definition, pos: np.ndarray) -> np.ndarray | None:
     """Boot time (s) of the records of ``d`` at ``pos``, or None when ``d`` has none."""
-    tf = d.time_field()
+    tf = d.time_field
     if tf is None:
         return None
-    i, scale = tf
+    _, i, scale = tf
     dt = np.dtype(FORMAT_CHARS[d.format[i]].dtype)
     ofs = sum(np.dtype(FORMAT_CHARS[c].dtype).itemsize for c in d.format[:i])
     return _records(a, dt, pos + 3 + ofs).astype(np.float64) * scale
@@ -517,10 +515,17 @@ _BUILD_TYPES = {1: "rover", 2: "copter", 3: "plane", 4: "tracker", 7: "sub", 12:
                 13: "heli"}
 
 
-def _vehicle_and_firmware(
-    texts: Sequence[TextMessage], tables: Mapping[str, Mapping[str, np.ndarray]]
+def vehicle_and_firmware(
+    texts: Sequence[str], tables: Mapping[str, Mapping[str, np.ndarray]]
 ) -> tuple[str | None, str | None]:
-    firmware = next((t.text for t in texts if _FIRMWARE_RE.match(t.text)), None)
+    """Vehicle kind (plus frame when a ``Frame:`` text names it) and firmware banner.
+
+    Examples
+    --------
+    >>> vehicle_and_firmware(["ArduCopter V4.6.2 (1ebd4d99)", "Frame: QUAD/X"], {})
+    ('copter QUAD/X', 'ArduCopter V4.6.2 (1ebd4d99)')
+    """
+    firmware = next((t for t in texts if _FIRMWARE_RE.match(t)), None)
     ver = tables.get("VER", {})
     if firmware is None and "FWS" in ver and len(ver["FWS"]):
         firmware = str(ver["FWS"][0]) or None
@@ -529,8 +534,7 @@ def _vehicle_and_firmware(
         vehicle = _BUILD_TYPES.get(int(ver["BU"][0]))
     if vehicle is None and firmware:
         vehicle = next((v for key, v in _VEHICLES if key in firmware), None)
-    frame = next((t.text.split(":", 1)[1].strip() for t in texts
-                  if t.text.startswith("Frame:")), None)
+    frame = next((t.split(":", 1)[1].strip() for t in texts if t.startswith("Frame:")), None)
     if vehicle and frame:
         vehicle = f"{vehicle} {frame}"
     return vehicle, firmware
@@ -578,11 +582,13 @@ def assemble(
     wanted: Iterable[str] | None,
     meta_columns: Mapping[str, Mapping[str, np.ndarray]] | None = None,
     meta_times: Mapping[str, np.ndarray] | None = None,
+    banner: Sequence[str] = (),
 ) -> RawLog:
     """Build the :class:`RawLog` from decoded columns (shared by the binary and text readers).
 
     ``columns``/``times`` hold the messages to return; ``meta_*`` the full-log PARM, MSG,
-    MODE, VER and FMTU/UNIT/MULT tables used for parameters, texts, modes and units.
+    MODE, VER and FMTU/UNIT/MULT tables used for parameters, texts, modes and units;
+    ``banner`` extra lines (text logs' preamble) searched for the firmware after the texts.
     """
     meta_columns = meta_columns if meta_columns is not None else columns
     meta_times = meta_times if meta_times is not None else times
@@ -603,7 +609,8 @@ def assemble(
     if "Message" in msg:
         texts = tuple(TextMessage(float(t), str(s)) for t, s in
                       zip(meta_times["MSG"].tolist(), msg["Message"].tolist(), strict=True))
-    vehicle, firmware = _vehicle_and_firmware(texts, meta_columns)
+    vehicle, firmware = vehicle_and_firmware([t.text for t in texts] + list(banner),
+                                             meta_columns)
     modes = _modes(meta_columns.get("MODE"), meta_times.get("MODE"), vehicle)
     return RawLog(source, messages, params=params, texts=texts, modes=modes,
                   autopilot="ardupilot", vehicle=vehicle, firmware=firmware)
@@ -625,11 +632,12 @@ def backwards_steps(time_s: np.ndarray, where: np.ndarray) -> list[tuple[int, fl
 
 def _skipped_regions(n: int, pos: np.ndarray, end: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Offsets and sizes of the byte ranges not covered by accepted records."""
-    starts = np.concatenate([[0], end])
-    stops = np.concatenate([pos, [n]])
-    gap = stops - starts
-    k = np.flatnonzero(gap > 0)
-    return starts[k], gap[k]
+    inner = pos[1:] - end[:-1]
+    k = np.flatnonzero(inner > 0)
+    starts = np.concatenate([[0], end[k], [end[-1]]])
+    sizes = np.concatenate([[pos[0]], inner[k], [n - end[-1]]])
+    keep = sizes > 0
+    return starts[keep], sizes[keep]
 
 
 # --------------------------------------------------------------------------- entry point
@@ -725,10 +733,28 @@ def _read_buffer(
         by_name.setdefault(table.defs[i].name, []).append(i)
 
     wanted = None if messages is None else set(messages)
-    decode = set(by_name) if wanted is None else (wanted | set(_META_NAMES) | {"VER"})
-    times = _record_times(a, framing, table, rows, {i for nm in decode if nm in by_name
-                                                    for i in by_name[nm]})
-    steps = backwards_steps(times, framing.pos)
+    windowed = start is not None or stop is not None
+    timed = np.array([d.time_field is not None for d in table.defs])
+    timeline = np.full(framing.pos.size, np.nan)  # time of each decoded record
+    decoded: dict[int, tuple[np.ndarray, dict[str, np.ndarray]]] = {}
+    for i, r in rows.items():
+        d = table.defs[i]
+        if wanted is not None and d.name not in wanted and d.name not in _META_NAMES:
+            continue
+        if windowed and timed[i] and d.name not in _META_NAMES:
+            t = _gather_times(a, d, framing.pos[r])
+            assert t is not None
+            r = r[window_mask(t, start, stop)]
+        cols = _gather(a, d, framing.pos[r])
+        if d.time_field is not None:
+            name, _, scale = d.time_field
+            timeline[r] = cols[name].astype(np.float64) * scale
+        decoded[i] = (r, cols)
+    untimed = [decoded[i][0] for i in decoded if not timed[i]]
+    if untimed:
+        _hold_times(a, framing, table, timed, timeline, np.concatenate(untimed))
+
+    steps = backwards_steps(timeline, framing.pos)
     if steps:
         shown = ", ".join(f"byte {w} ({t0:.3f} s -> {t1:.3f} s)" for w, t0, t1 in steps[:5])
         notes.append(f"time goes backwards {len(steps)} time(s) (reboot or concatenated logs): "
@@ -740,25 +766,17 @@ def _read_buffer(
     meta_times: dict[str, np.ndarray] = {}
     defs_by_name: dict[str, Definition] = {}
     for name, ids in by_name.items():
-        if name not in decode:
+        parts = [(table.defs[i], *decoded[i]) for i in ids if i in decoded]
+        if not parts:
             continue
-        parts = [(table.defs[i], rows[i]) for i in ids]
         defs_by_name[name] = parts[-1][0]
-        is_meta = name in _META_NAMES or name == "VER"
-        if wanted is not None and name not in wanted and not is_meta:
-            continue
-        if is_meta or (start is None and stop is None):
-            cols, t = _merge(a, framing.pos, times, parts)
-            if is_meta:
-                meta_columns[name], meta_times[name] = cols, t
-            if wanted is None or name in wanted:
-                keep = _window(t, start, stop)
-                columns[name] = cols if keep is None else {k: v[keep] for k, v in cols.items()}
-                time_s[name] = t if keep is None else t[keep]
-            continue
-        # windowed: decode only the records inside the window
-        parts = [(d, r[_window(times[r], start, stop)]) for d, r in parts]
-        columns[name], time_s[name] = _merge(a, framing.pos, times, parts)
+        cols, t = _merge(parts, timeline)
+        if name in _META_NAMES:
+            meta_columns[name], meta_times[name] = cols, t
+        if wanted is None or name in wanted:
+            keep = window_mask(t, start, stop)
+            columns[name] = cols if keep is None else {k: v[keep] for k, v in cols.items()}
+            time_s[name] = t if keep is None else t[keep]
 
     skip_at, skip_len = _skipped_regions(n, framing.pos, framing.end)
     skipped = int(skip_len.sum())
@@ -779,8 +797,14 @@ def _read_buffer(
     return assemble(source, columns, time_s, defs_by_name, wanted, meta_columns, meta_times)
 
 
-def _window(t: np.ndarray, start: float | None, stop: float | None) -> np.ndarray | None:
-    """Boolean mask of ``start <= t <= stop`` (None when no bound is given)."""
+def window_mask(t: np.ndarray, start: float | None, stop: float | None) -> np.ndarray | None:
+    """Boolean mask of ``start <= t <= stop`` (None when no bound is given).
+
+    Examples
+    --------
+    >>> window_mask(np.array([0.0, 1.0, np.nan, 2.0]), 0.5, None).tolist()
+    [False, True, False, True]
+    """
     if start is None and stop is None:
         return None
     keep = np.isfinite(t)
@@ -791,86 +815,74 @@ def _window(t: np.ndarray, start: float | None, stop: float | None) -> np.ndarra
     return keep
 
 
-def _record_times(
+def hold_forward(times: np.ndarray, timed: np.ndarray) -> np.ndarray:
+    """Each entry's own time where ``timed``, else the latest timed entry's before it (NaN
+    before the first).
+
+    Examples
+    --------
+    >>> hold_forward(np.array([np.nan, 1.0, np.nan, 3.0]), np.array([0, 1, 0, 1], bool))
+    array([nan,  1.,  1.,  3.])
+    """
+    prev = np.where(timed, np.arange(timed.size), -1)
+    np.maximum.accumulate(prev, out=prev)
+    out = times[np.maximum(prev, 0)]
+    out[prev < 0] = np.nan
+    return out
+
+
+def _hold_times(
     a: np.ndarray,
     framing: _Framing,
     table: _Definitions,
-    rows: Mapping[int, np.ndarray],
-    decoded: set[int],
-) -> np.ndarray:
-    """Time (s) of each accepted record, in file order.
-
-    Records of the ``decoded`` definitions get their own time, or, without a time field, the
-    time of the nearest earlier record that has one (NaN before the first). Other records'
-    entries are NaN except where needed for that hold.
-    """
-    times = np.full(framing.pos.size, np.nan)
-    timed = np.array([d.time_field() is not None for d in table.defs])
-    untimed_rows = []
-    for i in decoded:
-        if i not in rows:
-            continue
-        if timed[i]:
-            t = _gather_times(a, table.defs[i], framing.pos[rows[i]])
-            assert t is not None
-            times[rows[i]] = t
-        else:
-            untimed_rows.append(rows[i])
-    if untimed_rows:
-        r = np.concatenate(untimed_rows)
-        is_timed = timed[framing.defid]
-        prev = np.where(is_timed, np.arange(is_timed.size), -1)
-        np.maximum.accumulate(prev, out=prev)
-        src = prev[r]
-        need = np.unique(src[(src >= 0)])
-        need = need[np.isnan(times[need])]
-        for i in np.unique(framing.defid[need]).tolist():
-            k = need[framing.defid[need] == i]
-            t = _gather_times(a, table.defs[i], framing.pos[k])
-            assert t is not None
-            times[k] = t
-        times[r] = np.where(src >= 0, times[np.maximum(src, 0)], np.nan)
-    return times
+    timed: np.ndarray,
+    timeline: np.ndarray,
+    rows: np.ndarray,
+) -> None:
+    """Give the records ``rows`` (of definitions without a time field) the time of the nearest
+    earlier record that has one, in place (NaN before the first); times not yet in
+    ``timeline`` are read from the file."""
+    is_timed = timed[framing.defid]
+    prev = np.where(is_timed, np.arange(is_timed.size), -1)
+    np.maximum.accumulate(prev, out=prev)
+    src = prev[rows]
+    need = np.unique(src[src >= 0])
+    need = need[np.isnan(timeline[need])]
+    for i in np.unique(framing.defid[need]).tolist():
+        k = need[framing.defid[need] == i]
+        t = _gather_times(a, table.defs[i], framing.pos[k])
+        assert t is not None
+        timeline[k] = t
+    timeline[rows] = np.where(src >= 0, timeline[np.maximum(src, 0)], np.nan)
 
 
 def _merge(
-    a: np.ndarray,
-    all_pos: np.ndarray,
-    time_s: np.ndarray,
-    parts: list[tuple[Definition, np.ndarray]],
+    parts: list[tuple[Definition, np.ndarray, dict[str, np.ndarray]]], timeline: np.ndarray
 ) -> tuple[dict[str, np.ndarray], np.ndarray]:
-    """Decode one message name whose records may use several definitions (log order).
+    """One message's columns and times from its decoded parts ``(definition, rows, columns)``.
 
-    ``parts`` holds ``(definition, rows)``; rows index ``all_pos`` and ``time_s``.
+    A message name defined more than once with different layouts (concatenated logs of
+    different firmware) gets the union of the columns, in file order; a part lacking a
+    column contributes NaN (numbers, arrays) or empty strings.
     """
     if len(parts) == 1:
-        d, r = parts[0]
-        return _gather(a, d, all_pos[r]), time_s[r]
-    # several layouts: decode each, then interleave by file position
-    rows = np.concatenate([r for _, r in parts])
+        _, r, cols = parts[0]
+        return cols, timeline[r]
+    rows = np.concatenate([r for _, r, _ in parts])
     order = np.argsort(rows, kind="stable")
-    decoded = [_gather(a, d, all_pos[r]) for d, r in parts]
     names: list[str] = []
-    for cols in decoded:
+    for _, _, cols in parts:
         names.extend(c for c in cols if c not in names)
     merged: dict[str, np.ndarray] = {}
     for c in names:
-        pieces = []
-        for (_, r), cols in zip(parts, decoded, strict=True):
-            if c in cols:
-                pieces.append(cols[c])
-            else:
-                like = next(x[c] for x in decoded if c in x)
-                pieces.append(_missing(like, r.size))
-        kinds = {p.dtype.kind for p in pieces}
-        if "O" in kinds:
+        like = next(cols[c] for _, _, cols in parts if c in cols)
+        pieces = [cols[c] if c in cols else _missing(like, r.size) for _, r, cols in parts]
+        if any(p.dtype.kind == "O" for p in pieces):
             pieces = [p.astype(object) for p in pieces]
-        elif any(p.shape[1:] != pieces[0].shape[1:] for p in pieces):
-            pieces = [_missing(pieces[0][:0].astype(np.float64), r.size) if p.shape[1:]
-                      != pieces[0].shape[1:] else p for p, (_, r) in zip(pieces, parts,
-                                                                         strict=True)]
+        pieces = [p if p.shape[1:] == like.shape[1:] else _missing(like, p.shape[0])
+                  for p in pieces]
         merged[c] = np.concatenate(pieces)[order]
-    return merged, time_s[rows[order]]
+    return merged, timeline[rows[order]]
 
 
 def _missing(like: np.ndarray, n: int) -> np.ndarray:

@@ -1,0 +1,238 @@
+"""ArduPilot DataFlash text logs (``.log``): the comma-separated form with FMT lines.
+
+Each line is ``NAME, value, value, ...`` (delimiter ``", "``, or ``","`` in logs without
+``"FMT, "``); ``FMT`` lines define a message's format characters and column names. Values are
+those pymavlink presents for text logs: numbers as printed (no format-character scaling: the
+text already holds scaled values), ``n N Z`` and the mode ``M`` as text. Lines before the first
+FMT line (firmware banner, free RAM) are not records; a banner naming the firmware fills
+``RawLog.firmware`` when no MSG record does. Unlike pymavlink, this reader does not derive a
+clock from GPS time, so logs whose GPS messages lack a week field read fine.
+
+Each message type's lines are split once and converted column by column with numpy; a line
+with too few values or a value that does not parse is skipped, counted and reported in one
+:class:`~mavsid.errors.DataQualityWarning`. Timing, parameters, texts and modes follow
+:mod:`mavsid.readers.dataflash`.
+
+Examples
+--------
+>>> import os, tempfile
+>>> text = ("FMT, 128, 89, FMT, BBnNZ, Type,Length,Name,Format,Columns\\n"
+...         "FMT, 129, 15, ATT, Icc, TimeMS,Roll,Pitch\\n"
+...         "ATT, 1500, -1.25, 2.5\\n")
+>>> with tempfile.NamedTemporaryFile("w", suffix=".log", delete=False) as f:
+...     _ = f.write(text)
+>>> log = read(f.name)
+>>> log["ATT"]["Roll"].tolist(), log["ATT"].time_s.tolist()
+([-1.25], [1.5])
+>>> os.unlink(f.name)
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from collections.abc import Sequence
+
+import numpy as np
+
+from mavsid.data import RawLog, SourceInfo
+from mavsid.errors import DataQualityWarning, LogFormatError
+from mavsid.readers.dataflash import (
+    FORMAT_CHARS,
+    Definition,
+    assemble,
+    backwards_steps,
+    hold_forward,
+    window_mask,
+)
+
+__all__ = ["read"]
+
+_MAX_BYTES = 1 << 31  # text logs are small; refuse absurd sizes rather than exhaust memory
+
+
+def _null_term(s: str) -> str:
+    cut = s.find("\0")
+    return s if cut < 0 else s[:cut]
+
+
+def _convert(values: list[str], ch: str) -> tuple[np.ndarray, np.ndarray]:
+    """Column of text values -> (array, ok mask) as pymavlink converts them."""
+    kind = FORMAT_CHARS[ch].kind
+    n = len(values)
+    if ch in "aM":  # pymavlink leaves these as the printed text
+        out = np.empty(n, dtype=object)
+        out[:] = values
+        return out, np.ones(n, bool)
+    if kind == "str":
+        out = np.empty(n, dtype=object)
+        out[:] = [_null_term(v) for v in values]
+        return out, np.ones(n, bool)
+    parse = int if kind == "int" else float
+    dtype = np.int64 if kind == "int" else np.float64
+    try:
+        return np.array([parse(v) for v in values], dtype=dtype), np.ones(n, bool)
+    except (ValueError, OverflowError):
+        pass
+    ok = np.ones(n, bool)
+    out = np.zeros(n, dtype)
+    for k, v in enumerate(values):
+        try:
+            out[k] = parse(v)
+        except (ValueError, OverflowError):
+            ok[k] = False
+    return out, ok
+
+
+def read(
+    path: str | os.PathLike[str],
+    messages: Sequence[str] | None = None,
+    start: float | None = None,
+    stop: float | None = None,
+) -> RawLog:
+    """Read a DataFlash text log; same parameters and result as
+    :func:`mavsid.readers.dataflash.read`.
+
+    Raises
+    ------
+    LogFormatError
+        The file cannot be opened or holds no FMT line or no decodable record.
+    """
+    spath = os.fspath(path)
+    try:
+        size = os.path.getsize(spath)
+        if size > _MAX_BYTES:
+            raise LogFormatError(f"text log too large ({size} bytes)", path=spath)
+        with open(spath, "rb") as f:
+            raw = f.read()
+    except OSError as exc:
+        raise LogFormatError(f"cannot open: {exc.strerror or exc}", path=spath) from None
+    text = raw.decode("utf-8", errors="replace")
+    delim = ", " if "FMT, " in text else ","
+    first = text.find("FMT" + delim)
+    if first < 0:
+        raise LogFormatError("no FMT line: not a DataFlash text log", path=spath)
+    banner = [ln.strip() for ln in text[:first].splitlines() if ln.strip()]
+    lines = text[first:].split("\n")
+
+    # split every line once; group line numbers by message name, in file order
+    defs: dict[str, list[tuple[int, Definition]]] = {}
+    records: dict[str, list[tuple[int, list[str]]]] = {}
+    bad_lines = 0
+    for k, line in enumerate(lines):
+        fields = line.rstrip().split(delim)
+        if len(fields) < 2:
+            continue
+        if len(fields) == 5 and fields[-1] == ",":  # an FMT line with empty format and columns
+            fields[-1:] = ["", ""]
+        name = fields[0]
+        if name == "FMT":
+            d = _definition(fields, delim)
+            if d is None:
+                bad_lines += 1
+                continue
+            defs.setdefault(d.name, []).append((k, d))
+        records.setdefault(name, []).append((k, fields))
+    defs.setdefault("FMT", []).insert(0, (-1, Definition(128, "FMT", 89, "BBnNZ", (
+        "Type", "Length", "Name", "Format", "Columns"))))
+
+    wanted = None if messages is None else set(messages)
+    n_lines = len(lines)
+    timeline = np.full(n_lines, np.nan)
+    timed_line = np.zeros(n_lines, bool)
+    decoded: dict[str, tuple[np.ndarray, dict[str, np.ndarray], Definition]] = {}
+    undefined = 0
+    for name, recs in records.items():
+        if name not in defs:
+            undefined += len(recs)
+            continue
+        cols, line_no, d, bad = _decode(recs, defs[name])
+        bad_lines += bad
+        if d.time_field is not None:
+            tname, _, scale = d.time_field
+            timeline[line_no] = cols[tname].astype(np.float64) * scale
+            timed_line[line_no] = True
+        decoded[name] = (line_no, cols, d)
+    if not decoded:
+        raise LogFormatError("no decodable DataFlash text records", path=spath)
+    held = hold_forward(timeline, timed_line)
+
+    columns, times, defs_by_name = {}, {}, {}
+    for name, (line_no, cols, d) in decoded.items():
+        defs_by_name[name] = d
+        times[name] = held[line_no]
+        columns[name] = cols
+    meta_columns, meta_times = dict(columns), dict(times)
+    if wanted is not None or start is not None or stop is not None:
+        for name in list(columns):
+            if wanted is not None and name not in wanted:
+                del columns[name], times[name]
+                continue
+            keep = window_mask(times[name], start, stop)
+            if keep is not None:
+                columns[name] = {k: v[keep] for k, v in columns[name].items()}
+                times[name] = times[name][keep]
+
+    notes = []
+    if bad_lines:
+        notes.append(f"skipped {bad_lines} line(s) with missing or unparsable values")
+    if undefined:
+        notes.append(f"skipped {undefined} line(s) of message types without FMT")
+    steps = backwards_steps(timeline, np.arange(n_lines))
+    if steps:
+        shown = ", ".join(f"line {w + 1} ({t0:.3f} s -> {t1:.3f} s)" for w, t0, t1 in steps[:5])
+        notes.append(f"time goes backwards {len(steps)} time(s) (reboot or concatenated logs): "
+                     f"{shown}")
+    source = SourceInfo(spath, "dataflash-text", len(raw), skipped_bytes=0, notes=tuple(notes))
+    if notes:
+        warnings.warn(f"{spath}: " + "; ".join(notes), DataQualityWarning, stacklevel=2)
+    return assemble(source, columns, times, defs_by_name, wanted, meta_columns, meta_times,
+                    banner=banner)
+
+
+def _definition(fields: list[str], delim: str) -> Definition | None:
+    """The definition an FMT line gives, or None when it is malformed."""
+    if len(fields) < 5:
+        return None
+    try:
+        ftype, length = int(fields[1]), int(fields[2])
+    except ValueError:
+        return None
+    name, fmt = fields[3].strip(), fields[4].strip()
+    columns = ",".join(fields[5:]) if delim == "," else (fields[5] if len(fields) > 5 else "")
+    if name == "FMT" and columns == "Type,Length,Name,Format":
+        columns += ",Columns"  # some text logs omit it
+    if not name or any(c not in FORMAT_CHARS for c in fmt):
+        return None
+    cols = tuple(columns.split(",")) if columns else ()
+    return Definition(ftype, name, length, fmt, cols)
+
+
+def _decode(
+    recs: list[tuple[int, list[str]]], versions: list[tuple[int, Definition]]
+) -> tuple[dict[str, np.ndarray], np.ndarray, Definition, int]:
+    """Columns of one message's lines (with the latest layout, earlier layouts dropped
+    when they differ), their line numbers, the definition and the count of bad lines."""
+    # the definition in force at each line: the latest FMT before it, else the first one
+    starts = [k for k, _ in versions]
+    line_no = np.array([k for k, _ in recs], np.int64)
+    which = np.maximum(np.searchsorted(starts, line_no, side="right") - 1, 0)
+    d = versions[-1][1]
+    use = np.array([versions[w][1].format == d.format and versions[w][1].columns == d.columns
+                    for w in which.tolist()], bool)
+    width = len(d.format) + 1
+    rows = [f for (_, f), u in zip(recs, use.tolist(), strict=True) if u and len(f) >= width]
+    keep = np.array([u and len(f) >= width for (_, f), u in zip(recs, use.tolist(),
+                                                                 strict=True)], bool)
+    bad = int((~keep).sum())
+    line_no = line_no[keep]
+    ok = np.ones(len(rows), bool)
+    cols: dict[str, np.ndarray] = {}
+    for name, i in d.fields:
+        cols[name], good = _convert([r[i + 1] for r in rows], d.format[i])
+        ok &= good
+    if not ok.all():
+        bad += int((~ok).sum())
+        cols = {k: v[ok] for k, v in cols.items()}
+        line_no = line_no[ok]
+    return cols, line_no, d, bad

@@ -1,0 +1,636 @@
+"""FlightData -> well-excited windows, each kept or rejected with reasons that carry numbers.
+
+Two sources of windows, per axis (``roll``, ``pitch``, ``yaw``; the plant input is
+``u_<axis>``, the output the body rate ``p``/``q``/``r``, or the angle when a log has no
+rates):
+
+``sysid``
+    ArduPilot SYSTEMID runs (``FlightData.meta["sysid_runs"]``, found by alignment from
+    SIDS/SIDD, or SYSTEMID mode + SID_* parameters in a .tlog). The window is the injected
+    chirp; ``SID_AXIS`` 1–12 name the axis (angle, recovery, rate or mixer injection), 13 is
+    mixer thrust, which excites no attitude axis and is reported, not kept.
+``scan``
+    Sliding windows (``window_s`` long, every ``step_s``) inside each contiguous block, for
+    axes without a SYSTEMID run (or all axes with ``scan=True``).
+
+Every window gets the same metrics and gates:
+
+- **input power**: RMS of the (linearly detrended) input against the axis's *noise floor*,
+  the 10th percentile of its 1-s RMS over the airborne flight (at least ``min_floor``): what
+  the controller output does when nobody excites it. Gate: ``power_ratio``× the floor.
+- **band coverage**: share of the ``band_hz`` band (log-frequency weighted; upper edge at
+  most 0.4× the sample rate) where the input's Welch PSD is above 10× the floor's white
+  level. Gate: ``min_coverage``.
+- **conditioning**: condition number of the Gram matrix of the regressors of the model to be
+  fitted, ``[rate, input, 1]``, each column scaled by its RMS over the airborne flight, so a
+  regressor that barely moves in the window (or moves only with another) makes it large.
+  Gate: ``max_condition``.
+- **coherence**: input–output magnitude-squared coherence, averaged over the band weighted by
+  the input's PSD. Gate: ``min_coherence``.
+- **flight state**: airborne and armed over ``min_airborne`` of the window; no mode change
+  inside a scan window; ``|roll|``, ``|pitch|`` within ``max_angle_deg``; the axis input and
+  ``u_thrust`` saturated (``|u| >= saturation``, thrust also <= 0.02) on at most
+  ``max_saturated`` of the samples.
+
+``score`` (0..1) is the geometric mean of ``min(1, log10(power ratio)/2)``, the coverage,
+the coherence and ``1 - log10(condition)/8`` (each clipped to 0..1). Adjacent kept scan
+windows are merged, and a merged window's quiet head and tail (0.5-s input RMS below the
+power gate) are trimmed. :func:`find_segments` returns every window's
+:class:`WindowReport`; :func:`select_segments` turns the kept ones into
+:class:`~mavsid.data.Segment` objects for the estimators.
+
+Examples
+--------
+>>> import numpy as np
+>>> from mavsid.data import FlightData, SourceInfo
+>>> rng = np.random.default_rng(0)
+>>> n, dt = 6000, 0.01
+>>> t = np.arange(n) * dt
+>>> u = 0.002 * rng.standard_normal(n)
+>>> u[2000:4000] += 0.1 * np.sign(np.sin(2 * np.pi * 0.7 * t[2000:4000]))   # 20 s of doublets
+>>> p = np.zeros(n)
+>>> for k in range(1, n):
+...     p[k] = 0.95 * p[k - 1] + 0.5 * u[k - 1]
+>>> x = np.column_stack([np.zeros(n), np.zeros(n), np.zeros(n), p])
+>>> fd = FlightData(t, x, u[:, None], ("roll", "pitch", "yaw", "p"), ("u_roll",),
+...                 ("rad",) * 3 + ("rad/s",), ("1",), dt, np.array([[0, n]]),
+...                 {"armed": np.ones(n, bool), "airborne": np.ones(n, bool)},
+...                 SourceInfo("sim", "synthetic", 0), "test")
+>>> kept = [w for w in find_segments(fd, axis="roll") if w.kept]
+>>> [(round(w.start_s, 1), round(w.stop_s, 1), w.source) for w in kept]
+[(20.0, 40.0, 'scan')]
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from scipy import signal
+
+from mavsid.data import FlightData, Segment
+from mavsid.errors import ConfigError
+
+__all__ = [
+    "AXES",
+    "ScanOptions",
+    "WindowReport",
+    "find_segments",
+    "select_segments",
+    "sid_axis_name",
+]
+
+AXES: tuple[str, ...] = ("roll", "pitch", "yaw")
+_RATE = {"roll": "p", "pitch": "q", "yaw": "r"}
+_INJECTION = {0: "input angle", 1: "recovery angle", 2: "rate", 3: "mixer"}
+
+
+def sid_axis_name(sid_axis: int) -> tuple[str, str]:
+    """ArduCopter ``SID_AXIS`` -> (axis, injection point).
+
+    Examples
+    --------
+    >>> sid_axis_name(10), sid_axis_name(13)
+    (('roll', 'mixer'), ('thrust', 'mixer'))
+    """
+    if 1 <= sid_axis <= 12:
+        return AXES[(sid_axis - 1) % 3], _INJECTION[(sid_axis - 1) // 3]
+    if sid_axis == 13:
+        return "thrust", "mixer"
+    return "other", f"SID_AXIS {sid_axis}"
+
+
+@dataclass(frozen=True)
+class ScanOptions:
+    """Window lengths, gates and thresholds (defaults suit multirotor attitude dynamics).
+
+    Parameters
+    ----------
+    window_s, step_s : float
+        Scan window length and step, s (step default: half the window).
+    band_hz : tuple of float
+        Identification band for coverage and coherence, Hz.
+    power_ratio : float
+        Input RMS must reach this many noise floors.
+    min_floor : float
+        Smallest noise floor (normalised input units): below it the log's own quantisation.
+    min_coverage, min_coherence : float
+        Gates on band coverage and input–output coherence (0..1).
+    max_condition : float
+        Gate on the regressor Gram's condition number.
+    min_airborne : float
+        Share of the window that must be airborne and armed.
+    max_angle_deg : float
+        Bound on ``|roll|`` and ``|pitch|``.
+    saturation, max_saturated : float
+        ``|u| >= saturation`` counts as saturated; at most ``max_saturated`` of the window.
+    """
+
+    window_s: float = 5.0
+    step_s: float | None = None
+    band_hz: tuple[float, float] = (0.5, 10.0)
+    power_ratio: float = 5.0
+    min_floor: float = 1e-3
+    min_coverage: float = 0.3
+    min_coherence: float = 0.5
+    max_condition: float = 1e4
+    min_airborne: float = 0.95
+    max_angle_deg: float = 45.0
+    saturation: float = 0.95
+    max_saturated: float = 0.05
+
+    def __post_init__(self) -> None:
+        if not self.window_s > 0 or (self.step_s is not None and not self.step_s > 0):
+            raise ConfigError("window_s and step_s must be positive")
+        if not 0 < self.band_hz[0] < self.band_hz[1]:
+            raise ConfigError(f"band_hz must be increasing and positive, got {self.band_hz}")
+
+    @property
+    def step(self) -> float:
+        """Scan step, s."""
+        return self.step_s if self.step_s is not None else self.window_s / 2
+
+
+@dataclass(frozen=True)
+class WindowReport:
+    """One window on one axis: where, how good, kept or not and why.
+
+    ``start_s``/``stop_s`` are the first and last sample times (log clock); ``i0``/``i1``
+    the ``[start, stop)`` sample indices into the FlightData.
+    """
+
+    axis: str
+    start_s: float
+    stop_s: float
+    score: float
+    kept: bool
+    source: str
+    reasons: tuple[str, ...]
+    i0: int
+    i1: int
+    metrics: Mapping[str, float] = field(default_factory=dict)
+    meta: Mapping[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-safe dict (``axis start_s stop_s score kept source reasons metrics meta``)."""
+        return {
+            "axis": self.axis,
+            "start_s": round(self.start_s, 6),
+            "stop_s": round(self.stop_s, 6),
+            "score": _json_float(self.score),
+            "kept": bool(self.kept),
+            "source": self.source,
+            "reasons": list(self.reasons),
+            "metrics": {k: _json_float(v) for k, v in self.metrics.items()},
+            "meta": {k: v for k, v in self.meta.items() if k != "params"},
+        }
+
+
+def _json_float(x: float) -> float | None:
+    return round(float(x), 6) if math.isfinite(x) else None
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+@dataclass(frozen=True)
+class _Axis:
+    """What one axis needs from the FlightData."""
+
+    name: str
+    u: np.ndarray | None  # input
+    u_hp: np.ndarray | None  # input without content below the band (per block)
+    y: np.ndarray | None  # output (rate, else angle)
+    y_name: str
+    u_name: str
+    floor: float
+    u_scale: float
+    y_scale: float
+
+
+def _col(fd: FlightData, name: str) -> np.ndarray | None:
+    if name in fd.state_names:
+        return fd.states[:, fd.state_names.index(name)]
+    if name in fd.input_names:
+        return fd.inputs[:, fd.input_names.index(name)]
+    return None
+
+
+def _moving(x: np.ndarray, n: int) -> np.ndarray:
+    """Centred moving average over ``n`` samples (same length, shrinking at the ends)."""
+    n = max(1, min(int(n), x.size))
+    c = np.concatenate([[0.0], np.cumsum(x)])
+    lo = np.clip(np.arange(x.size) - n // 2, 0, x.size)
+    hi = np.clip(lo + n, 0, x.size)
+    return (c[hi] - c[lo]) / np.maximum(hi - lo, 1)
+
+
+def _airborne(fd: FlightData) -> np.ndarray:
+    n = fd.time_s.size
+    air = np.asarray(fd.flags.get("airborne", np.ones(n, bool)), dtype=bool)
+    armed = np.asarray(fd.flags.get("armed", np.ones(n, bool)), dtype=bool)
+    return air & armed
+
+
+def _axis(fd: FlightData, name: str, opts: ScanOptions, air: np.ndarray) -> _Axis:
+    u_name = f"u_{name}"
+    u = _col(fd, u_name)
+    y_name = _RATE[name] if _RATE[name] in fd.state_names else name
+    y = _col(fd, y_name)
+    sel = air if air.any() else np.ones_like(air)
+    floor, u_scale, y_scale = opts.min_floor, 1.0, 1.0
+    u_hp = None
+    if u is not None:
+        # crude high-pass: remove the moving average over one period of the band's low edge
+        n_lo = max(3, round(1.0 / (opts.band_hz[0] * fd.dt)))
+        u_hp = np.zeros_like(u)
+        for a, b in fd.blocks:
+            u_hp[a:b] = u[a:b] - _moving(u[a:b], n_lo)
+        n1 = max(3, round(1.0 / fd.dt))
+        parts = [np.sqrt(_moving(u_hp[a:b] ** 2, n1))[sel[a:b]] for a, b in fd.blocks]
+        env = np.concatenate(parts) if parts else np.empty(0)
+        if env.size:
+            floor = max(opts.min_floor, float(np.percentile(env, 10)))
+        u_scale = float(np.sqrt(np.mean(u[sel] ** 2))) or 1.0
+    if y is not None:
+        y_scale = float(np.sqrt(np.mean(y[sel] ** 2))) or 1.0
+    return _Axis(name, u, u_hp, y, y_name, u_name, floor, u_scale, y_scale)
+
+
+def _metrics(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions
+             ) -> dict[str, float]:
+    """Excitation metrics of samples ``[i0, i1)`` for one axis."""
+    fs = 1.0 / fd.dt
+    out: dict[str, float] = {"noise_floor": ax.floor}
+    if ax.u is None or ax.u_hp is None or ax.y is None or i1 - i0 < 8:
+        return out
+    u, y = ax.u[i0:i1], ax.y[i0:i1]
+    rms = float(np.sqrt(np.mean(ax.u_hp[i0:i1] ** 2)))
+    out["input_rms"] = rms
+    out["power_ratio"] = rms / ax.floor
+    f_lo, f_hi = opts.band_hz[0], min(opts.band_hz[1], 0.4 * fs)
+    out["band_lo_hz"], out["band_hi_hz"] = f_lo, f_hi
+    nper = int(min(u.size, max(16, round(2.0 * fs))))
+    if f_hi > f_lo:
+        f, puu = signal.welch(u, fs=fs, nperseg=nper, detrend="linear")
+        band = (f >= f_lo) & (f <= f_hi)
+        if band.sum() >= 2:
+            w = np.zeros_like(f)
+            w[band] = 1.0 / f[band]  # log-frequency weighting
+            white = ax.floor**2 / (fs / 2)
+            out["coverage"] = float(np.sum(w * (puu > 10 * white)) / np.sum(w))
+            _, coh = signal.coherence(u, y, fs=fs, nperseg=nper, detrend="linear")
+            wp = puu * band
+            out["coherence"] = float(np.sum(wp * np.nan_to_num(coh)) / np.sum(wp)) if wp.sum(
+            ) > 0 else 0.0
+    phi = np.column_stack([y / ax.y_scale, u / ax.u_scale, np.ones_like(u)])
+    gram = phi.T @ phi / phi.shape[0]
+    ev = np.linalg.eigvalsh(gram)
+    out["condition"] = float(ev[-1] / ev[0]) if ev[0] > 0 else math.inf
+    return out
+
+
+def _score(m: Mapping[str, float]) -> float:
+    if "power_ratio" not in m:
+        return 0.0
+    terms = [
+        min(1.0, max(0.0, math.log10(max(m["power_ratio"], 1e-12)) / 2)),
+        m.get("coverage", 0.0),
+        m.get("coherence", 0.0),
+        min(1.0, max(0.0, 1 - math.log10(max(m.get("condition", math.inf), 1.0)) / 8))
+        if math.isfinite(m.get("condition", math.inf)) else 0.0,
+    ]
+    return float(np.prod(terms) ** (1 / len(terms)))
+
+
+def _fmt(x: float) -> str:
+    return f"{x:.3g}" if abs(x) < 1e4 else f"{x:.2g}"
+
+
+def _gates(ax: _Axis, fd: FlightData, i0: int, i1: int, m: Mapping[str, float],
+           opts: ScanOptions, air: np.ndarray, check_mode: bool, check_excitation: bool = True
+           ) -> list[str]:
+    """Rejection reasons (empty: passes)."""
+    out: list[str] = []
+    if ax.u is None:
+        return [f"rejected: the log has no {ax.u_name} input (preset {fd.preset})"]
+    if ax.y is None:
+        return [f"rejected: the log has no {ax.y_name} output (preset {fd.preset})"]
+    frac = float(air[i0:i1].mean())
+    if frac < opts.min_airborne:
+        out.append(
+            f"rejected: on the ground or disarmed for {100 * (1 - frac):.0f} % of the window "
+            f"(must be airborne for {100 * opts.min_airborne:.0f} %)"
+        )
+    mode = fd.flags.get("mode")
+    if check_mode and mode is not None:
+        mw = np.asarray(mode[i0:i1])
+        ch = np.flatnonzero(np.diff(mw) != 0)
+        if ch.size:
+            names = fd.meta.get("mode_names", {})
+            assert isinstance(names, Mapping)
+            k = ch[0]
+            a, b = (names.get(int(v), str(int(v))) for v in (mw[k], mw[k + 1]))
+            out.append(
+                f"rejected: flight mode changes inside the window ({a}→{b} at "
+                f"{fd.time_s[i0 + k + 1]:.1f} s)"
+            )
+    for ang in ("roll", "pitch"):
+        a = _col(fd, ang)
+        if a is not None:
+            peak = float(np.degrees(np.max(np.abs(a[i0:i1]))))
+            if peak > opts.max_angle_deg:
+                out.append(
+                    f"rejected: |{ang}| reaches {peak:.0f}° (bound {opts.max_angle_deg:g}°)"
+                )
+    sat = np.abs(ax.u[i0:i1]) >= opts.saturation
+    if sat.mean() > opts.max_saturated:
+        out.append(
+            f"rejected: {ax.u_name} saturated (|u| >= {opts.saturation:g}) for "
+            f"{100 * sat.mean():.0f} % of the window (limit {100 * opts.max_saturated:.0f} %)"
+        )
+    thr = _col(fd, "u_thrust")
+    if thr is not None:
+        tw = thr[i0:i1][air[i0:i1]]
+        if tw.size and np.ptp(thr) > 1e-6:  # a constant thrust column was not really logged
+            ts = (tw >= opts.saturation) | (tw <= 0.02)
+            if ts.mean() > opts.max_saturated:
+                out.append(
+                    f"rejected: u_thrust at its limits for {100 * ts.mean():.0f} % of the "
+                    f"airborne window (limit {100 * opts.max_saturated:.0f} %)"
+                )
+    if not check_excitation:
+        return out
+    if "power_ratio" not in m:
+        out.append(f"rejected: window too short ({i1 - i0} samples)")
+        return out
+    if m["power_ratio"] < opts.power_ratio:
+        out.append(
+            f"rejected: input RMS {_fmt(m['input_rms'])} below {opts.power_ratio:g}× noise "
+            f"floor {_fmt(ax.floor)} ({ax.u_name})"
+        )
+    cond = m.get("condition", math.inf)
+    if not cond <= opts.max_condition:
+        out.append(
+            f"rejected: ill-conditioned regressors [{ax.y_name}, {ax.u_name}, 1]: Gram condition "
+            f"number {_fmt(cond)} above {_fmt(opts.max_condition)} ({ax.u_name} barely varies "
+            "in this window, or only together with the response)"
+        )
+    band = f"{m.get('band_lo_hz', 0):.3g}–{m.get('band_hi_hz', 0):.3g} Hz"
+    if m.get("coverage", 0.0) < opts.min_coverage:
+        out.append(
+            f"rejected: input covers {100 * m.get('coverage', 0.0):.0f} % of the {band} band "
+            f"(need {100 * opts.min_coverage:.0f} %)"
+        )
+    if m.get("coherence", 0.0) < opts.min_coherence:
+        out.append(
+            f"rejected: {ax.u_name}→{ax.y_name} coherence {m.get('coherence', 0.0):.2f} below "
+            f"{opts.min_coherence:g} in {band}"
+        )
+    return out
+
+
+def _kept_reason(ax: _Axis, m: Mapping[str, float]) -> str:
+    return (
+        f"kept: input RMS {_fmt(m['input_rms'])} = {m['power_ratio']:.0f}× noise floor; "
+        f"band coverage {100 * m.get('coverage', 0):.0f} %; {ax.u_name}→{ax.y_name} coherence "
+        f"{m.get('coherence', 0):.2f}; Gram condition {_fmt(m.get('condition', math.inf))}"
+    )
+
+
+def _report(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions, air: np.ndarray,
+            source: str, meta: Mapping[str, Any]) -> WindowReport:
+    m = _metrics(ax, fd, i0, i1, opts)
+    reasons = _gates(ax, fd, i0, i1, m, opts, air, source == "scan")
+    kept = not reasons
+    if kept:
+        reasons = [_kept_reason(ax, m)]
+    return WindowReport(
+        ax.name, float(fd.time_s[i0]), float(fd.time_s[i1 - 1]), _score(m), kept, source,
+        tuple(reasons), i0, i1, m, dict(meta),
+    )
+
+
+# --------------------------------------------------------------------------- sources
+
+
+def _block_parts(fd: FlightData, t0: float, t1: float) -> list[tuple[int, int]]:
+    """``[i0, i1)`` pieces of the time span ``[t0, t1]``, one per block it touches."""
+    out = []
+    for a, b in fd.blocks:
+        i0 = int(np.searchsorted(fd.time_s[a:b], t0, side="left")) + a
+        i1 = int(np.searchsorted(fd.time_s[a:b], t1, side="right")) + a
+        if i1 - i0 >= 2:
+            out.append((i0, i1))
+    return out
+
+
+def _sysid_windows(fd: FlightData, axes: Sequence[str], axes_cache: Mapping[str, _Axis],
+                   opts: ScanOptions, air: np.ndarray) -> list[WindowReport]:
+    runs = fd.meta.get("sysid_runs", [])
+    out: list[WindowReport] = []
+    assert isinstance(runs, Iterable)
+    for run in runs:
+        sid = int(run.get("axis", 0))
+        name, injection = sid_axis_name(sid)
+        settings = {k: v for k, v in run.items() if k not in ("start_s", "stop_s")}
+        meta = {"sid_axis": sid, "injection": injection, "sysid": settings}
+        if name not in AXES:
+            if axes == AXES:  # only when every axis was asked for
+                for i0, i1 in _block_parts(fd, run["start_s"], run["stop_s"]):
+                    out.append(WindowReport(
+                        name, float(fd.time_s[i0]), float(fd.time_s[i1 - 1]), float("nan"),
+                        False, "sysid",
+                        (f"rejected: SYSTEMID run on {name} ({injection}, SID_AXIS {sid}) "
+                         "does not excite roll, pitch or yaw",), i0, i1, {}, meta))
+            continue
+        if name not in axes:
+            continue
+        for i0, i1 in _block_parts(fd, run["start_s"], run["stop_s"]):
+            rep = _report(axes_cache[name], fd, i0, i1, opts, air, "sysid", meta)
+            mag = run.get("magnitude", float("nan"))
+            note = (f"SYSTEMID {injection} {name} chirp, SID_AXIS {sid}, magnitude {mag:g}, "
+                    f"{run.get('f_start_hz', float('nan')):g}–"
+                    f"{run.get('f_stop_hz', float('nan')):g} Hz")
+            out.append(replace(rep, reasons=(*rep.reasons, note)))
+    return out
+
+
+def _trim(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions) -> tuple[int, int]:
+    """Drop the quiet head and tail of a merged window.
+
+    The head ends where the input (smoothed over 50 ms) first departs from its median over
+    the window's first 0.5 s by more than the power gate (``power_ratio`` × noise floor);
+    the tail likewise from the end.
+    """
+    assert ax.u is not None
+    n = max(3, round(0.5 / fd.dt))
+    if i1 - i0 < 3 * n:
+        return i0, i1
+    u = ax.u[i0:i1]
+    k = max(1, round(0.05 / fd.dt))
+    thr = opts.power_ratio * ax.floor
+    head = _moving(np.abs(u - np.median(u[:n])), k) > thr
+    tail = _moving(np.abs(u - np.median(u[-n:])), k) > thr
+    a = int(np.argmax(head)) if head.any() else 0
+    b = u.size - int(np.argmax(tail[::-1])) if tail.any() else u.size
+    return (i0 + a, i0 + b) if b - a >= n else (i0, i1)
+
+
+def _scan_windows(fd: FlightData, ax: _Axis, opts: ScanOptions, air: np.ndarray,
+                  exclude: Sequence[tuple[int, int]]) -> list[WindowReport]:
+    win = max(8, round(opts.window_s / fd.dt))
+    step = max(1, round(opts.step / fd.dt))
+    reports: list[WindowReport] = []
+    for a, b in fd.blocks:
+        a, b = int(a), int(b)
+        if b - a < win:
+            starts = [a] if b - a >= 8 else []
+        else:
+            starts = list(range(a, b - win + 1, step))
+            if starts[-1] + win < b:
+                starts.append(b - win)
+        for s in starts:
+            e = min(b, s + win)
+            if any(s < x1 and x0 < e for x0, x1 in exclude):
+                continue
+            reports.append(_report(ax, fd, s, e, opts, air, "scan", {}))
+    return _merge(fd, ax, reports, opts, air)
+
+
+def _merge(fd: FlightData, ax: _Axis, reports: list[WindowReport], opts: ScanOptions,
+           air: np.ndarray) -> list[WindowReport]:
+    """Merge runs of overlapping kept windows (within one block) and trim their quiet ends."""
+    out: list[WindowReport] = []
+    run: list[WindowReport] = []
+
+    def flush() -> None:
+        if not run:
+            return
+        i0, i1 = run[0].i0, max(r.i1 for r in run)
+        j0, j1 = _trim(ax, fd, i0, i1, opts)
+        merged = _report(ax, fd, j0, j1, opts, air, "scan", {"merged_windows": len(run)})
+        if merged.kept:
+            out.append(replace(merged, reasons=(
+                *merged.reasons,
+                f"merged from {len(run)} overlapping {opts.window_s:g}-s windows"
+                + (f", quiet ends trimmed ({fd.time_s[i0]:.2f}–{fd.time_s[i1 - 1]:.2f} s before)"
+                   if (j0, j1) != (i0, i1) else ""),
+            )))
+        else:  # the whole fails where its parts passed: keep the parts as they were
+            out.extend(run)
+        run.clear()
+
+    block_of = np.searchsorted(fd.blocks[:, 1], [r.i0 for r in reports], side="right")
+    for r, blk in zip(reports, block_of, strict=True):
+        if r.kept and run and r.i0 <= run[-1].i1 and blk == np.searchsorted(
+                fd.blocks[:, 1], run[-1].i0, side="right"):
+            run.append(r)
+            continue
+        flush()
+        if r.kept:
+            run.append(r)
+        else:
+            out.append(r)
+    flush()
+    return out
+
+
+# --------------------------------------------------------------------------- public
+
+
+def find_segments(
+    flight: FlightData,
+    axis: str | Sequence[str] | None = None,
+    *,
+    scan: bool | None = None,
+    options: ScanOptions | None = None,
+) -> list[WindowReport]:
+    """Every window considered, kept or rejected, with reasons.
+
+    Parameters
+    ----------
+    flight : FlightData
+    axis : str or sequence of str, optional
+        ``"roll"``, ``"pitch"``, ``"yaw"``; default all three.
+    scan : bool, optional
+        Scan sliding windows: default only for axes without a SYSTEMID run; True for all
+        axes (outside their SYSTEMID runs), False never.
+    options : ScanOptions, optional
+
+    Returns
+    -------
+    list of WindowReport
+        Sorted by axis (roll, pitch, yaw, then others), then start time.
+
+    Raises
+    ------
+    ConfigError
+        Unknown axis.
+    """
+    opts = options or ScanOptions()
+    axes = AXES if axis is None else ((axis,) if isinstance(axis, str) else tuple(axis))
+    for a in axes:
+        if a not in AXES:
+            raise ConfigError(f"unknown axis {a!r} (choose from {', '.join(AXES)})")
+    air = _airborne(flight)
+    cache = {a: _axis(flight, a, opts, air) for a in axes}
+    reports = _sysid_windows(flight, axes, cache, opts, air)
+    for a in axes:
+        mine = [(r.i0, r.i1) for r in reports if r.axis == a and r.source == "sysid"]
+        if scan is False or (scan is None and mine):
+            continue
+        if cache[a].u is None or cache[a].y is None:
+            n = flight.time_s.size
+            reason = _gates(cache[a], flight, 0, n, {}, opts, air, False, False)
+            reports.append(WindowReport(a, float(flight.time_s[0]), float(flight.time_s[-1]),
+                                        0.0, False, "scan", tuple(reason), 0, n))
+            continue
+        reports += _scan_windows(flight, cache[a], opts, air, mine)
+    order = {a: i for i, a in enumerate(AXES)}
+    reports.sort(key=lambda r: (order.get(r.axis, len(AXES)), r.start_s))
+    return reports
+
+
+def select_segments(
+    flight: FlightData,
+    axis: str | Sequence[str] | None = None,
+    reports: Sequence[WindowReport] | None = None,
+    **kwargs: Any,
+) -> list[Segment]:
+    """The kept windows as :class:`~mavsid.data.Segment` objects for the estimators.
+
+    Each segment carries every state and input column of the flight; ``meta`` holds the
+    log's parameters (``params``), the preset, the window's metrics and, for SYSTEMID runs,
+    the SIDS settings (``sysid``, ``sid_axis``, ``injection``).
+
+    Parameters
+    ----------
+    reports : sequence of WindowReport, optional
+        From :func:`find_segments` (computed when omitted, with ``axis`` and ``kwargs``).
+    """
+    reps = find_segments(flight, axis, **kwargs) if reports is None else reports
+    out = []
+    for r in reps:
+        if not r.kept:
+            continue
+        meta = {**r.meta, "params": dict(flight.params), "preset": flight.preset,
+                "metrics": dict(r.metrics)}
+        out.append(Segment(
+            time_s=flight.time_s[r.i0:r.i1].copy(),
+            states=flight.states[r.i0:r.i1].copy(),
+            inputs=flight.inputs[r.i0:r.i1].copy(),
+            state_names=flight.state_names,
+            input_names=flight.input_names,
+            dt=flight.dt,
+            axis=r.axis,
+            source=r.source,
+            score=r.score,
+            log=flight.source.path,
+            reasons=r.reasons,
+            meta=meta,
+        ))
+    return out

@@ -37,6 +37,7 @@ Examples
 
 from __future__ import annotations
 
+import os
 import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -55,11 +56,13 @@ from mavsid.channels import (
     get_preset,
     mixer_for,
     motor_thrusts,
+    preset_messages,
 )
 from mavsid.data import FlightData, RawLog
 from mavsid.errors import ConfigError, DataQualityWarning, MavsidError, NoExcitationError
+from mavsid.readers import read_log, sniff_format
 
-__all__ = ["align", "sysid_runs"]
+__all__ = ["FLAG_MESSAGES", "align", "load_flight", "sysid_runs"]
 
 #: a channel pausing longer than this many of its own median sample intervals is a gap
 MAX_GAP_SAMPLES = 4.0
@@ -421,6 +424,14 @@ def sysid_runs(raw: RawLog) -> list[dict[str, float]]:
 
 # --------------------------------------------------------------------------- align
 
+#: messages alignment reads besides the presets' channels: flags, modes, params, SYSTEMID
+FLAG_MESSAGES: dict[str, tuple[str, ...]] = {
+    "dataflash": ("EV", "ARM", "MODE", "MSG", "PARM", "SIDS", "SIDD"),
+    "tlog": ("HEARTBEAT", "EXTENDED_SYS_STATE", "PARAM_VALUE", "STATUSTEXT"),
+    "ulog": ("actuator_armed", "vehicle_land_detected", "vehicle_status"),
+}
+FLAG_MESSAGES["dataflash-text"] = FLAG_MESSAGES["dataflash"]
+
 
 def align(
     raw: RawLog,
@@ -518,3 +529,30 @@ def align(
         params=dict(raw.params),
         meta=meta,
     )
+
+
+def load_flight(
+    path: str | os.PathLike[str],
+    preset: Preset | str | None = None,
+    rate_hz: float | None = None,
+    *,
+    presets: Mapping[str, Preset] | None = None,
+    mixers: Mapping[str, Mixer] | None = None,
+) -> FlightData:
+    """Read only the messages alignment needs from a log file, then :func:`align` it.
+
+    Examples
+    --------
+    >>> load_flight("/nonexistent.bin")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    mavsid.errors.LogFormatError: /nonexistent.bin: cannot open: ...
+    """
+    fmt = sniff_format(path)
+    chosen = [preset] if isinstance(preset, Preset) else []
+    if isinstance(preset, str):
+        chosen = [get_preset(preset, presets)]
+    extra = [*chosen, *(presets or {}).values()]
+    wanted = preset_messages(fmt, extra) if not chosen else chosen[0].messages
+    raw = read_log(path, messages=[*wanted, *FLAG_MESSAGES.get(fmt, ())])
+    return align(raw, preset, rate_hz, presets=presets, mixers=mixers)

@@ -46,6 +46,50 @@ _default_showwarning = warnings.showwarning
 SUBCOMMANDS: list[Callable[[argparse._SubParsersAction], None]] = []  # type: ignore[type-arg]
 
 
+def _add_segments(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = sub.add_parser(
+        "segments",
+        help="list the well-excited windows of a log, and why the others were rejected",
+    )
+    p.add_argument("log", help="flight log (.bin, .log, .tlog, .ulg)")
+    p.add_argument("--axis", choices=("roll", "pitch", "yaw"), help="one axis only")
+    p.add_argument("--json", action="store_true", help="print a JSON list of windows")
+    p.add_argument("--all", action="store_true", help="list every rejected scan window")
+    p.add_argument("--scan", action="store_true",
+                   help="scan sliding windows also on axes that have a SYSTEMID run")
+    p.add_argument("--window", type=float, default=5.0, help="scan window length, s (5)")
+    p.add_argument("--preset", help="channel preset name, or a TOML file of presets")
+    p.add_argument("--rate", type=float, help="grid rate, Hz (default: the rate channel's)")
+    p.set_defaults(handler=_segments)
+
+
+def _segments(args: argparse.Namespace) -> int:
+    import json
+
+    from mavsid.align import load_flight
+    from mavsid.channels import load_presets
+    from mavsid.excitation import ScanOptions, find_segments, format_reports
+
+    preset, presets, mixers = args.preset, None, None
+    if preset and preset.lower().endswith(".toml"):
+        presets, mixers = load_presets(preset)
+        preset = None
+    flight = load_flight(args.log, preset, args.rate, presets=presets, mixers=mixers)
+    reports = find_segments(flight, args.axis, scan=True if args.scan else None,
+                            options=ScanOptions(window_s=args.window))
+    if args.json:
+        print(json.dumps([r.to_dict() for r in reports], indent=1, ensure_ascii=False))
+    else:
+        span = flight.time_s[-1] - flight.time_s[0]
+        print(f"{args.log}: preset {flight.preset}, {1 / flight.dt:.0f} Hz, {span:.1f} s, "
+              f"{len(flight.blocks)} block(s)")
+        print(format_reports(reports, show_all=args.all))
+    return 0
+
+
+SUBCOMMANDS.append(_add_segments)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every subcommand."""
     parser = argparse.ArgumentParser(

@@ -634,3 +634,55 @@ def select_segments(
             meta=meta,
         ))
     return out
+
+
+def format_reports(reports: Sequence[WindowReport], show_all: bool = False) -> str:
+    """Human-readable table: SYSTEMID and kept windows in full, rejected scan windows
+    counted by their first reason (every window with ``show_all``).
+
+    Examples
+    --------
+    >>> r = WindowReport("roll", 1.0, 6.0, 0.1, False, "scan",
+    ...                  ("rejected: input RMS 0.0002 below 5× noise floor 0.001 (u_roll)",), 0, 9)
+    >>> print(format_reports([r]))
+    axis    start_s   stop_s  score  kept  source  reasons
+    roll: 1 scan window(s) rejected: 1× input RMS below noise floor
+    """
+    lines = [f"{'axis':6s} {'start_s':>8s} {'stop_s':>8s} {'score':>6s}  kept  source  reasons"]
+    hidden: dict[str, dict[str, int]] = {}
+    for r in reports:
+        if r.kept or r.source == "sysid" or show_all:
+            score = f"{r.score:6.2f}" if math.isfinite(r.score) else "     -"
+            lines.append(
+                f"{r.axis:6s} {r.start_s:8.2f} {r.stop_s:8.2f} {score}  "
+                f"{'yes' if r.kept else 'no':4s}  {r.source:6s}  {r.reasons[0]}"
+            )
+            lines += [f"{'':47s}{x}" for x in r.reasons[1:]]
+        else:
+            key = _reason_kind(r.reasons[0])
+            hidden.setdefault(r.axis, {})
+            hidden[r.axis][key] = hidden[r.axis].get(key, 0) + 1
+    for axis, kinds in hidden.items():
+        total = sum(kinds.values())
+        detail = ", ".join(f"{n}× {k}" for k, n in sorted(kinds.items(), key=lambda kv: -kv[1]))
+        lines.append(f"{axis}: {total} scan window(s) rejected: {detail}")
+    return "\n".join(lines)
+
+
+_KINDS = (
+    ("on the ground", "on the ground or disarmed"),
+    ("flight mode changes", "mode change inside"),
+    ("reaches", "attitude beyond bound"),
+    ("saturated", "input saturated"),
+    ("u_thrust at its limits", "thrust at its limits"),
+    ("input RMS", "input RMS below noise floor"),
+    ("ill-conditioned", "ill-conditioned regressors"),
+    ("covers", "narrow band coverage"),
+    ("coherence", "low coherence"),
+    ("too short", "too short"),
+    ("has no", "missing channel"),
+)
+
+
+def _reason_kind(reason: str) -> str:
+    return next((kind for key, kind in _KINDS if key in reason), reason)

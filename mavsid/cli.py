@@ -46,6 +46,50 @@ _default_showwarning = warnings.showwarning
 SUBCOMMANDS: list[Callable[[argparse._SubParsersAction], None]] = []  # type: ignore[type-arg]
 
 
+def _add_info(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("info", help="what a log holds: messages, rates, units, modes, SYSTEMID")
+    p.add_argument("log", help="flight log (.bin, .log, .tlog, .ulg)")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.set_defaults(handler=_info)
+
+
+def _info(args: argparse.Namespace) -> int:
+    import json
+
+    from mavsid.info import format_summary, summarize
+    from mavsid.readers import read_log
+
+    summary = summarize(read_log(args.log))
+    print(json.dumps(summary, indent=1, ensure_ascii=False) if args.json
+          else format_summary(summary))
+    return 0
+
+
+def _add_extract(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("extract", help="decoded messages to .npz (or one type to .parquet/.csv)")
+    p.add_argument("log", help="flight log (.bin, .log, .tlog, .ulg)")
+    p.add_argument("--messages", help="comma-separated message types (default: all)")
+    p.add_argument("--start", type=float, help="first time to keep, s (log clock)")
+    p.add_argument("--stop", type=float, help="last time to keep, s (log clock)")
+    p.add_argument("-o", "--output", required=True, help="OUT.npz, OUT.parquet or OUT.csv")
+    p.set_defaults(handler=_extract)
+
+
+def _extract(args: argparse.Namespace) -> int:
+    from mavsid.export import write
+    from mavsid.readers import read_log
+
+    names = [m.strip() for m in args.messages.split(",") if m.strip()] if args.messages else None
+    log = read_log(args.log, messages=names, start=args.start, stop=args.stop)
+    out = write(log, args.output, names)
+    n = len(names) if names is not None else len(log.messages)
+    print(f"wrote {out} ({n} message type(s))")
+    return 0
+
+
+SUBCOMMANDS.extend([_add_info, _add_extract])
+
+
 def _add_segments(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "segments",
@@ -88,6 +132,60 @@ def _segments(args: argparse.Namespace) -> int:
 
 
 SUBCOMMANDS.append(_add_segments)
+
+
+def _add_simulate(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    p = sub.add_parser(
+        "simulate",
+        help="fly a known plant like ArduCopter and write real-format logs + truth JSON",
+        description="Simulate an ArduCopter-like quadrotor (known plant, ArduPilot-style "
+        "controller, SYSTEMID chirps or pilot manoeuvres) and write a DataFlash .bin and/or "
+        "a MAVLink .tlog (format from the suffix), with OUT.truth.json beside it.",
+    )
+    p.add_argument("-o", "--output", action="append", required=True, metavar="OUT",
+                   help="OUT.bin or OUT.tlog (repeat to write both from one flight)")
+    p.add_argument("--manoeuvre", default="sysid",
+                   choices=("sysid", "doublet", "3211", "random", "hover"),
+                   help="excitation (default sysid: an ArduPilot SYSTEMID chirp)")
+    p.add_argument("--axis", choices=("roll", "pitch", "yaw"), default="roll",
+                   help="stick axis of a manoeuvre; mixer axis of the default chirp (roll)")
+    p.add_argument("--sid-axis", type=int, action="append", metavar="N",
+                   help="SID_AXIS 1-13 of a SYSTEMID run (repeat for several runs)")
+    p.add_argument("--duration", type=float, metavar="S", help="log length, s")
+    p.add_argument("--seed", type=int, default=0, help="random seed (0)")
+    p.add_argument("--noise", type=float, default=1.0, metavar="K",
+                   help="scale of sensor noise, gyro bias and disturbance (1; 0 = none)")
+    p.add_argument("--magnitude", type=float, help="SID_MAGNITUDE")
+    p.add_argument("--f-start", type=float, default=0.5, help="SID_F_START_HZ (0.5)")
+    p.add_argument("--f-stop", type=float, default=15.0, help="SID_F_STOP_HZ (15)")
+    p.add_argument("--t-rec", type=float, default=20.0, help="SID_T_REC, s (20)")
+    p.add_argument("--rate-hz", type=float, default=400.0,
+                   help="RATE/SIDD logging rate, must divide 400 Hz (400)")
+    p.add_argument("--faults", default="", metavar="SPEC",
+                   help="damage: drop=FRACTION,reboot=SECONDS,truncate=BYTES")
+    p.set_defaults(handler=_simulate)
+
+
+def _simulate(args: argparse.Namespace) -> int:
+    from mavsid.synthetic.faults import Faults
+    from mavsid.synthetic.run import scenario_from_options, simulate
+
+    scenario = scenario_from_options(
+        manoeuvre=args.manoeuvre, axis=args.axis, sid_axes=args.sid_axis or (),
+        duration_s=args.duration, seed=args.seed, noise=args.noise, magnitude=args.magnitude,
+        f_start_hz=args.f_start, f_stop_hz=args.f_stop, t_rec=args.t_rec, rate_hz=args.rate_hz,
+    )
+    faults = Faults.parse(args.faults, seed=args.seed)
+    command = "mavsid simulate " + " ".join(sys.argv[2:]) if len(sys.argv) > 2 else None
+    result = simulate(scenario, args.output, faults, command=command)
+    for path, size in zip(result.logs, result.sizes, strict=True):
+        print(f"wrote {path} ({size} bytes)")
+    for path in result.truths:
+        print(f"wrote {path}")
+    return 0
+
+
+SUBCOMMANDS.append(_add_simulate)
 
 
 def build_parser() -> argparse.ArgumentParser:

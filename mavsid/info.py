@@ -1,0 +1,188 @@
+"""Summary of a log for ``mavsid info``: what is in it, how fast, and what was skipped.
+
+Works on any :class:`~mavsid.data.RawLog` (every reader's output). :func:`summarize` gives a
+JSON-safe dict (``mavsid info --json``), :func:`format_summary` the text a person reads.
+
+Rates are medians: for each message type the median interval between samples (per instance
+when the type has an instance column, so two IMUs logged together count as one rate), as Hz.
+SYSTEMID runs are the ArduPilot SIDS records, one per run, with their settings as logged.
+
+Examples
+--------
+>>> import numpy as np
+>>> from mavsid.data import MessageTable, RawLog, SourceInfo
+>>> t = np.arange(0, 1, 0.01)
+>>> log = RawLog(SourceInfo("x.bin", "dataflash", 100),
+...              {"RATE": MessageTable("RATE", {"R": t}, t, {"R": "deg/s"})})
+>>> s = summarize(log)
+>>> s["messages"]["RATE"]["count"], s["messages"]["RATE"]["rate_hz"]
+(100, 100.0)
+>>> print(format_summary(s).splitlines()[0])
+x.bin
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from mavsid.data import MessageTable, RawLog
+
+__all__ = ["format_summary", "median_rate_hz", "summarize"]
+
+_INSTANCE_FIELDS = ("I", "Instance", "C", "Id")
+
+
+def _num(x: float) -> float | None:
+    """JSON-safe float (None for NaN/inf), rounded to 6 significant digits."""
+    if x is None or not math.isfinite(x):
+        return None
+    return float(f"{x:.6g}")
+
+
+def _instance_column(table: MessageTable) -> str | None:
+    """The column that tells instances apart: declared unit 'instance', else a usual name."""
+    for name in table.fields:
+        if table.unit(name) == "instance":
+            return name
+    return next((n for n in _INSTANCE_FIELDS if n in table and table[n].ndim == 1
+                 and table[n].dtype.kind in "iu"), None)
+
+
+def median_rate_hz(table: MessageTable) -> float:
+    """Median sample rate (Hz) of one message type, per instance when it has instances.
+
+    Examples
+    --------
+    >>> t = np.repeat(np.arange(0.0, 1.0, 0.1), 2)  # two instances stamped together
+    >>> tab = MessageTable("IMU", {"I": np.tile([0, 1], 10)}, t, {"I": "instance"})
+    >>> round(median_rate_hz(tab), 6)
+    10.0
+    """
+    t = np.asarray(table.time_s, np.float64)
+    inst = _instance_column(table)
+    groups = [t] if inst is None else [t[table[inst] == v] for v in np.unique(table[inst])]
+    rates = []
+    for g in groups:
+        g = g[np.isfinite(g)]
+        d = np.diff(g)
+        d = d[d > 0]
+        if d.size:
+            rates.append(1.0 / float(np.median(d)))
+    return float(np.median(rates)) if rates else float("nan")
+
+
+def _span(log: RawLog) -> tuple[float | None, float | None]:
+    lo, hi = math.inf, -math.inf
+    for table in log.messages.values():
+        t = table.time_s[np.isfinite(table.time_s)]
+        if t.size:
+            lo, hi = min(lo, float(t.min())), max(hi, float(t.max()))
+    return (_num(lo), _num(hi)) if hi >= lo else (None, None)
+
+
+def _value(v: Any) -> Any:
+    """JSON-safe scalar."""
+    if isinstance(v, (np.integer, int)) and not isinstance(v, bool):
+        return int(v)
+    if isinstance(v, (np.floating, float)):
+        return _num(float(v))
+    if isinstance(v, bytes):
+        return v.hex()
+    return str(v)
+
+
+def _sysid_runs(log: RawLog) -> list[dict[str, Any]]:
+    """One entry per SIDS record: its time and settings as logged."""
+    if "SIDS" not in log:
+        return []
+    table = log["SIDS"]
+    runs = []
+    for k in range(len(table)):
+        run: dict[str, Any] = {"time_s": _num(float(table.time_s[k]))}
+        for name in table.fields:
+            if name != "TimeUS" and table[name].ndim == 1:
+                run[name] = _value(table[name][k])
+        runs.append(run)
+    return runs
+
+
+def summarize(log: RawLog) -> dict[str, Any]:
+    """Everything ``mavsid info`` shows, as a JSON-safe dict.
+
+    Keys: ``path, format, size_bytes, autopilot, firmware, vehicle, start_s, end_s,
+    duration_s, messages`` (name -> ``count, rate_hz, fields`` (name -> unit or None)),
+    ``modes`` (``time_s, mode, name``), ``param_count, text_count, sysid_runs,
+    skipped_bytes, notes``.
+    """
+    start, end = _span(log)
+    messages: dict[str, dict[str, Any]] = {}
+    for name in sorted(log.messages):
+        table = log.messages[name]
+        messages[name] = {
+            "count": len(table),
+            "rate_hz": _num(median_rate_hz(table)),
+            "fields": {f: table.unit(f) for f in table.fields},
+        }
+    return {
+        "path": log.source.path,
+        "format": log.source.format,
+        "size_bytes": log.source.size_bytes,
+        "autopilot": log.autopilot,
+        "firmware": log.firmware,
+        "vehicle": log.vehicle,
+        "start_s": start,
+        "end_s": end,
+        "duration_s": _num(log.duration_s),
+        "messages": messages,
+        "modes": [{"time_s": _num(m.time_s), "mode": m.mode, "name": m.name}
+                  for m in log.modes],
+        "param_count": len(log.params),
+        "text_count": len(log.texts),
+        "sysid_runs": _sysid_runs(log),
+        "skipped_bytes": log.source.skipped_bytes,
+        "notes": list(log.source.notes),
+    }
+
+
+def _fmt_time(t: float | None) -> str:
+    return "?" if t is None else f"{t:.3f} s"
+
+
+def format_summary(summary: Mapping[str, Any], max_fields: int | None = None) -> str:
+    """The text ``mavsid info`` prints for a :func:`summarize` dict.
+
+    ``max_fields`` shortens long field lists (None: all).
+    """
+    s = summary
+    lines = [
+        f"{s['path']}",
+        f"  format      {s['format']} ({s['size_bytes']} bytes), autopilot {s['autopilot']}",
+        f"  firmware    {s['firmware'] or '?'}",
+        f"  vehicle     {s['vehicle'] or '?'}",
+        f"  time        {_fmt_time(s['start_s'])} .. {_fmt_time(s['end_s'])}"
+        f" (duration {_fmt_time(s['duration_s'])})",
+        f"  parameters  {s['param_count']}, texts {s['text_count']}, "
+        f"skipped bytes {s['skipped_bytes']}",
+    ]
+    lines.append(f"  messages    {len(s['messages'])} types")
+    width = max((len(n) for n in s["messages"]), default=4)
+    for name, m in s["messages"].items():
+        rate = "    ?   " if m["rate_hz"] is None else f"{m['rate_hz']:8.2f}"
+        fields = [f if u is None else f"{f}[{u}]" for f, u in m["fields"].items()]
+        if max_fields is not None and len(fields) > max_fields:
+            fields = [*fields[:max_fields], f"... ({len(m['fields'])} fields)"]
+        lines.append(f"    {name:<{width}} {m['count']:>8} {rate} Hz  {' '.join(fields)}")
+    lines.append(f"  modes       {len(s['modes'])} changes")
+    for m in s["modes"]:
+        lines.append(f"    {_fmt_time(m['time_s']):>12}  {m['mode']:>3} {m['name'] or '?'}")
+    lines.append(f"  SYSTEMID    {len(s['sysid_runs'])} runs")
+    for run in s["sysid_runs"]:
+        settings = " ".join(f"{k}={v}" for k, v in run.items() if k != "time_s")
+        lines.append(f"    {_fmt_time(run['time_s']):>12}  {settings}")
+    for note in s["notes"]:
+        lines.append(f"  note: {note}")
+    return "\n".join(lines)

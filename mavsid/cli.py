@@ -134,7 +134,7 @@ def _segments(args: argparse.Namespace) -> int:
 SUBCOMMANDS.append(_add_segments)
 
 
-def _add_simulate(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def _add_simulate(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "simulate",
         help="fly a known plant like ArduCopter and write real-format logs + truth JSON",
@@ -176,7 +176,15 @@ def _simulate(args: argparse.Namespace) -> int:
         f_start_hz=args.f_start, f_stop_hz=args.f_stop, t_rec=args.t_rec, rate_hz=args.rate_hz,
     )
     faults = Faults.parse(args.faults, seed=args.seed)
-    command = "mavsid simulate " + " ".join(sys.argv[2:]) if len(sys.argv) > 2 else None
+    opts = [f"-o {o}" for o in args.output] + [f"--manoeuvre {args.manoeuvre}",
+                                                 f"--axis {args.axis}"]
+    opts += [f"--sid-axis {a}" for a in args.sid_axis or ()]
+    for name in ("duration", "seed", "noise", "magnitude", "f_start", "f_stop", "t_rec",
+                 "rate_hz", "faults"):
+        value = getattr(args, name)
+        if value not in (None, ""):
+            opts.append(f"--{name.replace('_', '-')} {value}")
+    command = "mavsid simulate " + " ".join(opts)
     result = simulate(scenario, args.output, faults, command=command)
     for path, size in zip(result.logs, result.sizes, strict=True):
         print(f"wrote {path} ({size} bytes)")

@@ -1,0 +1,206 @@
+"""An ArduPilot-like multicopter attitude controller at loop rate, and the quad-X mixer.
+
+Per axis, each loop:
+
+1. angle target: the pilot's desired angle (or, for yaw, the integral of the desired rate) is
+   approached with a first-order time constant ``ATC_INPUT_TC``; its rate of change is the
+   body-rate feed-forward (``ATC_RATE_FF_ENAB``);
+2. angle P: ``rate_target = ATC_ANG_*_P * (angle_target - angle) + feed-forward``;
+3. rate PID (ArduPilot's ``AC_PID``): target low-passed at ``FLTT``, error = target - measured
+   (filtered gyro) low-passed at ``FLTE`` (0 = off), derivative of the filtered error low-passed
+   at ``FLTD``; ``out = P*err + I + D*derr + FF*target``, ``|I| <= IMAX``;
+4. the mixer input ``u = out + mixer injection`` is limited to [-1, 1] (RATE.ROut/POut/YOut).
+
+Small-angle approximation: Euler-angle errors and rates are used as body-frame ones.
+
+Examples
+--------
+>>> c = ControllerParams()
+>>> c.params()["ATC_RAT_RLL_P"]
+0.135
+>>> pid = RatePID(c.rate_gains("roll"), dt=0.0025)
+>>> round(pid.update(target=1.0, measured=0.0), 4)   # P + FF on the first sample
+0.135
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from mavsid.errors import ConfigError
+
+__all__ = ["QUAD_X", "ControllerParams", "RateGains", "RatePID", "motor_outputs"]
+
+_PREFIX = {"roll": "RLL", "pitch": "PIT", "yaw": "YAW"}
+
+#: quad-X motor factors (rows: motors 1-4; columns: roll, pitch, yaw), ArduPilot numbering:
+#: 1 front-right (CCW), 2 rear-left (CCW), 3 front-left (CW), 4 rear-right (CW)
+QUAD_X = np.array(
+    [
+        [-0.5, 0.5, 0.5],
+        [0.5, -0.5, 0.5],
+        [0.5, 0.5, -0.5],
+        [-0.5, -0.5, -0.5],
+    ]
+)
+
+
+@dataclass(frozen=True)
+class RateGains:
+    """One axis of ``ATC_RAT_<AX>_*`` (P, I, D dimensionless per rad/s; filters in Hz)."""
+
+    p: float
+    i: float
+    d: float
+    ff: float
+    imax: float
+    fltt: float
+    fltd: float
+    flte: float
+
+
+@dataclass(frozen=True)
+class ControllerParams:
+    """Attitude-controller parameters with ArduPilot's meanings (defaults: ArduCopter-like).
+
+    Rate gains act on rad/s and produce a normalised output; angle P is in 1/s.
+    """
+
+    rll_p: float = 0.135
+    rll_i: float = 0.135
+    rll_d: float = 0.0036
+    rll_ff: float = 0.0
+    rll_imax: float = 0.5
+    rll_fltt: float = 20.0
+    rll_fltd: float = 20.0
+    rll_flte: float = 0.0
+    pit_p: float = 0.135
+    pit_i: float = 0.135
+    pit_d: float = 0.0036
+    pit_ff: float = 0.0
+    pit_imax: float = 0.5
+    pit_fltt: float = 20.0
+    pit_fltd: float = 20.0
+    pit_flte: float = 0.0
+    yaw_p: float = 0.18
+    yaw_i: float = 0.018
+    yaw_d: float = 0.0
+    yaw_ff: float = 0.0
+    yaw_imax: float = 0.5
+    yaw_fltt: float = 20.0
+    yaw_fltd: float = 0.0
+    yaw_flte: float = 2.5
+    ang_rll_p: float = 4.5
+    ang_pit_p: float = 4.5
+    ang_yaw_p: float = 4.5
+    input_tc: float = 0.15
+    rate_ff_enab: bool = True
+    angle_max_deg: float = 30.0
+    pilot_yaw_rate_degs: float = 202.5
+    loop_hz: float = 400.0
+
+    def __post_init__(self) -> None:
+        for name, value in asdict(self).items():
+            if not np.isfinite(float(value)) or float(value) < 0:
+                raise ConfigError(f"controller parameter {name} must be finite and >= 0")
+        if self.loop_hz <= 0 or self.input_tc <= 0:
+            raise ConfigError("loop_hz and input_tc must be positive")
+
+    def rate_gains(self, axis: str) -> RateGains:
+        """The rate-PID gains of ``axis`` (``"roll"``, ``"pitch"``, ``"yaw"``)."""
+        k = {"roll": "rll", "pitch": "pit", "yaw": "yaw"}[axis]
+        g = {f: getattr(self, f"{k}_{f}") for f in ("p", "i", "d", "ff", "imax", "fltt",
+                                                     "fltd", "flte")}
+        return RateGains(**g)
+
+    def angle_p(self, axis: str) -> float:
+        """``ATC_ANG_<AX>_P`` (1/s)."""
+        return float(getattr(self, f"ang_{ {'roll': 'rll', 'pitch': 'pit', 'yaw': 'yaw'}[axis]}_p"))
+
+    def params(self) -> dict[str, float]:
+        """ArduPilot parameter names and values."""
+        out: dict[str, float] = {}
+        for axis, pre in _PREFIX.items():
+            g = self.rate_gains(axis)
+            for f, name in (("p", "P"), ("i", "I"), ("d", "D"), ("ff", "FF"), ("imax", "IMAX"),
+                            ("fltt", "FLTT"), ("fltd", "FLTD"), ("flte", "FLTE")):
+                out[f"ATC_RAT_{pre}_{name}"] = float(getattr(g, f))
+            out[f"ATC_ANG_{pre}_P"] = self.angle_p(axis)
+        out["ATC_INPUT_TC"] = self.input_tc
+        out["ATC_RATE_FF_ENAB"] = float(self.rate_ff_enab)
+        out["ANGLE_MAX"] = self.angle_max_deg * 100.0
+        out["PILOT_Y_RATE"] = self.pilot_yaw_rate_degs
+        out["SCHED_LOOP_RATE"] = self.loop_hz
+        return out
+
+
+def _alpha(cutoff_hz: float, dt: float) -> float:
+    """First-order low-pass gain per step (1 = no filtering)."""
+    if cutoff_hz <= 0:
+        return 1.0
+    rc = 1.0 / (2 * np.pi * cutoff_hz)
+    return dt / (dt + rc)
+
+
+class RatePID:
+    """ArduPilot ``AC_PID``-style rate controller for one axis."""
+
+    def __init__(self, gains: RateGains, dt: float) -> None:
+        self.g = gains
+        self.dt = dt
+        self.a_t = _alpha(gains.fltt, dt)
+        self.a_e = _alpha(gains.flte, dt)
+        self.a_d = _alpha(gains.fltd, dt)
+        self.target = 0.0
+        self.error = 0.0
+        self.deriv = 0.0
+        self.integ = 0.0
+        self.reset = True
+
+    def update(self, target: float, measured: float) -> float:
+        """One step: target and measured rate (rad/s) -> normalised output."""
+        g = self.g
+        if self.reset:
+            self.target = target
+            self.error = target - measured
+            self.deriv = 0.0
+            self.reset = False
+        else:
+            self.target += self.a_t * (target - self.target)
+            err_prev = self.error
+            self.error += self.a_e * ((self.target - measured) - self.error)
+            self.deriv += self.a_d * ((self.error - err_prev) / self.dt - self.deriv)
+        self.integ = float(np.clip(self.integ + g.i * self.error * self.dt, -g.imax, g.imax))
+        return g.p * self.error + self.integ + g.d * self.deriv + g.ff * self.target
+
+
+def motor_outputs(throttle: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Quad-X mixing: motor thrust demands (0-1) and the axis inputs they really realise.
+
+    Parameters
+    ----------
+    throttle : numpy.ndarray, shape (n,)
+        Collective throttle (0-1).
+    u : numpy.ndarray, shape (n, 3)
+        Roll, pitch, yaw mixer inputs.
+
+    Returns
+    -------
+    motors : numpy.ndarray, shape (n, 4)
+        Demands limited to [0, 1].
+    u_eff : numpy.ndarray, shape (n, 3)
+        The roll/pitch/yaw the limited motors produce (equal to ``u`` unless saturated).
+
+    Examples
+    --------
+    >>> m, ue = motor_outputs(np.array([0.4]), np.array([[0.1, 0.0, 0.0]]))
+    >>> m.round(3).tolist(), ue.round(6).tolist()
+    ([[0.35, 0.45, 0.45, 0.35]], [[0.1, 0.0, 0.0]])
+    """
+    mix = np.hstack([np.ones((4, 1)), QUAD_X])  # motors = mix @ (thr, r, p, y)
+    cmd = np.column_stack([throttle, u])
+    motors = np.clip(cmd @ mix.T, 0.0, 1.0)
+    realised = motors @ np.linalg.inv(mix).T
+    return motors, realised[:, 1:]

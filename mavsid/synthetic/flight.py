@@ -1,0 +1,454 @@
+"""Fly the known plant with the ArduPilot-like controller: one closed-loop simulation.
+
+:func:`fly` turns a :class:`Scenario` into a :class:`Flight` — every signal at loop rate —
+which the writers (:mod:`mavsid.synthetic.dfwriter`, :mod:`mavsid.synthetic.tlogwriter`) turn
+into log files and :meth:`Flight.truth` into the ground-truth sidecar.
+
+Examples
+--------
+>>> sc = Scenario(manoeuvre="doublet", axis="roll", duration_s=3.0, seed=1)
+>>> fl = fly(sc)
+>>> fl.t_s.shape, fl.u.shape, round(fl.dt, 4)
+((1200,), (1200, 3), 0.0025)
+>>> fl.truth()["axes"]["roll"]["effectiveness"]
+180.0
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from mavsid.errors import ConfigError
+from mavsid.synthetic.controller import ControllerParams, RatePID, motor_outputs
+from mavsid.synthetic.plant import AXES, Lowpass2p, PlantParams, discretise
+from mavsid.synthetic.sysid import MANOEUVRES, SysIdSettings, chirp, pilot_sticks
+
+__all__ = ["GRAVITY", "MODE_STABILIZE", "MODE_SYSTEMID", "Flight", "LogRates", "Scenario", "fly"]
+
+GRAVITY = 9.80665
+MODE_STABILIZE = 0
+MODE_SYSTEMID = 25
+_SID_AXIS_OF = {"roll": 10, "pitch": 11, "yaw": 12, "thrust": 13}
+
+
+@dataclass(frozen=True)
+class LogRates:
+    """Logging rates (Hz) of each DataFlash message; each must divide the loop rate.
+
+    ``rate`` applies to RATE and (in SYSTEMID) SIDD — loop rate with fast attitude logging;
+    ``tlog`` to the streamed MAVLink messages (ATTITUDE, SCALED_IMU, SERVO_OUTPUT_RAW,
+    RC_CHANNELS).
+    """
+
+    rate: float = 400.0
+    att: float = 10.0
+    imu: float = 25.0
+    rcou: float = 10.0
+    rcin: float = 10.0
+    tlog: float = 50.0
+
+    def step(self, name: str, loop_hz: float) -> int:
+        """Loop samples between two records of ``name``."""
+        hz = float(getattr(self, name))
+        k = round(loop_hz / hz) if hz > 0 else 0
+        if hz <= 0 or k < 1 or abs(loop_hz / k - hz) > 1e-6 * hz:
+            raise ConfigError(f"log rate {name}={hz} Hz must divide the loop rate {loop_hz} Hz")
+        return int(k)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """What to fly.
+
+    Parameters
+    ----------
+    manoeuvre : str
+        ``"sysid"`` (SYSTEMID runs), ``"doublet"``, ``"3211"``, ``"random"`` or ``"hover"``.
+    axis : str
+        ``"roll"``, ``"pitch"`` or ``"yaw"``: the pilot's stick axis, and the default mixer
+        SYSTEMID axis.
+    sysid : tuple of SysIdSettings
+        SYSTEMID runs flown one after the other (``manoeuvre="sysid"``); default one mixer run
+        on ``axis``.
+    duration_s : float, optional
+        Total length of the log (s); default: long enough for the runs plus ``hover_after_s``
+        (sysid) or 20 s.
+    hover_before_s, hover_after_s, gap_s : float
+        Hover before the first run, after the last and between runs (s).
+    stick_amplitude : float
+        Pilot stick deflection (fraction of full stick).
+    seed : int
+        Seeds every random draw: equal scenarios give equal flights.
+    plant, controller : PlantParams, ControllerParams
+    rates : LogRates
+    boot_s : float
+        Time since boot (s) at the first logged sample.
+    """
+
+    manoeuvre: str = "sysid"
+    axis: str = "roll"
+    sysid: tuple[SysIdSettings, ...] = ()
+    duration_s: float | None = None
+    hover_before_s: float = 3.0
+    hover_after_s: float = 2.0
+    gap_s: float = 3.0
+    stick_amplitude: float = 0.3
+    seed: int = 0
+    plant: PlantParams = field(default_factory=PlantParams)
+    controller: ControllerParams = field(default_factory=ControllerParams)
+    rates: LogRates = field(default_factory=LogRates)
+    boot_s: float = 30.0
+
+    def __post_init__(self) -> None:
+        if self.manoeuvre not in ("sysid", *MANOEUVRES):
+            raise ConfigError(
+                f"unknown manoeuvre {self.manoeuvre!r} (choose from sysid, {', '.join(MANOEUVRES)})"
+            )
+        if self.axis not in AXES:
+            raise ConfigError(f"axis must be one of {', '.join(AXES)}, got {self.axis!r}")
+        if self.duration_s is not None and not self.duration_s > 0:
+            raise ConfigError(f"duration must be positive, got {self.duration_s}")
+        if self.sysid and self.manoeuvre != "sysid":
+            raise ConfigError("SYSTEMID settings given for a pilot manoeuvre")
+
+    @property
+    def runs(self) -> tuple[SysIdSettings, ...]:
+        """The SYSTEMID runs to fly (none for pilot manoeuvres)."""
+        if self.manoeuvre != "sysid":
+            return ()
+        return self.sysid or (SysIdSettings(axis=_SID_AXIS_OF[self.axis]),)
+
+    def run_starts(self) -> list[float]:
+        """Start of each run, seconds after the first logged sample."""
+        starts, t = [], self.hover_before_s
+        for r in self.runs:
+            starts.append(t)
+            t += r.duration + self.gap_s
+        return starts
+
+    @property
+    def length_s(self) -> float:
+        """Simulated length (s)."""
+        if self.duration_s is not None:
+            return float(self.duration_s)
+        if self.runs:
+            last = self.run_starts()[-1] + self.runs[-1].duration
+            return last + self.hover_after_s
+        return 20.0
+
+
+@dataclass(frozen=True)
+class Flight:
+    """Every signal of one simulated flight at loop rate (samples first, SI units).
+
+    Attributes
+    ----------
+    t_s : (n,) time since boot (s).
+    rate_true, gyro_raw, gyro : (n, 3) true, measured and filtered body rates (rad/s).
+    attitude, attitude_target : (n, 3) roll, pitch, yaw (rad).
+    rate_target : (n, 3) rate-controller targets (rad/s).
+    u : (n, 3) mixer inputs (RATE.ROut/POut/YOut). u_eff : what the motors realised.
+    throttle : (n,) collective (0-1). motors : (n, 4) motor demands (0-1). pwm : (n, 4) (µs).
+    accel : (n, 3) specific force (m/s²). sticks : (n, 4) roll, pitch, throttle, yaw (-1..1;
+    throttle 0..1).
+    mode : (n,) flight mode number. sid_time, sid_targ, sid_freq : (n,) SYSTEMID waveform clock,
+    signal and frequency (NaN outside SYSTEMID).
+    run_index : (n,) index of the SYSTEMID run, -1 outside.
+    """
+
+    scenario: Scenario
+    dt: float
+    t_s: np.ndarray
+    rate_true: np.ndarray
+    gyro_raw: np.ndarray
+    gyro: np.ndarray
+    attitude: np.ndarray
+    attitude_target: np.ndarray
+    rate_target: np.ndarray
+    u: np.ndarray
+    u_eff: np.ndarray
+    throttle: np.ndarray
+    motors: np.ndarray
+    pwm: np.ndarray
+    accel: np.ndarray
+    sticks: np.ndarray
+    mode: np.ndarray
+    sid_time: np.ndarray
+    sid_targ: np.ndarray
+    sid_freq: np.ndarray
+    run_index: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.t_s.shape[0])
+
+    def rc_in(self) -> np.ndarray:
+        """RC input PWM (µs), shape (n, 8): C1 roll, C2 pitch, C3 throttle, C4 yaw, C5 the
+        flight-mode switch (low STABILIZE, high SYSTEMID), C6-C8 centred."""
+        st = self.sticks
+        hover = self.scenario.plant.hover_throttle
+        rc = np.full((len(self), 8), 1500.0)
+        rc[:, 0] = 1500 + 500 * st[:, 0]
+        rc[:, 1] = 1500 + 500 * st[:, 1]
+        rc[:, 2] = 1500 + 1000 * (st[:, 2] - hover)
+        rc[:, 3] = 1500 + 500 * st[:, 3]
+        rc[:, 4] = np.where(self.mode == MODE_SYSTEMID, 1815, 1165)
+        return np.round(rc)
+
+    def params(self) -> dict[str, float]:
+        """ArduPilot parameters describing this vehicle and run (PARM / PARAM_VALUE)."""
+        sc = self.scenario
+        p: dict[str, float] = {}
+        p.update(sc.controller.params())
+        p["INS_GYRO_FILTER"] = sc.plant.gyro_filter_hz
+        p["INS_ACCEL_FILTER"] = 20.0
+        p["MOT_THST_HOVER"] = sc.plant.hover_throttle
+        p["MOT_PWM_MIN"], p["MOT_PWM_MAX"] = 1000.0, 2000.0
+        p["MOT_SPIN_MIN"], p["MOT_SPIN_MAX"] = 0.15, 0.95
+        p["FRAME_CLASS"], p["FRAME_TYPE"] = 1.0, 1.0
+        p["LOG_BITMASK"] = 180222.0 if sc.rates.rate >= sc.controller.loop_hz else 176126.0
+        p["FLTMODE1"] = float(MODE_STABILIZE)
+        p["FLTMODE6"] = float(MODE_SYSTEMID)
+        runs = sc.runs
+        p.update((runs[-1] if runs else SysIdSettings(axis=_SID_AXIS_OF[sc.axis])).params())
+        if not runs:
+            p["SID_AXIS"] = 0.0
+        return dict(sorted(p.items()))
+
+    def run_windows(self) -> list[dict[str, Any]]:
+        """Each SYSTEMID run: settings, mode entry/exit and the chirp's sweep window (s)."""
+        out = []
+        sc = self.scenario
+        for i, (s, start) in enumerate(zip(sc.runs, sc.run_starts(), strict=True)):
+            t0 = float(self.t_s[0]) + start
+            out.append({
+                "index": i,
+                "sid_axis": s.axis,
+                "injection": s.injection,
+                "axis": s.target_axis,
+                "settings": s.params(),
+                "mode_enter_s": t0,
+                "mode_exit_s": t0 + s.duration,
+                "waveform_start_s": t0 + 1.0,
+                "sweep_start_s": t0 + 1.0 + s.t_const_freq,
+                "waveform_stop_s": t0 + 1.0 + s.t_rec,
+            })
+        return out
+
+    def truth(self) -> dict[str, Any]:
+        """The ground truth as a JSON-safe dict (see ``fixtures/README.md``)."""
+        sc, pl = self.scenario, self.scenario.plant
+        loop_hz = sc.controller.loop_hz
+        axes: dict[str, Any] = {}
+        for i, (ax, state, inp, fld, out_fld) in enumerate(
+            zip(AXES, ("p", "q", "r"), ("u_roll", "u_pitch", "u_yaw"),
+                ("RATE.ROut", "RATE.POut", "RATE.YOut"), ("RATE.R", "RATE.P", "RATE.Y"),
+                strict=True)
+        ):
+            axes[ax] = {
+                "state": state,
+                "input": inp,
+                "input_field": fld,
+                "output_field": out_fld,
+                "model": f"d{state}/dt = -damping*{state} + effectiveness*{inp}(t - delay_s)",
+                "damping": pl.damping[i],
+                "effectiveness": pl.effectiveness[i],
+                "delay_s": pl.delay_s,
+                "motor_tau_s": pl.motor_tau_s,
+                "effective_delay_s": pl.delay_s + pl.motor_tau_s,
+                "gyro_filter_hz": pl.gyro_filter_hz,
+                "gyro_bias": pl.gyro_bias[i],
+                "pole": -pl.damping[i],
+                "dc_gain": pl.effectiveness[i] / pl.damping[i],
+                "coupling": {
+                    AXES[j]: pl.coupling[i][j] for j in range(3) if j != i and pl.coupling[i][j]
+                },
+                "units": {
+                    "damping": "1/s",
+                    "effectiveness": "rad/s^2 per unit",
+                    "delay_s": "s",
+                    "motor_tau_s": "s",
+                    "effective_delay_s": "s",
+                    "gyro_filter_hz": "Hz",
+                    "gyro_bias": "rad/s",
+                    "pole": "1/s",
+                    "dc_gain": "rad/s per unit",
+                },
+            }
+        sat = float(np.mean(np.any(np.abs(self.u_eff - self.u) > 1e-9, axis=1)))
+        return {
+            "format": "mavsid-truth/1",
+            "generator": "mavsid simulate",
+            "seed": sc.seed,
+            "manoeuvre": sc.manoeuvre,
+            "axis": sc.axis,
+            "loop_hz": loop_hz,
+            "t_start_s": float(self.t_s[0]),
+            "t_stop_s": float(self.t_s[-1]),
+            "axes": axes,
+            "logged_rate": (
+                "RATE.R/P/Y (deg/s), IMU.GyrX/Y/Z (rad/s) and MAVLink ATTITUDE.rollspeed/"
+                "pitchspeed/yawspeed (rad/s) are the FILTERED gyro: true body rate + gyro_bias + "
+                "white noise, passed through gyro_filter (2nd-order Butterworth, "
+                "INS_GYRO_FILTER) at loop rate. SIDD.Gx/Gy/Gz (deg/s) are the UNFILTERED gyro. "
+                "RATE.ROut/POut/YOut are the mixer inputs u that drive the plant (after delay_s "
+                "and the motor lag motor_tau_s)."
+            ),
+            "gyro_filter": {
+                "param": "INS_GYRO_FILTER",
+                "type": "2nd-order Butterworth low pass, bilinear transform with pre-warping "
+                "(ArduPilot LowPassFilter2p)",
+                "cutoff_hz": pl.gyro_filter_hz,
+                "sample_hz": loop_hz,
+            },
+            "motor": {"type": "first-order lag", "tau_s": pl.motor_tau_s,
+                      "delay_s": pl.delay_s},
+            "plant": pl.to_dict(),
+            "plant_units": {
+                "damping": "1/s", "effectiveness": "rad/s^2 per unit",
+                "coupling": "rad/s^2 per unit", "motor_tau_s": "s", "delay_s": "s",
+                "gyro_noise": "rad/s (std per loop sample)", "gyro_bias": "rad/s",
+                "accel_noise": "m/s^2", "disturbance": "rad/s^2 (std, held per loop step)",
+                "gyro_filter_hz": "Hz", "hover_throttle": "0-1",
+            },
+            "controller": sc.controller.params(),
+            "log_rates_hz": {k: float(getattr(sc.rates, k))
+                             for k in ("rate", "att", "imu", "rcou", "rcin", "tlog")},
+            "sysid_runs": self.run_windows(),
+            "saturated_fraction": sat,
+        }
+
+
+def _desired(sc: Scenario, n: int, dt: float, rng: np.random.Generator) -> np.ndarray:
+    """Pilot sticks (n, 4): roll, pitch, throttle, yaw."""
+    sticks = np.zeros((n, 4))
+    sticks[:, 2] = sc.plant.hover_throttle
+    if sc.manoeuvre not in ("sysid", "hover"):
+        col = {"roll": 0, "pitch": 1, "yaw": 3}[sc.axis]
+        sticks[:, col] = pilot_sticks(
+            sc.manoeuvre, n, dt, rng, amplitude=sc.stick_amplitude, start_s=sc.hover_before_s
+        )
+    return sticks
+
+
+def fly(sc: Scenario) -> Flight:
+    """Simulate the closed loop of ``sc`` at the controller's loop rate."""
+    ctl, pl = sc.controller, sc.plant
+    dt = 1.0 / ctl.loop_hz
+    n = round(sc.length_s / dt)
+    if n < 8:
+        raise ConfigError(f"duration {sc.length_s} s is too short")
+    rng = np.random.default_rng(sc.seed)
+    sticks = _desired(sc, n, dt, rng)
+    t = sc.boot_s + np.arange(n) * dt
+
+    # SYSTEMID schedule: waveform clock, signal and frequency per loop
+    mode = np.full(n, MODE_STABILIZE, dtype=np.int64)
+    sid_time = np.full(n, np.nan)
+    sid_targ = np.zeros(n)
+    sid_freq = np.full(n, np.nan)
+    run_index = np.full(n, -1, dtype=np.int64)
+    inj_axis = np.full(n, -1, dtype=np.int64)
+    inj_kind = np.full(n, "", dtype=object)
+    for i, (s, start) in enumerate(zip(sc.runs, sc.run_starts(), strict=True)):
+        k0 = round(start / dt)
+        k1 = min(n, k0 + int(np.floor(s.duration / dt)) + 1)
+        if k0 >= n:
+            break
+        clock = (np.arange(k0, k1) - k0 + 1) * dt  # advanced before use, as the mode does
+        targ, freq = chirp(clock, s)
+        mode[k0:k1], sid_time[k0:k1], sid_targ[k0:k1] = MODE_SYSTEMID, clock, targ
+        sid_freq[k0:k1], run_index[k0:k1] = freq, i
+        inj_axis[k0:k1] = ("roll", "pitch", "yaw", "thrust").index(s.target_axis)
+        inj_kind[k0:k1] = s.injection
+
+    disc = discretise(pl, dt)
+    noise = rng.standard_normal((n, 3)) * pl.gyro_noise
+    acc_noise = rng.standard_normal((n, 3)) * pl.accel_noise
+    dist = rng.standard_normal((n, 3)) * pl.disturbance
+    bias = np.array(pl.gyro_bias)
+    gyro_filter = Lowpass2p(pl.gyro_filter_hz, ctl.loop_hz, 3)
+    pids = [RatePID(ctl.rate_gains(ax), dt) for ax in AXES]
+    ang_p = np.array([ctl.angle_p(ax) for ax in AXES])
+    a_in = dt / (dt + ctl.input_tc)
+
+    x = np.zeros(disc.n_state)
+    att = np.zeros(3)
+    att_tgt = np.zeros(3)
+    yaw_rate_tgt = 0.0
+    out = {k: np.zeros((n, 3)) for k in ("rate_true", "gyro_raw", "gyro", "attitude",
+                                          "attitude_target", "rate_target", "u", "u_eff")}
+    throttle = np.zeros(n)
+    motors = np.zeros((n, 4))
+    u_hist = np.zeros((disc.delay_steps + 2, 3))  # u_eff[k-n-1 .. k]
+    angle_max = np.radians(ctl.angle_max_deg)
+    yaw_max = np.radians(ctl.pilot_yaw_rate_degs)
+    for k in range(n):
+        rate = x[:3]
+        g_raw = rate + bias + noise[k]
+        g = gyro_filter(g_raw)
+        kind, ax_i, sig = inj_kind[k], inj_axis[k], sid_targ[k]
+        # desired attitude from sticks (+ angle injection, deg -> rad)
+        want = np.array([sticks[k, 0] * angle_max, sticks[k, 1] * angle_max])
+        want_yaw_rate = sticks[k, 3] * yaw_max
+        if kind in ("input_angle", "recovery_angle"):
+            if ax_i < 2:
+                want[ax_i] += np.radians(sig)
+            else:
+                want_yaw_rate += np.radians(sig)
+        # input shaping with ATC_INPUT_TC; its rate is the body-rate feed-forward
+        ff = np.zeros(3)
+        ff[:2] = (want - att_tgt[:2]) * a_in / dt
+        att_tgt[:2] += ff[:2] * dt
+        yaw_rate_tgt += (want_yaw_rate - yaw_rate_tgt) * a_in
+        ff[2] = yaw_rate_tgt
+        att_tgt[2] += yaw_rate_tgt * dt
+        use_ff = ctl.rate_ff_enab and kind != "recovery_angle"
+        err = att_tgt - att
+        err[2] = (err[2] + np.pi) % (2 * np.pi) - np.pi
+        rt = ang_p * err + (ff if use_ff else 0.0)
+        if kind == "rate" and ax_i < 3:
+            rt[ax_i] += np.radians(sig)
+        u = np.array([pids[j].update(float(rt[j]), float(g[j])) for j in range(3)])
+        thr = pl.hover_throttle
+        if kind == "mixer":
+            if ax_i < 3:
+                u[ax_i] += sig
+            else:
+                thr += sig
+        u = np.clip(u, -1.0, 1.0)
+        m, ue = motor_outputs(np.array([thr]), u[None, :])
+        # plant: x[k+1] from x[k] and the delayed realised inputs
+        u_hist = np.roll(u_hist, -1, axis=0)
+        u_hist[-1] = ue[0]
+        x_next = (disc.phi @ x + disc.gamma_prev @ u_hist[0] + disc.gamma_now @ u_hist[1]
+                  + disc.gamma_w @ dist[k])
+        out["rate_true"][k], out["gyro_raw"][k], out["gyro"][k] = rate, g_raw, g
+        out["attitude"][k], out["attitude_target"][k], out["rate_target"][k] = att, att_tgt, rt
+        out["u"][k], out["u_eff"][k] = u, ue[0]
+        throttle[k], motors[k] = thr, m[0]
+        # Euler kinematics with the mean rate over the step
+        pm, qm, rm = 0.5 * (rate + x_next[:3])
+        phi, theta = att[0], att[1]
+        att = att + dt * np.array([
+            pm + np.tan(theta) * (qm * np.sin(phi) + rm * np.cos(phi)),
+            qm * np.cos(phi) - rm * np.sin(phi),
+            (qm * np.sin(phi) + rm * np.cos(phi)) / np.cos(theta),
+        ])
+        att[2] = att[2] % (2 * np.pi)
+        x = x_next
+    if disc.delay_steps + 2 > n:
+        raise ConfigError("delay longer than the flight")
+
+    spin_min, spin_max = 0.15, 0.95
+    pwm = 1000.0 + 1000.0 * (spin_min + (spin_max - spin_min) * motors)
+    specific = -GRAVITY * motors.mean(axis=1) / pl.hover_throttle
+    accel = acc_noise.copy()
+    accel[:, 2] += specific
+    return Flight(
+        scenario=sc, dt=dt, t_s=t, throttle=throttle, motors=motors, pwm=np.round(pwm),
+        accel=accel, sticks=sticks, mode=mode, sid_time=sid_time, sid_targ=sid_targ,
+        sid_freq=sid_freq, run_index=run_index, **out,
+    )

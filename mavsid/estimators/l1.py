@@ -1,0 +1,148 @@
+"""L1 (lasso) and elastic net through cvxpy (CLARABEL), with bounds and sign constraints.
+
+The problem is posed on the Gram's square root, not on the rows, so that its size is the
+number of features whatever the number of samples::
+
+    min_Θ  ‖R Θs − Q‖²_F / n + α (ρ ‖Θs‖₁ + (1 − ρ)/2 ‖Θs‖²_F)   (bias not penalised)
+
+with ``Θs`` the coefficients of the unit-RMS columns, ``RᵀR`` the scaled Gram and
+``RᵀQ = ZᵀY`` (scaled), which equals ``‖Y − ZΘ‖²`` up to a constant.
+
+Examples
+--------
+>>> import numpy as np
+>>> from mavsid.estimators._base import Gram
+>>> from mavsid.estimators.regressors import Structure
+>>> rng = np.random.default_rng(0)
+>>> z = rng.standard_normal((500, 3))
+>>> y = z @ np.array([[1.0], [0.0], [-2.0]])
+>>> st = Structure(("p",), ("p", "q", "r"))
+>>> coef = Lasso(alpha=1e-3)._solve(Gram.of(z, y), 1e-3, st)
+>>> np.round(coef.ravel(), 2).tolist()
+[1.0, 0.0, -2.0]
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+from mavsid.errors import ConfigError, SolverError
+from mavsid.estimators import library
+from mavsid.estimators._base import Estimator, Gram, _scales, param_names
+from mavsid.estimators.regressors import Structure
+
+__all__ = ["ElasticNet", "Lasso", "gram_sqrt"]
+
+
+def gram_sqrt(zz: np.ndarray, zy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``R, Q`` with ``RᵀR = zz`` and ``RᵀQ = zy`` (eigen-square-root; works when singular)."""
+    lam, vec = np.linalg.eigh(zz)
+    lam = np.clip(lam, 0, None)
+    tol = lam.max() * 1e-13 if lam.size else 0.0
+    keep = lam > tol
+    r = np.sqrt(lam[keep])[:, None] * vec[:, keep].T
+    q = (vec[:, keep].T @ zy) / np.sqrt(lam[keep])[:, None]
+    return r, q
+
+
+class ElasticNet(Estimator):
+    """Elastic net / lasso via cvxpy on the Gram.
+
+    Parameters
+    ----------
+    alpha : float or "cv"
+        Penalty weight (per row, on unit-RMS columns); ``"cv"``: by rollout cross-validation.
+    l1_ratio : float
+        ρ: 1 is the lasso, 0 ridge.
+    bounds : Mapping[str, tuple[float, float]]
+        Parameter name (e.g. ``"B_d[p,u_roll]"``) -> (low, high) on the raw coefficient.
+    signs : Mapping[str, int]
+        Parameter name -> +1 (≥ 0) or −1 (≤ 0).
+    zero_tol : float
+        Standardised coefficients below this are set exactly to zero.
+    solver : str
+        cvxpy solver (CLARABEL by default).
+    """
+
+    name = "elasticnet"
+    penalised = True
+
+    def __init__(self, structure: Structure | None = None, *, alpha: float | str = "cv",
+                 l1_ratio: float = 0.5, bounds: Mapping[str, tuple[float, float]] | None = None,
+                 signs: Mapping[str, int] | None = None, zero_tol: float = 1e-6,
+                 solver: str = "CLARABEL", n_bootstrap: int = 0, **kwargs: object) -> None:
+        super().__init__(structure, alpha=alpha, n_bootstrap=n_bootstrap,
+                         **kwargs)  # type: ignore[arg-type]
+        self.l1_ratio = l1_ratio
+        self.bounds = dict(bounds or {})
+        self.signs = dict(signs or {})
+        self.zero_tol = zero_tol
+        self.solver = solver
+
+    def _constraints(self, structure: Structure) -> tuple[np.ndarray, np.ndarray]:
+        names = param_names(structure)
+        flat = {n: (j, i) for j, row in enumerate(names) for i, n in enumerate(row)}
+        p, m = len(names), len(structure.outputs)
+        lo, hi = np.full((p, m), -np.inf), np.full((p, m), np.inf)
+        for name, (a, b) in self.bounds.items():
+            if name not in flat:
+                raise ConfigError(f"bound on unknown parameter {name!r}; known: {sorted(flat)}")
+            lo[flat[name]], hi[flat[name]] = max(lo[flat[name]], a), min(hi[flat[name]], b)
+        for name, sgn in self.signs.items():
+            if name not in flat:
+                raise ConfigError(f"sign on unknown parameter {name!r}; known: {sorted(flat)}")
+            if sgn > 0:
+                lo[flat[name]] = max(lo[flat[name]], 0.0)
+            elif sgn < 0:
+                hi[flat[name]] = min(hi[flat[name]], 0.0)
+        return lo, hi
+
+    def _solve(self, g: Gram, alpha: float, structure: Structure) -> np.ndarray:
+        import cvxpy as cp
+
+        p, m = g.zy.shape
+        s = _scales(g)
+        zz = g.zz / np.outer(s, s) / g.n
+        zy = g.zy / s[:, None] / g.n
+        r, q = gram_sqrt(zz, zy)
+        pen = np.array([f != library.BIAS for f in structure.features], float)
+        lo, hi = self._constraints(structure)
+        th = cp.Variable((p, m))
+        rho = float(self.l1_ratio)
+        obj = cp.sum_squares(r @ th - q)
+        if alpha > 0:
+            weighted = cp.multiply(pen[:, None] * np.ones((1, m)), th)
+            obj = obj + alpha * (rho * cp.sum(cp.abs(weighted))
+                                 + 0.5 * (1 - rho) * cp.sum_squares(weighted))
+        cons = []
+        lo_s, hi_s = lo * s[:, None], hi * s[:, None]
+        if np.isfinite(lo_s).any():
+            mask = np.isfinite(lo_s)
+            cons.append(cp.multiply(mask, th) >= np.where(mask, lo_s, 0.0))
+        if np.isfinite(hi_s).any():
+            mask = np.isfinite(hi_s)
+            cons.append(cp.multiply(mask, th) <= np.where(mask, hi_s, 0.0))
+        prob = cp.Problem(cp.Minimize(obj), cons)
+        try:
+            prob.solve(solver=self.solver)
+        except cp.error.SolverError as exc:
+            raise SolverError(f"{self.name}: {self.solver} failed: {exc}") from None
+        if th.value is None or prob.status not in ("optimal", "optimal_inaccurate"):
+            raise SolverError(f"{self.name}: {self.solver} status {prob.status}")
+        val = np.asarray(th.value)
+        ys = np.sqrt(np.clip(np.diag(g.yy), 0, None) / g.n)
+        val[np.abs(val) < self.zero_tol * np.where(ys > 0, ys, 1.0)[None, :]] = 0.0
+        return val / s[:, None]
+
+
+class Lasso(ElasticNet):
+    """The lasso: :class:`ElasticNet` with ``l1_ratio=1``."""
+
+    name = "l1"
+
+    def __init__(self, structure: Structure | None = None, *, alpha: float | str = "cv",
+                 **kwargs: object) -> None:
+        kwargs.setdefault("l1_ratio", 1.0)
+        super().__init__(structure, alpha=alpha, **kwargs)  # type: ignore[arg-type]

@@ -1,0 +1,598 @@
+"""The fitted model: named parameters with units and standard errors, rollouts, JSON.
+
+A :class:`Model` is ``x[k+1] = Θᵀ φ(x[k], u[k-d])`` (discrete) or ``ẋ = Θᵀ φ(x, u(t-d·dt))``
+(continuous) for the modelled states ``state_names``, with the features ``φ`` named as in
+:mod:`mavsid.estimators.library` and the inputs passed through the model's known input
+filters first. Variables a feature uses that are neither modelled states nor inputs (say
+``roll`` in a model of ``p``) are taken from the measured segment.
+
+Parameter names: ``A[p,p]`` (state), ``B[p,u_roll]`` (input), ``c[p]`` (bias), ``W[p,term]``
+(library term) for continuous time; discrete-time coefficients carry ``_d`` (``A_d[p,p]``...).
+A linear discrete model also reports the equivalent continuous-time ``A``, ``B``, ``c`` (zero-
+order hold inverted), with standard errors by the delta method: ``B[p,u_roll]`` is the control
+effectiveness in rad/s² per unit of controller output, whichever form was fitted.
+
+Examples
+--------
+>>> import numpy as np
+>>> from mavsid.data import Segment
+>>> m = Model(("p",), ("u_roll",), ("p", "u_roll", "1"), np.array([[0.99], [0.5], [0.0]]),
+...           dt=0.01)
+>>> sorted(m.params)[:3], m.units["B[p,u_roll]"]
+(['A[p,p]', 'A_d[p,p]', 'B[p,u_roll]'], 'rad/s^2')
+>>> round(m.params["B[p,u_roll]"], 2)   # 0.5 rad/s per sample -> about 50 rad/s^2
+50.25
+>>> seg = Segment(np.arange(4) * 0.01, np.zeros((4, 1)), np.ones((4, 1)), ("p",), ("u_roll",),
+...               0.01, "roll", "scan")
+>>> m.simulate(seg).ravel().round(3).tolist()   # 0.99 * 0.995 + 0.5 = 1.48505
+[0.0, 0.5, 0.995, 1.485]
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import hashlib
+import json
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy import linalg, signal
+
+from mavsid.data import Segment
+from mavsid.errors import ConfigError, LogFormatError
+from mavsid.estimators import library
+from mavsid.estimators.regressors import InputFilter, Structure, variables
+
+__all__ = ["UNITS", "Model", "load_model"]
+
+#: Units of the canonical variables.
+UNITS: dict[str, str] = {
+    "p": "rad/s", "q": "rad/s", "r": "rad/s",
+    "roll": "rad", "pitch": "rad", "yaw": "rad",
+    "u_roll": "1", "u_pitch": "1", "u_yaw": "1", "u_thrust": "1",
+}
+
+_FORMAT = "mavsid-model"
+
+
+def _unit(var: str) -> str:
+    return UNITS.get(var, "?")
+
+
+def _feature_unit(feature: str) -> str:
+    facs = library.parse(feature)
+    parts = []
+    for f in facs:
+        u = "1" if f.func else _unit(f.var)
+        if u != "1":
+            parts.append(u if f.power == 1 else f"({u})^{f.power}")
+    return "*".join(parts) or "1"
+
+
+def _ratio(num: str, den: str) -> str:
+    if den == "1":
+        return num
+    if num == den:
+        return "1"
+    if num == "rad/s^2" and den == "rad/s":
+        return "1/s"
+    if num == "rad/s" and den == "rad":
+        return "1/s"
+    return f"{num}/({den})" if "*" in den or "/" in den else f"{num}/{den}"
+
+
+def _sha256(path: str, cache: dict[str, str | None] = {}) -> str | None:  # noqa: B006
+    """sha256 of a file (memoised per path; None when it does not exist)."""
+    if path not in cache:
+        p = Path(path)
+        if not path or not p.is_file():
+            cache[path] = None
+        else:
+            h = hashlib.sha256()
+            with p.open("rb") as fh:
+                for chunk in iter(lambda: fh.read(1 << 20), b""):
+                    h.update(chunk)
+            cache[path] = h.hexdigest()
+    return cache[path]
+
+
+def provenance(segments: Sequence[Segment], **settings: object) -> dict[str, object]:
+    """Where a fit came from: logs (with sha256), segment windows, settings, time, version."""
+    from mavsid import __version__
+
+    logs = sorted({s.log for s in segments if s.log})
+    return {
+        "logs": [{"path": p, "sha256": _sha256(p)} for p in logs],
+        "segments": [
+            {"log": s.log, "start_s": s.start_s, "stop_s": s.stop_s, "axis": s.axis,
+             "source": s.source}
+            for s in segments
+        ],
+        "settings": settings,
+        "created_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "mavsid_version": __version__,
+    }
+
+
+def _jsonable(obj: Any) -> Any:
+    if isinstance(obj, Mapping):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _jsonable(obj.tolist())
+    if isinstance(obj, (np.floating, float)):
+        return float(obj) if math.isfinite(float(obj)) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, InputFilter):
+        return obj.to_dict()
+    return obj
+
+
+def _none_to_nan(obj: Any) -> Any:
+    if isinstance(obj, list):
+        return [_none_to_nan(v) for v in obj]
+    return np.nan if obj is None else obj
+
+
+@dataclass(frozen=True)
+class Model:
+    """A fitted attitude-dynamics model.
+
+    Parameters
+    ----------
+    state_names : tuple of str
+        Modelled states (what ``simulate`` and ``predict`` return, in this order).
+    input_names : tuple of str
+        Inputs (filtered by ``filters``, delayed by ``delay`` samples).
+    features : tuple of str
+        Regressors, see :mod:`mavsid.estimators.library`.
+    coef : numpy.ndarray, shape (len(features), len(state_names))
+        Θ.
+    dt : float
+        Sample time (s) the model was fitted at.
+    delay : int
+        Input delay (samples).
+    continuous : bool
+        ``ẋ = Θᵀφ`` instead of ``x[k+1] = Θᵀφ``.
+    filters : tuple of InputFilter
+        Known filters applied to the inputs (e.g. the gyro low-pass).
+    covariance : numpy.ndarray, shape (len(state_names), p, p), optional
+        Covariance of each output's coefficient column.
+    coef_stderr : numpy.ndarray, shape like ``coef``, optional
+        Reported standard errors (NaN: not estimated, e.g. a term an L1 fit removed).
+    sigma : numpy.ndarray, shape (len(state_names),), optional
+        Residual standard deviation per output.
+    provenance : Mapping
+        Logs (sha256), segments, estimator and its settings.
+    """
+
+    state_names: tuple[str, ...]
+    input_names: tuple[str, ...]
+    features: tuple[str, ...]
+    coef: np.ndarray
+    dt: float
+    delay: int = 0
+    continuous: bool = False
+    filters: tuple[InputFilter, ...] = ()
+    covariance: np.ndarray | None = field(default=None, repr=False)
+    coef_stderr: np.ndarray | None = field(default=None, repr=False)
+    sigma: np.ndarray | None = field(default=None, repr=False)
+    provenance: Mapping[str, object] = field(default_factory=dict, repr=False)
+
+    def __post_init__(self) -> None:
+        coef = np.asarray(self.coef, dtype=float).reshape(len(self.features),
+                                                         len(self.state_names))
+        object.__setattr__(self, "coef", coef)
+        object.__setattr__(self, "state_names", tuple(self.state_names))
+        object.__setattr__(self, "input_names", tuple(self.input_names))
+        object.__setattr__(self, "features", tuple(self.features))
+        object.__setattr__(self, "filters", tuple(self.filters))
+        for f in self.features:
+            library.parse(f)
+
+    # ----------------------------------------------------------------- structure
+
+    @property
+    def structure(self) -> Structure:
+        """The regression structure this model evaluates."""
+        return Structure(outputs=self.state_names, features=self.features,
+                         inputs=self.input_names, delay=self.delay,
+                         continuous=self.continuous, filters=self.filters)
+
+    @cached_property
+    def _split(self) -> tuple[list[int], list[int], list[int]]:
+        """Feature indices: exactly a modelled state / free of modelled states / other."""
+        states, exo, other = [], [], []
+        for j, f in enumerate(self.features):
+            facs = library.parse(f)
+            if len(facs) == 1 and facs[0].var in self.state_names and facs[0].power == 1 \
+                    and not facs[0].func:
+                states.append(j)
+            elif all(fac.var not in self.state_names for fac in facs):
+                exo.append(j)
+            else:
+                other.append(j)
+        return states, exo, other
+
+    @property
+    def is_affine(self) -> bool:
+        """True when the modelled states enter linearly (inputs may enter through any term)."""
+        return not self._split[2]
+
+    @property
+    def A(self) -> np.ndarray:
+        """State matrix of the modelled states (discrete ``A_d`` or continuous ``A``)."""
+        n = len(self.state_names)
+        a = np.zeros((n, n))
+        for j in self._split[0]:
+            a[:, self.state_names.index(self.features[j])] = self.coef[j]
+        return a
+
+    def eigenvalues(self) -> np.ndarray:
+        """Eigenvalues of :attr:`A` (linear part; discrete or continuous per ``continuous``)."""
+        return np.asarray(np.linalg.eigvals(self.A))
+
+    # ----------------------------------------------------------------- parameters
+
+    def _name(self, out: str, feature: str) -> tuple[str, str]:
+        """Parameter name and unit of coefficient (feature -> d out)."""
+        sfx = "" if self.continuous else "_d"
+        facs = library.parse(feature)
+        yunit = _unit(out) if not self.continuous else (
+            "rad/s^2" if _unit(out) == "rad/s" else "rad/s" if _unit(out) == "rad" else "?/s")
+        funit = _feature_unit(feature)
+        if not facs:
+            return f"c{sfx}[{out}]", yunit
+        kind = "W"
+        if len(facs) == 1 and facs[0].power == 1 and not facs[0].func:
+            kind = "B" if facs[0].var in self.input_names else "A"
+        unit = _ratio(yunit, funit)
+        if not self.continuous and kind == "A" and _unit(out) == _unit(feature):
+            unit = "1"
+        return f"{kind}{sfx}[{out},{feature}]", unit
+
+    @cached_property
+    def _table(self) -> tuple[dict[str, float], dict[str, float], dict[str, str]]:
+        params: dict[str, float] = {}
+        stderr: dict[str, float] = {}
+        units: dict[str, str] = {}
+        se = self.coef_stderr if self.coef_stderr is not None else np.full_like(
+            self.coef, np.nan)
+        for i, out in enumerate(self.state_names):
+            for j, f in enumerate(self.features):
+                name, unit = self._name(out, f)
+                params[name] = float(self.coef[j, i])
+                stderr[name] = float(se[j, i])
+                units[name] = unit
+        derived = self._continuous_equivalent()
+        if derived is not None:
+            for name, (val, err, unit) in derived.items():
+                params[name], stderr[name], units[name] = val, err, unit
+        return params, stderr, units
+
+    @property
+    def params(self) -> dict[str, float]:
+        """Parameter name -> value (see the module docstring for names)."""
+        return dict(self._table[0])
+
+    @property
+    def stderr(self) -> dict[str, float]:
+        """Parameter name -> standard error (NaN where not estimated)."""
+        return dict(self._table[1])
+
+    @property
+    def units(self) -> dict[str, str]:
+        """Parameter name -> unit."""
+        return dict(self._table[2])
+
+    def _continuous_equivalent(self) -> dict[str, tuple[float, float, str]] | None:
+        """Continuous-time A, B, c of a linear discrete model (ZOH inverted), delta-method σ."""
+        if self.continuous or not library.is_linear(self.features):
+            return None
+        states, exo, _ = self._split
+        if not states:
+            return None
+
+        def convert(coef: np.ndarray) -> np.ndarray | None:
+            n = len(self.state_names)
+            ad = np.zeros((n, n))
+            for j in states:
+                ad[:, self.state_names.index(self.features[j])] = coef[j]
+            bd = coef[exo].T  # (n, len(exo))
+            ev = np.linalg.eigvals(ad)
+            if np.any(np.abs(ev.imag) > 1e-12) or np.any(ev.real <= 0):
+                return None
+            ac = np.real(linalg.logm(ad)) / self.dt
+            m = ad - np.eye(n)
+            bc = np.linalg.solve(m, ac @ bd) if np.linalg.cond(m) < 1e12 else bd / self.dt
+            return np.concatenate([ac.T.ravel(), bc.T.ravel()])
+
+        base = convert(self.coef)
+        if base is None:
+            return None
+        # delta method over every coefficient, per-output covariance (outputs independent)
+        cov = self._reported_covariance()
+        var = np.zeros_like(base)
+        if cov is not None:
+            for i in range(len(self.state_names)):
+                jac = np.zeros((base.size, len(self.features)))
+                for j in range(len(self.features)):
+                    h = 1e-6 * max(1.0, abs(self.coef[j, i]))
+                    pert = self.coef.copy()
+                    pert[j, i] += h
+                    up = convert(pert)
+                    pert[j, i] -= 2 * h
+                    dn = convert(pert)
+                    if up is None or dn is None:
+                        jac[:, j] = np.nan
+                    else:
+                        jac[:, j] = (up - dn) / (2 * h)
+                var += np.einsum("ij,jk,ik->i", jac, np.nan_to_num(cov[i]), jac)
+            var = np.where(np.isfinite(var), var, np.nan)
+        err = np.sqrt(var) if cov is not None else np.full_like(base, np.nan)
+        out: dict[str, tuple[float, float, str]] = {}
+        flip = replace(self, continuous=True, covariance=None, coef_stderr=None)
+        k = 0
+        for j in states:  # ac.T.ravel(): column = feature state, row = output
+            for out_name in self.state_names:
+                name, unit = flip._name(out_name, self.features[j])
+                out[name] = (float(base[k]), float(err[k]), unit)
+                k += 1
+        for j in exo:
+            for out_name in self.state_names:
+                name, unit = flip._name(out_name, self.features[j])
+                out[name] = (float(base[k]), float(err[k]), unit)
+                k += 1
+        return out
+
+    def _reported_covariance(self) -> np.ndarray | None:
+        """Covariance whose diagonal is the reported standard error squared."""
+        if self.covariance is None:
+            return None
+        cov = np.array(self.covariance, dtype=float)
+        if self.coef_stderr is None:
+            return cov
+        out = np.empty_like(cov)
+        for i in range(cov.shape[0]):
+            d = np.sqrt(np.clip(np.diag(cov[i]), 0, None))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                corr = cov[i] / np.outer(d, d)
+            corr = np.where(np.isfinite(corr), corr, 0.0)
+            np.fill_diagonal(corr, 1.0)
+            s = np.nan_to_num(self.coef_stderr[:, i])
+            out[i] = corr * np.outer(s, s)
+        return out
+
+    # ----------------------------------------------------------------- rollouts
+
+    def _check_segment(self, segment: Segment) -> None:
+        if not np.isclose(segment.dt, self.dt, rtol=1e-3):
+            raise ConfigError(f"segment dt {segment.dt:g} s differs from the model dt {self.dt:g}"
+                              " s; resample the data or refit")
+
+    def _measured(self, segment: Segment) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """Measured modelled states (n, m) and every feature variable (inputs filtered and
+        delayed, other variables as measured)."""
+        self._check_segment(segment)
+        var = variables(segment, self.structure,
+                        library.variables_of(self.features) + self.state_names)
+        x = np.column_stack([var[s] for s in self.state_names])
+        return x, var
+
+    def _affine(self, var: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """Discrete-time transition ``Φ`` (m, m) and forcing ``f`` (n, m): x⁺ = Φx + f."""
+        _, exo, _ = self._split
+        n = len(next(iter(var.values())))
+        feats = [self.features[j] for j in exo]
+        forcing = (library.evaluate(feats, var) @ self.coef[exo] if exo
+                   else np.zeros((n, len(self.state_names))))
+        a = self.A
+        if not self.continuous:
+            return a, forcing
+        m = len(self.state_names)
+        big = np.zeros((2 * m, 2 * m))
+        big[:m, :m] = a
+        big[:m, m:] = np.eye(m)
+        e = linalg.expm(big * self.dt)
+        return e[:m, :m], forcing @ e[:m, m:].T
+
+    def _stepper(self, var: Mapping[str, np.ndarray]) -> Callable[[np.ndarray, np.ndarray],
+                                                                  np.ndarray]:
+        """Generic one-step map ``(x (k, m), rows (k,)) -> x⁺`` for non-affine models."""
+        names = library.variables_of(self.features)
+
+        def rhs(x: np.ndarray, idx: np.ndarray) -> np.ndarray:
+            v = {k: (x[:, self.state_names.index(k)] if k in self.state_names else var[k][idx])
+                 for k in names}
+            return library.evaluate(self.features, v) @ self.coef
+
+        def step(x: np.ndarray, idx: np.ndarray) -> np.ndarray:
+            if not self.continuous:
+                return rhs(x, idx)
+            h = self.dt
+            k1 = rhs(x, idx)
+            k2 = rhs(x + 0.5 * h * k1, idx)
+            k3 = rhs(x + 0.5 * h * k2, idx)
+            k4 = rhs(x + h * k3, idx)
+            return x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+        return step
+
+    def simulate(self, segment: Segment, x0: np.ndarray | None = None) -> np.ndarray:
+        """Free run: from the segment's first measured state (or ``x0``), measured inputs only,
+        the model's own predictions fed back.
+
+        Returns
+        -------
+        numpy.ndarray, shape (len(segment), len(state_names))
+        """
+        xm, var = self._measured(segment)
+        n, m = xm.shape
+        out = np.empty((n, m))
+        out[0] = xm[0] if x0 is None else np.asarray(x0, dtype=float).reshape(m)
+        if n == 1:
+            return out
+        if self.is_affine:
+            phi, f = self._affine(var)
+            if m == 1:
+                out[1:, 0] = signal.lfilter([1.0], [1.0, -phi[0, 0]], f[:-1, 0],
+                                            zi=[phi[0, 0] * out[0, 0]])[0]
+                return out
+            x = out[0]
+            for k in range(n - 1):
+                x = phi @ x + f[k]
+                out[k + 1] = x
+            return out
+        step = self._stepper(var)
+        x2 = out[:1].copy()
+        with np.errstate(over="ignore", invalid="ignore"):
+            for k in range(n - 1):
+                x2 = step(x2, np.array([k]))
+                out[k + 1] = x2[0]
+        return out
+
+    def predict(self, segment: Segment, horizon: int = 1) -> np.ndarray:
+        """``horizon``-step-ahead prediction: row ``i`` is the prediction of sample ``i`` made
+        from the measured state at ``i - horizon`` and the measured inputs; NaN for the first
+        ``horizon`` rows.
+        """
+        if horizon < 1:
+            raise ConfigError(f"horizon must be >= 1 sample, got {horizon}")
+        xm, var = self._measured(segment)
+        n, m = xm.shape
+        out = np.full((n, m), np.nan)
+        if horizon >= n:
+            return out
+        starts = np.arange(n - horizon)
+        x = xm[starts].copy()
+        with np.errstate(over="ignore", invalid="ignore"):
+            if self.is_affine:
+                phi, f = self._affine(var)
+                for j in range(horizon):
+                    x = x @ phi.T + f[starts + j]
+            else:
+                step = self._stepper(var)
+                for j in range(horizon):
+                    x = step(x, starts + j)
+        out[horizon:] = x
+        return out
+
+    # ----------------------------------------------------------------- export
+
+    def to_statespace(self) -> Any:
+        """A python-control ``StateSpace`` of the linear part, with the input filters in series
+        and (discrete time) the input delay as extra states.
+
+        The bias ``c`` is left out (it is an operating-point offset). Continuous-time models
+        do not include the delay (``control.pade`` approximates it). Raises ``ConfigError``
+        for a model with nonlinear library terms and ``ImportError`` when python-control is
+        not installed.
+        """
+        import control
+
+        if not library.is_linear(self.features):
+            raise ConfigError("to_statespace needs a linear model; this one has library terms")
+        _, exo, _ = self._split
+        ins = [j for j in exo if self.features[j] != library.BIAS]
+        a = self.A
+        b = self.coef[ins].T if ins else np.zeros((len(self.state_names), 0))
+        in_names = [self.features[j] for j in ins]
+        dt: float | bool = 0 if self.continuous else self.dt
+        plant = control.ss(a, b, np.eye(len(self.state_names)), 0, dt,
+                           inputs=in_names, outputs=list(self.state_names))
+        nin = len(in_names)
+        chain = None
+        for flt in self.filters:
+            if self.continuous:
+                num, den = signal.butter(flt.order, 2 * np.pi * flt.cutoff_hz, analog=True)
+            else:
+                num, den = flt.coefficients(self.dt)
+            tf = control.ss(control.tf(num, den, dt))
+            blockdiag = control.append(*([tf] * nin)) if nin > 1 else tf
+            chain = blockdiag if chain is None else control.series(chain, blockdiag)
+        if not self.continuous and self.delay > 0 and nin:
+            z = control.tf([1.0], [1.0] + [0.0] * self.delay, dt)
+            dl = control.ss(z)
+            blockdiag = control.append(*([dl] * nin)) if nin > 1 else dl
+            chain = blockdiag if chain is None else control.series(chain, blockdiag)
+        sys = plant if chain is None else control.series(chain, plant)
+        return control.ss(sys.A, sys.B, sys.C, sys.D, dt, inputs=in_names,
+                          outputs=list(self.state_names))
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-safe dictionary (non-finite numbers become ``null``)."""
+        return _jsonable({
+            "format": _FORMAT,
+            "version": 1,
+            "state_names": self.state_names,
+            "input_names": self.input_names,
+            "features": self.features,
+            "coef": self.coef,
+            "dt": self.dt,
+            "delay": self.delay,
+            "continuous": self.continuous,
+            "filters": [f.to_dict() for f in self.filters],
+            "covariance": self.covariance,
+            "coef_stderr": self.coef_stderr,
+            "sigma": self.sigma,
+            "params": self.params,
+            "stderr": self.stderr,
+            "units": self.units,
+            "provenance": self.provenance,
+        })
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Model:
+        """Rebuild a model written by :meth:`to_dict`."""
+        if d.get("format") != _FORMAT:
+            raise LogFormatError(f"not a mavsid model (format {d.get('format')!r})")
+
+        def arr(key: str) -> np.ndarray | None:
+            v = d.get(key)
+            if v is None:
+                return None
+            return np.array(_none_to_nan(v), dtype=float)
+
+        try:
+            return cls(
+                state_names=tuple(d["state_names"]), input_names=tuple(d["input_names"]),
+                features=tuple(d["features"]), coef=np.asarray(d["coef"], dtype=float),
+                dt=float(d["dt"]), delay=int(d["delay"]), continuous=bool(d["continuous"]),
+                filters=tuple(InputFilter(float(f["cutoff_hz"]), int(f["order"]),
+                                          str(f.get("source", ""))) for f in d["filters"]),
+                covariance=arr("covariance"), coef_stderr=arr("coef_stderr"),
+                sigma=arr("sigma"), provenance=d.get("provenance") or {},
+            )
+        except (KeyError, TypeError, ValueError) as exc:
+            raise LogFormatError(f"model dictionary is incomplete or malformed: {exc}") from None
+
+    def save(self, path: str | Path) -> None:
+        """Write the model as JSON."""
+        Path(path).write_text(json.dumps(self.to_dict(), indent=1))
+
+
+def load_model(path: str | Path) -> Model:
+    """Read a model saved by :meth:`Model.save`.
+
+    Raises
+    ------
+    LogFormatError
+        The file is not valid JSON or not a mavsid model.
+    """
+    try:
+        d = json.loads(Path(path).read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise LogFormatError(f"cannot read model: {exc}", path=path) from None
+    if not isinstance(d, dict):
+        raise LogFormatError("not a mavsid model (JSON is not an object)", path=path)
+    try:
+        return Model.from_dict(d)
+    except LogFormatError as exc:
+        raise LogFormatError(exc.reason, path=path) from None

@@ -1,0 +1,376 @@
+"""Regression rows from segments: what a model structure needs, stacked over many segments.
+
+A :class:`Structure` says which outputs are modelled, from which features (states, inputs,
+bias, library terms), with which input delay and input filters, in discrete time
+(``x[k+1] = Θᵀ φ(x[k], u[k-d])``) or continuous time (``ẋ(t) = Θᵀ φ(x(t), u(t-d·dt))``, the
+derivative estimated by Savitzky–Golay or total-variation regularisation).
+
+Known linear filters that sit between the plant and the measurement (the gyro low-pass
+``INS_GYRO_FILTER`` of ArduPilot, for instance) are modelled by filtering the *inputs*
+with the same filter: for a linear plant ``F(z) P(z) u = P(z) F(z) u``, so the fitted
+parameters stay those of the physical plant instead of absorbing the filter's lag.
+
+Rows never straddle two segments: each segment contributes the rows whose every sample lies
+inside it, and its rows are further cut into *blocks* (contiguous row ranges) which are the
+unit of cross-validation and of the block bootstrap.
+
+Examples
+--------
+>>> import numpy as np
+>>> from mavsid.data import Segment
+>>> t = np.arange(6) * 0.01
+>>> seg = Segment(t, np.arange(6.0)[:, None], np.ones((6, 1)), ("p",), ("u_roll",), 0.01,
+...               "roll", "scan")
+>>> s = Structure(outputs=("p",), features=("p", "u_roll", "1"), delay=1)
+>>> z, y = rows(seg, s)
+>>> z.tolist()[:2], y.ravel().tolist()
+([[1.0, 1.0, 1.0], [2.0, 1.0, 1.0]], [2.0, 3.0, 4.0, 5.0])
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import signal, sparse
+from scipy.sparse import linalg as splinalg
+
+from mavsid.data import Segment
+from mavsid.errors import ConfigError, NoExcitationError
+from mavsid.estimators import library
+
+__all__ = [
+    "InputFilter",
+    "Regression",
+    "Structure",
+    "derivative",
+    "filter_inputs",
+    "filters_from_params",
+    "rows",
+    "stack",
+    "variables",
+]
+
+
+@dataclass(frozen=True)
+class InputFilter:
+    """A known linear filter applied to the inputs before regression.
+
+    Parameters
+    ----------
+    cutoff_hz : float
+        Cut-off frequency (Hz).
+    order : int
+        Butterworth order (2 = ArduPilot's ``LowPassFilter2p`` biquad; 1 = first order).
+    source : str
+        Where it came from, e.g. ``"INS_GYRO_FILTER"``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> f = InputFilter(20.0)
+    >>> y = f.apply(np.ones(5), dt=0.0025)   # starts in steady state: a constant passes
+    >>> bool(np.allclose(y, 1.0))
+    True
+    """
+
+    cutoff_hz: float
+    order: int = 2
+    source: str = ""
+
+    def coefficients(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """Discrete (bilinear, pre-warped) Butterworth coefficients ``(b, a)`` at step ``dt``."""
+        nyq = 0.5 / dt
+        if not 0 < self.cutoff_hz < nyq:
+            raise ConfigError(
+                f"input filter {self.source or 'cut-off'} {self.cutoff_hz:g} Hz outside "
+                f"(0, {nyq:g}) Hz for dt {dt:g} s"
+            )
+        b, a = signal.butter(self.order, self.cutoff_hz, fs=1.0 / dt)
+        return np.asarray(b), np.asarray(a)
+
+    def apply(self, u: np.ndarray, dt: float) -> np.ndarray:
+        """Filter along axis 0, starting in steady state at the first sample."""
+        b, a = self.coefficients(dt)
+        u = np.asarray(u, dtype=float)
+        zi = signal.lfilter_zi(b, a)
+        zi = zi.reshape((-1,) + (1,) * (u.ndim - 1)) * u[:1]
+        out, _ = signal.lfilter(b, a, u, axis=0, zi=zi)
+        return np.asarray(out)
+
+    def to_dict(self) -> dict[str, object]:
+        return {"cutoff_hz": self.cutoff_hz, "order": self.order, "source": self.source}
+
+
+def filters_from_params(params: Mapping[str, float], dt: float) -> tuple[InputFilter, ...]:
+    """The known measurement filters that a log's parameters declare.
+
+    ArduPilot: ``INS_GYRO_FILTER`` (Hz), the second-order low-pass on every gyro sample that
+    the logged rates (RATE.R/P/Y, SIDD.G*) have passed through. 0 or absent: no filter.
+    A cut-off at or above the Nyquist frequency of ``dt`` cannot be represented and is left out.
+
+    Examples
+    --------
+    >>> filters_from_params({"INS_GYRO_FILTER": 20.0}, dt=0.0025)
+    (InputFilter(cutoff_hz=20.0, order=2, source='INS_GYRO_FILTER'),)
+    >>> filters_from_params({}, dt=0.0025)
+    ()
+    """
+    out = []
+    fc = float(params.get("INS_GYRO_FILTER", 0.0) or 0.0)
+    if 0.0 < fc < 0.5 / dt:
+        out.append(InputFilter(fc, 2, "INS_GYRO_FILTER"))
+    return tuple(out)
+
+
+@dataclass(frozen=True)
+class Structure:
+    """What to regress on what.
+
+    Parameters
+    ----------
+    outputs : tuple of str
+        The modelled states (their next value, or their derivative).
+    features : tuple of str
+        Regressors (see :mod:`mavsid.estimators.library`): states, inputs, ``"1"``, terms.
+    inputs : tuple of str
+        Which variables are inputs (filtered and delayed); default: every feature variable
+        whose name starts with ``u_``.
+    delay : int
+        Input delay in samples.
+    continuous : bool
+        Continuous time (derivatives) instead of discrete time (next sample).
+    filters : tuple of InputFilter
+        Applied to the inputs in order.
+    derivative : str
+        ``"savgol"`` or ``"tv"`` (continuous time only).
+    window : int
+        Savitzky–Golay window (odd, samples); also rows trimmed at each end.
+    tv_weight : float
+        Regularisation of the TV derivative (relative; see :func:`derivative`).
+    """
+
+    outputs: tuple[str, ...]
+    features: tuple[str, ...]
+    inputs: tuple[str, ...] = ()
+    delay: int = 0
+    continuous: bool = False
+    filters: tuple[InputFilter, ...] = ()
+    derivative: str = "savgol"
+    window: int = 9
+    tv_weight: float = 1e-3
+
+    def __post_init__(self) -> None:
+        if self.delay < 0:
+            raise ConfigError(f"delay must be >= 0 samples, got {self.delay}")
+        if not self.outputs or not self.features:
+            raise ConfigError("a structure needs at least one output and one feature")
+        for f in self.features:
+            library.parse(f)
+        if not self.inputs:
+            ins = tuple(v for v in library.variables_of(self.features) if v.startswith("u_"))
+            object.__setattr__(self, "inputs", ins)
+        if self.derivative not in ("savgol", "tv"):
+            raise ConfigError(f"derivative must be 'savgol' or 'tv', got {self.derivative!r}")
+
+    @property
+    def lead(self) -> int:
+        """Samples lost at the start of every segment (delay, derivative window)."""
+        return max(self.delay, self.window // 2 if self.continuous else 0)
+
+    @property
+    def trail(self) -> int:
+        """Samples lost at the end of every segment."""
+        return self.window // 2 if self.continuous else 1
+
+
+@dataclass(frozen=True)
+class Regression:
+    """Stacked rows of several segments.
+
+    Attributes
+    ----------
+    z : numpy.ndarray, shape (n, p)
+        Regressors, one column per feature.
+    y : numpy.ndarray, shape (n, m)
+        Targets (next state or derivative), one column per output.
+    structure : Structure
+    blocks : numpy.ndarray, shape (k, 4)
+        ``[row_start, row_stop, segment_index, sample_start]`` of each block; the rows of a
+        block are the samples ``sample_start ... sample_start + rows`` of that segment.
+    segments : tuple of Segment
+    """
+
+    z: np.ndarray
+    y: np.ndarray
+    structure: Structure
+    blocks: np.ndarray
+    segments: tuple[Segment, ...] = field(repr=False)
+
+    @property
+    def n(self) -> int:
+        return int(self.z.shape[0])
+
+
+def _column(segment: Segment, name: str) -> tuple[np.ndarray, bool]:
+    """A segment column by name and whether it is an input."""
+    if name in segment.input_names:
+        return segment.inputs[:, segment.input_names.index(name)], True
+    if name in segment.state_names:
+        return segment.states[:, segment.state_names.index(name)], False
+    raise ConfigError(
+        f"segment has no column {name!r} (states {segment.state_names}, "
+        f"inputs {segment.input_names})"
+    )
+
+
+def filter_inputs(u: np.ndarray, dt: float, filters: Iterable[InputFilter]) -> np.ndarray:
+    """Apply the filters in order along axis 0."""
+    for f in filters:
+        u = f.apply(u, dt)
+    return u
+
+
+def variables(
+    segment: Segment, structure: Structure, names: Sequence[str] | None = None
+) -> dict[str, np.ndarray]:
+    """Every variable the structure needs, full segment length: inputs filtered and delayed
+    (held at their first filtered value before the delay has elapsed), states as measured."""
+    names = tuple(names) if names is not None else library.variables_of(structure.features)
+    out: dict[str, np.ndarray] = {}
+    ins = [v for v in names if v in structure.inputs]
+    if ins:
+        u = np.column_stack([_column(segment, v)[0] for v in ins]).astype(float)
+        u = filter_inputs(u, segment.dt, structure.filters)
+        d = structure.delay
+        if d:
+            u = np.concatenate([np.repeat(u[:1], d, axis=0), u[:-d]], axis=0)
+        out.update({v: u[:, i] for i, v in enumerate(ins)})
+    for v in names:
+        if v not in out:
+            out[v] = np.asarray(_column(segment, v)[0], dtype=float)
+    return out
+
+
+def derivative(x: np.ndarray, dt: float, method: str = "savgol", window: int = 9,
+               tv_weight: float = 1e-3, iterations: int = 20) -> np.ndarray:
+    """Time derivative along axis 0.
+
+    ``"savgol"``: Savitzky–Golay (cubic, ``window`` samples). ``"tv"``: the signal is first
+    smoothed by ℓ1 trend filtering, ``min ½‖x̂ − x‖² + λ‖D²x̂‖₁`` (piecewise-linear x̂, hence a
+    piecewise-constant derivative: the total-variation-regularised derivative), solved by
+    iteratively reweighted banded least squares, then differenced centrally. The weight is
+    relative: ``λ = tv_weight · ‖x − x̄‖² / ‖D²x‖₁``, which makes both terms comparable at
+    ``tv_weight = 1``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> t = np.arange(200) * 0.01
+    >>> d = derivative(np.sin(t), 0.01)
+    >>> bool(np.allclose(d[10:-10], np.cos(t[10:-10]), atol=1e-6))
+    True
+    >>> d = derivative(np.sin(t), 0.01, method="tv", tv_weight=1e-6)
+    >>> bool(np.allclose(d[10:-10], np.cos(t[10:-10]), atol=1e-2))
+    True
+    """
+    x = np.asarray(x, dtype=float)
+    if method == "savgol":
+        w = max(5, window | 1)
+        if x.shape[0] < w:
+            raise NoExcitationError(f"segment of {x.shape[0]} samples shorter than the "
+                                    f"derivative window {w}")
+        return np.asarray(signal.savgol_filter(x, w, 3, deriv=1, delta=dt, axis=0))
+    if method != "tv":
+        raise ConfigError(f"derivative method must be 'savgol' or 'tv', got {method!r}")
+    two_d = x.reshape(x.shape[0], -1)
+    out = np.empty_like(two_d)
+    n = two_d.shape[0]
+    d2 = sparse.diags([1.0, -2.0, 1.0], [0, 1, 2], shape=(n - 2, n), format="csc")
+    eye = sparse.identity(n, format="csc")
+    for j in range(two_d.shape[1]):
+        col = two_d[:, j]
+        rough = float(np.abs(np.diff(col, 2)).sum()) or 1.0
+        lam = tv_weight * float(((col - col.mean()) ** 2).sum()) / rough
+        scale = rough / n
+        xh = col.copy()
+        for _ in range(iterations):
+            w = 1.0 / np.maximum(np.abs(d2 @ xh), 1e-6 * scale)
+            xh = splinalg.spsolve((eye + lam * d2.T @ sparse.diags(w) @ d2).tocsc(), col)
+        out[:, j] = np.gradient(xh, dt)
+    return out.reshape(x.shape)
+
+
+def rows(segment: Segment, structure: Structure) -> tuple[np.ndarray, np.ndarray]:
+    """Regressors and targets of one segment.
+
+    Discrete: rows ``k = delay ... n-2`` with target ``x[k+1]``. Continuous: rows inside the
+    derivative window with target ``ẋ[k]``. No row uses a held (pre-delay) input.
+    """
+    n = len(segment)
+    lead, trail = structure.lead, structure.trail
+    if n - lead - trail < 1:
+        return np.empty((0, len(structure.features))), np.empty((0, len(structure.outputs)))
+    var = variables(segment, structure)
+    z = library.evaluate(structure.features, var)[lead : n - trail]
+    x = np.column_stack([_column(segment, o)[0] for o in structure.outputs]).astype(float)
+    if structure.continuous:
+        y = derivative(x, segment.dt, structure.derivative, structure.window,
+                       structure.tv_weight)[lead : n - trail]
+    else:
+        y = x[lead + 1 : n]
+    return z, y
+
+
+def stack(
+    segments: Sequence[Segment], structure: Structure, min_blocks: int = 10,
+    block_rows: int | None = None
+) -> Regression:
+    """Rows of every segment, stacked; each segment cut into blocks.
+
+    Parameters
+    ----------
+    segments : sequence of Segment
+        All must share ``dt`` (relative tolerance 1e-6).
+    structure : Structure
+    min_blocks : int
+        When ``block_rows`` is not given, segments are cut so that there are at least this
+        many blocks in all (a segment is never cut below 50 rows).
+    block_rows : int, optional
+        Rows per block.
+    """
+    segments = tuple(segments)
+    if not segments:
+        raise NoExcitationError("no segments to fit")
+    dt = segments[0].dt
+    for s in segments:
+        if not np.isclose(s.dt, dt, rtol=1e-6):
+            raise ConfigError(f"segments differ in dt ({s.dt:g} s vs {dt:g} s); resample first")
+    zs, ys, blocks = [], [], []
+    parts = [rows(s, structure) for s in segments]
+    total = sum(len(z) for z, _ in parts)
+    if block_rows is None:
+        block_rows = max(50, total // max(min_blocks, 1))
+    start = 0
+    for i, (z, y) in enumerate(parts):
+        m = len(z)
+        if m == 0:
+            continue
+        k = max(1, m // block_rows)
+        edges = np.linspace(0, m, k + 1).astype(int)
+        for a, b in itertools.pairwise(edges):
+            blocks.append((start + a, start + b, i, structure.lead + a))
+        zs.append(z)
+        ys.append(y)
+        start += m
+    if not zs:
+        raise NoExcitationError(
+            f"segments too short for the structure (each loses {structure.lead + structure.trail}"
+            " samples to delay and derivative window)"
+        )
+    return Regression(
+        z=np.concatenate(zs), y=np.concatenate(ys), structure=structure,
+        blocks=np.asarray(blocks, dtype=int), segments=segments,
+    )

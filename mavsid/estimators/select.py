@@ -1,0 +1,191 @@
+"""Structure from data: which inputs, which known filters, which delay; then fit one axis.
+
+:func:`fit_axis` is what the ``mavsid fit`` pipeline calls per axis. The structure it fits is
+physically meaningful for a multicopter's rate loop:
+
+* first-order rate dynamics per axis in discrete time, ``p[k+1] = a p[k] + b ũ[k-d] + c``,
+  reported also in continuous time (``A[p,p]`` in 1/s, ``B[p,u_roll]`` the control
+  effectiveness in rad/s² per unit of controller output, ``c[p]`` the trim offset);
+* ``ũ`` is the input passed through the known measurement filters of the log's parameters
+  (ArduPilot ``INS_GYRO_FILTER``, see :func:`~mavsid.estimators.regressors.filters_from_params`)
+  so that the filter's lag is not absorbed into a smaller gain;
+* the delay ``d`` chosen by searching the one-step residual over ``delays``.
+
+Examples
+--------
+>>> import numpy as np
+>>> from mavsid.data import Segment
+>>> rng = np.random.default_rng(3)
+>>> u = rng.standard_normal(2000) * 0.05
+>>> p = np.zeros(2000)
+>>> for k in range(3, 1999):
+...     p[k + 1] = 0.98 * p[k] + 0.4 * u[k - 3]
+>>> seg = Segment(np.arange(2000) * 0.0025, p[:, None], u[:, None], ("p",), ("u_roll",),
+...               0.0025, "roll", "sysid")
+>>> m = fit_axis([seg], "roll", n_bootstrap=0)
+>>> m.delay, round(m.params["B_d[p,u_roll]"], 6)
+(3, 0.4)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import replace
+
+import numpy as np
+
+from mavsid.data import Segment
+from mavsid.errors import ConfigError, NoExcitationError
+from mavsid.estimators import library
+from mavsid.estimators._base import Estimator, block_grams, check_identifiable, solve
+from mavsid.estimators.l1 import ElasticNet, Lasso
+from mavsid.estimators.least_squares import STLSQ, LeastSquares, Ridge
+from mavsid.estimators.model import Model
+from mavsid.estimators.regressors import InputFilter, Structure, filters_from_params, stack
+
+__all__ = ["AXES", "ESTIMATORS", "fit_axis", "log_params", "make_estimator", "select_delay"]
+
+#: Axis -> (modelled states, inputs).
+AXES: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
+    "roll": (("p",), ("u_roll",)),
+    "pitch": (("q",), ("u_pitch",)),
+    "yaw": (("r",), ("u_yaw",)),
+    "all": (("p", "q", "r"), ("u_roll", "u_pitch", "u_yaw")),
+}
+
+#: Estimator name -> class.
+ESTIMATORS: dict[str, type[Estimator]] = {
+    "ls": LeastSquares,
+    "ridge": Ridge,
+    "l1": Lasso,
+    "lasso": Lasso,
+    "elasticnet": ElasticNet,
+    "stlsq": STLSQ,
+}
+
+
+def make_estimator(name: str, structure: Structure | None = None, **kwargs: object
+                   ) -> Estimator:
+    """An estimator by name (``ls``, ``ridge``, ``l1``, ``elasticnet``, ``stlsq``)."""
+    try:
+        cls = ESTIMATORS[name]
+    except KeyError:
+        raise ConfigError(f"unknown estimator {name!r}; choose from {sorted(ESTIMATORS)}") \
+            from None
+    try:
+        return cls(structure, **kwargs)  # type: ignore[arg-type]
+    except TypeError as exc:
+        raise ConfigError(f"estimator {name!r}: {exc}") from None
+
+
+def log_params(segments: Iterable[Segment], params: Mapping[str, float] | None = None
+               ) -> dict[str, float]:
+    """The log parameters to use: ``params`` if given, else ``segment.meta['params']``."""
+    if params is not None:
+        return dict(params)
+    for s in segments:
+        got = s.meta.get("params") if isinstance(s.meta, Mapping) else None
+        if isinstance(got, Mapping) and got:
+            return {str(k): float(v) for k, v in got.items()
+                    if isinstance(v, (int, float, np.floating))}
+    return {}
+
+
+def select_delay(segments: Sequence[Segment], structure: Structure, delays: Iterable[int]
+                 ) -> tuple[int, dict[int, float]]:
+    """The delay (samples) with the smallest one-step mean squared residual (least squares).
+
+    Returns the best delay and the residual per row for every candidate.
+    """
+    scan: dict[int, float] = {}
+    for d in delays:
+        st = replace(structure, delay=int(d))
+        try:
+            reg = stack(segments, st)
+        except NoExcitationError:
+            continue
+        grams = block_grams(reg)
+        g = sum(grams[1:], grams[0])
+        check_identifiable(reg, g)
+        coef = solve(g)
+        resid = reg.y - reg.z @ coef
+        scan[int(d)] = float(np.mean(resid**2))
+    if not scan:
+        raise NoExcitationError("segments too short for every candidate delay")
+    return min(scan, key=scan.__getitem__), scan
+
+
+def fit_axis(
+    segments: Sequence[Segment],
+    axis: str,
+    estimator: str = "ls",
+    *,
+    params: Mapping[str, float] | None = None,
+    filters: Sequence[InputFilter] | None = None,
+    delays: Iterable[int] | None = None,
+    delay: int | None = None,
+    inputs: Sequence[str] | None = None,
+    bias: bool = True,
+    continuous: bool = False,
+    features: Sequence[str] = (),
+    **estimator_kwargs: object,
+) -> Model:
+    """Choose the structure for one axis from the data and the log, fit it, return the model.
+
+    Parameters
+    ----------
+    segments : sequence of Segment
+        Segments whose ``axis`` is another attitude axis are left out when at least one
+        segment is for ``axis`` (or ``"all"``).
+    axis : {"roll", "pitch", "yaw", "all"}
+        ``"all"``: the coupled p/q/r model with all three inputs.
+    estimator : str
+        ``ls``, ``ridge``, ``l1``, ``elasticnet`` or ``stlsq``.
+    params : Mapping, optional
+        The log's parameters (default: ``segment.meta['params']``); used for known filters.
+    filters : sequence of InputFilter, optional
+        Override the filters derived from ``params`` (``()`` for none).
+    delays : iterable of int, optional
+        Candidate delays in samples (default 0 ... 25 ms worth).
+    delay : int, optional
+        Fix the delay instead of searching.
+    inputs : sequence of str, optional
+        Inputs (default: the axis's own).
+    bias : bool
+        Include the constant term.
+    continuous : bool
+        Continuous-time regression (Savitzky–Golay derivatives) instead of discrete time.
+    features : sequence of str
+        Extra library terms (e.g. ``library.state_input(...)``).
+    **estimator_kwargs
+        Passed to the estimator (``alpha``, ``n_bootstrap``, ...).
+    """
+    if axis not in AXES:
+        raise ConfigError(f"unknown axis {axis!r}; choose from {sorted(AXES)}")
+    segments = list(segments)
+    if not segments:
+        raise NoExcitationError(f"no segments to fit the {axis} axis")
+    mine = [s for s in segments if s.axis in (axis, "all")]
+    if mine and len(mine) < len(segments):
+        segments = mine
+    outputs, default_inputs = AXES[axis]
+    ins = tuple(inputs) if inputs is not None else default_inputs
+    dt = float(segments[0].dt)
+    flt = tuple(filters) if filters is not None else filters_from_params(
+        log_params(segments, params), dt)
+    feats = library.library(outputs, ins, (library.BIAS,) if bias else (), features)
+    structure = Structure(outputs=outputs, features=feats, inputs=ins, filters=flt,
+                          continuous=continuous)
+    if delay is None:
+        cand = list(delays) if delays is not None else list(range(round(0.025 / dt) + 1))
+        delay, scan = select_delay(segments, structure, cand)
+    else:
+        scan = {}
+    structure = replace(structure, delay=int(delay))
+    est = make_estimator(estimator, structure, **estimator_kwargs).fit(segments)
+    model = est.model_
+    prov = dict(model.provenance)
+    prov["delay_scan"] = {str(k): v for k, v in scan.items()}
+    prov["axis"] = axis
+    prov["filters"] = [f.to_dict() for f in flt]
+    return replace(model, provenance=prov)

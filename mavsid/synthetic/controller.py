@@ -19,8 +19,8 @@ Examples
 >>> c.params()["ATC_RAT_RLL_P"]
 0.135
 >>> pid = RatePID(c.rate_gains("roll"), dt=0.0025)
->>> round(pid.update(target=1.0, measured=0.0), 4)   # P + FF on the first sample
-0.135
+>>> round(pid.update(target=1.0, measured=0.0), 4)   # P*err + I*err*dt on the first sample
+0.1353
 """
 
 from __future__ import annotations

@@ -26,7 +26,7 @@ Examples
 >>> round(float(p.effective_delay_s[0]), 4)
 0.02
 >>> b = lowpass2p_coefficients(20.0, 400.0)
->>> round(sum(b[0]) / sum(b[1]), 6)   # unit DC gain
+>>> round(float(sum(b[0]) / sum(b[1])), 6)   # unit DC gain
 1.0
 """
 

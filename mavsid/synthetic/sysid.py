@@ -26,9 +26,9 @@ Examples
 ...                   t_fade_in=5.0, t_rec=60.0, t_fade_out=2.0)
 >>> s.t_const_freq, s.duration
 (4.0, 72.0)
->>> targ, f = chirp(np.array([0.5, 5.0, 61.0]), s)
->>> targ.tolist(), f.round(3).tolist()
-([0.0, 0.0, -0.0], [0.5, 0.5, 20.0])
+>>> targ, f = chirp(np.array([0.5, 4.5, 5.0, 33.0, 62.0]), s)
+>>> np.abs(targ).round(4).tolist(), f.round(3).tolist()
+([0.0, 0.0397, 0.0, 0.0253, 0.0], [0.5, 0.5, 0.5, 3.162, 20.0])
 """
 
 from __future__ import annotations

@@ -68,10 +68,17 @@ AXIS_RATE = {"roll": "p", "pitch": "q", "yaw": "r"}
 class Model(Protocol):
     """What validation needs of a fitted model (see ``mavsid.estimators``)."""
 
-    state_names: tuple[str, ...]
-    input_names: tuple[str, ...]
-    dt: float
-    delay: int
+    @property
+    def state_names(self) -> tuple[str, ...]: ...
+
+    @property
+    def input_names(self) -> tuple[str, ...]: ...
+
+    @property
+    def dt(self) -> float: ...
+
+    @property
+    def delay(self) -> int: ...
 
     @property
     def params(self) -> dict[str, float]: ...
@@ -562,6 +569,9 @@ def residual_test(
 def _band(segment: Segment) -> tuple[float, float] | None:
     """The chirp band a SYSTEMID segment declares in ``meta`` (Hz), if any."""
     meta: Mapping[str, object] = segment.meta or {}
+    nested = meta.get("sysid")
+    if isinstance(nested, Mapping):
+        meta = {**meta, **nested}
     for lo_key, hi_key in (
         ("f_start_hz", "f_stop_hz"),
         ("FSt", "FSp"),

@@ -1,0 +1,561 @@
+"""The whole path from logs to a validated model: read → align → segment → fit → validate.
+
+:func:`fit` runs it with defaults taken from the log (channel preset, SYSTEMID runs or scored
+windows, the estimator) unless a :class:`PipelineConfig` (usually a TOML file, see
+``pipelines/``) says otherwise. :func:`validate_logs` applies saved models to other flights.
+
+Training and validation data never share samples: every segment of an axis is cut into
+blocks of about ``block_s`` seconds (one long SYSTEMID run becomes several), the blocks are
+put in time order and alternate — even blocks train, odd blocks validate (a lone block is
+cut in two halves).
+
+TOML configuration (every key optional)::
+
+    [pipeline]
+    name = "ArduCopter SYSTEMID rate loop"
+    preset = "ardupilot-rate"    # channel preset (mavsid.channels); default from the log
+    rate_hz = 400.0              # alignment grid; default the body-rate channel's rate
+    axes = ["roll", "pitch", "yaw"]
+    estimator = "ls"             # ls | ridge | l1
+
+    [segments]
+    source = "auto"              # auto | sysid | scan
+    block_s = 10.0               # train/validation block length, s
+    options = {}                 # passed to the segment finder
+
+    [model]                      # passed to the estimator (e.g. order, delay)
+
+    [validation]
+    horizons_s = [0.01, 0.05, 0.1, 0.5, 1.0, 2.0]
+    max_lag = 50
+    fft_window_s = 4.0
+
+Examples
+--------
+>>> cfg = config_from_dict({"pipeline": {"axes": ["roll"], "estimator": "ridge"},
+...                         "segments": {"block_s": 5.0}})
+>>> cfg.axes, cfg.estimator, cfg.block_s
+(('roll',), 'ridge', 5.0)
+>>> config_from_dict({"pipeline": {"estimator": "magic"}})
+Traceback (most recent call last):
+...
+mavsid.errors.ConfigError: pipeline.estimator: 'magic' is not one of ls, ridge, l1
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from mavsid.data import FlightData, Segment
+from mavsid.errors import ConfigError, MavsidError, NoExcitationError
+from mavsid.validation import AXIS_RATE, DEFAULT_HORIZONS_S, Model, Validation, validate
+
+if TYPE_CHECKING:
+    from mavsid.excitation import WindowReport
+
+__all__ = [
+    "AXES",
+    "ESTIMATORS",
+    "AxisFit",
+    "FitResult",
+    "PipelineConfig",
+    "config_from_dict",
+    "fit",
+    "load_config",
+    "split_segments",
+    "validate_logs",
+]
+
+AXES = ("roll", "pitch", "yaw")
+ESTIMATORS = ("ls", "ridge", "l1")
+SEGMENT_SOURCES = ("auto", "sysid", "scan")
+
+
+# --------------------------------------------------------------------------- configuration
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    """Settings of one pipeline run (see the module docstring for the TOML form)."""
+
+    name: str = "default"
+    preset: str | None = None
+    rate_hz: float | None = None
+    axes: tuple[str, ...] = AXES
+    estimator: str = "ls"
+    segment_source: str = "auto"
+    block_s: float = 10.0
+    segment_options: Mapping[str, Any] = field(default_factory=dict)
+    model_options: Mapping[str, Any] = field(default_factory=dict)
+    horizons_s: tuple[float, ...] = DEFAULT_HORIZONS_S
+    max_lag: int = 50
+    fft_window_s: float = 4.0
+    path: str | None = None
+    presets: Mapping[str, Any] = field(default_factory=dict)
+    mixers: Mapping[str, Any] = field(default_factory=dict)
+
+    def with_overrides(self, **changes: Any) -> PipelineConfig:
+        """A copy with the given fields replaced (``None`` values ignored)."""
+        return dataclasses.replace(self, **{k: v for k, v in changes.items() if v is not None})
+
+
+_KEYS: dict[str, dict[str, str]] = {
+    "pipeline": {
+        "name": "name",
+        "preset": "preset",
+        "rate_hz": "rate_hz",
+        "axes": "axes",
+        "estimator": "estimator",
+    },
+    "segments": {"source": "segment_source", "block_s": "block_s", "options": "segment_options"},
+    "validation": {
+        "horizons_s": "horizons_s",
+        "max_lag": "max_lag",
+        "fft_window_s": "fft_window_s",
+    },
+}
+
+
+def config_from_dict(data: Mapping[str, Any], path: str | None = None) -> PipelineConfig:
+    """Build a :class:`PipelineConfig` from the TOML structure; unknown keys are errors."""
+    where = f"{path}: " if path else ""
+    values: dict[str, Any] = {"path": path}
+    for section, content in data.items():
+        if section == "model":
+            if not isinstance(content, Mapping):
+                raise ConfigError(f"{where}[model] must be a table")
+            values["model_options"] = dict(content)
+            continue
+        if section not in _KEYS or not isinstance(content, Mapping):
+            raise ConfigError(
+                f"{where}unknown section [{section}] (known: {', '.join([*_KEYS, 'model'])})"
+            )
+        for key, value in content.items():
+            if key not in _KEYS[section]:
+                raise ConfigError(
+                    f"{where}unknown key {section}.{key} "
+                    f"(known: {', '.join(_KEYS[section])})"
+                )
+            values[_KEYS[section][key]] = value
+    try:
+        cfg = _checked(values)
+    except ConfigError as exc:
+        raise ConfigError(f"{where}{exc}") from None
+    return cfg
+
+
+def _checked(v: dict[str, Any]) -> PipelineConfig:
+    def need(cond: bool, key: str, text: str) -> None:
+        if not cond:
+            raise ConfigError(f"{key}: {text}")
+
+    if "axes" in v:
+        axes = v["axes"]
+        axes = [axes] if isinstance(axes, str) else axes
+        need(
+            isinstance(axes, list) and bool(axes) and all(a in AXES for a in axes),
+            "pipeline.axes",
+            f"{v['axes']!r} is not a list of {', '.join(AXES)}",
+        )
+        v["axes"] = tuple(axes)
+    if "estimator" in v:
+        need(
+            v["estimator"] in ESTIMATORS,
+            "pipeline.estimator",
+            f"{v['estimator']!r} is not one of {', '.join(ESTIMATORS)}",
+        )
+    if "segment_source" in v:
+        need(
+            v["segment_source"] in SEGMENT_SOURCES,
+            "segments.source",
+            f"{v['segment_source']!r} is not one of {', '.join(SEGMENT_SOURCES)}",
+        )
+    for key, name in (("rate_hz", "pipeline.rate_hz"), ("block_s", "segments.block_s"),
+                      ("fft_window_s", "validation.fft_window_s")):
+        if key in v:
+            x = v[key]
+            need(
+                isinstance(x, int | float) and not isinstance(x, bool) and x > 0,
+                name,
+                f"{x!r} is not a positive number",
+            )
+            v[key] = float(x)
+    if "horizons_s" in v:
+        h = v["horizons_s"]
+        need(
+            isinstance(h, list) and all(isinstance(x, int | float) and x > 0 for x in h),
+            "validation.horizons_s",
+            f"{h!r} is not a list of positive numbers",
+        )
+        v["horizons_s"] = tuple(float(x) for x in h)
+    if "max_lag" in v:
+        need(isinstance(v["max_lag"], int) and v["max_lag"] > 0, "validation.max_lag",
+             f"{v['max_lag']!r} is not a positive integer")
+    for key in ("segment_options",):
+        if key in v:
+            need(isinstance(v[key], Mapping), "segments.options", "must be a table")
+    for key in ("name", "preset"):
+        if key in v:
+            need(isinstance(v[key], str), f"pipeline.{key}", f"{v[key]!r} is not a string")
+    return PipelineConfig(**v)
+
+
+def load_config(path: str | os.PathLike[str]) -> PipelineConfig:
+    """Read a pipeline TOML file.
+
+    The file may also define channel presets and mixers (``[preset.NAME]``,
+    ``[mixer.NAME]``, see :mod:`mavsid.channels`); they are tried before the built-in ones.
+
+    Raises
+    ------
+    ConfigError
+        The file cannot be read, is not TOML, or has unknown keys or bad values.
+    """
+    from mavsid.channels import _read_toml, load_presets
+
+    data = _read_toml(path)
+    own = {k: v for k, v in data.items() if k not in ("preset", "mixer")}
+    cfg = config_from_dict(own, path=os.fspath(path))
+    if "preset" in data or "mixer" in data:
+        presets, mixers = load_presets(path)
+        cfg = dataclasses.replace(cfg, presets=presets, mixers=mixers)
+    return cfg
+
+
+# --------------------------------------------------------------------------- split
+
+
+def _slice(seg: Segment, a: int, b: int, block: int) -> Segment:
+    return dataclasses.replace(
+        seg,
+        time_s=seg.time_s[a:b],
+        states=seg.states[a:b],
+        inputs=seg.inputs[a:b],
+        meta={**dict(seg.meta), "block": block},
+    )
+
+
+def split_segments(
+    segments: Sequence[Segment], block_s: float = 10.0
+) -> tuple[tuple[Segment, ...], tuple[Segment, ...]]:
+    """Split segments into training and validation blocks that share no sample.
+
+    Each segment is cut into ``max(1, round(duration / block_s))`` equal blocks; all blocks,
+    in time order, alternate train / validation (train first). A single block is halved.
+
+    Parameters
+    ----------
+    segments : sequence of Segment
+    block_s : float
+        Target block length, s.
+
+    Returns
+    -------
+    train, validation : tuple of Segment
+
+    Raises
+    ------
+    NoExcitationError
+        No segment, or too few samples to give both sets.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mavsid.data import Segment
+    >>> t = np.arange(0, 30, 0.01)
+    >>> seg = Segment(t, t[:, None], t[:, None], ("p",), ("u_roll",), 0.01, "roll", "sysid")
+    >>> train, val = split_segments([seg], block_s=10.0)
+    >>> [(s.start_s, round(s.stop_s, 2)) for s in train], [(s.start_s, s.stop_s) for s in val]
+    ([(0.0, 9.99), (20.0, 29.99)], [(10.0, 19.99)])
+    """
+    if not segments:
+        raise NoExcitationError("no segments to fit")
+    pieces: list[tuple[Segment, int, int]] = []
+    for seg in sorted(segments, key=lambda s: s.start_s):
+        n = len(seg)
+        k = max(1, round(n * seg.dt / block_s))
+        edges = np.linspace(0, n, k + 1).round().astype(int)
+        pieces += [(seg, int(a), int(b)) for a, b in itertools.pairwise(edges)]
+    if len(pieces) == 1:
+        seg, a, b = pieces[0]
+        mid = (a + b) // 2
+        pieces = [(seg, a, mid), (seg, mid, b)]
+    blocks = [_slice(s, a, b, i) for i, (s, a, b) in enumerate(pieces) if b - a >= 2]
+    train = tuple(blocks[0::2])
+    held_out = tuple(blocks[1::2])
+    if not train or not held_out:
+        raise NoExcitationError("too little data to hold out a validation segment")
+    return train, held_out
+
+
+# --------------------------------------------------------------------------- results
+
+
+@dataclass(frozen=True)
+class AxisFit:
+    """One axis: the fitted model, its validation and the segments used for each."""
+
+    axis: str
+    model: Model
+    validation: Validation
+    train: tuple[Segment, ...]
+    held_out: tuple[Segment, ...]
+    estimator: str = ""
+    windows: tuple[WindowReport, ...] = ()
+
+    @property
+    def output(self) -> str:
+        """The output that represents the axis (its body rate when the model predicts it)."""
+        rate = AXIS_RATE.get(self.axis, "")
+        return rate if rate in self.validation.state_names else self.validation.state_names[0]
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON form of ``mavsid fit --json`` for this axis."""
+        v = self.validation
+        stderr = getattr(self.model, "stderr", {}) or {}
+        units = getattr(self.model, "units", {}) or {}
+        return _json_safe(
+            {
+                "output": self.output,
+                "estimator": self.estimator,
+                "params": dict(self.model.params),
+                "stderr": dict(stderr),
+                "units": dict(units),
+                "fit_percent": v.fit_summary(self.output),
+                "fit_vs_horizon": {
+                    state: {
+                        "horizon_s": [*np.round(v.horizons_s, 9).tolist(), "free_run"],
+                        "fit_percent": [*v.fit_vs_horizon[:, j].tolist(), v.fit_free_run[j]],
+                    }
+                    for j, state in enumerate(v.state_names)
+                },
+                "rmse": {
+                    s: {"one_step": v.rmse_one_step[j], "free_run": v.rmse_free_run[j]}
+                    for j, s in enumerate(v.state_names)
+                },
+                "stable": v.stable,
+                "eigenvalues": (
+                    None
+                    if v.eigenvalues is None
+                    else [[float(z.real), float(z.imag)] for z in v.eigenvalues]
+                ),
+                "residual_whiteness": {
+                    "band": v.residuals.band,
+                    "autocorr_outside": dict(
+                        zip(v.state_names, v.residuals.autocorr_outside.tolist(), strict=True)
+                    ),
+                },
+                "train_segments": [[s.start_s, s.stop_s] for s in self.train],
+                "validation_segments": [[s.start_s, s.stop_s] for s in self.held_out],
+            }
+        )
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """The outcome of :func:`fit` or :func:`validate_logs`."""
+
+    axes: Mapping[str, AxisFit]
+    flights: tuple[FlightData, ...]
+    logs: tuple[str, ...]
+    config: PipelineConfig = field(default_factory=PipelineConfig)
+
+    def to_dict(self) -> dict[str, Any]:
+        """``{"axes": {axis: {...}}, "logs": [...], "preset": ..., "config": ...}``."""
+        return {
+            "axes": {a: f.to_dict() for a, f in self.axes.items()},
+            "logs": list(self.logs),
+            "presets": sorted({fd.preset for fd in self.flights}),
+            "pipeline": self.config.name,
+        }
+
+    def models_dict(self) -> dict[str, Any]:
+        """The fitted models in the form :func:`validate_logs` reads back."""
+        return {
+            "mavsid_models": 1,
+            "axes": {a: f.model.to_dict() for a, f in self.axes.items()},  # type: ignore[attr-defined]
+        }
+
+
+def _json_safe(x: Any) -> Any:
+    """NaN/inf -> None, numpy scalars -> Python, recursively."""
+    if isinstance(x, Mapping):
+        return {str(k): _json_safe(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_json_safe(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _json_safe(x.tolist())
+    if isinstance(x, bool | np.bool_):
+        return bool(x)
+    if isinstance(x, int | np.integer):
+        return int(x)
+    if isinstance(x, float | np.floating):
+        return float(x) if math.isfinite(float(x)) else None
+    return x
+
+
+# --------------------------------------------------------------------------- running
+
+
+def _read_flight(path: str | os.PathLike[str], cfg: PipelineConfig) -> FlightData:
+    """Read only the messages alignment needs, then align."""
+    from mavsid.align import load_flight
+
+    return load_flight(
+        path,
+        cfg.preset,
+        cfg.rate_hz,
+        presets=cfg.presets or None,
+        mixers=cfg.mixers or None,
+    )
+
+
+def _windows(flight: FlightData, axis: str, cfg: PipelineConfig) -> list[WindowReport]:
+    """Every window considered on ``axis``, kept or rejected, as the config asks."""
+    from mavsid.excitation import ScanOptions, find_segments
+
+    try:
+        options = ScanOptions(**dict(cfg.segment_options))
+    except TypeError as exc:
+        raise ConfigError(f"segments.options: {exc}") from None
+    scan = {"auto": None, "sysid": False, "scan": True}[cfg.segment_source]
+    reports = find_segments(flight, axis, scan=scan, options=options)
+    if cfg.segment_source == "scan":
+        reports = [r for r in reports if r.source == "scan"]
+    return [r for r in reports if r.axis == axis]
+
+
+def _segments(flight: FlightData, reports: Sequence[WindowReport]) -> list[Segment]:
+    from mavsid.excitation import select_segments
+
+    return select_segments(flight, reports=reports)
+
+
+def _fit_model(train: Sequence[Segment], axis: str, cfg: PipelineConfig) -> Model:
+    from mavsid import estimators
+
+    model: Model = estimators.fit_axis(
+        list(train), axis=axis, estimator=cfg.estimator, **dict(cfg.model_options)
+    )
+    return model
+
+
+def fit(
+    logs: Sequence[str | os.PathLike[str]],
+    config: PipelineConfig | None = None,
+) -> FitResult:
+    """Fit and validate a model per axis from one or more logs.
+
+    Parameters
+    ----------
+    logs : sequence of path-like
+        Flight logs (any supported format); their segments are pooled per axis.
+    config : PipelineConfig, optional
+        Settings; defaults chosen from the log.
+
+    Returns
+    -------
+    FitResult
+
+    Raises
+    ------
+    MavsidError
+        Unreadable logs, no excitation on any requested axis, or estimator failure.
+    """
+    cfg = config or PipelineConfig()
+    if not logs:
+        raise ConfigError("no log given")
+    flights = tuple(_read_flight(p, cfg) for p in logs)
+    fits: dict[str, AxisFit] = {}
+    problems: list[str] = []
+    for axis in cfg.axes:
+        reports = [(fd, _windows(fd, axis, cfg)) for fd in flights]
+        windows = tuple(r for _, rs in reports for r in rs)
+        segs = [s for fd, rs in reports for s in _segments(fd, rs)]
+        try:
+            train, held_out = split_segments(segs, cfg.block_s)
+            model = _fit_model(train, axis, cfg)
+            val = validate(
+                model,
+                held_out,
+                horizons_s=cfg.horizons_s,
+                max_lag=cfg.max_lag,
+                fft_window_s=cfg.fft_window_s,
+            )
+        except NoExcitationError as exc:
+            problems.append(f"{axis}: {exc}")
+            continue
+        fits[axis] = AxisFit(axis, model, val, train, held_out, cfg.estimator, windows)
+    if not fits:
+        names = ", ".join(os.fspath(p) for p in logs)
+        raise NoExcitationError(f"{names}: nothing identifiable ({'; '.join(problems)})")
+    return FitResult(fits, flights, tuple(os.fspath(p) for p in logs), cfg)
+
+
+def load_models(path: str | os.PathLike[str]) -> dict[str, Model]:
+    """Read the models ``mavsid fit -o`` wrote: ``{axis: model}``."""
+    import json
+
+    from mavsid import estimators
+
+    try:
+        with open(path, encoding="utf-8") as f:
+            data = json.load(f)
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{path}: not a mavsid model file: {exc}") from None
+    if not isinstance(data, dict) or not isinstance(data.get("axes"), dict):
+        raise ConfigError(f"{path}: not a mavsid model file (no 'axes' table)")
+    out: dict[str, Model] = {}
+    for axis, d in data["axes"].items():
+        try:
+            out[axis] = estimators.Model.from_dict(d)
+        except MavsidError as exc:
+            raise ConfigError(f"{path}: axis {axis}: {exc}") from None
+    return out
+
+
+def validate_logs(
+    models: Mapping[str, Model],
+    logs: Sequence[str | os.PathLike[str]],
+    config: PipelineConfig | None = None,
+) -> FitResult:
+    """Validate saved models on other flights: every segment found is held out."""
+    cfg = config or PipelineConfig()
+    flights = tuple(_read_flight(p, cfg) for p in logs)
+    fits: dict[str, AxisFit] = {}
+    problems: list[str] = []
+    for axis, model in models.items():
+        if axis not in cfg.axes:
+            continue
+        reports = [(fd, _windows(fd, axis, cfg)) for fd in flights]
+        windows = tuple(r for _, rs in reports for r in rs)
+        segs = tuple(s for fd, rs in reports for s in _segments(fd, rs))
+        try:
+            if not segs:
+                raise NoExcitationError("no segments")
+            val = validate(
+                model,
+                segs,
+                horizons_s=cfg.horizons_s,
+                max_lag=cfg.max_lag,
+                fft_window_s=cfg.fft_window_s,
+            )
+        except NoExcitationError as exc:
+            problems.append(f"{axis}: {exc}")
+            continue
+        estimator = str(getattr(model, "estimator", ""))
+        fits[axis] = AxisFit(axis, model, val, (), segs, estimator, windows)
+    if not fits:
+        names = ", ".join(os.fspath(p) for p in logs)
+        raise NoExcitationError(f"{names}: no segment to validate on ({'; '.join(problems)})")
+    return FitResult(fits, flights, tuple(os.fspath(p) for p in logs), cfg)

@@ -1,0 +1,246 @@
+"""A static HTML report of a fit: one self-contained file to attach to a tuning discussion.
+
+Per axis: the parameter table (value ± σ, unit), fit % at one step / 0.5 s / free run,
+stability, and figures embedded as base64 PNG (matplotlib, no pyplot state): measured vs
+one-step vs free-run on the validation segments with the input below, fit % against
+horizon, residual autocorrelation with its confidence band, and, for SYSTEMID (chirp)
+segments, the Bode magnitude and phase of measured and model response with the coherence.
+
+Examples
+--------
+>>> html = render_html_page("t", ["<p>hello</p>"])
+>>> html.startswith("<!DOCTYPE html>") and "<p>hello</p>" in html
+True
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import os
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from mavsid import __version__
+from mavsid.validation import Validation, horizon_label
+
+if TYPE_CHECKING:
+    from mavsid.pipeline import AxisFit, FitResult
+
+__all__ = ["figure_png", "render_html", "render_html_page", "write_report"]
+
+_COLOURS = {"measured": "#333333", "one_step": "#2f6fde", "free_run": "#f08a12", "input": "#2a9d46"}
+
+_CSS = """
+body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 1100px; color: #222; }
+h1 { font-size: 1.6em; } h2 { border-bottom: 1px solid #ccc; padding-bottom: .2em; }
+table { border-collapse: collapse; margin: .5em 0 1em; }
+td, th { border: 1px solid #ccc; padding: .25em .6em; text-align: right; }
+th { background: #f3f3f3; } td.name, th.name { text-align: left; font-family: monospace; }
+img { max-width: 100%; display: block; margin: .5em 0; }
+.meta { color: #666; font-size: .9em; }
+"""
+
+
+def figure_png(fig: Figure) -> str:
+    """A figure as an ``<img>`` tag with the PNG inlined (base64)."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90)
+    data = base64.b64encode(buf.getvalue()).decode("ascii")
+    return f'<img alt="figure" src="data:image/png;base64,{data}">'
+
+
+def _gapped(parts: Sequence[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    ts: list[np.ndarray] = []
+    vs: list[np.ndarray] = []
+    for t, v in parts:
+        ts += [np.asarray(t, float), np.array([np.nan])]
+        vs += [np.asarray(v, float), np.array([np.nan])]
+    if not ts:
+        return np.zeros(0), np.zeros(0)
+    return np.concatenate(ts), np.concatenate(vs)
+
+
+def _time_figure(fit: AxisFit) -> Figure:
+    v = fit.validation
+    j = v.state_names.index(fit.output)
+    fig = Figure(figsize=(11, 4.5))
+    ax, ax_u = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+    for kind in ("measured", "one_step", "free_run"):
+        t, y = _gapped([(s.time_s, getattr(s, kind)[:, j]) for s in v.segments])
+        ax.plot(t, y, color=_COLOURS[kind], lw=1.6 if kind == "measured" else 1.0,
+                label=kind.replace("_", "-"))
+    ax.set_ylabel(f"{fit.output}")
+    ax.legend(loc="upper right", fontsize=8)
+    ax.set_title(f"{fit.axis}: validation segments (not used for fitting)", fontsize=10)
+    for name in v.input_names:
+        parts = [
+            (s.time_s, s.inputs[:, s.input_names.index(name)])
+            for s in fit.held_out
+            if name in s.input_names
+        ]
+        if parts:
+            ax_u.plot(*_gapped(parts), lw=0.8, label=name)
+    ax_u.set_ylabel("input")
+    ax_u.set_xlabel("log time [s]")
+    ax_u.legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def _horizon_figure(v: Validation) -> Figure:
+    fig = Figure(figsize=(5.2, 3.4))
+    ax = fig.subplots()
+    h = v.horizons_s
+    for j, state in enumerate(v.state_names):
+        ax.semilogx(h, v.fit_vs_horizon[:, j], "o-", label=state)
+        ax.axhline(v.fit_free_run[j], ls="--", lw=0.8, color=f"C{j}")
+    ax.set_xlabel("prediction horizon [s]")
+    ax.set_ylabel("fit [%]")
+    ax.set_title("fit vs horizon (dashed: free run)", fontsize=10)
+    lo = np.nanmin(np.r_[v.fit_vs_horizon.ravel(), v.fit_free_run, 0.0])
+    ax.set_ylim(max(lo, -100.0) - 5, 102)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def _residual_figure(v: Validation) -> Figure:
+    r = v.residuals
+    fig = Figure(figsize=(5.2, 3.4))
+    ax = fig.subplots()
+    for j, state in enumerate(v.state_names):
+        ax.plot(r.lags * v.dt * 1e3, r.autocorr[:, j], ".-", ms=3, label=f"{state} residual")
+    ax.axhspan(-r.band, r.band, color="0.85", label=f"{r.confidence:.0%} band (white)")
+    ax.set_xlabel("lag [ms]")
+    ax.set_ylabel("autocorrelation")
+    ax.set_title("one-step residual whiteness", fontsize=10)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def _bode_figure(v: Validation) -> Figure | None:
+    if not v.frequency:
+        return None
+    fig = Figure(figsize=(11, 6))
+    axes = fig.subplots(3, len(v.frequency), sharex="col", squeeze=False,
+                        gridspec_kw={"height_ratios": [3, 2, 1.3]})
+    for i, fr in enumerate(v.frequency):
+        lo, hi = fr.band_hz or (fr.freq_hz[1], fr.freq_hz[-1])
+        sel = (fr.freq_hz >= lo) & (fr.freq_hz <= hi)
+        f = fr.freq_hz[sel]
+        mag, ph, coh = axes[0, i], axes[1, i], axes[2, i]
+        for label, h, colour in (("measured", fr.measured, _COLOURS["measured"]),
+                                 ("model", fr.model, _COLOURS["free_run"])):
+            mag.semilogx(f, 20 * np.log10(np.abs(h[sel]) + 1e-12), color=colour, label=label)
+            ph.semilogx(f, np.degrees(np.unwrap(np.angle(h[sel]))), color=colour)
+        coh.semilogx(f, fr.coherence[sel], color="#7a4fd6")
+        coh.set_ylim(0, 1.05)
+        mag.set_title(f"{fr.input_name} → {fr.output_name}", fontsize=10)
+        mag.set_ylabel("|H| [dB]")
+        ph.set_ylabel("phase [deg]")
+        coh.set_ylabel("coherence")
+        coh.set_xlabel("frequency [Hz]")
+        mag.legend(fontsize=8)
+        for a in (mag, ph, coh):
+            a.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    return fig
+
+
+def _num(x: float) -> str:
+    return "–" if x is None or not np.isfinite(x) else f"{x:.4g}"
+
+
+def _axis_section(fit: AxisFit) -> str:
+    m, v = fit.model, fit.validation
+    stderr = getattr(m, "stderr", {}) or {}
+    units = getattr(m, "units", {}) or {}
+    rows = "".join(
+        f'<tr><td class="name">{html.escape(k)}</td><td>{_num(val)}</td>'
+        f"<td>{_num(stderr.get(k, np.nan))}</td><td>{html.escape(str(units.get(k, '')))}</td></tr>"
+        for k, val in m.params.items()
+    )
+    keys = ("one_step", horizon_label(0.5), "free_run")
+    fit_rows = "".join(
+        f'<tr><td class="name">{html.escape(s)}</td>'
+        + "".join(f"<td>{_num(v.fit_summary(s)[k])}</td>" for k in keys)
+        + f"<td>{_num(v.rmse_one_step[j])}</td><td>{_num(v.rmse_free_run[j])}</td></tr>"
+        for j, s in enumerate(v.state_names)
+    )
+    stable = {True: "stable", False: "UNSTABLE", None: "not reported"}[v.stable]
+    eig = "" if v.eigenvalues is None else ", ".join(f"{z:.4g}" for z in v.eigenvalues)
+    segs = ", ".join(f"{s.start_s:.2f}–{s.stop_s:.2f} s" for s in fit.held_out)
+    train = ", ".join(f"{s.start_s:.2f}–{s.stop_s:.2f} s" for s in fit.train) or "–"
+    parts = [
+        f"<h2>{html.escape(fit.axis)}</h2>",
+        f'<p class="meta">estimator {html.escape(fit.estimator or "–")}; '
+        f"dynamics {stable}{' (eigenvalues ' + html.escape(eig) + ')' if eig else ''}; "
+        f"trained on {html.escape(train)}; validated on {html.escape(segs)}</p>",
+        '<table><tr><th class="name">parameter</th><th>value</th><th>σ</th><th>unit</th></tr>'
+        f"{rows}</table>",
+        '<table><tr><th class="name">output</th><th>fit % one step</th><th>fit % 0.5 s</th>'
+        "<th>fit % free run</th><th>RMSE one step</th><th>RMSE free run</th></tr>"
+        f"{fit_rows}</table>",
+        figure_png(_time_figure(fit)),
+        '<div style="display:flex;gap:1em">'
+        + figure_png(_horizon_figure(v))
+        + figure_png(_residual_figure(v))
+        + "</div>",
+    ]
+    bode = _bode_figure(v)
+    if bode is not None:
+        parts.append(figure_png(bode))
+    return "\n".join(parts)
+
+
+def render_html_page(title: str, sections: Sequence[str]) -> str:
+    """Wrap body sections into one standalone HTML document."""
+    return (
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+        f"<title>{html.escape(title)}</title><style>{_CSS}</style></head><body>\n"
+        + "\n".join(sections)
+        + "\n</body></html>\n"
+    )
+
+
+def render_html(result: FitResult) -> str:
+    """The report of a :class:`~mavsid.pipeline.FitResult` as one HTML string."""
+    logs = ", ".join(html.escape(os.path.basename(p)) for p in result.logs)
+    presets = ", ".join(sorted({html.escape(fd.preset) for fd in result.flights}))
+    header = (
+        f"<h1>mavsid fit: {logs}</h1>"
+        f'<p class="meta">mavsid {__version__}; pipeline {html.escape(result.config.name)}; '
+        f"channel preset {presets or '–'}. Fit % = 100·(1 − ‖y − ŷ‖ / ‖y − ȳ‖) on segments "
+        "held out from fitting; free run feeds the model its own predictions with measured "
+        "inputs.</p>"
+    )
+    summary_rows = "".join(
+        f'<tr><td class="name">{html.escape(a)}</td><td class="name">{html.escape(f.output)}</td>'
+        + "".join(
+            f"<td>{_num(f.validation.fit_summary(f.output)[k])}</td>"
+            for k in ("one_step", horizon_label(0.5), "free_run")
+        )
+        + "</tr>"
+        for a, f in result.axes.items()
+    )
+    summary = (
+        '<table><tr><th class="name">axis</th><th class="name">output</th>'
+        "<th>fit % one step</th><th>fit % 0.5 s</th><th>fit % free run</th></tr>"
+        f"{summary_rows}</table>"
+    )
+    sections = [header, summary, *(_axis_section(f) for f in result.axes.values())]
+    return render_html_page(f"mavsid fit: {logs}", sections)
+
+
+def write_report(result: FitResult, path: str | os.PathLike[str]) -> None:
+    """Write :func:`render_html` of ``result`` to ``path``."""
+    text = render_html(result)
+    with open(path, "w", encoding="utf-8") as f:
+        f.write(text)

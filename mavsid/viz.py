@@ -1,0 +1,553 @@
+"""Log a fit to rerun: data, predictions, segments, attitude, fit and frequency plots.
+
+Every function takes an explicit :class:`rerun.RecordingStream`; nothing touches rerun's
+global recording. Time series are sent whole with ``send_columns`` on the timeline
+``log_time`` (the log's own clock, seconds since boot). Entity layout:
+
+====================================  ==================================================
+entity                                content
+====================================  ==================================================
+``flight/states/<name>``              every state of the flight (rad, rad/s)
+``flight/inputs/<name>``              every input of the flight (normalised)
+``axes/<axis>/<state>/measured``      measured output on the validation segments
+``axes/<axis>/<state>/one_step``      one-step-ahead prediction
+``axes/<axis>/<state>/free_run``      free-run simulation (measured inputs only)
+``axes/<axis>/inputs/<name>``         the model's inputs on the validation segments
+``segments/<axis>``                   text log: each segment's start and end, role, reasons
+``world/data``                        measured attitude (3-D transform, FRD body in NED)
+``world/model/<axis>``                attitude with the model's free-run rate in place
+                                      of the measured one, on validation segments
+``fit/<axis>``                        2-D plot: fit % against prediction horizon
+``frequency/<axis>``                  2-D plot: |H| (dB) measured vs model, coherence
+``summary``                           markdown table of parameters and fit %
+====================================  ==================================================
+
+Between segments every predicted series gets one NaN sample so that the viewer does not
+draw a line across the gap. :func:`blueprint` lays all of this out; :func:`save_rrd` writes a
+whole :class:`~mavsid.pipeline.FitResult` to an ``.rrd`` file.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+from scipy.spatial.transform import Rotation
+
+from mavsid.data import FlightData, Segment
+from mavsid.validation import AXIS_RATE, Validation, horizon_label
+
+if TYPE_CHECKING:
+    from mavsid.excitation import WindowReport
+    from mavsid.pipeline import AxisFit, FitResult
+
+__all__ = [
+    "APPLICATION_ID",
+    "TIMELINE",
+    "blueprint",
+    "log_attitude",
+    "log_fit_result",
+    "log_flight",
+    "log_segments",
+    "log_summary",
+    "log_validation",
+    "new_recording",
+    "save_rrd",
+]
+
+APPLICATION_ID = "mavsid"
+TIMELINE = "log_time"
+
+MEASURED = (200, 200, 200)
+ONE_STEP = (70, 140, 255)
+FREE_RUN = (255, 150, 40)
+INPUT = (90, 200, 110)
+COHERENCE = (180, 120, 255)
+GRID = (90, 90, 90)
+AXIS_COLOURS = {"roll": (230, 80, 80), "pitch": (80, 200, 90), "yaw": (80, 140, 255)}
+
+
+def new_recording(recording_id: str | None = None) -> rr.RecordingStream:
+    """A fresh recording stream for mavsid (not made the global default)."""
+    return rr.RecordingStream(APPLICATION_ID, recording_id=recording_id)
+
+
+def _time(t: np.ndarray) -> rr.TimeColumn:
+    return rr.TimeColumn(TIMELINE, duration=np.asarray(t, dtype=float))
+
+
+def _send_series(rec: rr.RecordingStream, path: str, t: np.ndarray, v: np.ndarray) -> None:
+    """One scalar series, rows with a non-finite time dropped."""
+    t = np.asarray(t, dtype=float)
+    v = np.asarray(v, dtype=float)
+    ok = np.isfinite(t)
+    if not ok.any():
+        return
+    rr.send_columns(
+        path, indexes=[_time(t[ok])], columns=rr.Scalars.columns(scalars=v[ok]), recording=rec
+    )
+
+
+def _joined(parts: Iterable[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    """Concatenate (time, value) pieces with a NaN value between them (a gap in the plot)."""
+    ts: list[np.ndarray] = []
+    vs: list[np.ndarray] = []
+    for t, v in parts:
+        if ts:
+            ts.append(np.array([0.5 * (ts[-1][-1] + t[0])]))
+            vs.append(np.array([np.nan]))
+        ts.append(np.asarray(t, dtype=float))
+        vs.append(np.asarray(v, dtype=float))
+    if not ts:
+        return np.zeros(0), np.zeros(0)
+    return np.concatenate(ts), np.concatenate(vs)
+
+
+def _style(rec: rr.RecordingStream, path: str, colour: Sequence[int], name: str) -> None:
+    rec.log(path, rr.SeriesLines(colors=[colour], names=[name]), static=True)
+
+
+# --------------------------------------------------------------------------- flight data
+
+
+def log_flight(rec: rr.RecordingStream, flight: FlightData, prefix: str = "flight") -> None:
+    """Every state and input of ``flight`` as time series, and its attitude in 3-D."""
+    t = flight.time_s
+    blocks = flight.blocks if len(flight.blocks) else np.array([[0, len(t)]])
+    for group, names, data, units in (
+        ("states", flight.state_names, flight.states, flight.state_units),
+        ("inputs", flight.input_names, flight.inputs, flight.input_units),
+    ):
+        for j, name in enumerate(names):
+            path = f"{prefix}/{group}/{name}"
+            _style(rec, path, INPUT if group == "inputs" else MEASURED, f"{name} [{units[j]}]")
+            tt, vv = _joined((t[a:b], data[a:b, j]) for a, b in blocks)
+            _send_series(rec, path, tt, vv)
+    if all(n in flight.state_names for n in ("roll", "pitch", "yaw")):
+        idx = [flight.state_names.index(n) for n in ("roll", "pitch", "yaw")]
+        log_attitude(rec, "world/data", t, flight.states[:, idx], colour=MEASURED)
+
+
+def _quaternions(euler: np.ndarray) -> np.ndarray:
+    """ZYX Euler angles (roll, pitch, yaw; rad) -> quaternions (x, y, z, w)."""
+    ok = np.all(np.isfinite(euler), axis=1)
+    q = np.tile([0.0, 0.0, 0.0, 1.0], (len(euler), 1))
+    if ok.any():
+        q[ok] = Rotation.from_euler("ZYX", euler[ok][:, ::-1]).as_quat()
+    return q
+
+
+def log_attitude(
+    rec: rr.RecordingStream,
+    path: str,
+    time_s: np.ndarray,
+    euler: np.ndarray,
+    *,
+    colour: Sequence[int] = MEASURED,
+    offset_m: Sequence[float] = (0.0, 0.0, 0.0),
+    max_rate_hz: float = 50.0,
+) -> None:
+    """Attitude ``(roll, pitch, yaw)`` [rad] as a 3-D transform carrying a small airframe.
+
+    The airframe is drawn once (static, in body axes: x forward, y right, z down); its
+    transform is sent as a column, decimated to at most ``max_rate_hz``.
+    """
+    time_s = np.asarray(time_s, dtype=float)
+    if len(time_s) > 1:
+        step = max(1, round(1.0 / (max_rate_hz * float(np.median(np.diff(time_s))))))
+        time_s, euler = time_s[::step], euler[::step]
+    quat = _quaternions(np.asarray(euler, dtype=float))
+    rr.send_columns(
+        path,
+        indexes=[_time(time_s)],
+        columns=rr.Transform3D.columns(
+            quaternion=quat, translation=np.tile(np.asarray(offset_m, float), (len(quat), 1))
+        ),
+        recording=rec,
+    )
+    arm = 0.5
+    rec.log(
+        f"{path}/airframe",
+        rr.Arrows3D(
+            vectors=[[arm, 0, 0], [-arm, 0, 0], [0, arm, 0], [0, -arm, 0], [0, 0, 0.25]],
+            colors=[(255, 60, 60), colour, colour, colour, (60, 120, 255)],
+            radii=0.02,
+        ),
+        static=True,
+    )
+
+
+def _model_attitude(segment: Segment, rate_name: str, rate_hat: np.ndarray) -> np.ndarray | None:
+    """Integrate the Euler kinematics from the segment's first attitude, with the model's
+    prediction of ``rate_name`` in place of the measured rate (the others measured)."""
+    names = segment.state_names
+    if not all(n in names for n in ("roll", "pitch", "yaw", "p", "q", "r")):
+        return None
+    rates = segment.states[:, [names.index(n) for n in ("p", "q", "r")]].copy()
+    rates[:, "pqr".index(rate_name)] = np.where(
+        np.isfinite(rate_hat), rate_hat, rates[:, "pqr".index(rate_name)]
+    )
+    att = np.empty((len(segment), 3))
+    att[0] = segment.states[0, [names.index(n) for n in ("roll", "pitch", "yaw")]]
+    dt = segment.dt
+    for k in range(len(segment) - 1):
+        phi, theta, _ = att[k]
+        p, q, r = rates[k]
+        s, c = np.sin(phi), np.cos(phi)
+        ct = np.cos(theta)
+        ct = ct if abs(ct) > 1e-6 else 1e-6
+        att[k + 1] = att[k] + dt * np.array(
+            [p + (q * s + r * c) * np.tan(theta), q * c - r * s, (q * s + r * c) / ct]
+        )
+    return att
+
+
+# --------------------------------------------------------------------------- segments
+
+
+def log_segments(
+    rec: rr.RecordingStream,
+    axis: str,
+    train: Sequence[Segment],
+    held_out: Sequence[Segment],
+    windows: Sequence[WindowReport] = (),
+) -> None:
+    """Segment boundaries as text-log entries with their role and reasons.
+
+    ``windows`` (from :func:`mavsid.excitation.find_segments`) adds every rejected window
+    with the reasons it was rejected (level ``WARN``).
+    """
+    rows: list[tuple[float, str, str]] = []
+    for role, segs in (("train", train), ("validation", held_out)):
+        for seg in segs:
+            why = "; ".join(seg.reasons) if seg.reasons else seg.source
+            rows.append(
+                (seg.start_s, f"{axis} {role} segment starts ({seg.source}): {why}", "INFO")
+            )
+            rows.append((seg.stop_s, f"{axis} {role} segment ends", "DEBUG"))
+    for w in windows:
+        if not w.kept:
+            why = "; ".join(w.reasons)
+            rows.append(
+                (w.start_s, f"{axis} {w.source} window {w.start_s:.2f}-{w.stop_s:.2f} s "
+                 f"rejected: {why}", "WARN")
+            )
+    if not rows:
+        return
+    rows.sort(key=lambda r: r[0])
+    rr.send_columns(
+        f"segments/{axis}",
+        indexes=[_time(np.array([r[0] for r in rows]))],
+        columns=rr.TextLog.columns(text=[r[1] for r in rows], level=[r[2] for r in rows]),
+        recording=rec,
+    )
+
+
+# --------------------------------------------------------------------------- 2-D plots
+
+
+def _plot2d(
+    rec: rr.RecordingStream,
+    path: str,
+    series: Sequence[tuple[str, np.ndarray, np.ndarray, Sequence[int]]],
+    *,
+    xlog: bool,
+    x_ticks: Sequence[float] | np.ndarray,
+    y_ticks: Sequence[float] | np.ndarray,
+    x_unit: str,
+    y_unit: str,
+    origin_y: float = 0.0,
+    height: float = 100.0,
+    y_range: tuple[float, float] | None = None,
+) -> None:
+    """A static line plot drawn with 2-D primitives (rerun time-series views plot against
+    time only). Plot space: x in [0, 200], y from ``origin_y`` down to ``origin_y - height``
+    (rerun's 2-D y axis points down, so values are flipped)."""
+    xs_all = [np.asarray(x, dtype=float) for _, x, _, _ in series]
+    ys_all = [np.asarray(y, dtype=float) for _, _, y, _ in series]
+
+    def fx(x: np.ndarray) -> np.ndarray:
+        return np.log10(x) if xlog else x
+
+    x_lo, x_hi = fx(np.array([min(x_ticks), max(x_ticks)]))
+    if y_range is None:
+        finite = np.concatenate([y[np.isfinite(y)] for y in ys_all] + [np.asarray(y_ticks)])
+        y_lo, y_hi = float(finite.min()), float(finite.max())
+    else:
+        y_lo, y_hi = y_range
+    y_hi = y_hi if y_hi > y_lo else y_lo + 1.0
+
+    def px(x: np.ndarray) -> np.ndarray:
+        return 200.0 * (fx(x) - x_lo) / (x_hi - x_lo)
+
+    def py(y: np.ndarray) -> np.ndarray:
+        return origin_y + height * (1.0 - (np.clip(y, y_lo, y_hi) - y_lo) / (y_hi - y_lo))
+
+    grid: list[np.ndarray] = []
+    labels_at: list[tuple[float, float]] = []
+    labels: list[str] = []
+    for xt in x_ticks:
+        x = float(px(np.array([xt]))[0])
+        grid.append(np.array([[x, origin_y], [x, origin_y + height]]))
+        labels_at.append((x, origin_y + height + 6))
+        labels.append(f"{xt:g}{x_unit}")
+    for yt in y_ticks:
+        if y_lo <= yt <= y_hi:
+            y = float(py(np.array([yt]))[0])
+            grid.append(np.array([[0.0, y], [200.0, y]]))
+            labels_at.append((-12.0, y))
+            labels.append(f"{yt:g}{y_unit}")
+    rec.log(f"{path}/grid", rr.LineStrips2D(grid, colors=[GRID], radii=0.15), static=True)
+    rec.log(
+        f"{path}/ticks",
+        rr.Points2D(labels_at, labels=labels, radii=0.1, colors=[GRID], show_labels=True),
+        static=True,
+    )
+    for (name, _, _, colour), xv, yv in zip(series, xs_all, ys_all, strict=True):
+        ok = np.isfinite(xv) & np.isfinite(yv) & (xv > 0 if xlog else np.isfinite(xv))
+        if ok.sum() < 1:
+            continue
+        pts = np.c_[px(xv[ok]), py(yv[ok])]
+        rec.log(
+            f"{path}/{name}",
+            rr.LineStrips2D([pts], colors=[colour], radii=0.6, labels=[name], show_labels=False),
+            static=True,
+        )
+        if len(pts) < 30:  # few points (fit vs horizon): mark them
+            rec.log(f"{path}/{name}/points", rr.Points2D(pts, colors=[colour], radii=1.2),
+                    static=True)
+
+
+def _log_fit_plot(rec: rr.RecordingStream, axis: str, v: Validation) -> None:
+    """Fit % against horizon per predicted state; free run drawn at twice the longest."""
+    h = v.horizons_s
+    xs = np.r_[h, 2.0 * h[-1]]
+    series = []
+    palette = [ONE_STEP, FREE_RUN, INPUT, COHERENCE]
+    for j, state in enumerate(v.state_names):
+        ys = np.r_[v.fit_vs_horizon[:, j], v.fit_free_run[j]]
+        series.append((f"{state} fit", xs, ys, palette[j % len(palette)]))
+    decades = 10.0 ** np.arange(np.floor(np.log10(h[0])), np.ceil(np.log10(xs[-1])) + 1)
+    lo = np.nanmin([*(s[2] for s in series)]) if series else 0.0
+    lo = float(min(0.0, np.floor(np.nan_to_num(lo, nan=0.0) / 20) * 20))
+    _plot2d(
+        rec,
+        f"fit/{axis}",
+        series,
+        xlog=True,
+        x_ticks=decades,
+        y_ticks=np.arange(lo, 101, 20),
+        x_unit=" s",
+        y_unit=" %",
+        y_range=(lo, 100.0),
+    )
+    rec.log(
+        f"fit/{axis}/free_run_label",
+        rr.Points2D([[200.0, -8.0]], labels=["right: free run"], show_labels=True, radii=0.1),
+        static=True,
+    )
+
+
+def _log_frequency_plot(rec: rr.RecordingStream, axis: str, v: Validation) -> None:
+    """Bode magnitude (dB) of measured and model response above, coherence below."""
+    for fr in v.frequency:
+        band = fr.band_hz or (fr.freq_hz[1], fr.freq_hz[-1])
+        sel = (fr.freq_hz >= band[0]) & (fr.freq_hz <= band[1])
+        if sel.sum() < 2:
+            continue
+        f = fr.freq_hz[sel]
+        mag = 20 * np.log10(np.abs(fr.measured[sel]) + 1e-12)
+        mod = 20 * np.log10(np.abs(fr.model[sel]) + 1e-12)
+        ticks = 10.0 ** np.arange(np.floor(np.log10(f[0])), np.ceil(np.log10(f[-1])) + 1)
+        lo = float(np.floor(min(mag.min(), mod.min()) / 10) * 10)
+        hi = float(np.ceil(max(mag.max(), mod.max()) / 10) * 10)
+        name = f"frequency/{axis}/{fr.output_name}_{fr.input_name}"
+        _plot2d(
+            rec,
+            f"{name}/magnitude",
+            [("measured", f, mag, MEASURED), ("model", f, mod, FREE_RUN)],
+            xlog=True,
+            x_ticks=ticks,
+            y_ticks=np.arange(lo, hi + 1, 10),
+            x_unit=" Hz",
+            y_unit=" dB",
+            y_range=(lo, hi),
+        )
+        _plot2d(
+            rec,
+            f"{name}/coherence",
+            [("coherence", f, fr.coherence[sel], COHERENCE)],
+            xlog=True,
+            x_ticks=ticks,
+            y_ticks=(0.0, 0.5, 1.0),
+            x_unit=" Hz",
+            y_unit="",
+            origin_y=125.0,
+            height=40.0,
+            y_range=(0.0, 1.0),
+        )
+
+
+# --------------------------------------------------------------------------- validation
+
+
+def log_validation(
+    rec: rr.RecordingStream,
+    axis: str,
+    validation: Validation,
+    segments: Sequence[Segment] = (),
+    input_names: Sequence[str] = (),
+) -> None:
+    """Measured, one-step and free-run series, inputs, model attitude and the plots.
+
+    Parameters
+    ----------
+    rec : rerun.RecordingStream
+    axis : str
+    validation : Validation
+        From :func:`mavsid.validation.validate`.
+    segments : sequence of Segment
+        The held-out segments (same order as ``validation.segments``): their inputs are
+        logged and, when they carry attitude and all body rates, the model's attitude.
+    input_names : sequence of str
+        Inputs to log (default the model's).
+    """
+    v = validation
+    for j, state in enumerate(v.state_names):
+        for kind, colour, pick in (
+            ("measured", MEASURED, lambda s: s.measured),
+            ("one_step", ONE_STEP, lambda s: s.one_step),
+            ("free_run", FREE_RUN, lambda s: s.free_run),
+        ):
+            path = f"axes/{axis}/{state}/{kind}"
+            _style(rec, path, colour, f"{state} {kind.replace('_', '-')}")
+            t, y = _joined((s.time_s, pick(s)[:, j]) for s in v.segments)
+            _send_series(rec, path, t, y)
+    names = tuple(input_names) or v.input_names
+    for name in names:
+        parts = [
+            (seg.time_s, seg.inputs[:, seg.input_names.index(name)])
+            for seg in segments
+            if name in seg.input_names
+        ]
+        if parts:
+            path = f"axes/{axis}/inputs/{name}"
+            _style(rec, path, INPUT, name)
+            _send_series(rec, path, *_joined(parts))
+    rate = AXIS_RATE.get(axis, "")
+    if rate in v.state_names and segments:
+        j = v.state_names.index(rate)
+        for i, (seg, sv) in enumerate(zip(segments, v.segments, strict=False)):
+            att = _model_attitude(seg, rate, sv.free_run[:, j])
+            if att is not None:
+                log_attitude(
+                    rec,
+                    f"world/model/{axis}/{i}",
+                    seg.time_s,
+                    att,
+                    colour=AXIS_COLOURS.get(axis, FREE_RUN),
+                    offset_m=(0.0, 1.5, 0.0),
+                )
+    _log_fit_plot(rec, axis, v)
+    _log_frequency_plot(rec, axis, v)
+
+
+def _fmt(x: float) -> str:
+    return "–" if not np.isfinite(x) else f"{x:.4g}"
+
+
+def log_summary(rec: rr.RecordingStream, fits: Sequence[AxisFit]) -> None:
+    """A markdown document: per axis the parameters ± σ and fit % on validation data."""
+    lines = ["# mavsid fit", ""]
+    for fit in fits:
+        m, v = fit.model, fit.validation
+        lines += [f"## {fit.axis}", "", "| parameter | value | σ |", "|---|---|---|"]
+        stderr = getattr(m, "stderr", {}) or {}
+        for k, val in m.params.items():
+            lines.append(f"| {k} | {_fmt(val)} | {_fmt(stderr.get(k, np.nan))} |")
+        lines += ["", "| output | " + " | ".join(_fit_keys()) + " |", "|---" * 4 + "|"]
+        for state in v.state_names:
+            s = v.fit_summary(state)
+            lines.append(f"| {state} | " + " | ".join(_fmt(s[k]) for k in _fit_keys()) + " |")
+        lines.append("")
+    rec.log("summary", rr.TextDocument("\n".join(lines), media_type="text/markdown"), static=True)
+
+
+def _fit_keys() -> tuple[str, ...]:
+    return ("one_step", horizon_label(0.5), "free_run")
+
+
+# --------------------------------------------------------------------------- layout
+
+
+def blueprint(axes: Sequence[str], *, with_flight: bool = True) -> rrb.Blueprint:
+    """The layout: per axis predicted vs measured and inputs; attitude, fit, frequency."""
+    columns: list[rrb.Container | rrb.View] = []
+    per_axis: list[rrb.Container] = []
+    for axis in axes:
+        per_axis.append(
+            rrb.Vertical(
+                rrb.TimeSeriesView(
+                    origin=f"axes/{axis}",
+                    contents=["$origin/**", f"- axes/{axis}/inputs/**"],
+                    name=f"{axis}: measured / one-step / free-run",
+                ),
+                rrb.TimeSeriesView(origin=f"axes/{axis}/inputs", name=f"{axis}: inputs"),
+                row_shares=[3, 1],
+            )
+        )
+    if with_flight:
+        per_axis.append(
+            rrb.Horizontal(
+                rrb.TimeSeriesView(origin="flight/states", name="flight: states"),
+                rrb.TimeSeriesView(origin="flight/inputs", name="flight: inputs"),
+            )
+        )
+    columns.append(rrb.Vertical(*per_axis))
+    plots: list[rrb.View] = []
+    for axis in axes:
+        plots.append(rrb.Spatial2DView(origin=f"fit/{axis}", name=f"{axis}: fit % vs horizon"))
+        plots.append(rrb.Spatial2DView(origin=f"frequency/{axis}", name=f"{axis}: |H| & coherence"))
+    side = [
+        rrb.Spatial3DView(origin="world", name="attitude: data (centre) / model (right)"),
+        rrb.Tabs(*plots) if plots else rrb.TextDocumentView(origin="summary"),
+        rrb.Tabs(
+            rrb.TextDocumentView(origin="summary", name="summary"),
+            rrb.TextLogView(origin="segments", name="segments"),
+        ),
+    ]
+    columns.append(rrb.Vertical(*side, row_shares=[2, 2, 1]))
+    return rrb.Blueprint(
+        rrb.Horizontal(*columns, column_shares=[3, 2]),
+        collapse_panels=True,
+    )
+
+
+def log_fit_result(rec: rr.RecordingStream, result: FitResult, *, flight: bool = True) -> None:
+    """Everything of a pipeline result into ``rec``."""
+    rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_DOWN, static=True)
+    if flight:
+        for fd in result.flights:
+            log_flight(rec, fd)
+    fits = list(result.axes.values())
+    for fit in fits:
+        log_segments(rec, fit.axis, fit.train, fit.held_out, fit.windows)
+        log_validation(rec, fit.axis, fit.validation, fit.held_out)
+    log_summary(rec, fits)
+
+
+def save_rrd(
+    result: FitResult, path: str | os.PathLike[str], *, flight: bool = True
+) -> rrb.Blueprint:
+    """Write ``result`` with its blueprint to an ``.rrd`` file; returns the blueprint."""
+    bp = blueprint(list(result.axes), with_flight=flight)
+    rec = new_recording()
+    rec.save(os.fspath(path), default_blueprint=bp)
+    log_fit_result(rec, result, flight=flight)
+    rec.flush()
+    rec.disconnect()
+    return bp

@@ -25,14 +25,16 @@ receive time, s). ``MessageTable.time_s`` is the vehicle's clock:
   ``time_usec`` whose median is over 1e15 µs is a UNIX time, not a boot time, and is not
   used);
 - otherwise the receive time moved onto the vehicle's clock by the median offset between the
-  two clocks over all time-stamped messages of the same system id, NaN when that system sends
-  none. These times carry the link's latency and jitter: alignment should prefer messages
-  with their own clock.
+  two clocks over the time-stamped messages of the same vehicle (for systems that are no
+  vehicle, such as the ground station: of the main vehicle), NaN when there are none. These
+  times carry the link's latency and jitter: alignment should prefer messages with their own
+  clock.
 
-``PARAM_VALUE`` gives ``params``, ``STATUSTEXT`` the text messages, the ``HEARTBEAT``'s
-``custom_mode`` the mode changes (names from pymavlink's ArduPilot and PX4 mode tables) and
-``autopilot`` — all of the main vehicle (the first system whose heartbeat is neither a ground
-station nor ``MAV_AUTOPILOT_INVALID``), as pymavlink picks it.
+``PARAM_VALUE`` gives ``params``, ``STATUSTEXT`` the text messages (chunks joined), the
+``HEARTBEAT``'s ``custom_mode`` the mode changes (names from pymavlink's ArduPilot and PX4
+mode tables) and ``autopilot`` — all of the main vehicle: the first system whose heartbeat is
+neither a ground station, gimbal, ADS-B receiver, onboard computer nor
+``MAV_AUTOPILOT_INVALID``, as pymavlink picks it.
 
 Bytes that form no valid frame (garbage, bad CRC, truncated records), frames of message ids
 the dialect does not define and receive times that run backwards or jump by more than an hour
@@ -474,21 +476,23 @@ def _load(path: str | os.PathLike[str]) -> tuple[NDArray[np.uint8], int]:
     return buf, size
 
 
-def _main_vehicle(hb: MessageTable | None) -> tuple[int, int, int, int] | None:
-    """(sysid, compid, autopilot, type) of the first heartbeat that is probably a vehicle."""
+def _vehicles(hb: MessageTable | None) -> tuple[tuple[int, int, int, int] | None, set[int]]:
+    """(sysid, compid, autopilot, type) of the first heartbeat that is probably a vehicle's
+    (None if none is), and the system ids of all such heartbeats."""
     if hb is None:
-        return None
+        return None, set()
     vehicle = (
         (hb["_compid"] != _MAV_COMP_ID_GIMBAL)
         & ~np.isin(hb["type"], _NOT_VEHICLE_TYPES)
         & (hb["autopilot"] != _MAV_AUTOPILOT_INVALID)
     )
-    first = np.flatnonzero(vehicle)
-    if not first.size:
-        return None
-    k = int(first[0])
-    return (int(hb["_sysid"][k]), int(hb["_compid"][k]), int(hb["autopilot"][k]),
-            int(hb["type"][k]))
+    rows = np.flatnonzero(vehicle)
+    if not rows.size:
+        return None, set()
+    k = int(rows[0])
+    main = (int(hb["_sysid"][k]), int(hb["_compid"][k]), int(hb["autopilot"][k]),
+            int(hb["type"][k]))  # fmt: skip
+    return main, set(hb["_sysid"][rows].tolist())
 
 
 _MAV_COMP_ID_GIMBAL = 154
@@ -522,14 +526,16 @@ def _params(table: MessageTable | None, vehicle: tuple[int, int, int, int]) -> d
     return dict(zip(names.tolist(), out.tolist(), strict=True))
 
 
-def _texts(table: MessageTable | None) -> tuple[TextMessage, ...]:
-    """STATUSTEXT messages; chunked ones (``id`` != 0) joined in order."""
+def _texts(table: MessageTable | None, sysid: int | None) -> tuple[TextMessage, ...]:
+    """STATUSTEXT messages of one system (all when None); chunked ones (``id`` != 0)
+    joined in order."""
     if table is None:
         return ()
     out: list[TextMessage] = []
     pending: dict[tuple[int, int], int] = {}  # (sysid, id) -> index in out
     has_id = "id" in table
-    for k in range(len(table)):
+    rows = range(len(table)) if sysid is None else np.flatnonzero(table["_sysid"] == sysid)
+    for k in rows:
         text, sev = str(table["text"][k]), int(table["severity"][k])
         key = (int(table["_sysid"][k]), int(table["id"][k]) if has_id else 0)
         if key[1] and key in pending and int(table["chunk_seq"][k]) > 0:
@@ -601,16 +607,26 @@ def _groups(keys: NDArray[np.int64]) -> dict[int, NDArray[np.int64]]:
 
 def _clock_offsets(
     pieces: list[tuple[NDArray[np.int64], NDArray[np.float64]]],
+    vehicles: set[int],
+    main: int | None,
 ) -> NDArray[np.float64]:
-    """Per system id: median of (vehicle clock - receive time) over time-stamped frames."""
-    offsets = np.full(256, np.nan)
-    if not pieces:
-        return offsets
-    diff = np.concatenate([p[1] for p in pieces])
-    for sid, rows in _groups(np.concatenate([p[0] for p in pieces])).items():
-        finite = diff[rows][np.isfinite(diff[rows])]
-        if finite.size:
-            offsets[sid] = float(np.median(finite))
+    """Per system id, the offset (vehicle clock - receive time) to put frames without a
+    clock of their own on a vehicle's clock.
+
+    A vehicle's own offset is the median over its time-stamped frames; systems that are no
+    vehicle (ground stations, companion computers) take the main vehicle's, since the file
+    has one receive clock. Without any vehicle: the median over all time-stamped frames.
+    """
+    sysid = np.concatenate([p[0] for p in pieces]) if pieces else np.zeros(0, np.int64)
+    diff = np.concatenate([p[1] for p in pieces]) if pieces else np.zeros(0)
+    ok = np.isfinite(diff)
+    sysid, diff = sysid[ok], diff[ok]
+    if main is None:
+        return np.full(256, float(np.median(diff)) if diff.size else np.nan)
+    per = {sid: float(np.median(diff[rows])) for sid, rows in _groups(sysid).items()}
+    offsets = np.full(256, per.get(main, np.nan))
+    for sid in vehicles & set(per):
+        offsets[sid] = per[sid]
     return offsets
 
 
@@ -659,10 +675,17 @@ def read(
 
     groups = _groups(frames.msgid)
     own = {i: _own_time(buf, frames, rows, defs[i]) for i, rows in groups.items()}
+    hb_id = next((i for i in groups if defs[i].name == "HEARTBEAT"), None)
+    vehicle, vehicle_ids = _vehicles(
+        None if hb_id is None else
+        _table(buf, frames, groups[hb_id], defs[hb_id], np.array([]), {})
+    )  # fmt: skip
     offsets = _clock_offsets(
         [(frames.sysid[groups[i]], t - frames.recv_s[groups[i]])
-         for i, t in own.items() if t is not None]
-    )
+         for i, t in own.items() if t is not None],
+        vehicle_ids,
+        vehicle[0] if vehicle else None,
+    )  # fmt: skip
 
     wanted = None if messages is None else set(messages)
     always = {"HEARTBEAT", "PARAM_VALUE", "STATUSTEXT"}
@@ -676,8 +699,7 @@ def read(
         tables[mdef.name] = _table(buf, frames, rows, mdef, time_s, _units(dialect, i))
 
     hb, pv, st = (tables.get(n) for n in ("HEARTBEAT", "PARAM_VALUE", "STATUSTEXT"))
-    vehicle = _main_vehicle(hb)
-    texts = _texts(st)
+    texts = _texts(st, vehicle[0] if vehicle else None)
     firmware = next((m.text for m in texts if _FIRMWARE.match(m.text)), None)
     params = _params(pv, vehicle) if vehicle else {}
     modes = _modes(hb, vehicle) if vehicle else ()

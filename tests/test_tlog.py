@@ -260,7 +260,8 @@ def synthetic_tlog(path: Path, seed: int = 0) -> list[tuple[float, bytes]]:
     MAVLink 2 with half its fields zero (truncated payloads), as signed MAVLink 2. Returns
     (receive time, frame) per record."""
     rng = np.random.default_rng(seed)
-    records, t0 = [], 1_700_000_000_000_000
+    records: list[tuple[int, bytes]] = []
+    t0 = 1_700_000_000_000_000
     for msgid, cls in sorted(mavlink.mavlink_map.items()):
         lengths = dict(zip(cls.ordered_fieldnames, cls.array_lengths, strict=True))
         for variant in range(3):

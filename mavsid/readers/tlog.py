@@ -598,10 +598,12 @@ _FRAME = "Frame:"
 
 def _groups(keys: NDArray[np.int64]) -> dict[int, NDArray[np.int64]]:
     """key -> indices of ``keys`` equal to it, in their original order."""
+    if not keys.size:
+        return {}
     order = np.argsort(keys, kind="stable")
     ordered = keys[order]
     cut = np.flatnonzero(ordered[1:] != ordered[:-1]) + 1
-    firsts = np.concatenate([[0], cut]) if keys.size else cut
+    firsts = np.concatenate([[0], cut])
     return dict(zip(ordered[firsts].tolist(), np.split(order, cut), strict=True))
 
 

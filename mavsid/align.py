@@ -41,6 +41,7 @@ import os
 import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -354,12 +355,14 @@ def _mode_spans(raw: RawLog, name: str) -> list[tuple[float, float]]:
     return spans
 
 
-def sysid_runs(raw: RawLog) -> list[dict[str, float]]:
+def sysid_runs(raw: RawLog) -> list[dict[str, Any]]:
     """ArduPilot SYSTEMID runs: settings and the span of the injected waveform.
 
     From DataFlash: one per SIDS record, with SIDS's settings; the span is the SIDD samples
     after it (or up to leaving SYSTEMID mode when SIDD was not logged). From a .tlog: one
-    per stay in SYSTEMID mode, the settings being the last SID_* PARAM_VALUE before it.
+    per stay in SYSTEMID mode, the settings being the last SID_* PARAM_VALUE before it
+    (``settings_from`` says which; a ground station may have sent the parameters only once,
+    so segment selection checks that axis against the data).
 
     Examples
     --------
@@ -371,9 +374,9 @@ def sysid_runs(raw: RawLog) -> list[dict[str, float]]:
     >>> log = RawLog(SourceInfo("x.bin", "dataflash", 0), {"SIDS": sids, "SIDD": sidd},
     ...              modes=(ModeChange(5.0, 25, "SYSTEMID"), ModeChange(9.5, 0, "STABILIZE")))
     >>> sysid_runs(log)
-    [{'start_s': 5.1, 'stop_s': 9.0, 'axis': 10, 'magnitude': 0.05}]
+    [{'start_s': 5.1, 'stop_s': 9.0, 'settings_from': 'SIDS', 'axis': 10, 'magnitude': 0.05}]
     """
-    runs: list[dict[str, float]] = []
+    runs: list[dict[str, Any]] = []
     spans = _mode_spans(raw, "SYSTEMID")
     if "SIDS" in raw.messages and len(raw.messages["SIDS"]):
         sids = raw.messages["SIDS"]
@@ -391,7 +394,7 @@ def sysid_runs(raw: RawLog) -> list[dict[str, float]]:
                 start, stop = float(t0), float(mode_end)
             else:
                 continue
-            run: dict[str, float] = {"start_s": start, "stop_s": stop}
+            run: dict[str, Any] = {"start_s": start, "stop_s": stop, "settings_from": "SIDS"}
             for f, key in _SIDS_FIELDS.items():
                 if f in sids.columns:
                     val = float(np.asarray(sids.columns[f])[k])
@@ -407,7 +410,7 @@ def sysid_runs(raw: RawLog) -> list[dict[str, float]]:
     for a, b in spans:
         if not np.isfinite(b):
             continue
-        run = {"start_s": float(a), "stop_s": float(b)}
+        run = {"start_s": float(a), "stop_s": float(b), "settings_from": "PARAM_VALUE"}
         for pname, key in _SID_PARAMS.items():
             sel = np.flatnonzero((names == pname) & ~(times > a))
             if sel.size:

@@ -22,9 +22,12 @@ Every window gets the same metrics and gates:
   most 0.4× the sample rate) where the input's Welch PSD is above 10× the floor's white
   level. Gate: ``min_coverage``.
 - **conditioning**: condition number of the Gram matrix of the regressors of the model to be
-  fitted, ``[rate, input, 1]``, each column scaled by its RMS over the airborne flight, so a
-  regressor that barely moves in the window (or moves only with another) makes it large.
-  Gate: ``max_condition``.
+  fitted, ``[rate, input]``, centred (which accounts for the constant term), the rate scaled
+  by its own spread in the window and the input by the spread of all attitude inputs
+  (``u_roll u_pitch u_yaw``) in the window. It is large when the axis's input carries a
+  small share of the window's excitation (the other axes of a one-input manoeuvre) or only
+  follows the response (closed-loop feedback without independent excitation). Gate:
+  ``max_condition``.
 - **coherence**: input–output magnitude-squared coherence, averaged over the band weighted by
   the input's PSD. Gate: ``min_coherence``.
 - **flight state**: airborne and armed over ``min_airborne`` of the window; no mode change
@@ -33,7 +36,7 @@ Every window gets the same metrics and gates:
   ``max_saturated`` of the samples.
 
 ``score`` (0..1) is the geometric mean of ``min(1, log10(power ratio)/2)``, the coverage,
-the coherence and ``1 - log10(condition)/8`` (each clipped to 0..1). Adjacent kept scan
+the coherence and ``1 - log10(condition)/2`` (each clipped to 0..1). Adjacent kept scan
 windows are merged, and a merged window's quiet head and tail (0.5-s input RMS below the
 power gate) are trimmed. :func:`find_segments` returns every window's
 :class:`WindowReport`; :func:`select_segments` turns the kept ones into
@@ -136,7 +139,7 @@ class ScanOptions:
     min_floor: float = 1e-3
     min_coverage: float = 0.3
     min_coherence: float = 0.5
-    max_condition: float = 1e4
+    max_condition: float = 10.0
     min_airborne: float = 0.95
     max_angle_deg: float = 45.0
     saturation: float = 0.95
@@ -207,8 +210,6 @@ class _Axis:
     y_name: str
     u_name: str
     floor: float
-    u_scale: float
-    y_scale: float
 
 
 def _col(fd: FlightData, name: str) -> np.ndarray | None:
@@ -241,7 +242,7 @@ def _axis(fd: FlightData, name: str, opts: ScanOptions, air: np.ndarray) -> _Axi
     y_name = _RATE[name] if _RATE[name] in fd.state_names else name
     y = _col(fd, y_name)
     sel = air if air.any() else np.ones_like(air)
-    floor, u_scale, y_scale = opts.min_floor, 1.0, 1.0
+    floor = opts.min_floor
     u_hp = None
     if u is not None:
         # crude high-pass: remove the moving average over one period of the band's low edge
@@ -254,10 +255,7 @@ def _axis(fd: FlightData, name: str, opts: ScanOptions, air: np.ndarray) -> _Axi
         env = np.concatenate(parts) if parts else np.empty(0)
         if env.size:
             floor = max(opts.min_floor, float(np.percentile(env, 10)))
-        u_scale = float(np.sqrt(np.mean(u[sel] ** 2))) or 1.0
-    if y is not None:
-        y_scale = float(np.sqrt(np.mean(y[sel] ** 2))) or 1.0
-    return _Axis(name, u, u_hp, y, y_name, u_name, floor, u_scale, y_scale)
+    return _Axis(name, u, u_hp, y, y_name, u_name, floor)
 
 
 def _metrics(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions
@@ -286,10 +284,20 @@ def _metrics(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions
             wp = puu * band
             out["coherence"] = float(np.sum(wp * np.nan_to_num(coh)) / np.sum(wp)) if wp.sum(
             ) > 0 else 0.0
-    phi = np.column_stack([y / ax.y_scale, u / ax.u_scale, np.ones_like(u)])
-    gram = phi.T @ phi / phi.shape[0]
-    ev = np.linalg.eigvalsh(gram)
-    out["condition"] = float(ev[-1] / ev[0]) if ev[0] > 0 else math.inf
+    # Gram of the model's regressors [y, u], centred (the constant term); y scaled by its own
+    # spread, u by the spread of all attitude inputs in the window (its share of the excitation)
+    att = [c for c in (_col(fd, f"u_{a}") for a in AXES) if c is not None]
+    ref = float(np.sqrt(np.mean([np.var(c[i0:i1]) for c in att])))
+    phi = np.column_stack([y - y.mean(), u - u.mean()])
+    sd = np.array([phi[:, 0].std(), ref])
+    if np.all(sd > 0):
+        z = phi / sd
+        ev = np.linalg.eigvalsh(z.T @ z / z.shape[0])
+        out["condition"] = float(ev[-1] / ev[0]) if ev[0] > 0 else math.inf
+        out["input_share"] = float(u.std() / ref)
+        out["correlation"] = float(np.corrcoef(phi.T)[0, 1]) if u.std() > 0 else math.nan
+    else:
+        out["condition"] = math.inf
     return out
 
 
@@ -300,7 +308,7 @@ def _score(m: Mapping[str, float]) -> float:
         min(1.0, max(0.0, math.log10(max(m["power_ratio"], 1e-12)) / 2)),
         m.get("coverage", 0.0),
         m.get("coherence", 0.0),
-        min(1.0, max(0.0, 1 - math.log10(max(m.get("condition", math.inf), 1.0)) / 8))
+        min(1.0, max(0.0, 1 - math.log10(max(m.get("condition", math.inf), 1.0)) / 2))
         if math.isfinite(m.get("condition", math.inf)) else 0.0,
     ]
     return float(np.prod(terms) ** (1 / len(terms)))
@@ -374,10 +382,18 @@ def _gates(ax: _Axis, fd: FlightData, i0: int, i1: int, m: Mapping[str, float],
         )
     cond = m.get("condition", math.inf)
     if not cond <= opts.max_condition:
+        rho, share = m.get("correlation", math.nan), m.get("input_share", math.nan)
+        if not math.isfinite(rho):
+            why = f"{ax.u_name} or {ax.y_name} does not vary"
+        elif share < 0.5:
+            why = (f"{ax.u_name} carries {100 * share:.0f} % of the window's input spread: "
+                   "another axis is being excited, not this one")
+        else:
+            why = (f"{ax.u_name} follows {ax.y_name}, correlation {rho:+.2f}: closed-loop "
+                   "feedback, no independent excitation")
         out.append(
-            f"rejected: ill-conditioned regressors [{ax.y_name}, {ax.u_name}, 1]: Gram condition "
-            f"number {_fmt(cond)} above {_fmt(opts.max_condition)} ({ax.u_name} barely varies "
-            "in this window, or only together with the response)"
+            f"rejected: ill-conditioned regressors [{ax.y_name}, {ax.u_name}]: Gram condition "
+            f"number {_fmt(cond)} above {_fmt(opts.max_condition)} ({why})"
         )
     band = f"{m.get('band_lo_hz', 0):.3g}–{m.get('band_hi_hz', 0):.3g} Hz"
     if m.get("coverage", 0.0) < opts.min_coverage:
@@ -437,7 +453,17 @@ def _sysid_windows(fd: FlightData, axes: Sequence[str], axes_cache: Mapping[str,
         sid = int(run.get("axis", 0))
         name, injection = sid_axis_name(sid)
         settings = {k: v for k, v in run.items() if k not in ("start_s", "stop_s")}
-        meta = {"sid_axis": sid, "injection": injection, "sysid": settings}
+        meta: dict[str, Any] = {"sid_axis": sid, "injection": injection, "sysid": settings}
+        notes: list[str] = []
+        if run.get("settings_from") == "PARAM_VALUE" and name in AXES:
+            found = _excited_axis(fd, run, opts, air)
+            if found is not None and found != name:
+                notes.append(
+                    f"SID_AXIS {sid} ({name}) comes from a parameter message sent before the "
+                    f"run, but only the {found} input is excited: taken as a {found} run"
+                )
+                name = found
+                meta["axis_from_data"] = found
         if name not in AXES:
             if axes == AXES:  # only when every axis was asked for
                 for i0, i1 in _block_parts(fd, run["start_s"], run["stop_s"]):
@@ -455,8 +481,24 @@ def _sysid_windows(fd: FlightData, axes: Sequence[str], axes_cache: Mapping[str,
             note = (f"SYSTEMID {injection} {name} chirp, SID_AXIS {sid}, magnitude {mag:g}, "
                     f"{run.get('f_start_hz', float('nan')):g}–"
                     f"{run.get('f_stop_hz', float('nan')):g} Hz")
-            out.append(replace(rep, reasons=(*rep.reasons, note)))
+            out.append(replace(rep, reasons=(*rep.reasons, note, *notes)))
     return out
+
+
+def _excited_axis(fd: FlightData, run: Mapping[str, Any], opts: ScanOptions,
+                  air: np.ndarray) -> str | None:
+    """The one attitude axis whose input passes the power gate during a run, if exactly one."""
+    parts = _block_parts(fd, run["start_s"], run["stop_s"])
+    excited = []
+    for a in AXES:
+        ax = _axis(fd, a, opts, air)
+        if ax.u_hp is None or not parts:
+            continue
+        rms = math.sqrt(sum(float(np.sum(ax.u_hp[i0:i1] ** 2)) for i0, i1 in parts)
+                        / sum(i1 - i0 for i0, i1 in parts))
+        if rms >= opts.power_ratio * ax.floor:
+            excited.append(a)
+    return excited[0] if len(excited) == 1 else None
 
 
 def _trim(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions) -> tuple[int, int]:

@@ -95,7 +95,7 @@ def _time_s(data: dict[str, NDArray[Any]]) -> NDArray[np.float64]:
     """``timestamp_sample`` if present, else ``timestamp``, in seconds (NaN if neither)."""
     for key in ("timestamp_sample", "timestamp"):
         if key in data:
-            return data[key].astype(np.float64) * 1e-6
+            return data[key].astype(np.float64) / 1e6
     n = len(next(iter(data.values()))) if data else 0
     return np.full(n, np.nan)
 
@@ -109,7 +109,7 @@ def _texts(ulog: Any) -> list[TextMessage]:
     for m in entries:
         level = int(m.log_level)
         severity = level - ord("0") if ord("0") <= level <= ord("7") else level
-        texts.append(TextMessage(m.timestamp * 1e-6, m.message, severity))
+        texts.append(TextMessage(m.timestamp / 1e6, m.message, severity))
     return sorted(texts, key=lambda t: t.time_s)
 
 
@@ -188,7 +188,8 @@ def read(
     Raises
     ------
     LogFormatError
-        Empty or unreadable file, or one pyulog cannot parse.
+        Empty or unreadable file, one pyulog cannot parse, or one without any topic sample
+        or parameter (when all topics were asked for).
 
     Warns
     -----
@@ -203,6 +204,8 @@ def read(
         raise LogFormatError("empty file", path=path)
     topics, wanted = _wanted_topics(messages)
     ulog, printed = _parse(path, topics)
+    if messages is None and not ulog.data_list and not ulog.initial_parameters:
+        raise LogFormatError("no ULog data (no topic samples, no parameters)", path=path)
 
     tables: dict[str, MessageTable] = {}
     for d in ulog.data_list:

@@ -19,7 +19,8 @@ payloads zero-padded, as MAVLink specifies) and split into columns by field name
 
 Every table has the fields of the message (2-D arrays for array fields, ``str`` for char
 arrays, decoded as pymavlink does) plus ``_sysid``, ``_compid`` and ``_recv_time_s`` (the
-receive time, s). ``MessageTable.time_s`` is the vehicle's clock:
+receive time, s); units are the dialect's, the message's instance field (``RAW_IMU.id``)
+has unit ``"instance"``. ``MessageTable.time_s`` is the vehicle's clock:
 
 - ``time_boot_ms`` × 1e-3 or ``time_usec`` × 1e-6 when the message has such a field (a
   ``time_usec`` whose median is over 1e15 µs is a UNIX time, not a boot time, and is not
@@ -736,9 +737,13 @@ def read(
 
 @functools.lru_cache(maxsize=1024)
 def _units(dialect: str, msgid: int) -> dict[str, str]:
-    """Field units the dialect declares for one message."""
-    module = importlib.import_module(f"pymavlink.dialects.v20.{dialect}")
-    return dict(getattr(module.mavlink_map[msgid], "fieldunits_by_name", {}) or {})
+    """Field units the dialect declares for one message; its instance field (e.g.
+    ``RAW_IMU.id``, ``PID_TUNING.axis``) marked ``"instance"`` as DataFlash does."""
+    cls = importlib.import_module(f"pymavlink.dialects.v20.{dialect}").mavlink_map[msgid]
+    units = dict(getattr(cls, "fieldunits_by_name", {}) or {})
+    if getattr(cls, "instance_field", None):
+        units[cls.instance_field] = "instance"
+    return units
 
 
 def _window(table: MessageTable, lo: float, hi: float) -> MessageTable:

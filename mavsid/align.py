@@ -358,11 +358,14 @@ def _mode_spans(raw: RawLog, name: str) -> list[tuple[float, float]]:
 def sysid_runs(raw: RawLog) -> list[dict[str, Any]]:
     """ArduPilot SYSTEMID runs: settings and the span of the injected waveform.
 
-    From DataFlash: one per SIDS record, with SIDS's settings; the span is the SIDD samples
-    after it (or up to leaving SYSTEMID mode when SIDD was not logged). From a .tlog: one
+    From DataFlash: one per SIDS record, with SIDS's settings; the span is that of the SIDD
+    samples after it whose waveform ``Targ`` is non-zero (the chirp itself, without the
+    initial delay and the wait after it), else of all its SIDD samples, else the stay in
+    SYSTEMID mode. From a .tlog: one
     per stay in SYSTEMID mode, the settings being the last SID_* PARAM_VALUE before it
     (``settings_from`` says which; a ground station may have sent the parameters only once,
-    so segment selection checks that axis against the data).
+    so segment selection checks that axis against the data); the span is then ArduCopter's
+    injection: ``SYSTEM_ID_DELAY`` (1 s) after entering the mode, for ``SID_T_REC`` seconds.
 
     Examples
     --------
@@ -370,26 +373,32 @@ def sysid_runs(raw: RawLog) -> list[dict[str, Any]]:
     >>> from mavsid.data import MessageTable, ModeChange, RawLog, SourceInfo
     >>> sids = MessageTable("SIDS", {"Ax": np.array([10]), "Mag": np.array([0.05])},
     ...                     time_s=np.array([5.0]))
-    >>> sidd = MessageTable("SIDD", {"F": np.ones(3)}, time_s=np.array([5.1, 6.0, 9.0]))
+    >>> sidd = MessageTable("SIDD", {"Targ": np.array([0.0, 0.01, -0.02, 0.0])},
+    ...                     time_s=np.array([5.1, 6.0, 8.0, 9.0]))
     >>> log = RawLog(SourceInfo("x.bin", "dataflash", 0), {"SIDS": sids, "SIDD": sidd},
     ...              modes=(ModeChange(5.0, 25, "SYSTEMID"), ModeChange(9.5, 0, "STABILIZE")))
     >>> sysid_runs(log)
-    [{'start_s': 5.1, 'stop_s': 9.0, 'settings_from': 'SIDS', 'axis': 10, 'magnitude': 0.05}]
+    [{'start_s': 6.0, 'stop_s': 8.0, 'settings_from': 'SIDS', 'axis': 10, 'magnitude': 0.05}]
     """
     runs: list[dict[str, Any]] = []
     spans = _mode_spans(raw, "SYSTEMID")
     if "SIDS" in raw.messages and len(raw.messages["SIDS"]):
         sids = raw.messages["SIDS"]
         ts = np.asarray(sids.time_s, dtype=float)
-        sidd_t = (np.sort(np.asarray(raw.messages["SIDD"].time_s, dtype=float))
-                  if "SIDD" in raw.messages else np.empty(0))
+        sidd_t, active = np.empty(0), np.empty(0, dtype=bool)
+        if "SIDD" in raw.messages:
+            sidd = raw.messages["SIDD"]
+            sidd_t = np.asarray(sidd.time_s, dtype=float)
+            targ = np.asarray(sidd.columns.get("Targ", np.ones(sidd_t.size)), dtype=float)
+            active = np.isfinite(targ) & (targ != 0)
         for k, t0 in enumerate(ts):
             t_next = ts[k + 1] if k + 1 < ts.size else np.inf
             mode_end = next((b for a, b in spans if a <= t0 + 0.5 < b), np.inf)
             end = min(t_next, mode_end)
-            inside = sidd_t[(sidd_t >= t0) & (sidd_t < end)]
+            sel = (sidd_t >= t0) & (sidd_t < end)
+            inside = sidd_t[sel & active] if np.count_nonzero(sel & active) >= 2 else sidd_t[sel]
             if inside.size >= 2:
-                start, stop = float(inside[0]), float(inside[-1])
+                start, stop = float(np.min(inside)), float(np.max(inside))
             elif np.isfinite(mode_end):
                 start, stop = float(t0), float(mode_end)
             else:
@@ -399,6 +408,8 @@ def sysid_runs(raw: RawLog) -> list[dict[str, Any]]:
                 if f in sids.columns:
                     val = float(np.asarray(sids.columns[f])[k])
                     run[key] = int(val) if key == "axis" else val
+            if inside.size < 2:
+                run["start_s"], run["stop_s"] = _chirp_span(start, stop, run)
             runs.append(run)
         return runs
     if not spans or "PARAM_VALUE" not in raw.messages:
@@ -421,8 +432,22 @@ def sysid_runs(raw: RawLog) -> list[dict[str, Any]]:
                 continue
             run[key] = int(val) if key == "axis" else val
         if "axis" in run:
+            run["start_s"], run["stop_s"] = _chirp_span(a, b, run)
             runs.append(run)
     return runs
+
+
+#: ArduCopter waits this long after entering SYSTEMID before injecting (SYSTEM_ID_DELAY)
+SYSTEM_ID_DELAY_S = 1.0
+
+
+def _chirp_span(enter: float, leave: float, run: Mapping[str, Any]) -> tuple[float, float]:
+    """The injection inside a SYSTEMID mode stay: from SYSTEM_ID_DELAY after entry for
+    SID_T_REC seconds, cut at the mode exit (the whole stay when SID_T_REC is unknown)."""
+    start = min(enter + SYSTEM_ID_DELAY_S, leave)
+    rec = run.get("t_record_s")
+    stop = min(start + float(rec), leave) if rec else leave
+    return float(start), float(stop)
 
 
 # --------------------------------------------------------------------------- align

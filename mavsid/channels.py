@@ -732,6 +732,8 @@ def load_presets(path: str | os.PathLike[str]) -> tuple[dict[str, Preset], dict[
                 name, tuple(float(a) for a in spec["angle_deg"]),
                 tuple(float(y) for y in spec["yaw"]),
             )
+        except ConfigError as exc:
+            raise ConfigError(f"{path}: {exc}") from None
         except (KeyError, TypeError, ValueError):
             raise ConfigError(f"{path}: mixer {name!r} needs numeric angle_deg and yaw") from None
     presets: dict[str, Preset] = {}

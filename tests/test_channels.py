@@ -1,0 +1,208 @@
+"""Channel presets, units, mixers and TOML presets (mavsid.channels)."""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+from helpers import shared_path
+from scipy.spatial.transform import Rotation
+
+from mavsid.channels import (
+    MIXERS,
+    PRESETS,
+    Channel,
+    choose_preset,
+    evaluate,
+    get_preset,
+    load_presets,
+    pwm_to_thrust,
+    quat_to_euler,
+)
+from mavsid.data import MessageTable, RawLog, SourceInfo
+from mavsid.errors import ConfigError, MissingMessageError
+
+
+def _log(fmt: str, tables: dict[str, dict[str, np.ndarray]], **kw) -> RawLog:
+    msgs = {}
+    for name, cols in tables.items():
+        n = len(next(iter(cols.values())))
+        msgs[name] = MessageTable(name, cols, time_s=np.arange(n) * 0.01, **kw.pop(name, {}))
+    return RawLog(SourceInfo(f"x.{fmt}", fmt, 0), msgs)
+
+
+# --------------------------------------------------------------------------- conversions
+
+
+def test_quaternion_to_euler_matches_scipy():
+    rng = np.random.default_rng(3)
+    rot = Rotation.random(200, random_state=rng)
+    xyzw = rot.as_quat()
+    wxyz = np.column_stack([xyzw[:, 3], xyzw[:, :3]])
+    ours = quat_to_euler(wxyz)
+    ref = rot.as_euler("ZYX")[:, ::-1]  # scipy: yaw, pitch, roll (intrinsic ZYX)
+    assert np.allclose(ours, ref, atol=1e-9)
+
+
+def test_declared_unit_and_multiplier_win_over_preset_unit():
+    # the log declares centidegrees through its multiplier and deg through its unit
+    raw = _log("dataflash", {"ATT": {"Roll": np.array([1000.0, -4500.0])}},
+               ATT={"units": {"Roll": "deg"}, "multipliers": {"Roll": 0.01}})
+    _, v = evaluate(raw, Channel("ATT", "Roll", "rad"))
+    assert np.allclose(v, np.radians([10.0, -45.0]))
+
+
+def test_field_expressions_sum_alternatives_and_array_elements():
+    raw = _log("dataflash", {
+        "PIDR": {"P": np.array([0.1, 0.2]), "I": np.array([0.01, 0.02]),
+                 "D": np.array([0.001, 0.0])},
+        "RCOU": {"Chan1": np.array([1100.0, 1200.0])},
+        "vec": {"xyz": np.array([[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]])},
+    })
+    assert np.allclose(evaluate(raw, Channel("PIDR", "P+I+D+FF|P+I+D"))[1], [0.111, 0.22])
+    assert np.allclose(evaluate(raw, Channel("RCOU", "C1|Chan1"))[1], [1100, 1200])
+    assert np.allclose(evaluate(raw, Channel("vec", "xyz[2]"))[1], [3.0, 6.0])
+    with pytest.raises(MissingMessageError, match="PIDR.Q"):
+        evaluate(raw, Channel("PIDR", "Q"))
+
+
+def test_pwm_to_thrust_inverts_ardupilot_thrust_curve():
+    # ArduPilot's forward path (AP_Motors thrust linearisation, documented formula):
+    # throttle ratio r = ((expo - 1) + sqrt((1 - expo)^2 + 4 expo thrust)) / (2 expo)
+    # actuator = spin_min + (spin_max - spin_min) r ; pwm = pwm_min + (pwm_max - pwm_min) actuator
+    params = {"MOT_PWM_MIN": 1100, "MOT_PWM_MAX": 1900, "MOT_SPIN_MIN": 0.12,
+              "MOT_SPIN_MAX": 0.95, "MOT_THST_EXPO": 0.55}
+    thrust = np.linspace(0.0, 1.0, 21)
+    e = params["MOT_THST_EXPO"]
+    r = ((e - 1) + np.sqrt((1 - e) ** 2 + 4 * e * thrust)) / (2 * e)
+    act = params["MOT_SPIN_MIN"] + (params["MOT_SPIN_MAX"] - params["MOT_SPIN_MIN"]) * r
+    pwm = params["MOT_PWM_MIN"] + (params["MOT_PWM_MAX"] - params["MOT_PWM_MIN"]) * act
+    assert np.allclose(pwm_to_thrust(pwm, params), thrust, atol=1e-9)
+
+
+# --------------------------------------------------------------------------- mixers
+
+
+@pytest.mark.parametrize("name", sorted(MIXERS))
+def test_mixer_geometry_and_inverse(name):
+    m = MIXERS[name]
+    f = m.factors()
+    angles = np.radians(m.angle_deg)
+    # a motor on the right (0 < angle < 180) must slow down for a right roll (roll factor < 0);
+    # a motor in front must speed up for nose up
+    right = (np.sin(angles) > 1e-6)
+    front = (np.cos(angles) > 1e-6)
+    assert np.all(f[right, 0] < 0) and np.all(f[~right & (np.sin(angles) < -1e-6), 0] > 0)
+    assert np.all(f[front, 1] > 0)
+    # balanced frame: no net roll, pitch or yaw at equal thrust
+    assert np.allclose(f.sum(axis=0), 0.0, atol=1e-12)
+    assert math.isclose(np.abs(f[:, :2]).max(), 0.5) and math.isclose(np.abs(f[:, 2]).max(), 0.5)
+    rng = np.random.default_rng(0)
+    u = np.column_stack([rng.uniform(-0.2, 0.2, (50, 3)), rng.uniform(0.2, 0.6, 50)])
+    motors = u[:, 3:] + u[:, :3] @ f.T
+    assert np.allclose(m.unmix(motors), u, atol=1e-12)
+
+
+def test_mixer_chosen_from_frame_params():
+    from mavsid.channels import mixer_for
+
+    p = PRESETS["mavlink-servo"]
+    assert mixer_for(p, {"FRAME_CLASS": 1, "FRAME_TYPE": 1}).name == "quad-x"
+    assert mixer_for(p, {"FRAME_CLASS": 2, "FRAME_TYPE": 0}).name == "hexa-plus"
+    assert mixer_for(p, {}).name == "quad-x"
+
+
+# --------------------------------------------------------------------------- choosing
+
+
+@pytest.mark.parametrize(
+    ("path", "expected"),
+    [
+        (("sitl", "flightA_mixer.BIN"), "ardupilot-rate"),
+        (("sitl", "flightA_mixer.tlog"), "mavlink-servo"),
+        (("public", "Auterion__px4-ulog-rs", "quadrotor_local.ulg"), "px4-torque"),
+        (("public", "PX4__pyulog", "sample.ulg"), "px4-legacy"),
+        (("public", "ArduPilot__ardupilot", "underpowered.log"), "ardupilot-att"),
+    ],
+)
+def test_preset_chosen_from_log_content(path, expected):
+    from mavsid.align import FLAG_MESSAGES
+    from mavsid.channels import preset_messages
+    from mavsid.readers import read_log, sniff_format
+
+    p = shared_path(*path)
+    fmt = sniff_format(p)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        raw = read_log(p, messages=[*preset_messages(fmt), *FLAG_MESSAGES.get(fmt, ())])
+    assert choose_preset(raw).name == expected
+
+
+def test_no_preset_fits_names_what_is_missing():
+    raw = _log("dataflash", {"GPS": {"Lat": np.zeros(3)}})
+    with pytest.raises(MissingMessageError, match="ATT"):
+        choose_preset(raw)
+    with pytest.raises(ConfigError, match="unknown channel preset"):
+        get_preset("nope")
+
+
+# --------------------------------------------------------------------------- TOML
+
+
+def test_toml_presets_and_mixers(tmp_path):
+    f = tmp_path / "p.toml"
+    f.write_text(
+        """
+[preset.my-quad]
+formats = ["dataflash"]
+mixer = "my-tri"
+[preset.my-quad.states]
+roll = { message = "AHR2", field = "Roll", unit = "deg" }
+p = { message = "GYR", field = "GyrX", unit = "rad/s" }
+[preset.my-quad.inputs]
+u_roll = { message = "CTRL", field = "R", scale = -1.0 }
+
+[mixer.my-tri]
+angle_deg = [60, -60, 180]
+yaw = [0, 0, 1]
+""",
+        encoding="utf-8",
+    )
+    presets, mixers = load_presets(f)
+    p = presets["my-quad"]
+    assert p.requires == ("AHR2", "GYR", "CTRL") and p.mixer == "my-tri"
+    assert mixers["my-tri"].n_motors == 3
+    raw = _log("dataflash", {"AHR2": {"Roll": np.array([90.0, 0.0])},
+                             "GYR": {"GyrX": np.array([0.1, 0.2])},
+                             "CTRL": {"R": np.array([0.3, 0.4])}})
+    assert choose_preset(raw, presets).name == "my-quad"
+    assert np.allclose(evaluate(raw, p.inputs["u_roll"])[1], [-0.3, -0.4])
+    assert np.allclose(evaluate(raw, p.states["roll"])[1], [math.pi / 2, 0.0])
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        ("[preset.a\n", "not valid TOML"),
+        ("[preset.a.states]\nroll = { message = 'ATT', field = 'Roll', unit = 'furlong' }\n",
+         "unknown unit"),
+        ("[preset.a.states]\nroll = { message = 'ATT', field = 'Roll', colour = 1 }\n",
+         "unknown key"),
+        ("[preset.a.states]\nalpha = { message = 'ATT', field = 'A' }\n", "unknown state"),
+        ("[preset.a]\nstates = {}\n", "defines no states"),
+        ("[mixer.m]\nangle_deg = [1, 2]\nyaw = [1]\n", "same number"),
+        ("[other]\nx = 1\n", "unknown table"),
+    ],
+)
+def test_bad_toml_is_a_config_error(tmp_path, text, match):
+    f = tmp_path / "bad.toml"
+    f.write_text(text, encoding="utf-8")
+    with pytest.raises(ConfigError, match=match):
+        load_presets(f)
+
+
+def test_missing_toml_file_is_a_config_error(tmp_path):
+    with pytest.raises(ConfigError, match="cannot open"):
+        load_presets(tmp_path / "none.toml")

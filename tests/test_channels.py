@@ -64,7 +64,7 @@ def test_field_expressions_sum_alternatives_and_array_elements():
     assert np.allclose(evaluate(raw, Channel("PIDR", "P+I+D+FF|P+I+D"))[1], [0.111, 0.22])
     assert np.allclose(evaluate(raw, Channel("RCOU", "C1|Chan1"))[1], [1100, 1200])
     assert np.allclose(evaluate(raw, Channel("vec", "xyz[2]"))[1], [3.0, 6.0])
-    with pytest.raises(MissingMessageError, match="PIDR.Q"):
+    with pytest.raises(MissingMessageError, match=r"PIDR\.Q"):
         evaluate(raw, Channel("PIDR", "Q"))
 
 

@@ -217,9 +217,13 @@ def _grid(series: list[_Series], ref: _Series, rate_hz: float | None, max_gap: f
     return t[sel], np.column_stack([new_edges[:-1], new_edges[1:]]).astype(np.int64), dt
 
 
-def _hold(s: _Series, t: np.ndarray) -> np.ndarray:
-    """Zero-order hold: the latest native sample at or before each time."""
-    i = np.searchsorted(s.t, t, side="right") - 1
+def _hold(s: _Series, t: np.ndarray, dt: float) -> np.ndarray:
+    """Zero-order hold: the latest native sample at or before each time.
+
+    "At" allows ``1e-6 * dt`` for the rounding of the grid times, so that a grid point meant
+    to fall on a sample does not pick the one before it.
+    """
+    i = np.searchsorted(s.t, t + 1e-6 * dt, side="right") - 1
     return s.v[np.clip(i, 0, None)]
 
 
@@ -513,7 +517,7 @@ def align(
         x[:, j] = np.interp(t, s.t, s.v)
     u = np.empty((t.size, len(inputs)))
     for j, s in enumerate(inputs):
-        u[:, j] = _hold(s, t)
+        u[:, j] = _hold(s, t, dt)
     rates = {s.name: (1.0 / s.median_dt if s.median_dt > 0 else 0.0) for s in series}
     warned = set()
     for s in inputs:

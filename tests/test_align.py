@@ -1,0 +1,239 @@
+"""RawLog -> FlightData (mavsid.align): properties on hand-built logs, references on real ones."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+from helpers import FIXTURES, ids, require_shared, shared_logs, shared_path
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from mavsid.align import MAX_GAP_SAMPLES, align, load_flight, sysid_runs
+from mavsid.channels import Channel, Preset
+from mavsid.data import MessageTable, ModeChange, RawLog, SourceInfo
+from mavsid.errors import DataQualityWarning, MavsidError
+
+# --------------------------------------------------------------------------- properties
+
+_PRESET = Preset(
+    "test", (), states={"p": Channel("S", "x", "rad/s"), "q": Channel("S", "y", "rad/s")},
+    inputs={"u_roll": Channel("U", "v")},
+)
+
+
+@st.composite
+def _times(draw, max_n: int = 150):
+    """Sample times with jitter and a few long pauses (gaps)."""
+    n = draw(st.integers(20, max_n))
+    dt = draw(st.floats(0.002, 0.05))
+    jitter = draw(st.floats(0.0, 0.3))
+    rng = np.random.default_rng(draw(st.integers(0, 2**31)))
+    steps = dt * (1 + jitter * rng.uniform(-1, 1, n - 1))
+    for _ in range(draw(st.integers(0, 3))):
+        steps[rng.integers(0, n - 1)] += dt * draw(st.floats(6.0, 60.0))
+    t0 = draw(st.floats(0.0, 2.0))
+    return t0 + np.concatenate([[0.0], np.cumsum(steps)]), rng
+
+
+def _raw(ts, tu, rng) -> RawLog:
+    s = MessageTable("S", {"x": rng.standard_normal(ts.size), "y": rng.standard_normal(ts.size)},
+                     time_s=ts)
+    u = MessageTable("U", {"v": np.round(rng.standard_normal(tu.size), 3)}, time_s=tu)
+    return RawLog(SourceInfo("h.bin", "dataflash", 0), {"S": s, "U": u})
+
+
+def _gaps(t: np.ndarray) -> np.ndarray:
+    d = np.diff(t)
+    i = np.flatnonzero(d > MAX_GAP_SAMPLES * np.median(d))
+    return np.column_stack([t[i], t[i + 1]])
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(_times(), _times(60))
+def test_alignment_properties(states, inputs):
+    (ts, rng), (tu, _) = states, inputs
+    tu = tu - tu[0] + ts[0] - 0.01  # overlapping spans
+    raw = _raw(ts, tu, rng)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataQualityWarning)
+        try:
+            fd = align(raw, _PRESET)
+        except MavsidError:
+            return  # nothing overlaps for two samples: a typed error is the right answer
+    t, b = fd.time_s, fd.blocks
+    # blocks partition the samples, in order
+    assert b[0, 0] == 0 and b[-1, 1] == t.size and np.all(b[1:, 0] == b[:-1, 1])
+    assert np.all(b[:, 1] - b[:, 0] >= 2)
+    # strictly increasing everywhere, uniform within each block
+    assert np.all(np.diff(t) > 0)
+    for a, e in b:
+        assert np.allclose(np.diff(t[a:e]), fd.dt, rtol=1e-9, atol=1e-9)
+    # inputs are held, never interpolated: each value is the latest native sample at or before t
+    v = raw["U"]["v"]
+    for k in range(0, t.size, max(1, t.size // 40)):
+        latest = np.flatnonzero(tu <= t[k] + 1e-6 * fd.dt).max()
+        assert fd.inputs[k, 0] == v[latest]
+    # states interpolate between their two bracketing samples
+    x = raw["S"]["x"]
+    i = np.searchsorted(ts, t, side="right") - 1
+    j = np.minimum(i + 1, ts.size - 1)
+    lo, hi = np.minimum(x[i], x[j]), np.maximum(x[i], x[j])
+    assert np.all(fd.states[:, 0] >= lo - 1e-12) and np.all(fd.states[:, 0] <= hi + 1e-12)
+    # no grid point inside a gap of any channel, and no block spans one
+    for g in (_gaps(ts), _gaps(tu)):
+        for g0, g1 in g:
+            assert not np.any((t > g0) & (t < g1))
+            for a, e in b:
+                assert not np.any((t[a:e - 1] < g0) & (t[a + 1:e] > g0))
+
+
+def test_yaw_unwrapped_units_converted_and_flags():
+    t = np.arange(0, 10, 0.01)
+    yaw = np.mod(350 + 5 * t, 360)  # crosses 360 -> 0 at t = 2 s
+    att = MessageTable("ATT", {"Roll": np.full(t.size, 10.0), "Pitch": np.zeros(t.size),
+                               "Yaw": yaw}, time_s=t, units={"Roll": "deg"})
+    rate = MessageTable("RATE", {"R": np.full(t.size, 90.0), "P": np.zeros(t.size),
+                                 "Y": np.zeros(t.size), "ROut": np.sin(t), "POut": t * 0,
+                                 "YOut": t * 0}, time_s=t)
+    ev = MessageTable("EV", {"Id": np.array([10, 28, 18, 11])},
+                      time_s=np.array([1.0, 2.0, 8.0, 9.0]))
+    raw = RawLog(SourceInfo("a.bin", "dataflash", 0), {"ATT": att, "RATE": rate, "EV": ev},
+                 modes=(ModeChange(0.5, 0, "STABILIZE"), ModeChange(5.0, 25, "SYSTEMID")))
+    fd = align(raw)
+    col = {n: fd.states[:, i] for i, n in enumerate(fd.state_names)}
+    assert fd.preset == "ardupilot-rate" and fd.input_names == ("u_roll", "u_pitch", "u_yaw")
+    assert np.allclose(col["roll"], np.radians(10)) and np.allclose(col["p"], np.pi / 2)
+    assert np.all(np.abs(np.diff(col["yaw"])) < np.radians(1))
+    assert np.isclose(col["yaw"][-1] - col["yaw"][0], np.radians(5 * (t[-1] - t[0])))
+    tt, f = fd.time_s, fd.flags
+    assert np.array_equal(f["armed"], (tt >= 1.0) & (tt < 9.0))
+    assert np.array_equal(f["airborne"], (tt >= 2.0) & (tt < 8.0))
+    assert np.array_equal(f["mode"], np.where(tt < 0.5, -1, np.where(tt < 5.0, 0, 25)))
+
+
+def test_slow_input_warns_with_message_and_rate():
+    t = np.arange(0, 10, 0.0025)
+    tr = np.arange(0, 10, 0.1)
+    att = MessageTable("ATT", {k: np.zeros(t.size) for k in ("Roll", "Pitch", "Yaw")}, time_s=t)
+    imu = MessageTable("IMU", {k: np.zeros(t.size) for k in ("GyrX", "GyrY", "GyrZ")}, time_s=t)
+    rcou = MessageTable("RCOU", {f"C{i}": np.full(tr.size, 1500.0) for i in range(1, 9)},
+                        time_s=tr)
+    raw = RawLog(SourceInfo("b.bin", "dataflash", 0), {"ATT": att, "IMU": imu, "RCOU": rcou})
+    with pytest.warns(DataQualityWarning, match=r"RCOU .*10\.0 Hz"):
+        fd = align(raw)
+    assert fd.preset == "ardupilot-rcou" and fd.meta["mixer"] == "quad-x"
+    assert np.isclose(1 / fd.dt, 400.0)
+
+
+def test_no_overlap_is_a_typed_error():
+    s = MessageTable("S", {"x": np.zeros(5), "y": np.zeros(5)}, time_s=np.arange(5.0))
+    u = MessageTable("U", {"v": np.zeros(5)}, time_s=np.arange(5.0) + 100)
+    raw = RawLog(SourceInfo("c.bin", "dataflash", 0), {"S": s, "U": u})
+    with pytest.raises(MavsidError, match="never overlap"):
+        align(raw, _PRESET)
+
+
+# --------------------------------------------------------------------------- references
+
+
+def test_dataflash_values_match_pymavlink():
+    from pymavlink import mavutil
+
+    path = FIXTURES / "doublets.bin"
+    if not path.exists():
+        pytest.skip("fixtures/doublets.bin not generated")
+    fd = load_flight(path)
+    m = mavutil.mavlink_connection(str(path))
+    rows = []
+    while (msg := m.recv_match(type="RATE")) is not None:
+        rows.append((msg.TimeUS * 1e-6, msg.R, msg.ROut))
+    m.close()
+    ref = np.array(rows)
+    p = fd.states[:, fd.state_names.index("p")]
+    assert np.allclose(p, np.interp(fd.time_s, ref[:, 0], np.radians(ref[:, 1])), atol=1e-6)
+    # zero-order hold: the ROut of the latest RATE record at or before each grid time
+    k = np.searchsorted(ref[:, 0], fd.time_s + 1e-6 * fd.dt, side="right") - 1
+    assert np.allclose(fd.inputs[:, fd.input_names.index("u_roll")], ref[k, 2], atol=1e-7)
+
+
+def test_px4_attitude_and_rates_match_pyulog():
+    from pyulog import ULog
+    from scipy.spatial.transform import Rotation
+
+    path = shared_path("public", "Auterion__px4-ulog-rs", "quadrotor_local.ulg")
+    fd = load_flight(path)
+    u = ULog(str(path), ["vehicle_attitude", "vehicle_angular_velocity"])
+    att = u.get_dataset("vehicle_attitude").data
+    av = u.get_dataset("vehicle_angular_velocity").data
+    ta = att["timestamp_sample"] * 1e-6
+    q = np.column_stack([att[f"q[{i}]"] for i in (1, 2, 3, 0)])  # scipy wants x y z w
+    eul = Rotation.from_quat(q).as_euler("ZYX")  # yaw, pitch, roll
+    col = {n: fd.states[:, i] for i, n in enumerate(fd.state_names)}
+    assert np.allclose(col["roll"], np.interp(fd.time_s, ta, eul[:, 2]), atol=1e-6)
+    assert np.allclose(col["pitch"], np.interp(fd.time_s, ta, eul[:, 1]), atol=1e-6)
+    assert np.allclose(col["yaw"], np.interp(fd.time_s, ta, np.unwrap(eul[:, 0])), atol=1e-6)
+    tv = av["timestamp_sample"] * 1e-6
+    assert np.allclose(col["q"], np.interp(fd.time_s, tv, av["xyz[1]"]), atol=1e-6)
+    assert fd.preset == "px4-torque"
+
+
+@pytest.fixture(scope="module")
+def sitl_pair():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataQualityWarning)
+        return (load_flight(shared_path("sitl", "flightA_mixer.BIN")),
+                load_flight(shared_path("sitl", "flightA_mixer.tlog")))
+
+
+@pytest.mark.parametrize(("name", "lo", "hi"),
+                         [("u_roll", 88, 118), ("u_pitch", 174, 204), ("u_yaw", 260, 290)])
+def test_tlog_mixer_inputs_match_dataflash_rate_outputs(sitl_pair, name, lo, hi):
+    # the same flight: SERVO_OUTPUT_RAW PWMs through the quad-plus mixer (tlog) against the
+    # rate controller's own RATE.ROut/POut/YOut (DataFlash), over the first 30 s of each chirp
+    binf, tlog = sitl_pair
+    assert tlog.meta["mixer"] == "quad-plus"  # FRAME_CLASS 1, FRAME_TYPE 0 (README: + frame)
+    sel = (tlog.time_s > lo) & (tlog.time_s < hi)
+    ut = tlog.inputs[sel, tlog.input_names.index(name)]
+    ub = np.interp(tlog.time_s[sel], binf.time_s, binf.inputs[:, binf.input_names.index(name)])
+    assert np.corrcoef(ut, ub)[0, 1] > 0.95
+    slope = np.polyfit(ub, ut, 1)[0]
+    assert 0.9 < slope < 1.2
+
+
+def test_sitl_sysid_runs_from_sids(sitl_pair):
+    # README: SID_AXIS 10, 11, 12, 13 entered at about 87, 173, 258 and 344 s; SID_T_REC 60 s,
+    # injection 1 s (ArduCopter's SYSTEM_ID_DELAY) after entering the mode
+    for fd in sitl_pair:
+        runs = fd.meta["sysid_runs"]
+        assert [r["axis"] for r in runs] == [10, 11, 12, 13]
+        for r, enter in zip(runs, (87, 173, 258, 344), strict=True):
+            assert abs(r["start_s"] - (enter + 1)) < 1.0
+            assert abs(r["stop_s"] - r["start_s"] - 60.0) < 0.2
+            assert r["t_record_s"] == 60.0 and r["f_stop_hz"] == 20.0
+        assert fd.params["INS_GYRO_FILTER"] == 20.0
+
+
+def test_sysid_runs_absent_without_systemid():
+    raw = RawLog(SourceInfo("d.bin", "dataflash", 0), {}, modes=(ModeChange(1.0, 0, "STAB"),))
+    assert sysid_runs(raw) == []
+
+
+_LOGS = shared_logs(".bin", ".log", ".tlog", ".ulg")
+
+
+@pytest.mark.parametrize("path", _LOGS, ids=ids(_LOGS))
+def test_every_shared_log_aligns_or_gives_a_typed_error(path):
+    require_shared()
+    if path.stat().st_size > 50e6:
+        pytest.skip("the big SITL log is covered by the sitl_pair tests")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            fd = load_flight(path)
+        except MavsidError:
+            return
+    assert fd.time_s.size >= 2 and np.all(np.isfinite(fd.states))
+    assert np.all(np.isfinite(fd.inputs))
+    assert set(fd.flags) == {"armed", "airborne", "mode"}

@@ -1,0 +1,514 @@
+"""mavsid.synthetic: the known plant, its logs and their truth.
+
+References outside the code under test: pymavlink (decodes every written .bin and .tlog),
+scipy.signal (an independent re-simulation of the plant and the gyro filter), the SIDD records
+of a real ArduCopter SITL flight (the SYSTEMID waveform), and the chirp's specification
+written out here.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+from collections import defaultdict
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from helpers import FIXTURES, shared_path
+from pymavlink import DFReader
+from pymavlink.dialects.v20 import ardupilotmega as mav2
+from scipy import signal
+
+from mavsid import read_log
+from mavsid.cli import main
+from mavsid.errors import ConfigError
+from mavsid.synthetic import (
+    Faults,
+    LogRates,
+    PlantParams,
+    Scenario,
+    SysIdSettings,
+    chirp,
+    fly,
+    simulate,
+)
+from mavsid.synthetic.flight import MODE_SYSTEMID
+from mavsid.synthetic.tlogwriter import EPOCH_US
+
+LOOP_HZ = 400.0
+DT = 1.0 / LOOP_HZ
+FIXTURE_LOGS = ["sysid_roll.bin", "sysid_pitch.bin", "sysid_yaw.bin", "doublets.bin",
+                "hover.bin", "sysid_roll.tlog"]
+
+
+# --------------------------------------------------------------------------- references
+
+
+def pymavlink_bin(path: Path) -> dict[str, dict[str, np.ndarray]]:
+    """Every message of a .bin as pymavlink decodes it: type -> field -> array."""
+    log = DFReader.DFReader_binary(str(path), zero_time_base=False)
+    rows: dict[str, list[dict]] = defaultdict(list)
+    while (m := log.recv_msg()) is not None:
+        d = m.to_dict()
+        rows[d.pop("mavpackettype")].append(d)
+    return {name: {k: np.array([r[k] for r in rs]) for k in rs[0]} for name, rs in rows.items()}
+
+
+def pymavlink_tlog(path: Path) -> dict[str, dict[str, np.ndarray]]:
+    """Every frame of a .tlog decoded by pymavlink's MAVLink 2 parser (CRC checked);
+    ``_recv_us`` is the record's receive time, ``_sysid`` its sender."""
+    data = path.read_bytes()
+    parser = mav2.MAVLink(None)
+    rows: dict[str, list[dict]] = defaultdict(list)
+    pos = 0
+    while pos + 10 <= len(data):
+        recv_us = struct.unpack(">Q", data[pos:pos + 8])[0]
+        assert data[pos + 8] == 0xFD, f"record at {pos} is not MAVLink 2"
+        size = 10 + data[pos + 9] + 2
+        if pos + 8 + size > len(data):
+            break  # truncated tail
+        msg = parser.decode(bytearray(data[pos + 8:pos + 8 + size]))
+        d = msg.to_dict()
+        d["_recv_us"], d["_sysid"] = recv_us, msg.get_srcSystem()
+        rows[d.pop("mavpackettype")].append(d)
+        pos += 8 + size
+    return {name: {k: np.array([r[k] for r in rs]) for k in rs[0]} for name, rs in rows.items()}
+
+
+def every(n: int, hz: float) -> np.ndarray:
+    """Loop indices of a message logged at ``hz``."""
+    return np.arange(0, n, round(LOOP_HZ / hz))
+
+
+def f32(x: np.ndarray) -> np.ndarray:
+    return np.asarray(x, dtype=np.float32).astype(float)
+
+
+def spec_frequency(tau: np.ndarray, f0: float, f1: float, tc: float, tr: float) -> np.ndarray:
+    """SYSTEMID chirp frequency (Hz) at chirp time ``tau`` (= SIDD.Time - 1 s): f0 for two
+    cycles (tc), then exponential to f1 at tr; f1 after."""
+    f = f0 * np.exp(np.log(f1 / f0) * np.clip(tau - tc, 0, None) / (tr - tc))
+    return np.where(tau > tr, f1, f)
+
+
+# --------------------------------------------------------------------------- fixtures
+
+SHORT_SID = SysIdSettings(axis=10, magnitude=0.06, f_start_hz=1.0, f_stop_hz=12.0,
+                          t_fade_in=1.0, t_rec=6.0, t_fade_out=0.5)
+
+
+@pytest.fixture(scope="module")
+def short(tmp_path_factory: pytest.TempPathFactory):
+    """A short SYSTEMID flight logged at loop rate, written as .bin and .tlog."""
+    d = tmp_path_factory.mktemp("short")
+    sc = Scenario(sysid=(SHORT_SID,), hover_before_s=1.0, hover_after_s=1.0, seed=11)
+    res = simulate(sc, [d / "s.bin", d / "s.tlog"])
+    return res.flight, d / "s.bin", d / "s.tlog"
+
+
+@pytest.fixture(scope="module")
+def short_bin(short):
+    return pymavlink_bin(short[1])
+
+
+@pytest.fixture(scope="module")
+def short_tlog(short):
+    return pymavlink_tlog(short[2])
+
+
+# --------------------------------------------------------------------------- the waveform
+
+
+@pytest.fixture(scope="module")
+def sitl_sid():
+    """SIDS and SIDD of the real SITL flight (pymavlink, those two types only)."""
+    log = DFReader.DFReader_binary(str(shared_path("sitl", "flightA_mixer.BIN")),
+                                   zero_time_base=False)
+    out = {}
+    for name in ("SIDS", "SIDD"):
+        log.rewind()
+        rows = []
+        while (m := log.recv_match(type=name)) is not None:
+            rows.append(m.to_dict())
+        out[name] = {k: np.array([r[k] for r in rows]) for k in rows[0] if k != "mavpackettype"}
+    return out
+
+
+def test_chirp_reproduces_real_sitl_sidd(sitl_sid):
+    """Our waveform, given the SIDS settings and SIDD.Time, equals ArduCopter's SIDD.Targ and
+    SIDD.F in all four real runs (within ArduPilot's float32 arithmetic)."""
+    sids, sidd = sitl_sid["SIDS"], sitl_sid["SIDD"]
+    assert len(sids["Ax"]) == 4
+    for k in range(4):
+        s = SysIdSettings(axis=int(sids["Ax"][k]), magnitude=float(sids["Mag"][k]),
+                          f_start_hz=float(sids["FSt"][k]), f_stop_hz=float(sids["FSp"][k]),
+                          t_fade_in=float(sids["TFin"][k]), t_rec=float(sids["TR"][k]),
+                          t_fade_out=float(sids["TFout"][k]))
+        assert s.t_const_freq == pytest.approx(float(sids["TC"][k]))
+        stop = sids["TimeUS"][k + 1] if k < 3 else np.inf
+        m = (sidd["TimeUS"] >= sids["TimeUS"][k]) & (sidd["TimeUS"] < stop)
+        assert m.sum() > 20_000
+        targ, freq = chirp(sidd["Time"][m].astype(float), s)
+        np.testing.assert_allclose(targ, sidd["Targ"][m], rtol=0, atol=2e-3 * s.magnitude)
+        np.testing.assert_allclose(freq, sidd["F"][m], rtol=2e-5)
+        assert np.abs(sidd["Targ"][m]).max() == pytest.approx(s.magnitude, rel=1e-3)
+
+
+def test_sidd_frequency_matches_specification(short, short_bin):
+    """SIDD.F follows the chirp specification, and the waveform's own zero crossings have
+    that instantaneous frequency."""
+    flight, _, _ = short
+    sidd, sids = short_bin["SIDD"], short_bin["SIDS"]
+    s = SHORT_SID
+    assert (sids["Ax"][0], sids["FSt"][0], sids["FSp"][0], sids["TR"][0]) == (10, 1.0, 12.0, 6.0)
+    tau = sidd["Time"].astype(float) - 1.0
+    want = spec_frequency(tau, s.f_start_hz, s.f_stop_hz, 2.0 / s.f_start_hz, s.t_rec)
+    np.testing.assert_allclose(sidd["F"], want, rtol=1e-5)
+    # zero crossings of Targ during the sweep: half a period apart
+    t, y = sidd["Time"].astype(float), sidd["Targ"].astype(float)
+    live = (tau > 0.2) & (tau < s.t_rec - 0.2)
+    idx = np.flatnonzero(live[:-1] & live[1:] & (np.sign(y[:-1]) != np.sign(y[1:]))
+                         & (y[:-1] != 0))
+    tz = t[idx] - y[idx] * (t[idx + 1] - t[idx]) / (y[idx + 1] - y[idx])
+    f_meas = 0.5 / np.diff(tz)
+    f_spec = spec_frequency(0.5 * (tz[1:] + tz[:-1]) - 1.0, s.f_start_hz, s.f_stop_hz,
+                            2.0 / s.f_start_hz, s.t_rec)
+    assert len(f_meas) > 25
+    np.testing.assert_allclose(f_meas, f_spec, rtol=0.03)
+    # SIDD exists exactly while SYSTEMID is the mode, Time advancing one loop per sample
+    assert np.allclose(np.diff(sidd["Time"]), DT, atol=1e-6)
+    assert len(sidd["Time"]) == int(np.sum(flight.mode == MODE_SYSTEMID))
+
+
+# --------------------------------------------------------------------------- .bin content
+
+
+def test_bin_values_match_simulation(short, short_bin):
+    """pymavlink decodes the .bin to exactly the simulated signals (float32 / µs rounding)."""
+    fl, _, _ = short
+    n, log = len(fl), short_bin
+    tus = np.round(fl.t_s * 1e6).astype(np.int64)
+    i = every(n, 400)
+    rate = log["RATE"]
+    np.testing.assert_array_equal(rate["TimeUS"], tus[i])
+    for j, ax in enumerate("RPY"):
+        np.testing.assert_array_equal(rate[ax], f32(np.degrees(fl.gyro[i, j])))
+        np.testing.assert_array_equal(rate[f"{ax}Des"], f32(np.degrees(fl.rate_target[i, j])))
+        np.testing.assert_array_equal(rate[f"{ax}Out"], f32(fl.u[i, j]))
+    np.testing.assert_array_equal(rate["AOut"], f32(fl.throttle[i]))
+    sid = np.flatnonzero(fl.mode == MODE_SYSTEMID)
+    sidd = log["SIDD"]
+    np.testing.assert_array_equal(sidd["TimeUS"], tus[sid])
+    np.testing.assert_array_equal(sidd["Targ"], f32(fl.sid_targ[sid]))
+    for j, ax in enumerate("xyz"):
+        np.testing.assert_array_equal(sidd[f"G{ax}"], f32(np.degrees(fl.gyro_raw[sid, j])))
+        np.testing.assert_array_equal(sidd[f"A{ax}"], f32(fl.accel[sid, j]))
+    i = every(n, 10)
+    att = log["ATT"]
+    np.testing.assert_array_equal(att["TimeUS"], tus[i])
+    np.testing.assert_array_equal(att["Roll"], f32(np.degrees(fl.attitude[i, 0])))
+    np.testing.assert_array_equal(att["Pitch"], f32(np.degrees(fl.attitude[i, 1])))
+    np.testing.assert_array_equal(att["Yaw"], f32(np.degrees(fl.attitude[i, 2]) % 360))
+    np.testing.assert_array_equal(att["DesRoll"], f32(np.degrees(fl.attitude_target[i, 0])))
+    i = every(n, 25)
+    imu = log["IMU"]
+    np.testing.assert_array_equal(imu["TimeUS"], tus[i])
+    np.testing.assert_array_equal(imu["GyrX"], f32(fl.gyro[i, 0]))
+    np.testing.assert_array_equal(imu["AccZ"], f32(fl.accel[i, 2]))
+    i = every(n, 10)
+    for c in range(4):
+        np.testing.assert_array_equal(log["RCOU"][f"C{c + 1}"], fl.pwm[i, c])
+    rc = fl.rc_in()
+    for c in range(8):
+        np.testing.assert_array_equal(log["RCIN"][f"C{c + 1}"], rc[i, c])
+    # the mode goes STABILIZE -> SYSTEMID -> STABILIZE; one SIDS
+    assert log["MODE"]["Mode"].tolist() == [0, 25, 0]
+    assert len(log["SIDS"]["TimeUS"]) == 1
+    params = dict(zip(log["PARM"]["Name"], log["PARM"]["Value"], strict=True))
+    for name, value in fl.params().items():
+        assert params[name] == pytest.approx(value, rel=1e-6), name
+    assert params["INS_GYRO_FILTER"] == fl.scenario.plant.gyro_filter_hz
+    assert any(m.startswith("ArduCopter V4") for m in log["MSG"]["Message"])
+
+
+def test_bin_layouts_are_arducopter_4(short, short_bin):
+    """FMT/FMTU of our logs equal those of the real ArduCopter 4.7 SITL log."""
+    real = DFReader.DFReader_binary(str(shared_path("sitl", "flightA_mixer.BIN")),
+                                    zero_time_base=False)
+    ours = DFReader.DFReader_binary(str(short[1]), zero_time_base=False)
+    names = ["PARM", "MSG", "MODE", "ATT", "RATE", "IMU", "RCOU", "RCIN", "SIDS", "SIDD"]
+    for name in names:
+        a, b = real.formats[real.name_to_id[name]], ours.formats[ours.name_to_id[name]]
+        assert (a.type, a.len, a.format, a.columns) == (b.type, b.len, b.format, b.columns)
+    # units / multipliers as declared by FMTU, as in the real log
+    real_fmtu = {}
+    while (m := real.recv_match(type="FMTU")) is not None:
+        real_fmtu[m.FmtType] = (m.UnitIds, m.MultIds)
+    fmtu = short_bin["FMTU"]
+    declared = {int(t): (u, m) for t, u, m in zip(fmtu["FmtType"], fmtu["UnitIds"],
+                                                 fmtu["MultIds"], strict=True)}
+    for name in names:
+        assert declared[ours.name_to_id[name]] == real_fmtu[real.name_to_id[name]], name
+    units = dict(zip(short_bin["UNIT"]["Id"], short_bin["UNIT"]["Label"], strict=True))
+    assert units[ord("k")] == "deg/s" and units[ord("E")] == "rad/s"
+
+
+# --------------------------------------------------------------------------- .tlog content
+
+
+def test_tlog_values_match_simulation(short, short_tlog):
+    fl, _, _ = short
+    n, log = len(fl), short_tlog
+    i = every(n, 50)
+    att = log["ATTITUDE"]
+    ms = np.round(fl.t_s * 1e3).astype(np.int64)
+    np.testing.assert_array_equal(att["time_boot_ms"], ms[i])
+    np.testing.assert_array_equal(att["roll"], f32(fl.attitude[i, 0]))
+    np.testing.assert_array_equal(att["rollspeed"], f32(fl.gyro[i, 0]))
+    yaw = (fl.attitude[i, 2] + np.pi) % (2 * np.pi) - np.pi
+    np.testing.assert_array_equal(att["yaw"], f32(yaw))
+    servo = log["SERVO_OUTPUT_RAW"]
+    np.testing.assert_array_equal(servo["time_usec"], np.round(fl.t_s[i] * 1e6))
+    for c in range(4):
+        np.testing.assert_array_equal(servo[f"servo{c + 1}_raw"], fl.pwm[i, c])
+    rc = fl.rc_in()
+    for c in range(8):
+        np.testing.assert_array_equal(log["RC_CHANNELS"][f"chan{c + 1}_raw"], rc[i, c])
+    imu = log["SCALED_IMU"]
+    np.testing.assert_array_equal(imu["xgyro"], np.round(fl.gyro[i, 0] * 1000))
+    np.testing.assert_array_equal(imu["zacc"], np.round(fl.accel[i, 2] / 9.80665 * 1000))
+    params = dict(zip(log["PARAM_VALUE"]["param_id"], log["PARAM_VALUE"]["param_value"],
+                      strict=True))
+    for name, value in fl.params().items():
+        assert params[name] == pytest.approx(value, rel=1e-6), name
+    hb = log["HEARTBEAT"]
+    vehicle = hb["_sysid"] == 1
+    assert set(hb["custom_mode"][vehicle]) == {0, 25}
+    assert (hb["_sysid"] == 255).sum() >= 1
+    # receive times: after the send time, with jitter, never backwards
+    recv = np.concatenate([t["_recv_us"] for t in log.values()])
+    assert np.all(np.diff(np.sort(recv)) >= 0)
+    lat = att["_recv_us"] - EPOCH_US - (fl.t_s[i] - fl.t_s[0]) * 1e6
+    assert lat.min() > 10_000 and np.std(lat) > 1_000
+
+
+# --------------------------------------------------------------------------- mavsid readers
+
+
+def _compare_tables(ours, ref: dict[str, dict[str, np.ndarray]], skip=()) -> int:
+    """Field-by-field equality of mavsid's RawLog against pymavlink; returns fields compared."""
+    compared = 0
+    for name, fields in ref.items():
+        if name in skip:
+            continue
+        table = ours[name]
+        for field, want in fields.items():
+            if field.startswith("_"):
+                continue
+            got = table[field]
+            assert len(got) == len(want), f"{name}.{field}"
+            if want.dtype.kind in "fiub":
+                np.testing.assert_array_equal(np.asarray(got, dtype=float),
+                                              want.astype(float), err_msg=f"{name}.{field}")
+            else:
+                assert [str(x) for x in got] == [str(x) for x in want], f"{name}.{field}"
+            compared += 1
+    return compared
+
+
+@pytest.mark.parametrize("name", FIXTURE_LOGS)
+def test_fixtures_read_alike_by_pymavlink_and_mavsid(name):
+    """Every committed fixture: pymavlink decodes it, mavsid's reader agrees on every value,
+    and it is small enough to ship."""
+    path = FIXTURES / name
+    assert path.stat().st_size <= 1_000_000
+    ref = pymavlink_bin(path) if path.suffix == ".bin" else pymavlink_tlog(path)
+    ours = read_log(path)
+    assert ours.source.skipped_bytes == 0
+    assert _compare_tables(ours, ref) > 50
+    if path.suffix == ".bin":
+        np.testing.assert_array_equal(ours["RATE"].time_s, ref["RATE"]["TimeUS"] * 1e-6)
+        assert ours.firmware and ours.firmware.startswith("ArduCopter V4")
+    truth = json.loads((FIXTURES / (path.stem + ".truth.json")).read_text())
+    assert name in truth["logs"]
+
+
+def test_short_logs_read_alike(short, short_bin, short_tlog):
+    _, bin_path, tlog_path = short
+    assert _compare_tables(read_log(bin_path), short_bin) > 100
+    ours = read_log(tlog_path)
+    assert _compare_tables(ours, short_tlog) > 50
+    np.testing.assert_array_equal(ours["ATTITUDE"]["_recv_time_s"],
+                                  short_tlog["ATTITUDE"]["_recv_us"] * 1e-6)
+
+
+# --------------------------------------------------------------------------- the plant
+
+
+def resimulate(u: np.ndarray, p: PlantParams, axis: int, dt: float, sub: int = 1) -> np.ndarray:
+    """Independent re-simulation with scipy: u (loop rate) -> delay -> motor lag ->
+    b/(s + d) -> 2nd-order Butterworth at the gyro filter cutoff. ``sub`` substeps per loop
+    step let the delay be a multiple of dt/sub."""
+    b, d, tau = p.effectiveness[axis], p.damping[axis], p.motor_tau_s
+    num, den = [b], np.polymul([tau, 1.0], [1.0, d])
+    h = dt / sub
+    bz, az, _ = signal.cont2discrete((num, den), h, method="zoh")
+    delay = round(p.delay_s / h)
+    assert abs(delay * h - p.delay_s) < 1e-12
+    us = np.repeat(u, sub)
+    us = np.concatenate([np.zeros(delay), us[: len(us) - delay]])
+    rate = signal.lfilter(np.ravel(bz), az, us)[::sub]
+    fb, fa = signal.butter(2, p.gyro_filter_hz, fs=1.0 / dt)
+    return signal.lfilter(fb, fa, rate)
+
+
+@pytest.mark.parametrize("delay_s", [0.005, 0.00375])
+def test_logged_rates_obey_the_plant(tmp_path, delay_s):
+    """Noiseless: re-simulating the plant from the logged RATE.*Out reproduces RATE.R/P/Y
+    (also with a delay that is not a whole number of loop steps)."""
+    plant = replace(PlantParams().scaled_noise(0.0), delay_s=delay_s)
+    sc = Scenario(sysid=(replace(SHORT_SID, axis=10),), plant=plant, seed=5,
+                  hover_before_s=0.5, hover_after_s=0.5)
+    simulate(sc, [tmp_path / "a.bin"])
+    rate = pymavlink_bin(tmp_path / "a.bin")["RATE"]
+    for j, ax in enumerate("RPY"):
+        u = rate[f"{ax}Out"].astype(float)
+        want = np.degrees(resimulate(u, plant, j, DT, sub=4))
+        got = rate[ax].astype(float)
+        scale = max(np.abs(got).max(), 1e-3)
+        assert np.abs(got - want).max() < 1e-4 * scale + 1e-5, ax
+    assert np.abs(rate["R"]).max() > 5.0  # the roll chirp moved the vehicle
+
+
+def test_noisy_rates_obey_the_plant_within_noise(short, short_bin):
+    """With sensor noise: the residual to the noiseless re-simulation is the filtered noise
+    plus the gyro bias, of the size the truth declares."""
+    fl, _, _ = short
+    p = fl.scenario.plant
+    rate = short_bin["RATE"]
+    sc = replace(fl.scenario, plant=replace(p, disturbance=0.0))
+    fl2 = fly(sc)  # same seed, no disturbance: the only difference from the model is noise
+    u = fl2.u[:, 0]
+    want = resimulate(u, p, 0, DT) + p.gyro_bias[0]
+    resid = fl2.gyro[:, 0] - want
+    fb, fa = signal.butter(2, p.gyro_filter_hz, fs=LOOP_HZ)
+    _, h = signal.freqz(fb, fa, worN=4096)
+    noise_gain = np.sqrt(np.mean(np.abs(h) ** 2))
+    expected = p.gyro_noise * noise_gain
+    assert 0.7 * expected < np.std(resid[200:]) < 1.3 * expected
+    assert abs(np.mean(resid[200:])) < 3 * expected
+    assert len(rate["R"]) == len(fl)
+
+
+def test_gyro_filter_is_butterworth():
+    from mavsid.synthetic.plant import lowpass2p_coefficients
+
+    b, a = lowpass2p_coefficients(20.0, 400.0)
+    sb, sa = signal.butter(2, 20.0, fs=400.0)
+    np.testing.assert_allclose(b, sb, rtol=1e-12)
+    np.testing.assert_allclose(a, sa, rtol=1e-12)
+
+
+def test_truth_sidecar(short):
+    fl, bin_path, _ = short
+    truth = json.loads(bin_path.with_name("s.truth.json").read_text())
+    p = fl.scenario.plant
+    assert truth["logs"] == ["s.bin", "s.tlog"]
+    for j, ax in enumerate(("roll", "pitch", "yaw")):
+        t = truth["axes"][ax]
+        assert (t["damping"], t["effectiveness"], t["delay_s"]) == (
+            p.damping[j], p.effectiveness[j], p.delay_s)
+        assert t["motor_tau_s"] == p.motor_tau_s and t["gyro_filter_hz"] == p.gyro_filter_hz
+        assert set(t["units"]) >= {"damping", "effectiveness", "delay_s"}
+    assert "FILTERED" in truth["logged_rate"]
+    assert truth["gyro_filter"]["cutoff_hz"] == 20.0
+    run = truth["sysid_runs"][0]
+    assert run["sid_axis"] == 10 and run["sweep_start_s"] - run["waveform_start_s"] == 2.0
+
+
+# --------------------------------------------------------------------------- determinism, CLI
+
+
+def test_same_seed_same_bytes(tmp_path):
+    sc = Scenario(manoeuvre="random", duration_s=3.0, seed=7)
+    a = simulate(sc, [tmp_path / "a.bin", tmp_path / "a.tlog"])
+    b = simulate(sc, [tmp_path / "b.bin", tmp_path / "b.tlog"])
+    assert (tmp_path / "a.bin").read_bytes() == (tmp_path / "b.bin").read_bytes()
+    assert (tmp_path / "a.tlog").read_bytes() == (tmp_path / "b.tlog").read_bytes()
+    c = simulate(replace(sc, seed=8), [tmp_path / "c.bin"])
+    assert not np.array_equal(a.flight.gyro, c.flight.gyro)
+    assert a.sizes == b.sizes
+
+
+def test_fixture_regenerates_from_its_truth_command(tmp_path, monkeypatch):
+    """The command recorded in sysid_roll.truth.json rewrites sysid_roll.bin byte for byte."""
+    truth = json.loads((FIXTURES / "sysid_roll.truth.json").read_text())
+    argv = truth["command"].split()[1:]
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 0
+    assert (tmp_path / "sysid_roll.bin").read_bytes() == (FIXTURES / "sysid_roll.bin").read_bytes()
+    assert (tmp_path / "sysid_roll.tlog").read_bytes() == (
+        FIXTURES / "sysid_roll.tlog").read_bytes()
+
+
+def test_cli_errors(tmp_path, capsys):
+    assert main(["simulate", "-o", str(tmp_path / "x.txt")]) == 1
+    assert "x.txt" in capsys.readouterr().err
+    assert main(["simulate", "-o", str(tmp_path / "x.bin"), "--sid-axis", "14"]) == 1
+    assert main(["simulate", "-o", str(tmp_path / "x.bin"), "--manoeuvre", "doublet",
+                 "--sid-axis", "10"]) == 1
+    assert main(["simulate", "-o", str(tmp_path / "x.bin"), "--rate-hz", "300"]) == 1
+    assert main(["simulate", "-o", str(tmp_path / "no" / "x.bin")]) == 1
+    assert main(["simulate", "-o", str(tmp_path / "x.bin"), "--faults", "melt=1"]) == 1
+    with pytest.raises(SystemExit) as exc:
+        main(["simulate", "-o", str(tmp_path / "x.bin"), "--manoeuvre", "loop"])
+    assert exc.value.code == 2
+    with pytest.raises(ConfigError):
+        SysIdSettings(f_start_hz=0.1, t_rec=15.0)  # two cycles at 0.1 Hz take 20 s
+    assert not list(tmp_path.iterdir())
+
+
+def test_cli_writes_tlog_and_bin(tmp_path, capsys):
+    out = tmp_path / "d.tlog"
+    assert main(["simulate", "-o", str(out), "--manoeuvre", "3211", "--axis", "pitch",
+                 "--duration", "4", "--seed", "2"]) == 0
+    log = pymavlink_tlog(out)
+    truth = json.loads((tmp_path / "d.truth.json").read_text())
+    assert truth["manoeuvre"] == "3211" and truth["axis"] == "pitch" and truth["seed"] == 2
+    assert truth["command"].startswith("mavsid simulate -o ")
+    assert np.ptp(log["RC_CHANNELS"]["chan2_raw"]) > 100  # the pitch stick moved
+    assert np.ptp(log["RC_CHANNELS"]["chan1_raw"]) == 0
+
+
+# --------------------------------------------------------------------------- faults
+
+
+def test_faults(tmp_path):
+    sc = Scenario(manoeuvre="doublet", duration_s=4.0, seed=3, rates=LogRates(rate=100))
+    clean = simulate(sc, [tmp_path / "c.bin", tmp_path / "c.tlog"])
+    ref = pymavlink_bin(tmp_path / "c.bin")
+    n_rate = len(ref["RATE"]["TimeUS"])
+    simulate(sc, [tmp_path / "d.bin", tmp_path / "d.tlog"], Faults(drop_fraction=0.1, seed=1))
+    dropped = pymavlink_bin(tmp_path / "d.bin")
+    assert 0.8 * n_rate < len(dropped["RATE"]["TimeUS"]) < 0.97 * n_rate
+    assert set(dropped["RATE"]["TimeUS"]) <= set(ref["RATE"]["TimeUS"])
+    tl = pymavlink_tlog(tmp_path / "d.tlog")
+    assert len(tl["ATTITUDE"]["time_boot_ms"]) < len(pymavlink_tlog(tmp_path / "c.tlog")[
+        "ATTITUDE"]["time_boot_ms"])
+    # reboot: time restarts at 5 s, headers repeated
+    simulate(sc, [tmp_path / "r.bin", tmp_path / "r.tlog"], Faults(reboot_at_s=2.0))
+    rb = pymavlink_bin(tmp_path / "r.bin")
+    t = rb["RATE"]["TimeUS"]
+    assert np.sum(np.diff(t) < 0) == 1 and t.min() == 5_000_000
+    assert len(rb["PARM"]["Name"]) == 2 * len(clean.flight.params())
+    ms = pymavlink_tlog(tmp_path / "r.tlog")["ATTITUDE"]["time_boot_ms"]
+    assert np.sum(np.diff(ms) < 0) == 1
+    # truncated: all but the cut record decode; mavsid reads the rest and counts the bytes
+    simulate(sc, [tmp_path / "t.bin"], Faults(truncate_bytes=20))
+    assert (tmp_path / "t.bin").stat().st_size == (tmp_path / "c.bin").stat().st_size - 20
+    with pytest.warns(Warning):
+        ours = read_log(tmp_path / "t.bin")
+    assert ours.source.skipped_bytes > 0
+    assert len(ours["RATE"]) >= n_rate - 1

@@ -126,9 +126,10 @@ def check_identifiable(reg: Regression, g: Gram, max_condition: float = 1e10) ->
     for j, f in enumerate(st.features):
         if f == library.BIAS:
             continue
+        col = reg.z[:, j]
         rms = np.sqrt(max(zz[j, j], 0.0))
-        spread = np.sqrt(max(zz[j, j] - mean[j] ** 2, 0.0)) if has_bias else rms
-        if spread <= 1e-9 * max(rms, 1e-300) or rms == 0.0:
+        spread = float(np.ptp(col)) if has_bias else rms
+        if spread <= 1e-12 * max(rms, 1e-300) or rms == 0.0:
             what = "is zero" if rms == 0.0 else "does not vary"
             raise NoExcitationError(
                 f"{label([j])} unidentifiable: {f} {what} in the selected segments"
@@ -429,7 +430,8 @@ class Estimator:
         self.model_ = Model(
             state_names=st.outputs, input_names=st.inputs, features=st.features, coef=coef,
             dt=float(segments[0].dt), delay=st.delay, continuous=st.continuous,
-            filters=st.filters, covariance=cov, coef_stderr=se, sigma=sigma,
+            filters=st.filters, delay_frac=st.delay_frac, covariance=cov, coef_stderr=se,
+            sigma=sigma,
             provenance=provenance(
                 segments, estimator=self.name, alpha_selected=alpha, rows=reg.n,
                 blocks=len(reg.blocks), hac_lags=lags, derivative=st.derivative
@@ -477,7 +479,8 @@ class Estimator:
                     scores.append(-np.inf)
                     continue
                 m = Model(st.outputs, st.inputs, st.features, coef, subs[i].dt,
-                          delay=st.delay, continuous=st.continuous, filters=st.filters)
+                          delay=st.delay, continuous=st.continuous, filters=st.filters,
+                          delay_frac=st.delay_frac)
                 with np.errstate(all="ignore"):
                     scores.append(rollout_fit(m, subs[i], self.cv_horizon))
             score = float(np.mean(scores))

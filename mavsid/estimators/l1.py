@@ -61,7 +61,8 @@ class ElasticNet(Estimator):
     signs : Mapping[str, int]
         Parameter name -> +1 (≥ 0) or −1 (≤ 0).
     zero_tol : float
-        Standardised coefficients below this are set exactly to zero.
+        A term whose contribution (coefficient × its column's RMS) is below ``zero_tol`` ×
+        the output's RMS is set exactly to zero (the interior-point solver's numerical zeros).
     solver : str
         cvxpy solver (CLARABEL by default).
     """
@@ -71,7 +72,7 @@ class ElasticNet(Estimator):
 
     def __init__(self, structure: Structure | None = None, *, alpha: float | str = "cv",
                  l1_ratio: float = 0.5, bounds: Mapping[str, tuple[float, float]] | None = None,
-                 signs: Mapping[str, int] | None = None, zero_tol: float = 1e-6,
+                 signs: Mapping[str, int] | None = None, zero_tol: float = 1e-4,
                  solver: str = "CLARABEL", n_bootstrap: int = 0, **kwargs: object) -> None:
         super().__init__(structure, alpha=alpha, n_bootstrap=n_bootstrap,
                          **kwargs)  # type: ignore[arg-type]

@@ -159,6 +159,8 @@ class Model:
         Sample time (s) the model was fitted at.
     delay : int
         Input delay (samples).
+    delay_frac : float
+        Further fraction of a sample of input delay (see ``Structure``).
     continuous : bool
         ``ẋ = Θᵀφ`` instead of ``x[k+1] = Θᵀφ``.
     filters : tuple of InputFilter
@@ -181,6 +183,7 @@ class Model:
     delay: int = 0
     continuous: bool = False
     filters: tuple[InputFilter, ...] = ()
+    delay_frac: float = 0.0
     covariance: np.ndarray | None = field(default=None, repr=False)
     coef_stderr: np.ndarray | None = field(default=None, repr=False)
     sigma: np.ndarray | None = field(default=None, repr=False)
@@ -204,7 +207,8 @@ class Model:
         """The regression structure this model evaluates."""
         return Structure(outputs=self.state_names, features=self.features,
                          inputs=self.input_names, delay=self.delay,
-                         continuous=self.continuous, filters=self.filters)
+                         delay_frac=self.delay_frac, continuous=self.continuous,
+                         filters=self.filters)
 
     @cached_property
     def _split(self) -> tuple[list[int], list[int], list[int]]:
@@ -517,8 +521,10 @@ class Model:
             tf = control.ss(control.tf(num, den, dt))
             blockdiag = control.append(*([tf] * nin)) if nin > 1 else tf
             chain = blockdiag if chain is None else control.series(chain, blockdiag)
-        if not self.continuous and self.delay > 0 and nin:
-            z = control.tf([1.0], [1.0] + [0.0] * self.delay, dt)
+        if not self.continuous and (self.delay > 0 or self.delay_frac > 0) and nin:
+            f = self.delay_frac
+            num_d = [1.0 - f, f] if f > 0 else [1.0]
+            z = control.tf(num_d, [1.0] + [0.0] * (self.delay + (1 if f > 0 else 0)), dt)
             dl = control.ss(z)
             blockdiag = control.append(*([dl] * nin)) if nin > 1 else dl
             chain = blockdiag if chain is None else control.series(chain, blockdiag)
@@ -537,6 +543,8 @@ class Model:
             "coef": self.coef,
             "dt": self.dt,
             "delay": self.delay,
+            "delay_frac": self.delay_frac,
+            "delay_s": (self.delay + self.delay_frac) * self.dt,
             "continuous": self.continuous,
             "filters": [f.to_dict() for f in self.filters],
             "covariance": self.covariance,
@@ -565,6 +573,7 @@ class Model:
                 state_names=tuple(d["state_names"]), input_names=tuple(d["input_names"]),
                 features=tuple(d["features"]), coef=np.asarray(d["coef"], dtype=float),
                 dt=float(d["dt"]), delay=int(d["delay"]), continuous=bool(d["continuous"]),
+                delay_frac=float(d.get("delay_frac", 0.0)),
                 filters=tuple(InputFilter(float(f["cutoff_hz"]), int(f["order"]),
                                           str(f.get("source", ""))) for f in d["filters"]),
                 covariance=arr("covariance"), coef_stderr=arr("coef_stderr"),

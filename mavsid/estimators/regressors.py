@@ -140,6 +140,10 @@ class Structure:
         whose name starts with ``u_``.
     delay : int
         Input delay in samples.
+    delay_frac : float
+        Further fraction of a sample (0 <= f < 1): the input enters as
+        ``(1 − f) u[k−d] + f u[k−d−1]``, which is exact for held (zero-order-hold) inputs
+        acting on a plant that integrates them over the sample.
     continuous : bool
         Continuous time (derivatives) instead of discrete time (next sample).
     filters : tuple of InputFilter
@@ -156,6 +160,7 @@ class Structure:
     features: tuple[str, ...]
     inputs: tuple[str, ...] = ()
     delay: int = 0
+    delay_frac: float = 0.0
     continuous: bool = False
     filters: tuple[InputFilter, ...] = ()
     derivative: str = "savgol"
@@ -165,6 +170,8 @@ class Structure:
     def __post_init__(self) -> None:
         if self.delay < 0:
             raise ConfigError(f"delay must be >= 0 samples, got {self.delay}")
+        if not 0.0 <= self.delay_frac < 1.0:
+            raise ConfigError(f"delay_frac must be in [0, 1), got {self.delay_frac}")
         if not self.outputs or not self.features:
             raise ConfigError("a structure needs at least one output and one feature")
         for f in self.features:
@@ -178,7 +185,8 @@ class Structure:
     @property
     def lead(self) -> int:
         """Samples lost at the start of every segment (delay, derivative window)."""
-        return max(self.delay, self.window // 2 if self.continuous else 0)
+        d = self.delay + (1 if self.delay_frac > 0 else 0)
+        return max(d, self.window // 2 if self.continuous else 0)
 
     @property
     def trail(self) -> int:
@@ -233,6 +241,16 @@ def filter_inputs(u: np.ndarray, dt: float, filters: Iterable[InputFilter]) -> n
     return u
 
 
+def _shift(u: np.ndarray, d: int, frac: float = 0.0) -> np.ndarray:
+    """``u`` delayed by ``d + frac`` samples (held at the first value before it starts)."""
+    if d >= len(u):
+        return np.repeat(u[:1], len(u), axis=0)
+    out = np.concatenate([np.repeat(u[:1], d, axis=0), u[: len(u) - d]], axis=0) if d else u
+    if frac > 0:
+        out = (1.0 - frac) * out + frac * _shift(u, d + 1)
+    return out
+
+
 def variables(
     segment: Segment, structure: Structure, names: Sequence[str] | None = None
 ) -> dict[str, np.ndarray]:
@@ -244,9 +262,7 @@ def variables(
     if ins:
         u = np.column_stack([_column(segment, v)[0] for v in ins]).astype(float)
         u = filter_inputs(u, segment.dt, structure.filters)
-        d = structure.delay
-        if d:
-            u = np.concatenate([np.repeat(u[:1], d, axis=0), u[:-d]], axis=0)
+        u = _shift(u, structure.delay, structure.delay_frac)
         out.update({v: u[:, i] for i, v in enumerate(ins)})
     for v in names:
         if v not in out:

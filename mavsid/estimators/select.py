@@ -91,15 +91,17 @@ def log_params(segments: Iterable[Segment], params: Mapping[str, float] | None =
     return {}
 
 
-def select_delay(segments: Sequence[Segment], structure: Structure, delays: Iterable[int]
-                 ) -> tuple[int, dict[int, float]]:
-    """The delay (samples) with the smallest one-step mean squared residual (least squares).
+def select_delay(segments: Sequence[Segment], structure: Structure, delays: Iterable[float]
+                 ) -> tuple[float, dict[float, float]]:
+    """The delay (samples, possibly fractional) with the smallest one-step mean squared
+    residual of a least-squares fit.
 
-    Returns the best delay and the residual per row for every candidate.
+    Returns the best delay and the mean squared residual for every candidate.
     """
-    scan: dict[int, float] = {}
-    for d in delays:
-        st = replace(structure, delay=int(d))
+    scan: dict[float, float] = {}
+    for dly in delays:
+        d = int(np.floor(dly + 1e-9))
+        st = replace(structure, delay=d, delay_frac=round(float(dly) - d, 9) % 1.0)
         try:
             reg = stack(segments, st)
         except NoExcitationError:
@@ -109,7 +111,7 @@ def select_delay(segments: Sequence[Segment], structure: Structure, delays: Iter
         check_identifiable(reg, g)
         coef = solve(g)
         resid = reg.y - reg.z @ coef
-        scan[int(d)] = float(np.mean(resid**2))
+        scan[float(dly)] = float(np.mean(resid**2))
     if not scan:
         raise NoExcitationError("segments too short for every candidate delay")
     return min(scan, key=scan.__getitem__), scan
@@ -123,7 +125,8 @@ def fit_axis(
     params: Mapping[str, float] | None = None,
     filters: Sequence[InputFilter] | None = None,
     delays: Iterable[int] | None = None,
-    delay: int | None = None,
+    delay: float | None = None,
+    delay_step: float = 0.125,
     inputs: Sequence[str] | None = None,
     bias: bool = True,
     continuous: bool = False,
@@ -145,10 +148,13 @@ def fit_axis(
         The log's parameters (default: ``segment.meta['params']``); used for known filters.
     filters : sequence of InputFilter, optional
         Override the filters derived from ``params`` (``()`` for none).
-    delays : iterable of int, optional
-        Candidate delays in samples (default 0 ... 25 ms worth).
-    delay : int, optional
-        Fix the delay instead of searching.
+    delays : iterable of float, optional
+        Candidate delays in samples; fractions allowed (default 0 ... 25 ms worth in steps
+        of ``delay_step``).
+    delay : float, optional
+        Fix the delay (samples) instead of searching.
+    delay_step : float
+        Resolution of the default delay grid, in samples (1: whole samples only).
     inputs : sequence of str, optional
         Inputs (default: the axis's own).
     bias : bool
@@ -162,6 +168,8 @@ def fit_axis(
     """
     if axis not in AXES:
         raise ConfigError(f"unknown axis {axis!r}; choose from {sorted(AXES)}")
+    if estimator not in ESTIMATORS:
+        raise ConfigError(f"unknown estimator {estimator!r}; choose from {sorted(ESTIMATORS)}")
     segments = list(segments)
     if not segments:
         raise NoExcitationError(f"no segments to fit the {axis} axis")
@@ -170,6 +178,8 @@ def fit_axis(
         segments = mine
     outputs, default_inputs = AXES[axis]
     ins = tuple(inputs) if inputs is not None else default_inputs
+    ins = ins + tuple(v for v in library.variables_of(features)
+                      if v.startswith("u_") and v not in ins)
     dt = float(segments[0].dt)
     flt = tuple(filters) if filters is not None else filters_from_params(
         log_params(segments, params), dt)
@@ -177,11 +187,13 @@ def fit_axis(
     structure = Structure(outputs=outputs, features=feats, inputs=ins, filters=flt,
                           continuous=continuous)
     if delay is None:
-        cand = list(delays) if delays is not None else list(range(round(0.025 / dt) + 1))
+        cand = (list(delays) if delays is not None
+                else list(np.arange(0.0, round(0.025 / dt) + 1e-9, delay_step)))
         delay, scan = select_delay(segments, structure, cand)
     else:
         scan = {}
-    structure = replace(structure, delay=int(delay))
+    whole = int(np.floor(delay + 1e-9))
+    structure = replace(structure, delay=whole, delay_frac=round(float(delay) - whole, 9) % 1.0)
     est = make_estimator(estimator, structure, **estimator_kwargs).fit(segments)
     model = est.model_
     prov = dict(model.provenance)

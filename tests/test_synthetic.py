@@ -442,15 +442,16 @@ def test_same_seed_same_bytes(tmp_path):
     assert a.sizes == b.sizes
 
 
-def test_fixture_regenerates_from_its_truth_command(tmp_path, monkeypatch):
-    """The command recorded in sysid_roll.truth.json rewrites sysid_roll.bin byte for byte."""
-    truth = json.loads((FIXTURES / "sysid_roll.truth.json").read_text())
+@pytest.mark.parametrize("truth_file", sorted(p.name for p in FIXTURES.glob("*.truth.json")))
+def test_fixture_regenerates_from_its_truth_command(tmp_path, monkeypatch, truth_file):
+    """The command recorded in each truth file rewrites its logs byte for byte."""
+    truth = json.loads((FIXTURES / truth_file).read_text())
     argv = truth["command"].split()[1:]
     monkeypatch.chdir(tmp_path)
     assert main(argv) == 0
-    assert (tmp_path / "sysid_roll.bin").read_bytes() == (FIXTURES / "sysid_roll.bin").read_bytes()
-    assert (tmp_path / "sysid_roll.tlog").read_bytes() == (
-        FIXTURES / "sysid_roll.tlog").read_bytes()
+    for name in truth["logs"]:
+        assert (tmp_path / name).read_bytes() == (FIXTURES / name).read_bytes(), name
+    assert json.loads((tmp_path / truth_file).read_text()) == truth
 
 
 def test_cli_errors(tmp_path, capsys):

@@ -504,21 +504,24 @@ def _excited_axis(fd: FlightData, run: Mapping[str, Any], opts: ScanOptions,
 def _trim(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions) -> tuple[int, int]:
     """Drop the quiet head and tail of a merged window.
 
-    The head ends where the input (smoothed over 50 ms) first departs from its median over
-    the window's first 0.5 s by more than the power gate (``power_ratio`` × noise floor);
-    the tail likewise from the end.
+    An end is trimmed only when its first (last) 0.5 s is quiet (input RMS below the power
+    gate, ``power_ratio`` × noise floor); the trimmed end is where the input, smoothed over
+    50 ms, first departs from its median over that quiet 0.5 s by more than the gate.
     """
-    assert ax.u is not None
+    assert ax.u is not None and ax.u_hp is not None
     n = max(3, round(0.5 / fd.dt))
     if i1 - i0 < 3 * n:
         return i0, i1
-    u = ax.u[i0:i1]
+    u, hp = ax.u[i0:i1], ax.u_hp[i0:i1]
     k = max(1, round(0.05 / fd.dt))
     thr = opts.power_ratio * ax.floor
-    head = _moving(np.abs(u - np.median(u[:n])), k) > thr
-    tail = _moving(np.abs(u - np.median(u[-n:])), k) > thr
-    a = int(np.argmax(head)) if head.any() else 0
-    b = u.size - int(np.argmax(tail[::-1])) if tail.any() else u.size
+    a, b = 0, u.size
+    if np.sqrt(np.mean(hp[:n] ** 2)) < thr:
+        head = _moving(np.abs(u - np.median(u[:n])), k) > thr
+        a = int(np.argmax(head)) if head.any() else 0
+    if np.sqrt(np.mean(hp[-n:] ** 2)) < thr:
+        tail = _moving(np.abs(u - np.median(u[-n:])), k) > thr
+        b = u.size - int(np.argmax(tail[::-1])) if tail.any() else u.size
     return (i0 + a, i0 + b) if b - a >= n else (i0, i1)
 
 
@@ -631,7 +634,15 @@ def find_segments(
             reports.append(WindowReport(a, float(flight.time_s[0]), float(flight.time_s[-1]),
                                         0.0, False, "scan", tuple(reason), 0, n))
             continue
-        reports += _scan_windows(flight, cache[a], opts, air, mine)
+        found = _scan_windows(flight, cache[a], opts, air, mine)
+        if not found and not mine:
+            n = flight.time_s.size
+            longest = int(np.max(flight.blocks[:, 1] - flight.blocks[:, 0]))
+            found = [WindowReport(
+                a, float(flight.time_s[0]), float(flight.time_s[-1]), 0.0, False, "scan",
+                (f"rejected: too little data: the longest contiguous block has {longest} "
+                 f"samples ({longest * flight.dt:.2f} s), a window needs 8",), 0, n)]
+        reports += found
     order = {a: i for i, a in enumerate(AXES)}
     reports.sort(key=lambda r: (order.get(r.axis, len(AXES)), r.start_s))
     return reports

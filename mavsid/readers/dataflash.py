@@ -6,10 +6,13 @@ A DataFlash log is a sequence of records ``0xA3 0x95 <type> <payload>``. FMT rec
 1. memory-maps the file and finds every ``0xA3 0x95`` pair with numpy (the *candidates*);
 2. reads the FMT definitions (a type may be redefined later in the log, e.g. in concatenated
    logs: each record uses the definition in force at its position, or the type's first one);
-3. frames the log: a candidate is a record when its type is defined and either the next
-   record's header follows exactly where it ends (forward evidence) or the record before it
-   ends exactly where it starts (backward evidence; a record with only backward evidence may
-   not swallow a record with forward evidence); from the first such record, each record is
+3. frames the log: a candidate is a record when its type is defined, it fits in the file, and
+   either a header follows exactly where it ends (forward evidence) or the
+   record before it ends exactly where it starts (backward evidence; a record with only
+   backward evidence may not swallow a record with forward evidence), or it is a well-formed
+   FMT record, or it has no evidence but lies outside the declared span of every header that
+   has some (a lone record between two stretches of garbage; not a header-like pattern inside
+   a cut last record). From the first record, each record is
    followed by the next one at or after its end, so garbage is skipped and reading resumes on
    the next valid record;
 4. gathers each type's records into one structured numpy array through an overlapping view
@@ -405,15 +408,28 @@ def _frame(a: np.ndarray, cand: np.ndarray, table: _Definitions) -> _Framing:
     defid = _assign_definitions(cand, types, table)
     lengths = np.array([d.length for d in table.defs] + [0], np.int64)
     end = cand + lengths[defid]  # undefined (-1) -> the sentinel 0
-    complete = (end > cand) & (end <= n)
+    known = end > cand
+    complete = known & (end <= n)
     m = cand.size
     j = _successors(cand, end, complete)
     found = j < m
+    # forward evidence: the next header starts where this record ends
     fwd = complete & found
-    fwd[found] &= (cand[j[found]] == end[found]) & complete[j[found]]
+    fwd[found] &= cand[j[found]] == end[found]
     has_in = np.zeros(m + 1, bool)
     has_in[j[fwd]] = True
-    node = complete & (fwd | has_in[:m])
+    backed = known & (fwd | has_in[:m])
+    node = complete & backed
+    # a lone record between two stretches of garbage has neither kind of evidence: take it
+    # unless it lies inside the declared span of a backed header (e.g. a cut last record)
+    # (FMT records need plausible content instead, below)
+    weak = np.flatnonzero(complete & ~backed & (defid != 0))
+    bpos = cand[backed]
+    if weak.size and bpos.size:
+        reach = np.maximum.accumulate(end[backed])
+        k = np.searchsorted(bpos, cand[weak], side="left") - 1
+        weak = weak[(k < 0) | (reach[np.maximum(k, 0)] <= cand[weak])]
+    node[weak] = True
     node[np.searchsorted(cand, np.array(table.plausible, np.int64))] = True
     back_only = np.flatnonzero(node & ~fwd)
     fpos = cand[fwd]
@@ -781,9 +797,10 @@ def _read_buffer(
     skip_at, skip_len = _skipped_regions(n, framing.pos, framing.end)
     skipped = int(skip_len.sum())
     if skipped:
-        inside = np.searchsorted(cand, skip_at)
-        inside = inside[inside < cand.size]
-        unknown = sorted({int(t) for t in a[cand[inside] + 2] if int(t) not in table.by_type})
+        lo = np.searchsorted(cand, skip_at[:1000])
+        hi = np.searchsorted(cand, skip_at[:1000] + skip_len[:1000])
+        inside = np.concatenate([cand[i:j] for i, j in zip(lo, hi, strict=True)])
+        unknown = sorted({int(t) for t in a[inside + 2]} - set(table.by_type))
         shown = ", ".join(f"{int(o)}+{int(k)}" for o, k in zip(skip_at[:5], skip_len[:5],
                                                               strict=True))
         notes.insert(0, f"skipped {skipped} undecodable byte(s) in {skip_at.size} region(s) "

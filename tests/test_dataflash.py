@@ -1,0 +1,397 @@
+"""DataFlash .bin reader: values equal pymavlink's, robustness on broken logs.
+
+Reference: pymavlink (``mavutil.mavlink_connection(path)``, ``recv_match()``, ``to_dict()``),
+every message type, every field, same counts, on every shared ``.bin`` pymavlink reads. The
+104 MB SITL log is compared on a chosen set of types (the attitude, rate, SYSTEMID and
+metadata messages, ~190k records) with ``recv_match(type=...)``, once per session; the small
+logs on everything.
+"""
+
+from __future__ import annotations
+
+import array
+import math
+import os
+import random
+import warnings
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from helpers import LOGS, ids, require_shared, shared_logs, shared_path
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from mavsid.data import RawLog
+from mavsid.errors import DataQualityWarning, LogFormatError, MissingMessageError
+from mavsid.readers import dataflash, read_log
+from mavsid.readers.dataflash import build_fmt, build_record
+
+BIN_LOGS = [p for p in shared_logs(".bin") if "sitl" not in p.parts]
+SITL = ("sitl", "flightA_mixer.BIN")
+SITL_TYPES = ["ATT", "RATE", "SIDS", "MODE", "PARM", "MSG", "RCOU", "RCIN", "CTUN", "VER",
+              "FMT", "FMTU", "UNIT", "MULT", "PIDR", "BAT"]
+SMALL = ("public", "ArduPilot__pymavlink", "test.BIN")
+
+
+# --------------------------------------------------------------------------- reference
+def pymavlink_records(path: Path, types: list[str] | None = None) -> dict[str, list[dict]]:
+    """Every message pymavlink yields, as ``to_dict()``, grouped by type."""
+    from pymavlink import mavutil
+
+    conn = mavutil.mavlink_connection(str(path))
+    out: dict[str, list[dict]] = defaultdict(list)
+    while True:
+        m = conn.recv_match(type=types) if types else conn.recv_match()
+        if m is None:
+            break
+        out[m.get_type()].append(m.to_dict())
+    conn.close()
+    return dict(out)
+
+
+def same_value(ours: Any, ref: Any) -> bool:
+    """Equal value and Python type; NaN equals NaN; int16 arrays as lists."""
+    if isinstance(ref, array.array):
+        return list(ours) == list(ref)
+    if isinstance(ref, float) and math.isnan(ref):
+        return isinstance(ours, float) and math.isnan(ours)
+    return type(ours) is type(ref) and ours == ref
+
+
+def assert_matches(log: RawLog, ref: dict[str, list[dict]], types: list[str] | None = None):
+    """Same types (all, or ``types``), counts, fields and values as pymavlink."""
+    if types is None:
+        assert set(log.messages) == set(ref)
+    for name, recs in ref.items():
+        table = log[name]
+        assert len(table) == len(recs), name
+        fields = [f for f in recs[0] if f != "mavpackettype"]
+        assert list(table.fields) == fields, name
+        for f in fields:
+            ours = table[f].tolist()
+            for k, rec in enumerate(recs):
+                assert same_value(ours[k], rec[f]), (name, f, k, ours[k], rec[f])
+
+
+@pytest.fixture(scope="module")
+def sitl_pair():
+    path = shared_path(*SITL)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataQualityWarning)
+        log = read_log(path)
+    return log, pymavlink_records(path, SITL_TYPES)
+
+
+# --------------------------------------------------------------------------- equality
+@pytest.mark.parametrize("path", BIN_LOGS, ids=ids(BIN_LOGS))
+def test_every_value_equals_pymavlink(path):
+    require_shared()
+    ref = pymavlink_records(path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataQualityWarning)
+        log = read_log(path)
+    assert log.autopilot == "ardupilot"
+    assert_matches(log, ref)
+
+
+def test_shared_bin_logs_are_all_covered():
+    require_shared()
+    names = {p.name for p in BIN_LOGS}
+    assert {"test.BIN", "backend_log_80k.bin", "output.BIN", "minimal.bin"} <= names
+
+
+def test_sitl_log_equals_pymavlink_on_attitude_rate_sysid_types(sitl_pair):
+    log, ref = sitl_pair
+    assert set(ref) <= set(SITL_TYPES) and {"ATT", "RATE", "SIDS", "PARM"} <= set(ref)
+    assert_matches(log, ref, types=SITL_TYPES)
+    assert len(ref["RATE"]) > 100_000 and len(ref["SIDS"]) == 4
+
+
+def test_sitl_log_metadata(sitl_pair):
+    log, ref = sitl_pair
+    assert log.firmware == next(r["Message"] for r in ref["MSG"] if r["Message"].startswith(
+        "ArduCopter"))
+    assert log.vehicle is not None and log.vehicle.startswith("copter")
+    last = {}
+    for r in ref["PARM"]:
+        last[r["Name"]] = r["Value"]
+    assert log.params == pytest.approx(last)
+    assert [m.mode for m in log.modes] == [r["ModeNum"] for r in ref["MODE"]]
+    assert [m.name for m in log.modes].count("SYSTEMID") == 4
+    assert [t.text for t in log.texts] == [r["Message"] for r in ref["MSG"]]
+    att = log["ATT"]
+    np.testing.assert_array_equal(att.time_s, att["TimeUS"] * 1e-6)
+    assert log["RATE"].unit("R") == "deg/s" and log["ATT"].unit("Roll") == "deg"
+
+
+def test_selective_load_and_time_window_match_full_decode(sitl_pair):
+    full, _ = sitl_pair
+    path = shared_path(*SITL)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataQualityWarning)
+        sel = read_log(path, messages=["ATT", "RATE", "SIDS", "NOPE"])
+        win = read_log(path, messages=["RATE", "FMT"], start=100.0, stop=110.0)
+    assert set(sel.messages) == {"ATT", "RATE", "SIDS"}
+    for name in sel.messages:
+        for f in full[name].fields:
+            np.testing.assert_array_equal(sel[name][f], full[name][f])
+    assert sel.params == full.params and sel.modes == full.modes
+    t = full["RATE"].time_s
+    keep = (t >= 100.0) & (t <= 110.0)
+    np.testing.assert_array_equal(win["RATE"]["R"], full["RATE"]["R"][keep])
+    assert win["RATE"].time_s.min() >= 100.0 and win["RATE"].time_s.max() <= 110.0
+    with pytest.raises(MissingMessageError, match="NOPE"):
+        sel["NOPE"]
+
+
+# --------------------------------------------------------------------------- broken logs
+def test_minimal_bin_salvages_the_fmt_and_warns_once():
+    path = shared_path("public", "HatemslaH__rust_dataflash_parser", "minimal.bin")
+    with pytest.warns(DataQualityWarning) as rec:
+        log = read_log(path)
+    assert len(rec) == 1
+    msg = str(rec[0].message)
+    assert "36" in msg and "89" in msg and "only format definitions" in msg
+    assert set(log.messages) == {"FMT"} and log.source.skipped_bytes == 36
+
+
+@pytest.mark.parametrize("parts", [("public", "ArduPilot__pymavlink", "test.BIN"),
+                                   ("public", "ArduPilot__MethodicConfigurator",
+                                    "backend_log_80k.bin")])
+def test_cut_logs_warn_once_with_the_cut_offset(parts):
+    path = shared_path(*parts)
+    with pytest.warns(DataQualityWarning) as rec:
+        log = read_log(path)
+    assert len(rec) == 1
+    size = path.stat().st_size
+    cut = log.source.skipped_bytes
+    assert 0 < cut < 100 and f"{size - cut}+{cut}" in str(rec[0].message)
+
+
+@pytest.mark.parametrize("content", [b"", b"\xa3\x95", b"\xa3\x95\x80" + bytes(40),
+                                     os.urandom(3000).replace(b"\xa3", b"\x00")])
+def test_nothing_decodable_is_a_log_format_error_naming_the_file(tmp_path, content):
+    path = tmp_path / "bad.bin"
+    path.write_bytes(content)
+    with pytest.raises(LogFormatError, match=r"bad\.bin"):
+        dataflash.read(path)
+
+
+def test_fmt_only_log_is_empty_with_a_warning(tmp_path):
+    path = tmp_path / "fmt_only.bin"
+    path.write_bytes(build_fmt(0x81, "ATT", "Qf", "TimeUS,Roll")
+                     + build_fmt(0x82, "RATE", "Qf", "TimeUS,R"))
+    with pytest.warns(DataQualityWarning, match="only format definitions"):
+        log = dataflash.read(path)
+    assert set(log.messages) == {"FMT"} and len(log["FMT"]) == 2
+    assert log.duration_s == 0.0
+
+
+# --------------------------------------------------------------------------- synthetic logs
+ALL_TYPES = ("bBhHiIfdnNZ", "cCeELMqQag")  # every format character; FMT holds <= 16
+
+
+def _all_types_log() -> tuple[bytes, list[list[Any]]]:
+    raw = [[-5, 250, -300, 60000, -70000, 4000000000, 1.5, -2.25, "abc", "sixteen chars!!",
+            "text\0junk"],
+           [-12345, 54321, -1234567, 3000000000, -353632123, 7, -(2**40), 2**63 + 5,
+            list(range(-16, 16)), 0.333251953125]]
+    data = b""
+    for k, (chars, values) in enumerate(zip(ALL_TYPES, raw, strict=True)):
+        columns = ",".join(f"F{c}" for c in chars)
+        data += build_fmt(0x81 + k, f"ALL{k}", "Q" + chars, "TimeUS," + columns)
+        data += build_record(0x81 + k, "Q" + chars, 2_000_000, *values)
+    return data, raw
+
+
+def test_every_format_character_is_presented_as_pymavlink_does(tmp_path):
+    data, raw = _all_types_log()
+    path = tmp_path / "all.bin"
+    path.write_bytes(data)
+    ref = pymavlink_records(path)
+    log = dataflash.read(path)
+    assert_matches(log, ref)
+    # and by hand, for what the scaling means
+    row = {f: log["ALL1"][f].tolist()[0] for f in log["ALL1"].fields}
+    assert row["Fc"] == -123.45 and row["FL"] == -353632123 / (1 / 1e-7)
+    assert row["Fa"] == list(range(-16, 16)) and row["Fg"] == raw[1][-1]
+    assert log["ALL0"]["FZ"].tolist() == ["text"]
+    assert log["ALL0"].time_s.tolist() == [2.0]
+
+
+def test_units_and_multipliers_from_fmtu_unit_mult(tmp_path):
+    data = (build_fmt(0x81, "ATT", "QfcB", "TimeUS,Roll,Pitch,I")
+            + build_fmt(0x82, "UNIT", "QbZ", "TimeUS,Id,Label")
+            + build_fmt(0x83, "MULT", "Qbd", "TimeUS,Id,Mult")
+            + build_fmt(0x84, "FMTU", "QBNN", "TimeUS,FmtType,UnitIds,MultIds")
+            + build_record(0x82, "QbZ", 1, ord("d"), "deg")
+            + build_record(0x82, "QbZ", 1, ord("s"), "s")
+            + build_record(0x82, "QbZ", 1, ord("#"), "instance")
+            + build_record(0x83, "Qbd", 1, ord("F"), 1e-6)
+            + build_record(0x83, "Qbd", 1, ord("B"), 0.01)
+            + build_record(0x84, "QBNN", 1, 0x81, "sdd#", "FBB-")
+            + build_record(0x81, "QfcB", 5, 1.0, 100, 0))
+    path = tmp_path / "units.bin"
+    path.write_bytes(data)
+    att = dataflash.read(path)["ATT"]
+    assert dict(att.units) == {"TimeUS": "s", "Roll": "deg", "Pitch": "deg", "I": "instance"}
+    # the multiplier is metadata only; none for Pitch whose format character already scales
+    assert dict(att.multipliers) == {"TimeUS": 1e-6, "Roll": 0.01}
+    assert att["Roll"].tolist() == [1.0] and att["Pitch"].tolist() == [1.0]
+
+
+def test_fmt_redefinition_mid_log_and_time_going_backwards(tmp_path):
+    first = (build_fmt(0x81, "ATT", "Qcc", "TimeUS,Roll,Pitch")
+             + b"".join(build_record(0x81, "Qcc", 10_000_000 + k, k, -k) for k in range(3)))
+    second = (build_fmt(0x81, "ATT", "Qfff", "TimeUS,Roll,Pitch,Yaw")
+              + b"".join(build_record(0x81, "Qfff", 1_000 + k, k, -k, 9) for k in range(2)))
+    path = tmp_path / "concat.bin"
+    path.write_bytes(first + second)
+    with pytest.warns(DataQualityWarning, match="backwards 1 time") as rec:
+        log = dataflash.read(path)
+    assert len(rec) == 1 and any("backwards" in n for n in log.source.notes)
+    att = log["ATT"]
+    assert att["Roll"].tolist() == [0.0, 0.01, 0.02, 0.0, 1.0]
+    assert np.isnan(att["Yaw"][:3]).all() and att["Yaw"][3:].tolist() == [9.0, 9.0]
+    assert att.time_s.tolist() == [10.0, 10.000001, 10.000002, 0.001, 0.001001]
+    assert log.source.skipped_bytes == 0
+
+
+def test_unknown_types_and_garbage_between_records_are_skipped_and_counted(tmp_path):
+    good = [build_record(0x81, "Qh", 1000 * k, k) for k in range(7)]
+    data = (build_fmt(0x81, "X", "Qh", "TimeUS,V") + good[0] + good[1] + b"\x00\xff\xa3"
+            + good[2] + build_record(0x90, "Q", 5) + good[3] + good[4][:7] + good[5]
+            + good[6])
+    path = tmp_path / "messy.bin"
+    path.write_bytes(data)
+    with pytest.warns(DataQualityWarning, match=r"undefined type id\(s\) \[144\]") as rec:
+        log = dataflash.read(path)
+    assert len(rec) == 1
+    assert log["X"]["V"].tolist() == [0, 1, 2, 3, 5, 6]
+    assert log.source.skipped_bytes == 3 + 11 + 7
+
+
+def test_messages_without_time_hold_the_previous_time(tmp_path):
+    data = (build_fmt(0x81, "T", "Q", "TimeUS") + build_fmt(0x82, "P", "Nf", "Name,Value")
+            + build_record(0x82, "Nf", "A", 1.0) + build_record(0x81, "Q", 2_000_000)
+            + build_record(0x82, "Nf", "B", 2.0))
+    path = tmp_path / "hold.bin"
+    path.write_bytes(data)
+    log = dataflash.read(path)
+    t = log["P"].time_s
+    assert np.isnan(t[0]) and t[1] == 2.0
+    assert np.isnan(log["FMT"].time_s).all()
+
+
+# --------------------------------------------------------------------------- properties
+def _decode_quietly(path: Path) -> RawLog | None:
+    """Decode, letting only LogFormatError/DataQualityWarning through (None on the error)."""
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        try:
+            log = dataflash.read(path)
+        except LogFormatError:
+            log = None
+    assert all(issubclass(w.category, DataQualityWarning) for w in rec), [
+        str(w.message) for w in rec]
+    assert len(rec) <= 1
+    return log
+
+
+def _same_column(a: np.ndarray, b: np.ndarray) -> bool:
+    if a.dtype.kind == "f":
+        return np.array_equal(a, b, equal_nan=True)
+    return a.shape == b.shape and bool(np.all(a == b))
+
+
+def _assert_prefix(part: RawLog | None, full: RawLog) -> None:
+    if part is None:
+        return
+    assert set(part.messages) <= set(full.messages)
+    for name, table in part.messages.items():
+        n = len(table)
+        assert n <= len(full[name])
+        for f in table.fields:
+            assert _same_column(table[f], full[name][f][:n]), (name, f, n)
+
+
+class _Small(tuple):
+    """(bytes, full decode, record offsets, temp dir), with a short repr for hypothesis."""
+
+    def __repr__(self) -> str:
+        return "small_log"
+
+
+@pytest.fixture(scope="module")
+def small_log(tmp_path_factory):
+    path = shared_path(*SMALL)
+    data = path.read_bytes()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataQualityWarning)
+        full = dataflash.read(path)
+    from pymavlink import DFReader
+
+    reader = DFReader.DFReader_binary(str(path))
+    offsets = sorted(o for lst in reader.offsets for o in lst)
+    reader.close()
+    return _Small((data, full, offsets, tmp_path_factory.mktemp("cut")))
+
+
+def test_truncation_at_every_byte_of_the_first_and_last_kilobyte(small_log):
+    data, full, _, tmp = small_log
+    n = len(data)
+    rng = random.Random(5)
+    cuts = [*range(1, 1025), *range(n - 1024, n), *rng.sample(range(1025, n - 1024), 100)]
+    path = tmp / "cut.bin"
+    salvaged = 0
+    for cut in cuts:
+        path.write_bytes(data[:cut])
+        part = _decode_quietly(path)
+        _assert_prefix(part, full)
+        salvaged += part is not None
+    assert salvaged > len(cuts) * 0.9
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=list(HealthCheck))
+@given(data=st.data())
+def test_garbage_between_records_loses_no_intact_record(small_log, data):
+    raw, full, offsets, tmp = small_log
+    boundaries = [o for o in offsets if 89 * 3 <= o < len(raw) - 24]  # after the first FMTs
+    where = sorted(data.draw(st.lists(st.sampled_from(boundaries), min_size=1, max_size=3,
+                                      unique=True)))
+    junk = [data.draw(st.binary(min_size=1, max_size=120)) for _ in where]
+    pieces, last = [], 0
+    for w, j in zip(where, junk, strict=True):
+        pieces += [raw[last:w], j]
+        last = w
+    pieces.append(raw[last:])
+    path = tmp / "junk.bin"
+    path.write_bytes(b"".join(pieces))
+    log = _decode_quietly(path)
+    assert log is not None
+    assert set(log.messages) == set(full.messages)
+    for name, table in full.messages.items():
+        assert len(log[name]) == len(table), name
+        for f in table.fields:
+            assert _same_column(log[name][f], table[f]), (name, f)
+    assert log.source.skipped_bytes == full.source.skipped_bytes + sum(map(len, junk))
+
+
+def test_a_partial_record_inserted_as_garbage_does_not_swallow_the_next(small_log):
+    raw, full, offsets, tmp = small_log
+    k = offsets[len(offsets) // 2]
+    nxt = offsets[len(offsets) // 2 + 1]
+    partial = raw[k : k + (nxt - k) // 2]  # the first half of a real record
+    path = tmp / "partial.bin"
+    path.write_bytes(raw[:nxt] + partial + raw[nxt:])
+    log = _decode_quietly(path)
+    assert log is not None
+    assert sum(map(len, log.messages.values())) == sum(map(len, full.messages.values()))
+
+
+def test_shared_folder_layout():
+    require_shared()
+    assert (LOGS / "sitl").is_dir()

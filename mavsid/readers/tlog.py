@@ -253,7 +253,8 @@ def _windows(buf: NDArray[np.uint8], at: NDArray[np.int64], width: int) -> NDArr
 def _scan(buf: NDArray[np.uint8], size: int, defs: dict[int, MessageDef]) -> _Frames:
     """Find every valid record in ``buf[:size]`` (``buf`` is zero-padded beyond ``size``)."""
     magic = buf[_PREFIX:size]
-    s = np.flatnonzero((magic == _MAGIC_V1) | (magic == _MAGIC_V2)).astype(np.int64)
+    s = np.flatnonzero(magic >= _MAGIC_V2)  # 0xFD, 0xFE (or 0xFF, dropped next)
+    s = s[magic[s] != 0xFF].astype(np.int64)
     head = _windows(buf, s + _PREFIX, 10)
     v2 = head[:, 0] == _MAGIC_V2
     mlen = head[:, 1].astype(np.int64)
@@ -275,11 +276,14 @@ def _scan(buf: NDArray[np.uint8], size: int, defs: dict[int, MessageDef]) -> _Fr
     # CRC first of the candidates that chain into another candidate (or the file's end),
     # then of the others that do not lie inside a frame found valid by then
     plausible = well_formed & known
-    chained = (end == size) | _member(end, s)
+    is_start = np.zeros(buf.size, dtype=bool)
+    is_start[s] = True
+    chained = (end == size) | is_start[np.minimum(end, buf.size - 1)]
     crc_extra = extras[pos]
     ok = np.zeros(s.size, dtype=bool)
     ok[plausible & chained] = _crc_ok(buf, s, hdr, mlen, crc_extra, plausible & chained)
-    rest = plausible & ~chained & ~_inside(s, s[ok], end[ok])
+    rest = np.flatnonzero(plausible & ~chained)
+    rest = rest[~_inside(s[rest], s[ok], end[ok])]
     ok[rest] = _crc_ok(buf, s, hdr, mlen, crc_extra, rest)
     cand = np.flatnonzero(ok)
     valid = cand[_resolve_overlaps(s[cand], end[cand], size)]
@@ -311,24 +315,30 @@ def _crc_ok(
     hdr: NDArray[np.int64],
     mlen: NDArray[np.int64],
     crc_extra: NDArray[np.uint8],
-    pick: NDArray[np.bool_],
+    pick: NDArray[np.bool_] | NDArray[np.int64],
 ) -> NDArray[np.bool_]:
-    """Whether the picked candidates' CRC (after the magic byte to the payload's end, then
-    CRC_EXTRA) matches the two bytes after the payload; grouped by CRC length."""
-    check = np.flatnonzero(pick)
+    """Whether the picked candidates' (mask or indices) CRC, from after the magic byte to
+    the payload's end then CRC_EXTRA, matches the two bytes after the payload; computed in
+    groups of equal length."""
+    check = np.flatnonzero(pick) if pick.dtype == bool else pick
     crc_len = (hdr - 1 + mlen)[check]
-    order = np.argsort(crc_len, kind="stable")
+    order = np.argsort(crc_len.astype(np.uint16), kind="stable")  # radix sort
     counts = np.bincount(crc_len)
     ok = np.zeros(check.size, dtype=bool)
     for width, part in enumerate(np.split(order, np.cumsum(counts)[:-1])):
         if not part.size:
             continue
-        rows = check[part]
-        body = s[rows] + _PREFIX + 1
-        got = _x25(_windows(buf, body, width), crc_extra[rows])
-        tail = _windows(buf, body + width, 2).astype(np.uint16)
-        ok[part] = got == (tail[:, 0] | (tail[:, 1] << 8))
+        for lo in range(0, part.size, _CRC_CHUNK):  # chunks small enough to stay in cache
+            sub = part[lo : lo + _CRC_CHUNK]
+            rows = check[sub]
+            body = s[rows] + _PREFIX + 1
+            got = _x25(_windows(buf, body, width), crc_extra[rows])
+            tail = _windows(buf, body + width, 2).astype(np.uint16)
+            ok[sub] = got == (tail[:, 0] | (tail[:, 1] << 8))
     return ok
+
+
+_CRC_CHUNK = 32768
 
 
 def _member(x: NDArray[np.int64], ordered: NDArray[np.int64]) -> NDArray[np.bool_]:
@@ -601,7 +611,8 @@ def _groups(keys: NDArray[np.int64]) -> dict[int, NDArray[np.int64]]:
     """key -> indices of ``keys`` equal to it, in their original order."""
     if not keys.size:
         return {}
-    order = np.argsort(keys, kind="stable")
+    small = 0 <= keys.min() and keys.max() < 2**16  # then a radix sort
+    order = np.argsort(keys.astype(np.uint16) if small else keys, kind="stable")
     ordered = keys[order]
     cut = np.flatnonzero(ordered[1:] != ordered[:-1]) + 1
     firsts = np.concatenate([[0], cut])

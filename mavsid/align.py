@@ -59,11 +59,11 @@ from mavsid.channels import (
     motor_thrusts,
     preset_messages,
 )
-from mavsid.data import FlightData, RawLog
+from mavsid.data import FlightData, MessageTable, RawLog
 from mavsid.errors import ConfigError, DataQualityWarning, MavsidError, NoExcitationError
 from mavsid.readers import read_log, sniff_format
 
-__all__ = ["FLAG_MESSAGES", "align", "load_flight", "sysid_runs"]
+__all__ = ["FLAG_MESSAGES", "align", "flight_table", "load_flight", "sysid_runs"]
 
 #: a channel pausing longer than this many of its own median sample intervals is a gap
 MAX_GAP_SAMPLES = 4.0
@@ -588,3 +588,40 @@ def load_flight(
     wanted = preset_messages(fmt, extra) if not chosen else chosen[0].messages
     raw = read_log(path, messages=[*wanted, *FLAG_MESSAGES.get(fmt, ())])
     return align(raw, preset, rate_hz, presets=presets, mixers=mixers)
+
+
+def flight_table(flight: FlightData, start: float | None = None, stop: float | None = None
+                 ) -> MessageTable:
+    """FlightData as one table ``FlightData`` (for ``mavsid extract --aligned``).
+
+    Columns: every state and input (SI units), the flags ``armed``, ``airborne``, ``mode``
+    and ``block`` (index of the contiguous block); rows with ``start <= time_s <= stop``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mavsid.data import SourceInfo
+    >>> fd = FlightData(np.array([0.0, 0.1]), np.zeros((2, 1)), np.ones((2, 1)), ("p",),
+    ...                 ("u_roll",), ("rad/s",), ("1",), 0.1, np.array([[0, 2]]),
+    ...                 {"armed": np.ones(2, bool)}, SourceInfo("x", "tlog", 0), "t")
+    >>> tab = flight_table(fd)
+    >>> tab.fields, tab.unit("p")
+    (('p', 'u_roll', 'armed', 'block'), 'rad/s')
+    """
+    t = flight.time_s
+    keep = np.ones(t.size, dtype=bool)
+    if start is not None:
+        keep &= t >= start
+    if stop is not None:
+        keep &= t <= stop
+    cols: dict[str, np.ndarray] = {}
+    units: dict[str, str] = {}
+    for j, (name, unit) in enumerate(zip(flight.state_names, flight.state_units, strict=True)):
+        cols[name], units[name] = flight.states[keep, j], unit
+    for j, (name, unit) in enumerate(zip(flight.input_names, flight.input_units, strict=True)):
+        cols[name], units[name] = flight.inputs[keep, j], unit
+    for name, flag in flight.flags.items():
+        cols[name] = np.asarray(flag)[keep]
+    block = np.repeat(np.arange(len(flight.blocks)), flight.blocks[:, 1] - flight.blocks[:, 0])
+    cols["block"] = block[keep]
+    return MessageTable("FlightData", cols, time_s=t[keep], units=units)

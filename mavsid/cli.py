@@ -72,6 +72,8 @@ def _add_extract(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--start", type=float, help="first time to keep, s (log clock)")
     p.add_argument("--stop", type=float, help="last time to keep, s (log clock)")
     p.add_argument("-o", "--output", required=True, help="OUT.npz, OUT.parquet or OUT.csv")
+    p.add_argument("--aligned", action="store_true",
+                   help="write the aligned FlightData (states, inputs, flags on one grid)")
     p.set_defaults(handler=_extract)
 
 
@@ -80,6 +82,16 @@ def _extract(args: argparse.Namespace) -> int:
     from mavsid.readers import read_log
 
     names = [m.strip() for m in args.messages.split(",") if m.strip()] if args.messages else None
+    if args.aligned:
+        from mavsid.align import flight_table, load_flight
+        from mavsid.data import RawLog
+
+        flight = load_flight(args.log)
+        table = flight_table(flight, args.start, args.stop)
+        out = write(RawLog(flight.source, {"FlightData": table}), args.output, ["FlightData"])
+        print(f"wrote {out} (FlightData: {len(table)} samples at {1 / flight.dt:.0f} Hz, "
+              f"preset {flight.preset})")
+        return 0
     log = read_log(args.log, messages=names, start=args.start, stop=args.stop)
     out = write(log, args.output, names)
     n = len(names) if names is not None else len(log.messages)

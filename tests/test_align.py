@@ -138,24 +138,46 @@ def test_no_overlap_is_a_typed_error():
 # --------------------------------------------------------------------------- references
 
 
-def test_dataflash_values_match_pymavlink():
+@pytest.fixture(scope="module")
+def doublets_rate():
+    """pymavlink's RATE records of the simulated doublets log: (time_s, R deg/s, ROut)."""
     from pymavlink import mavutil
 
     path = FIXTURES / "doublets.bin"
     if not path.exists():
         pytest.skip("fixtures/doublets.bin not generated")
-    fd = load_flight(path)
     m = mavutil.mavlink_connection(str(path))
     rows = []
     while (msg := m.recv_match(type="RATE")) is not None:
         rows.append((msg.TimeUS * 1e-6, msg.R, msg.ROut))
     m.close()
-    ref = np.array(rows)
+    return path, np.array(rows)
+
+
+def test_dataflash_values_match_pymavlink(doublets_rate):
+    path, ref = doublets_rate
+    fd = load_flight(path)
     p = fd.states[:, fd.state_names.index("p")]
     assert np.allclose(p, np.interp(fd.time_s, ref[:, 0], np.radians(ref[:, 1])), atol=1e-6)
     # zero-order hold: the ROut of the latest RATE record at or before each grid time
     k = np.searchsorted(ref[:, 0], fd.time_s + 1e-6 * fd.dt, side="right") - 1
     assert np.allclose(fd.inputs[:, fd.input_names.index("u_roll")], ref[k, 2], atol=1e-7)
+
+
+def test_extract_aligned_writes_flightdata(doublets_rate, tmp_path, capsys):
+    import pandas as pd
+
+    from mavsid.cli import main
+
+    path, ref = doublets_rate
+    out = tmp_path / "fd.parquet"
+    assert main(["extract", str(path), "--aligned", "--start", "35", "--stop", "40",
+                 "-o", str(out)]) == 0
+    assert "FlightData" in capsys.readouterr().out
+    d = pd.read_parquet(out)
+    assert {"time_s", "roll", "p", "u_roll", "armed", "airborne", "mode", "block"} <= set(d)
+    assert d.time_s.min() >= 35 and d.time_s.max() <= 40 and len(d) > 1900
+    assert np.allclose(d.p, np.interp(d.time_s, ref[:, 0], np.radians(ref[:, 1])), atol=1e-6)
 
 
 def test_px4_attitude_and_rates_match_pyulog():

@@ -402,6 +402,58 @@ def test_noisy_rates_obey_the_plant_within_noise(short, short_bin):
     assert len(rate["R"]) == len(fl)
 
 
+def _corr(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.corrcoef(a, b)[0, 1])
+
+
+@pytest.mark.parametrize("sid_axis", [1, 2, 3, 4, 7, 8, 9, 10, 11, 12, 13])
+def test_injection_points(sid_axis):
+    """SID_AXIS puts the waveform where ArduPilot does: angle target (deg), rate target
+    (deg/s), mixer input (0-1) or throttle; nowhere else."""
+    s = SysIdSettings(axis=sid_axis, magnitude=0.05 if sid_axis >= 10 else 5.0,
+                      f_start_hz=1.0, f_stop_hz=5.0, t_fade_in=0.5, t_rec=4.0, t_fade_out=0.5)
+    fl = fly(Scenario(sysid=(s,), hover_before_s=0.2, hover_after_s=0.2, seed=1,
+                      plant=PlantParams().scaled_noise(0.0)))
+    on = fl.mode == MODE_SYSTEMID
+    targ = fl.sid_targ[on]
+    ax = (sid_axis - 1) % 3
+    if sid_axis == 13:
+        np.testing.assert_allclose(fl.throttle[on], fl.scenario.plant.hover_throttle + targ)
+        return
+    if sid_axis in (1, 2, 3, 4):  # desired angle (deg), for yaw the desired rate (deg/s)
+        np.testing.assert_allclose(np.degrees(fl.desired[on, ax]), targ, atol=1e-12)
+    elif sid_axis in (7, 8, 9):  # added to the rate target (deg/s)
+        assert _corr(np.degrees(fl.rate_target[on, ax]), targ) > 0.8
+    else:  # added to the rate controller's output
+        np.testing.assert_allclose(fl.u[on, ax] - fl.pid_out[on, ax], targ, atol=1e-12)
+    if sid_axis in (1, 2, 4):  # the shaped angle target follows it (ATC_INPUT_TC)
+        assert _corr(np.degrees(fl.attitude_target[on, ax]), targ) > 0.5
+    others = [j for j in range(3) if j != ax]
+    for j in others:  # no cross coupling in the default plant: other axes stay quiet
+        assert np.abs(np.degrees(fl.rate_true[on, j])).max() < 0.05
+    assert np.abs(np.degrees(fl.rate_true[on, ax])).max() > 1.0
+
+
+def test_cross_coupling_moves_the_other_axis():
+    coupling = ((0.0, 0.0, 0.0), (20.0, 0.0, 0.0), (0.0, 0.0, 0.0))  # roll input -> pitch
+    plant = replace(PlantParams().scaled_noise(0.0), coupling=coupling)
+    s = replace(SHORT_SID, t_rec=3.0, f_start_hz=2.0)
+    fl = fly(Scenario(sysid=(s,), plant=plant, hover_before_s=0.2, hover_after_s=0.2))
+    q = fl.rate_true[:, 1]
+    assert np.abs(q).max() > 0.002
+    # pitch rate obeys q' = -d q + b m_pitch + c m_roll: re-simulate from the realised inputs
+    assert _corr(q, signal.lfilter(*_first_order(plant, 0), fl.u_eff[:, 0])) > 0.5
+    truth = fl.truth()
+    assert truth["axes"]["pitch"]["coupling"] == {"roll": 20.0}
+
+
+def _first_order(p: PlantParams, axis: int) -> tuple[np.ndarray, np.ndarray]:
+    """ZOH-discretised lag + first-order rate response at the loop rate (no delay)."""
+    num, den = [1.0], np.polymul([p.motor_tau_s, 1.0], [1.0, p.damping[axis]])
+    bz, az, _ = signal.cont2discrete((num, den), DT, method="zoh")
+    return np.ravel(bz), az
+
+
 def test_gyro_filter_is_butterworth():
     from mavsid.synthetic.plant import lowpass2p_coefficients
 

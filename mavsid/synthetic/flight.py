@@ -149,7 +149,10 @@ class Flight:
     t_s : (n,) time since boot (s).
     rate_true, gyro_raw, gyro : (n, 3) true, measured and filtered body rates (rad/s).
     attitude, attitude_target : (n, 3) roll, pitch, yaw (rad).
+    desired : (n, 3) desired roll, pitch angle (rad) and yaw rate (rad/s) before input shaping:
+    pilot sticks plus any SYSTEMID angle injection.
     rate_target : (n, 3) rate-controller targets (rad/s).
+    pid_out : (n, 3) rate-PID outputs, before any SYSTEMID mixer injection.
     u : (n, 3) mixer inputs (RATE.ROut/POut/YOut). u_eff : what the motors realised.
     throttle : (n,) collective (0-1). motors : (n, 4) motor demands (0-1). pwm : (n, 4) (µs).
     accel : (n, 3) specific force (m/s²). sticks : (n, 4) roll, pitch, throttle, yaw (-1..1;
@@ -167,7 +170,9 @@ class Flight:
     gyro: np.ndarray
     attitude: np.ndarray
     attitude_target: np.ndarray
+    desired: np.ndarray
     rate_target: np.ndarray
+    pid_out: np.ndarray
     u: np.ndarray
     u_eff: np.ndarray
     throttle: np.ndarray
@@ -208,7 +213,11 @@ class Flight:
         p["MOT_PWM_MIN"], p["MOT_PWM_MAX"] = 1000.0, 2000.0
         p["MOT_SPIN_MIN"], p["MOT_SPIN_MAX"] = 0.15, 0.95
         p["FRAME_CLASS"], p["FRAME_TYPE"] = 1.0, 1.0
-        p["LOG_BITMASK"] = 180222.0 if sc.rates.rate >= sc.controller.loop_hz else 176126.0
+        # RCIN, IMU, RCOU bits plus ATTITUDE_FAST/MED as SYSTEMID's logging rate implies:
+        # both -> every loop, FAST -> every 2nd, MED -> every 4th, neither -> every 8th
+        every_k = sc.rates.step("rate", sc.controller.loop_hz)
+        att_bits = {1: 3, 2: 1, 4: 2}.get(every_k, 0)
+        p["LOG_BITMASK"] = float(64 | 128 | 1024 | att_bits)
         p["FLTMODE1"] = float(MODE_STABILIZE)
         p["FLTMODE6"] = float(MODE_SYSTEMID)
         runs = sc.runs
@@ -379,7 +388,8 @@ def fly(sc: Scenario) -> Flight:
     att_tgt = np.zeros(3)
     yaw_rate_tgt = 0.0
     out = {k: np.zeros((n, 3)) for k in ("rate_true", "gyro_raw", "gyro", "attitude",
-                                          "attitude_target", "rate_target", "u", "u_eff")}
+                                          "attitude_target", "desired", "rate_target", "pid_out",
+                                          "u", "u_eff")}
     throttle = np.zeros(n)
     motors = np.zeros((n, 4))
     u_hist = np.zeros((disc.delay_steps + 2, 3))  # u_eff[k-n-1 .. k]
@@ -412,6 +422,8 @@ def fly(sc: Scenario) -> Flight:
         if kind == "rate" and ax_i < 3:
             rt[ax_i] += np.radians(sig)
         u = np.array([pids[j].update(float(rt[j]), float(g[j])) for j in range(3)])
+        out["pid_out"][k] = u
+        out["desired"][k] = (want[0], want[1], want_yaw_rate)
         thr = pl.hover_throttle
         if kind == "mixer":
             if ax_i < 3:

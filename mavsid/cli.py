@@ -17,16 +17,20 @@ import sys
 import traceback
 import warnings
 from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any
 
 from mavsid import __version__
 from mavsid.errors import MavsidError, MavsidWarning
+
+if TYPE_CHECKING:
+    from mavsid.pipeline import FitResult, PipelineConfig
 
 __all__ = ["build_parser", "main"]
 
 Handler = Callable[[argparse.Namespace], int]
 
 
-def _show_warning(message, category, filename, lineno, file=None, line=None):  # type: ignore[no-untyped-def]
+def _show_warning(message, category, filename, lineno, file=None, line=None):
     """Print mavsid's warnings as one plain line, others as Python would."""
     if issubclass(category, MavsidWarning):
         print(f"warning: {message}", file=sys.stderr)
@@ -43,7 +47,7 @@ _default_showwarning = warnings.showwarning
 # ``mavsid --help`` stays fast.
 
 
-SUBCOMMANDS: list[Callable[[argparse._SubParsersAction], None]] = []  # type: ignore[type-arg]
+SUBCOMMANDS: list[Callable[[argparse._SubParsersAction], None]] = []
 
 
 def _add_info(sub: argparse._SubParsersAction) -> None:
@@ -206,6 +210,151 @@ def _simulate(args: argparse.Namespace) -> int:
 
 
 SUBCOMMANDS.append(_add_simulate)
+
+
+def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
+    """The pipeline config from ``--config`` with the command line's overrides."""
+    from mavsid.pipeline import PipelineConfig, load_config
+
+    cfg = load_config(args.config) if args.config else PipelineConfig()
+    axes = tuple(dict.fromkeys(args.axis)) if args.axis else None
+    return cfg.with_overrides(axes=axes, estimator=getattr(args, "estimator", None))
+
+
+def _write_outputs(args: argparse.Namespace, result: FitResult) -> None:
+    if args.rrd:
+        from mavsid.viz import save_rrd
+
+        save_rrd(result, args.rrd)
+    if args.report:
+        from mavsid.report import write_report
+
+        write_report(result, args.report)
+
+
+def _print_result(args: argparse.Namespace, result: FitResult) -> None:
+    import json
+
+    from mavsid.pipeline import format_result
+
+    if args.json:
+        print(json.dumps(result.to_dict(), indent=1, ensure_ascii=False, allow_nan=False))
+    else:
+        print(format_result(result))
+        for flag, path in (("rrd", args.rrd), ("report", args.report)):
+            if path:
+                print(f"wrote {path}" + (f" (open it with: rerun {path})" if flag == "rrd" else ""))
+
+
+def _add_output_flags(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--axis", action="append", choices=("roll", "pitch", "yaw"),
+                   help="axis to fit (repeat for several; default all with excitation)")
+    p.add_argument("--config", metavar="FILE.toml", help="pipeline settings (see pipelines/)")
+    p.add_argument("--rrd", metavar="OUT.rrd", help="write a rerun recording")
+    p.add_argument("--report", metavar="OUT.html", help="write a self-contained HTML report")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+
+
+def _add_fit(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "fit", help="log(s) -> validated attitude-dynamics model per axis",
+        description="Read, align, find excited segments, fit per axis on alternate blocks "
+        "and validate on the held-out ones (one-step, 0.5 s and free-run fit %%).",
+    )
+    p.add_argument("logs", nargs="+", metavar="LOG", help="flight log(s) (.bin .log .tlog .ulg)")
+    p.add_argument("--estimator", choices=("ls", "ridge", "l1"), help="regression (default ls)")
+    p.add_argument("-o", "--output", metavar="model.json", help="write the fitted models")
+    _add_output_flags(p)
+    p.set_defaults(handler=_fit)
+
+
+def _fit(args: argparse.Namespace) -> int:
+    import json
+
+    from mavsid.pipeline import fit
+
+    result = fit(args.logs, _pipeline_config(args))
+    if args.output:
+        with open(args.output, "w", encoding="utf-8") as f:
+            json.dump(result.models_dict(), f, indent=1)
+    _write_outputs(args, result)
+    _print_result(args, result)
+    if args.output and not args.json:
+        print(f"wrote {args.output}")
+    return 0
+
+
+def _add_validate(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "validate", help="apply saved models to another flight (all its segments held out)"
+    )
+    p.add_argument("model", metavar="MODEL", help="model.json written by mavsid fit -o")
+    p.add_argument("logs", nargs="+", metavar="LOG", help="flight log(s) to validate on")
+    _add_output_flags(p)
+    p.set_defaults(handler=_validate)
+
+
+def _validate(args: argparse.Namespace) -> int:
+    from mavsid.pipeline import load_models, validate_logs
+
+    result = validate_logs(load_models(args.model), args.logs, _pipeline_config(args))
+    _write_outputs(args, result)
+    _print_result(args, result)
+    return 0
+
+
+def _add_view(sub: argparse._SubParsersAction) -> None:
+    import rerun as rr
+
+    p = sub.add_parser(
+        "view", help="show a log (and a model's predictions) in the rerun viewer",
+        description="Log the flight, its segments and, with --model, the model's one-step and "
+        "free-run predictions to rerun. A served viewer (--serve) listens on 127.0.0.1 "
+        "unless --bind says otherwise.",
+    )
+    p.add_argument("log", metavar="LOG", help="flight log (.bin .log .tlog .ulg)")
+    p.add_argument("--model", metavar="model.json", help="models written by mavsid fit -o")
+    p.add_argument("--config", metavar="FILE.toml", help="pipeline settings (see pipelines/)")
+    p.add_argument("--axis", action="append", choices=("roll", "pitch", "yaw"),
+                   help="axis to show (repeat for several)")
+    rr.script_add_args(p)
+    p.add_argument("--spawn", action="store_true", help="spawn a native viewer (the default)")
+    p.add_argument("--bind", default="127.0.0.1",
+                   help="address a served viewer listens on (default 127.0.0.1)")
+    p.set_defaults(handler=_view)
+
+
+def _view(args: argparse.Namespace) -> int:
+    import rerun as rr
+
+    from mavsid import viz
+    from mavsid.pipeline import find_windows, load_models, validate_logs
+
+    cfg = _pipeline_config(args)
+    rec = viz.new_recording()
+    if args.model:
+        result = validate_logs(load_models(args.model), [args.log], cfg)
+        uri = viz.open_sink(rec, viz.blueprint(list(result.axes)), **_sink_args(args))
+        viz.log_fit_result(rec, result)
+    else:
+        flight, windows = find_windows(args.log, cfg)
+        uri = viz.open_sink(rec, viz.blueprint([], with_flight=True), **_sink_args(args))
+        viz.log_flight_windows(rec, flight, windows)
+    rec.flush()
+    if uri:
+        print(f"serving {uri} (Ctrl-C to stop)")
+    rr.script_teardown(args)
+    if args.save:
+        print(f"wrote {args.save}")
+    return 0
+
+
+def _sink_args(args: argparse.Namespace) -> dict[str, Any]:
+    return {"save": args.save, "serve": args.serve, "connect": args.connect, "url": args.url,
+            "stdout": args.stdout, "headless": args.headless, "bind": args.bind}
+
+
+SUBCOMMANDS.extend([_add_fit, _add_validate, _add_view])
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -14,6 +14,7 @@ TOML configuration (every key optional)::
     [pipeline]
     name = "ArduCopter SYSTEMID rate loop"
     preset = "ardupilot-rate"    # channel preset (mavsid.channels); default from the log
+    presets_file = "my.toml"     # extra presets/mixers (relative to this file)
     rate_hz = 400.0              # alignment grid; default the body-rate channel's rate
     axes = ["roll", "pitch", "yaw"]
     estimator = "ls"             # ls | ridge | l1
@@ -68,8 +69,11 @@ __all__ = [
     "FitResult",
     "PipelineConfig",
     "config_from_dict",
+    "find_windows",
     "fit",
+    "format_result",
     "load_config",
+    "load_models",
     "split_segments",
     "validate_logs",
 ]
@@ -211,8 +215,9 @@ def _checked(v: dict[str, Any]) -> PipelineConfig:
 def load_config(path: str | os.PathLike[str]) -> PipelineConfig:
     """Read a pipeline TOML file.
 
-    The file may also define channel presets and mixers (``[preset.NAME]``,
-    ``[mixer.NAME]``, see :mod:`mavsid.channels`); they are tried before the built-in ones.
+    ``pipeline.presets_file`` may name a TOML file of channel presets and mixers
+    (:func:`mavsid.channels.load_presets`; a relative path is taken from the config's
+    folder); they are tried before the built-in ones.
 
     Raises
     ------
@@ -222,10 +227,13 @@ def load_config(path: str | os.PathLike[str]) -> PipelineConfig:
     from mavsid.channels import _read_toml, load_presets
 
     data = _read_toml(path)
-    own = {k: v for k, v in data.items() if k not in ("preset", "mixer")}
-    cfg = config_from_dict(own, path=os.fspath(path))
-    if "preset" in data or "mixer" in data:
-        presets, mixers = load_presets(path)
+    section = data.get("pipeline")
+    extra = section.pop("presets_file", None) if isinstance(section, dict) else None
+    cfg = config_from_dict(data, path=os.fspath(path))
+    if extra is not None:
+        if not isinstance(extra, str):
+            raise ConfigError(f"{path}: pipeline.presets_file: {extra!r} is not a path")
+        presets, mixers = load_presets(os.path.join(os.path.dirname(os.fspath(path)), extra))
         cfg = dataclasses.replace(cfg, presets=presets, mixers=mixers)
     return cfg
 
@@ -326,6 +334,9 @@ class AxisFit:
             {
                 "output": self.output,
                 "estimator": self.estimator,
+                "dt_s": round(v.dt, 9),
+                "delay_samples": int(getattr(self.model, "delay", 0)),
+                "delay_s": round(int(getattr(self.model, "delay", 0)) * v.dt, 9),
                 "params": dict(self.model.params),
                 "stderr": dict(stderr),
                 "units": dict(units),
@@ -529,8 +540,17 @@ def validate_logs(
     logs: Sequence[str | os.PathLike[str]],
     config: PipelineConfig | None = None,
 ) -> FitResult:
-    """Validate saved models on other flights: every segment found is held out."""
+    """Validate saved models on other flights: every segment found is held out.
+
+    Unless the config fixes ``rate_hz``, the flights are aligned at the models' own rate
+    (a discrete-time model predicts only at the step it was fitted at).
+    """
     cfg = config or PipelineConfig()
+    if cfg.rate_hz is None and models:
+        rates = {round(1.0 / m.dt, 6) for m in models.values()}
+        if len(rates) > 1:
+            raise ConfigError(f"models of different rates ({sorted(rates)} Hz) in one file")
+        cfg = dataclasses.replace(cfg, rate_hz=rates.pop())
     flights = tuple(_read_flight(p, cfg) for p in logs)
     fits: dict[str, AxisFit] = {}
     problems: list[str] = []
@@ -553,9 +573,65 @@ def validate_logs(
         except NoExcitationError as exc:
             problems.append(f"{axis}: {exc}")
             continue
-        estimator = str(getattr(model, "estimator", ""))
+        estimator = str(dict(getattr(model, "provenance", {}) or {}).get("estimator", ""))
         fits[axis] = AxisFit(axis, model, val, (), segs, estimator, windows)
     if not fits:
         names = ", ".join(os.fspath(p) for p in logs)
         raise NoExcitationError(f"{names}: no segment to validate on ({'; '.join(problems)})")
     return FitResult(fits, flights, tuple(os.fspath(p) for p in logs), cfg)
+
+
+def find_windows(
+    log: str | os.PathLike[str], config: PipelineConfig | None = None
+) -> tuple[FlightData, dict[str, list[WindowReport]]]:
+    """Read and align one log and find its windows per axis (for viewing without a model)."""
+    cfg = config or PipelineConfig()
+    flight = _read_flight(log, cfg)
+    return flight, {axis: _windows(flight, axis, cfg) for axis in cfg.axes}
+
+
+def _pm(value: float, sigma: float | None) -> str:
+    text = f"{value:.6g}" if math.isfinite(value) else "nan"
+    if sigma is not None and math.isfinite(sigma):
+        text += f" ± {sigma:.2g}"
+    return text
+
+
+def format_result(result: FitResult) -> str:
+    """The compact per-axis table ``mavsid fit`` prints: parameters ± σ, fit % on held-out
+    data at one step, 0.5 s and free run.
+
+    Examples
+    --------
+    >>> print(format_result(FitResult({}, (), ("x.bin",))))
+    x.bin: no axis fitted
+    """
+    logs = ", ".join(result.logs)
+    if not result.axes:
+        return f"{logs}: no axis fitted"
+    lines = [f"{logs}: {len(result.axes)} axis model(s), fit % on held-out segments"]
+    for axis, f in result.axes.items():
+        d = f.to_dict()
+        train_s = sum(s.stop_s - s.start_s for s in f.train)
+        val_s = sum(s.stop_s - s.start_s for s in f.held_out)
+        stable = {True: "stable", False: "UNSTABLE", None: "stability n/a"}[f.validation.stable]
+        lines.append(
+            f"{axis} ({f.output}; {f.estimator or 'model'}; {1 / f.validation.dt:.0f} Hz, "
+            f"delay {d['delay_s'] * 1e3:.1f} ms; train {len(f.train)} seg "
+            f"{train_s:.1f} s, validation {len(f.held_out)} seg {val_s:.1f} s; {stable})"
+        )
+        width = max((len(k) for k in d["params"]), default=0)
+        for name, value in d["params"].items():
+            sigma = d["stderr"].get(name)
+            unit = d["units"].get(name, "")
+            lines.append(
+                f"  {name:<{width}}  {_pm(np.nan if value is None else value, sigma)} {unit}"
+                .rstrip()
+            )
+        fp = d["fit_percent"]
+        cells = "  ".join(
+            f"{k.replace('_', '-')} {'n/a' if fp[k] is None else format(fp[k], '.1f')}"
+            for k in fp
+        )
+        lines.append(f"  fit %  {cells}")
+    return "\n".join(lines)

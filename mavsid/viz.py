@@ -30,7 +30,7 @@ whole :class:`~mavsid.pipeline.FitResult` to an ``.rrd`` file.
 from __future__ import annotations
 
 import os
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -52,10 +52,12 @@ __all__ = [
     "log_attitude",
     "log_fit_result",
     "log_flight",
+    "log_flight_windows",
     "log_segments",
     "log_summary",
     "log_validation",
     "new_recording",
+    "open_sink",
     "save_rrd",
 ]
 
@@ -230,12 +232,13 @@ def log_segments(
             )
             rows.append((seg.stop_s, f"{axis} {role} segment ends", "DEBUG"))
     for w in windows:
+        why = "; ".join(w.reasons)
+        span = f"{axis} {w.source} window {w.start_s:.2f}-{w.stop_s:.2f} s"
         if not w.kept:
-            why = "; ".join(w.reasons)
-            rows.append(
-                (w.start_s, f"{axis} {w.source} window {w.start_s:.2f}-{w.stop_s:.2f} s "
-                 f"rejected: {why}", "WARN")
-            )
+            rows.append((w.start_s, f"{span} rejected: {why}", "WARN"))
+        elif not train and not held_out:
+            rows.append((w.start_s, f"{span} kept: {why}", "INFO"))
+            rows.append((w.stop_s, f"{axis} {w.source} window ends", "DEBUG"))
     if not rows:
         return
     rows.sort(key=lambda r: r[0])
@@ -312,13 +315,14 @@ def _plot2d(
         if ok.sum() < 1:
             continue
         pts = np.c_[px(xv[ok]), py(yv[ok])]
+        entity = f"{path}/{name.replace(' ', '_')}"
         rec.log(
-            f"{path}/{name}",
+            entity,
             rr.LineStrips2D([pts], colors=[colour], radii=0.6, labels=[name], show_labels=False),
             static=True,
         )
         if len(pts) < 30:  # few points (fit vs horizon): mark them
-            rec.log(f"{path}/{name}/points", rr.Points2D(pts, colors=[colour], radii=1.2),
+            rec.log(f"{entity}/points", rr.Points2D(pts, colors=[colour], radii=1.2),
                     static=True)
 
 
@@ -512,19 +516,32 @@ def blueprint(axes: Sequence[str], *, with_flight: bool = True) -> rrb.Blueprint
     for axis in axes:
         plots.append(rrb.Spatial2DView(origin=f"fit/{axis}", name=f"{axis}: fit % vs horizon"))
         plots.append(rrb.Spatial2DView(origin=f"frequency/{axis}", name=f"{axis}: |H| & coherence"))
-    side = [
-        rrb.Spatial3DView(origin="world", name="attitude: data (centre) / model (right)"),
-        rrb.Tabs(*plots) if plots else rrb.TextDocumentView(origin="summary"),
-        rrb.Tabs(
-            rrb.TextDocumentView(origin="summary", name="summary"),
-            rrb.TextLogView(origin="segments", name="segments"),
-        ),
-    ]
-    columns.append(rrb.Vertical(*side, row_shares=[2, 2, 1]))
+    texts = rrb.Tabs(
+        rrb.TextDocumentView(origin="summary", name="summary"),
+        rrb.TextLogView(origin="segments", name="segments"),
+        active_tab=0 if axes else 1,
+    )
+    attitude = rrb.Spatial3DView(origin="world", name="attitude: data (centre) / model (right)")
+    if plots:
+        columns.append(rrb.Vertical(attitude, rrb.Tabs(*plots), texts, row_shares=[2, 2, 1]))
+    else:
+        columns.append(rrb.Vertical(attitude, texts, row_shares=[1, 1]))
     return rrb.Blueprint(
         rrb.Horizontal(*columns, column_shares=[3, 2]),
         collapse_panels=True,
     )
+
+
+def log_flight_windows(
+    rec: rr.RecordingStream,
+    flight: FlightData,
+    windows: Mapping[str, Sequence[WindowReport]],
+) -> None:
+    """A flight without a model: its data, attitude and every window kept or rejected."""
+    rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_DOWN, static=True)
+    log_flight(rec, flight)
+    for axis, reports in windows.items():
+        log_segments(rec, axis, (), (), reports)
 
 
 def log_fit_result(rec: rr.RecordingStream, result: FitResult, *, flight: bool = True) -> None:
@@ -551,3 +568,37 @@ def save_rrd(
     rec.flush()
     rec.disconnect()
     return bp
+
+
+def open_sink(
+    rec: rr.RecordingStream,
+    bp: rrb.Blueprint,
+    *,
+    save: str | None = None,
+    serve: bool = False,
+    connect: bool = False,
+    url: str | None = None,
+    stdout: bool = False,
+    headless: bool = False,
+    bind: str = "127.0.0.1",
+) -> str | None:
+    """Send ``rec`` where rerun's standard script flags say (``rr.script_add_args``).
+
+    Like ``rr.script_setup``, except that ``serve`` hosts the gRPC server on ``bind``
+    (default 127.0.0.1: flight data is not published to the network unless asked) and
+    the recording is the one given, not the global one. Returns the served URI, if any.
+    """
+    if stdout:
+        rec.stdout(default_blueprint=bp)
+    elif serve:
+        sink = rr.GrpcServerSink(bind_ip=bind)
+        rec.set_sinks(sink, default_blueprint=bp)
+        rr.serve_web_viewer(open_browser=True, connect_to=sink.uri)
+        return str(sink.uri)
+    elif connect:
+        rec.connect_grpc(url, default_blueprint=bp)
+    elif save is not None:
+        rec.save(save, default_blueprint=bp)
+    elif not headless:
+        rec.spawn(default_blueprint=bp)
+    return None

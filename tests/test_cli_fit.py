@@ -1,0 +1,167 @@
+"""``mavsid fit``, ``validate`` and ``view`` from the command line."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+from helpers import FIXTURES
+from rerun.chunk import RrdReader
+
+from mavsid import cli, viz
+
+
+@dataclass
+class Result:
+    returncode: int
+    stdout: str
+    stderr: str
+
+
+def run(*argv: str) -> Result:
+    """The command line, in this process (imports are paid once)."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = cli.main(list(argv))
+    return Result(code, out.getvalue(), err.getvalue())
+
+
+def test_installed_command_runs_in_a_fresh_process() -> None:
+    proc = subprocess.run([sys.executable, "-m", "mavsid.cli", "fit", "/nonexistent/f.bin"],
+                          capture_output=True, text=True, timeout=120, check=False)
+    assert proc.returncode == 1
+    assert proc.stderr.strip() == "mavsid: error: /nonexistent/f.bin: cannot open: " \
+        "No such file or directory"
+
+
+@pytest.fixture(scope="module")
+def fitted(tmp_path_factory):  # type: ignore[no-untyped-def]
+    out = tmp_path_factory.mktemp("cli")
+    proc = run("fit", str(FIXTURES / "sysid_roll.bin"), "--json", "-o", str(out / "model.json"),
+               "--rrd", str(out / "fit.rrd"), "--report", str(out / "fit.html"))
+    assert proc.returncode == 0, proc.stderr
+    return out, json.loads(proc.stdout)
+
+
+def test_fit_json_shape(fitted) -> None:  # type: ignore[no-untyped-def]
+    _, doc = fitted
+    assert list(doc["axes"]) == ["roll"]
+    roll = doc["axes"]["roll"]
+    assert set(roll["fit_percent"]) == {"one_step", "0.5s", "free_run"}
+    assert all(isinstance(v, float) for v in roll["fit_percent"].values())
+    assert set(roll["params"]) == set(roll["stderr"]) and roll["params"]
+    for key in ("train_segments", "validation_segments"):
+        assert roll[key] and all(len(span) == 2 and span[0] < span[1] for span in roll[key])
+    train = roll["train_segments"]
+    val = roll["validation_segments"]
+    assert all(b[1] < v[0] or v[1] < b[0] for b in train for v in val)
+
+
+def test_fit_writes_model_rrd_and_report(fitted) -> None:  # type: ignore[no-untyped-def]
+    out, _ = fitted
+    models = json.loads((out / "model.json").read_text())
+    assert list(models["axes"]) == ["roll"]
+    html = (out / "fit.html").read_text()
+    assert html.startswith("<!DOCTYPE html>") and "data:image/png;base64," in html
+    entities = {c.entity_path for c in RrdReader(out / "fit.rrd").stream().to_chunks()}
+    assert {"/axes/roll/p/measured", "/axes/roll/p/free_run", "/segments/roll"} <= entities
+
+
+def test_fit_text_table() -> None:
+    proc = run("fit", str(FIXTURES / "sysid_roll.bin"))
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    assert lines[1].startswith("roll (p; ls;")
+    assert any(line.strip().startswith("B[p,u_roll]") and "±" in line for line in lines)
+    assert any(line.strip().startswith("fit %  one-step") and "free-run" in line
+               for line in lines)
+
+
+def test_model_from_one_flight_predicts_the_next(fitted, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    out, doc = fitted
+    # a second flight of the same simulated vehicle, different seed: every segment held out
+    nxt = tmp_path / "next.bin"
+    sim = run("simulate", "-o", str(nxt), "--manoeuvre", "sysid", "--axis", "roll",
+              "--sid-axis", "10", "--seed", "11", "--t-rec", "20", "--rate-hz", "200")
+    assert sim.returncode == 0, sim.stderr
+    proc = run("validate", str(out / "model.json"), str(nxt), "--json")
+    assert proc.returncode == 0, proc.stderr
+    val = json.loads(proc.stdout)["axes"]["roll"]
+    assert val["train_segments"] == [] and val["validation_segments"]
+    assert val["params"] == doc["axes"]["roll"]["params"]
+    # the next flight is predicted about as well as the held-out part of the first
+    assert val["fit_percent"]["free_run"] > doc["axes"]["roll"]["fit_percent"]["free_run"] - 10
+    assert val["fit_percent"]["one_step"] > 90
+
+
+@pytest.mark.parametrize(
+    ("argv", "needle"),
+    [
+        (["fit", "/nonexistent/flight.bin"], "flight.bin"),
+        (["fit", "EMPTY"], "empty file"),
+        (["fit", "TEXT"], "not a DataFlash"),
+        (["fit", str(FIXTURES / "hover.bin")], "nothing identifiable"),
+        (["fit", str(FIXTURES / "sysid_roll.bin"), "--config", "BADTOML"], "not valid TOML"),
+        (["validate", "TEXT", str(FIXTURES / "sysid_roll.bin")], "not a mavsid model"),
+        (["view", "EMPTY", "--save", "x.rrd"], "empty file"),
+    ],
+)
+def test_bad_input_one_line_exit_1(argv: list[str], needle: str, tmp_path: Path) -> None:
+    (tmp_path / "empty.bin").write_bytes(b"")
+    (tmp_path / "text.bin").write_text("hello, this is not a log\n")
+    (tmp_path / "bad.toml").write_text("[pipeline\n")
+    subst = {"EMPTY": str(tmp_path / "empty.bin"), "TEXT": str(tmp_path / "text.bin"),
+             "BADTOML": str(tmp_path / "bad.toml"), "x.rrd": str(tmp_path / "x.rrd")}
+    proc = run(*[subst.get(a, a) for a in argv])
+    assert proc.returncode == 1
+    err = proc.stderr.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("mavsid: error:") and needle in err[0], err
+    assert "Traceback" not in proc.stderr
+
+
+def test_view_saves_flight_and_windows(tmp_path: Path) -> None:
+    out = tmp_path / "view.rrd"
+    proc = run("view", str(FIXTURES / "sysid_roll.bin"), "--save", str(out))
+    assert proc.returncode == 0, proc.stderr
+    entities = {c.entity_path for c in RrdReader(out).stream().to_chunks()}
+    want = {"/flight/states/p", "/flight/inputs/u_roll", "/world/data", "/segments/roll"}
+    assert want <= entities
+
+
+def test_view_with_model(fitted, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    out_dir, _ = fitted
+    out = tmp_path / "view.rrd"
+    proc = run("view", str(FIXTURES / "sysid_roll.bin"), "--model", str(out_dir / "model.json"),
+               "--save", str(out))
+    assert proc.returncode == 0, proc.stderr
+    entities = {c.entity_path for c in RrdReader(out).stream().to_chunks()}
+    assert {"/axes/roll/p/one_step", "/axes/roll/p/free_run"} <= entities
+
+
+def test_view_has_rerun_flags_and_binds_localhost(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    args = cli.build_parser().parse_args(["view", "x.bin", "--serve"])
+    assert args.serve and args.bind == "127.0.0.1"
+    for flag in ("headless", "connect", "save", "stdout", "url", "spawn"):
+        assert hasattr(args, flag)
+    seen: dict[str, object] = {}
+
+    class FakeSink:
+        def __init__(self, bind_ip: str = "0.0.0.0", port: int = 9876) -> None:
+            seen["bind_ip"] = bind_ip
+            self.uri = f"rerun+http://{bind_ip}:{port}/proxy"
+
+    rec = viz.new_recording()
+    monkeypatch.setattr(viz.rr, "GrpcServerSink", FakeSink)
+    monkeypatch.setattr(viz.rr, "serve_web_viewer",
+                        lambda **kw: seen.setdefault("web", kw))
+    monkeypatch.setattr(rec, "set_sinks", lambda *s, **kw: seen.setdefault("sinks", s))
+    uri = viz.open_sink(rec, viz.blueprint(["roll"]), serve=True)
+    assert seen["bind_ip"] == "127.0.0.1" and uri and "127.0.0.1" in uri
+    viz.open_sink(rec, viz.blueprint(["roll"]), serve=True, bind="0.0.0.0")
+    assert seen["bind_ip"] == "0.0.0.0"

@@ -1,0 +1,238 @@
+"""The pipeline: configuration, the train/validation split, every bundled pipeline on the
+fixtures, truth recovery on simulated logs, and the SITL SYSTEMID flight against the issue's
+free-run goals."""
+
+from __future__ import annotations
+
+import itertools
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from helpers import FIXTURES, ROOT, shared_path
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from mavsid.channels import get_preset
+from mavsid.data import Segment
+from mavsid.errors import ConfigError, NoExcitationError
+from mavsid.pipeline import (
+    PipelineConfig,
+    config_from_dict,
+    fit,
+    load_config,
+    split_segments,
+)
+
+PIPELINES = sorted((ROOT / "pipelines").glob("*.toml"))
+
+
+# --------------------------------------------------------------------------- configuration
+
+
+def test_every_bundled_pipeline_parses() -> None:
+    names = {p.stem for p in PIPELINES}
+    assert {"arducopter-sysid-rate", "arducopter-manual", "px4-torque-rate",
+            "tlog-attitude"} <= names
+    for path in PIPELINES:
+        cfg = load_config(path)
+        assert cfg.path == str(path) and cfg.name != "default"
+        if cfg.preset is not None:
+            assert get_preset(cfg.preset).name == cfg.preset
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        ({"pipline": {}}, "unknown section [pipline]"),
+        ({"pipeline": {"estimater": "ls"}}, "unknown key pipeline.estimater"),
+        ({"pipeline": {"axes": ["rol"]}}, "pipeline.axes"),
+        ({"segments": {"block_s": -1}}, "segments.block_s"),
+        ({"segments": {"source": "guess"}}, "segments.source"),
+        ({"validation": {"horizons_s": [0.1, "x"]}}, "validation.horizons_s"),
+        ({"validation": {"max_lag": 0}}, "validation.max_lag"),
+    ],
+)
+def test_bad_config_names_the_key(data: dict, message: str) -> None:
+    with pytest.raises(ConfigError, match=message.replace("[", r"\[").replace("]", r"\]")):
+        config_from_dict(data)
+
+
+def test_config_file_errors(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[pipeline\nname = 1\n")
+    with pytest.raises(ConfigError, match=r"bad\.toml"):
+        load_config(bad)
+    with pytest.raises(ConfigError, match=r"missing\.toml"):
+        load_config(tmp_path / "missing.toml")
+    wrong = tmp_path / "wrong.toml"
+    wrong.write_text('[pipeline]\nestimator = "magic"\n')
+    with pytest.raises(ConfigError, match=r"wrong.toml: pipeline.estimator"):
+        load_config(wrong)
+
+
+def test_config_may_carry_its_own_presets(tmp_path: Path) -> None:
+    (tmp_path / "presets.toml").write_text(
+        '[preset.my-rate]\nformats = ["dataflash"]\n'
+        '[preset.my-rate.states]\np = { message = "RATE", field = "R", unit = "deg/s" }\n'
+        '[preset.my-rate.inputs]\nu_roll = { message = "RATE", field = "ROut" }\n'
+    )
+    path = tmp_path / "mine.toml"
+    path.write_text('[pipeline]\npreset = "my-rate"\npresets_file = "presets.toml"\n')
+    cfg = load_config(path)
+    assert cfg.preset == "my-rate" and "my-rate" in cfg.presets
+    result = fit([FIXTURES / "sysid_roll.bin"], cfg.with_overrides(axes=("roll",)))
+    assert result.flights[0].preset == "my-rate"
+    assert result.flights[0].state_names == ("p",)
+
+
+# --------------------------------------------------------------------------- split
+
+
+def _segment(t0: float, n: int, dt: float = 0.01) -> Segment:
+    t = t0 + np.arange(n) * dt
+    return Segment(t, t[:, None], t[:, None], ("p",), ("u_roll",), dt, "roll", "sysid")
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    lengths=st.lists(st.integers(min_value=4, max_value=3000), min_size=1, max_size=5),
+    block_s=st.floats(min_value=0.5, max_value=20.0),
+)
+def test_split_never_shares_a_sample(lengths: list[int], block_s: float) -> None:
+    segs, t0 = [], 0.0
+    for n in lengths:
+        segs.append(_segment(t0, n))
+        t0 += n * 0.01 + 5.0
+    train, val = split_segments(segs, block_s)
+    t_train = np.concatenate([s.time_s for s in train])
+    t_val = np.concatenate([s.time_s for s in val])
+    assert not np.intersect1d(t_train, t_val).size
+    # every sample of the input is used exactly once
+    t_all = np.sort(np.concatenate([s.time_s for s in segs]))
+    np.testing.assert_array_equal(np.sort(np.r_[t_train, t_val]), t_all)
+    # blocks alternate in time, training first
+    blocks = sorted([(s.start_s, "t") for s in train] + [(s.start_s, "v") for s in val])
+    assert [b[1] for b in blocks] == ["t", "v"] * (len(blocks) // 2) + ["t"] * (len(blocks) % 2)
+    # each block stays inside one segment and is contiguous
+    for s in (*train, *val):
+        assert np.allclose(np.diff(s.time_s), 0.01)
+
+
+def test_split_errors() -> None:
+    with pytest.raises(NoExcitationError):
+        split_segments([])
+    with pytest.raises(NoExcitationError):
+        split_segments([_segment(0.0, 3)])
+
+
+# --------------------------------------------------------------------------- bundled pipelines
+
+
+def _shape_ok(result_dict: dict) -> None:
+    for d in result_dict["axes"].values():
+        assert set(d["fit_percent"]) == {"one_step", "0.5s", "free_run"}
+        assert set(d["params"]) == set(d["stderr"])
+        assert d["train_segments"] and d["validation_segments"]
+        spans = sorted([(a, b, "t") for a, b in d["train_segments"]]
+                       + [(a, b, "v") for a, b in d["validation_segments"]])
+        assert all(prev[1] < nxt[0] for prev, nxt in itertools.pairwise(spans))
+    json.dumps(result_dict, allow_nan=False)
+
+
+@pytest.mark.parametrize(
+    ("pipeline", "log", "preset", "axes"),
+    [
+        ("arducopter-sysid-rate", "sysid_roll.bin", "ardupilot-rate", {"roll"}),
+        ("arducopter-manual", "doublets.bin", "ardupilot-rate", {"roll"}),
+        ("tlog-attitude", "sysid_roll.tlog", "mavlink-servo", {"roll"}),
+    ],
+)
+def test_pipeline_runs_on_fixture(pipeline: str, log: str, preset: str, axes: set) -> None:
+    cfg = load_config(ROOT / "pipelines" / f"{pipeline}.toml")
+    result = fit([FIXTURES / log], cfg)
+    assert result.flights[0].preset == preset
+    # the fixtures excite one axis (the simulator's truth says which): only it is fitted
+    assert set(result.axes) == axes
+    _shape_ok(result.to_dict())
+    for f in result.axes.values():
+        # a usable model of the excited axis: stable, and clearly better than the mean
+        assert f.validation.stable is True
+        assert f.validation.fit_free_run[0] > 50
+
+
+def test_px4_pipeline_runs_on_a_real_ulog() -> None:
+    # no PX4 fixture exists (the simulator writes .bin/.tlog only): use a real ULog
+    log = shared_path("public", "Auterion__px4-ulog-rs", "quadrotor_local.ulg")
+    cfg = load_config(ROOT / "pipelines" / "px4-torque-rate.toml")
+    result = fit([log], cfg)
+    assert result.flights[0].preset == "px4-torque"
+    assert result.axes and set(result.axes) <= {"roll", "pitch", "yaw"}
+    _shape_ok(result.to_dict())
+
+
+# --------------------------------------------------------------------------- truth
+
+
+@pytest.mark.parametrize("axis", ["roll", "pitch", "yaw"])
+def test_fit_recovers_the_simulated_plant(axis: str) -> None:
+    """Continuous-time damping and control effectiveness against the simulator's truth.
+
+    The fitted structure is first order, ``p' = A p + B u(t - d)``; the simulated plant has
+    in addition a 15 ms first-order motor lag that no first-order model represents, and the
+    chirp reaches 15 Hz where that lag costs a quarter of the gain. So the estimates carry a
+    bias of a few per cent: effectiveness within 8 %, damping within 15 %.
+    """
+    truth = json.loads((FIXTURES / f"sysid_{axis}.truth.json").read_text())["axes"][axis]
+    result = fit([FIXTURES / f"sysid_{axis}.bin"], PipelineConfig(axes=(axis,)))
+    fitted = result.axes[axis]
+    rate, inp = truth["state"], truth["input"]
+    params = fitted.model.params
+    damping = -params[f"A[{rate},{rate}]"]
+    effectiveness = params[f"B[{rate},{inp}]"]
+    assert damping == pytest.approx(truth["damping"], rel=0.15)
+    assert effectiveness == pytest.approx(truth["effectiveness"], rel=0.08)
+    assert fitted.validation.stable is True
+    assert 0 <= fitted.model.delay * fitted.model.dt <= truth["effective_delay_s"] + 0.005
+
+
+def test_no_excitation_is_a_typed_error() -> None:
+    with pytest.raises(NoExcitationError, match=r"hover\.bin: nothing identifiable"):
+        fit([FIXTURES / "hover.bin"])
+
+
+# --------------------------------------------------------------------------- SITL
+
+
+@pytest.fixture(scope="module")
+def sitl():  # type: ignore[no-untyped-def]
+    log = shared_path("sitl", "flightA_mixer.BIN")
+    cfg = load_config(ROOT / "pipelines" / "arducopter-sysid-rate.toml")
+    return fit([log], cfg)
+
+
+# The issue's goal for the SITL SYSTEMID flight: free-run fit on validation segments of at
+# least 95 % for roll and pitch and 99 % for yaw.
+SITL_GOALS = [("roll", 95.0), ("pitch", 95.0), ("yaw", 99.0)]
+
+
+@pytest.mark.parametrize(("axis", "goal"), SITL_GOALS)
+def test_sitl_free_run_fit_reaches_the_goal(sitl, axis: str, goal: float) -> None:  # type: ignore[no-untyped-def]
+    fitted = sitl.axes[axis]
+    # validated on SYSTEMID data held out from fitting, never the same samples
+    assert fitted.held_out and all(s.source == "sysid" for s in fitted.held_out)
+    got = fitted.validation.fit_summary(fitted.output)["free_run"]
+    print(f"SITL {axis}: free-run fit {got:.2f} % (goal {goal} %)")
+    assert got >= goal
+
+
+def test_sitl_chirp_frequency_response(sitl) -> None:  # type: ignore[no-untyped-def]
+    """Where the held-out chirp data is coherent, the model's gain matches the measured."""
+    for axis in ("roll", "pitch", "yaw"):
+        (fr,) = sitl.axes[axis].validation.frequency
+        assert (fr.input_name, fr.band_hz) == (f"u_{axis}", (0.5, 20.0))
+        sel = (fr.coherence > 0.9) & (fr.freq_hz >= 0.5) & (fr.freq_hz <= 20.0)
+        assert sel.sum() >= 30
+        gain_error_db = 20 * np.log10(np.abs(fr.model[sel] / fr.measured[sel]))
+        assert np.median(np.abs(gain_error_db)) < 0.5

@@ -55,7 +55,7 @@ import struct
 import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import lru_cache
 
 import numpy as np
 
@@ -142,34 +142,16 @@ class Definition:
     format: str
     columns: tuple[str, ...]
 
-    @cached_property
+    @property
     def fields(self) -> tuple[tuple[str, int], ...]:
         """``(column name, index into format)`` in log order; a repeated name keeps its last
         position (as pymavlink does); columns beyond the format are ignored."""
-        last: dict[str, int] = {}
-        for i, name in enumerate(self.columns[: len(self.format)]):
-            if name:
-                last[name] = i
-        seen: set[str] = set()
-        out = []
-        for name in self.columns[: len(self.format)]:
-            if name and name not in seen:
-                seen.add(name)
-                out.append((name, last[name]))
-        return tuple(out)
+        return _fields(self.columns, len(self.format))
 
-    @cached_property
+    @property
     def payload_dtype(self) -> np.dtype:
         """Packed structured dtype of the payload, fields named ``f0, f1, ...``."""
-        names, formats, offsets, ofs = [], [], [], 0
-        for i, ch in enumerate(self.format):
-            dt = np.dtype(FORMAT_CHARS[ch].dtype)
-            names.append(f"f{i}")
-            formats.append(dt)
-            offsets.append(ofs)
-            ofs += dt.itemsize
-        return np.dtype({"names": names, "formats": formats, "offsets": offsets,
-                         "itemsize": ofs})
+        return _payload_dtype(self.format)
 
     def problem(self) -> str | None:
         """Why this definition cannot be used, or None."""
@@ -181,16 +163,49 @@ class Definition:
             return f"declared length {self.length} but format {self.format!r} needs {size}"
         return None
 
-    @cached_property
+    @property
     def time_field(self) -> tuple[str, int, float] | None:
         """``(column, format index, seconds per count)`` of the boot-time field, if any."""
-        index = dict(self.fields)
-        if "TimeUS" in index and self.format[index["TimeUS"]] in "QqIi":
-            return "TimeUS", index["TimeUS"], 1e-6
-        if ("TimeMS" in index and not self.name.startswith("GPS")
-                and self.format[index["TimeMS"]] in "QqIi"):
-            return "TimeMS", index["TimeMS"], 1e-3
-        return None
+        return _time_field(self.name, self.format, self.fields)
+
+
+@lru_cache(maxsize=4096)
+def _time_field(
+    name: str, fmt: str, fields: tuple[tuple[str, int], ...]
+) -> tuple[str, int, float] | None:
+    index = dict(fields)
+    if "TimeUS" in index and fmt[index["TimeUS"]] in "QqIi":
+        return "TimeUS", index["TimeUS"], 1e-6
+    if "TimeMS" in index and not name.startswith("GPS") and fmt[index["TimeMS"]] in "QqIi":
+        return "TimeMS", index["TimeMS"], 1e-3
+    return None
+
+
+@lru_cache(maxsize=4096)
+def _fields(columns: tuple[str, ...], n: int) -> tuple[tuple[str, int], ...]:
+    last: dict[str, int] = {}
+    for i, name in enumerate(columns[:n]):
+        if name:
+            last[name] = i
+    seen: set[str] = set()
+    out = []
+    for name in columns[:n]:
+        if name and name not in seen:
+            seen.add(name)
+            out.append((name, last[name]))
+    return tuple(out)
+
+
+@lru_cache(maxsize=4096)
+def _payload_dtype(fmt: str) -> np.dtype:
+    names, formats, offsets, ofs = [], [], [], 0
+    for i, ch in enumerate(fmt):
+        dt = np.dtype(FORMAT_CHARS[ch].dtype)
+        names.append(f"f{i}")
+        formats.append(dt)
+        offsets.append(ofs)
+        ofs += dt.itemsize
+    return np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": ofs})
 
 
 _FMT_DEF = Definition(_FMT_TYPE, "FMT", _FMT_LEN, "BBnNZ",

@@ -36,11 +36,11 @@ __all__ = ["format_summary", "median_rate_hz", "summarize"]
 _INSTANCE_FIELDS = ("I", "Instance", "C", "Id")
 
 
-def _num(x: float) -> float | None:
-    """JSON-safe float (None for NaN/inf), rounded to 6 significant digits."""
+def _num(x: float | None, digits: int | None = None) -> float | None:
+    """JSON-safe float (None for NaN/inf), optionally rounded to ``digits`` significant."""
     if x is None or not math.isfinite(x):
         return None
-    return float(f"{x:.6g}")
+    return float(f"{x:.{digits}g}") if digits else float(x)
 
 
 def _instance_column(table: MessageTable) -> str | None:
@@ -124,7 +124,7 @@ def summarize(log: RawLog) -> dict[str, Any]:
         table = log.messages[name]
         messages[name] = {
             "count": len(table),
-            "rate_hz": _num(median_rate_hz(table)),
+            "rate_hz": _num(median_rate_hz(table), 6),
             "fields": {f: table.unit(f) for f in table.fields},
         }
     return {

@@ -1,0 +1,179 @@
+"""``mavsid info`` and ``mavsid extract``: golden text, JSON checked against pymavlink, exports.
+
+The golden file is rewritten only with ``MAVSID_UPDATE_GOLDEN=1`` (the test then skips, so an
+update is always a deliberate, reviewed change).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import warnings
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from helpers import shared_path
+from test_dataflash import pymavlink_records, same_value
+
+from mavsid.cli import main
+from mavsid.data import MessageTable, RawLog, SourceInfo
+from mavsid.errors import DataQualityWarning
+from mavsid.info import format_summary, median_rate_hz, summarize
+from mavsid.readers import read_log
+
+GOLDEN = Path(__file__).parent / "golden"
+SMALL = ("public", "ArduPilot__pymavlink", "test.BIN")
+MODERN = ("public", "ArduPilot__MethodicConfigurator", "backend_log_80k.bin")
+
+
+def _read(path):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataQualityWarning)
+        return read_log(path)
+
+
+@pytest.fixture(scope="module")
+def small_ref():
+    path = shared_path(*SMALL)
+    return path, pymavlink_records(path)
+
+
+# --------------------------------------------------------------------------- info
+@pytest.mark.parametrize("parts", [SMALL, MODERN], ids=["test.BIN", "backend_log_80k.bin"])
+def test_info_text_matches_golden(parts):
+    path = shared_path(*parts)
+    summary = summarize(_read(path))
+    summary["path"] = path.name  # independent of where shared/ lives
+    text = format_summary(summary) + "\n"
+    golden = GOLDEN / f"info_{path.name}.txt"
+    if os.environ.get("MAVSID_UPDATE_GOLDEN") == "1":
+        golden.parent.mkdir(exist_ok=True)
+        golden.write_text(text)
+        pytest.skip(f"rewrote {golden}")
+    assert text == golden.read_text()
+
+
+def test_info_json_agrees_with_pymavlink(small_ref, capsys):
+    path, ref = small_ref
+    assert main(["info", str(path), "--json"]) == 0
+    out, err = capsys.readouterr()
+    s = json.loads(out)
+    assert {k: v["count"] for k, v in s["messages"].items()} == {k: len(v)
+                                                                  for k, v in ref.items()}
+    for name, recs in ref.items():
+        assert list(s["messages"][name]["fields"]) == [f for f in recs[0]
+                                                        if f != "mavpackettype"]
+    assert s["param_count"] == len({r["Name"] for r in ref["PARM"]})
+    assert s["text_count"] == len(ref["MSG"])
+    assert s["firmware"] == ref["MSG"][0]["Message"] and s["vehicle"] == "plane"
+    assert [m["mode"] for m in s["modes"]] == [r["ModeNum"] for r in ref["MODE"]]
+    assert s["format"] == "dataflash" and s["skipped_bytes"] == 24
+    times = [r["TimeUS"] * 1e-6 for recs in ref.values() for r in recs if "TimeUS" in r]
+    assert s["start_s"] == pytest.approx(min(times)) and s["end_s"] == pytest.approx(max(times))
+    # the ATT rate: the median interval of pymavlink's own TimeUS stamps
+    t = np.array([r["TimeUS"] for r in ref["ATT"]]) * 1e-6
+    assert s["messages"]["ATT"]["rate_hz"] == pytest.approx(1 / np.median(np.diff(t)), rel=1e-5)
+    assert err.startswith("warning: ") and err.count("\n") == 1
+
+
+def test_info_lists_the_sysid_runs_pymavlink_sees():
+    from pymavlink import mavutil
+
+    path = shared_path("sitl", "flightA_mixer.BIN")
+    conn = mavutil.mavlink_connection(str(path))
+    sids = []
+    while (m := conn.recv_match(type="SIDS")) is not None:
+        sids.append(m.to_dict())
+    conn.close()
+    runs = summarize(_read(path))["sysid_runs"]
+    assert [r["Ax"] for r in runs] == [s["Ax"] for s in sids] == [10, 11, 12, 13]
+    for run, ref in zip(runs, sids, strict=True):
+        assert run["time_s"] == pytest.approx(ref["TimeUS"] * 1e-6)
+        assert run["FSp"] == pytest.approx(ref["FSp"]) and run["Mag"] == pytest.approx(ref["Mag"])
+
+
+def test_median_rate_counts_instances_separately():
+    t = np.arange(0.0, 2.0, 0.0025)  # 400 Hz
+    two = MessageTable("IMU", {"I": np.tile([0, 1], t.size)}, np.repeat(t, 2), {"I": "instance"})
+    assert median_rate_hz(two) == pytest.approx(400.0)
+    jitter = MessageTable("ATT", {}, np.cumsum(np.r_[0.1, np.full(9, 0.1), 5.0]))
+    assert median_rate_hz(jitter) == pytest.approx(10.0)
+    assert np.isnan(median_rate_hz(MessageTable("X", {}, np.array([1.0]))))
+
+
+def test_summary_of_an_empty_log_is_json_safe():
+    log = RawLog(SourceInfo("e.bin", "dataflash", 0), messages={})
+    s = summarize(log)
+    assert json.loads(json.dumps(s))["duration_s"] == 0.0 and s["messages"] == {}
+    assert "0 types" in format_summary(s)
+
+
+# --------------------------------------------------------------------------- extract
+def test_extract_npz_holds_pymavlink_values(small_ref, tmp_path, capsys):
+    path, ref = small_ref
+    out = tmp_path / "x.npz"
+    assert main(["extract", str(path), "--messages", "ATT,PARM,IMU", "-o", str(out)]) == 0
+    data = np.load(out)  # no pickle needed
+    assert sorted({k.split(".")[0] for k in data.files}) == ["ATT", "IMU", "PARM"]
+    for name in ("ATT", "PARM", "IMU"):
+        recs = ref[name]
+        fields = [f for f in recs[0] if f != "mavpackettype"]
+        assert [k.split(".", 1)[1] for k in data.files if k.startswith(name + ".")] == [
+            *fields, "time_s"]
+        for f in fields:
+            col = data[f"{name}.{f}"].tolist()
+            assert all(same_value(c, r[f]) for c, r in zip(col, recs, strict=True)), (name, f)
+        np.testing.assert_allclose(data[f"{name}.time_s"],
+                                   [r["TimeUS"] * 1e-6 for r in recs], rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("suffix", [".parquet", ".csv"])
+def test_extract_one_type_to_a_table(small_ref, tmp_path, suffix):
+    path, ref = small_ref
+    out = tmp_path / f"rcou{suffix}"
+    assert main(["extract", str(path), "--messages", "RCOU", "--start", "82.5",
+                 "-o", str(out)]) == 0
+    frame = pd.read_parquet(out) if suffix == ".parquet" else pd.read_csv(out)
+    recs = [r for r in ref["RCOU"] if r["TimeUS"] * 1e-6 >= 82.5]
+    assert 0 < len(frame) == len(recs) < len(ref["RCOU"])
+    assert list(frame.columns) == ["time_s"] + [f for f in recs[0] if f != "mavpackettype"]
+    for f in frame.columns[1:]:
+        assert frame[f].tolist() == [r[f] for r in recs]
+
+
+def test_extract_errors_are_one_line_and_exit_1(small_ref, tmp_path, capsys):
+    path, _ = small_ref
+    cases = [
+        ["extract", str(path), "-o", str(tmp_path / "all.csv")],  # many types to csv
+        ["extract", str(path), "--messages", "NOPE", "-o", str(tmp_path / "n.npz")],
+        ["extract", str(path), "-o", str(tmp_path / "x.txt")],
+        ["extract", str(path), "--messages", "ATT", "-o", str(tmp_path / "no" / "x.npz")],
+        ["info", str(tmp_path / "missing.bin")],
+    ]
+    for argv in cases:
+        assert main(argv) == 1, argv
+        err = capsys.readouterr().err
+        lines = [ln for ln in err.splitlines() if not ln.startswith("warning: ")]
+        assert len(lines) == 1 and lines[0].startswith("mavsid: error: "), (argv, err)
+
+
+def test_bad_input_via_the_console(tmp_path):
+    bad = tmp_path / "garbage.bin"
+    bad.write_bytes(b"\xa3\x95\x80" + bytes(200))
+    proc = subprocess.run([sys.executable, "-m", "mavsid.cli", "info", str(bad)],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 1 and proc.stdout == ""
+    assert proc.stderr.count("\n") == 1 and "garbage.bin" in proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
+def test_info_counts_of_every_small_log_agree_with_pymavlink(small_ref):
+    path, ref = small_ref
+    s = summarize(_read(path))
+    assert Counter({k: v["count"] for k, v in s["messages"].items()}) == Counter(
+        {k: len(v) for k, v in ref.items()})

@@ -9,7 +9,6 @@ written out here.
 from __future__ import annotations
 
 import json
-import struct
 from collections import defaultdict
 from dataclasses import replace
 from pathlib import Path
@@ -17,8 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from helpers import FIXTURES, shared_path
-from pymavlink import DFReader
-from pymavlink.dialects.v20 import ardupilotmega as mav2
+from pymavlink import DFReader, mavutil
 from scipy import signal
 
 from mavsid import read_log
@@ -57,23 +55,18 @@ def pymavlink_bin(path: Path) -> dict[str, dict[str, np.ndarray]]:
 
 
 def pymavlink_tlog(path: Path) -> dict[str, dict[str, np.ndarray]]:
-    """Every frame of a .tlog decoded by pymavlink's MAVLink 2 parser (CRC checked);
-    ``_recv_us`` is the record's receive time, ``_sysid`` its sender."""
-    data = path.read_bytes()
-    parser = mav2.MAVLink(None)
+    """Every message of a .tlog as pymavlink's log reader (mavutil) decodes it; ``_recv_us``
+    is the record's receive time, ``_sysid`` its sender."""
+    conn = mavutil.mavlink_connection(str(path), dialect="ardupilotmega")
     rows: dict[str, list[dict]] = defaultdict(list)
-    pos = 0
-    while pos + 10 <= len(data):
-        recv_us = struct.unpack(">Q", data[pos:pos + 8])[0]
-        assert data[pos + 8] == 0xFD, f"record at {pos} is not MAVLink 2"
-        size = 10 + data[pos + 9] + 2
-        if pos + 8 + size > len(data):
-            break  # truncated tail
-        msg = parser.decode(bytearray(data[pos + 8:pos + 8 + size]))
-        d = msg.to_dict()
-        d["_recv_us"], d["_sysid"] = recv_us, msg.get_srcSystem()
-        rows[d.pop("mavpackettype")].append(d)
-        pos += 8 + size
+    try:
+        while (msg := conn.recv_match()) is not None:
+            d = msg.to_dict()
+            d["_recv_us"] = round(msg._timestamp * 1e6)
+            d["_sysid"] = msg.get_srcSystem()
+            rows[d.pop("mavpackettype")].append(d)
+    finally:
+        conn.close()
     return {name: {k: np.array([r[k] for r in rs]) for k in rs[0]} for name, rs in rows.items()}
 
 
@@ -340,8 +333,8 @@ def test_short_logs_read_alike(short, short_bin, short_tlog):
     assert _compare_tables(read_log(bin_path), short_bin) > 100
     ours = read_log(tlog_path)
     assert _compare_tables(ours, short_tlog) > 50
-    np.testing.assert_array_equal(ours["ATTITUDE"]["_recv_time_s"],
-                                  short_tlog["ATTITUDE"]["_recv_us"] * 1e-6)
+    np.testing.assert_allclose(ours["ATTITUDE"]["_recv_time_s"],
+                               short_tlog["ATTITUDE"]["_recv_us"] * 1e-6, rtol=0, atol=2e-6)
 
 
 # --------------------------------------------------------------------------- the plant
@@ -535,6 +528,31 @@ def test_cli_writes_tlog_and_bin(tmp_path, capsys):
     assert np.ptp(log["RC_CHANNELS"]["chan1_raw"]) == 0
 
 
+def test_multi_run_log(tmp_path):
+    """Three SYSTEMID runs in one log: one SIDS and one STABILIZE -> SYSTEMID -> STABILIZE
+    cycle each, every SIDD record inside its run's mode window."""
+    from mavsid.synthetic.run import scenario_from_options
+
+    sc = scenario_from_options(sid_axes=[10, 11, 12], f_start_hz=1.0, t_rec=4.0, seed=4,
+                               rate_hz=100)
+    res = simulate(sc, [tmp_path / "m.bin"])
+    log = pymavlink_bin(tmp_path / "m.bin")
+    assert log["SIDS"]["Ax"].tolist() == [10, 11, 12]
+    assert log["SIDS"]["Mag"].tolist() == pytest.approx([0.05, 0.05, 0.1])
+    assert log["MODE"]["Mode"].tolist() == [0, 25, 0, 25, 0, 25, 0]
+    runs = json.loads((tmp_path / "m.truth.json").read_text())["sysid_runs"]
+    t = log["SIDD"]["TimeUS"] * 1e-6
+    inside = np.zeros(len(t), dtype=bool)
+    for run, t_sids in zip(runs, log["SIDS"]["TimeUS"] * 1e-6, strict=True):
+        assert run["mode_enter_s"] == pytest.approx(t_sids, abs=1e-6)
+        inside |= (t >= run["mode_enter_s"] - 1e-9) & (t <= run["mode_exit_s"] + 1e-9)
+    assert inside.all()
+    assert [r["axis"] for r in runs] == ["roll", "pitch", "yaw"]
+    assert res.flight.scenario.runs[2].magnitude == 0.1
+    with pytest.raises(ConfigError, match="duration"):
+        scenario_from_options(sid_axes=[10], duration_s=10.0)
+
+
 # --------------------------------------------------------------------------- faults
 
 
@@ -559,7 +577,14 @@ def test_faults(tmp_path):
     ms = pymavlink_tlog(tmp_path / "r.tlog")["ATTITUDE"]["time_boot_ms"]
     assert np.sum(np.diff(ms) < 0) == 1
     # truncated: all but the cut record decode; mavsid reads the rest and counts the bytes
-    simulate(sc, [tmp_path / "t.bin"], Faults(truncate_bytes=20))
+    simulate(sc, [tmp_path / "t.bin", tmp_path / "t.tlog"], Faults(truncate_bytes=20))
+    ref_t = pymavlink_tlog(tmp_path / "c.tlog")
+    cut = pymavlink_tlog(tmp_path / "t.tlog")
+    assert sum(len(v["_sysid"]) for v in cut.values()) == sum(
+        len(v["_sysid"]) for v in ref_t.values()) - 1
+    with pytest.warns(Warning):
+        ours_t = read_log(tmp_path / "t.tlog")
+    assert _compare_tables(ours_t, cut) > 50
     assert (tmp_path / "t.bin").stat().st_size == (tmp_path / "c.bin").stat().st_size - 20
     with pytest.warns(Warning):
         ours = read_log(tmp_path / "t.bin")

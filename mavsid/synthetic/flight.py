@@ -113,6 +113,13 @@ class Scenario:
             raise ConfigError(f"duration must be positive, got {self.duration_s}")
         if self.sysid and self.manoeuvre != "sysid":
             raise ConfigError("SYSTEMID settings given for a pilot manoeuvre")
+        if self.runs and self.duration_s is not None:
+            need = self.run_starts()[-1] + self.runs[-1].duration
+            if self.duration_s < need:
+                raise ConfigError(
+                    f"duration {self.duration_s:g} s ends before the SYSTEMID run(s) finish "
+                    f"(need at least {need:g} s)"
+                )
 
     @property
     def runs(self) -> tuple[SysIdSettings, ...]:

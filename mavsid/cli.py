@@ -50,10 +50,16 @@ _default_showwarning = warnings.showwarning
 SUBCOMMANDS: list[Callable[[argparse._SubParsersAction], None]] = []
 
 
+def _dialect(args: argparse.Namespace) -> dict[str, Any]:
+    """``dialect=`` for read_log when ``--dialect`` was given."""
+    return {"dialect": args.dialect} if getattr(args, "dialect", None) else {}
+
+
 def _add_info(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("info", help="what a log holds: messages, rates, units, modes, SYSTEMID")
     p.add_argument("log", help="flight log (.bin, .log, .tlog, .ulg)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.add_argument("--dialect", help="MAVLink dialect of a .tlog (default ardupilotmega)")
     p.set_defaults(handler=_info)
 
 
@@ -63,7 +69,7 @@ def _info(args: argparse.Namespace) -> int:
     from mavsid.info import format_summary, summarize
     from mavsid.readers import read_log
 
-    summary = summarize(read_log(args.log))
+    summary = summarize(read_log(args.log, **_dialect(args)))
     print(json.dumps(summary, indent=1, ensure_ascii=False) if args.json
           else format_summary(summary))
     return 0
@@ -76,6 +82,7 @@ def _add_extract(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--start", type=float, help="first time to keep, s (log clock)")
     p.add_argument("--stop", type=float, help="last time to keep, s (log clock)")
     p.add_argument("-o", "--output", required=True, help="OUT.npz, OUT.parquet or OUT.csv")
+    p.add_argument("--dialect", help="MAVLink dialect of a .tlog (default ardupilotmega)")
     p.add_argument("--aligned", action="store_true",
                    help="write the aligned FlightData (states, inputs, flags on one grid)")
     p.set_defaults(handler=_extract)
@@ -96,7 +103,7 @@ def _extract(args: argparse.Namespace) -> int:
         print(f"wrote {out} (FlightData: {len(table)} samples at {1 / flight.dt:.0f} Hz, "
               f"preset {flight.preset})")
         return 0
-    log = read_log(args.log, messages=names, start=args.start, stop=args.stop)
+    log = read_log(args.log, messages=names, start=args.start, stop=args.stop, **_dialect(args))
     out = write(log, args.output, names)
     n = len(names) if names is not None else len(log.messages)
     print(f"wrote {out} ({n} message type(s))")

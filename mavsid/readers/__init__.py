@@ -21,7 +21,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from mavsid.data import RawLog
-from mavsid.errors import LogFormatError
+from mavsid.errors import ConfigError, LogFormatError
 
 __all__ = ["READERS", "read_log", "sniff_format"]
 
@@ -121,8 +121,12 @@ def read_log(
     ------
     LogFormatError
         Unknown format, or nothing decodable in the file.
+    ConfigError
+        A ``dialect`` for a log that is not a .tlog, or an unknown dialect.
     """
     fmt = sniff_format(path)
+    if "dialect" in options and fmt != "tlog":
+        raise ConfigError(f"{path}: a MAVLink dialect applies to .tlog files only, not {fmt}")
     module = importlib.import_module(READERS[fmt])
     result: RawLog = module.read(path, messages=messages, start=start, stop=stop, **options)
     return result

@@ -126,7 +126,14 @@ def _collect(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer]
             raise NoExcitationError(f"{raw.source.path}: {ch.message} has fewer than 2 samples")
     inputs: list[_Series] = []
     mixer_name = None
-    if preset.motors is not None:
+    if preset.motors is not None and raw.vehicle not in (None, "copter"):
+        warnings.warn(
+            f"{raw.source.path}: a {raw.vehicle}'s {preset.motors.message} outputs are not a "
+            "multicopter's motors: no inputs (the mixer presets are for multicopters)",
+            DataQualityWarning,
+            stacklevel=3,
+        )
+    elif preset.motors is not None:
         mixer = mixer_for(preset, raw.params, {**MIXERS, **mixers})
         mixer_name = mixer.name
         t, thrust = motor_thrusts(raw, preset, mixer)

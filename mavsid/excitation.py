@@ -261,6 +261,12 @@ def _axis(fd: FlightData, name: str, opts: ScanOptions, air: np.ndarray) -> _Axi
 def _metrics(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions
              ) -> dict[str, float]:
     """Excitation metrics of samples ``[i0, i1)`` for one axis."""
+    with np.errstate(divide="ignore", invalid="ignore"):  # constant signals give NaN, handled
+        return _metrics_raw(ax, fd, i0, i1, opts)
+
+
+def _metrics_raw(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions
+                 ) -> dict[str, float]:
     fs = 1.0 / fd.dt
     out: dict[str, float] = {"noise_floor": ax.floor}
     if ax.u is None or ax.u_hp is None or ax.y is None or i1 - i0 < 8:
@@ -733,6 +739,7 @@ _KINDS = (
     ("covers", "narrow band coverage"),
     ("coherence", "low coherence"),
     ("too short", "too short"),
+    ("too little data", "too little data"),
     ("has no", "missing channel"),
 )
 

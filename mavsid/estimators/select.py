@@ -9,7 +9,10 @@ physically meaningful for a multicopter's rate loop:
 * ``ũ`` is the input passed through the known measurement filters of the log's parameters
   (ArduPilot ``INS_GYRO_FILTER``, see :func:`~mavsid.estimators.regressors.filters_from_params`)
   so that the filter's lag is not absorbed into a smaller gain;
-* the delay ``d`` chosen by searching the one-step residual over ``delays``.
+* the coefficients refined by output error (free-run error minimised) unless
+  ``refine=None``;
+* a first-order input lag (the motors' response, not in any log parameter) and the delay
+  ``d`` (whole samples, then fractions) chosen together by the one-step residual.
 
 Examples
 --------
@@ -18,8 +21,8 @@ Examples
 >>> rng = np.random.default_rng(3)
 >>> u = rng.standard_normal(2000) * 0.05
 >>> p = np.zeros(2000)
->>> for k in range(3, 1999):
-...     p[k + 1] = 0.98 * p[k] + 0.4 * u[k - 3]
+>>> for k in range(1999):  # the input before the record is taken as its first value
+...     p[k + 1] = 0.98 * p[k] + 0.4 * u[max(k - 3, 0)]
 >>> seg = Segment(np.arange(2000) * 0.0025, p[:, None], u[:, None], ("p",), ("u_roll",),
 ...               0.0025, "roll", "sysid")
 >>> m = fit_axis([seg], "roll", n_bootstrap=0)
@@ -41,9 +44,18 @@ from mavsid.estimators._base import Estimator, block_grams, check_identifiable, 
 from mavsid.estimators.l1 import ElasticNet, Lasso
 from mavsid.estimators.least_squares import STLSQ, LeastSquares, Ridge
 from mavsid.estimators.model import Model
+from mavsid.estimators.output_error import refine_output_error
 from mavsid.estimators.regressors import InputFilter, Structure, filters_from_params, stack
 
-__all__ = ["AXES", "ESTIMATORS", "fit_axis", "log_params", "make_estimator", "select_delay"]
+__all__ = [
+    "AXES",
+    "DEFAULT_LAGS_S",
+    "ESTIMATORS",
+    "fit_axis",
+    "log_params",
+    "make_estimator",
+    "select_delay",
+]
 
 #: Axis -> (modelled states, inputs).
 AXES: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
@@ -52,6 +64,9 @@ AXES: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     "yaw": (("r",), ("u_yaw",)),
     "all": (("p", "q", "r"), ("u_roll", "u_pitch", "u_yaw")),
 }
+
+#: Default candidates for a first-order input (motor) lag, s.
+DEFAULT_LAGS_S: tuple[float, ...] = (0.0, 0.005, 0.01, 0.015, 0.02, 0.03, 0.04, 0.06)
 
 #: Estimator name -> class.
 ESTIMATORS: dict[str, type[Estimator]] = {
@@ -127,10 +142,14 @@ def fit_axis(
     delays: Iterable[int] | None = None,
     delay: float | None = None,
     delay_step: float = 0.125,
+    max_delay_s: float = 0.025,
+    lags_s: Iterable[float] | None = DEFAULT_LAGS_S,
+    structure_tol: float = 0.005,
     inputs: Sequence[str] | None = None,
     bias: bool = True,
     continuous: bool = False,
     features: Sequence[str] = (),
+    refine: str | None = "oe",
     **estimator_kwargs: object,
 ) -> Model:
     """Choose the structure for one axis from the data and the log, fit it, return the model.
@@ -149,12 +168,20 @@ def fit_axis(
     filters : sequence of InputFilter, optional
         Override the filters derived from ``params`` (``()`` for none).
     delays : iterable of float, optional
-        Candidate delays in samples; fractions allowed (default 0 ... 25 ms worth in steps
-        of ``delay_step``).
+        Candidate delays in samples; fractions allowed. Default: whole samples up to
+        ``max_delay_s``, then steps of ``delay_step`` around the best.
     delay : float, optional
         Fix the delay (samples) instead of searching.
     delay_step : float
-        Resolution of the default delay grid, in samples (1: whole samples only).
+        Resolution of the default delay search, in samples (1: whole samples only).
+    max_delay_s : float
+        Longest delay searched by default (s).
+    lags_s : iterable of float, optional
+        Candidate time constants (s) of a first-order input lag (motor and ESC response),
+        searched jointly with the delay; 0 is always a candidate; None: no lag.
+    structure_tol : float
+        Parsimony: the simplest (lag, delay) whose mean squared one-step residual is within
+        this fraction of the best is chosen (a longer delay or a lag must earn its keep).
     inputs : sequence of str, optional
         Inputs (default: the axis's own).
     bias : bool
@@ -163,6 +190,11 @@ def fit_axis(
         Continuous-time regression (Savitzky–Golay derivatives) instead of discrete time.
     features : sequence of str
         Extra library terms (e.g. ``library.state_input(...)``).
+    refine : {"oe", None}
+        ``"oe"`` (default): refine the estimator's coefficients by output error, i.e. so that
+        the free run follows the training data (:mod:`~mavsid.estimators.output_error`);
+        standard errors then come from its sandwich covariance. None: the estimator's
+        equation-error result as is.
     **estimator_kwargs
         Passed to the estimator (``alpha``, ``n_bootstrap``, ...).
     """
@@ -186,18 +218,48 @@ def fit_axis(
     feats = library.library(outputs, ins, (library.BIAS,) if bias else (), features)
     structure = Structure(outputs=outputs, features=feats, inputs=ins, filters=flt,
                           continuous=continuous)
-    if delay is None:
-        cand = (list(delays) if delays is not None
-                else list(np.arange(0.0, round(0.025 / dt) + 1e-9, delay_step)))
-        delay, scan = select_delay(segments, structure, cand)
-    else:
-        scan = {}
-    whole = int(np.floor(delay + 1e-9))
-    structure = replace(structure, delay=whole, delay_frac=round(float(delay) - whole, 9) % 1.0)
+    lag_grid = [0.0] if lags_s is None else sorted({0.0, *map(float, lags_s)})
+    cands: list[tuple[float, float, float]] = []  # (mse, lag, delay)
+    scan: dict[str, float] = {}
+    for lag in lag_grid:
+        st = replace(structure, filters=flt + _lag_filter(lag))
+        if delay is not None:
+            d_scan = select_delay(segments, st, [float(delay)])[1]
+        elif delays is not None:
+            d_scan = select_delay(segments, st, delays)[1]
+        else:  # whole samples first, then fractions around the best
+            top = round(max_delay_s / dt)
+            d0, d_scan = select_delay(segments, st, range(top + 1))
+            if delay_step < 1:
+                fine = np.arange(max(d0 - 1, 0), min(d0 + 1, top) + 1e-9, delay_step)
+                d_scan.update(select_delay(segments, st, fine)[1])
+        scan.update({f"lag={lag:g}s,delay={k:g}": v for k, v in d_scan.items()})
+        cands.extend((v, lag, k) for k, v in d_scan.items())
+    # parsimony: the simplest structure (no or short lag, then short delay) whose one-step
+    # residual is within structure_tol of the best
+    floor = min(c[0] for c in cands)
+    _, lag, dly = min((c for c in cands if c[0] <= floor * (1 + structure_tol)),
+                      key=lambda c: (c[1], c[2]))
+    whole = int(np.floor(dly + 1e-9))
+    structure = replace(structure, filters=flt + _lag_filter(lag), delay=whole,
+                        delay_frac=round(float(dly) - whole, 9) % 1.0)
     est = make_estimator(estimator, structure, **estimator_kwargs).fit(segments)
     model = est.model_
+    if refine == "oe":
+        model = refine_output_error(model, segments)
+    elif refine is not None:
+        raise ConfigError(f"refine must be 'oe' or None, got {refine!r}")
     prov = dict(model.provenance)
-    prov["delay_scan"] = {str(k): v for k, v in scan.items()}
+    prov["structure_scan"] = scan
     prov["axis"] = axis
-    prov["filters"] = [f.to_dict() for f in flt]
+    prov["filters"] = [f.to_dict() for f in structure.filters]
+    prov["lag_s"] = lag
+    prov["delay_s"] = dly * dt
     return replace(model, provenance=prov)
+
+
+def _lag_filter(lag_s: float) -> tuple[InputFilter, ...]:
+    """A first-order input lag (motor/ESC response) as a filter; none for 0."""
+    if lag_s <= 0:
+        return ()
+    return (InputFilter(1.0 / (2 * np.pi * lag_s), 1, f"input lag {lag_s * 1e3:g} ms"),)

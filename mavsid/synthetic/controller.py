@@ -46,6 +46,10 @@ QUAD_X = np.array(
     ]
 )
 
+#: motors = _MIX @ (throttle, roll, pitch, yaw)
+_MIX = np.hstack([np.ones((4, 1)), QUAD_X])
+_MIX_INV = np.linalg.inv(_MIX)
+
 
 @dataclass(frozen=True)
 class RateGains:
@@ -172,7 +176,7 @@ class RatePID:
             err_prev = self.error
             self.error += self.a_e * ((self.target - measured) - self.error)
             self.deriv += self.a_d * ((self.error - err_prev) / self.dt - self.deriv)
-        self.integ = float(np.clip(self.integ + g.i * self.error * self.dt, -g.imax, g.imax))
+        self.integ = min(max(self.integ + g.i * self.error * self.dt, -g.imax), g.imax)
         return g.p * self.error + self.integ + g.d * self.deriv + g.ff * self.target
 
 
@@ -199,8 +203,7 @@ def motor_outputs(throttle: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.n
     >>> m.round(3).tolist(), ue.round(6).tolist()
     ([[0.35, 0.45, 0.45, 0.35]], [[0.1, 0.0, 0.0]])
     """
-    mix = np.hstack([np.ones((4, 1)), QUAD_X])  # motors = mix @ (thr, r, p, y)
     cmd = np.column_stack([throttle, u])
-    motors = np.clip(cmd @ mix.T, 0.0, 1.0)
-    realised = motors @ np.linalg.inv(mix).T
+    motors = np.clip(cmd @ _MIX.T, 0.0, 1.0)
+    realised = motors @ _MIX_INV.T
     return motors, realised[:, 1:]

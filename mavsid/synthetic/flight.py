@@ -399,7 +399,8 @@ def fly(sc: Scenario) -> Flight:
                                           "u", "u_eff")}
     throttle = np.zeros(n)
     motors = np.zeros((n, 4))
-    u_hist = np.zeros((disc.delay_steps + 2, 3))  # u_eff[k-n-1 .. k]
+    n_hist = disc.delay_steps + 2  # ring buffer of u_eff[k-n-1 .. k]
+    u_hist = np.zeros((n_hist, 3))
     angle_max = np.radians(ctl.angle_max_deg)
     yaw_max = np.radians(ctl.pilot_yaw_rate_degs)
     for k in range(n):
@@ -440,9 +441,9 @@ def fly(sc: Scenario) -> Flight:
         u = np.clip(u, -1.0, 1.0)
         m, ue = motor_outputs(np.array([thr]), u[None, :])
         # plant: x[k+1] from x[k] and the delayed realised inputs
-        u_hist = np.roll(u_hist, -1, axis=0)
-        u_hist[-1] = ue[0]
-        x_next = (disc.phi @ x + disc.gamma_prev @ u_hist[0] + disc.gamma_now @ u_hist[1]
+        u_hist[k % n_hist] = ue[0]
+        u_prev, u_now = u_hist[(k + 1) % n_hist], u_hist[(k + 2) % n_hist]
+        x_next = (disc.phi @ x + disc.gamma_prev @ u_prev + disc.gamma_now @ u_now
                   + disc.gamma_w @ dist[k])
         out["rate_true"][k], out["gyro_raw"][k], out["gyro"][k] = rate, g_raw, g
         out["attitude"][k], out["attitude_target"][k], out["rate_target"][k] = att, att_tgt, rt

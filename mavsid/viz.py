@@ -351,7 +351,8 @@ def _log_fit_plot(rec: rr.RecordingStream, axis: str, v: Validation) -> None:
     )
     rec.log(
         f"fit/{axis}/free_run_label",
-        rr.Points2D([[200.0, -8.0]], labels=["right: free run"], show_labels=True, radii=0.1),
+        rr.Points2D([[150.0, -8.0]], labels=["last point: free run"], show_labels=True,
+                    radii=0.1),
         static=True,
     )
 
@@ -501,17 +502,19 @@ def blueprint(axes: Sequence[str], *, with_flight: bool = True) -> rrb.Blueprint
                     name=f"{axis}: measured / one-step / free-run",
                 ),
                 rrb.TimeSeriesView(origin=f"axes/{axis}/inputs", name=f"{axis}: inputs"),
-                row_shares=[3, 1],
+                row_shares=[2, 1],
             )
         )
-    if with_flight:
-        per_axis.append(
-            rrb.Horizontal(
-                rrb.TimeSeriesView(origin="flight/states", name="flight: states"),
-                rrb.TimeSeriesView(origin="flight/inputs", name="flight: inputs"),
-            )
-        )
-    columns.append(rrb.Vertical(*per_axis))
+    flight = rrb.Vertical(
+        rrb.TimeSeriesView(origin="flight/states", name="flight: states"),
+        rrb.TimeSeriesView(origin="flight/inputs", name="flight: inputs"),
+        name="flight",
+    )
+    if per_axis:
+        validation = rrb.Vertical(*per_axis, name="validation")
+        columns.append(rrb.Tabs(validation, flight) if with_flight else validation)
+    else:
+        columns.append(flight)
     plots: list[rrb.View] = []
     for axis in axes:
         plots.append(rrb.Spatial2DView(origin=f"fit/{axis}", name=f"{axis}: fit % vs horizon"))

@@ -508,6 +508,10 @@ def test_cli_errors(tmp_path, capsys):
     assert main(["simulate", "-o", str(tmp_path / "x.bin"), "--rate-hz", "300"]) == 1
     assert main(["simulate", "-o", str(tmp_path / "no" / "x.bin")]) == 1
     assert main(["simulate", "-o", str(tmp_path / "x.bin"), "--faults", "melt=1"]) == 1
+    for bad in (["--seed", "-1"], ["--duration", "1e9"], ["--duration", "nan"],
+                ["--noise", "-1"], ["--magnitude", "nan"], ["--t-rec", "nan"],
+                ["--f-start", "0"], ["--rate-hz", "0"]):
+        assert main(["simulate", "-o", str(tmp_path / "x.bin"), *bad]) == 1, bad
     with pytest.raises(SystemExit) as exc:
         main(["simulate", "-o", str(tmp_path / "x.bin"), "--manoeuvre", "loop"])
     assert exc.value.code == 2

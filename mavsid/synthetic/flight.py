@@ -29,6 +29,8 @@ from mavsid.synthetic.sysid import MANOEUVRES, SysIdSettings, chirp, pilot_stick
 __all__ = ["GRAVITY", "MODE_STABILIZE", "MODE_SYSTEMID", "Flight", "LogRates", "Scenario", "fly"]
 
 GRAVITY = 9.80665
+#: longest flight simulated (s)
+MAX_DURATION_S = 3600.0
 MODE_STABILIZE = 0
 MODE_SYSTEMID = 25
 _SID_AXIS_OF = {"roll": 10, "pitch": 11, "yaw": 12, "thrust": 13}
@@ -109,8 +111,12 @@ class Scenario:
             )
         if self.axis not in AXES:
             raise ConfigError(f"axis must be one of {', '.join(AXES)}, got {self.axis!r}")
-        if self.duration_s is not None and not self.duration_s > 0:
-            raise ConfigError(f"duration must be positive, got {self.duration_s}")
+        if self.duration_s is not None and not 0 < self.duration_s <= MAX_DURATION_S:
+            raise ConfigError(
+                f"duration must lie in (0, {MAX_DURATION_S:g}] s, got {self.duration_s}"
+            )
+        if self.seed < 0:
+            raise ConfigError(f"seed must be >= 0, got {self.seed}")
         if self.sysid and self.manoeuvre != "sysid":
             raise ConfigError("SYSTEMID settings given for a pilot manoeuvre")
         if self.runs and self.duration_s is not None:

@@ -99,11 +99,13 @@ class SysIdSettings:
     def __post_init__(self) -> None:
         if self.axis not in SID_AXES:
             raise ConfigError(f"SID_AXIS must be 1-13, got {self.axis}")
+        if not np.isfinite(self.magnitude):
+            raise ConfigError(f"SID_MAGNITUDE must be finite, got {self.magnitude}")
         if not (self.f_start_hz > 0 and self.f_stop_hz > 0):
             raise ConfigError("SID_F_START_HZ and SID_F_STOP_HZ must be positive")
-        if self.t_fade_in < 0 or self.t_fade_out < 0:
+        if not (self.t_fade_in >= 0 and self.t_fade_out >= 0):
             raise ConfigError("SID_T_FADE_IN and SID_T_FADE_OUT must not be negative")
-        if self.t_rec <= self.t_const_freq:
+        if not self.t_rec > self.t_const_freq:
             raise ConfigError(
                 f"SID_T_REC ({self.t_rec} s) must exceed two cycles at SID_F_START_HZ "
                 f"({self.t_const_freq:g} s)"

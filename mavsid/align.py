@@ -95,6 +95,11 @@ def _dedupe(t: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return t[keep], v[keep]
 
 
+#: vehicle classes (RawLog.vehicle's first word) whose servo outputs are no multicopter motors
+_NOT_MULTICOPTER = {"plane", "rover", "boat", "sub", "blimp", "heli", "helicopter", "tracker",
+                    "vtol", "fixedwing", "fixed-wing", "airship", "antenna"}
+
+
 def _resolve_preset(raw: RawLog, preset: Preset | str | None,
                     presets: Mapping[str, Preset] | None) -> Preset:
     if isinstance(preset, Preset):
@@ -126,7 +131,8 @@ def _collect(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer]
             raise NoExcitationError(f"{raw.source.path}: {ch.message} has fewer than 2 samples")
     inputs: list[_Series] = []
     mixer_name = None
-    if preset.motors is not None and raw.vehicle not in (None, "copter"):
+    kind = (raw.vehicle or "").split()[0].lower() if (raw.vehicle or "").strip() else ""
+    if preset.motors is not None and kind in _NOT_MULTICOPTER:
         warnings.warn(
             f"{raw.source.path}: a {raw.vehicle}'s {preset.motors.message} outputs are not a "
             "multicopter's motors: no inputs (the mixer presets are for multicopters)",

@@ -259,3 +259,18 @@ def test_every_shared_log_aligns_or_gives_a_typed_error(path):
     assert fd.time_s.size >= 2 and np.all(np.isfinite(fd.states))
     assert np.all(np.isfinite(fd.inputs))
     assert set(fd.flags) == {"armed", "airborne", "mode"}
+
+
+def test_servo_outputs_of_a_plane_are_not_unmixed():
+    t = np.arange(0, 5, 0.02)
+    att = MessageTable("ATTITUDE", {k: np.zeros(t.size) for k in (
+        "roll", "pitch", "yaw", "rollspeed", "pitchspeed", "yawspeed")}, time_s=t)
+    servo = MessageTable("SERVO_OUTPUT_RAW", {f"servo{i}_raw": np.full(t.size, 1500.0)
+                                              for i in range(1, 9)}, time_s=t)
+    raw = RawLog(SourceInfo("p.tlog", "tlog", 0), {"ATTITUDE": att, "SERVO_OUTPUT_RAW": servo},
+                 vehicle="plane")
+    with pytest.warns(DataQualityWarning, match="plane"):
+        fd = align(raw)
+    assert fd.input_names == () and fd.inputs.shape == (t.size, 0)
+    copter = RawLog(raw.source, raw.messages, vehicle="copter QUAD/X")
+    assert align(copter).input_names == ("u_roll", "u_pitch", "u_yaw", "u_thrust")

@@ -434,7 +434,9 @@ def test_unknown_message_ids_are_counted(tmp_path: Path, vtol: Any) -> None:
     data = raw[: bounds[7]] + struct.pack(">Q", 1) + frame + raw[bounds[7] :]
     log, quality = _read_bytes(tmp_path, data)
     assert sum(len(t) for t in log.messages.values()) == len(messages)
-    assert len(quality) == 1 and "1 frames of message ids unknown" in quality[0]
+    assert quality == [f"{tmp_path / 'x.tlog'}: skipped 1 frames (23 bytes) of message ids "
+                       "unknown to dialect 'ardupilotmega'"]  # fmt: skip
+    assert log.source.skipped_bytes == 23
 
 
 def test_empty_and_foreign_files_raise_log_format_error(tmp_path: Path) -> None:

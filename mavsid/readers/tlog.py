@@ -240,8 +240,9 @@ class _Frames:
     sysid: NDArray[np.int64]
     compid: NDArray[np.int64]
     recv_s: NDArray[np.float64]
-    skipped_bytes: int
-    gaps: int
+    skipped_bytes: int  # not decoded
+    garbage_bytes: int  # not decoded and not a frame of unknown id either
+    gaps: int  # places with garbage
     unknown: int  # well-formed frames of ids the dialect does not define
 
 
@@ -289,12 +290,16 @@ def _scan(buf: NDArray[np.uint8], size: int, defs: dict[int, MessageDef]) -> _Fr
     valid = cand[_resolve_overlaps(s[cand], end[cand], size)]
 
     first, last = s[valid], end[valid]
-    odd = well_formed & ~known
-    unknown = _count_unknown(s[odd], end[odd], first, last, size)
+    odd = np.flatnonzero(well_formed & ~known)
+    odd = odd[_unknown_frames(s[odd], end[odd], first, last, size)]
+    # gaps: bytes in neither a valid frame nor a frame of unknown id
+    starts, ends = np.concatenate([first, s[odd]]), np.concatenate([last, end[odd]])
+    order = np.argsort(starts, kind="stable")
+    starts, ends = starts[order], ends[order]
+    gaps = int(np.count_nonzero(starts[1:] != ends[:-1])) if starts.size else 0
+    if starts.size:
+        gaps += int(starts[0] != 0) + int(ends[-1] != size)
     recv_us = _windows(buf, first, _PREFIX).copy().view(">u8")[:, 0]
-    gaps = int(np.count_nonzero(first[1:] != last[:-1])) if first.size else 0
-    if first.size:
-        gaps += int(first[0] != 0) + int(last[-1] != size)
     return _Frames(
         start=first,
         payload=first + _PREFIX + hdr[valid],
@@ -304,8 +309,9 @@ def _scan(buf: NDArray[np.uint8], size: int, defs: dict[int, MessageDef]) -> _Fr
         compid=np.where(v2, head[:, 6], head[:, 4])[valid].astype(np.int64),
         recv_s=recv_us.astype(np.float64) * 1e-6,
         skipped_bytes=int(size - (last - first).sum()),
+        garbage_bytes=int(size - (ends - starts).sum()),
         gaps=gaps,
-        unknown=unknown,
+        unknown=int(odd.size),
     )
 
 
@@ -390,23 +396,29 @@ def _resolve_overlaps(
     return keep
 
 
-def _count_unknown(
+def _unknown_frames(
     start: NDArray[np.int64],
     end: NDArray[np.int64],
     good_start: NDArray[np.int64],
     good_end: NDArray[np.int64],
     size: int,
-) -> int:
-    """Well-formed frames of unknown message id lying between valid records and chaining on."""
+) -> NDArray[np.bool_]:
+    """Which well-formed frames of unknown message id (sorted by start) lie between valid
+    records, chain on (end where a record starts, or at the end of the file) and do not
+    overlap one another: frames of another dialect rather than garbage."""
     if not start.size:
-        return 0
+        return np.zeros(0, dtype=bool)
     i = np.searchsorted(good_start, start, side="right") - 1
     after_prev = (i < 0) | (good_end[np.maximum(i, 0)] <= start)
-    nxt = np.append(good_start, size)[i + 1]
-    fits = np.flatnonzero(after_prev & (end <= nxt))
-    tail = end[fits]
-    chained = _member(tail, good_start) | (tail == size) | _member(tail, start)
-    return int(np.count_nonzero(chained))
+    fits = after_prev & (end <= np.append(good_start, size)[i + 1])
+    fits &= _member(end, good_start) | (end == size) | _member(end, start)
+    pick = np.flatnonzero(fits)
+    if pick.size > 1:  # drop any overlapping an earlier one
+        clash = start[pick[1:]] < np.maximum.accumulate(end[pick])[:-1]
+        pick = pick[np.concatenate([[True], ~clash])]
+    keep = np.zeros(start.size, dtype=bool)
+    keep[pick] = True
+    return keep
 
 
 # ----------------------------------------------------------------------------- decoding
@@ -767,13 +779,17 @@ def _window(table: MessageTable, lo: float, hi: float) -> MessageTable:
 def _quality_notes(frames: _Frames, dialect: str) -> list[str]:
     """Counts of what was skipped or suspicious, one phrase each."""
     notes = []
-    if frames.skipped_bytes:
+    if frames.garbage_bytes:
         notes.append(
-            f"skipped {frames.skipped_bytes} bytes in {frames.gaps} places "
+            f"skipped {frames.garbage_bytes} bytes in {frames.gaps} places "
             "(garbage, bad CRC or truncated frames)"
         )
     if frames.unknown:
-        notes.append(f"{frames.unknown} frames of message ids unknown to dialect {dialect!r}")
+        unknown_bytes = frames.skipped_bytes - frames.garbage_bytes
+        notes.append(
+            f"skipped {frames.unknown} frames ({unknown_bytes} bytes) of message ids "
+            f"unknown to dialect {dialect!r}"
+        )
     step = np.diff(frames.recv_s)
     back, jump = int(np.count_nonzero(step < 0)), int(np.count_nonzero(step > _TIME_JUMP_S))
     if back or jump:

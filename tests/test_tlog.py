@@ -517,3 +517,39 @@ def test_px4_vehicle_params_modes_and_chunked_texts(tmp_path: Path) -> None:
     # 20 ms after a vehicle heartbeat, so these were at 4.98, 5.02, 5.06 s; the ground
     # station's heartbeat, first, at 4.96 s
     assert np.allclose(log["HEARTBEAT"].time_s, [4.96, 4.98, 5.02, 5.06], atol=1e-6)
+
+
+# ----------------------------------------------------------------------------- info
+
+GOLDEN = Path(__file__).parent / "golden"
+
+
+def test_info_text_matches_golden() -> None:
+    """``mavsid info`` text of vtol.tlog; rewritten only with MAVSID_UPDATE_GOLDEN=1."""
+    from mavsid.info import format_summary, summarize
+
+    path = shared_path(*VTOL)
+    summary = summarize(mavsid_read(str(path))[0])
+    summary["path"] = path.name  # independent of where shared/ lives
+    text = format_summary(summary) + "\n"
+    golden = GOLDEN / f"info_{path.name}.txt"
+    if os.environ.get("MAVSID_UPDATE_GOLDEN") == "1":
+        golden.parent.mkdir(exist_ok=True)
+        golden.write_text(text)
+        pytest.skip(f"rewrote {golden}")
+    assert text == golden.read_text()
+
+
+def test_info_json_agrees_with_pymavlink() -> None:
+    from mavsid.info import summarize
+
+    path = shared_path(*VTOL)
+    summary = summarize(mavsid_read(str(path))[0])
+    messages, _, conn = pymavlink_stream(str(path))
+    assert {k: v["count"] for k, v in summary["messages"].items()} == Counter(
+        m.get_type() for m in messages
+    )
+    assert summary["param_count"] == len(conn.param_state[(1, 1)].params)
+    assert summary["text_count"] == sum(m.get_type() == "STATUSTEXT" for m in messages)
+    assert summary["format"] == "tlog" and summary["skipped_bytes"] == 0
+    assert summary["messages"]["ATTITUDE"]["fields"]["rollspeed"] == "rad/s"

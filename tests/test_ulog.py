@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import os
 import warnings
 from pathlib import Path
 from typing import Any
@@ -194,3 +195,43 @@ def test_overwritten_block_gives_pyulog_values_or_a_clean_error(
         return
     log, _ = read(path)
     assert_tables_match(log, ref)
+
+
+# ----------------------------------------------------------------------------- info
+
+GOLDEN = Path(__file__).parent / "golden"
+SMALL = ("public", "PX4__pyulog", "sample_log_small.ulg")
+
+
+def test_info_text_matches_golden() -> None:
+    """``mavsid info`` text of sample_log_small.ulg; rewritten only with
+    MAVSID_UPDATE_GOLDEN=1."""
+    from mavsid.info import format_summary, summarize
+
+    path = shared_path(*SMALL)
+    summary = summarize(read(path)[0])
+    summary["path"] = path.name  # independent of where shared/ lives
+    text = format_summary(summary) + "\n"
+    golden = GOLDEN / f"info_{path.name}.txt"
+    if os.environ.get("MAVSID_UPDATE_GOLDEN") == "1":
+        golden.parent.mkdir(exist_ok=True)
+        golden.write_text(text)
+        pytest.skip(f"rewrote {golden}")
+    assert text == golden.read_text()
+
+
+def test_info_json_agrees_with_pyulog() -> None:
+    from mavsid.info import summarize
+
+    path = shared_path(*SMALL)
+    summary = summarize(read(path)[0])
+    ref, _ = pyulog(path)
+    assert {k: v["count"] for k, v in summary["messages"].items()} == {
+        name_of(d): len(d.data["timestamp"]) for d in ref.data_list
+    }
+    assert summary["param_count"] == len(ref.initial_parameters)
+    assert summary["text_count"] == len(ref.logged_messages) + sum(
+        len(v) for v in ref.logged_messages_tagged.values()
+    )
+    assert summary["notes"][0] == f"{len(ref.dropouts)} dropouts, " \
+        f"{sum(d.duration for d in ref.dropouts)} ms in all"

@@ -154,6 +154,9 @@ class Channel:
         (ZYX, rad) of a Hamilton quaternion ``w x y z``.
     optional : bool
         The preset still applies when this channel is missing.
+    instance : int, optional
+        For multi-instance messages (a column with unit ``instance``, e.g. DataFlash IMU.I):
+        which instance; default the lowest logged.
     """
 
     message: str
@@ -162,6 +165,7 @@ class Channel:
     scale: float = 1.0
     transform: str = ""
     optional: bool = False
+    instance: int | None = None
 
 
 @dataclass(frozen=True)
@@ -593,6 +597,25 @@ def to_si(values: np.ndarray, unit: str, what: str = "") -> np.ndarray:
         raise ConfigError(f"{what or 'channel'}: unknown unit {unit!r}") from None
 
 
+def _rows(table: MessageTable, instance: int | None = None) -> np.ndarray | None:
+    """Rows of one source: one instance of a multi-instance message (the column whose unit
+    is ``instance``; lowest unless given) and, in a .tlog, the system id sending most.
+    None when all rows qualify."""
+    keep = np.ones(len(table), dtype=bool)
+    for name in table.fields:
+        if table.unit(name) == "instance":
+            col = np.asarray(table.columns[name])
+            if col.size:
+                keep &= col == (col.min() if instance is None else instance)
+            break
+    if "_sysid" in table.columns:
+        ids = np.asarray(table.columns["_sysid"])
+        if ids.size and np.any(ids != ids[0]):
+            vals, counts = np.unique(ids, return_counts=True)
+            keep &= ids == vals[np.argmax(counts)]
+    return None if keep.all() else keep
+
+
 def evaluate(raw: RawLog, channel: Channel, what: str = "") -> tuple[np.ndarray, np.ndarray]:
     """A channel's samples in SI units: ``(time_s, values)``, sorted by time, NaN-free.
 
@@ -623,6 +646,9 @@ def evaluate(raw: RawLog, channel: Channel, what: str = "") -> tuple[np.ndarray,
     values = values * channel.scale
     t = np.asarray(table.time_s, dtype=np.float64)
     ok = np.isfinite(t) & np.isfinite(values)
+    rows = _rows(table, channel.instance)
+    if rows is not None:
+        ok &= rows
     t, values = t[ok], values[ok]
     if t.size > 1 and np.any(np.diff(t) < 0):
         order = np.argsort(t, kind="stable")
@@ -671,6 +697,9 @@ def motor_thrusts(raw: RawLog, preset: Preset, mixer: Mixer) -> tuple[np.ndarray
     pwm = np.column_stack(cols)
     t = np.asarray(table.time_s, dtype=np.float64)
     ok = np.isfinite(t) & np.all(np.isfinite(pwm), axis=1)
+    rows = _rows(table, ch.instance)
+    if rows is not None:
+        ok &= rows
     t, pwm = t[ok], pwm[ok]
     order = np.argsort(t, kind="stable")
     return t[order], pwm_to_thrust(pwm[order], raw.params)
@@ -696,15 +725,18 @@ def _read_toml(path: str | os.PathLike[str]) -> dict[str, Any]:
 def _channel_from(spec: Any, where: str) -> Channel:
     if not isinstance(spec, Mapping) or "message" not in spec or "field" not in spec:
         raise ConfigError(f"{where}: needs a table with 'message' and 'field'")
-    unknown = set(spec) - {"message", "field", "unit", "scale", "transform", "optional"}
+    unknown = set(spec) - {"message", "field", "unit", "scale", "transform", "optional",
+                           "instance"}
     if unknown:
         raise ConfigError(f"{where}: unknown key(s) {', '.join(sorted(unknown))}")
     unit = str(spec.get("unit", "1"))
     if unit not in _UNIT_TO_SI and unit != "pwm":
         raise ConfigError(f"{where}: unknown unit {unit!r}")
+    inst = spec.get("instance")
     return Channel(
         str(spec["message"]), str(spec["field"]), unit, float(spec.get("scale", 1.0)),
         str(spec.get("transform", "")), bool(spec.get("optional", False)),
+        None if inst is None else int(inst),
     )
 
 

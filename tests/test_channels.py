@@ -206,3 +206,17 @@ def test_bad_toml_is_a_config_error(tmp_path, text, match):
 def test_missing_toml_file_is_a_config_error(tmp_path):
     with pytest.raises(ConfigError, match="cannot open"):
         load_presets(tmp_path / "none.toml")
+
+
+def test_multi_instance_and_multi_system_rows_are_separated():
+    t = np.repeat(np.arange(3) * 0.01, 2)
+    imu = MessageTable("IMU", {"I": np.tile([0, 1], 3), "GyrX": np.tile([0.1, 9.0], 3)},
+                       time_s=t, units={"I": "instance"})
+    att = MessageTable("ATTITUDE", {"_sysid": np.array([1, 1, 1, 7]),
+                                    "roll": np.array([0.1, 0.2, 0.3, 5.0])},
+                       time_s=np.arange(4) * 0.1)
+    raw = RawLog(SourceInfo("x.bin", "dataflash", 0), {"IMU": imu, "ATTITUDE": att})
+    tt, v = evaluate(raw, Channel("IMU", "GyrX", "rad/s"))
+    assert np.allclose(v, 0.1) and np.allclose(tt, [0.0, 0.01, 0.02])
+    assert np.allclose(evaluate(raw, Channel("IMU", "GyrX", "rad/s", instance=1))[1], 9.0)
+    assert np.allclose(evaluate(raw, Channel("ATTITUDE", "roll", "rad"))[1], [0.1, 0.2, 0.3])

@@ -104,6 +104,10 @@ class ControllerParams:
     angle_max_deg: float = 30.0
     pilot_yaw_rate_degs: float = 202.5
     loop_hz: float = 400.0
+    spin_min: float = 0.15
+    spin_max: float = 0.95
+    pwm_min: float = 1000.0
+    pwm_max: float = 2000.0
 
     def __post_init__(self) -> None:
         for name, value in asdict(self).items():
@@ -137,7 +141,18 @@ class ControllerParams:
         out["ANGLE_MAX"] = self.angle_max_deg * 100.0
         out["PILOT_Y_RATE"] = self.pilot_yaw_rate_degs
         out["SCHED_LOOP_RATE"] = self.loop_hz
+        out["MOT_SPIN_MIN"], out["MOT_SPIN_MAX"] = self.spin_min, self.spin_max
+        out["MOT_PWM_MIN"], out["MOT_PWM_MAX"] = self.pwm_min, self.pwm_max
         return out
+
+    def motor_pwm(self, motors: np.ndarray) -> np.ndarray:
+        """Motor demands (0-1) -> ESC pulse widths (µs, whole), via MOT_SPIN_* and MOT_PWM_*.
+
+        >>> ControllerParams().motor_pwm(np.array([0.0, 1.0])).tolist()
+        [1150.0, 1950.0]
+        """
+        spin = self.spin_min + (self.spin_max - self.spin_min) * np.asarray(motors)
+        return np.round(self.pwm_min + (self.pwm_max - self.pwm_min) * spin)
 
 
 def _alpha(cutoff_hz: float, dt: float) -> float:
@@ -178,6 +193,72 @@ class RatePID:
             self.deriv += self.a_d * ((self.error - err_prev) / self.dt - self.deriv)
         self.integ = min(max(self.integ + g.i * self.error * self.dt, -g.imax), g.imax)
         return g.p * self.error + self.integ + g.d * self.deriv + g.ff * self.target
+
+
+class AttitudeController:
+    """Angle loop (input shaping, angle P, feed-forward) and the three rate PIDs.
+
+    Examples
+    --------
+    >>> c = AttitudeController(ControllerParams())
+    >>> step = c.update(np.array([0.1, 0.0, 0.0]), np.zeros(3), np.zeros(3))
+    >>> [round(float(v), 4) for v in step.rate_target]   # ANG_P * err + shaped-target rate
+    [0.6937, 0.0, 0.0]
+    """
+
+    def __init__(self, params: ControllerParams) -> None:
+        self.params = params
+        self.dt = 1.0 / params.loop_hz
+        self.pids = [RatePID(params.rate_gains(ax), self.dt) for ax in _PREFIX]
+        self.ang_p = np.array([params.angle_p(ax) for ax in _PREFIX])
+        self.a_in = self.dt / (self.dt + params.input_tc)
+        self.att_target = np.zeros(3)
+        self.yaw_rate_target = 0.0
+
+    def update(
+        self,
+        desired: np.ndarray,
+        attitude: np.ndarray,
+        gyro: np.ndarray,
+        rate_injection: np.ndarray | None = None,
+        feedforward: bool = True,
+    ) -> ControlStep:
+        """One loop.
+
+        Parameters
+        ----------
+        desired : (3,) desired roll, pitch angle (rad) and yaw rate (rad/s).
+        attitude : (3,) estimated roll, pitch, yaw (rad).
+        gyro : (3,) filtered body rates (rad/s).
+        rate_injection : (3,), optional
+            Added to the rate targets (rad/s): SYSTEMID rate axes.
+        feedforward : bool
+            Body-rate feed-forward of the shaped target (off in SYSTEMID recovery axes).
+        """
+        dt, a_in = self.dt, self.a_in
+        ff = np.zeros(3)
+        ff[:2] = (desired[:2] - self.att_target[:2]) * a_in / dt
+        self.att_target[:2] += ff[:2] * dt
+        self.yaw_rate_target += (desired[2] - self.yaw_rate_target) * a_in
+        ff[2] = self.yaw_rate_target
+        self.att_target[2] += self.yaw_rate_target * dt
+        err = self.att_target - attitude
+        err[2] = (err[2] + np.pi) % (2 * np.pi) - np.pi
+        rate_target = self.ang_p * err + (ff if feedforward and self.params.rate_ff_enab else 0.0)
+        if rate_injection is not None:
+            rate_target = rate_target + rate_injection
+        out = np.array([self.pids[j].update(float(rate_target[j]), float(gyro[j]))
+                        for j in range(3)])
+        return ControlStep(self.att_target.copy(), rate_target, out)
+
+
+@dataclass(frozen=True)
+class ControlStep:
+    """What :meth:`AttitudeController.update` computed in one loop."""
+
+    att_target: np.ndarray
+    rate_target: np.ndarray
+    pid_out: np.ndarray
 
 
 def motor_outputs(throttle: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from mavsid.errors import ConfigError
-from mavsid.synthetic.controller import ControllerParams, RatePID, motor_outputs
+from mavsid.synthetic.controller import AttitudeController, ControllerParams, motor_outputs
 from mavsid.synthetic.plant import AXES, Lowpass2p, PlantParams, discretise
 from mavsid.synthetic.sysid import MANOEUVRES, SysIdSettings, chirp, pilot_sticks
 
@@ -223,8 +223,6 @@ class Flight:
         p["INS_GYRO_FILTER"] = sc.plant.gyro_filter_hz
         p["INS_ACCEL_FILTER"] = 20.0
         p["MOT_THST_HOVER"] = sc.plant.hover_throttle
-        p["MOT_PWM_MIN"], p["MOT_PWM_MAX"] = 1000.0, 2000.0
-        p["MOT_SPIN_MIN"], p["MOT_SPIN_MAX"] = 0.15, 0.95
         p["FRAME_CLASS"], p["FRAME_TYPE"] = 1.0, 1.0
         # RCIN, IMU, RCOU bits plus ATTITUDE_FAST/MED as SYSTEMID's logging rate implies:
         # both -> every loop, FAST -> every 2nd, MED -> every 4th, neither -> every 8th
@@ -392,14 +390,9 @@ def fly(sc: Scenario) -> Flight:
     dist = rng.standard_normal((n, 3)) * pl.disturbance
     bias = np.array(pl.gyro_bias)
     gyro_filter = Lowpass2p(pl.gyro_filter_hz, ctl.loop_hz, 3)
-    pids = [RatePID(ctl.rate_gains(ax), dt) for ax in AXES]
-    ang_p = np.array([ctl.angle_p(ax) for ax in AXES])
-    a_in = dt / (dt + ctl.input_tc)
-
+    control = AttitudeController(ctl)
     x = np.zeros(disc.n_state)
     att = np.zeros(3)
-    att_tgt = np.zeros(3)
-    yaw_rate_tgt = 0.0
     out = {k: np.zeros((n, 3)) for k in ("rate_true", "gyro_raw", "gyro", "attitude",
                                           "attitude_target", "desired", "rate_target", "pid_out",
                                           "u", "u_eff")}
@@ -407,44 +400,26 @@ def fly(sc: Scenario) -> Flight:
     motors = np.zeros((n, 4))
     n_hist = disc.delay_steps + 2  # ring buffer of u_eff[k-n-1 .. k]
     u_hist = np.zeros((n_hist, 3))
-    angle_max = np.radians(ctl.angle_max_deg)
-    yaw_max = np.radians(ctl.pilot_yaw_rate_degs)
+    # desired roll, pitch angle and yaw rate from the sticks (+ SYSTEMID angle injection)
+    desired = sticks[:, [0, 1, 3]] * np.radians(
+        [ctl.angle_max_deg, ctl.angle_max_deg, ctl.pilot_yaw_rate_degs])
+    angle_inj = (inj_kind == "input_angle") | (inj_kind == "recovery_angle")
+    rows = np.flatnonzero(angle_inj & (inj_axis < 3))
+    desired[rows, inj_axis[rows]] += np.radians(sid_targ[rows])
+    rate_inj = np.zeros((n, 3))
+    rows = np.flatnonzero((inj_kind == "rate") & (inj_axis < 3))
+    rate_inj[rows, inj_axis[rows]] = np.radians(sid_targ[rows])
+    mixer_inj = np.zeros((n, 4))  # roll, pitch, yaw, thrust
+    rows = np.flatnonzero(inj_kind == "mixer")
+    mixer_inj[rows, inj_axis[rows]] = sid_targ[rows]
+    feedforward = inj_kind != "recovery_angle"
     for k in range(n):
         rate = x[:3]
         g_raw = rate + bias + noise[k]
         g = gyro_filter(g_raw)
-        kind, ax_i, sig = inj_kind[k], inj_axis[k], sid_targ[k]
-        # desired attitude from sticks (+ angle injection, deg -> rad)
-        want = np.array([sticks[k, 0] * angle_max, sticks[k, 1] * angle_max])
-        want_yaw_rate = sticks[k, 3] * yaw_max
-        if kind in ("input_angle", "recovery_angle"):
-            if ax_i < 2:
-                want[ax_i] += np.radians(sig)
-            else:
-                want_yaw_rate += np.radians(sig)
-        # input shaping with ATC_INPUT_TC; its rate is the body-rate feed-forward
-        ff = np.zeros(3)
-        ff[:2] = (want - att_tgt[:2]) * a_in / dt
-        att_tgt[:2] += ff[:2] * dt
-        yaw_rate_tgt += (want_yaw_rate - yaw_rate_tgt) * a_in
-        ff[2] = yaw_rate_tgt
-        att_tgt[2] += yaw_rate_tgt * dt
-        use_ff = ctl.rate_ff_enab and kind != "recovery_angle"
-        err = att_tgt - att
-        err[2] = (err[2] + np.pi) % (2 * np.pi) - np.pi
-        rt = ang_p * err + (ff if use_ff else 0.0)
-        if kind == "rate" and ax_i < 3:
-            rt[ax_i] += np.radians(sig)
-        u = np.array([pids[j].update(float(rt[j]), float(g[j])) for j in range(3)])
-        out["pid_out"][k] = u
-        out["desired"][k] = (want[0], want[1], want_yaw_rate)
-        thr = pl.hover_throttle
-        if kind == "mixer":
-            if ax_i < 3:
-                u[ax_i] += sig
-            else:
-                thr += sig
-        u = np.clip(u, -1.0, 1.0)
+        step = control.update(desired[k], att, g, rate_inj[k], bool(feedforward[k]))
+        thr = pl.hover_throttle + mixer_inj[k, 3]
+        u = np.clip(step.pid_out + mixer_inj[k, :3], -1.0, 1.0)
         m, ue = motor_outputs(np.array([thr]), u[None, :])
         # plant: x[k+1] from x[k] and the delayed realised inputs
         u_hist[k % n_hist] = ue[0]
@@ -452,7 +427,8 @@ def fly(sc: Scenario) -> Flight:
         x_next = (disc.phi @ x + disc.gamma_prev @ u_prev + disc.gamma_now @ u_now
                   + disc.gamma_w @ dist[k])
         out["rate_true"][k], out["gyro_raw"][k], out["gyro"][k] = rate, g_raw, g
-        out["attitude"][k], out["attitude_target"][k], out["rate_target"][k] = att, att_tgt, rt
+        out["attitude"][k], out["attitude_target"][k] = att, step.att_target
+        out["rate_target"][k], out["pid_out"][k] = step.rate_target, step.pid_out
         out["u"][k], out["u_eff"][k] = u, ue[0]
         throttle[k], motors[k] = thr, m[0]
         # Euler kinematics with the mean rate over the step
@@ -465,16 +441,11 @@ def fly(sc: Scenario) -> Flight:
         ])
         att[2] = att[2] % (2 * np.pi)
         x = x_next
-    if disc.delay_steps + 2 > n:
-        raise ConfigError("delay longer than the flight")
-
-    spin_min, spin_max = 0.15, 0.95
-    pwm = 1000.0 + 1000.0 * (spin_min + (spin_max - spin_min) * motors)
-    specific = -GRAVITY * motors.mean(axis=1) / pl.hover_throttle
+    out["desired"][:] = desired
     accel = acc_noise.copy()
-    accel[:, 2] += specific
+    accel[:, 2] += -GRAVITY * motors.mean(axis=1) / pl.hover_throttle
     return Flight(
-        scenario=sc, dt=dt, t_s=t, throttle=throttle, motors=motors, pwm=np.round(pwm),
+        scenario=sc, dt=dt, t_s=t, throttle=throttle, motors=motors, pwm=ctl.motor_pwm(motors),
         accel=accel, sticks=sticks, mode=mode, sid_time=sid_time, sid_targ=sid_targ,
         sid_freq=sid_freq, run_index=run_index, **out,
     )

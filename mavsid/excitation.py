@@ -15,9 +15,10 @@ rates):
 
 Every window gets the same metrics and gates:
 
-- **input power**: RMS of the (linearly detrended) input against the axis's *noise floor*,
-  the 10th percentile of its 1-s RMS over the airborne flight (at least ``min_floor``): what
-  the controller output does when nobody excites it. Gate: ``power_ratio``× the floor.
+- **input power**: RMS of the input in the band (its moving average over one period of the
+  band's lower edge removed) against the axis's *noise floor*, the 10th percentile of the
+  same quantity's 1-s RMS over the airborne flight (at least ``min_floor``): what the
+  controller output does when nobody excites it. Gate: ``power_ratio``× the floor.
 - **band coverage**: share of the ``band_hz`` band (log-frequency weighted; upper edge at
   most 0.4× the sample rate) where the input's Welch PSD is above 10× the floor's white
   level. Gate: ``min_coverage``.
@@ -37,8 +38,9 @@ Every window gets the same metrics and gates:
 
 ``score`` (0..1) is the geometric mean of ``min(1, log10(power ratio)/2)``, the coverage,
 the coherence and ``1 - log10(condition)/2`` (each clipped to 0..1). Adjacent kept scan
-windows are merged, and a merged window's quiet head and tail (0.5-s input RMS below the
-power gate) are trimmed. :func:`find_segments` returns every window's
+windows are merged, and a merged window's quiet head and tail (where the input stays within
+the power gate of its level in a quiet first/last 0.5 s) are trimmed; when the merged window
+fails a gate its parts are reported as they were. :func:`find_segments` returns every window's
 :class:`WindowReport`; :func:`select_segments` turns the kept ones into
 :class:`~mavsid.data.Segment` objects for the estimators.
 

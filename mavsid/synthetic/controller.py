@@ -31,7 +31,15 @@ import numpy as np
 
 from mavsid.errors import ConfigError
 
-__all__ = ["QUAD_X", "ControllerParams", "RateGains", "RatePID", "motor_outputs"]
+__all__ = [
+    "QUAD_X",
+    "AttitudeController",
+    "ControlStep",
+    "ControllerParams",
+    "RateGains",
+    "RatePID",
+    "motor_outputs",
+]
 
 _PREFIX = {"roll": "RLL", "pitch": "PIT", "yaw": "YAW"}
 
@@ -203,7 +211,7 @@ class AttitudeController:
     >>> c = AttitudeController(ControllerParams())
     >>> step = c.update(np.array([0.1, 0.0, 0.0]), np.zeros(3), np.zeros(3))
     >>> [round(float(v), 4) for v in step.rate_target]   # ANG_P * err + shaped-target rate
-    [0.6937, 0.0, 0.0]
+    [0.6631, 0.0, 0.0]
     """
 
     def __init__(self, params: ControllerParams) -> None:

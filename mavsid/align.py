@@ -128,7 +128,12 @@ def _collect(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer]
         if t.size >= 2:
             states.append(_Series(name, f"{ch.message}.{ch.field}", *_dedupe(t, v)))
         elif not ch.optional:
-            raise NoExcitationError(f"{raw.source.path}: {ch.message} has fewer than 2 samples")
+            table = raw[ch.message]
+            timed = int(np.count_nonzero(np.isfinite(np.asarray(table.time_s, dtype=float))))
+            raise NoExcitationError(
+                f"{raw.source.path}: {ch.message} has {len(table)} record(s), {timed} with a "
+                f"time stamp and {t.size} usable: nothing to put on a time grid"
+            )
     inputs: list[_Series] = []
     mixer_name = None
     kind = (raw.vehicle or "").split()[0].lower() if (raw.vehicle or "").strip() else ""

@@ -374,7 +374,7 @@ class Estimator:
 
     def _settings(self) -> dict[str, Any]:
         return {k: v for k, v in vars(self).items()
-                if not k.endswith("_") and k != "structure"}
+                if not k.endswith("_") and not k.startswith("_") and k != "structure"}
 
     def fit(self, segments: Sequence[Segment], structure: Structure | None = None
             ) -> Estimator:

@@ -25,6 +25,7 @@ Examples
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
@@ -100,6 +101,32 @@ class ElasticNet(Estimator):
                 hi[flat[name]] = min(hi[flat[name]], 0.0)
         return lo, hi
 
+    def _problem(self, p: int, m: int, pen: np.ndarray, lo_mask: np.ndarray,
+                 hi_mask: np.ndarray) -> tuple[Any, dict[str, Any]]:
+        """The parametrised cvxpy problem for this shape (built once, then re-solved: cvxpy
+        caches the canonicalisation of a DPP problem)."""
+        import cvxpy as cp
+
+        key = (p, m, pen.tobytes(), lo_mask.tobytes(), hi_mask.tobytes(), self.l1_ratio)
+        cache: dict[Any, tuple[Any, dict[str, Any]]] = self.__dict__.setdefault("_cvx", {})
+        if key in cache:
+            return cache[key]
+        th = cp.Variable((p, m))
+        par = {"r": cp.Parameter((p, p)), "q": cp.Parameter((p, m)),
+               "alpha": cp.Parameter(nonneg=True), "lo": cp.Parameter((p, m)),
+               "hi": cp.Parameter((p, m)), "th": th}
+        rho = float(self.l1_ratio)
+        weighted = cp.multiply(pen[:, None] * np.ones((1, m)), th)
+        obj = cp.sum_squares(par["r"] @ th - par["q"]) + par["alpha"] * (
+            rho * cp.sum(cp.abs(weighted)) + 0.5 * (1 - rho) * cp.sum_squares(weighted))
+        cons = []
+        if lo_mask.any():
+            cons.append(cp.multiply(lo_mask.astype(float), th) >= par["lo"])
+        if hi_mask.any():
+            cons.append(cp.multiply(hi_mask.astype(float), th) <= par["hi"])
+        cache[key] = (cp.Problem(cp.Minimize(obj), cons), par)
+        return cache[key]
+
     def _solve(self, g: Gram, alpha: float, structure: Structure) -> np.ndarray:
         import cvxpy as cp
 
@@ -108,31 +135,25 @@ class ElasticNet(Estimator):
         zz = g.zz / np.outer(s, s) / g.n
         zy = g.zy / s[:, None] / g.n
         r, q = gram_sqrt(zz, zy)
+        r_full, q_full = np.zeros((p, p)), np.zeros((p, m))
+        r_full[: r.shape[0]], q_full[: q.shape[0]] = r, q
         pen = np.array([f != library.BIAS for f in structure.features], float)
         lo, hi = self._constraints(structure)
-        th = cp.Variable((p, m))
-        rho = float(self.l1_ratio)
-        obj = cp.sum_squares(r @ th - q)
-        if alpha > 0:
-            weighted = cp.multiply(pen[:, None] * np.ones((1, m)), th)
-            obj = obj + alpha * (rho * cp.sum(cp.abs(weighted))
-                                 + 0.5 * (1 - rho) * cp.sum_squares(weighted))
-        cons = []
         lo_s, hi_s = lo * s[:, None], hi * s[:, None]
-        if np.isfinite(lo_s).any():
-            mask = np.isfinite(lo_s)
-            cons.append(cp.multiply(mask, th) >= np.where(mask, lo_s, 0.0))
-        if np.isfinite(hi_s).any():
-            mask = np.isfinite(hi_s)
-            cons.append(cp.multiply(mask, th) <= np.where(mask, hi_s, 0.0))
-        prob = cp.Problem(cp.Minimize(obj), cons)
+        lo_mask, hi_mask = np.isfinite(lo_s), np.isfinite(hi_s)
+        prob, par = self._problem(p, m, pen, lo_mask, hi_mask)
+        par["r"].value, par["q"].value = r_full, q_full
+        par["alpha"].value = max(float(alpha), 0.0)
+        par["lo"].value = np.where(lo_mask, lo_s, 0.0)
+        par["hi"].value = np.where(hi_mask, hi_s, 0.0)
         try:
             prob.solve(solver=self.solver)
         except cp.error.SolverError as exc:
             raise SolverError(f"{self.name}: {self.solver} failed: {exc}") from None
+        th = par["th"]
         if th.value is None or prob.status not in ("optimal", "optimal_inaccurate"):
             raise SolverError(f"{self.name}: {self.solver} status {prob.status}")
-        val = np.asarray(th.value)
+        val = np.array(th.value)
         ys = np.sqrt(np.clip(np.diag(g.yy), 0, None) / g.n)
         val[np.abs(val) < self.zero_tol * np.where(ys > 0, ys, 1.0)[None, :]] = 0.0
         return val / s[:, None]

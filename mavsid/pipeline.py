@@ -281,8 +281,8 @@ def split_segments(
     >>> t = np.arange(0, 30, 0.01)
     >>> seg = Segment(t, t[:, None], t[:, None], ("p",), ("u_roll",), 0.01, "roll", "sysid")
     >>> train, val = split_segments([seg], block_s=10.0)
-    >>> [(s.start_s, round(s.stop_s, 2)) for s in train], [(s.start_s, s.stop_s) for s in val]
-    ([(0.0, 9.99), (20.0, 29.99)], [(10.0, 19.99)])
+    >>> [(round(s.start_s, 2), round(s.stop_s, 2)) for s in (*train, *val)]
+    [(0.0, 9.99), (20.0, 29.99), (10.0, 19.99)]
     """
     if not segments:
         raise NoExcitationError("no segments to fit")
@@ -363,6 +363,11 @@ class AxisFit:
                     "autocorr_outside": dict(
                         zip(v.state_names, v.residuals.autocorr_outside.tolist(), strict=True)
                     ),
+                    "crosscorr_outside": {
+                        f"{u}->{y}": v.residuals.crosscorr_outside[i, j]
+                        for i, u in enumerate(v.input_names)
+                        for j, y in enumerate(v.state_names)
+                    },
                 },
                 "train_segments": [[s.start_s, s.stop_s] for s in self.train],
                 "validation_segments": [[s.start_s, s.stop_s] for s in self.held_out],

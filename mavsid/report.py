@@ -112,15 +112,19 @@ def _horizon_figure(v: Validation) -> Figure:
 
 def _residual_figure(v: Validation) -> Figure:
     r = v.residuals
-    fig = Figure(figsize=(5.2, 3.4))
-    ax = fig.subplots()
+    fig = Figure(figsize=(5.2, 4.6))
+    ax, ax_u = fig.subplots(2, 1)
     for j, state in enumerate(v.state_names):
-        ax.plot(r.lags * v.dt * 1e3, r.autocorr[:, j], ".-", ms=3, label=f"{state} residual")
-    ax.axhspan(-r.band, r.band, color="0.85", label=f"{r.confidence:.0%} band (white)")
-    ax.set_xlabel("lag [ms]")
-    ax.set_ylabel("autocorrelation")
-    ax.set_title("one-step residual whiteness", fontsize=10)
-    ax.legend(fontsize=8)
+        ax.plot(r.lags * v.dt * 1e3, r.autocorr[:, j], ".-", ms=3, label=f"{state}")
+        for i, name in enumerate(v.input_names):
+            ax_u.plot(r.cross_lags * v.dt * 1e3, r.crosscorr[:, i, j], ".-", ms=3,
+                      label=f"{name} → {state}")
+    for a in (ax, ax_u):
+        a.axhspan(-r.band, r.band, color="0.85", label=f"{r.confidence:.0%} band (white)")
+        a.legend(fontsize=7)
+    ax.set_title("one-step residuals: autocorrelation", fontsize=10)
+    ax_u.set_title("input–residual cross-correlation", fontsize=10)
+    ax_u.set_xlabel("lag [ms]")
     fig.tight_layout()
     return fig
 
@@ -136,10 +140,18 @@ def _bode_figure(v: Validation) -> Figure | None:
         sel = (fr.freq_hz >= lo) & (fr.freq_hz <= hi)
         f = fr.freq_hz[sel]
         mag, ph, coh = axes[0, i], axes[1, i], axes[2, i]
+        trusted = fr.coherence[sel] >= 0.6
         for label, h, colour in (("measured", fr.measured, _COLOURS["measured"]),
                                  ("model", fr.model, _COLOURS["free_run"])):
-            mag.semilogx(f, 20 * np.log10(np.abs(h[sel]) + 1e-12), color=colour, label=label)
-            ph.semilogx(f, np.degrees(np.unwrap(np.angle(h[sel]))), color=colour)
+            db = 20 * np.log10(np.abs(h[sel]) + 1e-12)
+            deg = np.degrees(np.unwrap(np.angle(h[sel])))
+            if label == "measured":  # faint where the coherence says not to trust it
+                mag.semilogx(f, db, color=colour, lw=0.6, alpha=0.35)
+                ph.semilogx(f, deg, color=colour, lw=0.6, alpha=0.35)
+                db, deg = np.where(trusted, db, np.nan), np.where(trusted, deg, np.nan)
+                label = "measured (coherence ≥ 0.6)"
+            mag.semilogx(f, db, color=colour, label=label)
+            ph.semilogx(f, deg, color=colour)
         coh.semilogx(f, fr.coherence[sel], color="#7a4fd6")
         coh.set_ylim(0, 1.05)
         mag.set_title(f"{fr.input_name} → {fr.output_name}", fontsize=10)

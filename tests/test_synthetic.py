@@ -16,6 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from helpers import FIXTURES, shared_path
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 from pymavlink import DFReader, mavutil
 from scipy import signal
 
@@ -345,7 +347,7 @@ def resimulate(u: np.ndarray, p: PlantParams, axis: int, dt: float, sub: int = 1
     b/(s + d) -> 2nd-order Butterworth at the gyro filter cutoff. ``sub`` substeps per loop
     step let the delay be a multiple of dt/sub."""
     b, d, tau = p.effectiveness[axis], p.damping[axis], p.motor_tau_s
-    num, den = [b], np.polymul([tau, 1.0], [1.0, d])
+    num, den = [b], (np.polymul([tau, 1.0], [1.0, d]) if tau > 0 else [1.0, d])
     h = dt / sub
     bz, az, _ = signal.cont2discrete((num, den), h, method="zoh")
     delay = round(p.delay_s / h)
@@ -373,6 +375,33 @@ def test_logged_rates_obey_the_plant(tmp_path, delay_s):
         scale = max(np.abs(got).max(), 1e-3)
         assert np.abs(got - want).max() < 1e-4 * scale + 1e-5, ax
     assert np.abs(rate["R"]).max() > 5.0  # the roll chirp moved the vehicle
+
+
+@settings(max_examples=6, deadline=None, derandomize=True)
+@given(
+    damping=st.tuples(*[st.floats(0.5, 10.0)] * 3),
+    effectiveness=st.tuples(st.floats(60.0, 250.0), st.floats(60.0, 250.0),
+                            st.floats(8.0, 40.0)),
+    motor_tau_s=st.sampled_from([0.0, 0.01, 0.025]),
+    delay_steps=st.integers(0, 12),  # quarter loop steps
+    gyro_filter_hz=st.floats(10.0, 80.0),
+)
+def test_any_plant_is_what_the_log_obeys(damping, effectiveness, motor_tau_s, delay_steps,
+                                         gyro_filter_hz, tmp_path_factory):
+    """Property: for any plant, the noiseless logged rates are the plant's response to the
+    logged controller outputs (pilot random sticks on roll)."""
+    plant = PlantParams(damping=damping, effectiveness=effectiveness, motor_tau_s=motor_tau_s,
+                        delay_s=delay_steps * DT / 4, gyro_filter_hz=gyro_filter_hz,
+                        gyro_noise=0.0, gyro_bias=(0.0, 0.0, 0.0), disturbance=0.0)
+    sc = Scenario(manoeuvre="random", duration_s=3.0, hover_before_s=0.5, seed=2, plant=plant)
+    path = tmp_path_factory.mktemp("prop") / "p.bin"
+    res = simulate(sc, [path])
+    assume(res.flight.truth()["saturated_fraction"] == 0.0)
+    rate = pymavlink_bin(path)["RATE"]
+    for j, ax in enumerate("RPY"):
+        want = np.degrees(resimulate(rate[f"{ax}Out"].astype(float), plant, j, DT, sub=4))
+        got = rate[ax].astype(float)
+        assert np.abs(got - want).max() < 1e-4 * max(np.abs(got).max(), 1e-3) + 1e-5, ax
 
 
 def test_noisy_rates_obey_the_plant_within_noise(short, short_bin):

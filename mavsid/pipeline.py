@@ -371,6 +371,8 @@ class AxisFit:
                 },
                 "train_segments": [[s.start_s, s.stop_s] for s in self.train],
                 "validation_segments": [[s.start_s, s.stop_s] for s in self.held_out],
+                "train_segment_logs": [s.log for s in self.train],
+                "validation_segment_logs": [s.log for s in self.held_out],
             }
         )
 
@@ -489,7 +491,10 @@ def fit(
     cfg = config or PipelineConfig()
     if not logs:
         raise ConfigError("no log given")
-    flights = tuple(_read_flight(p, cfg) for p in logs)
+    first = _read_flight(logs[0], cfg)
+    # pooled segments need one step: later logs are aligned at the first one's rate
+    same_rate = cfg if cfg.rate_hz is not None else cfg.with_overrides(rate_hz=1.0 / first.dt)
+    flights = (first, *(_read_flight(p, same_rate) for p in logs[1:]))
     fits: dict[str, AxisFit] = {}
     problems: list[str] = []
     for axis in cfg.axes:

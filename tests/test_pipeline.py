@@ -197,6 +197,18 @@ def test_fit_recovers_the_simulated_plant(axis: str) -> None:
     assert 0 <= fitted.model.delay * fitted.model.dt <= truth["effective_delay_s"] + 0.005
 
 
+def test_several_logs_pool_their_segments_at_one_rate() -> None:
+    logs = [FIXTURES / "sysid_roll.bin", FIXTURES / "doublets.bin"]  # logged at 200 / 400 Hz
+    result = fit(logs, PipelineConfig(axes=("roll",)))
+    first, second = result.flights
+    assert second.dt == pytest.approx(first.dt, rel=1e-6)
+    roll = result.axes["roll"]
+    used = {s.log for s in (*roll.train, *roll.held_out)}
+    assert used == {str(p) for p in logs}
+    d = roll.to_dict()
+    assert sorted(set(d["train_segment_logs"])) == sorted(str(p) for p in logs)
+
+
 def test_no_excitation_is_a_typed_error() -> None:
     with pytest.raises(NoExcitationError, match=r"hover\.bin: nothing identifiable"):
         fit([FIXTURES / "hover.bin"])

@@ -251,11 +251,60 @@ def _windows(buf: NDArray[np.uint8], at: NDArray[np.int64], width: int) -> NDArr
     return sliding_window_view(buf, width)[at]
 
 
+_BLOCK = 1 << 24  # candidates are checked block by block: bounded memory, warm caches
+_MAX_RECORD = _PREFIX + 10 + 255 + 2 + _SIGNATURE_LEN
+
+
 def _scan(buf: NDArray[np.uint8], size: int, defs: dict[int, MessageDef]) -> _Frames:
     """Find every valid record in ``buf[:size]`` (``buf`` is zero-padded beyond ``size``)."""
-    magic = buf[_PREFIX:size]
+    ids = np.array(sorted(defs), dtype=np.int64)
+    extras = np.array([defs[i].crc_extra for i in ids.tolist()], dtype=np.uint8)
+    blocks = [_scan_block(buf, size, lo, min(lo + _BLOCK, size), ids, extras)
+              for lo in range(0, size, _BLOCK)]  # fmt: skip
+    start, end, hdr, mlen, msgid, sysid, compid, odd_start, odd_end = (
+        np.concatenate(parts) for parts in zip(*blocks, strict=True)
+    )
+    valid = _resolve_overlaps(start, end, size)
+    first, last = start[valid], end[valid]
+    odd = _unknown_frames(odd_start, odd_end, first, last, size)
+    # gaps: bytes in neither a valid frame nor a frame of unknown id
+    starts = np.concatenate([first, odd_start[odd]])
+    order = np.argsort(starts, kind="stable")
+    starts, ends = starts[order], np.concatenate([last, odd_end[odd]])[order]
+    gaps = int(np.count_nonzero(starts[1:] != ends[:-1])) if starts.size else 0
+    if starts.size:
+        gaps += int(starts[0] != 0) + int(ends[-1] != size)
+    recv_us = _windows(buf, first, _PREFIX).copy().view(">u8")[:, 0]
+    return _Frames(
+        start=first,
+        payload=first + _PREFIX + hdr[valid],
+        length=mlen[valid],
+        msgid=msgid[valid],
+        sysid=sysid[valid],
+        compid=compid[valid],
+        recv_s=recv_us.astype(np.float64) * 1e-6,
+        skipped_bytes=int(size - (last - first).sum()),
+        garbage_bytes=int(size - (ends - starts).sum()),
+        gaps=gaps,
+        unknown=int(np.count_nonzero(odd)),
+    )
+
+
+def _scan_block(
+    buf: NDArray[np.uint8],
+    size: int,
+    lo: int,
+    hi: int,
+    ids: NDArray[np.int64],
+    extras: NDArray[np.uint8],
+) -> tuple[NDArray[np.int64], ...]:
+    """Candidate records starting in ``[lo, hi)``: the CRC-valid ones (start, end, header
+    length, payload length, msgid, sysid, compid) and the well-formed ones of unknown id
+    that chain on (start, end)."""
+    top = min(hi + _MAX_RECORD, size)  # candidates up to here, to see chains leave the block
+    magic = buf[lo + _PREFIX : top + _PREFIX]
     s = np.flatnonzero(magic >= _MAGIC_V2)  # 0xFD, 0xFE (or 0xFF, dropped next)
-    s = s[magic[s] != 0xFF].astype(np.int64)
+    s = lo + s[magic[s] != 0xFF].astype(np.int64)
     head = _windows(buf, s + _PREFIX, 10)
     v2 = head[:, 0] == _MAGIC_V2
     mlen = head[:, 1].astype(np.int64)
@@ -268,51 +317,25 @@ def _scan(buf: NDArray[np.uint8], size: int, defs: dict[int, MessageDef]) -> _Fr
         | (head[:, 9].astype(np.int64) << 16),
         head[:, 5],
     )
-    ids = np.array(sorted(defs), dtype=np.int64)
-    extras = np.array([defs[i].crc_extra for i in ids.tolist()], dtype=np.uint8)
     pos = np.minimum(np.searchsorted(ids, msgid), ids.size - 1)
     known = ids[pos] == msgid
-    well_formed = (end <= size) & ((incompat & ~_IFLAG_SIGNED) == 0)
+    well_formed = (s < hi) & (end <= size) & ((incompat & ~_IFLAG_SIGNED) == 0)
+    chained = (end == size) | _member(end, s)
 
     # CRC first of the candidates that chain into another candidate (or the file's end),
     # then of the others that do not lie inside a frame found valid by then
     plausible = well_formed & known
-    is_start = np.zeros(buf.size, dtype=bool)
-    is_start[s] = True
-    chained = (end == size) | is_start[np.minimum(end, buf.size - 1)]
     crc_extra = extras[pos]
     ok = np.zeros(s.size, dtype=bool)
     ok[plausible & chained] = _crc_ok(buf, s, hdr, mlen, crc_extra, plausible & chained)
     rest = np.flatnonzero(plausible & ~chained)
     rest = rest[~_inside(s[rest], s[ok], end[ok])]
     ok[rest] = _crc_ok(buf, s, hdr, mlen, crc_extra, rest)
-    cand = np.flatnonzero(ok)
-    valid = cand[_resolve_overlaps(s[cand], end[cand], size)]
-
-    first, last = s[valid], end[valid]
-    odd = np.flatnonzero(well_formed & ~known)
-    odd = odd[_unknown_frames(s[odd], end[odd], first, last, size)]
-    # gaps: bytes in neither a valid frame nor a frame of unknown id
-    starts, ends = np.concatenate([first, s[odd]]), np.concatenate([last, end[odd]])
-    order = np.argsort(starts, kind="stable")
-    starts, ends = starts[order], ends[order]
-    gaps = int(np.count_nonzero(starts[1:] != ends[:-1])) if starts.size else 0
-    if starts.size:
-        gaps += int(starts[0] != 0) + int(ends[-1] != size)
-    recv_us = _windows(buf, first, _PREFIX).copy().view(">u8")[:, 0]
-    return _Frames(
-        start=first,
-        payload=first + _PREFIX + hdr[valid],
-        length=mlen[valid],
-        msgid=msgid[valid],
-        sysid=np.where(v2, head[:, 5], head[:, 3])[valid].astype(np.int64),
-        compid=np.where(v2, head[:, 6], head[:, 4])[valid].astype(np.int64),
-        recv_s=recv_us.astype(np.float64) * 1e-6,
-        skipped_bytes=int(size - (last - first).sum()),
-        garbage_bytes=int(size - (ends - starts).sum()),
-        gaps=gaps,
-        unknown=int(odd.size),
-    )
+    odd = well_formed & ~known & chained
+    sysid = np.where(v2, head[:, 5], head[:, 3]).astype(np.int64)
+    compid = np.where(v2, head[:, 6], head[:, 4]).astype(np.int64)
+    return (s[ok], end[ok], hdr[ok], mlen[ok], msgid[ok], sysid[ok], compid[ok],
+            s[odd], end[odd])  # fmt: skip
 
 
 def _crc_ok(

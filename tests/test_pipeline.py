@@ -162,6 +162,13 @@ def test_pipeline_runs_on_fixture(pipeline: str, log: str, preset: str, axes: se
         assert f.validation.fit_free_run[0] > 50
 
 
+def test_defaults_from_a_low_rate_telemetry_log() -> None:
+    # no config: preset, segments and estimator chosen from a 50 Hz .tlog
+    result = fit([FIXTURES / "sysid_roll.tlog"], PipelineConfig(axes=("roll",)))
+    assert result.flights[0].preset == "mavlink-servo"
+    assert result.axes["roll"].validation.stable is True
+
+
 def test_px4_pipeline_runs_on_a_real_ulog() -> None:
     # no PX4 fixture exists (the simulator writes .bin/.tlog only): use a real ULog
     log = shared_path("public", "Auterion__px4-ulog-rs", "quadrotor_local.ulg")

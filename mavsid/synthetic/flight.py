@@ -117,6 +117,8 @@ class Scenario:
             )
         if self.seed < 0:
             raise ConfigError(f"seed must be >= 0, got {self.seed}")
+        for name in ("rate", "att", "imu", "rcou", "rcin", "tlog"):
+            self.rates.step(name, self.controller.loop_hz)  # each must divide the loop rate
         if self.sysid and self.manoeuvre != "sysid":
             raise ConfigError("SYSTEMID settings given for a pilot manoeuvre")
         if self.runs and self.duration_s is not None:

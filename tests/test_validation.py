@@ -6,6 +6,9 @@ import dataclasses
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
 from toy_plants import DiagonalPlant, chirp, run_plant
 
 from mavsid.errors import ConfigError, NoExcitationError
@@ -147,3 +150,22 @@ def test_bad_input_raises_typed_errors() -> None:
         validate(other, [seg])
     with pytest.raises(ConfigError, match="dt"):
         validate(dataclasses.replace(PLANT, dt=0.01), [seg])
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    y=arrays(np.float64, st.integers(3, 60), elements=st.floats(-1e3, 1e3)),
+    noise=st.floats(0.0, 10.0),
+    scale=st.floats(0.01, 100.0) | st.floats(-100.0, -0.01),
+    shift=st.floats(-1e3, 1e3),
+)
+def test_fit_percent_invariants(y: np.ndarray, noise: float, scale: float, shift: float) -> None:
+    yhat = y + noise * np.cos(np.arange(len(y)))
+    f = float(fit_percent(y, yhat))
+    if np.ptp(y) < 1e-6:
+        return
+    assert f <= 100.0 + 1e-9
+    # units do not matter: the same affine change of y and yhat leaves fit % unchanged
+    assert float(fit_percent(scale * y + shift, scale * yhat + shift)) == pytest.approx(
+        f, abs=1e-6 * max(1.0, abs(f))
+    )

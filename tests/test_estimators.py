@@ -455,3 +455,41 @@ def test_to_statespace_reproduces_simulate():
     resp = control.forced_response(sys, U=u)
     np.testing.assert_allclose(np.ravel(resp.outputs), m.simulate(shifted)[:, 0],
                                atol=1e-9 * np.abs(resp.outputs).max())
+
+
+def test_coupled_pqr_model_with_all_inputs():
+    a = np.array([[0.995, 0.002, 0.0], [-0.003, 0.993, 0.001], [0.0, 0.0, 0.998]])
+    b = np.array([[0.75, 0.02, 0.0], [0.0, 0.70, 0.01], [0.0, 0.0, 0.04]])
+    c = np.array([0.001, -0.002, 0.0005])
+    segs = [plant(a, b, c, 2, 3000, s, noise=1e-5) for s in (61, 62)]
+    m = fit_axis(segs, "all", filters=(), delay_step=1, lags_s=None, n_bootstrap=0)
+    assert m.state_names == ("p", "q", "r") and m.input_names == INPUTS
+    assert m.delay == 2
+    np.testing.assert_allclose(m.A, a, atol=2e-4)
+    for i, x in enumerate(("p", "q", "r")):
+        for j, u in enumerate(INPUTS):
+            assert m.params[f"B_d[{x},{u}]"] == pytest.approx(b[i, j], abs=2e-3)
+    assert m.simulate(segs[0]).shape == (3000, 3)
+    assert m.to_statespace().ninputs == 3
+
+
+def test_property_noiseless_plants_are_recovered_and_one_step_equals_predict():
+    hypothesis = pytest.importorskip("hypothesis")
+    st = hypothesis.strategies
+
+    @hypothesis.settings(max_examples=25, deadline=None)
+    @hypothesis.given(pole=st.floats(0.5, 0.999), gain=st.floats(-2.0, 2.0).filter(
+        lambda g: abs(g) > 0.01), bias=st.floats(-0.01, 0.01), delay=st.integers(0, 6),
+        seed=st.integers(0, 1000))
+    def check(pole, gain, bias, delay, seed):
+        seg = plant(np.array([[pole]]), np.array([[gain]]), np.array([bias]), delay, 400, seed)
+        st_ = Structure(("p",), ("p", "u_roll", "1"), delay=delay)
+        m = LeastSquares(st_, n_bootstrap=0).fit([seg]).model_
+        np.testing.assert_allclose(m.coef[:, 0], [pole, gain, bias], rtol=1e-6, atol=1e-9)
+        one = m.predict(seg, 1)[1:, 0]
+        x, u = seg.states[:, 0], seg.inputs[:, 0]
+        held = np.r_[np.full(delay, u[0]), u][: len(u)]
+        ref = m.coef[0, 0] * x[:-1] + m.coef[1, 0] * held[:-1] + m.coef[2, 0]
+        np.testing.assert_allclose(one, ref, rtol=1e-9, atol=1e-12)
+
+    check()

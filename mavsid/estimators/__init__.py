@@ -2,8 +2,9 @@
 
 One regression core (:mod:`._base`) on Gram matrices; rows from segments
 (:mod:`.regressors`); SINDy-style libraries (:mod:`.library`); solvers
-(:mod:`.least_squares`, :mod:`.l1`); the fitted :class:`Model` (:mod:`.model`); structure
-selection and the per-axis entry point :func:`fit_axis` (:mod:`.select`).
+(:mod:`.least_squares`, :mod:`.l1`); output-error refinement (:mod:`.output_error`); the
+fitted :class:`Model` (:mod:`.model`); structure selection and the per-axis entry point
+:func:`fit_axis` (:mod:`.select`).
 
 Examples
 --------
@@ -17,6 +18,7 @@ from mavsid.estimators._base import Estimator, Gram, check_identifiable, rollout
 from mavsid.estimators.l1 import ElasticNet, Lasso
 from mavsid.estimators.least_squares import STLSQ, LeastSquares, Ridge
 from mavsid.estimators.model import Model, load_model
+from mavsid.estimators.output_error import refine_output_error
 from mavsid.estimators.regressors import (
     InputFilter,
     Regression,
@@ -49,6 +51,7 @@ __all__ = [
     "library",
     "load_model",
     "make_estimator",
+    "refine_output_error",
     "rollout_fit",
     "rows",
     "select_delay",

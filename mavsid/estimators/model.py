@@ -449,6 +449,16 @@ class Model:
                 out[1:, 0] = signal.lfilter([1.0], [1.0, -phi[0, 0]], f[:-1, 0],
                                             zi=[phi[0, 0] * out[0, 0]])[0]
                 return out
+            lam, vec = np.linalg.eig(phi)
+            if np.linalg.cond(vec) < 1e8:  # modal form: one first-order recursion per mode
+                vinv = np.linalg.inv(vec)
+                g = f[:-1] @ vinv.T
+                z0 = vinv @ out[0]
+                modes = np.column_stack([
+                    signal.lfilter([1.0], [1.0, -lam[i]], g[:, i], zi=[lam[i] * z0[i]])[0]
+                    for i in range(m)])
+                out[1:] = np.real(modes @ vec.T)
+                return out
             x = out[0]
             for k in range(n - 1):
                 x = phi @ x + f[k]

@@ -80,6 +80,7 @@ _HEAD_U16 = _HEAD1 | (_HEAD2 << 8)
 _FMT_TYPE = 0x80
 _FMT_LEN = 89
 _CHUNK = 1 << 23  # bytes scanned per step when looking for headers
+_GATHER_BYTES = 1 << 24  # record bytes copied per slice when decoding one type
 _BACKWARDS_S = 0.5  # a time step back larger than this is a discontinuity
 
 
@@ -247,22 +248,26 @@ def build_fmt(msg_type: int, name: str, fmt: str, columns: str) -> bytes:
 
 
 # --------------------------------------------------------------------------- framing
+def _index_dtype(n: int) -> type[np.signedinteger]:
+    """Smallest integer type for byte offsets and record indices of an ``n``-byte file."""
+    return np.int32 if n < 2**31 - 1024 else np.int64
+
+
 def _find_headers(a: np.ndarray) -> np.ndarray:
-    """Offsets of every ``0xA3 0x95`` byte pair, ascending (int64)."""
+    """Offsets of every ``0xA3 0x95`` byte pair, ascending."""
     n = a.size
-    found = []
+    dt = _index_dtype(n)
+    found = [np.zeros(0, dt)]
     for start in range(0, max(n - 1, 0), _CHUNK):
         seg = a[start : min(n, start + _CHUNK + 1)]
+        parts = []
         for parity in (0, 1):
             sub = seg[parity:]
             sub = sub[: sub.size - sub.size % 2]
             hits = np.flatnonzero(sub.view("<u2") == _HEAD_U16)
-            found.append(hits * 2 + (start + parity))
-    if not found:
-        return np.zeros(0, np.int64)
-    pos = np.concatenate(found).astype(np.int64, copy=False)
-    pos.sort(kind="stable")
-    return pos
+            parts.append((hits * 2 + (start + parity)).astype(dt))
+        found.append(np.sort(np.concatenate(parts)))  # chunks come in order
+    return np.concatenate(found)
 
 
 def _decode_text(raw: bytes) -> str:
@@ -352,7 +357,7 @@ def _assign_definitions(
     pos: np.ndarray, types: np.ndarray, table: _Definitions
 ) -> np.ndarray:
     """Index into ``table.defs`` for each candidate (-1: type undefined)."""
-    first = np.full(256, -1, np.int64)
+    first = np.full(256, -1, np.int16 if len(table.defs) < 2**15 else np.int32)
     for t, entries in table.by_type.items():
         first[t] = entries[0][1]
     defid = first[types]
@@ -363,7 +368,7 @@ def _assign_definitions(
         for t, entries in multi.items():
             sel = order[bounds[t] : bounds[t + 1]]
             starts = np.array([p for p, _ in entries], np.int64)
-            ids = np.array([i for _, i in entries], np.int64)
+            ids = np.array([i for _, i in entries], defid.dtype)
             k = np.searchsorted(starts, pos[sel], side="right") - 1
             defid[sel] = ids[np.maximum(k, 0)]
     return defid
@@ -376,13 +381,12 @@ def _successors(pos: np.ndarray, end: np.ndarray, ok: np.ndarray) -> np.ndarray:
     next entry, is checked first so that only the rest needs a binary search.
     """
     m = pos.size
-    nxt = np.full(m, m, np.int64)
     if m == 0:
-        return nxt
+        return np.zeros(0, pos.dtype)
     direct = np.zeros(m, bool)
     direct[:-1] = ok[:-1] & (pos[1:] == end[:-1])
-    k = np.flatnonzero(direct)
-    nxt[k] = k + 1
+    nxt = np.arange(1, m + 1, dtype=pos.dtype)
+    nxt[~direct] = m
     rest = np.flatnonzero(ok & ~direct)
     nxt[rest] = np.searchsorted(pos, end[rest], side="left")
     return nxt
@@ -398,13 +402,13 @@ def _chain(pos: np.ndarray, end: np.ndarray) -> np.ndarray:
     m = pos.size
     irregular = np.flatnonzero(end[:-1] != pos[1:]).tolist()
     if not irregular:
-        return np.arange(m)
+        return np.arange(m, dtype=pos.dtype)
     runs = []
     c, k = 0, 0
     while c < m:  # c strictly increases: always progresses
         k = bisect.bisect_left(irregular, c, k)
         r = irregular[k] if k < len(irregular) else m - 1
-        runs.append(np.arange(c, r + 1))
+        runs.append(np.arange(c, r + 1, dtype=pos.dtype))
         c = int(np.searchsorted(pos, end[r], side="left"))
     return np.concatenate(runs)
 
@@ -419,21 +423,21 @@ class _Framing:
 def _frame(a: np.ndarray, cand: np.ndarray, table: _Definitions) -> _Framing:
     """The accepted records among the header candidates ``cand`` (see the module doc)."""
     n = a.size
-    types = a[cand + 2]
-    defid = _assign_definitions(cand, types, table)
-    lengths = np.array([d.length for d in table.defs] + [0], np.int64)
+    defid = _assign_definitions(cand, a[cand + 2], table)
+    lengths = np.array([d.length for d in table.defs] + [0], cand.dtype)
     end = cand + lengths[defid]  # undefined (-1) -> the sentinel 0
     known = end > cand
     complete = known & (end <= n)
     m = cand.size
     j = _successors(cand, end, complete)
-    found = j < m
     # forward evidence: the next header starts where this record ends
-    fwd = complete & found
-    fwd[found] &= cand[j[found]] == end[found]
+    fwd = complete & (j < m)
+    fwd &= cand[np.minimum(j, m - 1)] == end
     has_in = np.zeros(m + 1, bool)
     has_in[j[fwd]] = True
+    del j
     backed = known & (fwd | has_in[:m])
+    del has_in, known
     node = complete & backed
     # a lone record between two stretches of garbage has neither kind of evidence: take it
     # unless it lies inside the declared span of a backed header (e.g. a cut last record)
@@ -452,7 +456,8 @@ def _frame(a: np.ndarray, cand: np.ndarray, table: _Definitions) -> _Framing:
         k = np.searchsorted(fpos, cand[back_only], side="right")
         swallows = (k < fpos.size) & (fpos[np.minimum(k, fpos.size - 1)] < end[back_only])
         node[back_only[swallows]] = False
-    nodes = np.flatnonzero(node)
+    nodes = np.flatnonzero(node).astype(cand.dtype)
+    del node, fwd, complete, backed
     keep = nodes[_chain(cand[nodes], end[nodes])]
     return _Framing(cand[keep], defid[keep], end[keep])
 
@@ -477,9 +482,24 @@ def _column(raw: np.ndarray, ch: str, message: str) -> np.ndarray:
 
 
 def _gather(a: np.ndarray, d: Definition, pos: np.ndarray) -> dict[str, np.ndarray]:
-    """Decode the records of definition ``d`` at offsets ``pos``."""
-    recs = _records(a, d.payload_dtype, pos + 3)
-    return {name: _column(recs[f"f{i}"], d.format[i], d.name) for name, i in d.fields}
+    """Decode the records of definition ``d`` at offsets ``pos``.
+
+    Records are copied out of the file in slices of about 16 MB, so that the temporary copy
+    stays small next to the columns.
+    """
+    step = max(1, _GATHER_BYTES // max(d.payload_dtype.itemsize, 1))
+    out: dict[str, np.ndarray] = {}
+    for k in range(0, max(pos.size, 1), step):
+        recs = _records(a, d.payload_dtype, pos[k : k + step] + 3)
+        for name, i in d.fields:
+            col = _column(recs[f"f{i}"], d.format[i], d.name)
+            if pos.size <= step:
+                out[name] = col
+                continue
+            if name not in out:
+                out[name] = np.empty((pos.size, *col.shape[1:]), col.dtype)
+            out[name][k : k + step] = col
+    return out
 
 
 def _gather_times(a: np.ndarray, d: Definition, pos: np.ndarray) -> np.ndarray | None:
@@ -655,10 +675,17 @@ def backwards_steps(time_s: np.ndarray, where: np.ndarray) -> list[tuple[int, fl
     >>> backwards_steps(np.array([1.0, 2.0, np.nan, 0.1, 0.2]), np.arange(5))
     [(3, 2.0, 0.1)]
     """
-    ok = np.flatnonzero(np.isfinite(time_s))
-    t = time_s[ok]
-    k = np.flatnonzero(np.diff(t) < -_BACKWARDS_S)
-    return [(int(where[ok[i + 1]]), float(t[i]), float(t[i + 1])) for i in k.tolist()]
+    out: list[tuple[int, float, float]] = []
+    last_t, step = np.nan, 1 << 18  # in slices, to keep the temporaries small
+    for k in range(0, time_s.size, step):
+        ok = np.flatnonzero(np.isfinite(time_s[k : k + step])) + k
+        t = np.concatenate([[last_t], time_s[ok]]) if np.isfinite(last_t) else time_s[ok]
+        w = np.concatenate([[-1], ok]) if np.isfinite(last_t) else ok
+        for i in np.flatnonzero(np.diff(t) < -_BACKWARDS_S).tolist():
+            out.append((int(where[w[i + 1]]), float(t[i]), float(t[i + 1])))
+        if t.size:
+            last_t = t[-1]
+    return out
 
 
 def _skipped_regions(n: int, pos: np.ndarray, end: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -751,12 +778,26 @@ def _read_buffer(
         framing = _frame(a, cand, table)
     if framing.pos.size == 0:
         raise LogFormatError("no DataFlash records found", path=path)
+    skip_at, skip_len = _skipped_regions(n, framing.pos, framing.end)
+    skipped = int(skip_len.sum())
+    if skipped:
+        lo = np.searchsorted(cand, skip_at[:1000])
+        hi = np.searchsorted(cand, skip_at[:1000] + skip_len[:1000])
+        inside = np.concatenate([cand[i:j] for i, j in zip(lo, hi, strict=True)])
+        unknown = sorted({int(t) for t in a[inside + 2]} - set(table.by_type))
+        shown = ", ".join(f"{int(o)}+{int(k)}" for o, k in zip(skip_at[:5], skip_len[:5],
+                                                              strict=True))
+        notes.append(f"skipped {skipped} undecodable byte(s) in {skip_at.size} region(s) "
+                     f"(offset+size: {shown}{', ...' if skip_at.size > 5 else ''})"
+                     + (f"; undefined type id(s) {unknown[:10]}" if unknown else ""))
     notes.extend(table.problems)
+    del cand, fmt_pos, fmt_kept
+    framing.end = framing.end[:0]  # not needed any more: free it
 
     # accepted records grouped by definition (radix sort on small integers)
     ndefs = len(table.defs)
     defid = framing.defid.astype(np.int16 if ndefs < 1 << 15 else np.int32)
-    order = np.argsort(defid, kind="stable")
+    order = np.argsort(defid, kind="stable").astype(framing.pos.dtype)
     bounds = np.concatenate([[0], np.cumsum(np.bincount(defid, minlength=ndefs))])
     rows = {i: order[bounds[i] : bounds[i + 1]] for i in range(ndefs) if bounds[i + 1] > bounds[i]}
     by_name: dict[str, list[int]] = {}
@@ -797,7 +838,7 @@ def _read_buffer(
     meta_times: dict[str, np.ndarray] = {}
     defs_by_name: dict[str, Definition] = {}
     for name, ids in by_name.items():
-        parts = [(table.defs[i], *decoded[i]) for i in ids if i in decoded]
+        parts = [(table.defs[i], *decoded.pop(i)) for i in ids if i in decoded]
         if not parts:
             continue
         defs_by_name[name] = parts[-1][0]
@@ -809,18 +850,6 @@ def _read_buffer(
             columns[name] = cols if keep is None else {k: v[keep] for k, v in cols.items()}
             time_s[name] = t if keep is None else t[keep]
 
-    skip_at, skip_len = _skipped_regions(n, framing.pos, framing.end)
-    skipped = int(skip_len.sum())
-    if skipped:
-        lo = np.searchsorted(cand, skip_at[:1000])
-        hi = np.searchsorted(cand, skip_at[:1000] + skip_len[:1000])
-        inside = np.concatenate([cand[i:j] for i, j in zip(lo, hi, strict=True)])
-        unknown = sorted({int(t) for t in a[inside + 2]} - set(table.by_type))
-        shown = ", ".join(f"{int(o)}+{int(k)}" for o, k in zip(skip_at[:5], skip_len[:5],
-                                                              strict=True))
-        notes.insert(0, f"skipped {skipped} undecodable byte(s) in {skip_at.size} region(s) "
-                     f"(offset+size: {shown}{', ...' if skip_at.size > 5 else ''})"
-                     + (f"; undefined type id(s) {unknown[:10]}" if unknown else ""))
     if not set(by_name) - _FORMAT_ONLY:
         notes.append("log holds only format definitions, no data records")
     source = SourceInfo(path, "dataflash", n, skipped_bytes=skipped, notes=tuple(notes))
@@ -875,7 +904,7 @@ def _hold_times(
     earlier record that has one, in place (NaN before the first); times not yet in
     ``timeline`` are read from the file."""
     is_timed = timed[framing.defid]
-    prev = np.where(is_timed, np.arange(is_timed.size), -1)
+    prev = np.where(is_timed, np.arange(is_timed.size, dtype=framing.pos.dtype), -1)
     np.maximum.accumulate(prev, out=prev)
     src = prev[rows]
     need = np.unique(src[src >= 0])

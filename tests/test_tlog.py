@@ -568,3 +568,23 @@ def test_block_boundaries_lose_nothing(monkeypatch: pytest.MonkeyPatch, vtol: An
     for kind, ref in by_type.items():
         assert_same_rows(kind, log[kind], ref)
     assert log.source.skipped_bytes == 0
+
+
+@pytest.mark.parametrize("fill", ["random", "magic"])
+def test_pathological_bytes_give_a_clean_answer(tmp_path: Path, fill: str) -> None:
+    """Random bytes, or nothing but MAVLink 2 magic bytes: a LogFormatError (or, should
+    chance form a valid frame, a log with a warning), never another exception."""
+    rng = np.random.default_rng(7)
+    data = (rng.integers(0, 256, 1 << 20).astype(np.uint8).tobytes() if fill == "random"
+            else b"\xfd" * (1 << 20))  # fmt: skip
+    path = tmp_path / "x.tlog"
+    path.write_bytes(data)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            log = tlog.read(path)
+        except LogFormatError as exc:
+            assert "no valid MAVLink frame" in str(exc)
+            return
+    assert sum(len(t) for t in log.messages.values()) < 5
+    assert [w.category for w in caught] == [DataQualityWarning]

@@ -303,14 +303,38 @@ def _scan_block(
     that chain on (start, end)."""
     top = min(hi + _MAX_RECORD, size)  # candidates up to here, to see chains leave the block
     magic = buf[lo + _PREFIX : top + _PREFIX]
-    s = np.flatnonzero(magic >= _MAGIC_V2)  # 0xFD, 0xFE (or 0xFF, dropped next)
-    s = lo + s[magic[s] != 0xFF].astype(np.int64)
+    every = np.flatnonzero(magic >= _MAGIC_V2)  # 0xFD, 0xFE (or 0xFF, dropped next)
+    every = lo + every[magic[every] != 0xFF].astype(np.int64)
+    own = int(np.searchsorted(every, hi))
+    slices = [_check(buf, size, every[a : min(a + _SLICE, own)], every, ids, extras)
+              for a in range(0, own, _SLICE)]  # fmt: skip
+    if not slices:
+        empty = np.zeros(0, dtype=np.int64)
+        return (empty,) * 9
+    return tuple(np.concatenate(parts) for parts in zip(*slices, strict=True))
+
+
+_SLICE = 1 << 20  # candidates checked at once (bounds memory on pathological input)
+
+
+def _check(
+    buf: NDArray[np.uint8],
+    size: int,
+    s: NDArray[np.int64],
+    every: NDArray[np.int64],
+    ids: NDArray[np.int64],
+    extras: NDArray[np.uint8],
+) -> tuple[NDArray[np.int64], ...]:
+    """:func:`_scan_block` for the candidates ``s`` (sorted), ``every`` being all candidate
+    starts around them (for the chain check)."""
     head = _windows(buf, s + _PREFIX, 10)
     v2 = head[:, 0] == _MAGIC_V2
-    mlen = head[:, 1].astype(np.int64)
     incompat = np.where(v2, head[:, 2], 0).astype(np.int64)
+    mlen = head[:, 1].astype(np.int64)
     hdr = np.where(v2, 10, 6)
     end = s + _PREFIX + hdr + mlen + 2 + np.where(incompat & _IFLAG_SIGNED, _SIGNATURE_LEN, 0)
+    keep = np.flatnonzero((end <= size) & ((incompat & ~_IFLAG_SIGNED) == 0))  # well-formed
+    s, head, v2, mlen, hdr, end = s[keep], head[keep], v2[keep], mlen[keep], hdr[keep], end[keep]
     msgid = np.where(
         v2,
         head[:, 7].astype(np.int64) | (head[:, 8].astype(np.int64) << 8)
@@ -319,19 +343,17 @@ def _scan_block(
     )
     pos = np.minimum(np.searchsorted(ids, msgid), ids.size - 1)
     known = ids[pos] == msgid
-    well_formed = (s < hi) & (end <= size) & ((incompat & ~_IFLAG_SIGNED) == 0)
-    chained = (end == size) | _member(end, s)
+    chained = (end == size) | _member(end, every)
 
     # CRC first of the candidates that chain into another candidate (or the file's end),
     # then of the others that do not lie inside a frame found valid by then
-    plausible = well_formed & known
     crc_extra = extras[pos]
     ok = np.zeros(s.size, dtype=bool)
-    ok[plausible & chained] = _crc_ok(buf, s, hdr, mlen, crc_extra, plausible & chained)
-    rest = np.flatnonzero(plausible & ~chained)
+    ok[known & chained] = _crc_ok(buf, s, hdr, mlen, crc_extra, known & chained)
+    rest = np.flatnonzero(known & ~chained)
     rest = rest[~_inside(s[rest], s[ok], end[ok])]
     ok[rest] = _crc_ok(buf, s, hdr, mlen, crc_extra, rest)
-    odd = well_formed & ~known & chained
+    odd = ~known & chained
     sysid = np.where(v2, head[:, 5], head[:, 3]).astype(np.int64)
     compid = np.where(v2, head[:, 6], head[:, 4]).astype(np.int64)
     return (s[ok], end[ok], hdr[ok], mlen[ok], msgid[ok], sysid[ok], compid[ok],
@@ -431,9 +453,9 @@ def _unknown_frames(
     overlap one another: frames of another dialect rather than garbage."""
     if not start.size:
         return np.zeros(0, dtype=bool)
-    i = np.searchsorted(good_start, start, side="right") - 1
-    after_prev = (i < 0) | (good_end[np.maximum(i, 0)] <= start)
-    fits = after_prev & (end <= np.append(good_start, size)[i + 1])
+    i = np.searchsorted(good_start, start, side="right")  # the valid record before: i - 1
+    after_prev = np.concatenate([[0], good_end])[i] <= start
+    fits = after_prev & (end <= np.append(good_start, size)[i])
     fits &= _member(end, good_start) | (end == size) | _member(end, start)
     pick = np.flatnonzero(fits)
     if pick.size > 1:  # drop any overlapping an earlier one

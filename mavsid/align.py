@@ -4,6 +4,8 @@
 log's content unless given) and
 
 - converts them to rad, rad/s and normalised inputs (motor PWMs through the frame's mixer);
+- keeps one boot when the log's clock restarts (reboot, concatenated logs: the longest, with
+  a :class:`~mavsid.errors.DataQualityWarning`) and sorts slightly unordered records;
 - unwraps yaw;
 - builds one grid with step ``1 / rate_hz`` (default: the mean sample interval of the
   body-rate channel, or of the attitude when the log has no rates), anchored at the first
@@ -37,6 +39,7 @@ Examples
 
 from __future__ import annotations
 
+import itertools
 import os
 import warnings
 from collections.abc import Mapping
@@ -111,7 +114,7 @@ def _resolve_preset(raw: RawLog, preset: Preset | str | None,
 
 def _collect(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer]
              ) -> tuple[list[_Series], list[_Series], str | None]:
-    """States and inputs of the preset, as native series in canonical order."""
+    """States and inputs of the preset, as native series (record order) in canonical order."""
     states: list[_Series] = []
     for name in STATE_NAMES:
         ch = preset.states.get(name)
@@ -123,10 +126,8 @@ def _collect(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer]
             if ch.optional:
                 continue
             raise
-        if name == "yaw":
-            v = np.unwrap(v)
         if t.size >= 2:
-            states.append(_Series(name, f"{ch.message}.{ch.field}", *_dedupe(t, v)))
+            states.append(_Series(name, f"{ch.message}.{ch.field}", t, v))
         elif not ch.optional:
             table = raw[ch.message]
             timed = int(np.count_nonzero(np.isfinite(np.asarray(table.time_s, dtype=float))))
@@ -149,10 +150,9 @@ def _collect(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer]
         mixer_name = mixer.name
         t, thrust = motor_thrusts(raw, preset, mixer)
         u = mixer.unmix(thrust)
-        t, keep = _dedupe(t, np.arange(t.size))
         for j, name in enumerate(INPUT_NAMES):
             inputs.append(_Series(name, f"{preset.motors.message} ({mixer.name} mixer)", t,
-                                  u[keep, j]))
+                                  u[:, j]))
     else:
         for name in INPUT_NAMES:
             ch = preset.inputs.get(name)
@@ -165,8 +165,55 @@ def _collect(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer]
                     continue
                 raise
             if t.size >= 2:
-                inputs.append(_Series(name, f"{ch.message}.{ch.field}", *_dedupe(t, v)))
+                inputs.append(_Series(name, f"{ch.message}.{ch.field}", t, v))
     return states, inputs, mixer_name
+
+
+#: a step back in time larger than this (s) is a reboot or the start of a concatenated log
+BOOT_JUMP_S = 1.0
+
+
+def _boots(t: np.ndarray) -> list[slice]:
+    """Record ranges between backward time jumps (one per boot)."""
+    cut = np.flatnonzero(np.diff(t) < -BOOT_JUMP_S) + 1
+    edges = [0, *cut.tolist(), t.size]
+    return [slice(a, b) for a, b in itertools.pairwise(edges)]
+
+
+def _one_boot(path: str, states: list[_Series], inputs: list[_Series]
+              ) -> tuple[list[_Series], list[_Series]]:
+    """Keep one boot of a log whose clock restarts, then sort by time and unwrap yaw.
+
+    The boot is the longest one of the reference channel (body rate, else attitude); every
+    channel keeps its records of that boot (its last boot when it has fewer).
+    """
+    by_name = {s.name: s for s in states}
+    ref = next(by_name[n] for n in ("p", "q", "r", "roll", "pitch", "yaw") if n in by_name)
+    ref_boots = _boots(ref.t)
+    k = 0
+    if len(ref_boots) > 1:
+        spans = [float(np.ptp(ref.t[b])) if b.stop - b.start > 1 else 0.0 for b in ref_boots]
+        k = int(np.argmax(spans))
+        b = ref_boots[k]
+        warnings.warn(
+            f"{path}: the log's clock restarts {len(ref_boots) - 1} time(s) (reboot or "
+            f"concatenated logs): only boot {k + 1} of {len(ref_boots)} is used "
+            f"({ref.t[b.start]:.1f}–{ref.t[b.stop - 1]:.1f} s)",
+            DataQualityWarning,
+            stacklevel=3,
+        )
+
+    def fix(s: _Series) -> _Series:
+        boots = _boots(s.t)
+        sl = boots[min(k, len(boots) - 1)]
+        t, v = s.t[sl], s.v[sl]
+        order = np.argsort(t, kind="stable")
+        t, v = _dedupe(t[order], v[order])
+        if s.name == "yaw":
+            v = np.unwrap(v)
+        return _Series(s.name, s.source, t, v)
+
+    return [fix(s) for s in states], [fix(s) for s in inputs]
 
 
 def _gaps(series: list[_Series], max_gap: float) -> np.ndarray:
@@ -521,6 +568,9 @@ def align(
     states, inputs, mixer = _collect(raw, preset, mixers or {})
     if not states:
         raise NoExcitationError(f"{raw.source.path}: no state samples for preset {preset.name}")
+    states, inputs = _one_boot(raw.source.path, states, inputs)
+    states = [s for s in states if s.t.size >= 2]
+    inputs = [s for s in inputs if s.t.size >= 2]
     by_name = {s.name: s for s in states}
     ref = next(by_name[n] for n in ("p", "q", "r", "roll", "pitch", "yaw") if n in by_name)
     series = states + inputs

@@ -617,7 +617,10 @@ def _rows(table: MessageTable, instance: int | None = None) -> np.ndarray | None
 
 
 def evaluate(raw: RawLog, channel: Channel, what: str = "") -> tuple[np.ndarray, np.ndarray]:
-    """A channel's samples in SI units: ``(time_s, values)``, sorted by time, NaN-free.
+    """A channel's samples in SI units: ``(time_s, values)`` in record order, NaN-free.
+
+    Record order is time order except after a reboot or in concatenated logs (time jumps
+    back) and for slightly unordered records; :func:`mavsid.align.align` deals with both.
 
     The unit the log declares for the field wins over ``channel.unit``.
 
@@ -649,11 +652,7 @@ def evaluate(raw: RawLog, channel: Channel, what: str = "") -> tuple[np.ndarray,
     rows = _rows(table, channel.instance)
     if rows is not None:
         ok &= rows
-    t, values = t[ok], values[ok]
-    if t.size > 1 and np.any(np.diff(t) < 0):
-        order = np.argsort(t, kind="stable")
-        t, values = t[order], values[order]
-    return t, values
+    return t[ok], values[ok]
 
 
 def pwm_to_thrust(pwm: np.ndarray, params: Mapping[str, float]) -> np.ndarray:
@@ -681,7 +680,8 @@ def pwm_to_thrust(pwm: np.ndarray, params: Mapping[str, float]) -> np.ndarray:
 
 
 def motor_thrusts(raw: RawLog, preset: Preset, mixer: Mixer) -> tuple[np.ndarray, np.ndarray]:
-    """``(time_s, thrust)`` of each motor, shape ``(n, n_motors)``, from the PWM channel."""
+    """``(time_s, thrust)`` of each motor, shape ``(n, n_motors)``, from the PWM channel, in
+    record order."""
     assert preset.motors is not None
     ch = preset.motors
     table = raw[ch.message]
@@ -700,9 +700,7 @@ def motor_thrusts(raw: RawLog, preset: Preset, mixer: Mixer) -> tuple[np.ndarray
     rows = _rows(table, ch.instance)
     if rows is not None:
         ok &= rows
-    t, pwm = t[ok], pwm[ok]
-    order = np.argsort(t, kind="stable")
-    return t[order], pwm_to_thrust(pwm[order], raw.params)
+    return t[ok], pwm_to_thrust(pwm[ok], raw.params)
 
 
 # --------------------------------------------------------------------------- TOML

@@ -274,3 +274,19 @@ def test_servo_outputs_of_a_plane_are_not_unmixed():
     assert fd.input_names == () and fd.inputs.shape == (t.size, 0)
     copter = RawLog(raw.source, raw.messages, vehicle="copter QUAD/X")
     assert align(copter).input_names == ("u_roll", "u_pitch", "u_yaw", "u_thrust")
+
+
+def test_reboot_keeps_the_longest_boot_only():
+    # boot 1 runs 10..20 s with roll 5 deg, boot 2 restarts the clock at 5 s (5..12 s, roll
+    # -5 deg); the time ranges overlap, so sorting alone would interleave two flights
+    t1, t2 = np.arange(10, 20, 0.01), np.arange(5, 12, 0.01)
+    t = np.concatenate([t1, t2])
+    roll = np.concatenate([np.full(t1.size, 5.0), np.full(t2.size, -5.0)])
+    att = MessageTable("ATT", {"Roll": roll, "Pitch": 0 * t, "Yaw": 0 * t}, time_s=t)
+    rate = MessageTable("RATE", {k: 0 * t for k in ("R", "P", "Y", "ROut", "POut", "YOut")},
+                        time_s=t)
+    raw = RawLog(SourceInfo("r.bin", "dataflash", 0), {"ATT": att, "RATE": rate})
+    with pytest.warns(DataQualityWarning, match=r"restarts 1 time.*boot 1 of 2"):
+        fd = align(raw)
+    assert np.all(np.diff(fd.time_s) > 0) and fd.time_s[0] >= 10 and fd.time_s[-1] < 20
+    assert np.allclose(fd.states[:, fd.state_names.index("roll")], np.radians(5.0))

@@ -250,6 +250,54 @@ def test_bin_layouts_are_arducopter_4(short, short_bin):
     assert units[ord("k")] == "deg/s" and units[ord("E")] == "rad/s"
 
 
+def test_builder_scales_every_format_character(tmp_path):
+    """Format characters with implied scaling (c C e E L), integers, strings, doubles and
+    int16[32] arrays come back from pymavlink as written."""
+    from mavsid.synthetic.dfwriter import DataFlashBuilder, MessageFormat
+
+    fmts = [MessageFormat(201, "TST", "QcCeELbBhHiIfd", ("TimeUS", "Ac", "BC", "Ce", "DE",
+                                                        "EL", "Fb", "GB", "Hh", "IH", "Ji",
+                                                        "KI", "Lf", "Md")),
+            MessageFormat(202, "TS2", "QnNZqa", ("TimeUS", "Nn", "ON", "PZ", "Qq", "Ra"))]
+    with pytest.raises(ConfigError):
+        MessageFormat(203, "LONG", "Q" * 17, tuple(f"c{i}" for i in range(17)))
+    rng = np.random.default_rng(0)
+    n = 50
+    vals = {
+        "Ac": np.round(rng.uniform(-300, 300, n), 2), "BC": np.round(rng.uniform(0, 600, n), 2),
+        "Ce": np.round(rng.uniform(-2e7, 2e7, n), 2), "DE": np.round(rng.uniform(0, 4e7, n), 2),
+        "EL": np.round(rng.uniform(-180, 180, n), 7), "Fb": rng.integers(-128, 128, n),
+        "GB": rng.integers(0, 256, n), "Hh": rng.integers(-2**15, 2**15, n),
+        "IH": rng.integers(0, 2**16, n), "Ji": rng.integers(-2**31, 2**31, n),
+        "KI": rng.integers(0, 2**32, n), "Lf": rng.normal(size=n), "Md": rng.normal(size=n),
+        "Nn": ["ab"] * n, "ON": ["sixteen_chars_ok"] * n, "PZ": ["x" * 64] * n,
+        "Qq": rng.integers(-2**62, 2**62, n), "Ra": rng.integers(-999, 999, (n, 32)),
+    }
+    b = DataFlashBuilder()
+    b.define(b.formats["FMT"])
+    t = np.arange(n) * 1000 + 5
+    for f in fmts:
+        b.define(f)
+        b.add(f.name, t, **{k: v for k, v in vals.items() if k in f.columns})
+    (tmp_path / "f.bin").write_bytes(b.to_bytes())
+    log = pymavlink_bin(tmp_path / "f.bin")
+    got = {**log["TST"], **log["TS2"]}
+    np.testing.assert_array_equal(got["TimeUS"], t)
+    for key, want in vals.items():
+        if key == "Ra":
+            np.testing.assert_array_equal(np.array(got[key].tolist()), want)
+        elif key in ("Nn", "ON", "PZ"):
+            assert got[key].tolist() == want
+        elif key == "Lf":
+            np.testing.assert_array_equal(got[key], f32(want))
+        else:
+            np.testing.assert_allclose(got[key], want, rtol=1e-12, atol=1e-9, err_msg=key)
+    ours = read_log(tmp_path / "f.bin")
+    assert _compare_tables(ours, {"TST": log["TST"]}) == 14
+    assert _compare_tables(ours, {"TS2": {k: v for k, v in log["TS2"].items() if k != "Ra"}}) == 5
+    np.testing.assert_array_equal(ours["TS2"]["Ra"], vals["Ra"])
+
+
 # --------------------------------------------------------------------------- .tlog content
 
 

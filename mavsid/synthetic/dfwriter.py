@@ -59,6 +59,16 @@ class MessageFormat:
     units: str = ""
     mults: str = ""
 
+    def __post_init__(self) -> None:
+        if len(self.name) > 4 or len(self.fmt) > 16 or len(",".join(self.columns)) > 64:
+            raise ConfigError(
+                f"message {self.name!r}: FMT allows a 4-char name, 16 format characters "
+                "and 64 characters of column names"
+            )
+        if len(self.columns) != len(self.fmt) or not set(self.fmt) <= set(CHAR_DTYPE):
+            raise ConfigError(f"message {self.name!r}: format {self.fmt!r} does not match "
+                              f"its {len(self.columns)} columns")
+
     @property
     def dtype(self) -> np.dtype:
         """Structured dtype of a whole record (3 header bytes + payload)."""
@@ -74,10 +84,7 @@ class MessageFormat:
 
 def _fmt(type_id: int, name: str, fmt: str, columns: str, units: str = "", mults: str = ""
          ) -> MessageFormat:
-    cols = tuple(columns.split(","))
-    if len(cols) != len(fmt):
-        raise ValueError(f"{name}: {len(fmt)} format chars for {len(cols)} columns")
-    return MessageFormat(type_id, name, fmt, cols, units, mults)
+    return MessageFormat(type_id, name, fmt, tuple(columns.split(",")), units, mults)
 
 
 #: Layouts of ArduCopter 4.7 (from a SITL log's own FMT/FMTU records).
@@ -146,14 +153,22 @@ class DataFlashBuilder:
 
     def __init__(self) -> None:
         self._chunks: list[tuple[np.ndarray, np.ndarray]] = []  # (time key, records)
+        self.formats: dict[str, MessageFormat] = dict(FORMATS)
+
+    def define(self, f: MessageFormat) -> None:
+        """Register a message type and write its FMT record (before all data)."""
+        self.formats[f.name] = f
+        self.add("FMT", [-1], Type=f.type_id, Length=f.length, Name=f.name, Format=f.fmt,
+                 Columns=",".join(f.columns))
 
     def add(self, name: str, time_us: Any, **columns: Any) -> None:
-        """Add records of message ``name``; columns by field name, values in display units.
+        """Add records of message ``name``; columns by field name, values in display units
+        (the writer applies the format character's scaling, e.g. x100 for ``c``).
 
         ``time_us`` gives the TimeUS field and the ordering (use -1 for header records, which
         keep their insertion order before all data). Missing columns are zero.
         """
-        f = FORMATS[name]
+        f = self.formats[name]
         t = np.asarray(time_us, dtype=np.int64)
         rec = np.zeros(t.shape[0], dtype=f.dtype)
         rec["_head"] = (0xA3, 0x95, f.type_id)
@@ -169,7 +184,7 @@ class DataFlashBuilder:
                              dtype=CHAR_DTYPE[ch])
             elif ch in CHAR_SCALE:
                 v = np.round(v.astype(float) * CHAR_SCALE[ch])
-            elif ch in "bBMhHiIqQ":
+            elif ch in "bBMhHiIqQa":
                 v = np.round(v.astype(float))
             rec[key] = np.broadcast_to(v, rec.shape[:1] + np.shape(rec[key])[1:])
         self._chunks.append((t, rec))
@@ -202,9 +217,7 @@ class DataFlashBuilder:
 def _header(b: DataFlashBuilder, time_us: int) -> None:
     """FMT, UNIT, MULT and FMTU records for every type this writer uses."""
     for name in _HEADER_TYPES + _DATA_TYPES:
-        f = FORMATS[name]
-        b.add("FMT", [-1], Type=f.type_id, Length=f.length, Name=f.name, Format=f.fmt,
-              Columns=",".join(f.columns))
+        b.define(FORMATS[name])
         if name == "MULT":
             b.add("UNIT", np.full(len(UNITS), -1), Id=[ord(k) for k in UNITS],
                   Label=list(UNITS.values()), TimeUS=time_us)

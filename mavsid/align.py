@@ -148,6 +148,14 @@ def _collect(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer]
     elif preset.motors is not None:
         mixer = mixer_for(preset, raw.params, {**MIXERS, **mixers})
         mixer_name = mixer.name
+        if preset.mixer == "auto" and not {"FRAME_CLASS", "FRAME_TYPE"} <= set(raw.params):
+            warnings.warn(
+                f"{raw.source.path}: no FRAME_CLASS/FRAME_TYPE parameters in the log: "
+                f"{preset.motors.message} unmixed as {mixer.name} (choose a preset with "
+                "another mixer if the frame differs)",
+                DataQualityWarning,
+                stacklevel=3,
+            )
         t, thrust = motor_thrusts(raw, preset, mixer)
         u = mixer.unmix(thrust)
         for j, name in enumerate(INPUT_NAMES):

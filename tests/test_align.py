@@ -120,7 +120,8 @@ def test_slow_input_warns_with_message_and_rate():
     imu = MessageTable("IMU", {k: np.zeros(t.size) for k in ("GyrX", "GyrY", "GyrZ")}, time_s=t)
     rcou = MessageTable("RCOU", {f"C{i}": np.full(tr.size, 1500.0) for i in range(1, 9)},
                         time_s=tr)
-    raw = RawLog(SourceInfo("b.bin", "dataflash", 0), {"ATT": att, "IMU": imu, "RCOU": rcou})
+    raw = RawLog(SourceInfo("b.bin", "dataflash", 0), {"ATT": att, "IMU": imu, "RCOU": rcou},
+                 params={"FRAME_CLASS": 1.0, "FRAME_TYPE": 1.0})
     with pytest.warns(DataQualityWarning, match=r"RCOU .*10\.0 Hz"):
         fd = align(raw)
     assert fd.preset == "ardupilot-rcou" and fd.meta["mixer"] == "quad-x"
@@ -273,7 +274,8 @@ def test_servo_outputs_of_a_plane_are_not_unmixed():
         fd = align(raw)
     assert fd.input_names == () and fd.inputs.shape == (t.size, 0)
     copter = RawLog(raw.source, raw.messages, vehicle="copter QUAD/X")
-    assert align(copter).input_names == ("u_roll", "u_pitch", "u_yaw", "u_thrust")
+    with pytest.warns(DataQualityWarning, match="no FRAME_CLASS/FRAME_TYPE .* quad-x"):
+        assert align(copter).input_names == ("u_roll", "u_pitch", "u_yaw", "u_thrust")
 
 
 def test_reboot_keeps_the_longest_boot_only():

@@ -18,6 +18,7 @@ from mavsid.estimators import (
     LeastSquares,
     Ridge,
     Structure,
+    filters_from_params,
     fit_axis,
     library,
     load_model,
@@ -162,7 +163,7 @@ def test_delay_found_exactly_with_the_known_filter():
     filt = InputFilter(20.0, 2, "INS_GYRO_FILTER")
     a, b, c = np.array([[0.995]]), np.array([[0.77]]), np.array([0.0])
     seg = plant(a, b, c, 5, 6000, 7, noise=1e-4, filt=filt)
-    m = fit_axis([seg], "roll", delay_step=1.0, n_bootstrap=0)
+    m = fit_axis([seg], "roll", delay_step=1.0, n_bootstrap=0, filters=(filt,))
     assert m.delay == 5 and m.delay_frac == 0.0
     assert m.filters == (filt,)
     assert m.params["B_d[p,u_roll]"] == pytest.approx(0.77, rel=0.01)
@@ -422,7 +423,7 @@ def test_json_round_trip(tmp_path):
     filt = InputFilter(20.0, 2, "INS_GYRO_FILTER")
     seg = plant(np.array([[0.995]]), np.array([[0.77]]), np.array([0.0]), 2, 2000, 3,
                 noise=1e-4, filt=filt)
-    m = fit_axis([seg], "roll", n_bootstrap=20)
+    m = fit_axis([seg], "roll", n_bootstrap=20)  # filter from INS_GYRO_FILTER, at 1 kHz
     path = tmp_path / "m.json"
     m.save(path)
     back = load_model(path)
@@ -441,9 +442,23 @@ def test_json_round_trip(tmp_path):
         load_model(bad)
 
 
+def test_gyro_filter_from_params_runs_at_the_gyro_rate():
+    flt = filters_from_params({"INS_GYRO_FILTER": 20.0, "INS_GYRO_RATE": 1}, DT)
+    assert flt == (InputFilter(20.0, 2, "INS_GYRO_FILTER", rate_hz=2000.0),)
+    assert flt[0].substeps(DT) == 5
+    rng = np.random.default_rng(0)
+    u = rng.standard_normal(300)
+    b, a = signal.butter(2, 20.0, fs=2000.0)
+    fast = signal.lfilter(b, a, np.repeat(u, 5), zi=signal.lfilter_zi(b, a) * u[0])[0]
+    np.testing.assert_allclose(flt[0].apply(u, DT), fast[4::5], rtol=1e-12, atol=1e-15)
+    assert filters_from_params({"IMU_GYRO_CUTOFF": 40.0, "IMU_GYRO_RATEMAX": 800.0}, DT)[0] \
+        == InputFilter(40.0, 2, "IMU_GYRO_CUTOFF", rate_hz=800.0)
+    assert filters_from_params({"INS_GYRO_FILTER": 0.0}, DT) == ()
+
+
 def test_to_statespace_reproduces_simulate():
     control = pytest.importorskip("control")
-    filt = InputFilter(20.0, 2, "INS_GYRO_FILTER")
+    filt = InputFilter(20.0, 2, "INS_GYRO_FILTER", rate_hz=1200.0)
     seg = plant(np.array([[0.995]]), np.array([[0.77]]), np.array([0.0]), 2, 1500, 9,
                 noise=1e-4, filt=filt)
     m = fit_axis([seg], "roll", bias=False, delay=2.5, n_bootstrap=0)

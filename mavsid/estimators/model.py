@@ -526,9 +526,9 @@ class Model:
         for flt in self.filters:
             if self.continuous:
                 num, den = signal.butter(flt.order, 2 * np.pi * flt.cutoff_hz, analog=True)
+                tf = control.ss(control.tf(num, den, dt))
             else:
-                num, den = flt.coefficients(self.dt)
-            tf = control.ss(control.tf(num, den, dt))
+                tf = control.ss(*flt.statespace(self.dt), dt)
             blockdiag = control.append(*([tf] * nin)) if nin > 1 else tf
             chain = blockdiag if chain is None else control.series(chain, blockdiag)
         if not self.continuous and (self.delay > 0 or self.delay_frac > 0) and nin:
@@ -585,7 +585,9 @@ class Model:
                 dt=float(d["dt"]), delay=int(d["delay"]), continuous=bool(d["continuous"]),
                 delay_frac=float(d.get("delay_frac", 0.0)),
                 filters=tuple(InputFilter(float(f["cutoff_hz"]), int(f["order"]),
-                                          str(f.get("source", ""))) for f in d["filters"]),
+                                          str(f.get("source", "")),
+                                          float(f.get("rate_hz", 0.0) or 0.0))
+                              for f in d["filters"]),
                 covariance=arr("covariance"), coef_stderr=arr("coef_stderr"),
                 sigma=arr("sigma"), provenance=d.get("provenance") or {},
             )

@@ -66,6 +66,11 @@ class InputFilter:
         Butterworth order (2 = ArduPilot's ``LowPassFilter2p`` biquad; 1 = first order).
     source : str
         Where it came from, e.g. ``"INS_GYRO_FILTER"``.
+    rate_hz : float
+        Rate the filter runs at (ArduPilot filters every gyro sample, typically 1 kHz or
+        more, and the loop reads the latest output). 0: the data's own rate. When it is
+        ``r ≥ 2`` times the data rate, the (held) input is filtered at ``r/dt`` and the last
+        sub-sample of each step is kept.
 
     Examples
     --------
@@ -74,54 +79,90 @@ class InputFilter:
     >>> y = f.apply(np.ones(5), dt=0.0025)   # starts in steady state: a constant passes
     >>> bool(np.allclose(y, 1.0))
     True
+    >>> InputFilter(20.0, rate_hz=1000.0).substeps(0.0025)
+    2
     """
 
     cutoff_hz: float
     order: int = 2
     source: str = ""
+    rate_hz: float = 0.0
+
+    def substeps(self, dt: float) -> int:
+        """Filter steps per data step."""
+        return max(1, round(self.rate_hz * dt)) if self.rate_hz > 0 else 1
 
     def coefficients(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        """Discrete (bilinear, pre-warped) Butterworth coefficients ``(b, a)`` at step ``dt``."""
-        nyq = 0.5 / dt
-        if not 0 < self.cutoff_hz < nyq:
+        """Discrete (bilinear, pre-warped) Butterworth ``(b, a)`` at the filter's own step
+        (``dt`` divided by :meth:`substeps`)."""
+        fs = self.substeps(dt) / dt
+        if not 0 < self.cutoff_hz < 0.5 * fs:
             raise ConfigError(
                 f"input filter {self.source or 'cut-off'} {self.cutoff_hz:g} Hz outside "
-                f"(0, {nyq:g}) Hz for dt {dt:g} s"
+                f"(0, {0.5 * fs:g}) Hz at {fs:g} Hz"
             )
-        b, a = signal.butter(self.order, self.cutoff_hz, fs=1.0 / dt)
+        b, a = signal.butter(self.order, self.cutoff_hz, fs=fs)
         return np.asarray(b), np.asarray(a)
+
+    def statespace(self, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The filter as a discrete state space at the data step ``dt`` (input held over the
+        step, output read at its last sub-step), exactly what :meth:`apply` computes."""
+        b, a = self.coefficients(dt)
+        af, bf, cf, df = signal.tf2ss(b, a)
+        r = self.substeps(dt)
+        eye = np.eye(af.shape[0])
+        powers = [np.linalg.matrix_power(af, i) for i in range(r)]
+        big_a = powers[-1] @ af
+        big_b = sum((powers[i] for i in range(r)), np.zeros_like(af)) @ bf
+        c = cf @ powers[-1]
+        d = cf @ sum((powers[i] for i in range(r - 1)), np.zeros_like(eye)) @ bf + df
+        return big_a, big_b, c, d
 
     def apply(self, u: np.ndarray, dt: float) -> np.ndarray:
         """Filter along axis 0, starting in steady state at the first sample."""
         b, a = self.coefficients(dt)
         u = np.asarray(u, dtype=float)
+        r = self.substeps(dt)
+        fast = np.repeat(u, r, axis=0) if r > 1 else u
         zi = signal.lfilter_zi(b, a)
         zi = zi.reshape((-1,) + (1,) * (u.ndim - 1)) * u[:1]
-        out, _ = signal.lfilter(b, a, u, axis=0, zi=zi)
-        return np.asarray(out)
+        out, _ = signal.lfilter(b, a, fast, axis=0, zi=zi)
+        return np.asarray(out[r - 1 :: r] if r > 1 else out)
 
     def to_dict(self) -> dict[str, object]:
-        return {"cutoff_hz": self.cutoff_hz, "order": self.order, "source": self.source}
+        return {"cutoff_hz": self.cutoff_hz, "order": self.order, "source": self.source,
+                "rate_hz": self.rate_hz}
 
 
 def filters_from_params(params: Mapping[str, float], dt: float) -> tuple[InputFilter, ...]:
     """The known measurement filters that a log's parameters declare.
 
     ArduPilot: ``INS_GYRO_FILTER`` (Hz), the second-order low-pass on every gyro sample that
-    the logged rates (RATE.R/P/Y, SIDD.G*) have passed through. 0 or absent: no filter.
-    A cut-off at or above the Nyquist frequency of ``dt`` cannot be represented and is left out.
+    the logged rates (RATE.R/P/Y, SIDD.G*) have passed through, running at the gyro rate
+    ``INS_GYRO_RATE`` (0..3 = 1, 2, 4, 8 kHz; 1 kHz when absent). PX4: ``IMU_GYRO_CUTOFF``
+    at ``IMU_GYRO_RATEMAX``. 0 or absent: no filter. A cut-off at or above the Nyquist
+    frequency cannot be represented and is left out.
 
     Examples
     --------
     >>> filters_from_params({"INS_GYRO_FILTER": 20.0}, dt=0.0025)
-    (InputFilter(cutoff_hz=20.0, order=2, source='INS_GYRO_FILTER'),)
+    (InputFilter(cutoff_hz=20.0, order=2, source='INS_GYRO_FILTER', rate_hz=1000.0),)
     >>> filters_from_params({}, dt=0.0025)
     ()
     """
     out = []
     fc = float(params.get("INS_GYRO_FILTER", 0.0) or 0.0)
-    if 0.0 < fc < 0.5 / dt:
-        out.append(InputFilter(fc, 2, "INS_GYRO_FILTER"))
+    if fc > 0.0:
+        rate = 1000.0 * 2 ** int(params.get("INS_GYRO_RATE", 0) or 0)
+        flt = InputFilter(fc, 2, "INS_GYRO_FILTER", rate_hz=max(rate, 1.0 / dt))
+        if fc < 0.5 * flt.substeps(dt) / dt:
+            out.append(flt)
+    fc = float(params.get("IMU_GYRO_CUTOFF", 0.0) or 0.0)
+    if fc > 0.0:
+        rate = float(params.get("IMU_GYRO_RATEMAX", 0.0) or 0.0)
+        flt = InputFilter(fc, 2, "IMU_GYRO_CUTOFF", rate_hz=max(rate, 1.0 / dt))
+        if fc < 0.5 * flt.substeps(dt) / dt:
+            out.append(flt)
     return tuple(out)
 
 

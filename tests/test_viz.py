@@ -58,6 +58,10 @@ def test_rrd_holds_exactly_the_computed_series(toy, rrd) -> None:  # type: ignor
     flight, result, _ = toy
     data, n_blueprints = _read(rrd)
     assert n_blueprints == 1
+    # a complete file (footer/manifest written) whose only timeline is the log's clock
+    RrdReader(rrd).store()
+    timelines = {t for c in RrdReader(rrd).stream().to_chunks() for t in c.timeline_names}
+    assert timelines == {viz.TIMELINE}
     for axis, fit in result.axes.items():
         v = fit.validation
         for j, state in enumerate(v.state_names):

@@ -44,22 +44,25 @@ without a single valid frame raises :class:`~mavsid.errors.LogFormatError`.
 
 Examples
 --------
-A one-record log: a MAVLink 2 HEARTBEAT (its payload's trailing zero truncated on the wire)
-from an ArduCopter quadrotor:
+A two-record log from an ArduCopter quadrotor: a MAVLink 2 HEARTBEAT (its payload's trailing
+zero truncated on the wire), then 20 ms later an ATTITUDE stamped 5 s after boot:
 
 >>> import os, struct, tempfile
 >>> from pymavlink.dialects.v20 import ardupilotmega as mavlink
 >>> mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
->>> frame = mav.heartbeat_encode(type=2, autopilot=3, base_mode=81, custom_mode=0,
-...                              system_status=4).pack(mav)
+>>> hb = mav.heartbeat_encode(type=2, autopilot=3, base_mode=81, custom_mode=0,
+...                           system_status=4).pack(mav)
+>>> att = mav.attitude_encode(5000, 0.1, -0.2, 1.5, 0.0, 0.0, 0.0).pack(mav)
+>>> t0 = 1_700_000_000_000_000  # receive time, µs (ground station clock)
 >>> with tempfile.NamedTemporaryFile(suffix=".tlog", delete=False) as f:
-...     _ = f.write(struct.pack(">Q", 1_700_000_000_000_000) + frame)
+...     _ = f.write(struct.pack(">Q", t0) + hb + struct.pack(">Q", t0 + 20_000) + att)
 >>> log = read(f.name)
->>> hb = log["HEARTBEAT"]
->>> hb["type"].tolist(), hb["custom_mode"].tolist(), hb["_sysid"].tolist(), log.autopilot
-([2], [0], [1], 'ardupilot')
->>> log.modes
-(ModeChange(time_s=nan, mode=0, name='STABILIZE'),)
+>>> log["ATTITUDE"]["roll"].tolist(), log["ATTITUDE"].time_s.tolist()
+([0.10000000149011612], [5.0])
+>>> log["HEARTBEAT"]["_sysid"].tolist(), log.autopilot, log.vehicle
+([1], 'ardupilot', 'copter')
+>>> [(round(m.time_s, 6), m.mode, m.name) for m in log.modes]  # received at 4.98 s
+[(4.98, 0, 'STABILIZE')]
 >>> os.unlink(f.name)
 """
 

@@ -53,7 +53,7 @@ import os
 import re
 import struct
 import warnings
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -80,6 +80,7 @@ _HEAD_U16 = _HEAD1 | (_HEAD2 << 8)
 _FMT_TYPE = 0x80
 _FMT_LEN = 89
 _CHUNK = 1 << 23  # bytes scanned per step when looking for headers
+_NEAR = 16  # candidates looked at around a record when checking overlaps
 _GATHER_BYTES = 1 << 24  # record bytes copied per slice when decoding one type
 _BACKWARDS_S = 0.5  # a time step back larger than this is a discontinuity
 
@@ -356,19 +357,46 @@ def _records(a: np.ndarray, dtype: np.dtype, offsets: np.ndarray) -> np.ndarray:
 def _assign_definitions(
     pos: np.ndarray, types: np.ndarray, table: _Definitions
 ) -> np.ndarray:
-    """Index into ``table.defs`` for each candidate (-1: type undefined)."""
-    first = np.full(256, -1, np.int16 if len(table.defs) < 2**15 else np.int32)
+    """Index into ``table.defs`` for each candidate (-1: type undefined).
+
+    A type's first definition applies up to its next FMT record (also before the first one,
+    so that a log whose first FMT records are damaged still decodes). The log is cut into
+    epochs at each redefinition; a (epochs x 256) table then gives every candidate's
+    definition in one lookup.
+    """
+    dt = np.int16 if len(table.defs) < 2**15 else np.int32
+    events = sorted((p, t, i) for t, e in table.by_type.items() for p, i in e[1:])
+    if len(events) > 4096:  # pathological: per-type lookup instead of a big table
+        return _assign_per_type(pos, types, table, dt)
+    lut = np.full((len(events) + 1, 256), -1, dt)
+    for t, entries in table.by_type.items():
+        lut[0, t] = entries[0][1]
+    for k, (_, t, i) in enumerate(events, start=1):
+        lut[k] = lut[k - 1]
+        lut[k, t] = i
+    if not events:
+        return lut[0][types]
+    starts = np.array([p for p, _, _ in events], pos.dtype)
+    epoch = np.searchsorted(starts, pos, side="right").astype(np.int32)
+    epoch *= 256
+    epoch += types
+    return lut.reshape(-1)[epoch]
+
+
+def _assign_per_type(
+    pos: np.ndarray, types: np.ndarray, table: _Definitions, dt: type[np.signedinteger]
+) -> np.ndarray:
+    first = np.full(256, -1, dt)
     for t, entries in table.by_type.items():
         first[t] = entries[0][1]
     defid = first[types]
-    multi = {t: e for t, e in table.by_type.items() if len(e) > 1}
-    if multi:
-        order = np.argsort(types, kind="stable")
-        bounds = np.concatenate([[0], np.cumsum(np.bincount(types, minlength=256))])
-        for t, entries in multi.items():
+    order = np.argsort(types, kind="stable")
+    bounds = np.concatenate([[0], np.cumsum(np.bincount(types, minlength=256))])
+    for t, entries in table.by_type.items():
+        if len(entries) > 1:
             sel = order[bounds[t] : bounds[t + 1]]
             starts = np.array([p for p, _ in entries], np.int64)
-            ids = np.array([i for _, i in entries], defid.dtype)
+            ids = np.array([i for _, i in entries], dt)
             k = np.searchsorted(starts, pos[sel], side="right") - 1
             defid[sel] = ids[np.maximum(k, 0)]
     return defid
@@ -413,6 +441,25 @@ def _chain(pos: np.ndarray, end: np.ndarray) -> np.ndarray:
     return np.concatenate(runs)
 
 
+def _near(
+    idx: np.ndarray, span: int, flag: np.ndarray, hit: Callable[[np.ndarray], np.ndarray]
+) -> np.ndarray:
+    """For each candidate index in ``idx``: is one of the ``|span|`` candidates before
+    (``span < 0``) or after it ``flag``-ged and satisfying ``hit``?
+
+    ``hit`` receives the neighbours' indices (shape ``(len(idx), |span|)``) and returns a
+    boolean array of that shape. Headers inside one record are few, so a short look-around
+    replaces a search over all candidates.
+    """
+    if idx.size == 0:
+        return np.zeros(0, bool)
+    steps = np.arange(1, abs(span) + 1) * (1 if span > 0 else -1)
+    nb = idx[:, None] + steps
+    valid = (nb >= 0) & (nb < flag.size)
+    nb = np.clip(nb, 0, flag.size - 1)
+    return np.any(valid & flag[nb] & hit(nb), axis=1)
+
+
 @dataclass
 class _Framing:
     pos: np.ndarray  # offsets of accepted records, ascending
@@ -443,19 +490,13 @@ def _frame(a: np.ndarray, cand: np.ndarray, table: _Definitions) -> _Framing:
     # unless it lies inside the declared span of a backed header (e.g. a cut last record)
     # (FMT records need plausible content instead, below)
     weak = np.flatnonzero(complete & ~backed & (defid != 0))
-    bpos = cand[backed]
-    if weak.size and bpos.size:
-        reach = np.maximum.accumulate(end[backed])
-        k = np.searchsorted(bpos, cand[weak], side="left") - 1
-        weak = weak[(k < 0) | (reach[np.maximum(k, 0)] <= cand[weak])]
+    weak = weak[~_near(weak, -_NEAR, backed, lambda nb: end[nb] > cand[weak, None])]
     node[weak] = True
     node[np.searchsorted(cand, np.array(table.plausible, np.int64))] = True
+    # a record with backward evidence only must not swallow one with forward evidence
     back_only = np.flatnonzero(node & ~fwd)
-    fpos = cand[fwd]
-    if back_only.size and fpos.size:
-        k = np.searchsorted(fpos, cand[back_only], side="right")
-        swallows = (k < fpos.size) & (fpos[np.minimum(k, fpos.size - 1)] < end[back_only])
-        node[back_only[swallows]] = False
+    swallows = _near(back_only, _NEAR, fwd, lambda nb: cand[nb] < end[back_only, None])
+    node[back_only[swallows]] = False
     nodes = np.flatnonzero(node).astype(cand.dtype)
     del node, fwd, complete, backed
     keep = nodes[_chain(cand[nodes], end[nodes])]
@@ -475,7 +516,7 @@ def _column(raw: np.ndarray, ch: str, message: str) -> np.ndarray:
         return _strings(raw)
     if spec.multiplier is not None:
         divisor = 1 / spec.multiplier  # pymavlink divides by this for accuracy
-        return raw.astype(np.float64) / divisor
+        return np.true_divide(raw, divisor, dtype=np.float64)
     if ch == "g":
         return raw.astype(np.float32)
     return np.ascontiguousarray(raw).astype(raw.dtype.newbyteorder("="), copy=False)
@@ -929,8 +970,11 @@ def _merge(
     if len(parts) == 1:
         _, r, cols = parts[0]
         return cols, timeline[r]
+    parts = sorted(parts, key=lambda part: int(part[1][0]) if part[1].size else -1)
     rows = np.concatenate([r for _, r, _ in parts])
-    order = np.argsort(rows, kind="stable")
+    order: np.ndarray | slice = slice(None)
+    if np.any(rows[1:] < rows[:-1]):
+        order = np.argsort(rows, kind="stable")
     names: list[str] = []
     for _, _, cols in parts:
         names.extend(c for c in cols if c not in names)

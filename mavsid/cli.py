@@ -266,7 +266,7 @@ def _add_fit(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "fit", help="log(s) -> validated attitude-dynamics model per axis",
         description="Read, align, find excited segments, fit per axis on alternate blocks "
-        "and validate on the held-out ones (one-step, 0.5 s and free-run fit %%).",
+        "and validate on the held-out ones (one-step, 0.5 s and free-run fit %).",
     )
     p.add_argument("logs", nargs="+", metavar="LOG", help="flight log(s) (.bin .log .tlog .ulg)")
     p.add_argument("--estimator", choices=("ls", "ridge", "l1"), help="regression (default ls)")

@@ -81,6 +81,8 @@ __all__ = [
 AXES = ("roll", "pitch", "yaw")
 ESTIMATORS = ("ls", "ridge", "l1")
 SEGMENT_SOURCES = ("auto", "sysid", "scan")
+#: The horizon (s) reported between one step and free run (``fit_percent["0.5s"]``).
+SUMMARY_HORIZON_S = 0.5
 
 
 # --------------------------------------------------------------------------- configuration
@@ -340,7 +342,7 @@ class AxisFit:
                 "params": dict(self.model.params),
                 "stderr": dict(stderr),
                 "units": dict(units),
-                "fit_percent": v.fit_summary(self.output),
+                "fit_percent": v.fit_summary(self.output, (SUMMARY_HORIZON_S,)),
                 "fit_vs_horizon": {
                     state: {
                         "horizon_s": [*np.round(v.horizons_s, 9).tolist(), "free_run"],
@@ -507,7 +509,7 @@ def fit(
             val = validate(
                 model,
                 held_out,
-                horizons_s=cfg.horizons_s,
+                horizons_s=(*cfg.horizons_s, SUMMARY_HORIZON_S),
                 max_lag=cfg.max_lag,
                 fft_window_s=cfg.fft_window_s,
             )
@@ -576,7 +578,7 @@ def validate_logs(
             val = validate(
                 model,
                 segs,
-                horizons_s=cfg.horizons_s,
+                horizons_s=(*cfg.horizons_s, SUMMARY_HORIZON_S),
                 max_lag=cfg.max_lag,
                 fft_window_s=cfg.fft_window_s,
             )

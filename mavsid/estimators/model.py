@@ -472,6 +472,29 @@ class Model:
                 out[k + 1] = x2[0]
         return out
 
+    def simulate_inputs(self, inputs: np.ndarray, x0: np.ndarray | None = None,
+                        exogenous: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
+        """Free run from arrays: ``inputs`` (n, len(input_names)) in the model's input order,
+        initial state ``x0`` (default zeros), other measured variables the features use in
+        ``exogenous``.
+
+        Examples
+        --------
+        >>> m = Model(("p",), ("u_roll",), ("p", "u_roll"), np.array([[0.5], [1.0]]), dt=0.01)
+        >>> m.simulate_inputs(np.ones((4, 1))).ravel().tolist()
+        [0.0, 1.0, 1.5, 1.75]
+        """
+        u = np.asarray(inputs, dtype=float).reshape(len(inputs), len(self.input_names))
+        n = len(u)
+        extra = dict(exogenous or {})
+        x = np.zeros((n, len(self.state_names)))
+        names = self.state_names + tuple(extra)
+        states = np.column_stack([x] + [np.asarray(extra[k], float) for k in extra])
+        seg = Segment(np.arange(n) * self.dt, states, u, names, self.input_names, self.dt,
+                      "all", "scan")
+        x0 = np.zeros(len(self.state_names)) if x0 is None else x0
+        return self.simulate(seg, x0=x0)
+
     def predict(self, segment: Segment, horizon: int = 1) -> np.ndarray:
         """``horizon``-step-ahead prediction: row ``i`` is the prediction of sample ``i`` made
         from the measured state at ``i - horizon`` and the measured inputs; NaN for the first

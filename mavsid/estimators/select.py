@@ -209,13 +209,13 @@ def fit_axis(
     if mine and len(mine) < len(segments):
         segments = mine
     outputs, default_inputs = AXES[axis]
-    ins = tuple(inputs) if inputs is not None else default_inputs
-    ins = ins + tuple(v for v in library.variables_of(features)
-                      if v.startswith("u_") and v not in ins)
+    linear = tuple(inputs) if inputs is not None else default_inputs
+    ins = linear + tuple(v for v in library.variables_of(features)
+                         if v.startswith("u_") and v not in linear)
     dt = float(segments[0].dt)
     flt = tuple(filters) if filters is not None else filters_from_params(
         log_params(segments, params), dt)
-    feats = library.library(outputs, ins, (library.BIAS,) if bias else (), features)
+    feats = library.library(outputs, linear, (library.BIAS,) if bias else (), features)
     structure = Structure(outputs=outputs, features=feats, inputs=ins, filters=flt,
                           continuous=continuous)
     lag_grid = [0.0] if lags_s is None else sorted({0.0, *map(float, lags_s)})

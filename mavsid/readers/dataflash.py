@@ -79,7 +79,7 @@ _HEAD1, _HEAD2 = 0xA3, 0x95
 _HEAD_U16 = _HEAD1 | (_HEAD2 << 8)
 _FMT_TYPE = 0x80
 _FMT_LEN = 89
-_CHUNK = 1 << 23  # bytes scanned per step when looking for headers
+_CHUNK = 1 << 20  # bytes scanned per step when looking for headers
 _NEAR = 16  # candidates looked at around a record when checking overlaps
 _GATHER_BYTES = 1 << 24  # record bytes copied per slice when decoding one type
 _BACKWARDS_S = 0.5  # a time step back larger than this is a discontinuity
@@ -254,21 +254,25 @@ def _index_dtype(n: int) -> type[np.signedinteger]:
     return np.int32 if n < 2**31 - 1024 else np.int64
 
 
-def _find_headers(a: np.ndarray) -> np.ndarray:
-    """Offsets of every ``0xA3 0x95`` byte pair, ascending."""
+def _find_headers(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Offsets of every ``0xA3 0x95`` byte pair followed by a type byte, ascending, and
+    those type bytes."""
     n = a.size
     dt = _index_dtype(n)
-    found = [np.zeros(0, dt)]
-    for start in range(0, max(n - 1, 0), _CHUNK):
-        seg = a[start : min(n, start + _CHUNK + 1)]
+    found, types = [np.zeros(0, dt)], [np.zeros(0, np.uint8)]
+    for start in range(0, max(n - 2, 0), _CHUNK):
+        seg = a[start : min(n, start + _CHUNK + 2)]
         parts = []
         for parity in (0, 1):
-            sub = seg[parity:]
+            sub = seg[parity : seg.size - 1]
             sub = sub[: sub.size - sub.size % 2]
             hits = np.flatnonzero(sub.view("<u2") == _HEAD_U16)
-            parts.append((hits * 2 + (start + parity)).astype(dt))
-        found.append(np.sort(np.concatenate(parts)))  # chunks come in order
-    return np.concatenate(found)
+            parts.append(hits * 2 + parity)
+        hits = np.sort(np.concatenate(parts))
+        hits = hits[hits < min(_CHUNK, seg.size - 2)]
+        found.append((hits + start).astype(dt))  # chunks come in order
+        types.append(seg[hits + 2])
+    return np.concatenate(found), np.concatenate(types)
 
 
 def _decode_text(raw: bytes) -> str:
@@ -377,8 +381,10 @@ def _assign_definitions(
     if not events:
         return lut[0][types]
     starts = np.array([p for p, _, _ in events], pos.dtype)
-    epoch = np.searchsorted(starts, pos, side="right").astype(np.int32)
-    epoch *= 256
+    # candidates are sorted: epoch k covers the index range between two events
+    bounds = np.searchsorted(pos, starts, side="left")
+    epoch = np.repeat(np.arange(len(events) + 1, dtype=np.int32) * 256,
+                      np.diff(np.concatenate([[0], bounds, [pos.size]])))
     epoch += types
     return lut.reshape(-1)[epoch]
 
@@ -467,10 +473,10 @@ class _Framing:
     end: np.ndarray  # offsets just past each record
 
 
-def _frame(a: np.ndarray, cand: np.ndarray, table: _Definitions) -> _Framing:
+def _frame(a: np.ndarray, cand: np.ndarray, types: np.ndarray, table: _Definitions) -> _Framing:
     """The accepted records among the header candidates ``cand`` (see the module doc)."""
     n = a.size
-    defid = _assign_definitions(cand, a[cand + 2], table)
+    defid = _assign_definitions(cand, types, table)
     lengths = np.array([d.length for d in table.defs] + [0], cand.dtype)
     end = cand + lengths[defid]  # undefined (-1) -> the sentinel 0
     known = end > cand
@@ -806,17 +812,15 @@ def _read_buffer(
 ) -> RawLog:
     n = a.size
     notes: list[str] = []
-    cand = _find_headers(a)
-    cand = cand[cand + 2 < n]
-    fmt_pos = cand[(cand + _FMT_LEN <= n)]
-    fmt_pos = fmt_pos[a[fmt_pos + 2] == _FMT_TYPE]
+    cand, types = _find_headers(a)
+    fmt_pos = cand[(types == _FMT_TYPE) & (cand + _FMT_LEN <= n)]
     table = _read_definitions(a, fmt_pos)
-    framing = _frame(a, cand, table)
+    framing = _frame(a, cand, types, table)
     # definitions only from FMT records that are part of the log (rarely differs)
     fmt_kept = framing.pos[framing.defid == 0]
     if not np.isin(np.array(table.plausible, np.int64), fmt_kept).all():
         table = _read_definitions(a, fmt_kept)
-        framing = _frame(a, cand, table)
+        framing = _frame(a, cand, types, table)
     if framing.pos.size == 0:
         raise LogFormatError("no DataFlash records found", path=path)
     skip_at, skip_len = _skipped_regions(n, framing.pos, framing.end)
@@ -832,7 +836,7 @@ def _read_buffer(
                      f"(offset+size: {shown}{', ...' if skip_at.size > 5 else ''})"
                      + (f"; undefined type id(s) {unknown[:10]}" if unknown else ""))
     notes.extend(table.problems)
-    del cand, fmt_pos, fmt_kept
+    del cand, types, fmt_pos, fmt_kept
     framing.end = framing.end[:0]  # not needed any more: free it
 
     # accepted records grouped by definition (radix sort on small integers)

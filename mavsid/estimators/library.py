@@ -19,6 +19,7 @@ Examples
 
 from __future__ import annotations
 
+import functools
 import itertools
 import re
 from collections.abc import Iterable, Mapping, Sequence
@@ -60,6 +61,7 @@ class Factor:
         return base if self.power == 1 else base**self.power
 
 
+@functools.lru_cache(maxsize=4096)
 def parse(feature: str) -> tuple[Factor, ...]:
     """Split a feature name into its factors (``()`` for the bias ``"1"``).
 

@@ -226,6 +226,11 @@ class Model:
         return states, exo, other
 
     @property
+    def delay_s(self) -> float:
+        """Total input delay in seconds (whole samples plus the fraction)."""
+        return (self.delay + self.delay_frac) * self.dt
+
+    @property
     def is_affine(self) -> bool:
         """True when the modelled states enter linearly (inputs may enter through any term)."""
         return not self._split[2]

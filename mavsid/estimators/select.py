@@ -32,13 +32,14 @@ Examples
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import replace
 
 import numpy as np
 
 from mavsid.data import Segment
-from mavsid.errors import ConfigError, NoExcitationError
+from mavsid.errors import ConfigError, DataQualityWarning, NoExcitationError, SolverError
 from mavsid.estimators import library
 from mavsid.estimators._base import Estimator, block_grams, check_identifiable, solve
 from mavsid.estimators.l1 import ElasticNet, Lasso
@@ -149,7 +150,7 @@ def fit_axis(
     bias: bool = True,
     continuous: bool = False,
     features: Sequence[str] = (),
-    refine: str | None = "oe",
+    refine: str | None = "auto",
     **estimator_kwargs: object,
 ) -> Model:
     """Choose the structure for one axis from the data and the log, fit it, return the model.
@@ -190,16 +191,19 @@ def fit_axis(
         Continuous-time regression (Savitzky–Golay derivatives) instead of discrete time.
     features : sequence of str
         Extra library terms (e.g. ``library.state_input(...)``).
-    refine : {"oe", None}
-        ``"oe"`` (default): refine the estimator's coefficients by output error, i.e. so that
-        the free run follows the training data (:mod:`~mavsid.estimators.output_error`);
-        standard errors then come from its sandwich covariance. None: the estimator's
-        equation-error result as is.
+    refine : {"auto", "oe", None}
+        ``"oe"``: refine the estimator's coefficients by output error, i.e. so that the free
+        run follows the training data (:mod:`~mavsid.estimators.output_error`); standard
+        errors then come from its sandwich covariance. ``"auto"`` (default): do so when the
+        modelled states enter linearly (fast free run), not for nonlinear libraries. None:
+        the estimator's equation-error result as is.
     **estimator_kwargs
         Passed to the estimator (``alpha``, ``n_bootstrap``, ...).
     """
     if axis not in AXES:
         raise ConfigError(f"unknown axis {axis!r}; choose from {sorted(AXES)}")
+    if refine not in ("auto", "oe", None):
+        raise ConfigError(f"refine must be 'auto', 'oe' or None, got {refine!r}")
     if estimator not in ESTIMATORS:
         raise ConfigError(f"unknown estimator {estimator!r}; choose from {sorted(ESTIMATORS)}")
     segments = list(segments)
@@ -247,8 +251,12 @@ def fit_axis(
     model = est.model_
     if refine == "oe":
         model = refine_output_error(model, segments)
-    elif refine is not None:
-        raise ConfigError(f"refine must be 'oe' or None, got {refine!r}")
+    elif refine == "auto" and model.is_affine:
+        try:
+            model = refine_output_error(model, segments)
+        except SolverError as exc:
+            warnings.warn(f"{axis}: {exc}; keeping the {estimator} estimate",
+                          DataQualityWarning, stacklevel=2)
     prov = dict(model.provenance)
     prov["structure_scan"] = scan
     prov["axis"] = axis

@@ -181,7 +181,8 @@ def format_summary(summary: Mapping[str, Any], max_fields: int | None = None) ->
         lines.append(f"    {_fmt_time(m['time_s']):>12}  {m['mode']:>3} {m['name'] or '?'}")
     lines.append(f"  SYSTEMID    {len(s['sysid_runs'])} runs")
     for run in s["sysid_runs"]:
-        settings = " ".join(f"{k}={v}" for k, v in run.items() if k != "time_s")
+        settings = " ".join(f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={v}"
+                            for k, v in run.items() if k != "time_s")
         lines.append(f"    {_fmt_time(run['time_s']):>12}  {settings}")
     for note in s["notes"]:
         lines.append(f"  note: {note}")

@@ -41,8 +41,8 @@ from mavsid.estimators.regressors import Regression, Structure, stack
 __all__ = [
     "Estimator",
     "Gram",
-    "block_grams",
     "bartlett_meat",
+    "block_grams",
     "check_identifiable",
     "hac_covariance",
     "param_names",

@@ -521,3 +521,16 @@ def test_newey_west_meat_equals_the_explicit_lag_sum():
             g = s[lag:].T @ s[:-lag]
             ref += (1 - lag / (lags + 1)) * (g + g.T)
         np.testing.assert_allclose(bartlett_meat(s, lags), ref, rtol=1e-10, atol=1e-9)
+
+
+def test_rows_with_nan_are_left_out_with_a_warning():
+    from mavsid.errors import DataQualityWarning
+
+    seg = plant(A2, B2, C2, 3, 1500, 71, noise=1e-4)
+    states = seg.states.copy()
+    states[700, 0] = np.nan
+    bad = Segment(seg.time_s, states, seg.inputs, seg.state_names, seg.input_names, DT, "all",
+                  "scan")
+    with pytest.warns(DataQualityWarning, match="2 of 1496 rows"):
+        m = LeastSquares(LIN2, n_bootstrap=0).fit([bad]).model_
+    np.testing.assert_allclose(m.coef, truth_coef(), atol=2e-3)

@@ -30,6 +30,7 @@ Examples
 from __future__ import annotations
 
 import itertools
+import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
@@ -38,7 +39,7 @@ from scipy import signal, sparse
 from scipy.sparse import linalg as splinalg
 
 from mavsid.data import Segment
-from mavsid.errors import ConfigError, NoExcitationError
+from mavsid.errors import ConfigError, DataQualityWarning, NoExcitationError
 from mavsid.estimators import library
 
 __all__ = [
@@ -378,6 +379,12 @@ def rows(segment: Segment, structure: Structure) -> tuple[np.ndarray, np.ndarray
                        structure.tv_weight)[lead : n - trail]
     else:
         y = x[lead + 1 : n]
+    ok = np.isfinite(z).all(axis=1) & np.isfinite(y).all(axis=1)
+    if not ok.all():
+        warnings.warn(f"{segment.log or 'segment'} {segment.start_s:.3f}-{segment.stop_s:.3f} s: "
+                      f"{int((~ok).sum())} of {len(ok)} rows with non-finite values left out",
+                      DataQualityWarning, stacklevel=2)
+        z, y = z[ok], y[ok]
     return z, y
 
 

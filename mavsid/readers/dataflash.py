@@ -448,22 +448,25 @@ def _chain(pos: np.ndarray, end: np.ndarray) -> np.ndarray:
 
 
 def _near(
-    idx: np.ndarray, span: int, flag: np.ndarray, hit: Callable[[np.ndarray], np.ndarray]
+    idx: np.ndarray, span: int, flag: np.ndarray, hit: Callable[[int, np.ndarray], np.ndarray]
 ) -> np.ndarray:
     """For each candidate index in ``idx``: is one of the ``|span|`` candidates before
     (``span < 0``) or after it ``flag``-ged and satisfying ``hit``?
 
-    ``hit`` receives the neighbours' indices (shape ``(len(idx), |span|)``) and returns a
-    boolean array of that shape. Headers inside one record are few, so a short look-around
-    replaces a search over all candidates.
+    ``hit(k, nb)`` receives the first position ``k`` in ``idx`` of a block and the
+    neighbours' indices (shape ``(block, |span|)``) and returns a boolean array of that
+    shape. Headers inside one record are few, so a short look-around replaces a search over
+    all candidates.
     """
-    if idx.size == 0:
-        return np.zeros(0, bool)
+    out = np.zeros(idx.size, bool)
     steps = np.arange(1, abs(span) + 1) * (1 if span > 0 else -1)
-    nb = idx[:, None] + steps
-    valid = (nb >= 0) & (nb < flag.size)
-    nb = np.clip(nb, 0, flag.size - 1)
-    return np.any(valid & flag[nb] & hit(nb), axis=1)
+    block = 1 << 16  # bounded temporaries, whatever the number of such candidates
+    for k in range(0, idx.size, block):
+        nb = idx[k : k + block, None] + steps
+        valid = (nb >= 0) & (nb < flag.size)
+        nb = np.clip(nb, 0, flag.size - 1)
+        out[k : k + block] = np.any(valid & flag[nb] & hit(k, nb), axis=1)
+    return out
 
 
 @dataclass
@@ -496,12 +499,14 @@ def _frame(a: np.ndarray, cand: np.ndarray, types: np.ndarray, table: _Definitio
     # unless it lies inside the declared span of a backed header (e.g. a cut last record)
     # (FMT records need plausible content instead, below)
     weak = np.flatnonzero(complete & ~backed & (defid != 0))
-    weak = weak[~_near(weak, -_NEAR, backed, lambda nb: end[nb] > cand[weak, None])]
+    weak = weak[~_near(weak, -_NEAR, backed,
+                       lambda k, nb: end[nb] > cand[weak[k : k + nb.shape[0]], None])]
     node[weak] = True
     node[np.searchsorted(cand, np.array(table.plausible, np.int64))] = True
     # a record with backward evidence only must not swallow one with forward evidence
     back_only = np.flatnonzero(node & ~fwd)
-    swallows = _near(back_only, _NEAR, fwd, lambda nb: cand[nb] < end[back_only, None])
+    swallows = _near(back_only, _NEAR, fwd,
+                     lambda k, nb: cand[nb] < end[back_only[k : k + nb.shape[0]], None])
     node[back_only[swallows]] = False
     nodes = np.flatnonzero(node).astype(cand.dtype)
     del node, fwd, complete, backed

@@ -48,7 +48,7 @@ from mavsid.readers.dataflash import (
 
 __all__ = ["read"]
 
-_MAX_BYTES = 1 << 31  # text logs are small; refuse absurd sizes rather than exhaust memory
+_MAX_BYTES = 1 << 29  # text logs are small (Python splits every line): refuse larger ones
 
 
 def _null_term(s: str) -> str:

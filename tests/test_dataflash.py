@@ -395,3 +395,36 @@ def test_a_partial_record_inserted_as_garbage_does_not_swallow_the_next(small_lo
 def test_shared_folder_layout():
     require_shared()
     assert (LOGS / "sitl").is_dir()
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 300), st.integers(1, 40)), min_size=1, max_size=40,
+                unique_by=lambda x: x[0]))
+def test_chain_follows_the_greedy_rule(nodes):
+    """Reference: walk node by node, each followed by the first node at or after its end."""
+    nodes.sort()
+    pos = np.array([p for p, _ in nodes], np.int32)
+    end = pos + np.array([n for _, n in nodes], np.int32)
+    expected, i = [], 0
+    while i < len(nodes):
+        expected.append(i)
+        i = next((k for k in range(i + 1, len(nodes)) if pos[k] >= end[i]), len(nodes))
+    assert dataflash._chain(pos, end).tolist() == expected
+
+
+@pytest.mark.parametrize("body", [b"\xa3\x95\x81" * 100_000,
+                                  (b"\xa3\x95\x81\xa3\x95" + bytes(range(3))) * 40_000,
+                                  b"\xa3\x95" * 150_000], ids=["triples", "mixed", "pairs"])
+def test_header_floods_stay_linear_in_memory(tmp_path, body):
+    import tracemalloc
+
+    data = build_fmt(0x81, "X", "Qh", "TimeUS,V") + body
+    path = tmp_path / "flood.bin"
+    path.write_bytes(data)
+    tracemalloc.start()
+    try:
+        _decode_quietly(path)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 40 * len(data), peak / len(data)

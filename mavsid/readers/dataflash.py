@@ -47,7 +47,7 @@ Examples
 
 from __future__ import annotations
 
-import bisect
+import array
 import mmap
 import os
 import re
@@ -430,21 +430,37 @@ def _chain(pos: np.ndarray, end: np.ndarray) -> np.ndarray:
     """Greedy chain from the first node: indices of the nodes it visits.
 
     Each node is followed by the first node at or after its end. Runs of nodes that end
-    exactly where the next one starts are taken whole; only at the (few) other nodes does
-    the walk look up its successor, so the loop runs once per irregular link at most.
+    exactly where the next one starts are taken whole; the successors of the other
+    ("irregular") nodes are found at once, and a plain walk hops from run to run, once per
+    irregular node at most.
     """
     m = pos.size
-    irregular = np.flatnonzero(end[:-1] != pos[1:]).tolist()
-    if not irregular:
+    irr = np.flatnonzero(end[:-1] != pos[1:])
+    if irr.size == 0:
         return np.arange(m, dtype=pos.dtype)
-    runs = []
+    after = np.searchsorted(pos, end[irr], side="left")  # where the chain goes on
+    # compact int arrays (not lists): bounded memory however many irregular nodes there are
+    next_irr = array.array("q", np.searchsorted(irr, after, side="left").tobytes())
+    after_a = array.array("q", after.astype(np.int64).tobytes())
+    irr_a = array.array("q", irr.astype(np.int64).tobytes())
+    starts, stops = array.array("q"), array.array("q")
     c, k = 0, 0
-    while c < m:  # c strictly increases: always progresses
-        k = bisect.bisect_left(irregular, c, k)
-        r = irregular[k] if k < len(irregular) else m - 1
-        runs.append(np.arange(c, r + 1, dtype=pos.dtype))
-        c = int(np.searchsorted(pos, end[r], side="left"))
-    return np.concatenate(runs)
+    while True:  # c strictly increases: always progresses
+        starts.append(c)
+        if k >= len(irr_a):
+            stops.append(m)
+            break
+        stops.append(irr_a[k] + 1)
+        c = after_a[k]
+        if c >= m:
+            break
+        k = next_irr[k]
+    first = np.frombuffer(starts, np.int64)
+    last = np.frombuffer(stops, np.int64)
+    step = np.ones(int((last - first).sum()), np.int64)
+    step[0] = first[0]
+    step[np.cumsum(last - first)[:-1]] = first[1:] - last[:-1] + 1
+    return np.cumsum(step).astype(pos.dtype)
 
 
 def _near(
@@ -460,7 +476,7 @@ def _near(
     """
     out = np.zeros(idx.size, bool)
     steps = np.arange(1, abs(span) + 1) * (1 if span > 0 else -1)
-    block = 1 << 16  # bounded temporaries, whatever the number of such candidates
+    block = 1 << 12  # bounded temporaries, whatever the number of such candidates
     for k in range(0, idx.size, block):
         nb = idx[k : k + block, None] + steps
         valid = (nb >= 0) & (nb < flag.size)
@@ -501,6 +517,9 @@ def _frame(a: np.ndarray, cand: np.ndarray, types: np.ndarray, table: _Definitio
     weak = np.flatnonzero(complete & ~backed & (defid != 0))
     weak = weak[~_near(weak, -_NEAR, backed,
                        lambda k, nb: end[nb] > cand[weak[k : k + nb.shape[0]], None])]
+    # ... and that has no other header inside it (not one of a flood of header patterns)
+    weak = weak[~_near(weak, _NEAR, np.ones(m, bool),
+                       lambda k, nb: cand[nb] < end[weak[k : k + nb.shape[0]], None])]
     node[weak] = True
     node[np.searchsorted(cand, np.array(table.plausible, np.int64))] = True
     # a record with backward evidence only must not swallow one with forward evidence
@@ -834,7 +853,7 @@ def _read_buffer(
         lo = np.searchsorted(cand, skip_at[:1000])
         hi = np.searchsorted(cand, skip_at[:1000] + skip_len[:1000])
         inside = np.concatenate([cand[i:j] for i, j in zip(lo, hi, strict=True)])
-        unknown = sorted({int(t) for t in a[inside + 2]} - set(table.by_type))
+        unknown = sorted(set(np.unique(a[inside + 2]).tolist()) - set(table.by_type))
         shown = ", ".join(f"{int(o)}+{int(k)}" for o, k in zip(skip_at[:5], skip_len[:5],
                                                               strict=True))
         notes.append(f"skipped {skipped} undecodable byte(s) in {skip_at.size} region(s) "

@@ -11,8 +11,9 @@ A DataFlash log is a sequence of records ``0xA3 0x95 <type> <payload>``. FMT rec
    record before it ends exactly where it starts (backward evidence; a record with only
    backward evidence may not swallow a record with forward evidence), or it is a well-formed
    FMT record, or it has no evidence but lies outside the declared span of every header that
-   has some (a lone record between two stretches of garbage; not a header-like pattern inside
-   a cut last record). From the first record, each record is
+   has some and has no header inside its own span (a lone record between two stretches of
+   garbage; not a header-like pattern inside a cut last record, nor one of a flood of header
+   patterns). From the first record, each record is
    followed by the next one at or after its end, so garbage is skipped and reading resumes on
    the next valid record;
 4. gathers each type's records into one structured numpy array through an overlapping view
@@ -60,7 +61,7 @@ from functools import lru_cache
 import numpy as np
 
 from mavsid.data import MessageTable, ModeChange, RawLog, SourceInfo, TextMessage
-from mavsid.errors import DataQualityWarning, LogFormatError
+from mavsid.errors import ConfigError, DataQualityWarning, LogFormatError
 
 __all__ = [
     "FORMAT_CHARS",
@@ -775,6 +776,7 @@ def read(
     messages: Sequence[str] | None = None,
     start: float | None = None,
     stop: float | None = None,
+    **options: object,
 ) -> RawLog:
     """Read a DataFlash ``.bin`` log.
 
@@ -788,7 +790,9 @@ def read(
         texts and modes are always read.
     start, stop : float, optional
         Keep only records with ``start <= time_s <= stop`` (seconds of ``TimeUS``); records
-        without a time are then dropped.
+        without a time are then dropped. Parameters, texts and modes come from the whole log.
+    **options
+        None applies to DataFlash logs (``read_log`` passes other formats' options on).
 
     Returns
     -------
@@ -798,6 +802,8 @@ def read(
     ------
     LogFormatError
         The file cannot be opened or holds no decodable record.
+    ConfigError
+        An option was given.
 
     Warns
     -----
@@ -806,6 +812,9 @@ def read(
         log holds only format definitions.
     """
     spath = os.fspath(path)
+    if options:
+        names = ", ".join(sorted(options))
+        raise ConfigError(f"{spath}: option(s) {names} do not apply to DataFlash .bin logs")
     try:
         with open(spath, "rb") as f:
             size = os.fstat(f.fileno()).st_size

@@ -36,7 +36,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from mavsid.data import RawLog, SourceInfo
-from mavsid.errors import DataQualityWarning, LogFormatError
+from mavsid.errors import ConfigError, DataQualityWarning, LogFormatError
 from mavsid.readers.dataflash import (
     FORMAT_CHARS,
     Definition,
@@ -89,6 +89,7 @@ def read(
     messages: Sequence[str] | None = None,
     start: float | None = None,
     stop: float | None = None,
+    **options: object,
 ) -> RawLog:
     """Read a DataFlash text log; same parameters and result as
     :func:`mavsid.readers.dataflash.read`.
@@ -99,6 +100,9 @@ def read(
         The file cannot be opened or holds no FMT line or no decodable record.
     """
     spath = os.fspath(path)
+    if options:
+        names = ", ".join(sorted(options))
+        raise ConfigError(f"{spath}: option(s) {names} do not apply to DataFlash text logs")
     try:
         size = os.path.getsize(spath)
         if size > _MAX_BYTES:

@@ -1,5 +1,5 @@
-"""Shared test helpers (import as ``helpers``): the ``../shared`` logs, skipped when absent unless CI
-requires them."""
+"""Shared test helpers (import as ``helpers``): the ``../shared`` logs, skipped when absent
+unless CI requires them."""
 
 from __future__ import annotations
 

@@ -898,7 +898,7 @@ def _read_buffer(
         cols = _gather(a, d, framing.pos[r])
         if d.time_field is not None:
             name, _, scale = d.time_field
-            timeline[r] = cols[name].astype(np.float64) * scale
+            timeline[r] = np.multiply(cols[name], scale, dtype=np.float64)
         decoded[i] = (r, cols)
     untimed = [decoded[i][0] for i in decoded if not timed[i]]
     if untimed:

@@ -341,16 +341,19 @@ def _view(args: argparse.Namespace) -> int:
     rec = viz.new_recording()
     if args.model:
         result = validate_logs(load_models(args.model), [args.log], cfg)
-        uri = viz.open_sink(rec, viz.blueprint(list(result.axes)), **_sink_args(args))
+        served = viz.open_sink(rec, viz.blueprint(list(result.axes)), **_sink_args(args))
         viz.log_fit_result(rec, result)
     else:
         flight, windows = find_windows(args.log, cfg)
-        uri = viz.open_sink(rec, viz.blueprint([], with_flight=True), **_sink_args(args))
+        served = viz.open_sink(rec, viz.blueprint([], with_flight=True), **_sink_args(args))
         viz.log_flight_windows(rec, flight, windows)
     rec.flush()
-    if uri:
-        print(f"serving {uri} (Ctrl-C to stop)")
-    rr.script_teardown(args)
+    if served is not None:
+        print(f"web viewer: {served.url} (Ctrl-C to stop)")
+        try:
+            rr.script_teardown(args)
+        finally:
+            served.close()
     if args.save:
         print(f"wrote {args.save}")
     return 0

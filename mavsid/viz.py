@@ -32,7 +32,11 @@ whole :class:`~mavsid.pipeline.FitResult` to an ``.rrd`` file.
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
+import urllib.parse
 from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -50,6 +54,7 @@ if TYPE_CHECKING:
 __all__ = [
     "APPLICATION_ID",
     "TIMELINE",
+    "Served",
     "blueprint",
     "log_attitude",
     "log_fit_result",
@@ -61,6 +66,7 @@ __all__ = [
     "new_recording",
     "open_sink",
     "save_rrd",
+    "serve_command",
 ]
 
 APPLICATION_ID = "mavsid"
@@ -590,6 +596,34 @@ def save_rrd(
     return bp
 
 
+@dataclass(frozen=True)
+class Served:
+    """A web viewer and gRPC proxy run by the rerun CLI for :func:`open_sink`."""
+
+    url: str
+    process: subprocess.Popen[bytes]
+
+    def close(self) -> None:
+        """Stop the server process."""
+        self.process.terminate()
+        try:
+            self.process.wait(timeout=10)
+        except subprocess.TimeoutExpired:  # pragma: no cover
+            self.process.kill()
+
+
+def serve_command(bind: str, grpc_port: int = 9876, web_port: int = 9090) -> list[str]:
+    """The rerun CLI command that hosts the web viewer and the gRPC proxy on ``bind``.
+
+    Examples
+    --------
+    >>> serve_command("127.0.0.1")[-7:]
+    ['--serve-web', '--bind', '127.0.0.1', '--port', '9876', '--web-viewer-port', '9090']
+    """
+    return [sys.executable, "-m", "rerun_cli", "--serve-web", "--bind", bind,
+            "--port", str(grpc_port), "--web-viewer-port", str(web_port)]
+
+
 def open_sink(
     rec: rr.RecordingStream,
     bp: rrb.Blueprint,
@@ -601,20 +635,26 @@ def open_sink(
     stdout: bool = False,
     headless: bool = False,
     bind: str = "127.0.0.1",
-) -> str | None:
+) -> Served | None:
     """Send ``rec`` where rerun's standard script flags say (``rr.script_add_args``).
 
-    Like ``rr.script_setup``, except that ``serve`` hosts the gRPC server on ``bind``
-    (default 127.0.0.1: flight data is not published to the network unless asked) and
-    the recording is the one given, not the global one. Returns the served URI, if any.
+    Like ``rr.script_setup``, with two differences: the recording is the one given, not the
+    global one; and ``serve`` runs the rerun CLI's web viewer and gRPC proxy listening on
+    ``bind`` only (default 127.0.0.1: flight data is not published to the network unless
+    asked; the SDK's own ``serve_grpc``/``serve_web_viewer`` listen on every interface).
+    Returns the running server for ``serve`` (call :meth:`Served.close` when done).
     """
     if stdout:
         rec.stdout(default_blueprint=bp)
     elif serve:
-        sink = rr.GrpcServerSink(bind_ip=bind)
-        rec.set_sinks(sink, default_blueprint=bp)
-        rr.serve_web_viewer(open_browser=True, connect_to=sink.uri)
-        return str(sink.uri)
+        cmd = serve_command(bind)
+        process = subprocess.Popen(cmd)
+        host = "127.0.0.1" if bind in ("0.0.0.0", "::", "") else bind
+        host = f"[{host}]" if ":" in host else host
+        grpc = f"rerun+http://{host}:{cmd[-3]}/proxy"
+        rec.connect_grpc(grpc, default_blueprint=bp)
+        web = f"http://{host}:{cmd[-1]}/?url={urllib.parse.quote(grpc, safe='')}"
+        return Served(web, process)
     elif connect:
         rec.connect_grpc(url, default_blueprint=bp)
     elif save is not None:

@@ -149,19 +149,23 @@ def test_view_has_rerun_flags_and_binds_localhost(monkeypatch) -> None:  # type:
     assert args.serve and args.bind == "127.0.0.1"
     for flag in ("headless", "connect", "save", "stdout", "url", "spawn"):
         assert hasattr(args, flag)
-    seen: dict[str, object] = {}
+    started: list[list[str]] = []
+    connected: list[str] = []
 
-    class FakeSink:
-        def __init__(self, bind_ip: str = "0.0.0.0", port: int = 9876) -> None:
-            seen["bind_ip"] = bind_ip
-            self.uri = f"rerun+http://{bind_ip}:{port}/proxy"
+    class FakeProcess:
+        def __init__(self, cmd: list[str]) -> None:
+            started.append(cmd)
 
     rec = viz.new_recording()
-    monkeypatch.setattr(viz.rr, "GrpcServerSink", FakeSink)
-    monkeypatch.setattr(viz.rr, "serve_web_viewer",
-                        lambda **kw: seen.setdefault("web", kw))
-    monkeypatch.setattr(rec, "set_sinks", lambda *s, **kw: seen.setdefault("sinks", s))
-    uri = viz.open_sink(rec, viz.blueprint(["roll"]), serve=True)
-    assert seen["bind_ip"] == "127.0.0.1" and uri and "127.0.0.1" in uri
+    monkeypatch.setattr(viz.subprocess, "Popen", FakeProcess)
+    monkeypatch.setattr(rec, "connect_grpc", lambda url, **kw: connected.append(url))
+    served = viz.open_sink(rec, viz.blueprint(["roll"]), serve=True)
+    assert served is not None
+    # the rerun CLI serves both the web viewer and the gRPC proxy, on 127.0.0.1 only
+    cmd = started[-1]
+    assert "--serve-web" in cmd and cmd[cmd.index("--bind") + 1] == "127.0.0.1"
+    assert connected[-1] == "rerun+http://127.0.0.1:9876/proxy"
+    assert served.url.startswith("http://127.0.0.1:9090/?url=rerun%2Bhttp")
     viz.open_sink(rec, viz.blueprint(["roll"]), serve=True, bind="0.0.0.0")
-    assert seen["bind_ip"] == "0.0.0.0"
+    assert started[-1][started[-1].index("--bind") + 1] == "0.0.0.0"
+    assert connected[-1] == "rerun+http://127.0.0.1:9876/proxy"

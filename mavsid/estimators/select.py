@@ -179,7 +179,8 @@ def fit_axis(
         Longest delay searched by default (s).
     lags_s : iterable of float, optional
         Candidate time constants (s) of a first-order input lag (motor and ESC response),
-        searched jointly with the delay; 0 is always a candidate; None: no lag.
+        searched jointly with the delay; 0 is always a candidate; None: no lag. Lags too
+        short for the sampling rate (corner above Nyquist) are left out.
     structure_tol : float
         Parsimony: the simplest (lag, delay) whose mean squared one-step residual is within
         this fraction of the best is chosen (a longer delay or a lag must earn its keep).
@@ -222,7 +223,11 @@ def fit_axis(
     feats = library.library(outputs, linear, (library.BIAS,) if bias else (), features)
     structure = Structure(outputs=outputs, features=feats, inputs=ins, filters=flt,
                           continuous=continuous)
-    lag_grid = [0.0] if lags_s is None else sorted({0.0, *map(float, lags_s)})
+    # a lag whose corner lies above the grid's Nyquist frequency cannot be told from a
+    # fraction of a sample of delay: such candidates are left out of the search
+    nyquist_hz = 0.5 / dt
+    lag_grid = [0.0] if lags_s is None else sorted(
+        {0.0, *(lag for lag in map(float, lags_s) if lag * 2 * np.pi * nyquist_hz > 1.0)})
     cands: list[tuple[float, float, float]] = []  # (mse, lag, delay)
     scan: dict[str, float] = {}
     for lag in lag_grid:

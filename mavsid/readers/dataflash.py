@@ -49,6 +49,7 @@ Examples
 from __future__ import annotations
 
 import array
+import itertools
 import mmap
 import os
 import re
@@ -82,7 +83,7 @@ _FMT_TYPE = 0x80
 _FMT_LEN = 89
 _CHUNK = 1 << 20  # bytes scanned per step when looking for headers
 _NEAR = 16  # candidates looked at around a record when checking overlaps
-_GATHER_BYTES = 1 << 24  # record bytes copied per slice when decoding one type
+_GATHER_BYTES = 1 << 16  # record bytes copied per slice when decoding one type
 _BACKWARDS_S = 0.5  # a time step back larger than this is a discontinuity
 
 
@@ -257,21 +258,27 @@ def _index_dtype(n: int) -> type[np.signedinteger]:
 
 def _find_headers(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Offsets of every ``0xA3 0x95`` byte pair followed by a type byte, ascending, and
-    those type bytes."""
+    those type bytes.
+
+    The file is compared as 16-bit words at both byte parities, in cache-sized chunks; the
+    two ascending hit lists are merged by a stable sort (a single merge of two runs).
+    """
     n = a.size
     dt = _index_dtype(n)
     found, types = [np.zeros(0, dt)], [np.zeros(0, np.uint8)]
     for start in range(0, max(n - 2, 0), _CHUNK):
         seg = a[start : min(n, start + _CHUNK + 2)]
+        limit = min(_CHUNK, seg.size - 2)  # a header needs its type byte
         parts = []
         for parity in (0, 1):
-            sub = seg[parity : seg.size - 1]
-            sub = sub[: sub.size - sub.size % 2]
-            hits = np.flatnonzero(sub.view("<u2") == _HEAD_U16)
-            parts.append(hits * 2 + parity)
-        hits = np.sort(np.concatenate(parts))
-        hits = hits[hits < min(_CHUNK, seg.size - 2)]
-        found.append((hits + start).astype(dt))  # chunks come in order
+            sub = seg[parity : parity + 2 * ((limit - parity + 1) // 2)]
+            hits = np.flatnonzero(sub.view("<u2") == _HEAD_U16).astype(dt)
+            hits *= 2
+            hits += parity
+            parts.append(hits)
+        hits = np.concatenate(parts)
+        hits.sort(kind="stable")
+        found.append(hits + dt(start))  # chunks come in order
         types.append(seg[hits + 2])
     return np.concatenate(found), np.concatenate(types)
 
@@ -366,8 +373,8 @@ def _assign_definitions(
 
     A type's first definition applies up to its next FMT record (also before the first one,
     so that a log whose first FMT records are damaged still decodes). The log is cut into
-    epochs at each redefinition; a (epochs x 256) table then gives every candidate's
-    definition in one lookup.
+    epochs at each redefinition; a (epochs x 256) table then gives the candidates of each
+    epoch their definitions in one lookup.
     """
     dt = np.int16 if len(table.defs) < 2**15 else np.int32
     events = sorted((p, t, i) for t, e in table.by_type.items() for p, i in e[1:])
@@ -383,11 +390,13 @@ def _assign_definitions(
         return lut[0][types]
     starts = np.array([p for p, _, _ in events], pos.dtype)
     # candidates are sorted: epoch k covers the index range between two events
-    bounds = np.searchsorted(pos, starts, side="left")
-    epoch = np.repeat(np.arange(len(events) + 1, dtype=np.int32) * 256,
-                      np.diff(np.concatenate([[0], bounds, [pos.size]])))
-    epoch += types
-    return lut.reshape(-1)[epoch]
+    edges = [0, *np.searchsorted(pos, starts, side="left").tolist(), pos.size]
+    out = np.empty(pos.size, dt)
+    for k in range(len(events) + 1):
+        lo, hi = edges[k], edges[k + 1]
+        if hi > lo:
+            np.take(lut[k], types[lo:hi], out=out[lo:hi])
+    return out
 
 
 def _assign_per_type(
@@ -409,26 +418,14 @@ def _assign_per_type(
     return defid
 
 
-def _successors(pos: np.ndarray, end: np.ndarray, ok: np.ndarray) -> np.ndarray:
-    """Index of the first of ``pos`` at or after each ``end`` (``pos.size`` when none).
-
-    Only entries with ``ok`` are computed (others: ``pos.size``); the common case, the very
-    next entry, is checked first so that only the rest needs a binary search.
-    """
-    m = pos.size
-    if m == 0:
-        return np.zeros(0, pos.dtype)
-    direct = np.zeros(m, bool)
-    direct[:-1] = ok[:-1] & (pos[1:] == end[:-1])
-    nxt = np.arange(1, m + 1, dtype=pos.dtype)
-    nxt[~direct] = m
-    rest = np.flatnonzero(ok & ~direct)
-    nxt[rest] = np.searchsorted(pos, end[rest], side="left")
-    return nxt
-
-
 def _chain(pos: np.ndarray, end: np.ndarray) -> np.ndarray:
-    """Greedy chain from the first node: indices of the nodes it visits.
+    """Greedy chain from the first node: indices of the nodes it visits (see
+    :func:`_chain_mask`)."""
+    return np.flatnonzero(_chain_mask(pos, end)).astype(pos.dtype)
+
+
+def _chain_mask(pos: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """Greedy chain from the first node: which nodes it visits.
 
     Each node is followed by the first node at or after its end. Runs of nodes that end
     exactly where the next one starts are taken whole; the successors of the other
@@ -438,7 +435,7 @@ def _chain(pos: np.ndarray, end: np.ndarray) -> np.ndarray:
     m = pos.size
     irr = np.flatnonzero(end[:-1] != pos[1:])
     if irr.size == 0:
-        return np.arange(m, dtype=pos.dtype)
+        return np.ones(m, bool)
     after = np.searchsorted(pos, end[irr], side="left")  # where the chain goes on
     # compact int arrays (not lists): bounded memory however many irregular nodes there are
     next_irr = array.array("q", np.searchsorted(irr, after, side="left").tobytes())
@@ -456,12 +453,11 @@ def _chain(pos: np.ndarray, end: np.ndarray) -> np.ndarray:
         if c >= m:
             break
         k = next_irr[k]
-    first = np.frombuffer(starts, np.int64)
-    last = np.frombuffer(stops, np.int64)
-    step = np.ones(int((last - first).sum()), np.int64)
-    step[0] = first[0]
-    step[np.cumsum(last - first)[:-1]] = first[1:] - last[:-1] + 1
-    return np.cumsum(step).astype(pos.dtype)
+    # +1 where a run starts, -1 past its end (runs are disjoint and ascending)
+    step = np.zeros(m + 1, np.int8)
+    step[np.frombuffer(starts, np.int64)] = 1
+    step[np.frombuffer(stops, np.int64)] -= 1
+    return np.cumsum(step[:m], dtype=np.int8).view(bool)
 
 
 def _near(
@@ -496,19 +492,27 @@ class _Framing:
 def _frame(a: np.ndarray, cand: np.ndarray, types: np.ndarray, table: _Definitions) -> _Framing:
     """The accepted records among the header candidates ``cand`` (see the module doc)."""
     n = a.size
+    m = cand.size
     defid = _assign_definitions(cand, types, table)
     lengths = np.array([d.length for d in table.defs] + [0], cand.dtype)
-    end = cand + lengths[defid]  # undefined (-1) -> the sentinel 0
+    end = lengths[defid]  # undefined (-1) -> the sentinel 0
+    end += cand
     known = end > cand
     complete = known & (end <= n)
-    m = cand.size
-    j = _successors(cand, end, complete)
-    # forward evidence: the next header starts where this record ends
-    fwd = complete & (j < m)
-    fwd &= cand[np.minimum(j, m - 1)] == end
+    # forward evidence: the next header starts where this record ends. The common case, the
+    # very next candidate, is checked first; only the rest needs a binary search.
+    fwd = np.zeros(m, bool)
+    np.equal(end[:-1], cand[1:], out=fwd[:-1])
+    # backward evidence: the record before ends here
     has_in = np.zeros(m + 1, bool)
-    has_in[j[fwd]] = True
-    del j
+    has_in[1:] = fwd
+    rest = np.flatnonzero(complete & ~fwd)
+    j = np.searchsorted(cand, end[rest], side="left")
+    found = j < m
+    found[found] = cand[j[found]] == end[rest[found]]
+    fwd[rest[found]] = True
+    has_in[j[found]] = True
+    del rest, j, found
     backed = known & (fwd | has_in[:m])
     del has_in, known
     node = complete & backed
@@ -522,55 +526,60 @@ def _frame(a: np.ndarray, cand: np.ndarray, types: np.ndarray, table: _Definitio
     weak = weak[~_near(weak, _NEAR, np.ones(m, bool),
                        lambda k, nb: cand[nb] < end[weak[k : k + nb.shape[0]], None])]
     node[weak] = True
-    node[np.searchsorted(cand, np.array(table.plausible, np.int64))] = True
+    node[np.searchsorted(cand, np.array(table.plausible, cand.dtype))] = True
     # a record with backward evidence only must not swallow one with forward evidence
     back_only = np.flatnonzero(node & ~fwd)
     swallows = _near(back_only, _NEAR, fwd,
                      lambda k, nb: cand[nb] < end[back_only[k : k + nb.shape[0]], None])
     node[back_only[swallows]] = False
-    nodes = np.flatnonzero(node).astype(cand.dtype)
-    del node, fwd, complete, backed
-    keep = nodes[_chain(cand[nodes], end[nodes])]
+    del fwd, complete, backed
+    if not node.all():  # header-like patterns inside records: chain the nodes only
+        node[node] = _chain_mask(cand[node], end[node])
+        return _Framing(cand[node], defid[node], end[node])
+    keep = _chain_mask(cand, end)
     return _Framing(cand[keep], defid[keep], end[keep])
 
 
 # --------------------------------------------------------------------------- decoding
-def _column(raw: np.ndarray, ch: str, message: str) -> np.ndarray:
-    """One field of a structured gather, as pymavlink presents it."""
+def _column_into(raw: np.ndarray, ch: str, message: str, out: np.ndarray) -> None:
+    """Write one field of a structured gather into ``out``, as pymavlink presents it."""
     spec = FORMAT_CHARS[ch]
     if spec.kind == "str":
         if message == "FILE" and ch == "Z":
             rows = np.ascontiguousarray(raw).view(np.uint8).reshape(raw.shape[0], -1)
-            out = np.empty(raw.shape[0], dtype=object)
             out[:] = [r.tobytes() for r in rows]
-            return out
-        return _strings(raw)
-    if spec.multiplier is not None:
+        else:
+            out[...] = _strings(raw)
+    elif spec.multiplier is not None:
         divisor = 1 / spec.multiplier  # pymavlink divides by this for accuracy
-        return np.true_divide(raw, divisor, dtype=np.float64)
-    if ch == "g":
-        return raw.astype(np.float32)
-    return np.ascontiguousarray(raw).astype(raw.dtype.newbyteorder("="), copy=False)
+        if out.dtype == np.float64:
+            np.true_divide(raw, divisor, out=out, dtype=np.float64)
+        else:
+            out[...] = np.true_divide(raw, divisor, dtype=np.float64)
+    elif ch == "g" and out.dtype != np.float32:
+        out[...] = raw.astype(np.float32)
+    else:
+        out[...] = raw
 
 
-def _gather(a: np.ndarray, d: Definition, pos: np.ndarray) -> dict[str, np.ndarray]:
-    """Decode the records of definition ``d`` at offsets ``pos``.
+def _gather_into(
+    a: np.ndarray, d: Definition, pos: np.ndarray, out: dict[str, np.ndarray] | None = None
+) -> dict[str, np.ndarray]:
+    """Decode the records of definition ``d`` at offsets ``pos`` into ``out`` (arrays of
+    ``pos.size`` rows, allocated when not given).
 
-    Records are copied out of the file in slices of about 16 MB, so that the temporary copy
-    stays small next to the columns.
+    Records are copied out of the file in slices that fit a CPU cache, then each field
+    is written straight into its column.
     """
+    layout = _layout(d)
+    if out is None:
+        out = {c: np.empty((pos.size, *shape), dt) for c, (_, _, dt, shape) in layout.items()}
+    fields = [(f, ch, out[c]) for c, (f, ch, _, _) in layout.items() if c in out]
     step = max(1, _GATHER_BYTES // max(d.payload_dtype.itemsize, 1))
-    out: dict[str, np.ndarray] = {}
-    for k in range(0, max(pos.size, 1), step):
+    for k in range(0, pos.size, step):
         recs = _records(a, d.payload_dtype, pos[k : k + step] + 3)
-        for name, i in d.fields:
-            col = _column(recs[f"f{i}"], d.format[i], d.name)
-            if pos.size <= step:
-                out[name] = col
-                continue
-            if name not in out:
-                out[name] = np.empty((pos.size, *col.shape[1:]), col.dtype)
-            out[name][k : k + step] = col
+        for f, ch, col in fields:
+            _column_into(recs[f], ch, d.name, col[k : k + step])
     return out
 
 
@@ -872,43 +881,60 @@ def _read_buffer(
     del cand, types, fmt_pos, fmt_kept
     framing.end = framing.end[:0]  # not needed any more: free it
 
-    # accepted records grouped by definition (radix sort on small integers)
+    # the records to decode (all of them, or those of the types asked for and the metadata),
+    # grouped by definition: a stable radix sort of small integers keeps file order
     ndefs = len(table.defs)
-    defid = framing.defid.astype(np.int16 if ndefs < 1 << 15 else np.int32)
-    order = np.argsort(defid, kind="stable").astype(framing.pos.dtype)
-    bounds = np.concatenate([[0], np.cumsum(np.bincount(defid, minlength=ndefs))])
-    rows = {i: order[bounds[i] : bounds[i + 1]] for i in range(ndefs) if bounds[i + 1] > bounds[i]}
-    by_name: dict[str, list[int]] = {}
-    for i in sorted(rows, key=lambda i: int(rows[i][0])):
-        by_name.setdefault(table.defs[i].name, []).append(i)
-
     wanted = None if messages is None else set(messages)
-    windowed = start is not None or stop is not None
+    decode = np.array([wanted is None or d.name in wanted or d.name in _META_NAMES
+                       for d in table.defs])
     timed = np.array([d.time_field is not None for d in table.defs])
-    timeline = np.full(framing.pos.size, np.nan)  # time of each decoded record
-    decoded: dict[int, tuple[np.ndarray, dict[str, np.ndarray]]] = {}
-    for i, r in rows.items():
-        d = table.defs[i]
-        if wanted is not None and d.name not in wanted and d.name not in _META_NAMES:
+    idx_dt = framing.pos.dtype
+    sel: np.ndarray | None = None  # indices of the decoded records (None: all)
+    defid = framing.defid
+    if not decode.all():
+        sel = np.flatnonzero(decode[framing.defid]).astype(idx_dt)
+        defid = framing.defid[sel]
+    defid = defid.astype(np.int16 if ndefs < 1 << 15 else np.int32)
+    order = np.argsort(defid, kind="stable").astype(idx_dt)
+    bounds = np.concatenate([[0], np.cumsum(np.bincount(defid, minlength=ndefs))]).tolist()
+    del defid
+    windowed = start is not None or stop is not None
+    # per definition: indices into the decoded records (``sel``), their offsets and times
+    groups: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray | None]] = {}
+    first: dict[int, int] = {}  # each definition's first record (orders the messages)
+    for i in range(ndefs):
+        if bounds[i + 1] == bounds[i]:
             continue
-        if windowed and timed[i] and d.name not in _META_NAMES:
-            t = _gather_times(a, d, framing.pos[r])
-            assert t is not None
-            r = r[window_mask(t, start, stop)]
-        cols = _gather(a, d, framing.pos[r])
-        if d.time_field is not None:
-            name, _, scale = d.time_field
-            timeline[r] = np.multiply(cols[name], scale, dtype=np.float64)
-        decoded[i] = (r, cols)
-    untimed = [decoded[i][0] for i in decoded if not timed[i]]
+        d = table.defs[i]
+        k = order[bounds[i] : bounds[i + 1]]
+        first[i] = int(k[0])
+        pos = framing.pos[k if sel is None else sel[k]]
+        t = _gather_times(a, d, pos) if windowed and d.name not in _META_NAMES else None
+        if t is not None:  # timed records outside the window are not decoded
+            keep = window_mask(t, start, stop)
+            assert keep is not None
+            k, pos, t = k[keep], pos[keep], t[keep]
+        groups[i] = (k, pos, t)
+    del order
+    # records without a time field hold the time of the latest timed record before them
+    untimed = [i for i in groups if not timed[i]]
+    src: tuple[np.ndarray, np.ndarray] = (np.zeros(0, idx_dt), np.zeros(0))
     if untimed:
-        _hold_times(a, framing, table, timed, timeline, np.concatenate(untimed))
-
-    steps = backwards_steps(timeline, framing.pos)
-    if steps:
-        shown = ", ".join(f"byte {w} ({t0:.3f} s -> {t1:.3f} s)" for w, t0, t1 in steps[:5])
-        notes.append(f"time goes backwards {len(steps)} time(s) (reboot or concatenated logs): "
-                     f"{shown}")
+        k = np.sort(np.concatenate([groups[i][0] for i in untimed]))
+        held, src = _held_times(a, framing, table, timed, k if sel is None else sel[k])
+        for i in untimed:
+            k_i, pos_i, _ = groups[i]
+            groups[i] = (k_i, pos_i, held[np.searchsorted(k, k_i)])
+    # the times of the decoded records and of those whose time they hold, in file order,
+    # for the backwards-steps check
+    timeline = np.full(framing.pos.size if sel is None else sel.size, np.nan)
+    where = framing.pos if sel is None else framing.pos[sel]
+    by_name: dict[str, list[int]] = {}
+    for i in sorted(groups, key=lambda i: first[i]):
+        by_name.setdefault(table.defs[i].name, []).append(i)
+    present = (np.bincount(framing.defid, minlength=ndefs) > 0).tolist() if sel is not None \
+        else [bounds[i + 1] > bounds[i] for i in range(ndefs)]
+    only_format = not {d.name for d, p in zip(table.defs, present, strict=True) if p} - _FORMAT_ONLY
 
     columns: dict[str, dict[str, np.ndarray]] = {}
     time_s: dict[str, np.ndarray] = {}
@@ -916,19 +942,37 @@ def _read_buffer(
     meta_times: dict[str, np.ndarray] = {}
     defs_by_name: dict[str, Definition] = {}
     for name, ids in by_name.items():
-        parts = [(table.defs[i], *decoded.pop(i)) for i in ids if i in decoded]
-        if not parts:
-            continue
+        parts = [(table.defs[i], *groups.pop(i)) for i in ids]
         defs_by_name[name] = parts[-1][0]
-        cols, t = _merge(parts, timeline)
+        cols, t = _decode_message(a, parts)
+        keys = parts[0][1] if len(parts) == 1 else np.sort(np.concatenate([p[1] for p in parts]))
+        timeline[keys] = t
+        del parts, keys
         if name in _META_NAMES:
             meta_columns[name], meta_times[name] = cols, t
         if wanted is None or name in wanted:
             keep = window_mask(t, start, stop)
-            columns[name] = cols if keep is None else {k: v[keep] for k, v in cols.items()}
-            time_s[name] = t if keep is None else t[keep]
+            if keep is not None and not keep.all():
+                cols, t = {k: v[keep] for k, v in cols.items()}, t[keep]
+            columns[name], time_s[name] = cols, t
+    if sel is None:
+        timeline[src[0]] = src[1]
+    elif src[0].size:
+        at = np.searchsorted(sel, src[0])
+        there = at < sel.size
+        there[there] = sel[at[there]] == src[0][there]
+        timeline[at[there]] = src[1][there]
+        timeline = np.insert(timeline, at[~there], src[1][~there])
+        where = np.insert(where, at[~there], framing.pos[src[0][~there]])
+    del framing, sel, src
+    steps = backwards_steps(timeline, where)
+    del timeline, where
+    if steps:
+        shown = ", ".join(f"byte {w} ({t0:.3f} s -> {t1:.3f} s)" for w, t0, t1 in steps[:5])
+        notes.append(f"time goes backwards {len(steps)} time(s) (reboot or concatenated logs): "
+                     f"{shown}")
 
-    if not set(by_name) - _FORMAT_ONLY:
+    if only_format:
         notes.append("log holds only format definitions, no data records")
     source = SourceInfo(path, "dataflash", n, skipped_bytes=skipped, notes=tuple(notes))
     if notes:
@@ -970,61 +1014,150 @@ def hold_forward(times: np.ndarray, timed: np.ndarray) -> np.ndarray:
     return out
 
 
-def _hold_times(
+def _held_times(
     a: np.ndarray,
     framing: _Framing,
     table: _Definitions,
     timed: np.ndarray,
-    timeline: np.ndarray,
     rows: np.ndarray,
-) -> None:
-    """Give the records ``rows`` (of definitions without a time field) the time of the nearest
-    earlier record that has one, in place (NaN before the first); times not yet in
-    ``timeline`` are read from the file."""
+) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    """Times of the records ``rows`` (ascending; of definitions without a time field): that
+    of the nearest earlier record that has one, read from the file (NaN before the first);
+    and those source records with their times."""
     is_timed = timed[framing.defid]
     prev = np.where(is_timed, np.arange(is_timed.size, dtype=framing.pos.dtype), -1)
+    del is_timed
     np.maximum.accumulate(prev, out=prev)
     src = prev[rows]
-    need = np.unique(src[src >= 0])
-    need = need[np.isnan(timeline[need])]
-    for i in np.unique(framing.defid[need]).tolist():
-        k = need[framing.defid[need] == i]
-        t = _gather_times(a, table.defs[i], framing.pos[k])
-        assert t is not None
-        timeline[k] = t
-    timeline[rows] = np.where(src >= 0, timeline[np.maximum(src, 0)], np.nan)
+    del prev
+    out = np.full(rows.size, np.nan)
+    has = src >= 0
+    need, inverse = np.unique(src[has], return_inverse=True)
+    t = np.empty(need.size)
+    ids = framing.defid[need]
+    for i in np.unique(ids).tolist():
+        k = np.flatnonzero(ids == i)
+        ti = _gather_times(a, table.defs[i], framing.pos[need[k]])
+        assert ti is not None
+        t[k] = ti
+    out[has] = t[inverse]
+    return out, (need, t)
 
 
-def _merge(
-    parts: list[tuple[Definition, np.ndarray, dict[str, np.ndarray]]], timeline: np.ndarray
+def _decode_message(
+    a: np.ndarray, parts: list[tuple[Definition, np.ndarray, np.ndarray, np.ndarray | None]]
 ) -> tuple[dict[str, np.ndarray], np.ndarray]:
-    """One message's columns and times from its decoded parts ``(definition, rows, columns)``.
+    """One message's columns and times from its parts ``(definition, file-order keys, record
+    offsets, times)``.
 
     A message name defined more than once with different layouts (concatenated logs of
     different firmware) gets the union of the columns, in file order; a part lacking a
-    column contributes NaN (numbers, arrays) or empty strings.
+    column contributes NaN (numbers, arrays) or empty strings. Each part is decoded straight
+    into its slice of the result when the parts follow one another in the file.
     """
     if len(parts) == 1:
-        _, r, cols = parts[0]
-        return cols, timeline[r]
+        d, _, pos, t = parts[0]
+        cols = _gather_into(a, d, pos)
+        return cols, _times_of(d, cols) if t is None else t
     parts = sorted(parts, key=lambda part: int(part[1][0]) if part[1].size else -1)
-    rows = np.concatenate([r for _, r, _ in parts])
+    keys = [k for _, k, _, _ in parts]
+    ends = [(int(k[0]), int(k[-1])) for k in keys if k.size]
+    if any(x[1] > y[0] for x, y in itertools.pairwise(ends)):
+        decoded = [(d, k, _gather_into(a, d, p)) for d, k, p, _ in parts]
+        return _merge([(d, k, cols, _times_of(d, cols) if t is None else t)
+                       for (d, k, cols), (_, _, _, t) in zip(decoded, parts, strict=True)])
+    names: list[str] = []
+    for d, _, _, _ in parts:
+        names.extend(c for c, _ in d.fields if c not in names)
+    sizes = [k.size for k in keys]
+    total = sum(sizes)
+    out: dict[str, np.ndarray] = {}
+    fill: dict[str, object] = {}
+    for c in names:
+        kinds = [_layout(d).get(c) for d, _, _, _ in parts]
+        like = next(k[2:] for k in kinds if k is not None)
+        dtypes = [k[2] if k is not None and k[3] == like[1] else _filler(like)[0]
+                  for k in kinds]
+        obj = any(k is not None and k[2].kind == "O" for k in kinds)
+        dtype = np.dtype(object) if obj else np.result_type(*dtypes)
+        out[c] = np.empty((total, *like[1]), dtype)
+        fill[c] = _filler(like)[1]
+    t_out = np.empty(total)
+    at = 0
+    for (d, _, pos, t), size in zip(parts, sizes, strict=True):
+        region = {c: v[at : at + size] for c, v in out.items()}
+        _gather_into(a, d, pos, region)
+        for c, v in region.items():
+            kind = _layout(d).get(c)
+            if kind is None or kind[3] != v.shape[1:]:
+                v[...] = fill[c]
+        if t is not None:
+            t_out[at : at + size] = t
+        else:
+            t_out[at : at + size] = _times_of(d, region)
+        at += size
+    return out, t_out
+
+
+def _times_of(d: Definition, cols: Mapping[str, np.ndarray]) -> np.ndarray:
+    """Boot time (s) of decoded records of a definition that has a time field."""
+    tf = d.time_field
+    assert tf is not None
+    name, _, scale = tf
+    return np.multiply(cols[name], scale, dtype=np.float64)
+
+
+@lru_cache(maxsize=4096)
+def _layout(d: Definition) -> dict[str, tuple[str, str, np.dtype, tuple[int, ...]]]:
+    """Column -> (payload field, format character, decoded dtype, per-row shape) for ``d``."""
+    out = {}
+    for column, i in d.fields:
+        ch = d.format[i]
+        spec = FORMAT_CHARS[ch]
+        dt = np.dtype(spec.dtype)
+        shape: tuple[int, ...] = ()
+        if spec.kind == "str":
+            dt = np.dtype(object)
+        elif spec.multiplier is not None:
+            dt = np.dtype(np.float64)
+        elif ch == "g":
+            dt = np.dtype(np.float32)
+        elif dt.subdtype is not None:
+            dt, shape = dt.subdtype[0].newbyteorder("="), dt.subdtype[1]
+        else:
+            dt = dt.newbyteorder("=")
+        out[column] = (f"f{i}", ch, dt, shape)
+    return out
+
+
+def _filler(kind: tuple[np.dtype, tuple[int, ...]]) -> tuple[np.dtype, object]:
+    """dtype and value that stand for a column a layout lacks: NaN, or an empty string."""
+    return (np.dtype(object), "") if kind[0].kind == "O" else (np.dtype(np.float64), np.nan)
+
+
+def _merge(
+    parts: list[tuple[Definition, np.ndarray, dict[str, np.ndarray], np.ndarray]],
+) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """:func:`_decode_message` for parts whose records interleave: decoded ``(definition,
+    file-order keys, columns, times)`` concatenated, then put in file order."""
+    rows = np.concatenate([r for _, r, _, _ in parts])
+    times = np.concatenate([t for _, _, _, t in parts])
     order: np.ndarray | slice = slice(None)
     if np.any(rows[1:] < rows[:-1]):
         order = np.argsort(rows, kind="stable")
     names: list[str] = []
-    for _, _, cols in parts:
+    for _, _, cols, _ in parts:
         names.extend(c for c in cols if c not in names)
     merged: dict[str, np.ndarray] = {}
     for c in names:
-        like = next(cols[c] for _, _, cols in parts if c in cols)
-        pieces = [cols[c] if c in cols else _missing(like, r.size) for _, r, cols in parts]
+        like = next(cols[c] for _, _, cols, _ in parts if c in cols)
+        pieces = [cols[c] if c in cols else _missing(like, r.size) for _, r, cols, _ in parts]
         if any(p.dtype.kind == "O" for p in pieces):
             pieces = [p.astype(object) for p in pieces]
         pieces = [p if p.shape[1:] == like.shape[1:] else _missing(like, p.shape[0])
                   for p in pieces]
         merged[c] = np.concatenate(pieces)[order]
-    return merged, timeline[rows[order]]
+    return merged, times[order]
 
 
 def _missing(like: np.ndarray, n: int) -> np.ndarray:

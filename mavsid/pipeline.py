@@ -332,13 +332,16 @@ class AxisFit:
         v = self.validation
         stderr = getattr(self.model, "stderr", {}) or {}
         units = getattr(self.model, "units", {}) or {}
+        prov = dict(getattr(self.model, "provenance", {}) or {})
         return _json_safe(
             {
                 "output": self.output,
                 "estimator": self.estimator,
                 "dt_s": round(v.dt, 9),
                 "delay_samples": int(getattr(self.model, "delay", 0)),
-                "delay_s": round(int(getattr(self.model, "delay", 0)) * v.dt, 9),
+                "delay_s": round(float(getattr(self.model, "delay_s", 0.0)), 9),
+                "input_lag_s": prov.get("lag_s"),
+                "filters": prov.get("filters", []),
                 "params": dict(self.model.params),
                 "stderr": dict(stderr),
                 "units": dict(units),
@@ -609,6 +612,17 @@ def _pm(value: float, sigma: float | None) -> str:
     return text
 
 
+def _structure(d: Mapping[str, Any]) -> str:
+    """The modelled input lag and filters, as the text table shows them."""
+    parts = []
+    if d.get("input_lag_s"):
+        parts.append(f"input lag {d['input_lag_s'] * 1e3:.1f} ms")
+    for flt in d.get("filters") or ():
+        if not str(flt.get("source", "")).startswith("input lag"):
+            parts.append(f"{flt.get('source') or 'filter'} {flt.get('cutoff_hz', 0):.3g} Hz")
+    return "".join(f", {p}" for p in parts)
+
+
 def format_result(result: FitResult) -> str:
     """The compact per-axis table ``mavsid fit`` prints: parameters ± σ, fit % on held-out
     data at one step, 0.5 s and free run.
@@ -629,7 +643,7 @@ def format_result(result: FitResult) -> str:
         stable = {True: "stable", False: "UNSTABLE", None: "stability n/a"}[f.validation.stable]
         lines.append(
             f"{axis} ({f.output}; {f.estimator or 'model'}; {1 / f.validation.dt:.0f} Hz, "
-            f"delay {d['delay_s'] * 1e3:.1f} ms; train {len(f.train)} seg "
+            f"delay {d['delay_s'] * 1e3:.1f} ms{_structure(d)}; train {len(f.train)} seg "
             f"{train_s:.1f} s, validation {len(f.held_out)} seg {val_s:.1f} s; {stable})"
         )
         width = max((len(k) for k in d["params"]), default=0)

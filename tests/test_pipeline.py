@@ -201,6 +201,17 @@ def test_fit_recovers_the_simulated_plant(axis: str) -> None:
     assert effectiveness == pytest.approx(truth["effectiveness"], rel=0.05)
     assert fitted.validation.stable is True
     assert 0 <= fitted.model.delay * fitted.model.dt <= truth["effective_delay_s"] + 0.005
+    # the structure reported to the user is the simulator's: delay plus motor lag to within
+    # one sample and its gyro filter; on roll and pitch (fast enough dynamics to tell them
+    # apart) the transport delay and the lag each. Yaw's slow response cannot separate them.
+    d = fitted.to_dict()
+    lag = d["input_lag_s"] or 0.0
+    assert d["delay_s"] + lag == pytest.approx(truth["effective_delay_s"], abs=fitted.model.dt)
+    if axis != "yaw":
+        assert d["delay_s"] == pytest.approx(truth["delay_s"], abs=fitted.model.dt)
+        assert lag == pytest.approx(truth["motor_tau_s"], rel=0.35)
+    gyro = [f for f in d["filters"] if f["source"] == "INS_GYRO_FILTER"]
+    assert [f["cutoff_hz"] for f in gyro] == [truth["gyro_filter_hz"]]
 
 
 def test_several_logs_pool_their_segments_at_one_rate() -> None:

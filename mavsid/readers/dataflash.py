@@ -486,7 +486,8 @@ def _near(
 class _Framing:
     pos: np.ndarray  # offsets of accepted records, ascending
     defid: np.ndarray  # their definition index
-    end: np.ndarray  # offsets just past each record
+    skip_at: np.ndarray  # offsets of the byte ranges no record covers
+    skip_len: np.ndarray  # and their sizes
 
 
 def _frame(a: np.ndarray, cand: np.ndarray, types: np.ndarray, table: _Definitions) -> _Framing:
@@ -513,13 +514,14 @@ def _frame(a: np.ndarray, cand: np.ndarray, types: np.ndarray, table: _Definitio
     fwd[rest[found]] = True
     has_in[j[found]] = True
     del rest, j, found
-    backed = known & (fwd | has_in[:m])
+    backed = fwd | has_in[:m]
+    backed &= known
     del has_in, known
     node = complete & backed
     # a lone record between two stretches of garbage has neither kind of evidence: take it
     # unless it lies inside the declared span of a backed header (e.g. a cut last record)
     # (FMT records need plausible content instead, below)
-    weak = np.flatnonzero(complete & ~backed & (defid != 0))
+    weak = np.flatnonzero(complete & ~backed & (types != _FMT_TYPE))
     weak = weak[~_near(weak, -_NEAR, backed,
                        lambda k, nb: end[nb] > cand[weak[k : k + nb.shape[0]], None])]
     # ... and that has no other header inside it (not one of a flood of header patterns)
@@ -533,11 +535,18 @@ def _frame(a: np.ndarray, cand: np.ndarray, types: np.ndarray, table: _Definitio
                      lambda k, nb: cand[nb] < end[back_only[k : k + nb.shape[0]], None])
     node[back_only[swallows]] = False
     del fwd, complete, backed
-    if not node.all():  # header-like patterns inside records: chain the nodes only
-        node[node] = _chain_mask(cand[node], end[node])
-        return _Framing(cand[node], defid[node], end[node])
-    keep = _chain_mask(cand, end)
-    return _Framing(cand[keep], defid[keep], end[keep])
+    if node.all():  # the usual case: no header-like pattern inside any record
+        keep = _chain_mask(cand, end)
+    else:  # chain the nodes only
+        keep = node
+        keep[node] = _chain_mask(cand[node], end[node])
+    del node
+    pos = cand[keep]
+    end = end[keep]
+    defid = defid[keep]
+    del keep
+    skipped = _skipped_regions(n, pos, end) if pos.size else (pos[:0], pos[:0])
+    return _Framing(pos, defid, *skipped)
 
 
 # --------------------------------------------------------------------------- decoding
@@ -757,7 +766,7 @@ def backwards_steps(time_s: np.ndarray, where: np.ndarray) -> list[tuple[int, fl
     [(3, 2.0, 0.1)]
     """
     out: list[tuple[int, float, float]] = []
-    last_t, step = np.nan, 1 << 18  # in slices, to keep the temporaries small
+    last_t, step = np.nan, 1 << 16  # in slices, to keep the temporaries small
     for k in range(0, time_s.size, step):
         ok = np.flatnonzero(np.isfinite(time_s[k : k + step])) + k
         t = np.concatenate([[last_t], time_s[ok]]) if np.isfinite(last_t) else time_s[ok]
@@ -855,7 +864,8 @@ def _read_buffer(
     n = a.size
     notes: list[str] = []
     cand, types = _find_headers(a)
-    fmt_pos = cand[(types == _FMT_TYPE) & (cand + _FMT_LEN <= n)]
+    fmt_pos = cand[types == _FMT_TYPE]
+    fmt_pos = fmt_pos[fmt_pos <= n - _FMT_LEN]
     table = _read_definitions(a, fmt_pos)
     framing = _frame(a, cand, types, table)
     # definitions only from FMT records that are part of the log (rarely differs)
@@ -865,7 +875,7 @@ def _read_buffer(
         framing = _frame(a, cand, types, table)
     if framing.pos.size == 0:
         raise LogFormatError("no DataFlash records found", path=path)
-    skip_at, skip_len = _skipped_regions(n, framing.pos, framing.end)
+    skip_at, skip_len = framing.skip_at, framing.skip_len
     skipped = int(skip_len.sum())
     if skipped:
         lo = np.searchsorted(cand, skip_at[:1000])
@@ -879,7 +889,6 @@ def _read_buffer(
                      + (f"; undefined type id(s) {unknown[:10]}" if unknown else ""))
     notes.extend(table.problems)
     del cand, types, fmt_pos, fmt_kept
-    framing.end = framing.end[:0]  # not needed any more: free it
 
     # the records to decode (all of them, or those of the types asked for and the metadata),
     # grouped by definition: a stable radix sort of small integers keeps file order
@@ -894,7 +903,8 @@ def _read_buffer(
     if not decode.all():
         sel = np.flatnonzero(decode[framing.defid]).astype(idx_dt)
         defid = framing.defid[sel]
-    defid = defid.astype(np.int16 if ndefs < 1 << 15 else np.int32)
+    key = np.uint8 if ndefs <= 256 else np.int16 if ndefs < 1 << 15 else np.int32
+    defid = defid.astype(key)  # the fewer bits, the fewer radix passes
     order = np.argsort(defid, kind="stable").astype(idx_dt)
     bounds = np.concatenate([[0], np.cumsum(np.bincount(defid, minlength=ndefs))]).tolist()
     del defid
@@ -929,12 +939,22 @@ def _read_buffer(
     # for the backwards-steps check
     timeline = np.full(framing.pos.size if sel is None else sel.size, np.nan)
     where = framing.pos if sel is None else framing.pos[sel]
+    inserts: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    if sel is None:
+        timeline[src[0]] = src[1]
+    elif src[0].size:  # sources that are not decoded themselves go in between
+        at = np.searchsorted(sel, src[0])
+        there = at < sel.size
+        there[there] = sel[at[there]] == src[0][there]
+        timeline[at[there]] = src[1][there]
+        inserts = (at[~there], src[1][~there], framing.pos[src[0][~there]])
     by_name: dict[str, list[int]] = {}
     for i in sorted(groups, key=lambda i: first[i]):
         by_name.setdefault(table.defs[i].name, []).append(i)
     present = (np.bincount(framing.defid, minlength=ndefs) > 0).tolist() if sel is not None \
         else [bounds[i + 1] > bounds[i] for i in range(ndefs)]
     only_format = not {d.name for d, p in zip(table.defs, present, strict=True) if p} - _FORMAT_ONLY
+    del framing, sel, src
 
     columns: dict[str, dict[str, np.ndarray]] = {}
     time_s: dict[str, np.ndarray] = {}
@@ -955,16 +975,9 @@ def _read_buffer(
             if keep is not None and not keep.all():
                 cols, t = {k: v[keep] for k, v in cols.items()}, t[keep]
             columns[name], time_s[name] = cols, t
-    if sel is None:
-        timeline[src[0]] = src[1]
-    elif src[0].size:
-        at = np.searchsorted(sel, src[0])
-        there = at < sel.size
-        there[there] = sel[at[there]] == src[0][there]
-        timeline[at[there]] = src[1][there]
-        timeline = np.insert(timeline, at[~there], src[1][~there])
-        where = np.insert(where, at[~there], framing.pos[src[0][~there]])
-    del framing, sel, src
+    if inserts is not None:
+        timeline = np.insert(timeline, inserts[0], inserts[1])
+        where = np.insert(where, inserts[0], inserts[2])
     steps = backwards_steps(timeline, where)
     del timeline, where
     if steps:

@@ -951,9 +951,11 @@ def _read_buffer(
     by_name: dict[str, list[int]] = {}
     for i in sorted(groups, key=lambda i: first[i]):
         by_name.setdefault(table.defs[i].name, []).append(i)
-    present = (np.bincount(framing.defid, minlength=ndefs) > 0).tolist() if sel is not None \
-        else [bounds[i + 1] > bounds[i] for i in range(ndefs)]
-    only_format = not {d.name for d, p in zip(table.defs, present, strict=True) if p} - _FORMAT_ONLY
+    only_format = not set(by_name) - _FORMAT_ONLY
+    if only_format and sel is not None:  # and the types not decoded?
+        present = np.bincount(framing.defid, minlength=ndefs) > 0
+        only_format = not {d.name for d, p in zip(table.defs, present, strict=True) if p} \
+            - _FORMAT_ONLY
     del framing, sel, src
 
     columns: dict[str, dict[str, np.ndarray]] = {}
@@ -1037,12 +1039,25 @@ def _held_times(
     """Times of the records ``rows`` (ascending; of definitions without a time field): that
     of the nearest earlier record that has one, read from the file (NaN before the first);
     and those source records with their times."""
-    is_timed = timed[framing.defid]
-    prev = np.where(is_timed, np.arange(is_timed.size, dtype=framing.pos.dtype), -1)
-    del is_timed
-    np.maximum.accumulate(prev, out=prev)
-    src = prev[rows]
-    del prev
+    # the source is nearly always a few records back: look there first
+    src = np.full(rows.size, -1, framing.pos.dtype)
+    todo = np.arange(rows.size)
+    for back in range(1, _NEAR + 1):
+        if not todo.size:
+            break
+        before = rows[todo] - back
+        todo = todo[before >= 0]  # none before: no source
+        before = before[before >= 0]
+        hit = timed[framing.defid[before]]
+        src[todo[hit]] = before[hit]
+        todo = todo[~hit]
+    if todo.size:  # the rest (e.g. the FMT records heading a log): a search back in bulk
+        is_timed = timed[framing.defid[: int(rows[todo[-1]]) + 1]]
+        prev = np.where(is_timed, np.arange(is_timed.size, dtype=framing.pos.dtype), -1)
+        del is_timed
+        np.maximum.accumulate(prev, out=prev)
+        src[todo] = prev[rows[todo]]
+        del prev
     out = np.full(rows.size, np.nan)
     has = src >= 0
     need, inverse = np.unique(src[has], return_inverse=True)

@@ -352,6 +352,24 @@ def _read_definitions(a: np.ndarray, fmt_pos: np.ndarray) -> _Definitions:
     return out
 
 
+def _lookup(table: np.ndarray, index: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """``table[index]`` for a compact integer ``index``, in slices (numpy indexes with
+    ``intp`` far faster than with small integer types, and a whole ``intp`` copy of the
+    index would be large).
+
+    Examples
+    --------
+    >>> _lookup(np.array([10, 20, 30]), np.array([2, 0, 2], np.uint8)).tolist()
+    [30, 10, 30]
+    """
+    if out is None:
+        out = np.empty(index.shape, table.dtype)
+    step = 1 << 16
+    for k in range(0, index.size, step):
+        np.take(table, index[k : k + step].astype(np.intp), out=out[k : k + step])
+    return out
+
+
 def _record_view(a: np.ndarray, dtype: np.dtype) -> np.ndarray:
     """Overlapping view: element ``k`` is ``dtype`` read at byte ``k`` of the file."""
     count = a.size - dtype.itemsize + 1
@@ -362,7 +380,7 @@ def _record_view(a: np.ndarray, dtype: np.dtype) -> np.ndarray:
 
 def _records(a: np.ndarray, dtype: np.dtype, offsets: np.ndarray) -> np.ndarray:
     """Copy the ``dtype`` items starting at ``offsets`` (one plain-bytes gather)."""
-    raw = _record_view(a, np.dtype((np.void, dtype.itemsize)))[offsets]
+    raw = _record_view(a, np.dtype((np.void, dtype.itemsize)))[offsets.astype(np.intp)]
     return raw.view(dtype)
 
 
@@ -387,7 +405,7 @@ def _assign_definitions(
         lut[k] = lut[k - 1]
         lut[k, t] = i
     if not events:
-        return lut[0][types]
+        return _lookup(lut[0], types)
     starts = np.array([p for p, _, _ in events], pos.dtype)
     # candidates are sorted: epoch k covers the index range between two events
     edges = [0, *np.searchsorted(pos, starts, side="left").tolist(), pos.size]
@@ -395,7 +413,7 @@ def _assign_definitions(
     for k in range(len(events) + 1):
         lo, hi = edges[k], edges[k + 1]
         if hi > lo:
-            np.take(lut[k], types[lo:hi], out=out[lo:hi])
+            _lookup(lut[k], types[lo:hi], out[lo:hi])
     return out
 
 
@@ -496,7 +514,7 @@ def _frame(a: np.ndarray, cand: np.ndarray, types: np.ndarray, table: _Definitio
     m = cand.size
     defid = _assign_definitions(cand, types, table)
     lengths = np.array([d.length for d in table.defs] + [0], cand.dtype)
-    end = lengths[defid]  # undefined (-1) -> the sentinel 0
+    end = _lookup(lengths, defid)  # undefined (-1) -> the sentinel 0
     end += cand
     known = end > cand
     complete = known & (end <= n)
@@ -901,7 +919,7 @@ def _read_buffer(
     sel: np.ndarray | None = None  # indices of the decoded records (None: all)
     defid = framing.defid
     if not decode.all():
-        sel = np.flatnonzero(decode[framing.defid]).astype(idx_dt)
+        sel = np.flatnonzero(_lookup(decode, framing.defid)).astype(idx_dt)
         defid = framing.defid[sel]
     key = np.uint8 if ndefs <= 256 else np.int16 if ndefs < 1 << 15 else np.int32
     defid = defid.astype(key)  # the fewer bits, the fewer radix passes
@@ -918,7 +936,7 @@ def _read_buffer(
         d = table.defs[i]
         k = order[bounds[i] : bounds[i + 1]]
         first[i] = int(k[0])
-        pos = framing.pos[k if sel is None else sel[k]]
+        pos = _lookup(framing.pos, k if sel is None else _lookup(sel, k))
         t = _gather_times(a, d, pos) if windowed and d.name not in _META_NAMES else None
         if t is not None:  # timed records outside the window are not decoded
             keep = window_mask(t, start, stop)
@@ -968,7 +986,7 @@ def _read_buffer(
         defs_by_name[name] = parts[-1][0]
         cols, t = _decode_message(a, parts)
         keys = parts[0][1] if len(parts) == 1 else np.sort(np.concatenate([p[1] for p in parts]))
-        timeline[keys] = t
+        timeline[keys.astype(np.intp)] = t
         del parts, keys
         if name in _META_NAMES:
             meta_columns[name], meta_times[name] = cols, t

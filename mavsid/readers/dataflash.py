@@ -83,7 +83,7 @@ _FMT_TYPE = 0x80
 _FMT_LEN = 89
 _CHUNK = 1 << 20  # bytes scanned per step when looking for headers
 _NEAR = 16  # candidates looked at around a record when checking overlaps
-_GATHER_BYTES = 1 << 16  # record bytes copied per slice when decoding one type
+_GATHER_BYTES = 1 << 18  # record bytes copied per slice when decoding one type
 _BACKWARDS_S = 0.5  # a time step back larger than this is a discontinuity
 
 
@@ -123,6 +123,10 @@ FORMAT_CHARS: Mapping[str, _Char] = {
 
 _STRUCT_CHARS = {"a": "64s", "g": "e", "n": "4s", "N": "16s", "Z": "64s", "c": "h",
                  "C": "H", "e": "i", "E": "I", "L": "i", "M": "b"}
+
+# stored as presented: decoding is a plain copy (or a widening cast)
+_PLAIN = frozenset(c for c, spec in FORMAT_CHARS.items()
+                   if spec.kind in ("int", "array") or c in "fd")
 
 # always decoded: parameters, texts, modes, units, firmware
 _META_NAMES = frozenset({"FMTU", "UNIT", "MULT", "PARM", "MSG", "MODE", "VER"})
@@ -601,12 +605,17 @@ def _gather_into(
     layout = _layout(d)
     if out is None:
         out = {c: np.empty((pos.size, *shape), dt) for c, (_, _, dt, shape) in layout.items()}
-    fields = [(f, ch, out[c]) for c, (f, ch, _, _) in layout.items() if c in out]
+    # (payload field, format character or None when a plain copy does, column)
+    fields = [(f, None if ch in _PLAIN and col.dtype != object else ch, col)
+              for c, (f, ch, _, _) in layout.items() if (col := out.get(c)) is not None]
     step = max(1, _GATHER_BYTES // max(d.payload_dtype.itemsize, 1))
     for k in range(0, pos.size, step):
         recs = _records(a, d.payload_dtype, pos[k : k + step] + 3)
         for f, ch, col in fields:
-            _column_into(recs[f], ch, d.name, col[k : k + step])
+            if ch is None:
+                col[k : k + step] = recs[f]
+            else:
+                _column_into(recs[f], ch, d.name, col[k : k + step])
     return out
 
 

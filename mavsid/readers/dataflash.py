@@ -16,8 +16,9 @@ A DataFlash log is a sequence of records ``0xA3 0x95 <type> <payload>``. FMT rec
    patterns). From the first record, each record is
    followed by the next one at or after its end, so garbage is skipped and reading resumes on
    the next valid record;
-4. gathers each type's records into one structured numpy array through an overlapping view
-   of the file (one fancy-indexing call per type) and converts every field to a column.
+4. decodes only the records asked for: each type's records are copied out of the file
+   through an overlapping view in cache-sized slices (one fancy-indexing call per slice) and
+   every field is written straight into its preallocated column.
 
 Values are those pymavlink presents: format characters ``c C e E`` are divided by 100 and ``L``
 by 1e7 (as pymavlink does it: ``value / (1 / multiplier)``), ``a`` is an ``int16[32]`` row,

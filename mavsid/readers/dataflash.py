@@ -375,6 +375,21 @@ def _lookup(table: np.ndarray, index: np.ndarray, out: np.ndarray | None = None)
     return out
 
 
+def _counts(index: np.ndarray, size: int) -> np.ndarray:
+    """``np.bincount(index, minlength=size)`` of a compact integer index, in slices.
+
+    Examples
+    --------
+    >>> _counts(np.array([0, 2, 2], np.uint8), 4).tolist()
+    [1, 0, 2, 0]
+    """
+    out = np.zeros(size, np.int64)
+    step = 1 << 16
+    for k in range(0, index.size, step):
+        out += np.bincount(index[k : k + step].astype(np.intp), minlength=size)
+    return out
+
+
 def _record_view(a: np.ndarray, dtype: np.dtype) -> np.ndarray:
     """Overlapping view: element ``k`` is ``dtype`` read at byte ``k`` of the file."""
     count = a.size - dtype.itemsize + 1
@@ -906,8 +921,8 @@ def _read_buffer(
     skip_at, skip_len = framing.skip_at, framing.skip_len
     skipped = int(skip_len.sum())
     if skipped:
-        lo = np.searchsorted(cand, skip_at[:1000])
-        hi = np.searchsorted(cand, skip_at[:1000] + skip_len[:1000])
+        lo = np.searchsorted(cand, skip_at[:1000].astype(cand.dtype))
+        hi = np.searchsorted(cand, (skip_at[:1000] + skip_len[:1000]).astype(cand.dtype))
         inside = np.concatenate([cand[i:j] for i, j in zip(lo, hi, strict=True)])
         unknown = sorted(set(np.unique(a[inside + 2]).tolist()) - set(table.by_type))
         shown = ", ".join(f"{int(o)}+{int(k)}" for o, k in zip(skip_at[:5], skip_len[:5],
@@ -930,11 +945,11 @@ def _read_buffer(
     defid = framing.defid
     if not decode.all():
         sel = np.flatnonzero(_lookup(decode, framing.defid)).astype(idx_dt)
-        defid = framing.defid[sel]
+        defid = _lookup(framing.defid, sel)
     key = np.uint8 if ndefs <= 256 else np.int16 if ndefs < 1 << 15 else np.int32
     defid = defid.astype(key)  # the fewer bits, the fewer radix passes
     order = np.argsort(defid, kind="stable").astype(idx_dt)
-    bounds = np.concatenate([[0], np.cumsum(np.bincount(defid, minlength=ndefs))]).tolist()
+    bounds = [0, *np.cumsum(_counts(defid, ndefs)).tolist()]
     del defid
     windowed = start is not None or stop is not None
     # per definition: indices into the decoded records (``sel``), their offsets and times
@@ -1076,11 +1091,11 @@ def _held_times(
         before = rows[todo] - back
         todo = todo[before >= 0]  # none before: no source
         before = before[before >= 0]
-        hit = timed[framing.defid[before]]
+        hit = _lookup(timed, framing.defid[before])
         src[todo[hit]] = before[hit]
         todo = todo[~hit]
     if todo.size:  # the rest (e.g. the FMT records heading a log): a search back in bulk
-        is_timed = timed[framing.defid[: int(rows[todo[-1]]) + 1]]
+        is_timed = _lookup(timed, framing.defid[: int(rows[todo[-1]]) + 1])
         prev = np.where(is_timed, np.arange(is_timed.size, dtype=framing.pos.dtype), -1)
         del is_timed
         np.maximum.accumulate(prev, out=prev)

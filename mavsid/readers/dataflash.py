@@ -491,11 +491,14 @@ def _chain_mask(pos: np.ndarray, end: np.ndarray) -> np.ndarray:
         if c >= m:
             break
         k = next_irr[k]
-    # +1 where a run starts, -1 past its end (runs are disjoint and ascending)
-    step = np.zeros(m + 1, np.int8)
-    step[np.frombuffer(starts, np.int64)] = 1
-    step[np.frombuffer(stops, np.int64)] -= 1
-    return np.cumsum(step[:m], dtype=np.int8).view(bool)
+    # runs are disjoint and ascending: off before each run, on along it, off after the last
+    edges = np.empty(2 * len(starts) + 2, np.int64)
+    edges[0], edges[-1] = 0, m
+    edges[1:-1:2] = np.frombuffer(starts, np.int64)
+    edges[2:-1:2] = np.frombuffer(stops, np.int64)
+    on = np.zeros(edges.size - 1, bool)
+    on[1::2] = True
+    return np.repeat(on, np.diff(edges))
 
 
 def _near(

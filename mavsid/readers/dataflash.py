@@ -390,6 +390,28 @@ def _counts(index: np.ndarray, size: int) -> np.ndarray:
     return out
 
 
+def _group(key: np.ndarray, size: int, dtype: np.dtype) -> dict[int, np.ndarray]:
+    """Indices of each value of ``key`` (``0 <= key < size``), ascending, for the values
+    present: stable radix sorts of cache-sized slices, joined per value.
+
+    Examples
+    --------
+    >>> {k: v.tolist() for k, v in _group(np.array([2, 0, 2, 1]), 3, np.dtype(np.int32)).items()}
+    {0: [1], 1: [3], 2: [0, 2]}
+    """
+    small = key.astype(np.uint8 if size <= 256 else np.uint16 if size <= 1 << 16 else np.int32)
+    pieces: dict[int, list[np.ndarray]] = {}
+    step = 1 << 16
+    for k in range(0, small.size, step):
+        part = small[k : k + step]
+        order = np.argsort(part, kind="stable").astype(dtype)
+        order += np.asarray(k, dtype)
+        bounds = [0, *np.cumsum(np.bincount(part.astype(np.intp), minlength=size)).tolist()]
+        for i in np.flatnonzero(np.diff(bounds)).tolist():
+            pieces.setdefault(i, []).append(order[bounds[i] : bounds[i + 1]])
+    return {i: p[0] if len(p) == 1 else np.concatenate(p) for i, p in sorted(pieces.items())}
+
+
 def _record_view(a: np.ndarray, dtype: np.dtype) -> np.ndarray:
     """Overlapping view: element ``k`` is ``dtype`` read at byte ``k`` of the file."""
     count = a.size - dtype.itemsize + 1
@@ -949,20 +971,14 @@ def _read_buffer(
     if not decode.all():
         sel = np.flatnonzero(_lookup(decode, framing.defid)).astype(idx_dt)
         defid = _lookup(framing.defid, sel)
-    key = np.uint8 if ndefs <= 256 else np.int16 if ndefs < 1 << 15 else np.int32
-    defid = defid.astype(key)  # the fewer bits, the fewer radix passes
-    order = np.argsort(defid, kind="stable").astype(idx_dt)
-    bounds = [0, *np.cumsum(_counts(defid, ndefs)).tolist()]
+    members = _group(defid, ndefs, idx_dt)
     del defid
     windowed = start is not None or stop is not None
     # per definition: indices into the decoded records (``sel``), their offsets and times
     groups: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray | None]] = {}
     first: dict[int, int] = {}  # each definition's first record (orders the messages)
-    for i in range(ndefs):
-        if bounds[i + 1] == bounds[i]:
-            continue
+    for i, k in members.items():
         d = table.defs[i]
-        k = order[bounds[i] : bounds[i + 1]]
         first[i] = int(k[0])
         pos = _lookup(framing.pos, k if sel is None else _lookup(sel, k))
         t = _gather_times(a, d, pos) if windowed and d.name not in _META_NAMES else None
@@ -971,7 +987,7 @@ def _read_buffer(
             assert keep is not None
             k, pos, t = k[keep], pos[keep], t[keep]
         groups[i] = (k, pos, t)
-    del order
+    del members
     # records without a time field hold the time of the latest timed record before them
     untimed = [i for i in groups if not timed[i]]
     src: tuple[np.ndarray, np.ndarray] = (np.zeros(0, idx_dt), np.zeros(0))

@@ -1175,16 +1175,18 @@ def _decode_message(
     t_out = np.empty(total)
     at = 0
     for (d, _, pos, t), size in zip(parts, sizes, strict=True):
+        layout = _layout(d)
         region = {c: v[at : at + size] for c, v in out.items()}
-        _gather_into(a, d, pos, region)
+        own = {c: v for c, v in region.items() if c in layout and layout[c][3] == v.shape[1:]}
+        _gather_into(a, d, pos, own)
         for c, v in region.items():
-            kind = _layout(d).get(c)
-            if kind is None or kind[3] != v.shape[1:]:
+            if c not in own:  # a column this layout lacks (or has in another shape)
                 v[...] = fill[c]
-        if t is not None:
-            t_out[at : at + size] = t
-        else:
-            t_out[at : at + size] = _times_of(d, region)
+        if t is None:
+            tf = d.time_field
+            t = _times_of(d, own) if tf is not None and tf[0] in own else _gather_times(a, d, pos)
+            assert t is not None
+        t_out[at : at + size] = t
         at += size
     return out, t_out
 

@@ -431,3 +431,84 @@ def test_header_floods_stay_linear_in_memory(tmp_path, body):
     finally:
         tracemalloc.stop()
     assert peak < 40 * len(data), peak / len(data)
+
+
+# one message name redefined with other layouts: the union of the columns, in file order;
+# a layout lacking a column (or holding it in another shape than its first holder) gives
+# NaN or an empty string
+_LAYOUTS = [("Qhf", "TimeUS,A,B"), ("QfN", "TimeUS,B,S"), ("Qa", "TimeUS,A"),
+            ("QcZ", "TimeUS,A,S"), ("QIf", "TimeUS,C,B")]
+
+
+def _written(ch: str, rng: random.Random) -> tuple[object, object]:
+    """A raw value to pack for format character ``ch`` and the value a reader must give."""
+    v: Any
+    if ch == "h":
+        v = rng.randrange(-30000, 30000)
+        return v, v
+    if ch == "I":
+        v = rng.randrange(1 << 32)
+        return v, v
+    if ch == "f":
+        v = rng.uniform(-1e3, 1e3)
+        return v, float(np.float32(v))
+    if ch == "c":
+        v = rng.randrange(-30000, 30000)
+        return v, v / 100
+    if ch == "a":
+        v = [rng.randrange(-1000, 1000) for _ in range(32)]
+        return v, v
+    v = f"s{rng.randrange(100)}"  # N, Z
+    return v, v
+
+
+@settings(max_examples=60, deadline=None)
+@given(blocks=st.lists(st.tuples(st.integers(0, len(_LAYOUTS) - 1),
+                                 st.sampled_from([0x81, 0x82]), st.integers(0, 6),
+                                 st.booleans()), min_size=1, max_size=6),
+       seed=st.integers(0, 2**32 - 1),
+       messages=st.sampled_from([None, ["TST"], ["TST", "OTH"]]))
+def test_redefined_layouts_give_every_written_value(tmp_path_factory, blocks, seed, messages):
+    rng = random.Random(seed)
+    data = bytearray(build_fmt(0x90, "OTH", "QH", "TimeUS,V"))
+    written: list[tuple[str, int, dict[str, object]]] = []  # (layout, time us, column values)
+    t_us = 1000
+    for layout, mtype, count, other in blocks:
+        fmt, cols = _LAYOUTS[layout]
+        data += build_fmt(mtype, "TST", fmt, cols)
+        for _ in range(count):
+            t_us += rng.randrange(1, 100_000)
+            pairs = [(t_us, t_us)] + [_written(ch, rng) for ch in fmt[1:]]
+            data += build_record(mtype, fmt, *(raw for raw, _ in pairs))
+            written.append((fmt, t_us, dict(zip(cols.split(","), (v for _, v in pairs),
+                                                strict=True))))
+            if other:
+                data += build_record(0x90, "QH", t_us, 7)
+    path = tmp_path_factory.mktemp("redef") / "redef.bin"
+    path.write_bytes(bytes(data))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataQualityWarning)
+        log = dataflash.read(path, messages=messages)
+    if not written:
+        assert "TST" not in log.messages
+        return
+    table = log["TST"]
+    assert len(table) == len(written)
+    assert table.time_s.tolist() == [t * 1e-6 for _, t, _ in written]
+    shape_of = {"a": (32,)}
+    first: dict[str, tuple[int, ...]] = {}  # column -> per-row shape in its first layout
+    for fmt, _, values in written:
+        for col, ch in zip(values, fmt, strict=True):
+            first.setdefault(col, shape_of.get(ch, ()))
+    assert set(table.columns) == set(first)
+    for k, (fmt, _, values) in enumerate(written):
+        chars = dict(zip(values, fmt, strict=True))
+        for col, shape in first.items():
+            got = table[col][k]
+            if col in values and shape_of.get(chars[col], ()) == shape:
+                want = values[col]
+                assert (got.tolist() if isinstance(got, np.ndarray) else got) == want, (k, col)
+            elif col == "S":
+                assert got == "", (k, col)
+            else:
+                assert np.all(np.isnan(got)), (k, col)

@@ -47,3 +47,25 @@ def require_shared() -> None:
 def ids(paths: list[Path]) -> list[str]:
     """Readable test ids for shared logs."""
     return [str(p.relative_to(LOGS)) if LOGS in p.parents else p.name for p in paths]
+
+
+GOLDEN = Path(__file__).parent / "golden"
+
+
+def assert_info_matches_golden(raw: object, path: Path) -> None:
+    """``mavsid info`` text of ``raw`` (read from ``path``) equals ``golden/info_NAME.txt``.
+
+    The golden file is rewritten only with ``MAVSID_UPDATE_GOLDEN=1`` (the test then skips,
+    so an update never passes silently).
+    """
+    from mavsid.info import format_summary, summarize
+
+    summary = summarize(raw)  # type: ignore[arg-type]
+    summary["path"] = path.name  # independent of where shared/ lives
+    text = format_summary(summary) + "\n"
+    golden = GOLDEN / f"info_{path.name}.txt"
+    if os.environ.get("MAVSID_UPDATE_GOLDEN") == "1":
+        golden.parent.mkdir(exist_ok=True)
+        golden.write_text(text)
+        pytest.skip(f"rewrote {golden}")
+    assert text == golden.read_text()

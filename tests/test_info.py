@@ -7,17 +7,15 @@ update is always a deliberate, reviewed change).
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 import warnings
 from collections import Counter
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
-from helpers import shared_path
+from helpers import assert_info_matches_golden, shared_path
 from test_dataflash import pymavlink_records, same_value
 
 from mavsid.cli import main
@@ -26,7 +24,6 @@ from mavsid.errors import DataQualityWarning
 from mavsid.info import format_summary, median_rate_hz, summarize
 from mavsid.readers import read_log
 
-GOLDEN = Path(__file__).parent / "golden"
 SMALL = ("public", "ArduPilot__pymavlink", "test.BIN")
 MODERN = ("public", "ArduPilot__MethodicConfigurator", "backend_log_80k.bin")
 
@@ -47,15 +44,7 @@ def small_ref():
 @pytest.mark.parametrize("parts", [SMALL, MODERN], ids=["test.BIN", "backend_log_80k.bin"])
 def test_info_text_matches_golden(parts):
     path = shared_path(*parts)
-    summary = summarize(_read(path))
-    summary["path"] = path.name  # independent of where shared/ lives
-    text = format_summary(summary) + "\n"
-    golden = GOLDEN / f"info_{path.name}.txt"
-    if os.environ.get("MAVSID_UPDATE_GOLDEN") == "1":
-        golden.parent.mkdir(exist_ok=True)
-        golden.write_text(text)
-        pytest.skip(f"rewrote {golden}")
-    assert text == golden.read_text()
+    assert_info_matches_golden(_read(path), path)
 
 
 def test_info_json_agrees_with_pymavlink(small_ref, capsys):

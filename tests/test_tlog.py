@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from helpers import ids, require_shared, shared_logs, shared_path
+from helpers import assert_info_matches_golden, ids, require_shared, shared_logs, shared_path
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from mavsid.data import RawLog
@@ -525,23 +525,12 @@ def test_px4_vehicle_params_modes_and_chunked_texts(tmp_path: Path) -> None:
 
 # ----------------------------------------------------------------------------- info
 
-GOLDEN = Path(__file__).parent / "golden"
 
 
 def test_info_text_matches_golden() -> None:
     """``mavsid info`` text of vtol.tlog; rewritten only with MAVSID_UPDATE_GOLDEN=1."""
-    from mavsid.info import format_summary, summarize
-
     path = shared_path(*VTOL)
-    summary = summarize(mavsid_read(str(path))[0])
-    summary["path"] = path.name  # independent of where shared/ lives
-    text = format_summary(summary) + "\n"
-    golden = GOLDEN / f"info_{path.name}.txt"
-    if os.environ.get("MAVSID_UPDATE_GOLDEN") == "1":
-        golden.parent.mkdir(exist_ok=True)
-        golden.write_text(text)
-        pytest.skip(f"rewrote {golden}")
-    assert text == golden.read_text()
+    assert_info_matches_golden(mavsid_read(str(path))[0], path)
 
 
 def test_info_json_agrees_with_pymavlink() -> None:

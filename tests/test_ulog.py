@@ -5,14 +5,13 @@ from __future__ import annotations
 
 import contextlib
 import io
-import os
 import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-from helpers import ids, require_shared, shared_logs, shared_path
+from helpers import assert_info_matches_golden, ids, require_shared, shared_logs, shared_path
 from pyulog import ULog
 
 from mavsid.data import RawLog
@@ -199,25 +198,14 @@ def test_overwritten_block_gives_pyulog_values_or_a_clean_error(
 
 # ----------------------------------------------------------------------------- info
 
-GOLDEN = Path(__file__).parent / "golden"
 SMALL = ("public", "PX4__pyulog", "sample_log_small.ulg")
 
 
 def test_info_text_matches_golden() -> None:
     """``mavsid info`` text of sample_log_small.ulg; rewritten only with
     MAVSID_UPDATE_GOLDEN=1."""
-    from mavsid.info import format_summary, summarize
-
     path = shared_path(*SMALL)
-    summary = summarize(read(path)[0])
-    summary["path"] = path.name  # independent of where shared/ lives
-    text = format_summary(summary) + "\n"
-    golden = GOLDEN / f"info_{path.name}.txt"
-    if os.environ.get("MAVSID_UPDATE_GOLDEN") == "1":
-        golden.parent.mkdir(exist_ok=True)
-        golden.write_text(text)
-        pytest.skip(f"rewrote {golden}")
-    assert text == golden.read_text()
+    assert_info_matches_golden(read(path)[0], path)
 
 
 def test_info_json_agrees_with_pyulog() -> None:

@@ -456,10 +456,16 @@ def _windows(flight: FlightData, axis: str, cfg: PipelineConfig) -> list[WindowR
     return [r for r in reports if r.axis == axis]
 
 
-def _segments(flight: FlightData, reports: Sequence[WindowReport]) -> list[Segment]:
+def _axis_segments(
+    flights: Sequence[FlightData], axis: str, cfg: PipelineConfig
+) -> tuple[tuple[WindowReport, ...], tuple[Segment, ...]]:
+    """Every window considered for ``axis`` over all flights, and the kept segments."""
     from mavsid.excitation import select_segments
 
-    return select_segments(flight, reports=reports)
+    reports = [(fd, _windows(fd, axis, cfg)) for fd in flights]
+    windows = tuple(r for _, rs in reports for r in rs)
+    segs = tuple(s for fd, rs in reports for s in select_segments(fd, reports=rs))
+    return windows, segs
 
 
 def _fit_model(train: Sequence[Segment], axis: str, cfg: PipelineConfig) -> Model:
@@ -503,9 +509,7 @@ def fit(
     fits: dict[str, AxisFit] = {}
     problems: list[str] = []
     for axis in cfg.axes:
-        reports = [(fd, _windows(fd, axis, cfg)) for fd in flights]
-        windows = tuple(r for _, rs in reports for r in rs)
-        segs = [s for fd, rs in reports for s in _segments(fd, rs)]
+        windows, segs = _axis_segments(flights, axis, cfg)
         try:
             train, held_out = split_segments(segs, cfg.block_s)
             model = _fit_model(train, axis, cfg)
@@ -572,9 +576,7 @@ def validate_logs(
     for axis, model in models.items():
         if axis not in cfg.axes:
             continue
-        reports = [(fd, _windows(fd, axis, cfg)) for fd in flights]
-        windows = tuple(r for _, rs in reports for r in rs)
-        segs = tuple(s for fd, rs in reports for s in _segments(fd, rs))
+        windows, segs = _axis_segments(flights, axis, cfg)
         try:
             if not segs:
                 raise NoExcitationError("no segments")

@@ -42,7 +42,7 @@ from __future__ import annotations
 import itertools
 import os
 import warnings
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -53,6 +53,7 @@ from mavsid.channels import (
     MIXERS,
     STATE_NAMES,
     STATE_UNITS,
+    Channel,
     Mixer,
     Preset,
     choose_preset,
@@ -115,26 +116,7 @@ def _resolve_preset(raw: RawLog, preset: Preset | str | None,
 def _collect(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer]
              ) -> tuple[list[_Series], list[_Series], str | None]:
     """States and inputs of the preset, as native series (record order) in canonical order."""
-    states: list[_Series] = []
-    for name in STATE_NAMES:
-        ch = preset.states.get(name)
-        if ch is None:
-            continue
-        try:
-            t, v = evaluate(raw, ch, f"{preset.name}:{name}")
-        except MavsidError:
-            if ch.optional:
-                continue
-            raise
-        if t.size >= 2:
-            states.append(_Series(name, f"{ch.message}.{ch.field}", t, v))
-        elif not ch.optional:
-            table = raw[ch.message]
-            timed = int(np.count_nonzero(np.isfinite(np.asarray(table.time_s, dtype=float))))
-            raise NoExcitationError(
-                f"{raw.source.path}: {ch.message} has {len(table)} record(s), {timed} with a "
-                f"time stamp and {t.size} usable: nothing to put on a time grid"
-            )
+    states = _channel_series(raw, preset, STATE_NAMES, preset.states, need_samples=True)
     inputs: list[_Series] = []
     mixer_name = None
     kind = (raw.vehicle or "").split()[0].lower() if (raw.vehicle or "").strip() else ""
@@ -162,19 +144,38 @@ def _collect(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer]
             inputs.append(_Series(name, f"{preset.motors.message} ({mixer.name} mixer)", t,
                                   u[:, j]))
     else:
-        for name in INPUT_NAMES:
-            ch = preset.inputs.get(name)
-            if ch is None:
-                continue
-            try:
-                t, v = evaluate(raw, ch, f"{preset.name}:{name}")
-            except MavsidError:
-                if ch.optional:
-                    continue
-                raise
-            if t.size >= 2:
-                inputs.append(_Series(name, f"{ch.message}.{ch.field}", t, v))
+        inputs = _channel_series(raw, preset, INPUT_NAMES, preset.inputs, need_samples=False)
     return states, inputs, mixer_name
+
+
+def _channel_series(raw: RawLog, preset: Preset, names: Sequence[str],
+                    channels: Mapping[str, Channel], need_samples: bool) -> list[_Series]:
+    """The preset's channels ``names`` (those it has) as native series, in that order.
+
+    A channel that cannot be evaluated is left out when optional; one with fewer than two
+    usable samples is left out, or (``need_samples``, not optional) is an error.
+    """
+    out: list[_Series] = []
+    for name in names:
+        ch = channels.get(name)
+        if ch is None:
+            continue
+        try:
+            t, v = evaluate(raw, ch, f"{preset.name}:{name}")
+        except MavsidError:
+            if ch.optional:
+                continue
+            raise
+        if t.size >= 2:
+            out.append(_Series(name, f"{ch.message}.{ch.field}", t, v))
+        elif need_samples and not ch.optional:
+            table = raw[ch.message]
+            timed = int(np.count_nonzero(np.isfinite(np.asarray(table.time_s, dtype=float))))
+            raise NoExcitationError(
+                f"{raw.source.path}: {ch.message} has {len(table)} record(s), {timed} with a "
+                f"time stamp and {t.size} usable: nothing to put on a time grid"
+            )
+    return out
 
 
 #: a step back in time larger than this (s) is a reboot or the start of a concatenated log

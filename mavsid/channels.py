@@ -459,6 +459,7 @@ def choose_preset(raw: RawLog, presets: Mapping[str, Preset] | None = None) -> P
     raise MissingMessageError(
         " or ".join(wanted) + f" (no channel preset fits this {raw.source.format} log)",
         available=raw.messages,
+        path=raw.source.path,
     )
 
 

@@ -135,7 +135,7 @@ class RawLog:
     >>> log["ATT"]
     Traceback (most recent call last):
     ...
-    mavsid.errors.MissingMessageError: log has no message 'ATT'
+    mavsid.errors.MissingMessageError: x.bin: log has no message 'ATT'
     """
 
     source: SourceInfo
@@ -151,7 +151,9 @@ class RawLog:
         try:
             return self.messages[name]
         except KeyError:
-            raise MissingMessageError(name, available=self.messages) from None
+            raise MissingMessageError(
+                name, available=self.messages, path=self.source.path or None
+            ) from None
 
     def __contains__(self, name: object) -> bool:
         return name in self.messages

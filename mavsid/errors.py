@@ -64,15 +64,21 @@ class MissingMessageError(MavsidError, KeyError):
     --------
     >>> str(MissingMessageError("RATE", available=["ATT", "IMU"]))
     "log has no message 'RATE' (it has: ATT, IMU)"
+    >>> str(MissingMessageError("RATE", path="a.bin"))
+    "a.bin: log has no message 'RATE'"
     """
 
-    def __init__(self, name: str, available: Iterable[str] = (), what: str = "message") -> None:
+    def __init__(self, name: str, available: Iterable[str] = (), what: str = "message",
+                 path: object = None) -> None:
         self.name = name
         self.available = sorted(available)
+        self.path = None if path is None else str(path)
         shown = ", ".join(self.available[:40])
         if len(self.available) > 40:
             shown += f", ... ({len(self.available)} in all)"
         self.text = f"log has no {what} {name!r}" + (f" (it has: {shown})" if shown else "")
+        if self.path is not None:
+            self.text = f"{self.path}: {self.text}"
         super().__init__(self.text)
 
     def __str__(self) -> str:  # KeyError would quote the whole message

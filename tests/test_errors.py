@@ -15,3 +15,15 @@ def test_public_api_exports_exist() -> None:
     for name in mavsid.__all__:
         assert hasattr(mavsid, name), name
     assert LOGS.name == "logs"
+
+
+def test_missing_message_names_the_file() -> None:
+    from mavsid.data import RawLog, SourceInfo
+
+    log = RawLog(SourceInfo("flight.bin", "dataflash", 0), messages={})
+    try:
+        log["ATT"]
+    except MissingMessageError as exc:
+        assert str(exc).startswith("flight.bin: ") and "'ATT'" in str(exc)
+    else:  # pragma: no cover
+        raise AssertionError("no error")

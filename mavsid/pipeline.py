@@ -468,6 +468,17 @@ def _axis_segments(
     return windows, segs
 
 
+def _validate(model: Model, segments: Sequence[Segment], cfg: PipelineConfig) -> Validation:
+    """Validate ``model`` on ``segments`` with the config's horizons and residual settings."""
+    return validate(
+        model,
+        segments,
+        horizons_s=(*cfg.horizons_s, SUMMARY_HORIZON_S),
+        max_lag=cfg.max_lag,
+        fft_window_s=cfg.fft_window_s,
+    )
+
+
 def _fit_model(train: Sequence[Segment], axis: str, cfg: PipelineConfig) -> Model:
     from mavsid import estimators
 
@@ -513,13 +524,7 @@ def fit(
         try:
             train, held_out = split_segments(segs, cfg.block_s)
             model = _fit_model(train, axis, cfg)
-            val = validate(
-                model,
-                held_out,
-                horizons_s=(*cfg.horizons_s, SUMMARY_HORIZON_S),
-                max_lag=cfg.max_lag,
-                fft_window_s=cfg.fft_window_s,
-            )
+            val = _validate(model, held_out, cfg)
         except NoExcitationError as exc:
             problems.append(f"{axis}: {exc}")
             continue
@@ -580,13 +585,7 @@ def validate_logs(
         try:
             if not segs:
                 raise NoExcitationError("no segments")
-            val = validate(
-                model,
-                segs,
-                horizons_s=(*cfg.horizons_s, SUMMARY_HORIZON_S),
-                max_lag=cfg.max_lag,
-                fft_window_s=cfg.fft_window_s,
-            )
+            val = _validate(model, segs, cfg)
         except NoExcitationError as exc:
             problems.append(f"{axis}: {exc}")
             continue

@@ -87,7 +87,6 @@ from __future__ import annotations
 import math
 import os
 import re
-import sys
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -708,10 +707,8 @@ def motor_thrusts(raw: RawLog, preset: Preset, mixer: Mixer) -> tuple[np.ndarray
 
 
 def _read_toml(path: str | os.PathLike[str]) -> dict[str, Any]:
-    if sys.version_info >= (3, 11):
-        import tomllib
-    else:  # pragma: no cover
-        import tomli as tomllib
+    import tomllib
+
     try:
         with open(path, "rb") as f:
             return tomllib.load(f)

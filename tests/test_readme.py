@@ -15,7 +15,9 @@ def _blocks(lang: str) -> list[str]:
 
 def test_ci_runs_the_quick_start_commands_verbatim() -> None:
     quick = _blocks("sh")[0].strip().splitlines()
-    assert len(quick) == 2 and quick[0].startswith("pip install . && mavsid ")
+    assert len(quick) == 2
+    venv = "python3 -m venv .venv && . .venv/bin/activate && "
+    assert quick[0].startswith(venv + "pip install . && mavsid ")
     ci = (ROOT / ".ci" / "run").read_text(encoding="utf-8").splitlines()
     for line in quick:
         assert line in ci, line

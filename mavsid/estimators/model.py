@@ -114,7 +114,7 @@ def provenance(segments: Sequence[Segment], **settings: object) -> dict[str, obj
             for s in segments
         ],
         "settings": settings,
-        "created_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "created_utc": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
         "mavsid_version": __version__,
     }
 

@@ -1214,8 +1214,8 @@ def _layout(d: Definition) -> dict[str, tuple[str, str, np.dtype, tuple[int, ...
             dt = np.dtype(np.float64)
         elif ch == "g":
             dt = np.dtype(np.float32)
-        elif dt.subdtype is not None:
-            dt, shape = dt.subdtype[0].newbyteorder("="), dt.subdtype[1]
+        elif (sub := dt.subdtype) is not None:
+            dt, shape = sub[0].newbyteorder("="), sub[1]
         else:
             dt = dt.newbyteorder("=")
         out[column] = (f"f{i}", ch, dt, shape)

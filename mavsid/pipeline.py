@@ -58,6 +58,7 @@ import numpy as np
 from mavsid.data import FlightData, Segment
 from mavsid.errors import ConfigError, MavsidError, NoExcitationError
 from mavsid.validation import AXIS_RATE, DEFAULT_HORIZONS_S, Model, Validation, validate
+from mavsid.verdict import Verdict, judge, not_identified
 
 if TYPE_CHECKING:
     from mavsid.excitation import WindowReport
@@ -320,6 +321,7 @@ class AxisFit:
     held_out: tuple[Segment, ...]
     estimator: str = ""
     windows: tuple[WindowReport, ...] = ()
+    verdict: Verdict | None = None
 
     @property
     def output(self) -> str:
@@ -357,6 +359,7 @@ class AxisFit:
                     s: {"one_step": v.rmse_one_step[j], "free_run": v.rmse_free_run[j]}
                     for j, s in enumerate(v.state_names)
                 },
+                "verdict": None if self.verdict is None else self.verdict.to_dict(),
                 "stable": v.stable,
                 "eigenvalues": (
                     None
@@ -390,11 +393,14 @@ class FitResult:
     flights: tuple[FlightData, ...]
     logs: tuple[str, ...]
     config: PipelineConfig = field(default_factory=PipelineConfig)
+    #: A verdict for every axis asked for, fitted or not (fitted ones: ``axes[a].verdict``).
+    verdicts: Mapping[str, Verdict] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
-        """``{"axes": {axis: {...}}, "logs": [...], "preset": ..., "config": ...}``."""
+        """``{"axes": {axis: {...}}, "verdicts": {axis: {...}}, "logs": [...], ...}``."""
         return {
             "axes": {a: f.to_dict() for a, f in self.axes.items()},
+            "verdicts": {a: v.to_dict() for a, v in self.verdicts.items()},
             "logs": list(self.logs),
             "presets": sorted({fd.preset for fd in self.flights}),
             "pipeline": self.config.name,
@@ -518,7 +524,7 @@ def fit(
     same_rate = cfg if cfg.rate_hz is not None else cfg.with_overrides(rate_hz=1.0 / first.dt)
     flights = (first, *(_read_flight(p, same_rate) for p in logs[1:]))
     fits: dict[str, AxisFit] = {}
-    problems: list[str] = []
+    verdicts: dict[str, Verdict] = {}
     for axis in cfg.axes:
         windows, segs = _axis_segments(flights, axis, cfg)
         try:
@@ -526,13 +532,16 @@ def fit(
             model = _fit_model(train, axis, cfg)
             val = _validate(model, held_out, cfg)
         except NoExcitationError as exc:
-            problems.append(f"{axis}: {exc}")
+            verdicts[axis] = not_identified(axis, str(exc))
             continue
-        fits[axis] = AxisFit(axis, model, val, train, held_out, cfg.estimator, windows)
+        fitted = AxisFit(axis, model, val, train, held_out, cfg.estimator, windows)
+        verdicts[axis] = judge(axis, val, fitted.output)
+        fits[axis] = dataclasses.replace(fitted, verdict=verdicts[axis])
     if not fits:
         names = ", ".join(os.fspath(p) for p in logs)
-        raise NoExcitationError(f"{names}: nothing identifiable ({'; '.join(problems)})")
-    return FitResult(fits, flights, tuple(os.fspath(p) for p in logs), cfg)
+        problems = "; ".join(v.line() for v in verdicts.values())
+        raise NoExcitationError(f"{names}: nothing identifiable ({problems})")
+    return FitResult(fits, flights, tuple(os.fspath(p) for p in logs), cfg, verdicts)
 
 
 def load_models(path: str | os.PathLike[str]) -> dict[str, Model]:
@@ -577,7 +586,7 @@ def validate_logs(
         cfg = dataclasses.replace(cfg, rate_hz=rates.pop())
     flights = tuple(_read_flight(p, cfg) for p in logs)
     fits: dict[str, AxisFit] = {}
-    problems: list[str] = []
+    verdicts: dict[str, Verdict] = {}
     for axis, model in models.items():
         if axis not in cfg.axes:
             continue
@@ -587,14 +596,17 @@ def validate_logs(
                 raise NoExcitationError("no segments")
             val = _validate(model, segs, cfg)
         except NoExcitationError as exc:
-            problems.append(f"{axis}: {exc}")
+            verdicts[axis] = not_identified(axis, str(exc))
             continue
         estimator = str(dict(getattr(model, "provenance", {}) or {}).get("estimator", ""))
-        fits[axis] = AxisFit(axis, model, val, (), segs, estimator, windows)
+        fitted = AxisFit(axis, model, val, (), segs, estimator, windows)
+        verdicts[axis] = judge(axis, val, fitted.output)
+        fits[axis] = dataclasses.replace(fitted, verdict=verdicts[axis])
     if not fits:
         names = ", ".join(os.fspath(p) for p in logs)
-        raise NoExcitationError(f"{names}: no segment to validate on ({'; '.join(problems)})")
-    return FitResult(fits, flights, tuple(os.fspath(p) for p in logs), cfg)
+        problems = "; ".join(v.line() for v in verdicts.values())
+        raise NoExcitationError(f"{names}: no segment to validate on ({problems})")
+    return FitResult(fits, flights, tuple(os.fspath(p) for p in logs), cfg, verdicts)
 
 
 def find_windows(
@@ -661,4 +673,8 @@ def format_result(result: FitResult) -> str:
             for k in fp
         )
         lines.append(f"  fit %  {cells}")
+    verdicts = [v.line() for v in result.verdicts.values()]
+    if verdicts:
+        lines.append("verdict:")
+        lines += [f"  {v}" for v in verdicts]
     return "\n".join(lines)

@@ -92,9 +92,7 @@ def _ratio(num: str, den: str) -> str:
         return num
     if num == den:
         return "1"
-    if num == "rad/s^2" and den == "rad/s":
-        return "1/s"
-    if num == "rad/s" and den == "rad":
+    if num == _rate_unit(den):  # (rad/s^2)/(rad/s), (m/s)/s over m/s ...
         return "1/s"
     return f"{num}/({den})" if "*" in den or "/" in den else f"{num}/{den}"
 

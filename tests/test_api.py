@@ -357,3 +357,22 @@ def test_public_names():
     assert mavsid.Model.__name__ == "Model"
     with pytest.raises(AttributeError):
         _ = mavsid.no_such_name  # type: ignore[attr-defined]
+
+
+def test_readme_array_api_examples_run():
+    """The README's array-API section is a doctest (its ``pycon`` blocks)."""
+    import doctest
+    import re
+
+    from helpers import ROOT
+
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    start = readme.index("## Your own arrays")
+    section = readme[start : readme.index("\n## ", start + 1)]
+    blocks = re.findall(r"```pycon\n(.*?)```", section, flags=re.S)
+    assert len(blocks) == 3
+    parser = doctest.DocTestParser()
+    test = parser.get_doctest("\n".join(blocks), {}, "README", "README.md", 0)
+    runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS)
+    runner.run(test)
+    assert runner.failures == 0 and runner.tries >= 14

@@ -181,16 +181,24 @@ class DelayScan:
                                   .astype(float), seg.dt, st.filters)
             else:
                 u = np.empty((n, 0))
-            cols = [np.asarray(_column(seg, v)[0], float)[:-1] for v in others]
+            w = np.empty((n - 1, q))
+            c = 0
+            for v in others:
+                w[:, c] = np.asarray(_column(seg, v)[0], float)[:-1]
+                c += 1
             for i in range(len(ins)):
-                ui = u[:, i]
+                ui = np.asarray(u[:, i], float)
                 for j in range(k_max + 1):  # u[k - j], held at u[0] before it starts
-                    cols.append(np.concatenate([np.full(min(j, n - 1), ui[0]),
-                                                ui[: max(n - 1 - j, 0)]]))
+                    h = min(j, n - 1)
+                    w[:h, c] = ui[0]
+                    w[h:, c] = ui[: n - 1 - h]
+                    c += 1
             if has_bias:
-                cols.append(np.ones(n - 1))
-            cols.extend(np.asarray(_column(seg, v)[0], float)[1:] for v in st.outputs)
-            w = np.column_stack(cols)
+                w[:, c] = 1.0
+                c += 1
+            for v in st.outputs:
+                w[:, c] = np.asarray(_column(seg, v)[0], float)[1:]
+                c += 1
             if not np.isfinite(w).all():
                 raise ValueError("non-finite rows")
             head = min(k_max + 1, n - 1)

@@ -162,6 +162,18 @@ def test_the_model_does_what_the_log_path_model_does(tmp_path):
     assert val is not None
 
 
+def test_estimator_by_name_or_instance():
+    from mavsid.estimators import Ridge
+
+    x, u = _plant(800, 9)
+    by_name = identify(x, u, dt=0.01, estimator="ridge", alpha=1e-3, n_bootstrap=0)
+    by_instance = identify(x, u, dt=0.01, estimator=Ridge(alpha=1e-3, n_bootstrap=0))
+    np.testing.assert_allclose(by_name.coef, by_instance.coef)
+    assert by_name.provenance["settings"]["estimator"] == "ridge"  # type: ignore[index]
+    with pytest.raises(ConfigError, match="unknown estimator"):
+        identify(x, u, dt=0.01, estimator="magic")
+
+
 def test_delay_search_on_arrays():
     x, u = _plant(3000, 5, a=((0.9,),), b=((0.4,),), noise=1e-4)
     u_late = np.concatenate([np.zeros((4, 1)), u[:-4]])  # the plant sees u 4 samples late

@@ -658,9 +658,10 @@ def regress(
     select : {None, "stepwise", "threshold"}
         ``"stepwise"``: Klein & Morelli's stepwise regression — the candidate with the
         largest partial F enters while it is ≥ ``f_in``, a regressor leaves when its partial F
-        drops below ``f_out``. ``"threshold"``: sequentially thresholded least squares, a
-        regressor leaves while its standardised coefficient ``|θⱼ| rms(xⱼ) / rms(y)`` is
-        below ``threshold``. ``keep`` names stay in either way.
+        drops below ``f_out`` (the partial F tests use least squares, then the selected
+        model is fitted with ``alpha``). ``"threshold"``: sequentially thresholded (ridge)
+        least squares, a regressor leaves while its standardised coefficient
+        ``|θⱼ| rms(xⱼ) / rms(y)`` is below ``threshold``. ``keep`` names stay in either way.
     colored : {"all-lags", "newey-west"}
         Correction of the covariance for coloured residuals: ``"all-lags"`` is Klein &
         Morelli's ``(XᵀX)⁻¹[Σᵢ Σⱼ x(i) R̂ᵥᵥ(i−j) x(j)ᵀ](XᵀX)⁻¹`` with the residual
@@ -737,7 +738,7 @@ def regress(
     keep_mask = np.array([k in keep for k in nm])
     lam_rows = alpha / n
     if select == "threshold":
-        act = thresholded(g, threshold, keep_mask, lam_rows)[:, 0] != 0
+        act = thresholded(g, threshold, keep_mask, lam_rows, standardize=False)[:, 0] != 0
         how = f"threshold: |θⱼ| rms(xⱼ)/rms(y) >= {threshold:g}"
     elif select == "stepwise":
         act, how = _stepwise(g, f_in, f_out, keep_mask, nm)

@@ -102,11 +102,13 @@ class STLSQ(Estimator):
 
 
 def thresholded(g: Gram, threshold: float, keep: np.ndarray | None = None, alpha: float = 0.0,
-                penalize: np.ndarray | None = None, max_iter: int = 20) -> np.ndarray:
+                penalize: np.ndarray | None = None, max_iter: int = 20,
+                standardize: bool = True) -> np.ndarray:
     """Sequentially thresholded least squares on a Gram, output by output.
 
     A term whose standardised coefficient ``|θⱼ| rms(zⱼ) / rms(y)`` is below ``threshold``
-    is removed and the rest refitted, until nothing changes; ``keep`` terms stay.
+    is removed and the rest refitted, until nothing changes; ``keep`` terms stay. ``alpha``
+    is a ridge weight as in :func:`~mavsid.estimators._base.solve` (``standardize`` too).
 
     Returns
     -------
@@ -122,12 +124,12 @@ def thresholded(g: Gram, threshold: float, keep: np.ndarray | None = None, alpha
     for i in range(m):
         gi = Gram(g.zz, g.zy[:, i : i + 1], g.yy[i : i + 1, i : i + 1], g.n)
         act = np.ones(p, bool)
-        coef = solve(gi, alpha, penalize, act)
+        coef = solve(gi, alpha, penalize, act, standardize)
         for _ in range(max_iter):
             new = act & ((np.abs(coef[:, 0]) * s / ys[i] >= threshold) | keep)
             if np.array_equal(new, act):
                 break
             act = new
-            coef = solve(gi, alpha, penalize, act)
+            coef = solve(gi, alpha, penalize, act, standardize)
         out[:, i] = coef[:, 0]
     return out

@@ -392,3 +392,23 @@ def test_readme_array_api_examples_run():
     runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS)
     runner.run(test)
     assert runner.failures == 0 and runner.tries >= 14
+
+
+@pytest.mark.parametrize("func", ["identify", "regress", "records", "fit_axis"])
+def test_every_parameter_is_documented(func):
+    """python-control's meta-test: a parameter missing from the docstring fails."""
+    import inspect
+    import re
+
+    from mavsid.estimators import api
+
+    f = getattr(api, func)
+    doc = inspect.getdoc(f) or ""
+    section = doc.split("Parameters\n----------\n", 1)[1].split("\n\nReturns", 1)[0]
+    entries = set()
+    for line in section.splitlines():
+        m = re.match(r"^(\*\*)?([\w, *]+?)(\s*:|$)", line)
+        if m and not line.startswith(" "):
+            entries.update(n.strip().lstrip("*") for n in m.group(2).split(","))
+    for name, par in inspect.signature(f).parameters.items():
+        assert name in entries, f"{func}: parameter {name} not documented"

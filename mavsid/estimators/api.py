@@ -312,8 +312,12 @@ def identify(
         Continuous time: derivative method and Savitzky–Golay window (samples).
     refine : {None, "oe", "auto"}
         ``"oe"``: output-error (free-run) estimation started from the equation-error fit
-        (linear models in the states); its covariance is the Cramér–Rao bound
-        (``oe_covariance="cramer-rao"``) or the Newey–West sandwich (``"newey-west"``).
+        (linear models in the states): every record simulated from its first sample with
+        the measured inputs, the squared free-run error minimised. ``"auto"``: only when
+        the states enter linearly.
+    oe_covariance : {"cramer-rao", "newey-west"}
+        Covariance of the output-error estimate: the Cramér–Rao bound for white output
+        noise, ``(Σₜ Jₜᵀ R̂⁻¹ Jₜ)⁻¹``, or the Newey–West sandwich (coloured residuals).
     **estimator_kwargs
         Passed to the estimator (``alpha``, ``threshold``, ``n_bootstrap``, ``bounds``...).
 
@@ -662,12 +666,21 @@ def regress(
         model is fitted with ``alpha``). ``"threshold"``: sequentially thresholded (ridge)
         least squares, a regressor leaves while its standardised coefficient
         ``|θⱼ| rms(xⱼ) / rms(y)`` is below ``threshold``. ``keep`` names stay in either way.
+    threshold : float
+        ``select="threshold"``: the relative threshold (dimensionless).
+    f_in, f_out : float
+        ``select="stepwise"``: partial F to enter, to stay.
+    keep : sequence of str
+        Regressors never left out by selection (e.g. the bias).
     colored : {"all-lags", "newey-west"}
         Correction of the covariance for coloured residuals: ``"all-lags"`` is Klein &
         Morelli's ``(XᵀX)⁻¹[Σᵢ Σⱼ x(i) R̂ᵥᵥ(i−j) x(j)ᵀ](XᵀX)⁻¹`` with the residual
-        autocorrelation ``R̂ᵥᵥ`` over every lag (``lags`` truncates it); ``"newey-west"`` is
-        the Bartlett-weighted sandwich with ``lags`` (default ``⌈4 (N/100)^{2/9}⌉``).
-        Sums never cross a record's end.
+        autocorrelation ``R̂ᵥᵥ(k) = (1/N) Σᵢ v(i) v(i+k)`` over every lag (pooled over records;
+        biased low for a bias column, whose residuals sum to zero); ``"newey-west"`` is the
+        Bartlett-weighted sandwich. Sums never cross a record's end.
+    lags : int, optional
+        ``"all-lags"``: truncate the sum at this lag. ``"newey-west"``: Bartlett lags
+        (default ``⌈4 (N/100)^{2/9}⌉``).
 
     Returns
     -------

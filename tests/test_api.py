@@ -410,5 +410,5 @@ def test_every_parameter_is_documented(func):
         m = re.match(r"^(\*\*)?([\w, *]+?)(\s*:|$)", line)
         if m and not line.startswith(" "):
             entries.update(n.strip().lstrip("*") for n in m.group(2).split(","))
-    for name, par in inspect.signature(f).parameters.items():
+    for name in inspect.signature(f).parameters:
         assert name in entries, f"{func}: parameter {name} not documented"

@@ -3,8 +3,9 @@
 One regression core (:mod:`._base`) on Gram matrices; rows from segments
 (:mod:`.regressors`); SINDy-style libraries (:mod:`.library`); solvers
 (:mod:`.least_squares`, :mod:`.l1`); output-error refinement (:mod:`.output_error`); the
-fitted :class:`Model` (:mod:`.model`); structure selection and the per-axis entry point
-:func:`fit_axis` (:mod:`.select`).
+fitted :class:`Model` (:mod:`.model`); structure search (:mod:`.select`); the array API
+:func:`identify` and :func:`regress`, and the log path's per-axis :func:`fit_axis` built on
+it (:mod:`.api`).
 
 Examples
 --------
@@ -15,6 +16,14 @@ Examples
 
 from mavsid.estimators import library
 from mavsid.estimators._base import Estimator, Gram, check_identifiable, rollout_fit, solve
+from mavsid.estimators.api import (
+    RegressionResult,
+    fit_axis,
+    identify,
+    identify_segments,
+    records,
+    regress,
+)
 from mavsid.estimators.l1 import ElasticNet, Lasso
 from mavsid.estimators.least_squares import STLSQ, LeastSquares, Ridge
 from mavsid.estimators.model import Model, load_model
@@ -28,7 +37,13 @@ from mavsid.estimators.regressors import (
     rows,
     stack,
 )
-from mavsid.estimators.select import AXES, ESTIMATORS, fit_axis, make_estimator, select_delay
+from mavsid.estimators.select import (
+    AXES,
+    ESTIMATORS,
+    make_estimator,
+    search_structure,
+    select_delay,
+)
 
 __all__ = [
     "AXES",
@@ -42,18 +57,24 @@ __all__ = [
     "LeastSquares",
     "Model",
     "Regression",
+    "RegressionResult",
     "Ridge",
     "Structure",
     "check_identifiable",
     "derivative",
     "filters_from_params",
     "fit_axis",
+    "identify",
+    "identify_segments",
     "library",
     "load_model",
     "make_estimator",
+    "records",
     "refine_output_error",
+    "regress",
     "rollout_fit",
     "rows",
+    "search_structure",
     "select_delay",
     "solve",
     "stack",

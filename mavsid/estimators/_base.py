@@ -117,7 +117,7 @@ def check_identifiable(reg: Regression, g: Gram, max_condition: float = 1e10) ->
     def label(js: Sequence[int]) -> str:
         return ", ".join(n for j in js for n in names[j])
 
-    if g.n <= p:
+    if g.n < p:
         raise NoExcitationError(
             f"{label(range(p))} unidentifiable: only {g.n} rows for {p} parameters per output"
         )
@@ -160,12 +160,14 @@ def check_identifiable(reg: Regression, g: Gram, max_condition: float = 1e10) ->
 
 
 def solve(g: Gram, ridge: float = 0.0, penalize: np.ndarray | None = None,
-          active: np.ndarray | None = None) -> np.ndarray:
+          active: np.ndarray | None = None, standardize: bool = True) -> np.ndarray:
     """Least squares (ridge when ``ridge > 0``) from the Gram.
 
     Columns are scaled to unit RMS first; the penalty ``ridge · n · ‖diag(s) θ‖²`` acts on
     the scaled coefficients of the ``penalize`` columns (default: all). Columns outside
-    ``active`` are fixed at zero. Solved by Cholesky of the scaled Gram.
+    ``active`` are fixed at zero. Solved by Cholesky of the scaled Gram. With
+    ``standardize=False`` the penalty is the textbook ``ridge · n · ‖θ‖²`` on the raw
+    coefficients (``θ = (ZᵀZ + λI)⁻¹ZᵀY`` for ``λ = ridge · n``).
 
     Returns
     -------
@@ -176,7 +178,7 @@ def solve(g: Gram, ridge: float = 0.0, penalize: np.ndarray | None = None,
     coef = np.zeros((p, g.zy.shape[1]))
     if not act.any():
         return coef
-    s = _scales(g)[act]
+    s = _scales(g)[act] if standardize else np.ones(int(act.sum()))
     a = g.zz[np.ix_(act, act)] / np.outer(s, s)
     b = g.zy[act] / s[:, None]
     if ridge > 0:

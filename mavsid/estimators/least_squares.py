@@ -28,7 +28,7 @@ from mavsid.estimators import library
 from mavsid.estimators._base import Estimator, Gram, _scales, solve
 from mavsid.estimators.regressors import Structure
 
-__all__ = ["STLSQ", "LeastSquares", "Ridge"]
+__all__ = ["STLSQ", "LeastSquares", "Ridge", "thresholded"]
 
 
 def _penalty_mask(structure: Structure) -> np.ndarray:
@@ -96,22 +96,40 @@ class STLSQ(Estimator):
         unknown = set(self.keep) - set(structure.features)
         if unknown:
             raise ConfigError(f"STLSQ keep= names unknown features {sorted(unknown)}")
-        p, m = g.zy.shape
-        s = _scales(g)
-        ys = np.sqrt(np.clip(np.diag(g.yy), 0, None) / max(g.n, 1))
-        ys = np.where(ys > 0, ys, 1.0)
         keep = np.array([f in self.keep for f in structure.features])
-        pen = _penalty_mask(structure)
-        out = np.zeros((p, m))
-        for i in range(m):
-            gi = Gram(g.zz, g.zy[:, i : i + 1], g.yy[i : i + 1, i : i + 1], g.n)
-            act = np.ones(p, bool)
-            coef = solve(gi, alpha, pen, act)
-            for _ in range(self.max_iter):
-                new = act & ((np.abs(coef[:, 0]) * s / ys[i] >= self.threshold) | keep)
-                if np.array_equal(new, act):
-                    break
-                act = new
-                coef = solve(gi, alpha, pen, act)
-            out[:, i] = coef[:, 0]
-        return out
+        return thresholded(g, self.threshold, keep, alpha, _penalty_mask(structure),
+                           self.max_iter)
+
+
+def thresholded(g: Gram, threshold: float, keep: np.ndarray | None = None, alpha: float = 0.0,
+                penalize: np.ndarray | None = None, max_iter: int = 20,
+                standardize: bool = True) -> np.ndarray:
+    """Sequentially thresholded least squares on a Gram, output by output.
+
+    A term whose standardised coefficient ``|θⱼ| rms(zⱼ) / rms(y)`` is below ``threshold``
+    is removed and the rest refitted, until nothing changes; ``keep`` terms stay. ``alpha``
+    is a ridge weight as in :func:`~mavsid.estimators._base.solve` (``standardize`` too).
+
+    Returns
+    -------
+    numpy.ndarray, shape (p, m)
+        Zero exactly where a term was removed.
+    """
+    p, m = g.zy.shape
+    s = _scales(g)
+    ys = np.sqrt(np.clip(np.diag(g.yy), 0, None) / max(g.n, 1))
+    ys = np.where(ys > 0, ys, 1.0)
+    keep = np.zeros(p, bool) if keep is None else np.asarray(keep, bool)
+    out = np.zeros((p, m))
+    for i in range(m):
+        gi = Gram(g.zz, g.zy[:, i : i + 1], g.yy[i : i + 1, i : i + 1], g.n)
+        act = np.ones(p, bool)
+        coef = solve(gi, alpha, penalize, act, standardize)
+        for _ in range(max_iter):
+            new = act & ((np.abs(coef[:, 0]) * s / ys[i] >= threshold) | keep)
+            if np.array_equal(new, act):
+                break
+            act = new
+            coef = solve(gi, alpha, penalize, act, standardize)
+        out[:, i] = coef[:, 0]
+    return out

@@ -60,15 +60,28 @@ UNITS: dict[str, str] = {
 _FORMAT = "mavsid-model"
 
 
-def _unit(var: str) -> str:
+def _unit(var: str, units: Mapping[str, str] | None = None) -> str:
+    if units and var in units:
+        return str(units[var])
     return UNITS.get(var, "?")
 
 
-def _feature_unit(feature: str) -> str:
+def _rate_unit(unit: str) -> str:
+    """Unit of the time derivative of a quantity in ``unit``."""
+    if unit == "rad/s":
+        return "rad/s^2"
+    if unit == "rad":
+        return "rad/s"
+    if unit in ("?", "1"):
+        return f"{unit}/s" if unit == "?" else "1/s"
+    return f"({unit})/s" if "/" in unit or "*" in unit else f"{unit}/s"
+
+
+def _feature_unit(feature: str, units: Mapping[str, str] | None = None) -> str:
     facs = library.parse(feature)
     parts = []
     for f in facs:
-        u = "1" if f.func else _unit(f.var)
+        u = "1" if f.func else _unit(f.var, units)
         if u != "1":
             parts.append(u if f.power == 1 else f"({u})^{f.power}")
     return "*".join(parts) or "1"
@@ -79,9 +92,7 @@ def _ratio(num: str, den: str) -> str:
         return num
     if num == den:
         return "1"
-    if num == "rad/s^2" and den == "rad/s":
-        return "1/s"
-    if num == "rad/s" and den == "rad":
+    if num == _rate_unit(den):  # (rad/s^2)/(rad/s), (m/s)/s over m/s ...
         return "1/s"
     return f"{num}/({den})" if "*" in den or "/" in den else f"{num}/{den}"
 
@@ -173,6 +184,9 @@ class Model:
         Residual standard deviation per output.
     provenance : Mapping
         Logs (sha256), segments, estimator and its settings.
+    var_units : Mapping[str, str]
+        Units of the variables (states, inputs) beyond the canonical ones of ``UNITS``
+        (``"?"`` where neither says); parameter units are derived from them.
     """
 
     state_names: tuple[str, ...]
@@ -188,6 +202,7 @@ class Model:
     coef_stderr: np.ndarray | None = field(default=None, repr=False)
     sigma: np.ndarray | None = field(default=None, repr=False)
     provenance: Mapping[str, object] = field(default_factory=dict, repr=False)
+    var_units: Mapping[str, str] = field(default_factory=dict, repr=False)
 
     def __post_init__(self) -> None:
         coef = np.asarray(self.coef, dtype=float).reshape(len(self.features),
@@ -254,16 +269,16 @@ class Model:
         """Parameter name and unit of coefficient (feature -> d out)."""
         sfx = "" if self.continuous else "_d"
         facs = library.parse(feature)
-        yunit = _unit(out) if not self.continuous else (
-            "rad/s^2" if _unit(out) == "rad/s" else "rad/s" if _unit(out) == "rad" else "?/s")
-        funit = _feature_unit(feature)
+        vu = self.var_units
+        yunit = _unit(out, vu) if not self.continuous else _rate_unit(_unit(out, vu))
+        funit = _feature_unit(feature, vu)
         if not facs:
             return f"c{sfx}[{out}]", yunit
         kind = "W"
         if len(facs) == 1 and facs[0].power == 1 and not facs[0].func:
             kind = "B" if facs[0].var in self.input_names else "A"
         unit = _ratio(yunit, funit)
-        if not self.continuous and kind == "A" and _unit(out) == _unit(feature):
+        if not self.continuous and kind == "A" and _unit(out, vu) == _unit(feature, vu):
             unit = "1"
         return f"{kind}{sfx}[{out},{feature}]", unit
 
@@ -443,9 +458,14 @@ class Model:
         numpy.ndarray, shape (len(segment), len(state_names))
         """
         xm, var = self._measured(segment)
-        n, m = xm.shape
+        return self._free_run(xm[0] if x0 is None else x0, var, len(xm))
+
+    def _free_run(self, x0: np.ndarray, var: Mapping[str, np.ndarray], n: int) -> np.ndarray:
+        """Free run of ``n`` samples from ``x0`` given every feature variable (inputs already
+        filtered and delayed: see :meth:`_measured`)."""
+        m = len(self.state_names)
         out = np.empty((n, m))
-        out[0] = xm[0] if x0 is None else np.asarray(x0, dtype=float).reshape(m)
+        out[0] = np.asarray(x0, dtype=float).reshape(m)
         if n == 1:
             return out
         if self.is_affine:
@@ -592,6 +612,7 @@ class Model:
             "stderr": self.stderr,
             "units": self.units,
             "provenance": self.provenance,
+            "var_units": dict(self.var_units),
         })
 
     @classmethod
@@ -618,6 +639,7 @@ class Model:
                               for f in d["filters"]),
                 covariance=arr("covariance"), coef_stderr=arr("coef_stderr"),
                 sigma=arr("sigma"), provenance=d.get("provenance") or {},
+                var_units={str(k): str(v) for k, v in (d.get("var_units") or {}).items()},
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise LogFormatError(f"model dictionary is incomplete or malformed: {exc}") from None

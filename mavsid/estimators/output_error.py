@@ -38,7 +38,7 @@ import numpy as np
 from scipy import optimize
 
 from mavsid.data import Segment
-from mavsid.errors import SolverError
+from mavsid.errors import ConfigError, SolverError
 from mavsid.estimators._base import hac_covariance
 from mavsid.estimators.model import Model
 from mavsid.estimators.regressors import Regression
@@ -51,7 +51,8 @@ def _measured(model: Model, seg: Segment) -> np.ndarray:
 
 
 def refine_output_error(model: Model, segments: Sequence[Segment], max_nfev: int = 100,
-                        hac: bool = True) -> Model:
+                        hac: bool = True, covariance: str | None = None,
+                        bounds: tuple[np.ndarray, np.ndarray] | None = None) -> Model:
     """Refine ``model``'s non-zero coefficients by minimising the free-run error.
 
     Parameters
@@ -63,7 +64,14 @@ def refine_output_error(model: Model, segments: Sequence[Segment], max_nfev: int
     max_nfev : int
         Limit on residual evaluations of the trust-region solver.
     hac : bool
-        Newey–West correction of the covariance.
+        Newey–West correction of the covariance (when ``covariance`` is not given).
+    covariance : {"newey-west", "cramer-rao"}, optional
+        ``"cramer-rao"``: the Cramér–Rao bound for white Gaussian output noise,
+        ``(Σₜ Jₜᵀ R̂⁻¹ Jₜ)⁻¹`` with ``R̂`` the diagonal of the residual variances per output
+        (what the output-error literature reports; too optimistic when the residuals are
+        coloured). ``"newey-west"``: the sandwich above. Default: from ``hac``.
+    bounds : (low, high) arrays shaped like ``model.coef``, optional
+        Bounds kept during the refinement (those of a bounded L1 fit, for instance).
 
     Returns
     -------
@@ -72,6 +80,10 @@ def refine_output_error(model: Model, segments: Sequence[Segment], max_nfev: int
         recorded in ``provenance['refine']``.
     """
     segments = list(segments)
+    if covariance is None:
+        covariance = "newey-west" if hac else "plain"
+    if covariance not in ("newey-west", "cramer-rao", "plain"):
+        raise ConfigError(f"covariance must be 'newey-west' or 'cramer-rao', got {covariance!r}")
     active = model.coef != 0
     idx = np.flatnonzero(active.ravel())
     ys = [_measured(model, s) for s in segments]
@@ -85,20 +97,29 @@ def refine_output_error(model: Model, segments: Sequence[Segment], max_nfev: int
         return replace(model, coef=coef.reshape(model.coef.shape), covariance=None,
                        coef_stderr=None)
 
+    # the inputs are filtered and delayed once: only the coefficients change
+    variables = [model._measured(s)[1] for s in segments]
+
     def residuals(theta: np.ndarray) -> np.ndarray:
         m = build(theta)
         out = []
         with np.errstate(all="ignore"):
-            for s, y in zip(segments, ys, strict=True):
-                e = (m.simulate(s) - y) / scale
+            for y, var in zip(ys, variables, strict=True):
+                e = (m._free_run(y[0], var, len(y)) - y) / scale
                 out.append(np.where(np.isfinite(e), np.clip(e, -big, big), big).ravel())
         return np.concatenate(out)
 
     theta0 = model.coef.ravel()[idx]
+    lo, hi = np.full(len(idx), -np.inf), np.full(len(idx), np.inf)
+    if bounds is not None:
+        lo = np.asarray(bounds[0], float).reshape(model.coef.shape).ravel()[idx]
+        hi = np.asarray(bounds[1], float).reshape(model.coef.shape).ravel()[idx]
+        theta0 = np.clip(theta0, lo, hi)
     x_scale = np.where(np.abs(theta0) > 0, np.abs(theta0), 1.0)
     try:
         sol = optimize.least_squares(residuals, theta0, x_scale=x_scale, max_nfev=max_nfev,
-                                     method="trf")
+                                     method="trf",
+                                     bounds=(lo, hi) if bounds is not None else (-np.inf, np.inf))
     except (ValueError, np.linalg.LinAlgError) as exc:
         raise SolverError(f"output-error refinement failed: {exc}") from None
     start_cost = 0.5 * float(np.sum(residuals(theta0) ** 2))
@@ -119,9 +140,18 @@ def refine_output_error(model: Model, segments: Sequence[Segment], max_nfev: int
                         blocks=np.asarray(spans, dtype=int), segments=tuple(segments))
     jtj = jac.T @ jac
     bread = np.linalg.pinv(jtj, hermitian=True)
-    if hac:
+    if covariance == "newey-west":
         cov_s, sig, lags = hac_covariance(pseudo, sol.x[:, None], bread)
         cov_theta = cov_s[0]
+    elif covariance == "cramer-rao":
+        # rows of sol.fun are (sample, output) interleaved: output i is row % m_out
+        out_of_row = np.arange(len(e)) % m_out
+        dof = max(len(e) - len(idx), 1) / m_out
+        var = np.array([float(e[out_of_row == i] @ e[out_of_row == i]) / dof
+                        for i in range(m_out)])
+        w = 1.0 / np.where(var > 0, var, np.inf)[out_of_row]
+        cov_theta = np.linalg.pinv(jac.T @ (jac * w[:, None]), hermitian=True)
+        lags = 0
     else:
         dof = max(len(e) - len(idx), 1)
         sig = np.array([np.sqrt(float(e @ e) / dof)])
@@ -135,9 +165,11 @@ def refine_output_error(model: Model, segments: Sequence[Segment], max_nfev: int
         cov[i][np.ix_(cols, cols)] = cov_theta[np.ix_(sel, sel)]
     se = np.sqrt(np.clip(np.stack([np.diag(c) for c in cov], axis=1), 0, None))
     se = np.where(active, se, np.nan)
-    resid = np.concatenate([(refined.simulate(s) - y) for s, y in zip(segments, ys, strict=True)])
+    resid = np.concatenate([refined._free_run(y[0], var, len(y)) - y
+                            for y, var in zip(ys, variables, strict=True)])
     sigma = np.sqrt(np.mean(resid**2, axis=0))
     prov = dict(model.provenance)
     prov["refine"] = {"method": "output-error", "nfev": int(sol.nfev), "hac_lags": int(lags),
+                      "covariance": covariance,
                       "cost_start": start_cost, "cost": float(sol.cost)}
     return replace(refined, covariance=cov, coef_stderr=se, sigma=sigma, provenance=prov)

@@ -29,6 +29,7 @@ Examples
 
 from __future__ import annotations
 
+import functools
 import itertools
 import warnings
 from collections.abc import Iterable, Mapping, Sequence
@@ -102,8 +103,8 @@ class InputFilter:
                 f"input filter {self.source or 'cut-off'} {self.cutoff_hz:g} Hz outside "
                 f"(0, {0.5 * fs:g}) Hz at {fs:g} Hz"
             )
-        b, a = signal.butter(self.order, self.cutoff_hz, fs=fs)
-        return np.asarray(b), np.asarray(a)
+        b, a, _ = _design(self.order, float(self.cutoff_hz), float(fs))
+        return b.copy(), a.copy()
 
     def statespace(self, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The filter as a discrete state space at the data step ``dt`` (input held over the
@@ -121,11 +122,11 @@ class InputFilter:
 
     def apply(self, u: np.ndarray, dt: float) -> np.ndarray:
         """Filter along axis 0, starting in steady state at the first sample."""
-        b, a = self.coefficients(dt)
-        u = np.asarray(u, dtype=float)
+        self.coefficients(dt)  # validates the cut-off against the rate
         r = self.substeps(dt)
+        b, a, zi = _design(self.order, float(self.cutoff_hz), r / dt)
+        u = np.asarray(u, dtype=float)
         fast = np.repeat(u, r, axis=0) if r > 1 else u
-        zi = signal.lfilter_zi(b, a)
         zi = zi.reshape((-1,) + (1,) * (u.ndim - 1)) * u[:1]
         out, _ = signal.lfilter(b, a, fast, axis=0, zi=zi)
         return np.asarray(out[r - 1 :: r] if r > 1 else out)
@@ -133,6 +134,18 @@ class InputFilter:
     def to_dict(self) -> dict[str, object]:
         return {"cutoff_hz": self.cutoff_hz, "order": self.order, "source": self.source,
                 "rate_hz": self.rate_hz}
+
+
+@functools.lru_cache(maxsize=256)
+def _design(order: int, cutoff_hz: float, fs: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Butterworth ``(b, a)`` and the steady-state initial condition, designed once per
+    (order, cut-off, rate): the structure search and every rollout reuse them."""
+    b, a = signal.butter(order, cutoff_hz, fs=fs)
+    b, a = np.asarray(b, float), np.asarray(a, float)
+    zi = np.asarray(signal.lfilter_zi(b, a), float)
+    for arr in (b, a, zi):
+        arr.flags.writeable = False
+    return b, a, zi
 
 
 def filters_from_params(params: Mapping[str, float], dt: float) -> tuple[InputFilter, ...]:

@@ -1,23 +1,29 @@
-"""Structure from data: which inputs, which known filters, which delay; then fit one axis.
+"""Structure from data: which input lag and which delay, chosen by the one-step residual.
 
-:func:`fit_axis` is what the ``mavsid fit`` pipeline calls per axis. The structure it fits is
-physically meaningful for a multicopter's rate loop:
+The search is what :func:`~mavsid.estimators.api.identify` (``delay="search"``) and the log
+path's :func:`~mavsid.estimators.api.fit_axis` run before fitting:
 
-* first-order rate dynamics per axis in discrete time, ``p[k+1] = a p[k] + b ũ[k-d] + c``,
-  reported also in continuous time (``A[p,p]`` in 1/s, ``B[p,u_roll]`` the control
-  effectiveness in rad/s² per unit of controller output, ``c[p]`` the trim offset);
-* ``ũ`` is the input passed through the known measurement filters of the log's parameters
-  (ArduPilot ``INS_GYRO_FILTER``, see :func:`~mavsid.estimators.regressors.filters_from_params`)
-  so that the filter's lag is not absorbed into a smaller gain;
-* the coefficients refined by output error (free-run error minimised) unless
-  ``refine=None``;
-* a first-order input lag (the motors' response, not in any log parameter) and the delay
-  ``d`` (whole samples, then fractions) chosen together by the one-step residual.
+* a first-order input lag (motor and ESC response, in no log parameter) and the input delay
+  ``d`` (whole samples, then fractions of a sample around the best) are chosen together;
+* each candidate is scored by the mean squared one-step residual of a least-squares fit;
+* parsimony: the simplest (lag, delay) within ``structure_tol`` of the best wins.
+
+Cost: the candidates share their rows. For a linear discrete-time structure the inputs are
+filtered once per lag (the Butterworth designs are cached), every delayed copy of them is
+one column of a single Gram matrix, and a candidate's Gram (including a fractional delay,
+``(1 − f) u[k−d] + f u[k−d−1]``, which is linear in two delayed copies) is a small projection
+of it plus the few rows at the record's start that only shorter delays use. Scores are
+therefore exact (the same rows and sums as refitting each candidate), and the search costs
+one pass over the data per lag. Other structures (continuous time, nonlinear libraries) are
+scored candidate by candidate.
+
+The default search ranges are the module constants below (``DEFAULT_*``).
 
 Examples
 --------
 >>> import numpy as np
 >>> from mavsid.data import Segment
+>>> from mavsid.estimators.regressors import Structure
 >>> rng = np.random.default_rng(3)
 >>> u = rng.standard_normal(2000) * 0.05
 >>> p = np.zeros(2000)
@@ -25,36 +31,38 @@ Examples
 ...     p[k + 1] = 0.98 * p[k] + 0.4 * u[max(k - 3, 0)]
 >>> seg = Segment(np.arange(2000) * 0.0025, p[:, None], u[:, None], ("p",), ("u_roll",),
 ...               0.0025, "roll", "sysid")
->>> m = fit_axis([seg], "roll", n_bootstrap=0)
->>> m.delay, round(m.params["B_d[p,u_roll]"], 6)
-(3, 0.4)
+>>> best, scan = select_delay([seg], Structure(("p",), ("p", "u_roll", "1")), range(6))
+>>> best, bool(scan[3.0] < 1e-20 < scan[2.0])
+(3.0, True)
 """
 
 from __future__ import annotations
 
-import warnings
-from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import replace
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from mavsid.data import Segment
-from mavsid.errors import ConfigError, DataQualityWarning, NoExcitationError, SolverError
+from mavsid.errors import ConfigError, NoExcitationError
 from mavsid.estimators import library
-from mavsid.estimators._base import Estimator, block_grams, check_identifiable, solve
+from mavsid.estimators._base import Estimator, Gram, block_grams, check_identifiable, solve
 from mavsid.estimators.l1 import ElasticNet, Lasso
 from mavsid.estimators.least_squares import STLSQ, LeastSquares, Ridge
-from mavsid.estimators.model import Model
-from mavsid.estimators.output_error import refine_output_error
-from mavsid.estimators.regressors import InputFilter, Structure, filters_from_params, stack
+from mavsid.estimators.regressors import InputFilter, Structure, _column, filter_inputs, stack
 
 __all__ = [
     "AXES",
+    "DEFAULT_DELAY_STEP",
     "DEFAULT_LAGS_S",
+    "DEFAULT_MAX_DELAY_S",
+    "DEFAULT_STRUCTURE_TOL",
     "ESTIMATORS",
-    "fit_axis",
-    "log_params",
+    "DelayScan",
+    "StructureChoice",
+    "lag_filter",
     "make_estimator",
+    "search_structure",
     "select_delay",
 ]
 
@@ -68,6 +76,15 @@ AXES: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
 
 #: Default candidates for a first-order input (motor) lag, s.
 DEFAULT_LAGS_S: tuple[float, ...] = (0.0, 0.005, 0.01, 0.015, 0.02, 0.03, 0.04, 0.06)
+
+#: Longest input delay searched by default, s.
+DEFAULT_MAX_DELAY_S: float = 0.025
+
+#: Resolution of the fractional delay search around the best whole sample, samples.
+DEFAULT_DELAY_STEP: float = 0.125
+
+#: Parsimony: the simplest candidate within this fraction of the best one-step residual wins.
+DEFAULT_STRUCTURE_TOL: float = 0.005
 
 #: Estimator name -> class.
 ESTIMATORS: dict[str, type[Estimator]] = {
@@ -94,17 +111,170 @@ def make_estimator(name: str, structure: Structure | None = None, **kwargs: obje
         raise ConfigError(f"estimator {name!r}: {exc}") from None
 
 
-def log_params(segments: Iterable[Segment], params: Mapping[str, float] | None = None
-               ) -> dict[str, float]:
-    """The log parameters to use: ``params`` if given, else ``segment.meta['params']``."""
-    if params is not None:
-        return dict(params)
-    for s in segments:
-        got = s.meta.get("params") if isinstance(s.meta, Mapping) else None
-        if isinstance(got, Mapping) and got:
-            return {str(k): float(v) for k, v in got.items()
-                    if isinstance(v, (int, float, np.floating))}
-    return {}
+def lag_filter(lag_s: float) -> tuple[InputFilter, ...]:
+    """A first-order input lag (motor/ESC response) as a filter; none for 0.
+
+    Examples
+    --------
+    >>> lag_filter(0.0), round(lag_filter(0.02)[0].cutoff_hz, 3)
+    ((), 7.958)
+    """
+    if lag_s <= 0:
+        return ()
+    return (InputFilter(1.0 / (2 * np.pi * lag_s), 1, f"input lag {lag_s * 1e3:g} ms"),)
+
+
+def _split_delay(dly: float) -> tuple[int, float]:
+    d = int(np.floor(dly + 1e-9))
+    return d, round(float(dly) - d, 9) % 1.0
+
+
+def _shift_needed(dly: float) -> int:
+    """Oldest input sample a delay uses (``d + 1`` for a fractional delay ``d + f``)."""
+    d, f = _split_delay(dly)
+    return d + (1 if f > 0 else 0)
+
+
+class DelayScan:
+    """One-step mean squared residual of a structure at many input delays, from one Gram.
+
+    Parameters
+    ----------
+    segments : sequence of Segment
+    structure : Structure
+        Discrete time, linear features (states, inputs, bias); its ``delay`` is ignored.
+    max_shift : int
+        Largest delay (whole samples, a fractional delay ``d + f`` needs ``d + 1``).
+    inputs : list of numpy.ndarray, optional
+        The structure's inputs per segment, already filtered by ``structure.filters``.
+
+    Raises
+    ------
+    ValueError
+        When the structure is not linear and discrete, or rows are not finite (callers then
+        score candidates one by one).
+    """
+
+    def __init__(self, segments: Sequence[Segment], structure: Structure, max_shift: int,
+                 inputs: Sequence[np.ndarray] | None = None) -> None:
+        st = structure
+        if st.continuous or not library.is_linear(st.features):
+            raise ValueError("fast delay scan needs a linear discrete-time structure")
+        self.structure = st
+        self.max_shift = k_max = int(max_shift)
+        ins = [f for f in st.features if f in st.inputs]
+        others = [f for f in st.features if f != library.BIAS and f not in st.inputs]
+        self._ins, self._others = ins, others
+        has_bias = library.BIAS in st.features
+        q = len(others) + len(ins) * (k_max + 1) + int(has_bias) + len(st.outputs)
+        suffix = np.zeros((k_max + 2, q, q))
+        self._lengths = []
+        for si, seg in enumerate(segments):
+            n = len(seg)
+            self._lengths.append(n)
+            if n < 2:
+                continue
+            if inputs is not None:
+                u = inputs[si]
+            elif ins:
+                u = filter_inputs(np.column_stack([_column(seg, v)[0] for v in ins])
+                                  .astype(float), seg.dt, st.filters)
+            else:
+                u = np.empty((n, 0))
+            w = np.empty((n - 1, q))
+            c = 0
+            for v in others:
+                w[:, c] = np.asarray(_column(seg, v)[0], float)[:-1]
+                c += 1
+            for i in range(len(ins)):
+                ui = np.asarray(u[:, i], float)
+                for j in range(k_max + 1):  # u[k - j], held at u[0] before it starts
+                    h = min(j, n - 1)
+                    w[:h, c] = ui[0]
+                    w[h:, c] = ui[: n - 1 - h]
+                    c += 1
+            if has_bias:
+                w[:, c] = 1.0
+                c += 1
+            for v in st.outputs:
+                w[:, c] = np.asarray(_column(seg, v)[0], float)[1:]
+                c += 1
+            if not np.isfinite(w).all():
+                raise ValueError("non-finite rows")
+            head = min(k_max + 1, n - 1)
+            suffix[head] += w[head:].T @ w[head:]
+            for r in range(head - 1, -1, -1):
+                suffix[r] += np.outer(w[r], w[r])
+        # suffix[r]: row r alone (r < head) or every row from head on; summed from the end,
+        # _cum[l] is the Gram of the rows k >= l of every segment
+        self._cum = np.cumsum(suffix[::-1], axis=0)[::-1]
+        self._has_bias = has_bias
+
+    def gram(self, dly: float) -> Gram:
+        """The Gram ``[Z Y]ᵀ[Z Y]`` of the rows a fit at delay ``dly`` (samples) uses."""
+        st = self.structure
+        d, f = _split_delay(dly)
+        lead = _shift_needed(dly)
+        if lead > self.max_shift:
+            raise ConfigError(f"delay {dly:g} beyond the scan's {self.max_shift} samples")
+        q = self._cum.shape[1]
+        p, m = len(st.features), len(st.outputs)
+        t = np.zeros((q, p + m))
+        n_oth, k1 = len(self._others), self.max_shift + 1
+        for j, feat in enumerate(st.features):
+            if feat == library.BIAS:
+                t[n_oth + len(self._ins) * k1, j] = 1.0
+            elif feat in st.inputs:
+                base = n_oth + self._ins.index(feat) * k1
+                t[base + d, j] = 1.0 - f
+                if f > 0:
+                    t[base + d + 1, j] = f
+            else:
+                t[self._others.index(feat), j] = 1.0
+        for i in range(m):
+            t[q - m + i, p + i] = 1.0
+        full = t.T @ self._cum[lead] @ t
+        rows = sum(max(n - 1 - lead, 0) for n in self._lengths)
+        return Gram(full[:p, :p], full[:p, p:], full[p:, p:], int(rows))
+
+    def mse(self, dly: float) -> float | None:
+        """Mean squared one-step residual (over rows and outputs) of the least-squares fit at
+        ``dly``; None when no segment is long enough."""
+        g = self.gram(dly)
+        if g.n < 1:
+            return None
+        # the least-squares solution of the (tiny) unit-RMS-scaled Gram; solve()'s Cholesky
+        # path would give the same numbers at ten times the call overhead
+        s = np.sqrt(np.clip(np.diag(g.zz), 0, None) / g.n)
+        s = np.where(s > 0, s, 1.0)
+        try:
+            coef = np.linalg.solve(g.zz / np.outer(s, s), g.zy / s[:, None]) / s[:, None]
+        except np.linalg.LinAlgError:
+            coef = solve(g)
+        sse = float(np.sum(g.sse(coef)))
+        return max(sse, 0.0) / (g.n * g.zy.shape[1])
+
+
+def _slow_mse(segments: Sequence[Segment], structure: Structure, dly: float) -> float | None:
+    d, f = _split_delay(dly)
+    st = replace(structure, delay=d, delay_frac=f)
+    try:
+        reg = stack(segments, st)
+    except NoExcitationError:
+        return None
+    grams = block_grams(reg)
+    g = sum(grams[1:], grams[0])
+    check_identifiable(reg, g)
+    resid = reg.y - reg.z @ solve(g)
+    return float(np.mean(resid**2))
+
+
+def _scorer(segments: Sequence[Segment], structure: Structure, max_shift: int,
+            inputs: Sequence[np.ndarray] | None = None) -> Callable[[float], float | None]:
+    try:
+        return DelayScan(segments, structure, max_shift, inputs).mse
+    except ValueError:
+        return lambda dly: _slow_mse(segments, structure, dly)
 
 
 def select_delay(segments: Sequence[Segment], structure: Structure, delays: Iterable[float]
@@ -114,165 +284,124 @@ def select_delay(segments: Sequence[Segment], structure: Structure, delays: Iter
 
     Returns the best delay and the mean squared residual for every candidate.
     """
-    scan: dict[float, float] = {}
-    for dly in delays:
-        d = int(np.floor(dly + 1e-9))
-        st = replace(structure, delay=d, delay_frac=round(float(dly) - d, 9) % 1.0)
-        try:
-            reg = stack(segments, st)
-        except NoExcitationError:
-            continue
-        grams = block_grams(reg)
-        g = sum(grams[1:], grams[0])
-        check_identifiable(reg, g)
-        coef = solve(g)
-        resid = reg.y - reg.z @ coef
-        scan[float(dly)] = float(np.mean(resid**2))
+    delays = [float(v) for v in delays]
+    if not delays:
+        raise ConfigError("no candidate delay given")
+    if min(delays) < 0:
+        raise ConfigError(f"delays must be >= 0 samples, got {min(delays):g}")
+    score = _scorer(segments, structure, max(_shift_needed(v) for v in delays))
+    scan = {dly: v for dly in delays if (v := score(dly)) is not None}
     if not scan:
         raise NoExcitationError("segments too short for every candidate delay")
     return min(scan, key=scan.__getitem__), scan
 
 
-def fit_axis(
+@dataclass(frozen=True)
+class StructureChoice:
+    """What :func:`search_structure` chose.
+
+    Attributes
+    ----------
+    structure : Structure
+        The input structure with the chosen lag filter appended and the chosen delay.
+    lag_s : float
+        Time constant of the chosen first-order input lag (0: none).
+    delay : float
+        Chosen delay, samples (whole plus fraction).
+    scan : dict of str to float
+        ``"lag=…s,delay=…"`` -> mean squared one-step residual of every candidate.
+    """
+
+    structure: Structure
+    lag_s: float
+    delay: float
+    scan: dict[str, float]
+
+
+def search_structure(
     segments: Sequence[Segment],
-    axis: str,
-    estimator: str = "ls",
+    structure: Structure,
     *,
-    params: Mapping[str, float] | None = None,
-    filters: Sequence[InputFilter] | None = None,
-    delays: Iterable[int] | None = None,
     delay: float | None = None,
-    delay_step: float = 0.125,
-    max_delay_s: float = 0.025,
+    delays: Iterable[float] | None = None,
+    delay_step: float = DEFAULT_DELAY_STEP,
+    max_delay_s: float = DEFAULT_MAX_DELAY_S,
     lags_s: Iterable[float] | None = DEFAULT_LAGS_S,
-    structure_tol: float = 0.005,
-    inputs: Sequence[str] | None = None,
-    bias: bool = True,
-    continuous: bool = False,
-    features: Sequence[str] = (),
-    refine: str | None = "auto",
-    **estimator_kwargs: object,
-) -> Model:
-    """Choose the structure for one axis from the data and the log, fit it, return the model.
+    structure_tol: float = DEFAULT_STRUCTURE_TOL,
+) -> StructureChoice:
+    """Choose the input lag and delay of ``structure`` from the data.
 
     Parameters
     ----------
     segments : sequence of Segment
-        Segments whose ``axis`` is another attitude axis are left out when at least one
-        segment is for ``axis`` (or ``"all"``).
-    axis : {"roll", "pitch", "yaw", "all"}
-        ``"all"``: the coupled p/q/r model with all three inputs.
-    estimator : str
-        ``ls``, ``ridge``, ``l1``, ``elasticnet`` or ``stlsq``.
-    params : Mapping, optional
-        The log's parameters (default: ``segment.meta['params']``); used for known filters.
-    filters : sequence of InputFilter, optional
-        Override the filters derived from ``params`` (``()`` for none).
-    delays : iterable of float, optional
-        Candidate delays in samples; fractions allowed. Default: whole samples up to
-        ``max_delay_s``, then steps of ``delay_step`` around the best.
+    structure : Structure
+        Its ``filters`` are the known ones; the lag filter is appended after them.
     delay : float, optional
-        Fix the delay (samples) instead of searching.
+        Fix the delay (samples) instead of searching it.
+    delays : iterable of float, optional
+        Candidate delays (samples, fractions allowed). Default: whole samples up to
+        ``max_delay_s``, then steps of ``delay_step`` around the best.
     delay_step : float
-        Resolution of the default delay search, in samples (1: whole samples only).
+        Resolution of the default delay search, samples (1: whole samples only).
     max_delay_s : float
-        Longest delay searched by default (s).
+        Longest delay searched by default, s.
     lags_s : iterable of float, optional
-        Candidate time constants (s) of a first-order input lag (motor and ESC response),
-        searched jointly with the delay; 0 is always a candidate; None: no lag. Lags too
-        short for the sampling rate (corner above Nyquist) are left out.
+        Candidate time constants (s) of a first-order input lag; 0 is always a candidate;
+        None: no lag. Lags whose corner lies above the Nyquist frequency are left out (they
+        cannot be told from a fraction of a sample of delay).
     structure_tol : float
-        Parsimony: the simplest (lag, delay) whose mean squared one-step residual is within
-        this fraction of the best is chosen (a longer delay or a lag must earn its keep).
-    inputs : sequence of str, optional
-        Inputs (default: the axis's own).
-    bias : bool
-        Include the constant term.
-    continuous : bool
-        Continuous-time regression (Savitzky–Golay derivatives) instead of discrete time.
-    features : sequence of str
-        Extra library terms (e.g. ``library.state_input(...)``).
-    refine : {"auto", "oe", None}
-        ``"oe"``: refine the estimator's coefficients by output error, i.e. so that the free
-        run follows the training data (:mod:`~mavsid.estimators.output_error`); standard
-        errors then come from its sandwich covariance. ``"auto"`` (default): do so when the
-        modelled states enter linearly (fast free run), not for nonlinear libraries. None:
-        the estimator's equation-error result as is.
-    **estimator_kwargs
-        Passed to the estimator (``alpha``, ``n_bootstrap``, ...).
+        Parsimony: the simplest (shortest lag, then shortest delay) candidate whose mean
+        squared one-step residual is within this fraction of the best is chosen.
     """
-    if axis not in AXES:
-        raise ConfigError(f"unknown axis {axis!r}; choose from {sorted(AXES)}")
-    if refine not in ("auto", "oe", None):
-        raise ConfigError(f"refine must be 'auto', 'oe' or None, got {refine!r}")
-    if estimator not in ESTIMATORS:
-        raise ConfigError(f"unknown estimator {estimator!r}; choose from {sorted(ESTIMATORS)}")
     segments = list(segments)
     if not segments:
-        raise NoExcitationError(f"no segments to fit the {axis} axis")
-    mine = [s for s in segments if s.axis in (axis, "all")]
-    if mine and len(mine) < len(segments):
-        segments = mine
-    outputs, default_inputs = AXES[axis]
-    linear = tuple(inputs) if inputs is not None else default_inputs
-    ins = linear + tuple(v for v in library.variables_of(features)
-                         if v.startswith("u_") and v not in linear)
+        raise NoExcitationError("no segments to fit")
     dt = float(segments[0].dt)
-    flt = tuple(filters) if filters is not None else filters_from_params(
-        log_params(segments, params), dt)
-    feats = library.library(outputs, linear, (library.BIAS,) if bias else (), features)
-    structure = Structure(outputs=outputs, features=feats, inputs=ins, filters=flt,
-                          continuous=continuous)
-    # a lag whose corner lies above the grid's Nyquist frequency cannot be told from a
-    # fraction of a sample of delay: such candidates are left out of the search
     nyquist_hz = 0.5 / dt
     lag_grid = [0.0] if lags_s is None else sorted(
         {0.0, *(lag for lag in map(float, lags_s) if lag * 2 * np.pi * nyquist_hz > 1.0)})
+    top = round(max_delay_s / dt)
+    if delay is not None:
+        fixed: list[float] | None = [float(delay)]
+    elif delays is not None:
+        fixed = [float(v) for v in delays]
+    else:
+        fixed = None
+    if fixed is not None:
+        max_shift = max(map(_shift_needed, fixed))
+    else:
+        max_shift = top + 1
+    # the known filters run once; each lag filters their output again (exactly what
+    # filtering by the whole chain does: every filter starts in steady state)
+    ins = [f for f in structure.features if f in structure.inputs]
+    base: list[np.ndarray] | None = None
+    if ins:
+        base = [filter_inputs(np.column_stack([_column(s, v)[0] for v in ins]).astype(float),
+                              s.dt, structure.filters) for s in segments]
     cands: list[tuple[float, float, float]] = []  # (mse, lag, delay)
     scan: dict[str, float] = {}
     for lag in lag_grid:
-        st = replace(structure, filters=flt + _lag_filter(lag))
-        if delay is not None:
-            d_scan = select_delay(segments, st, [float(delay)])[1]
-        elif delays is not None:
-            d_scan = select_delay(segments, st, delays)[1]
+        extra = lag_filter(lag)
+        st = replace(structure, filters=structure.filters + extra)
+        pre = None if base is None else [filter_inputs(u, s.dt, extra)
+                                         for u, s in zip(base, segments, strict=True)]
+        score = _scorer(segments, st, max_shift, pre)
+        if fixed is not None:
+            d_scan = {dly: v for dly in fixed if (v := score(dly)) is not None}
         else:  # whole samples first, then fractions around the best
-            top = round(max_delay_s / dt)
-            d0, d_scan = select_delay(segments, st, range(top + 1))
-            if delay_step < 1:
+            d_scan = {float(k): v for k in range(top + 1) if (v := score(float(k))) is not None}
+            if d_scan and delay_step < 1:
+                d0 = int(min(d_scan, key=d_scan.__getitem__))
                 fine = np.arange(max(d0 - 1, 0), min(d0 + 1, top) + 1e-9, delay_step)
-                d_scan.update(select_delay(segments, st, fine)[1])
+                d_scan.update({float(k): v for k in fine if (v := score(float(k))) is not None})
         scan.update({f"lag={lag:g}s,delay={k:g}": v for k, v in d_scan.items()})
         cands.extend((v, lag, k) for k, v in d_scan.items())
-    # parsimony: the simplest structure (no or short lag, then short delay) whose one-step
-    # residual is within structure_tol of the best
+    if not cands:
+        raise NoExcitationError("segments too short for every candidate delay")
     floor = min(c[0] for c in cands)
     _, lag, dly = min((c for c in cands if c[0] <= floor * (1 + structure_tol)),
                       key=lambda c: (c[1], c[2]))
-    whole = int(np.floor(dly + 1e-9))
-    structure = replace(structure, filters=flt + _lag_filter(lag), delay=whole,
-                        delay_frac=round(float(dly) - whole, 9) % 1.0)
-    est = make_estimator(estimator, structure, **estimator_kwargs).fit(segments)
-    model = est.model_
-    if refine == "oe":
-        model = refine_output_error(model, segments)
-    elif refine == "auto" and model.is_affine:
-        try:
-            model = refine_output_error(model, segments)
-        except SolverError as exc:
-            warnings.warn(f"{axis}: {exc}; keeping the {estimator} estimate",
-                          DataQualityWarning, stacklevel=2)
-    prov = dict(model.provenance)
-    prov["structure_scan"] = scan
-    prov["axis"] = axis
-    prov["filters"] = [f.to_dict() for f in structure.filters]
-    prov["lag_s"] = lag
-    prov["delay_s"] = dly * dt
-    return replace(model, provenance=prov)
-
-
-def _lag_filter(lag_s: float) -> tuple[InputFilter, ...]:
-    """A first-order input lag (motor/ESC response) as a filter; none for 0."""
-    if lag_s <= 0:
-        return ()
-    return (InputFilter(1.0 / (2 * np.pi * lag_s), 1, f"input lag {lag_s * 1e3:g} ms"),)
+    whole, frac = _split_delay(dly)
+    chosen = replace(structure, filters=structure.filters + lag_filter(lag), delay=whole,
+                     delay_frac=frac)
+    return StructureChoice(chosen, lag, float(dly), scan)

@@ -1,0 +1,1010 @@
+"""The loop stage: the vehicle's rate controller rebuilt from its parameters, the identified
+plant put inside it (the closed-loop twin), and what the loop does with the logged gains.
+
+One rate-controller implementation per autopilot, shared by the simulator
+(:mod:`mavsid.synthetic.controller`), the closed-loop twin and the loop analysis:
+
+- ArduPilot ``AC_PID`` (:class:`RatePID`): target low-passed at ``FLTT``, error
+  ``target - measured`` low-passed at ``FLTE`` (0 = off), derivative of the filtered error
+  low-passed at ``FLTD``; ``out = P·err + I + D·derr + FF·target`` with ``|I| ≤ IMAX``; when
+  ``SMAX`` > 0 the P and D terms are scaled down so that their slew rate stays near ``SMAX``
+  (an approximation of ArduPilot's slew limiter, see :class:`RatePID`);
+- PX4 multicopter rate control (:class:`PX4RatePID`): ``out = K·P·err + I - K·D·ṁ + FF·target``
+  with the derivative taken on the measured rate (``ṁ``, low-passed at ``IMU_DGYRO_CUTOFF``),
+  the integrator gain ``K·I`` scaled down for large errors and limited to ``MC_*R_INT_LIM``.
+
+:func:`controller_from_params` rebuilds one axis's controller from a log's parameters
+(ArduPilot ``ATC_RAT_{RLL,PIT,YAW}_*``, the 3.x ``RATE_{RLL,PIT,YAW}_*`` names, the 3.5–4.0
+single ``FILT``, ``SCHED_LOOP_RATE``, ``INS_GYRO_FILTER``; PX4 ``MC_{ROLL,PITCH,YAW}RATE_*``,
+``MC_{RR,PR,YR}_INT_LIM``, ``IMU_GYRO_CUTOFF``, ``IMU_DGYRO_CUTOFF``, ``IMU_GYRO_RATEMAX``);
+a parameter the log lacks takes the autopilot's documented default and is listed in
+``defaults_used``.
+
+The gyro low-pass (``INS_GYRO_FILTER``, ``IMU_GYRO_CUTOFF``) and any notch sit between the
+rotating body and what the controller reads; the logged rate (``RATE.R``,
+``vehicle_angular_velocity``) is already filtered, so a plant identified from it to the
+logged rate includes them: the twin feeds the plant model's output straight to the PID.
+
+The closed-loop twin (:func:`closed_loop_fit`) drives the controller with the logged rate
+target (``RATE.RDes/PDes/YDes``, ``PIDR.Tar``, PX4 ``vehicle_rates_setpoint``) plus any
+SYSTEMID mixer injection (``SIDD.Targ`` during ``SID_AXIS`` 10–12), closes the loop through
+the identified plant at the controller's loop rate (the plant re-discretised there when the
+log is slower), and compares the simulated rate and controller output with the measured
+ones on the held-out blocks. Its baseline is "the rate follows its target after the best
+delay" (the delay chosen on the training blocks).
+
+Examples
+--------
+>>> c = controller_from_params({"ATC_RAT_RLL_P": 0.1, "ATC_RAT_RLL_I": 0.1}, "roll")
+>>> c.autopilot, c.gains.p, c.gains.d, c.loop_hz
+('ardupilot', 0.1, 0.0036, 400.0)
+>>> c.defaults_used[:3]
+('ATC_RAT_RLL_D', 'ATC_RAT_RLL_FF', 'ATC_RAT_RLL_IMAX')
+>>> pid = c.new_pid(0.0025)
+>>> round(pid.update(target=1.0, measured=0.0), 5)   # P*err + I*err*dt on the first sample
+0.10025
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, Any, Protocol
+
+import numpy as np
+from scipy import linalg
+
+from mavsid.errors import ConfigError, MavsidError
+
+if TYPE_CHECKING:
+    from mavsid.data import FlightData, Segment
+    from mavsid.estimators.model import Model
+
+__all__ = [
+    "AXIS_RATE",
+    "AxisController",
+    "ClosedLoopFit",
+    "LinearPlant",
+    "PX4RateGains",
+    "PX4RatePID",
+    "RateGains",
+    "RatePID",
+    "TwinSignals",
+    "baseline_fit",
+    "closed_loop_fit",
+    "controller_from_params",
+    "plant_from_model",
+    "simulate_closed_loop",
+    "twin_signals",
+]
+
+AXES = ("roll", "pitch", "yaw")
+AXIS_RATE = {"roll": "p", "pitch": "q", "yaw": "r"}
+_AP = {"roll": "RLL", "pitch": "PIT", "yaw": "YAW"}
+_PX4 = {"roll": "ROLL", "pitch": "PITCH", "yaw": "YAW"}
+_PX4_LIM = {"roll": "RR", "pitch": "PR", "yaw": "YR"}
+#: ArduCopter 3.x rate PIDs act on centidegrees/s and output on the ±4500 motor scale
+_AP3_SCALE = (18000.0 / math.pi) / 4500.0
+
+
+def _alpha(cutoff_hz: float, dt: float) -> float:
+    """First-order low-pass gain per step (1 = no filtering)."""
+    if cutoff_hz <= 0:
+        return 1.0
+    rc = 1.0 / (2 * np.pi * cutoff_hz)
+    return dt / (dt + rc)
+
+
+# --------------------------------------------------------------------------- ArduPilot
+
+
+@dataclass(frozen=True)
+class RateGains:
+    """One axis of ArduPilot's ``ATC_RAT_<AX>_*`` (P, I, D per rad/s to a normalised output;
+    ``imax`` normalised; filters in Hz, 0 = off; ``smax`` the P+D slew limit, 0 = off)."""
+
+    p: float
+    i: float
+    d: float
+    ff: float
+    imax: float
+    fltt: float
+    fltd: float
+    flte: float
+    smax: float = 0.0
+
+
+#: slew-limiter constants: slew rate low-passed at this cut-off (Hz), the P+D modifier never
+#: below this fraction
+_SLEW_FILTER_HZ = 25.0
+_SLEW_MIN_MOD = 0.1
+
+
+class RatePID:
+    """ArduPilot ``AC_PID``-style rate controller for one axis.
+
+    ``SMAX`` (when > 0): the slew rate of the P+D output, low-passed at 25 Hz, above ``SMAX``
+    scales P and D by ``SMAX / slew`` (never below 0.1). ArduPilot's limiter also tracks the
+    slew peaks over a window; this keeps only the filtered rate (an approximation).
+
+    Examples
+    --------
+    >>> pid = RatePID(RateGains(0.1, 0.0, 0.0, 0.2, 0.5, 0.0, 0.0, 0.0), dt=0.01)
+    >>> [round(pid.update(1.0, 0.5), 3) for _ in range(2)]   # P*err + FF*target
+    [0.25, 0.25]
+    """
+
+    def __init__(self, gains: RateGains, dt: float) -> None:
+        self.g = gains
+        self.dt = dt
+        self.a_t = _alpha(gains.fltt, dt)
+        self.a_e = _alpha(gains.flte, dt)
+        self.a_d = _alpha(gains.fltd, dt)
+        self.a_s = _alpha(_SLEW_FILTER_HZ, dt)
+        self.target = 0.0
+        self.error = 0.0
+        self.deriv = 0.0
+        self.integ = 0.0
+        self.slew = 0.0
+        self.pd_last = 0.0
+        self.reset = True
+
+    def update(self, target: float, measured: float) -> float:
+        """One step: target and measured rate (rad/s) -> normalised output."""
+        g = self.g
+        if self.reset:
+            self.target = target
+            self.error = target - measured
+            self.deriv = 0.0
+            self.reset = False
+        else:
+            self.target += self.a_t * (target - self.target)
+            err_prev = self.error
+            self.error += self.a_e * ((self.target - measured) - self.error)
+            self.deriv += self.a_d * ((self.error - err_prev) / self.dt - self.deriv)
+        self.integ = min(max(self.integ + g.i * self.error * self.dt, -g.imax), g.imax)
+        if g.smax > 0:
+            pd = g.p * self.error + g.d * self.deriv
+            self.slew += self.a_s * (abs(pd - self.pd_last) / self.dt - self.slew)
+            self.pd_last = pd
+            mod = max(_SLEW_MIN_MOD, min(1.0, g.smax / self.slew)) if self.slew > 0 else 1.0
+            return mod * pd + self.integ + g.ff * self.target
+        return g.p * self.error + self.integ + g.d * self.deriv + g.ff * self.target
+
+    def preset(self, target: float, measured: float, output: float) -> None:
+        """Before the first :meth:`update`: set the integrator so that the first output of
+        ``update(target, measured)`` is ``output`` (within ``±IMAX``)."""
+        g = self.g
+        err = target - measured
+        i0 = output - g.p * err - g.ff * target - g.i * err * self.dt
+        self.integ = min(max(i0, -g.imax), g.imax)
+
+
+# --------------------------------------------------------------------------- PX4
+
+
+@dataclass(frozen=True)
+class PX4RateGains:
+    """One axis of PX4's ``MC_<AX>RATE_*``: P, I, D, FF and the gain ``K`` multiplying P, I
+    and D; ``int_lim`` the integrator limit (``MC_<AX>R_INT_LIM``); ``dgyro_hz`` the cut-off
+    of the low-pass on the measured rate's derivative (``IMU_DGYRO_CUTOFF``, 0 = off)."""
+
+    p: float
+    i: float
+    d: float
+    ff: float
+    k: float = 1.0
+    int_lim: float = 0.3
+    dgyro_hz: float = 30.0
+
+
+#: PX4 reduces the integration for rate errors approaching this (rad/s)
+_PX4_I_ERR = math.radians(400.0)
+
+
+class PX4RatePID:
+    """PX4 multicopter rate controller for one axis (derivative on measurement).
+
+    Examples
+    --------
+    >>> pid = PX4RatePID(PX4RateGains(0.2, 0.0, 0.0, 0.1, k=0.5), dt=0.004)
+    >>> round(pid.update(1.0, 0.0), 3)   # K*P*err + FF*target
+    0.2
+    """
+
+    def __init__(self, gains: PX4RateGains, dt: float) -> None:
+        from mavsid.synthetic.plant import Lowpass2p
+
+        self.g = gains
+        self.dt = dt
+        fs = 1.0 / dt
+        cut = gains.dgyro_hz if 0 < gains.dgyro_hz < 0.5 * fs else 0.0
+        self.accel_filter = Lowpass2p(cut, fs, 1)
+        self.integ = 0.0
+        self.last = 0.0
+        self.reset = True
+
+    def update(self, target: float, measured: float) -> float:
+        """One step: target and measured rate (rad/s) -> normalised torque."""
+        g = self.g
+        if self.reset:
+            self.last = measured
+            self.reset = False
+        accel = float(self.accel_filter(np.array([(measured - self.last) / self.dt]))[0])
+        self.last = measured
+        err = target - measured
+        out = g.k * g.p * err + self.integ - g.k * g.d * accel + g.ff * target
+        factor = max(0.0, 1.0 - (err / _PX4_I_ERR) ** 2)
+        i_new = self.integ + factor * g.k * g.i * err * self.dt
+        self.integ = min(max(i_new, -g.int_lim), g.int_lim)
+        return out
+
+    def preset(self, target: float, measured: float, output: float) -> None:
+        """Set the integrator so that the first output of ``update(target, measured)`` is
+        ``output`` (within the integrator limit)."""
+        g = self.g
+        err = target - measured
+        i0 = output - g.k * g.p * err - g.ff * target
+        self.integ = min(max(i0, -g.int_lim), g.int_lim)
+
+
+class PID(Protocol):
+    """What the twin needs of a rate controller."""
+
+    def update(self, target: float, measured: float) -> float: ...
+
+    def preset(self, target: float, measured: float, output: float) -> None: ...
+
+
+# --------------------------------------------------------------------------- from parameters
+
+
+@dataclass(frozen=True)
+class AxisController:
+    """One axis's rate controller as the log's parameters define it.
+
+    Attributes
+    ----------
+    autopilot : str
+        ``"ardupilot"`` or ``"px4"``.
+    axis : str
+    gains : RateGains or PX4RateGains
+        In the twin's units (rad/s in, normalised output).
+    loop_hz : float
+        Rate the controller runs at (``SCHED_LOOP_RATE``; PX4 ``IMU_GYRO_RATEMAX``).
+    gyro_filter_hz : float
+        The gyro low-pass ahead of the controller (``INS_GYRO_FILTER``, ``IMU_GYRO_CUTOFF``);
+        part of the identified plant when the plant maps to the logged (filtered) rate.
+    notch_hz : float
+        Centre of a configured static gyro notch (0: none configured).
+    params : Mapping[str, float]
+        Every parameter used, by the vehicle's own name, as the log has it (or the default).
+    defaults_used : tuple of str
+        Parameters the log lacks, taken at their documented defaults.
+    naming : str
+        ``"ATC_RAT"`` (ArduPilot >= 3.4), ``"ATC_RAT_FILT"`` (3.5-4.0 single filter),
+        ``"RATE"`` (ArduCopter <= 3.3, centidegree scale) or ``"MC"`` (PX4).
+    """
+
+    autopilot: str
+    axis: str
+    gains: RateGains | PX4RateGains
+    loop_hz: float
+    gyro_filter_hz: float = 0.0
+    notch_hz: float = 0.0
+    params: Mapping[str, float] = field(default_factory=dict)
+    defaults_used: tuple[str, ...] = ()
+    naming: str = "ATC_RAT"
+
+    def new_pid(self, dt: float | None = None) -> RatePID | PX4RatePID:
+        """A fresh controller stepping every ``dt`` (default ``1 / loop_hz``)."""
+        step = 1.0 / self.loop_hz if dt is None else dt
+        if isinstance(self.gains, PX4RateGains):
+            return PX4RatePID(self.gains, step)
+        return RatePID(self.gains, step)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form: autopilot, loop rate, filters, parameters and the defaults used."""
+        return {
+            "autopilot": self.autopilot,
+            "axis": self.axis,
+            "loop_hz": self.loop_hz,
+            "gyro_filter_hz": self.gyro_filter_hz,
+            "notch_hz": self.notch_hz,
+            "naming": self.naming,
+            "params": dict(self.params),
+            "defaults_used": list(self.defaults_used),
+        }
+
+
+#: ArduCopter 4.x defaults (ATC_RAT_*), per axis: P, I, D, FF, IMAX, FLTT, FLTE, FLTD, SMAX
+_AP_DEFAULTS = {
+    "roll": (0.135, 0.135, 0.0036, 0.0, 0.5, 20.0, 0.0, 20.0, 0.0),
+    "pitch": (0.135, 0.135, 0.0036, 0.0, 0.5, 20.0, 0.0, 20.0, 0.0),
+    "yaw": (0.18, 0.018, 0.0, 0.0, 0.5, 20.0, 2.5, 0.0, 0.0),
+}
+_AP_FIELDS = ("P", "I", "D", "FF", "IMAX", "FLTT", "FLTE", "FLTD", "SMAX")
+#: ArduCopter 3.3 defaults (RATE_*): P, I, D, IMAX (centi), FILT_HZ
+_AP3_DEFAULTS = {
+    "roll": (0.15, 0.1, 0.004, 1000.0, 20.0),
+    "pitch": (0.15, 0.1, 0.004, 1000.0, 20.0),
+    "yaw": (0.2, 0.02, 0.0, 1000.0, 5.0),
+}
+#: PX4 v1.14 defaults: P, I, D, FF, K, INT_LIM
+_PX4_DEFAULTS = {
+    "roll": (0.15, 0.2, 0.003, 0.0, 1.0, 0.3),
+    "pitch": (0.15, 0.2, 0.003, 0.0, 1.0, 0.3),
+    "yaw": (0.2, 0.1, 0.0, 0.0, 1.0, 0.3),
+}
+_AP_LOOP_HZ = 400.0
+_AP_GYRO_FILTER_HZ = 20.0
+_PX4_GYRO_CUTOFF_HZ = 40.0
+_PX4_DGYRO_CUTOFF_HZ = 30.0
+_PX4_LOOP_HZ = 400.0  # IMU_GYRO_RATEMAX default; pre-1.11 firmware ran the loop at 250 Hz
+_PX4_OLD_LOOP_HZ = 250.0
+
+
+def _is_px4(params: Mapping[str, float]) -> bool:
+    return any(k.startswith(("MC_ROLLRATE_", "MC_PITCHRATE_", "MC_YAWRATE_")) for k in params)
+
+
+def controller_from_params(
+    params: Mapping[str, float], axis: str, autopilot: str | None = None
+) -> AxisController:
+    """Rebuild one axis's rate controller from a log's parameters.
+
+    Parameters
+    ----------
+    params : Mapping[str, float]
+        The log's parameters (``RawLog.params`` / ``FlightData.params``).
+    axis : str
+        ``roll``, ``pitch`` or ``yaw``.
+    autopilot : str, optional
+        ``"ardupilot"`` or ``"px4"``; default from the parameter names (PX4 when any
+        ``MC_*RATE_*`` is present).
+
+    Raises
+    ------
+    ConfigError
+        Unknown axis or autopilot, or a gain that is negative or not finite.
+
+    Examples
+    --------
+    >>> c = controller_from_params({"MC_ROLLRATE_P": 0.2, "MC_ROLLRATE_K": 0.5}, "roll")
+    >>> c.autopilot, c.gains.p, c.gains.k, "MC_ROLLRATE_I" in c.defaults_used
+    ('px4', 0.2, 0.5, True)
+    >>> round(controller_from_params({"RATE_RLL_P": 0.15}, "roll").gains.p, 6)  # 3.x: cdeg scale
+    0.190986
+    """
+    if axis not in AXES:
+        raise ConfigError(f"axis must be one of {', '.join(AXES)}, got {axis!r}")
+    kind = autopilot or ("px4" if _is_px4(params) else "ardupilot")
+    if kind not in ("ardupilot", "px4"):
+        raise ConfigError(f"no rate-controller model for autopilot {kind!r} (ardupilot, px4)")
+    used: dict[str, float] = {}
+    defaults: list[str] = []
+
+    def get(name: str, default: float) -> float:
+        if name in params and params[name] is not None and math.isfinite(float(params[name])):
+            value = float(params[name])
+        else:
+            value = float(default)
+            defaults.append(name)
+        if value < 0:
+            raise ConfigError(f"parameter {name} = {value:g} must be >= 0")
+        used[name] = value
+        return value
+
+    if kind == "px4":
+        pre = f"MC_{_PX4[axis]}RATE_"
+        p, i, d, ff, k, lim = _PX4_DEFAULTS[axis]
+        gains: RateGains | PX4RateGains = PX4RateGains(
+            get(pre + "P", p), get(pre + "I", i), get(pre + "D", d), get(pre + "FF", ff),
+            get(pre + "K", k), get(f"MC_{_PX4_LIM[axis]}_INT_LIM", lim),
+            get("IMU_DGYRO_CUTOFF", _PX4_DGYRO_CUTOFF_HZ),
+        )
+        old = "IMU_GYRO_RATEMAX" not in params and "IMU_GYRO_CUTOFF" not in params
+        loop = get("IMU_GYRO_RATEMAX", _PX4_OLD_LOOP_HZ if old else _PX4_LOOP_HZ)
+        gyro = get("IMU_GYRO_CUTOFF", _PX4_GYRO_CUTOFF_HZ)
+        notch = float(params.get("IMU_GYRO_NF0_FRQ", params.get("IMU_GYRO_NF_FREQ", 0.0)) or 0)
+        return AxisController("px4", axis, gains, loop or _PX4_LOOP_HZ, gyro, notch, used,
+                              tuple(defaults), "MC")
+    ax = _AP[axis]
+    modern = any(k.startswith(f"ATC_RAT_{ax}_") for k in params)
+    legacy = not modern and any(k.startswith(f"RATE_{ax}_") for k in params)
+    if legacy:
+        p, i, d, imax, filt = _AP3_DEFAULTS[axis]
+        pre = f"RATE_{ax}_"
+        filt_name = pre + "FILT_HZ" if pre + "FILT_HZ" in params else pre + "FILT"
+        f = get(filt_name, filt)
+        gains = RateGains(
+            round(get(pre + "P", p) * _AP3_SCALE, 9), round(get(pre + "I", i) * _AP3_SCALE, 9),
+            round(get(pre + "D", d) * _AP3_SCALE, 9), 0.0,
+            round(get(pre + "IMAX", imax) / 4500.0, 9), 0.0, f, f,
+        )
+        naming = "RATE"
+    else:
+        pre = f"ATC_RAT_{ax}_"
+        vals = dict(zip(_AP_FIELDS, _AP_DEFAULTS[axis], strict=True))
+        if pre + "FLTE" not in params and pre + "FILT" in params:
+            # 3.5-4.0: one filter on the error, the derivative taken of the filtered error
+            f = get(pre + "FILT", 20.0)
+            vals.update(FLTT=0.0, FLTE=f, FLTD=0.0)
+            names = ("P", "I", "D", "FF", "IMAX")
+            naming = "ATC_RAT_FILT"
+        else:
+            names = _AP_FIELDS
+            naming = "ATC_RAT"
+        for n in names:
+            vals[n] = get(pre + n, vals[n])
+        gains = RateGains(vals["P"], vals["I"], vals["D"], vals["FF"], vals["IMAX"],
+                          vals["FLTT"], vals["FLTD"], vals["FLTE"], vals["SMAX"])
+    loop = get("SCHED_LOOP_RATE", _AP_LOOP_HZ) or _AP_LOOP_HZ
+    gyro = get("INS_GYRO_FILTER", _AP_GYRO_FILTER_HZ)
+    notch = 0.0
+    if params.get("INS_HNTCH_ENABLE", 0):
+        notch = float(params.get("INS_HNTCH_FREQ", 0.0) or 0.0)
+    elif params.get("INS_NOTCH_ENABLE", 0):
+        notch = float(params.get("INS_NOTCH_FREQ", 0.0) or 0.0)
+    return AxisController("ardupilot", axis, gains, loop, gyro, notch, used, tuple(defaults),
+                          naming)
+
+
+# --------------------------------------------------------------------------- the plant
+
+
+@dataclass(frozen=True)
+class LinearPlant:
+    """A discrete single-output plant ``x⁺ = A x + B (u + u_offset) + E w``, ``y = C x``.
+
+    ``u`` is the axis's controller output (mixer input, normalised); ``w`` the model's other
+    inputs, taken as measured; ``u_offset`` the model's bias expressed as an input offset.
+    """
+
+    a: np.ndarray
+    b: np.ndarray
+    c: np.ndarray
+    dt: float
+    e: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    u_offset: float = 0.0
+    other_inputs: tuple[str, ...] = ()
+
+    def initial_state(self, y0: float, u0: float, w0: np.ndarray | None = None) -> np.ndarray:
+        """A state in equilibrium with the input ``u0`` (and ``w0``) as far as the plant
+        allows, moved (least norm) so that its output is ``y0``."""
+        n = self.a.shape[0]
+        forcing = self.b * (u0 + self.u_offset)
+        if w0 is not None and self.e.size:
+            forcing = forcing + self.e @ w0
+        try:
+            x = np.linalg.solve(np.eye(n) - self.a, forcing)
+            if not np.all(np.isfinite(x)) or np.linalg.cond(np.eye(n) - self.a) > 1e8:
+                raise np.linalg.LinAlgError
+        except np.linalg.LinAlgError:
+            x = np.zeros(n)
+        cc = self.c.reshape(1, n)
+        return x + (np.linalg.pinv(cc) @ np.array([y0 - float((cc @ x)[0])])).ravel()
+
+
+def _continuous_blocks(model: Model) -> tuple[np.ndarray, np.ndarray, list[int], list[int]]:
+    """Continuous-time ``(A, B_exo)`` of a linear model, with the feature indices of states
+    and of exogenous terms (inputs and bias)."""
+    states, exo, other = model._split
+    if other:
+        raise ConfigError("the closed-loop twin needs a linear model (no library terms)")
+    n = len(model.state_names)
+    a = model.A
+    b = model.coef[exo].T if exo else np.zeros((n, 0))
+    if model.continuous:
+        return a, b, states, exo
+    m = b.shape[1]
+    big = np.zeros((n + m, n + m))
+    big[:n, :n], big[:n, n:], big[n:, n:] = a, b, np.eye(m)
+    ev = np.linalg.eigvals(a)
+    if np.any(np.abs(ev.imag) > 1e-12) or np.any(ev.real <= 0):
+        raise ConfigError("the model's discrete poles have no continuous-time equivalent "
+                          "(negative or complex); the twin runs at the model's own step")
+    log = np.real(linalg.logm(big)) / model.dt
+    return log[:n, :n], log[:n, n:], states, exo
+
+
+def _at_step(model: Model, dt: float) -> Model:
+    """The linear model re-discretised (zero-order hold) at step ``dt``, delay kept in s."""
+    if not model.continuous and math.isclose(model.dt, dt, rel_tol=1e-9):
+        return model
+    a, b, states, exo = _continuous_blocks(model)
+    n, m = a.shape[0], b.shape[1]
+    big = np.zeros((n + m, n + m))
+    big[:n, :n], big[:n, n:] = a, b
+    e = linalg.expm(big * dt)
+    coef = np.zeros_like(model.coef)
+    for j in states:
+        coef[j] = e[:n, :n][:, model.state_names.index(model.features[j])]
+    for k, j in enumerate(exo):
+        coef[j] = e[:n, n + k]
+    steps = model.delay_s / dt
+    whole = int(math.floor(steps + 1e-9))
+    frac = steps - whole if steps - whole > 1e-9 else 0.0
+    return replace(model, coef=coef, dt=dt, continuous=False, delay=whole, delay_frac=frac,
+                   covariance=None, coef_stderr=None)
+
+
+def plant_from_model(model: Model, axis: str, dt: float | None = None) -> LinearPlant:
+    """The identified plant of ``axis`` as a :class:`LinearPlant` at step ``dt`` (default
+    the model's own): input filters and delay included, the bias as an input offset.
+
+    Raises
+    ------
+    ConfigError
+        The model is not linear, does not predict the axis's rate from its input, or cannot
+        be re-discretised at ``dt``.
+    """
+    from mavsid.estimators import library
+
+    rate, u_name = AXIS_RATE[axis], f"u_{axis}"
+    if rate not in model.state_names or u_name not in model.input_names:
+        raise ConfigError(f"the {axis} model does not map {u_name} to {rate}")
+    if not library.is_linear(model.features):
+        raise ConfigError("the closed-loop twin needs a linear model (no library terms)")
+    m = _at_step(model, model.dt if dt is None else dt)
+    ss = m.to_statespace()
+    ins = list(ss.input_labels)
+    row = m.state_names.index(rate)
+    a = np.asarray(ss.A, dtype=float)
+    bmat = np.asarray(ss.B, dtype=float)
+    c = np.asarray(ss.C, dtype=float)[row]
+    if np.any(np.abs(np.asarray(ss.D, dtype=float)[row]) > 0):
+        raise ConfigError("the model's output reacts to its input within the same step")
+    j = ins.index(u_name)
+    others = tuple(k for k in ins if k != u_name)
+    e = bmat[:, [ins.index(k) for k in others]] if others else np.zeros((a.shape[0], 0))
+    # bias c[rate] as the input offset that produces it: B_plant * u0 = c
+    offset = 0.0
+    if library.BIAS in m.features:
+        fb, fu = m.features.index(library.BIAS), m.features.index(u_name)
+        bu = float(m.coef[fu, row])
+        if bu != 0:
+            offset = float(m.coef[fb, row]) / bu
+    return LinearPlant(a, bmat[:, j].copy(), c, m.dt, e, offset, others)
+
+
+# --------------------------------------------------------------------------- simulation
+
+
+def simulate_closed_loop(
+    plant: LinearPlant,
+    pid: PID,
+    target: np.ndarray,
+    *,
+    injection: np.ndarray | None = None,
+    others: np.ndarray | None = None,
+    substeps: int = 1,
+    y0: float = 0.0,
+    u0: float | None = None,
+    limit: float = 1.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Close the loop: the controller follows ``target`` through ``plant``.
+
+    Each of the ``n`` samples holds the target, injection and other inputs for ``substeps``
+    plant/controller steps (the plant's ``dt`` times ``substeps`` is the data step).
+
+    Parameters
+    ----------
+    plant : LinearPlant
+    pid : RatePID or PX4RatePID
+        A fresh controller at the plant's step.
+    target : (n,) rate target (rad/s).
+    injection : (n,), optional
+        Added to the controller output before the ``±limit`` clip (SYSTEMID mixer axes).
+    others : (n, len(plant.other_inputs)), optional
+        The model's other inputs, as measured.
+    y0, u0 : float
+        Measured rate and mixer input at the first sample: the plant starts at an equilibrium
+        moved to ``y0``; the integrator is preset so that the first output is ``u0``.
+    limit : float
+        The mixer input's clip.
+
+    Returns
+    -------
+    rate, u : numpy.ndarray, shape (n,)
+        Simulated rate and mixer input (controller output plus injection, clipped), sampled
+        at the first sub-step of each sample.
+
+    Examples
+    --------
+    >>> plant = LinearPlant(np.array([[1.0]]), np.array([0.01]), np.array([1.0]), 0.01)
+    >>> pid = RatePID(RateGains(2.0, 0.0, 0.0, 0.0, 0.5, 0.0, 0.0, 0.0), 0.01)
+    >>> y, u = simulate_closed_loop(plant, pid, np.ones(2000))
+    >>> round(float(y[-1]), 4)   # an integrator under P control reaches its target
+    1.0
+    """
+    n = len(target)
+    inj = np.zeros(n) if injection is None else np.asarray(injection, dtype=float)
+    w = np.zeros((n, 0)) if others is None else np.asarray(others, dtype=float).reshape(n, -1)
+    a, b, c, e = plant.a, plant.b, plant.c, plant.e
+    off = plant.u_offset
+    start_u = float(u0) if u0 is not None else 0.0
+    x = plant.initial_state(y0, start_u, w[0] if n and w.shape[1] else None)
+    if u0 is not None and n:
+        pid.preset(float(target[0]), float(c @ x), start_u - float(inj[0]))
+    y_out = np.empty(n)
+    u_out = np.empty(n)
+    ew = w @ e.T if w.shape[1] else np.zeros((n, a.shape[0]))
+    for k in range(n):
+        tk, ik, fk = float(target[k]), float(inj[k]), ew[k]
+        for s in range(substeps):
+            y = float(c @ x)
+            u = min(max(pid.update(tk, y) + ik, -limit), limit)
+            if s == 0:
+                y_out[k], u_out[k] = y, u
+            x = a @ x + b * (u + off) + fk
+    return y_out, u_out
+
+
+# --------------------------------------------------------------------------- log signals
+
+
+@dataclass(frozen=True)
+class TwinSignals:
+    """What the twin needs from a log besides states and inputs, on a flight's time grid.
+
+    Attributes
+    ----------
+    target : Mapping[str, numpy.ndarray]
+        Rate target (rad/s) per axis the log has one for.
+    injection : Mapping[str, numpy.ndarray]
+        SYSTEMID mixer injection (normalised) per axis; zeros outside the runs.
+    sources : Mapping[str, str]
+        Where each came from (``"RATE.RDes"``...).
+    """
+
+    target: Mapping[str, np.ndarray]
+    injection: Mapping[str, np.ndarray]
+    sources: Mapping[str, str] = field(default_factory=dict)
+
+
+def _on_grid(t: np.ndarray, v: np.ndarray, grid: np.ndarray, hold: bool) -> np.ndarray:
+    """Samples put on ``grid``: interpolated or held; NaN outside their span."""
+    order = np.argsort(t, kind="stable")
+    t, v = t[order], v[order]
+    keep = np.concatenate([[True], np.diff(t) > 0]) if t.size else np.zeros(0, bool)
+    t, v = t[keep], v[keep]
+    if t.size < 2:
+        return np.full(grid.shape, np.nan)
+    if hold:
+        i = np.searchsorted(t, grid + 1e-9, side="right") - 1
+        out = v[np.clip(i, 0, None)].astype(float)
+    else:
+        out = np.interp(grid, t, v)
+    out[(grid < t[0] - 1e-9) | (grid > t[-1] + 1e-9)] = np.nan
+    return out
+
+
+def twin_signals(flight: FlightData, raw: Any = None) -> TwinSignals:
+    """Rate targets and SYSTEMID mixer injections of ``flight``, from its log (re-read for
+    the few messages needed unless ``raw`` is given).
+
+    Targets come from the first of :data:`mavsid.channels.TARGET_CHANNELS` the log has;
+    mixer injections from ``SIDD.Targ`` during the SYSTEMID runs on ``SID_AXIS`` 10-12.
+    """
+    from mavsid.channels import INJECTION_CHANNEL, TARGET_CHANNELS, evaluate
+
+    if raw is None:
+        from mavsid.readers import read_log
+
+        path = flight.source.path
+        if not path or not os.path.exists(path):
+            return TwinSignals({}, {})
+        wanted = {ch.message for chans in TARGET_CHANNELS.values() for ch in chans}
+        wanted.add(INJECTION_CHANNEL.message)
+        import warnings
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            raw = read_log(path, messages=sorted(wanted))
+    grid = flight.time_s
+    targets: dict[str, np.ndarray] = {}
+    sources: dict[str, str] = {}
+    for axis in AXES:
+        for ch in TARGET_CHANNELS[AXIS_RATE[axis]]:
+            if ch.message not in raw.messages or not len(raw.messages[ch.message]):
+                continue
+            try:
+                t, v = evaluate(raw, ch, f"target {axis}")
+            except MavsidError:
+                continue
+            if t.size >= 2:
+                targets[axis] = _on_grid(t, v, grid, hold=False)
+                sources[f"target_{axis}"] = f"{ch.message}.{ch.field}"
+                break
+    injection: dict[str, np.ndarray] = {}
+    runs = [r for r in flight.meta.get("sysid_runs", ()) or ()  # type: ignore[attr-defined]
+            if int(r.get("axis", 0)) in (10, 11, 12)]
+    if runs and INJECTION_CHANNEL.message in raw.messages:
+        try:
+            t, v = evaluate(raw, INJECTION_CHANNEL, "SYSTEMID injection")
+        except MavsidError:
+            t = np.zeros(0)
+        if t.size >= 2:
+            held = np.nan_to_num(_on_grid(t, v, grid, hold=True))
+            for r in runs:
+                axis = AXES[int(r["axis"]) - 10]
+                inside = (grid >= float(r["start_s"]) - 1e-9) & (grid <= float(r["stop_s"]) + 1e-9)
+                inj = injection.setdefault(axis, np.zeros(grid.shape))
+                inj[inside] = held[inside]
+                sources[f"injection_{axis}"] = (f"{INJECTION_CHANNEL.message}."
+                                                f"{INJECTION_CHANNEL.field}")
+    return TwinSignals(targets, injection, sources)
+
+
+# --------------------------------------------------------------------------- the twin's fit
+
+
+@dataclass(frozen=True)
+class TwinBlock:
+    """One held-out block: measured and simulated rate and controller output."""
+
+    time_s: np.ndarray
+    target: np.ndarray
+    rate: np.ndarray
+    rate_twin: np.ndarray
+    output: np.ndarray
+    output_twin: np.ndarray
+    baseline: np.ndarray
+
+
+@dataclass(frozen=True)
+class ClosedLoopFit:
+    """How well the closed-loop twin reproduces the held-out blocks of one axis.
+
+    Attributes
+    ----------
+    fit_percent : float
+        Fit % of the simulated rate against the measured one (NRMSE, as elsewhere).
+    output_fit_percent : float
+        Fit % of the simulated controller output (mixer input minus any SYSTEMID
+        injection, which both share) against the measured one.
+    baseline_percent : float
+        Fit % of "the rate follows its target after ``baseline_delay_s``".
+    baseline_delay_s : float
+        The baseline's delay, chosen on the training blocks.
+    open_loop_percent : float
+        The open-loop free-run fit % of the same blocks, for comparison.
+    defaults_used : tuple of str
+        Controller parameters the log lacks, taken at documented defaults.
+    controller : Mapping
+        :meth:`AxisController.to_dict`.
+    substeps : int
+        Controller steps per data sample (the plant re-discretised when > 1).
+    target_source, injection_source : str
+    blocks : tuple of TwinBlock
+    """
+
+    fit_percent: float
+    output_fit_percent: float
+    baseline_percent: float
+    baseline_delay_s: float
+    defaults_used: tuple[str, ...] = ()
+    open_loop_percent: float = float("nan")
+    controller: Mapping[str, Any] = field(default_factory=dict)
+    substeps: int = 1
+    target_source: str = ""
+    injection_source: str = ""
+    blocks: tuple[TwinBlock, ...] = field(default=(), repr=False)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form (without the per-block arrays)."""
+        return {
+            "fit_percent": self.fit_percent,
+            "output_fit_percent": self.output_fit_percent,
+            "baseline_percent": self.baseline_percent,
+            "baseline_delay_s": self.baseline_delay_s,
+            "open_loop_percent": self.open_loop_percent,
+            "defaults_used": list(self.defaults_used),
+            "controller": dict(self.controller),
+            "substeps": self.substeps,
+            "target_source": self.target_source,
+            "injection_source": self.injection_source,
+            "blocks": [[float(b.time_s[0]), float(b.time_s[-1])] for b in self.blocks],
+        }
+
+
+def _pooled_fit(y: Sequence[np.ndarray], yhat: Sequence[np.ndarray]) -> float:
+    from mavsid.validation import fit_percent
+
+    if not y:
+        return float("nan")
+    return float(fit_percent(np.concatenate(y), np.concatenate(yhat)))
+
+
+#: longest delay (s) the baseline tries
+BASELINE_MAX_DELAY_S = 0.5
+
+
+def baseline_fit(
+    train: Sequence[tuple[np.ndarray, np.ndarray]],
+    held_out: Sequence[tuple[np.ndarray, np.ndarray]],
+    dt: float,
+    max_delay_s: float = BASELINE_MAX_DELAY_S,
+) -> tuple[float, float, list[np.ndarray]]:
+    """"The rate follows its target after the best delay": the delay (whole samples up to
+    ``max_delay_s``) that fits the training blocks best, and the fit % it gives on the
+    held-out ones.
+
+    Parameters
+    ----------
+    train, held_out : sequence of (target, rate) pairs, each (n_i,)
+    dt : float
+
+    Returns
+    -------
+    fit_percent, delay_s, predictions (one per held-out block, NaN before the delay)
+
+    Examples
+    --------
+    >>> t = np.sin(np.arange(400) * 0.05)
+    >>> y = np.concatenate([[0.0] * 3, t[:-3]])       # the target, 3 samples late
+    >>> fit, delay, _ = baseline_fit([(t, y)], [(t, y)], dt=0.01)
+    >>> round(fit, 6), delay
+    (100.0, 0.03)
+    """
+    from mavsid.validation import _fit_sums
+
+    def shifted(x: np.ndarray, d: int) -> np.ndarray:
+        out = np.full(x.shape, np.nan)
+        out[d:] = x[: len(x) - d] if d else x
+        return out
+
+    longest = max((len(t) for t, _ in (*train, *held_out)), default=0)
+    max_d = max(0, min(round(max_delay_s / dt), longest - 2))
+    best, best_d = -np.inf, 0
+    pool = train or held_out
+    for d in range(max_d + 1):
+        err = norm = 0.0
+        for t, y in pool:
+            e, n = _fit_sums(y, shifted(t, d))
+            err, norm = err + float(e[0]), norm + float(n[0])
+        score = -err / norm if norm > 0 else -np.inf
+        if score > best:
+            best, best_d = score, d
+    preds = [shifted(t, best_d) for t, _ in held_out]
+    fit = _pooled_fit([y for _, y in held_out], preds)
+    return fit, best_d * dt, preds
+
+
+def _flight_index(flight: FlightData, seg: Segment) -> int | None:
+    """Index of the segment's first sample on the flight's grid (None when not from it)."""
+    if seg.log and flight.source.path and os.fspath(seg.log) != os.fspath(flight.source.path):
+        return None
+    t = flight.time_s
+    i = int(np.searchsorted(t, seg.time_s[0] - 1e-9))
+    if i >= t.size or i + len(seg) > t.size:
+        return None
+    if not np.allclose(t[i:i + len(seg)], seg.time_s, atol=1e-6 * max(flight.dt, 1e-9)):
+        return None
+    return i
+
+
+def closed_loop_fit(
+    model: Model,
+    axis: str,
+    train: Sequence[Segment],
+    held_out: Sequence[Segment],
+    flights: Sequence[FlightData],
+    signals: Sequence[TwinSignals] | None = None,
+    open_loop_percent: float = float("nan"),
+) -> ClosedLoopFit:
+    """Run the closed-loop twin of ``axis`` on the held-out blocks.
+
+    The controller is rebuilt from the parameters of the flight each block comes from; it
+    follows the logged rate target (plus the SYSTEMID mixer injection) through the plant
+    model at the controller's loop rate, from the measured rate and controller output at
+    the block's start.
+
+    Raises
+    ------
+    ConfigError
+        No rate target in the logs, a model the twin cannot run, or no block on a flight's
+        grid.
+    """
+    from mavsid.validation import fit_percent
+
+    rate, u_name = AXIS_RATE[axis], f"u_{axis}"
+    sigs = list(signals) if signals is not None else [twin_signals(fd) for fd in flights]
+    plants: dict[int, LinearPlant] = {}
+    ys, yts, us, uts, blocks = [], [], [], [], []
+    base_train, base_val = [], []
+    ctrl: AxisController | None = None
+    substeps = 1
+    tsrc = isrc = ""
+
+    def locate(seg: Segment) -> tuple[int, int] | None:
+        for k, fd in enumerate(flights):
+            i = _flight_index(fd, seg)
+            if i is not None and axis in sigs[k].target:
+                return k, i
+        return None
+
+    for seg in train:
+        where = locate(seg)
+        if where is None:
+            continue
+        k, i = where
+        tgt = sigs[k].target[axis][i:i + len(seg)]
+        base_train.append((tgt, seg.states[:, seg.state_names.index(rate)]))
+    for seg in held_out:
+        where = locate(seg)
+        if where is None:
+            continue
+        k, i = where
+        fd = flights[k]
+        tgt = sigs[k].target[axis][i:i + len(seg)]
+        if not np.all(np.isfinite(tgt)):
+            continue
+        ctrl = controller_from_params(fd.params, axis, _autopilot(fd))
+        substeps = max(1, round(ctrl.loop_hz * seg.dt))
+        if substeps not in plants:
+            try:
+                plants[substeps] = plant_from_model(model, axis, seg.dt / substeps)
+            except ConfigError:
+                if substeps == 1:
+                    raise
+                substeps = 1
+                plants[1] = plants.get(1) or plant_from_model(model, axis, seg.dt)
+        plant = plants[substeps]
+        inj_full = sigs[k].injection.get(axis)
+        inj = inj_full[i:i + len(seg)] if inj_full is not None else np.zeros(len(seg))
+        y = seg.states[:, seg.state_names.index(rate)]
+        u = seg.inputs[:, seg.input_names.index(u_name)]
+        others = None
+        if plant.other_inputs:
+            others = np.column_stack([seg.inputs[:, seg.input_names.index(n)]
+                                      for n in plant.other_inputs])
+        y_sim, u_sim = simulate_closed_loop(
+            plant, ctrl.new_pid(seg.dt / substeps), tgt, injection=inj, others=others,
+            substeps=substeps, y0=float(y[0]), u0=float(u[0]),
+        )
+        ys.append(y)
+        yts.append(y_sim)
+        us.append(u - inj)
+        uts.append(u_sim - inj)
+        base_val.append((tgt, y))
+        blocks.append((seg.time_s, tgt, y, y_sim, u, u_sim))
+        tsrc = sigs[k].sources.get(f"target_{axis}", "")
+        isrc = isrc or sigs[k].sources.get(f"injection_{axis}", "")
+    if ctrl is None or not ys:
+        raise ConfigError(f"{axis}: no rate target logged for the held-out blocks "
+                          "(RATE.RDes, PIDR.Tar or vehicle_rates_setpoint)")
+    dt = held_out[0].dt
+    b_fit, b_delay, b_pred = baseline_fit(base_train, base_val, dt)
+    twin_blocks = tuple(
+        TwinBlock(t, tg, y, ysim, u, usim, bp)
+        for (t, tg, y, ysim, u, usim), bp in zip(blocks, b_pred, strict=True)
+    )
+    return ClosedLoopFit(
+        fit_percent=_pooled_fit(ys, yts),
+        output_fit_percent=float(fit_percent(np.concatenate(us), np.concatenate(uts))),
+        baseline_percent=b_fit,
+        baseline_delay_s=b_delay,
+        defaults_used=ctrl.defaults_used,
+        open_loop_percent=open_loop_percent,
+        controller=ctrl.to_dict(),
+        substeps=substeps,
+        target_source=tsrc,
+        injection_source=isrc,
+        blocks=twin_blocks,
+    )
+
+
+def _autopilot(flight: FlightData) -> str | None:
+    """``"px4"`` or ``"ardupilot"`` from the flight's metadata, None when unknown."""
+    ap = str(flight.meta.get("autopilot") or "").lower()
+    if "px4" in ap:
+        return "px4"
+    if "ardupilot" in ap or "apm" in ap:
+        return "ardupilot"
+    if flight.source.format == "ulog":
+        return "px4"
+    return None

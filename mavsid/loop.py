@@ -76,6 +76,7 @@ __all__ = [
     "closed_loop_fit",
     "controller_from_params",
     "plant_from_model",
+    "replay_controller",
     "simulate_closed_loop",
     "twin_signals",
 ]
@@ -181,6 +182,10 @@ class RatePID:
         i0 = output - g.p * err - g.ff * target - g.i * err * self.dt
         self.integ = min(max(i0, -g.imax), g.imax)
 
+    def adjust_integrator(self, delta: float) -> None:
+        """Add ``delta`` to the integrator (within ``±IMAX``)."""
+        self.integ = min(max(self.integ + delta, -self.g.imax), self.g.imax)
+
 
 # --------------------------------------------------------------------------- PX4
 
@@ -249,6 +254,10 @@ class PX4RatePID:
         i0 = output - g.k * g.p * err - g.ff * target
         self.integ = min(max(i0, -g.int_lim), g.int_lim)
 
+    def adjust_integrator(self, delta: float) -> None:
+        """Add ``delta`` to the integrator (within its limit)."""
+        self.integ = min(max(self.integ + delta, -self.g.int_lim), self.g.int_lim)
+
 
 class PID(Protocol):
     """What the twin needs of a rate controller."""
@@ -256,6 +265,8 @@ class PID(Protocol):
     def update(self, target: float, measured: float) -> float: ...
 
     def preset(self, target: float, measured: float, output: float) -> None: ...
+
+    def adjust_integrator(self, delta: float) -> None: ...
 
 
 # --------------------------------------------------------------------------- from parameters
@@ -581,13 +592,15 @@ def simulate_closed_loop(
     injection: np.ndarray | None = None,
     others: np.ndarray | None = None,
     substeps: int = 1,
-    y0: float = 0.0,
-    u0: float | None = None,
+    rate: np.ndarray | None = None,
+    u: np.ndarray | None = None,
+    warmup: int = 0,
     limit: float = 1.0,
+    lag: int = 0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Close the loop: the controller follows ``target`` through ``plant``.
 
-    Each of the ``n`` samples holds the target, injection and other inputs for ``substeps``
+    Each sample holds the target, injection and other inputs for ``substeps``
     plant/controller steps (the plant's ``dt`` times ``substeps`` is the data step).
 
     Parameters
@@ -600,15 +613,24 @@ def simulate_closed_loop(
         Added to the controller output before the ``±limit`` clip (SYSTEMID mixer axes).
     others : (n, len(plant.other_inputs)), optional
         The model's other inputs, as measured.
-    y0, u0 : float
-        Measured rate and mixer input at the first sample: the plant starts at an equilibrium
-        moved to ``y0``; the integrator is preset so that the first output is ``u0``.
+    rate, u : (n,), optional
+        Measured rate and mixer input. They set the initial conditions: the first
+        ``warmup`` samples drive the controller with the measured rate and the plant with the
+        measured input (no feedback); the integrator is then corrected so that the
+        controller's output matches the measured one, and the plant's state moved (least
+        norm) to the measured rate. Without warm-up, the plant starts in equilibrium at the
+        first sample and the integrator is preset from the first measured output.
+    warmup : int
+        Samples used for the initial conditions; the returned arrays start after them.
     limit : float
         The mixer input's clip.
+    lag : int
+        Controller steps between a target (and injection) sample and the step that first
+        uses it (ArduCopter: 1, see :func:`replay_controller`).
 
     Returns
     -------
-    rate, u : numpy.ndarray, shape (n,)
+    rate, u : numpy.ndarray, shape (n - warmup,)
         Simulated rate and mixer input (controller output plus injection, clipped), sampled
         at the first sub-step of each sample.
 
@@ -625,22 +647,83 @@ def simulate_closed_loop(
     w = np.zeros((n, 0)) if others is None else np.asarray(others, dtype=float).reshape(n, -1)
     a, b, c, e = plant.a, plant.b, plant.c, plant.e
     off = plant.u_offset
-    start_u = float(u0) if u0 is not None else 0.0
-    x = plant.initial_state(y0, start_u, w[0] if n and w.shape[1] else None)
-    if u0 is not None and n:
-        pid.preset(float(target[0]), float(c @ x), start_u - float(inj[0]))
-    y_out = np.empty(n)
-    u_out = np.empty(n)
-    ew = w @ e.T if w.shape[1] else np.zeros((n, a.shape[0]))
-    for k in range(n):
-        tk, ik, fk = float(target[k]), float(inj[k]), ew[k]
+    tg = _lagged(np.repeat(np.asarray(target, dtype=float), substeps), lag)
+    ij = _lagged(np.repeat(inj, substeps), lag)
+    ew = np.repeat(w @ e.T, substeps, axis=0) if w.shape[1] else np.zeros((n * substeps, a.shape[0]))
+    ym = np.zeros(n) if rate is None else np.asarray(rate, dtype=float)
+    um = np.zeros(n) if u is None else np.asarray(u, dtype=float)
+    warmup = min(max(0, warmup), n - 1) if rate is not None and u is not None else 0
+    x = plant.initial_state(float(ym[0]), float(um[0]), w[0] if n and w.shape[1] else None)
+    if u is not None and n:
+        pid.preset(float(tg[0]), float(ym[0]), float(um[0] - ij[0]))
+    j = 0
+    if warmup:
+        outs = np.empty(warmup)
+        for k in range(warmup):
+            for s in range(substeps):
+                out = pid.update(float(tg[j]), float(ym[k]))
+                if s == 0:
+                    outs[k] = out
+                x = a @ x + b * (float(um[k]) + off) + ew[j]
+                j += 1
+        last = max(1, min(10, warmup // 2))
+        resid = (um[:warmup] - ij[: warmup * substeps: substeps]) - outs
+        pid.adjust_integrator(float(np.mean(resid[-last:])))
+        cc = c.reshape(1, -1)
+        x = x + (np.linalg.pinv(cc) @ np.array([ym[warmup] - float((cc @ x)[0])])).ravel()
+    y_out = np.empty(n - warmup)
+    u_out = np.empty(n - warmup)
+    for k in range(warmup, n):
         for s in range(substeps):
             y = float(c @ x)
-            u = min(max(pid.update(tk, y) + ik, -limit), limit)
+            uk = min(max(pid.update(float(tg[j]), y) + float(ij[j]), -limit), limit)
             if s == 0:
-                y_out[k], u_out[k] = y, u
-            x = a @ x + b * (u + off) + fk
+                y_out[k - warmup], u_out[k - warmup] = y, uk
+            x = a @ x + b * (uk + off) + ew[j]
+            j += 1
     return y_out, u_out
+
+
+def _lagged(x: np.ndarray, lag: int) -> np.ndarray:
+    """``x`` delayed by ``lag`` samples, the first value held before it."""
+    if lag <= 0 or not x.size:
+        return x
+    return np.concatenate([np.full(min(lag, x.size), x[0]), x[: max(0, x.size - lag)]])
+
+
+def replay_controller(
+    ctrl: AxisController, dt: float, target: np.ndarray, rate: np.ndarray, output: np.ndarray,
+    injection: np.ndarray | None = None, lag: int = 0, substeps: int = 1,
+) -> np.ndarray:
+    """The rebuilt controller fed the *measured* rate: its output (mixer input minus the
+    injection) sample by sample, to compare with the logged one.
+
+    This checks the controller alone (its parameters, and ``lag``: ArduCopter runs the rate
+    controller at the start of each loop on the target and injection its attitude controller
+    and SYSTEMID set in the loop before, and logs them when they are set: 1 loop).
+    ``substeps`` controller steps per sample (``lag`` counts them) hold the measured rate.
+
+    Examples
+    --------
+    >>> c = controller_from_params({}, "roll")
+    >>> t = np.sin(np.arange(200) * 0.05); y = 0.9 * t
+    >>> u = replay_controller(c, 0.0025, t, y, np.zeros(200))
+    >>> u.shape
+    (200,)
+    """
+    n = len(target)
+    inj = np.zeros(n) if injection is None else np.asarray(injection, dtype=float)
+    tg = _lagged(np.repeat(np.asarray(target, dtype=float), substeps), lag)
+    ij = _lagged(np.repeat(inj, substeps), lag)[::substeps]
+    ym = np.repeat(np.asarray(rate, dtype=float), substeps)
+    pid = ctrl.new_pid(dt / substeps)
+    pid.preset(float(tg[0]), float(rate[0]), float(output[0] - ij[0]))
+    out = np.array([pid.update(float(a), float(b)) for a, b in zip(tg, ym, strict=True)])
+    out = out[::substeps]
+    # the first output has no derivative term: the integrator takes the offset it leaves
+    # (measured over samples 5-15, once the derivative filter has settled)
+    early = slice(min(5, n - 1), min(15, n))
+    return out + float(np.mean((output - ij - out)[early]))
 
 
 # --------------------------------------------------------------------------- log signals
@@ -778,6 +861,8 @@ class ClosedLoopFit:
         :meth:`AxisController.to_dict`.
     substeps : int
         Controller steps per data sample (the plant re-discretised when > 1).
+    lag_loops : int
+        Controller loops between a logged target (and injection) and its use.
     target_source, injection_source : str
     blocks : tuple of TwinBlock
     """
@@ -790,6 +875,7 @@ class ClosedLoopFit:
     open_loop_percent: float = float("nan")
     controller: Mapping[str, Any] = field(default_factory=dict)
     substeps: int = 1
+    lag_loops: int = 0
     target_source: str = ""
     injection_source: str = ""
     blocks: tuple[TwinBlock, ...] = field(default=(), repr=False)
@@ -805,6 +891,7 @@ class ClosedLoopFit:
             "defaults_used": list(self.defaults_used),
             "controller": dict(self.controller),
             "substeps": self.substeps,
+            "lag_loops": self.lag_loops,
             "target_source": self.target_source,
             "injection_source": self.injection_source,
             "blocks": [[float(b.time_s[0]), float(b.time_s[-1])] for b in self.blocks],
@@ -887,6 +974,31 @@ def _flight_index(flight: FlightData, seg: Segment) -> int | None:
     return i
 
 
+@dataclass(frozen=True)
+class _Block:
+    """A segment located on its flight, with up to ``warm`` samples before it."""
+
+    seg: Segment
+    ctrl: AxisController
+    warm: int
+    target: np.ndarray
+    injection: np.ndarray
+    rate: np.ndarray
+    u: np.ndarray
+    inputs: np.ndarray
+    input_names: tuple[str, ...]
+
+
+#: measured samples before a block (s) used for the twin's initial conditions
+WARMUP_S = 0.5
+
+
+#: target/injection lags (controller loops) tried
+LAGS = (0, 1, 2)
+#: ArduCopter uses a target one loop after logging it (see :func:`replay_controller`)
+_DEFAULT_LAG = {"ardupilot": 1, "px4": 0}
+
+
 def closed_loop_fit(
     model: Model,
     axis: str,
@@ -901,7 +1013,9 @@ def closed_loop_fit(
     The controller is rebuilt from the parameters of the flight each block comes from; it
     follows the logged rate target (plus the SYSTEMID mixer injection) through the plant
     model at the controller's loop rate, from the measured rate and controller output at
-    the block's start.
+    the block's start. The lag between a logged target and its use (0-2 loops) is the one
+    whose controller replay (:func:`replay_controller`) matches the training blocks best
+    (without training blocks: ArduPilot's 1 loop, PX4's 0).
 
     Raises
     ------
@@ -911,78 +1025,56 @@ def closed_loop_fit(
     """
     from mavsid.validation import fit_percent
 
-    rate, u_name = AXIS_RATE[axis], f"u_{axis}"
     sigs = list(signals) if signals is not None else [twin_signals(fd) for fd in flights]
-    plants: dict[int, LinearPlant] = {}
-    ys, yts, us, uts, blocks = [], [], [], [], []
-    base_train, base_val = [], []
-    ctrl: AxisController | None = None
-    substeps = 1
-    tsrc = isrc = ""
-
-    def locate(seg: Segment) -> tuple[int, int] | None:
-        for k, fd in enumerate(flights):
-            i = _flight_index(fd, seg)
-            if i is not None and axis in sigs[k].target:
-                return k, i
-        return None
-
-    for seg in train:
-        where = locate(seg)
-        if where is None:
-            continue
-        k, i = where
-        tgt = sigs[k].target[axis][i:i + len(seg)]
-        base_train.append((tgt, seg.states[:, seg.state_names.index(rate)]))
-    for seg in held_out:
-        where = locate(seg)
-        if where is None:
-            continue
-        k, i = where
-        fd = flights[k]
-        tgt = sigs[k].target[axis][i:i + len(seg)]
-        if not np.all(np.isfinite(tgt)):
-            continue
-        ctrl = controller_from_params(fd.params, axis, _autopilot(fd))
-        substeps = max(1, round(ctrl.loop_hz * seg.dt))
-        if substeps not in plants:
-            try:
-                plants[substeps] = plant_from_model(model, axis, seg.dt / substeps)
-            except ConfigError:
-                if substeps == 1:
-                    raise
-                substeps = 1
-                plants[1] = plants.get(1) or plant_from_model(model, axis, seg.dt)
-        plant = plants[substeps]
-        inj_full = sigs[k].injection.get(axis)
-        inj = inj_full[i:i + len(seg)] if inj_full is not None else np.zeros(len(seg))
-        y = seg.states[:, seg.state_names.index(rate)]
-        u = seg.inputs[:, seg.input_names.index(u_name)]
-        others = None
-        if plant.other_inputs:
-            others = np.column_stack([seg.inputs[:, seg.input_names.index(n)]
-                                      for n in plant.other_inputs])
-        y_sim, u_sim = simulate_closed_loop(
-            plant, ctrl.new_pid(seg.dt / substeps), tgt, injection=inj, others=others,
-            substeps=substeps, y0=float(y[0]), u0=float(u[0]),
-        )
-        ys.append(y)
-        yts.append(y_sim)
-        us.append(u - inj)
-        uts.append(u_sim - inj)
-        base_val.append((tgt, y))
-        blocks.append((seg.time_s, tgt, y, y_sim, u, u_sim))
-        tsrc = sigs[k].sources.get(f"target_{axis}", "")
-        isrc = isrc or sigs[k].sources.get(f"injection_{axis}", "")
-    if ctrl is None or not ys:
+    tr = _locate(train, axis, flights, sigs)
+    val = _locate(held_out, axis, flights, sigs)
+    if not val:
         raise ConfigError(f"{axis}: no rate target logged for the held-out blocks "
                           "(RATE.RDes, PIDR.Tar or vehicle_rates_setpoint)")
-    dt = held_out[0].dt
-    b_fit, b_delay, b_pred = baseline_fit(base_train, base_val, dt)
+    ctrl = val[0].ctrl
+    dt = val[0].seg.dt
+    substeps = max(1, round(ctrl.loop_hz * dt))
+    lag = _DEFAULT_LAG[ctrl.autopilot]
+    if tr:
+        scores = []
+        for cand in LAGS:
+            out = [(b.u - _lagged(np.repeat(b.injection, substeps), cand)[::substeps],
+                    replay_controller(b.ctrl, dt, b.target, b.rate, b.u, b.injection, cand,
+                                      substeps))
+                   for b in tr]
+            out = [(m[b.warm:], r[b.warm:]) for b, (m, r) in zip(tr, out, strict=True)]
+            scores.append(_pooled_fit([o[0] for o in out], [o[1] for o in out]))
+        if np.any(np.isfinite(scores)):
+            lag = LAGS[int(np.nanargmax(scores))]
+    try:
+        plant = plant_from_model(model, axis, dt / substeps)
+    except ConfigError:
+        if substeps == 1:
+            raise
+        substeps = 1
+        plant = plant_from_model(model, axis, dt)
+    ys, yts, us, uts, blocks = [], [], [], [], []
+    for b in val:
+        y_sim, u_sim = simulate_closed_loop(
+            plant, b.ctrl.new_pid(dt / substeps), b.target, injection=b.injection,
+            others=_others(b, plant), substeps=substeps, rate=b.rate, u=b.u, warmup=b.warm,
+            lag=lag,
+        )
+        w = b.warm
+        inj = _lagged(np.repeat(b.injection, substeps), lag)[::substeps][w:]
+        ys.append(b.rate[w:])
+        yts.append(y_sim)
+        us.append(b.u[w:] - inj)
+        uts.append(u_sim - inj)
+        blocks.append((b.seg.time_s, b.target[w:], b.rate[w:], y_sim, b.u[w:], u_sim))
+    b_fit, b_delay, b_pred = baseline_fit([(b.target[b.warm:], b.rate[b.warm:]) for b in tr],
+                                          [(b.target[b.warm:], b.rate[b.warm:]) for b in val],
+                                          dt)
     twin_blocks = tuple(
         TwinBlock(t, tg, y, ysim, u, usim, bp)
         for (t, tg, y, ysim, u, usim), bp in zip(blocks, b_pred, strict=True)
     )
+    k = flights.index(next(fd for fd in flights if _flight_index(fd, val[0].seg) is not None))
     return ClosedLoopFit(
         fit_percent=_pooled_fit(ys, yts),
         output_fit_percent=float(fit_percent(np.concatenate(us), np.concatenate(uts))),
@@ -992,10 +1084,51 @@ def closed_loop_fit(
         open_loop_percent=open_loop_percent,
         controller=ctrl.to_dict(),
         substeps=substeps,
-        target_source=tsrc,
-        injection_source=isrc,
+        lag_loops=lag,
+        target_source=sigs[k].sources.get(f"target_{axis}", ""),
+        injection_source=sigs[k].sources.get(f"injection_{axis}", ""),
         blocks=twin_blocks,
     )
+
+
+def _others(b: _Block, plant: LinearPlant) -> np.ndarray | None:
+    """The model's other inputs, as measured over the block and its warm-up."""
+    if not plant.other_inputs:
+        return None
+    return np.column_stack([b.inputs[:, b.input_names.index(n)] for n in plant.other_inputs])
+
+
+def _locate(segments: Sequence[Segment], axis: str, flights: Sequence[FlightData],
+            sigs: Sequence[TwinSignals]) -> list[_Block]:
+    """The segments found on a flight with a rate target, with their twin signals and the
+    measured samples before them (within the flight's contiguous block)."""
+    rate, u_name = AXIS_RATE[axis], f"u_{axis}"
+    out = []
+    for seg in segments:
+        for k, fd in enumerate(flights):
+            i = _flight_index(fd, seg)
+            if i is None or axis not in sigs[k].target or u_name not in fd.input_names:
+                continue
+            first = max((int(a) for a, _ in fd.blocks if a <= i), default=0)
+            warm = min(i - first, round(WARMUP_S / fd.dt))
+            sl = slice(i - warm, i + len(seg))
+            tgt = sigs[k].target[axis][sl]
+            ok = np.isfinite(tgt)
+            if not ok[warm:].all():
+                break
+            if not ok[:warm].all():  # no target before the block: no warm-up
+                warm = 0
+                sl = slice(i, i + len(seg))
+                tgt = tgt[-len(seg):]
+            inj_full = sigs[k].injection.get(axis)
+            inj = inj_full[sl] if inj_full is not None else np.zeros(len(tgt))
+            ctrl = controller_from_params(fd.params, axis, _autopilot(fd))
+            out.append(_Block(
+                seg, ctrl, warm, tgt, inj, fd.states[sl, fd.state_names.index(rate)],
+                fd.inputs[sl, fd.input_names.index(u_name)], fd.inputs[sl], fd.input_names,
+            ))
+            break
+    return out
 
 
 def _autopilot(flight: FlightData) -> str | None:

@@ -443,7 +443,7 @@ def controller_from_params(
             # 3.5-4.0: one filter on the error, the derivative taken of the filtered error
             f = get(pre + "FILT", 20.0)
             vals.update(FLTT=0.0, FLTE=f, FLTD=0.0)
-            names = ("P", "I", "D", "FF", "IMAX")
+            names: tuple[str, ...] = ("P", "I", "D", "FF", "IMAX")
             naming = "ATC_RAT_FILT"
         else:
             names = _AP_FIELDS
@@ -536,15 +536,17 @@ def _at_step(model: Model, dt: float) -> Model:
     for k, j in enumerate(exo):
         coef[j] = e[:n, n + k]
     steps = model.delay_s / dt
-    whole = int(math.floor(steps + 1e-9))
+    whole = math.floor(steps + 1e-9)
     frac = steps - whole if steps - whole > 1e-9 else 0.0
     return replace(model, coef=coef, dt=dt, continuous=False, delay=whole, delay_frac=frac,
                    covariance=None, coef_stderr=None)
 
 
-def plant_from_model(model: Model, axis: str, dt: float | None = None) -> LinearPlant:
+def plant_from_model(model: Any, axis: str, dt: float | None = None) -> LinearPlant:
     """The identified plant of ``axis`` as a :class:`LinearPlant` at step ``dt`` (default
     the model's own): input filters and delay included, the bias as an input offset.
+
+    ``model`` is a :class:`mavsid.estimators.Model` (linear features).
 
     Raises
     ------
@@ -649,7 +651,8 @@ def simulate_closed_loop(
     off = plant.u_offset
     tg = _lagged(np.repeat(np.asarray(target, dtype=float), substeps), lag)
     ij = _lagged(np.repeat(inj, substeps), lag)
-    ew = np.repeat(w @ e.T, substeps, axis=0) if w.shape[1] else np.zeros((n * substeps, a.shape[0]))
+    ew = (np.repeat(w @ e.T, substeps, axis=0) if w.shape[1]
+          else np.zeros((n * substeps, a.shape[0])))
     ym = np.zeros(n) if rate is None else np.asarray(rate, dtype=float)
     um = np.zeros(n) if u is None else np.asarray(u, dtype=float)
     warmup = min(max(0, warmup), n - 1) if rate is not None and u is not None else 0
@@ -720,10 +723,15 @@ def replay_controller(
     pid.preset(float(tg[0]), float(rate[0]), float(output[0] - ij[0]))
     out = np.array([pid.update(float(a), float(b)) for a, b in zip(tg, ym, strict=True)])
     out = out[::substeps]
-    # the first output has no derivative term: the integrator takes the offset it leaves
-    # (measured over samples 5-15, once the derivative filter has settled)
-    early = slice(min(5, n - 1), min(15, n))
+    # the first output has no derivative term and an unfiltered error: the integrator takes
+    # the offset that leaves, measured once the controller's filters have settled
+    settle = min(round(SETTLE_S / dt), n // 2)
+    early = slice(settle, min(settle + 20, n))
     return out + float(np.mean((output - ij - out)[early]))
+
+
+#: time (s) after which the controller's own filters (FLTE 2.5 Hz: 64 ms) have settled
+SETTLE_S = 0.25
 
 
 # --------------------------------------------------------------------------- log signals
@@ -1000,7 +1008,7 @@ _DEFAULT_LAG = {"ardupilot": 1, "px4": 0}
 
 
 def closed_loop_fit(
-    model: Model,
+    model: Any,
     axis: str,
     train: Sequence[Segment],
     held_out: Sequence[Segment],

@@ -67,17 +67,24 @@ __all__ = [
     "AxisController",
     "ClosedLoopFit",
     "LinearPlant",
+    "LoopAnalysis",
     "PX4RateGains",
     "PX4RatePID",
     "RateGains",
     "RatePID",
     "TwinSignals",
+    "analyse_loop",
+    "analyse_model",
     "baseline_fit",
     "closed_loop_fit",
     "controller_from_params",
+    "controller_tf",
+    "format_tune",
     "plant_from_model",
     "replay_controller",
     "simulate_closed_loop",
+    "suggest_gains",
+    "tune",
     "twin_signals",
 ]
 
@@ -1149,3 +1156,399 @@ def _autopilot(flight: FlightData) -> str | None:
     if flight.source.format == "ulog":
         return "px4"
     return None
+
+
+# --------------------------------------------------------------------------- loop analysis
+
+
+def _first_order_z(cutoff_hz: float, dt: float) -> tuple[list[float], list[float]]:
+    """The ``_alpha`` low pass as ``(num, den)`` in z⁻¹ (unity when off)."""
+    a = _alpha(cutoff_hz, dt)
+    return ([a, 0.0], [1.0, -(1.0 - a)]) if a < 1.0 else ([1.0], [1.0])
+
+
+def controller_tf(ctrl: AxisController, dt: float | None = None) -> tuple[Any, Any]:
+    """Discrete transfer functions of the rate controller at its loop step: ``(C_fb, C_t)``,
+    output per measured rate (negated: ``u = C_t·target − C_fb·rate``) and per target.
+
+    They are exactly :class:`RatePID` / :class:`PX4RatePID` without limits (integrator
+    ``I·dt/(1 − z⁻¹)``, derivative ``(1 − z⁻¹)/dt``, first-order filters ``α/(1 − (1−α)z⁻¹)``,
+    PX4's biquad on the derivative).
+
+    Examples
+    --------
+    >>> cfb, ct = controller_tf(controller_from_params({}, "roll"))
+    >>> round(float(abs(cfb(np.exp(1j * 2 * np.pi * 1.0 * 0.0025)))), 3)   # |C| at 1 Hz
+    0.136
+    """
+    import control
+
+    step = 1.0 / ctrl.loop_hz if dt is None else dt
+    one = control.tf([1.0], [1.0], step)
+    integ = control.tf([step, 0.0], [1.0, -1.0], step)  # dt / (1 - z^-1)
+    deriv = control.tf([1.0, -1.0], [step, 0.0], step)  # (1 - z^-1) / dt
+    g = ctrl.gains
+    if isinstance(g, PX4RateGains):
+        from mavsid.synthetic.plant import lowpass2p_coefficients
+
+        fd = one
+        if 0 < g.dgyro_hz < 0.5 / step:
+            b, a = lowpass2p_coefficients(g.dgyro_hz, 1.0 / step)
+            fd = control.tf(list(b), list(a), step)
+        pi = g.k * g.p * one + g.k * g.i * integ
+        return pi + g.k * g.d * fd * deriv, pi + g.ff * one
+    ft = control.tf(*_first_order_z(g.fltt, step), step)
+    fe = control.tf(*_first_order_z(g.flte, step), step)
+    fd = control.tf(*_first_order_z(g.fltd, step), step)
+    pid = fe * (g.p * one + g.i * integ + g.d * fd * deriv)
+    return pid, pid * ft + g.ff * ft
+
+
+@dataclass(frozen=True)
+class LoopAnalysis:
+    """The rate loop of one axis with given gains.
+
+    Attributes
+    ----------
+    gain_margin_db, phase_margin_deg, crossover_hz : float
+        Of the loop transfer ``L = C_fb·P`` (crossover: where ``|L| = 1``).
+    bandwidth_hz : float
+        −3 dB bandwidth of the closed loop from rate target to rate.
+    peak_db : float
+        Largest closed-loop gain.
+    disturbance_bandwidth_hz : float
+        Where the sensitivity ``1/(1+L)`` reaches −3 dB.
+    phase_delay_s : float
+        Phase delay of the closed loop at twice the −180° frequency (``-phase/ω``, at the
+        bandwidth when that is not reached).
+    rise_time_s, overshoot_percent : float
+        Of the closed-loop step response.
+    freq_hz, magnitude_db, phase_deg : numpy.ndarray
+        The closed-loop response from rate target to rate.
+    stderr : Mapping[str, float]
+        One-σ of each figure from the plant's parameter covariance.
+    """
+
+    gain_margin_db: float
+    phase_margin_deg: float
+    crossover_hz: float
+    bandwidth_hz: float
+    peak_db: float
+    disturbance_bandwidth_hz: float
+    phase_delay_s: float
+    rise_time_s: float
+    overshoot_percent: float
+    freq_hz: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+    magnitude_db: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+    phase_deg: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+    stderr: Mapping[str, float] = field(default_factory=dict)
+
+    def figures(self) -> dict[str, float]:
+        """The scalar figures by name."""
+        return {k: float(getattr(self, k)) for k in _FIGURES}
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON form ``mavsid tune --json`` gives per axis (margins, closed loop)."""
+        return {
+            "margins": {"gain_db": self.gain_margin_db, "phase_deg": self.phase_margin_deg,
+                        "crossover_hz": self.crossover_hz},
+            "closed_loop": {
+                "bandwidth_hz": self.bandwidth_hz, "peak_db": self.peak_db,
+                "disturbance_bandwidth_hz": self.disturbance_bandwidth_hz,
+                "phase_delay_s": self.phase_delay_s, "rise_time_s": self.rise_time_s,
+                "overshoot_percent": self.overshoot_percent,
+                "frequency_hz": self.freq_hz.tolist(),
+                "magnitude_db": self.magnitude_db.tolist(),
+                "phase_deg": self.phase_deg.tolist(),
+            },
+            "stderr": dict(self.stderr),
+        }
+
+
+_FIGURES = ("gain_margin_db", "phase_margin_deg", "crossover_hz", "bandwidth_hz", "peak_db",
+            "disturbance_bandwidth_hz", "phase_delay_s", "rise_time_s", "overshoot_percent")
+
+
+def _crossing(f: np.ndarray, mag_db: np.ndarray, level: float, rising: bool) -> float:
+    """First frequency where ``mag_db`` crosses ``level`` (log-interpolated), NaN if never."""
+    above = mag_db >= level
+    now, before = (above[1:], above[:-1]) if rising else (~above[1:], ~above[:-1])
+    idx = np.flatnonzero(now & ~before)
+    if not idx.size:
+        return float("nan")
+    i = int(idx[0])
+    x0, x1 = np.log(f[i]), np.log(f[i + 1])
+    y0, y1 = mag_db[i], mag_db[i + 1]
+    return float(np.exp(x0 + (level - y0) * (x1 - x0) / (y1 - y0))) if y1 != y0 else float(f[i])
+
+
+def analyse_loop(plant_ss: Any, ctrl: AxisController, lag: int = 0,
+                 freq_hz: np.ndarray | None = None) -> LoopAnalysis:
+    """Margins, bandwidths and step metrics of ``ctrl`` around ``plant_ss`` (a discrete
+    python-control system at the controller's loop step, rate per controller output).
+
+    ``lag`` loops of delay on the target path (see :func:`replay_controller`).
+    """
+    import control
+
+    dt = float(plant_ss.dt)
+    cfb, ct = controller_tf(ctrl, dt)
+    if lag:
+        ct = ct * control.tf([1.0], [1.0] + [0.0] * lag, dt)
+    p = control.ss(plant_ss)
+    cfb_ss, ct_ss = control.ss(cfb), control.ss(ct)
+    loop_tf = cfb_ss * p
+    closed = control.feedback(p, cfb_ss) * ct_ss
+    sens = control.feedback(control.ss([], [], [], [[1.0]], dt), loop_tf)
+    f = np.geomspace(0.1, 0.45 / dt, 400) if freq_hz is None else np.asarray(freq_hz)
+    w = 2 * np.pi * f
+    import warnings
+
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # python-control's method fall-backs
+        gm, pm, _sm, _wcg, wcp, _wcs = control.stability_margins(loop_tf)
+        t_resp = closed(np.exp(1j * w * dt))
+        s_resp = sens(np.exp(1j * w * dt))
+    mag = 20 * np.log10(np.abs(t_resp))
+    ph = np.degrees(np.unwrap(np.angle(t_resp)))
+    bw = _crossing(f, mag - mag[0], -3.0, rising=False)
+    dbw = _crossing(f, 20 * np.log10(np.abs(s_resp)), -3.0, rising=True)
+    i180 = np.flatnonzero(ph <= -180.0)
+    if i180.size:
+        f2 = 2 * f[i180[0]] if 2 * f[i180[0]] <= f[-1] else f[i180[0]]
+        phase_delay = float(-np.interp(f2, f, ph) / (360 * f2))
+    elif np.isfinite(bw):
+        phase_delay = float(-np.interp(bw, f, ph) / (360 * bw))
+    else:
+        phase_delay = float("nan")
+    rise, over = _step_metrics(closed, dt)
+    return LoopAnalysis(
+        gain_margin_db=float(20 * np.log10(gm)) if np.isfinite(gm) and gm > 0 else float("inf"),
+        phase_margin_deg=float(pm), crossover_hz=float(wcp / (2 * np.pi)),
+        bandwidth_hz=bw, peak_db=float(np.max(mag)), disturbance_bandwidth_hz=dbw,
+        phase_delay_s=phase_delay, rise_time_s=rise, overshoot_percent=over,
+        freq_hz=f, magnitude_db=mag, phase_deg=ph,
+    )
+
+
+def _step_metrics(closed: Any, dt: float, horizon_s: float = 2.0) -> tuple[float, float]:
+    """10-90 % rise time (s) and overshoot (%) of the closed loop's unit step."""
+    import control
+
+    t = np.arange(0.0, horizon_s, dt)
+    y = np.asarray(control.step_response(closed, T=t).outputs, dtype=float).ravel()
+    final = float(np.mean(y[-max(1, len(y) // 10):]))
+    if not np.all(np.isfinite(y)) or abs(final) < 1e-9:
+        return float("nan"), float("nan")
+    r = y / final
+    i10, i90 = np.flatnonzero(r >= 0.1), np.flatnonzero(r >= 0.9)
+    rise = float(t[i90[0]] - t[i10[0]]) if i10.size and i90.size else float("nan")
+    return rise, float(max(0.0, 100.0 * (np.max(r) - 1.0)))
+
+
+def plant_statespace(model: Any, axis: str, dt: float) -> Any:
+    """The axis's plant (controller output -> rate) as a discrete python-control system at
+    step ``dt`` (filters and delay included; bias and other inputs left out)."""
+    import control
+
+    pl = plant_from_model(model, axis, dt)
+    return control.ss(pl.a, pl.b.reshape(-1, 1), pl.c.reshape(1, -1), 0.0, dt)
+
+
+def analyse_model(model: Any, axis: str, ctrl: AxisController, lag: int = 0,
+                  samples: int = 40, seed: int = 0) -> LoopAnalysis:
+    """:func:`analyse_loop` of the identified plant, with one-σ uncertainties from
+    ``samples`` draws of the model's coefficients from their covariance."""
+    dt = 1.0 / ctrl.loop_hz
+    base = analyse_loop(plant_statespace(model, axis, dt), ctrl, lag)
+    cov = getattr(model, "covariance", None)
+    rate = AXIS_RATE[axis]
+    if cov is None or samples < 2 or rate not in model.state_names:
+        return base
+    j = model.state_names.index(rate)
+    c = np.nan_to_num(np.asarray(cov[j], dtype=float))
+    rng = np.random.default_rng(seed)
+    draws = []
+    for _ in range(samples):
+        coef = model.coef.copy()
+        coef[:, j] = rng.multivariate_normal(model.coef[:, j], c, check_valid="ignore")
+        try:
+            m = replace(model, coef=coef)
+            draws.append(analyse_loop(plant_statespace(m, axis, dt), ctrl, lag,
+                                      base.freq_hz).figures())
+        except (MavsidError, ValueError, np.linalg.LinAlgError):
+            continue
+    if len(draws) < 2:
+        return base
+    err = {k: float(np.nanstd([d[k] for d in draws if np.isfinite(d[k])] or [np.nan]))
+           for k in _FIGURES}
+    return replace(base, stderr=err)
+
+
+def _scaled(ctrl: AxisController, k: float) -> AxisController:
+    g = ctrl.gains
+    if isinstance(g, PX4RateGains):
+        return replace(ctrl, gains=replace(g, p=g.p * k, i=g.i * k, d=g.d * k))
+    return replace(ctrl, gains=replace(g, p=g.p * k, i=g.i * k, d=g.d * k))
+
+
+def suggest_gains(plant_ss: Any, ctrl: AxisController, target_pm_deg: float = 50.0,
+                  lag: int = 0) -> tuple[dict[str, float], LoopAnalysis] | None:
+    """P, I and D scaled together (ratios and filters kept) so that the loop's phase margin
+    is ``target_pm_deg``; the vehicle's parameter names and units, and the predicted loop.
+    None when no scale in [0.05, 20] reaches it with a stable loop."""
+    def pm(k: float) -> float:
+        a = analyse_loop(plant_ss, _scaled(ctrl, k), lag)
+        return a.phase_margin_deg if np.isfinite(a.phase_margin_deg) else -1e9
+
+    ks = np.geomspace(0.05, 20.0, 40)
+    vals = np.array([pm(k) for k in ks])
+    ok = np.flatnonzero((vals[:-1] >= target_pm_deg) & (vals[1:] < target_pm_deg))
+    if not ok.size:
+        return None
+    lo, hi = float(ks[ok[-1]]), float(ks[ok[-1] + 1])
+    for _ in range(30):
+        mid = np.sqrt(lo * hi)
+        lo, hi = (mid, hi) if pm(mid) >= target_pm_deg else (lo, mid)
+    new = _scaled(ctrl, lo)
+    result = analyse_loop(plant_ss, new, lag)
+    if not (np.isfinite(result.phase_margin_deg) and result.gain_margin_db > 0):
+        return None
+    return gain_params(new), result
+
+
+def gain_params(ctrl: AxisController) -> dict[str, float]:
+    """The controller's P, I, D in the vehicle's own parameter names and units."""
+    g = ctrl.gains
+    if ctrl.autopilot == "px4":
+        pre = f"MC_{_PX4[ctrl.axis]}RATE_"
+        k = g.k if isinstance(g, PX4RateGains) else 1.0
+        return {pre + "P": g.p, pre + "I": g.i, pre + "D": g.d, pre + "K": k}
+    ax = _AP[ctrl.axis]
+    if ctrl.naming == "RATE":
+        return {f"RATE_{ax}_{n}": round(v / _AP3_SCALE, 6)
+                for n, v in (("P", g.p), ("I", g.i), ("D", g.d))}
+    return {f"ATC_RAT_{ax}_{n}": round(v, 6) for n, v in (("P", g.p), ("I", g.i), ("D", g.d))}
+
+
+# --------------------------------------------------------------------------- tune
+
+
+def _advice(axis: str, fit: Any, ctrl: AxisController, bandwidth_hz: float,
+            plant_frf: Any) -> list[str]:
+    """What to change next flight, from what this one showed."""
+    out: list[str] = []
+    rate_hz = 1.0 / fit.validation.dt
+    if np.isfinite(bandwidth_hz) and rate_hz < 5 * bandwidth_hz:
+        out.append(
+            f"{axis}: the log's {rate_hz:.0f} Hz cannot resolve a {bandwidth_hz:.1f} Hz rate "
+            "loop: log rates at the loop rate (ArduPilot LOG_BITMASK ATTITUDE_FAST and "
+            "PID, or INS_RAW_LOG_OPT; PX4 SDLOG_PROFILE 'high rate' / 'system identification')")
+    if plant_frf is not None:
+        band = plant_frf.band()
+        want_lo = 0.5
+        want_hi = min(0.4 * rate_hz, max(3 * bandwidth_hz if np.isfinite(bandwidth_hz) else 20.0,
+                                          20.0))
+        if band is None:
+            out.append(f"{axis}: no coherent band: raise SID_MAGNITUDE (PX4: the "
+                       "system-identification chirp amplitude) and fly SID_AXIS "
+                       f"{10 + AXES.index(axis)}")
+        else:
+            if band[0] > 1.2 * want_lo:
+                out.append(f"{axis}: coherent only from {band[0]:.2f} Hz: set SID_F_START_HZ "
+                           f"{want_lo:g} and lengthen SID_T_REC")
+            if band[1] < 0.8 * want_hi:
+                out.append(f"{axis}: coherent only up to {band[1]:.1f} Hz: set SID_F_STOP_HZ "
+                           f"{want_hi:.0f} and raise SID_MAGNITUDE")
+    u = np.concatenate([s.inputs[:, s.input_names.index(f"u_{axis}")]
+                        for s in (*fit.train, *fit.held_out)])
+    peak = float(np.max(np.abs(u))) if u.size else 0.0
+    if peak > 0.8:
+        out.append(f"{axis}: the controller output reached {peak:.2f} of full scale: lower "
+                   "SID_MAGNITUDE")
+    if ctrl.defaults_used:
+        out.append(f"{axis}: the log lacks {', '.join(ctrl.defaults_used)} (defaults assumed): "
+                   "log the parameters")
+    return out
+
+
+def tune(result: Any, target_pm_deg: float = 50.0, samples: int = 40) -> dict[str, Any]:
+    """Per fitted axis of a :class:`mavsid.pipeline.FitResult`: the loop with the logged
+    gains (margins, closed loop, uncertainties), the plant FRF and TF fit for SYSTEMID data,
+    gains for ``target_pm_deg`` (only when the axis's verdict is ``good``) and next-flight
+    advice. The JSON form of ``mavsid tune --json``."""
+    from mavsid.frequency import fit_tf, frf
+
+    out: dict[str, Any] = {}
+    for axis, fit in result.axes.items():
+        entry: dict[str, Any] = {}
+        fd = result.flights[0]
+        ctrl = controller_from_params(fd.params, axis, _autopilot(fd))
+        lag = fit.closed_loop.lag_loops if fit.closed_loop is not None else 0
+        entry["controller"] = ctrl.to_dict()
+        try:
+            an = analyse_model(fit.model, axis, ctrl, lag, samples=samples)
+        except (MavsidError, ValueError, np.linalg.LinAlgError) as exc:
+            entry["error"] = str(exc)
+            out[axis] = entry
+            continue
+        entry.update(an.to_dict())
+        segs = [s for s in (*fit.train, *fit.held_out) if s.source == "sysid"]
+        plant = None
+        if segs:
+            rate = AXIS_RATE[axis]
+            try:
+                plant = frf([s.inputs[:, s.input_names.index(f"u_{axis}")] for s in segs],
+                            [s.states[:, s.state_names.index(rate)] for s in segs], segs[0].dt,
+                            names=(f"u_{axis}", rate))
+                entry["plant_frf"] = plant.to_dict()
+                entry["plant_tf"] = fit_tf(plant).to_dict()
+            except MavsidError as exc:
+                entry["plant_frf_note"] = str(exc)
+        level = fit.verdict.level if fit.verdict is not None else "not identified"
+        entry["verdict"] = level
+        if level != "good":
+            entry["suggested"] = {}
+            entry["suggested_note"] = f"no gains suggested: the plant model is {level}"
+        else:
+            got = suggest_gains(plant_statespace(fit.model, axis, 1.0 / ctrl.loop_hz), ctrl,
+                                target_pm_deg, lag)
+            if got is None:
+                entry["suggested"] = {}
+                entry["suggested_note"] = (f"no P/I/D scale gives {target_pm_deg:g} deg phase "
+                                           "margin with a stable loop")
+            else:
+                entry["suggested"] = {k: float(v) for k, v in got[0].items()}
+                entry["suggested_loop"] = {k: v for k, v in got[1].to_dict().items()
+                                           if k != "stderr"}
+        entry["advice"] = _advice(axis, fit, ctrl, an.bandwidth_hz, plant)
+        out[axis] = entry
+    return out
+
+
+def format_tune(report: Mapping[str, Any]) -> str:
+    """The text ``mavsid tune`` prints."""
+    lines = []
+    for axis, e in report.items():
+        if "error" in e:
+            lines.append(f"{axis}: loop not analysed: {e['error']}")
+            continue
+        m, c, sd = e["margins"], e["closed_loop"], e.get("stderr", {})
+
+        def pm(v: float, key: str, fmt: str = ".1f", sd: Mapping[str, float] = sd) -> str:
+            s = sd.get(key)
+            return f"{v:{fmt}}" + (f" ± {s:{fmt}}" if s is not None and np.isfinite(s) else "")
+
+        lines.append(
+            f"{axis}: phase margin {pm(m['phase_deg'], 'phase_margin_deg')} deg, gain margin "
+            f"{pm(m['gain_db'], 'gain_margin_db')} dB, crossover "
+            f"{pm(m['crossover_hz'], 'crossover_hz', '.2f')} Hz; closed-loop bandwidth "
+            f"{pm(c['bandwidth_hz'], 'bandwidth_hz', '.2f')} Hz, peak {c['peak_db']:.1f} dB, "
+            f"rise {c['rise_time_s'] * 1e3:.0f} ms, overshoot {c['overshoot_percent']:.0f} %")
+        if e.get("suggested"):
+            lines.append("  suggested: " + ", ".join(f"{k} {v:.4g}"
+                                                     for k, v in e["suggested"].items()))
+        elif e.get("suggested_note"):
+            lines.append(f"  {e['suggested_note']}")
+        lines += [f"  advice: {a}" for a in e.get("advice", [])]
+    return "\n".join(lines)

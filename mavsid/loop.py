@@ -77,9 +77,12 @@ __all__ = [
     "analyse_model",
     "baseline_fit",
     "closed_loop_fit",
+    "compare_response",
     "controller_from_params",
     "controller_tf",
     "format_tune",
+    "frd_margins",
+    "measured_responses",
     "plant_from_model",
     "replay_controller",
     "simulate_closed_loop",
@@ -814,7 +817,7 @@ def twin_signals(flight: FlightData, raw: Any = None) -> TwinSignals:
             except MavsidError:
                 continue
             if t.size >= 2:
-                targets[axis] = _on_grid(t, v, grid, hold=False)
+                targets[axis] = _on_grid(t, v, grid, hold=True)
                 sources[f"target_{axis}"] = f"{ch.message}.{ch.field}"
                 break
     injection: dict[str, np.ndarray] = {}
@@ -1227,6 +1230,8 @@ class LoopAnalysis:
         The closed-loop response from rate target to rate.
     stderr : Mapping[str, float]
         One-σ of each figure from the plant's parameter covariance.
+    loop_response, closed_response : numpy.ndarray
+        Complex ``L`` and ``T`` at ``freq_hz``.
     """
 
     gain_margin_db: float
@@ -1242,6 +1247,8 @@ class LoopAnalysis:
     magnitude_db: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
     phase_deg: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
     stderr: Mapping[str, float] = field(default_factory=dict)
+    loop_response: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0, complex))
+    closed_response: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0, complex))
 
     def figures(self) -> dict[str, float]:
         """The scalar figures by name."""
@@ -1260,6 +1267,11 @@ class LoopAnalysis:
                 "frequency_hz": self.freq_hz.tolist(),
                 "magnitude_db": self.magnitude_db.tolist(),
                 "phase_deg": self.phase_deg.tolist(),
+            },
+            "loop": {
+                "frequency_hz": self.freq_hz.tolist(),
+                "magnitude_db": (20 * np.log10(np.abs(self.loop_response))).tolist(),
+                "phase_deg": np.degrees(np.unwrap(np.angle(self.loop_response))).tolist(),
             },
             "stderr": dict(self.stderr),
         }
@@ -1309,6 +1321,7 @@ def analyse_loop(plant_ss: Any, ctrl: AxisController, lag: int = 0,
         gm, pm, _sm, _wcg, wcp, _wcs = control.stability_margins(loop_tf)
         t_resp = closed(np.exp(1j * w * dt))
         s_resp = sens(np.exp(1j * w * dt))
+        l_resp = loop_tf(np.exp(1j * w * dt))
     mag = 20 * np.log10(np.abs(t_resp))
     ph = np.degrees(np.unwrap(np.angle(t_resp)))
     bw = _crossing(f, mag - mag[0], -3.0, rising=False)
@@ -1328,6 +1341,7 @@ def analyse_loop(plant_ss: Any, ctrl: AxisController, lag: int = 0,
         bandwidth_hz=bw, peak_db=float(np.max(mag)), disturbance_bandwidth_hz=dbw,
         phase_delay_s=phase_delay, rise_time_s=rise, overshoot_percent=over,
         freq_hz=f, magnitude_db=mag, phase_deg=ph,
+        loop_response=np.asarray(l_resp).ravel(), closed_response=np.asarray(t_resp).ravel(),
     )
 
 
@@ -1397,17 +1411,30 @@ def suggest_gains(plant_ss: Any, ctrl: AxisController, target_pm_deg: float = 50
     """P, I and D scaled together (ratios and filters kept) so that the loop's phase margin
     is ``target_pm_deg``; the vehicle's parameter names and units, and the predicted loop.
     None when no scale in [0.05, 20] reaches it with a stable loop."""
-    def pm(k: float) -> float:
-        a = analyse_loop(plant_ss, _scaled(ctrl, k), lag)
-        return a.phase_margin_deg if np.isfinite(a.phase_margin_deg) else -1e9
+    import warnings
 
-    ks = np.geomspace(0.05, 20.0, 40)
+    import control
+
+    p = control.ss(plant_ss)
+    dt = float(plant_ss.dt)
+
+    def pm(k: float) -> float:
+        cfb, _ = controller_tf(_scaled(ctrl, k), dt)
+        loop_tf = control.ss(cfb) * p
+        if np.any(np.abs(control.feedback(loop_tf, 1).poles()) >= 1.0):
+            return -1e9  # unstable closed loop
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            margin = control.stability_margins(loop_tf)[1]
+        return float(margin) if np.isfinite(margin) else 1e9
+
+    ks = np.geomspace(0.05, 20.0, 25)
     vals = np.array([pm(k) for k in ks])
     ok = np.flatnonzero((vals[:-1] >= target_pm_deg) & (vals[1:] < target_pm_deg))
     if not ok.size:
         return None
-    lo, hi = float(ks[ok[-1]]), float(ks[ok[-1] + 1])
-    for _ in range(30):
+    lo, hi = float(ks[ok[0]]), float(ks[ok[0] + 1])
+    for _ in range(20):
         mid = np.sqrt(lo * hi)
         lo, hi = (mid, hi) if pm(mid) >= target_pm_deg else (lo, mid)
     new = _scaled(ctrl, lo)
@@ -1429,6 +1456,102 @@ def gain_params(ctrl: AxisController) -> dict[str, float]:
         return {f"RATE_{ax}_{n}": round(v / _AP3_SCALE, 6)
                 for n, v in (("P", g.p), ("I", g.i), ("D", g.d))}
     return {f"ATC_RAT_{ax}_{n}": round(v, 6) for n, v in (("P", g.p), ("I", g.i), ("D", g.d))}
+
+
+# --------------------------------------------------------------------------- measured loop
+
+
+def measured_responses(fit: Any, flights: Sequence[FlightData],
+                       signals: Sequence[TwinSignals] | None = None, lag: int = 0
+                       ) -> dict[str, Any]:
+    """Frequency responses measured on the axis's SYSTEMID blocks (train and held-out):
+
+    - ``"plant"``: controller output (mixer input) -> rate;
+    - ``"loop"``: the broken-loop response ``L = −c/u`` (``c`` the controller's part of the
+      mixer input ``u``) where the injection is at the mixer (``SID_AXIS`` 10-12);
+    - ``"closed_loop"``: rate target -> rate where the injection is in the target
+      (``SID_AXIS`` 1-9).
+
+    Each is a :class:`mavsid.frequency.FRF`; absent when there is no such block.
+    """
+    from mavsid.frequency import frf
+
+    axis = fit.axis
+    sigs = list(signals) if signals is not None else [twin_signals(fd) for fd in flights]
+    segs = [s for s in (*fit.train, *fit.held_out) if s.source == "sysid"]
+    blocks = sorted(_locate(segs, axis, flights, sigs), key=lambda b: b.seg.start_s)
+    out: dict[str, Any] = {}
+    if not blocks:
+        return out
+    from mavsid.validation import _band
+
+    dt = blocks[0].seg.dt
+    rate = AXIS_RATE[axis]
+    bands = [bd for bd in (_band(s) for s in segs) if bd is not None]
+    grid: dict[str, float] = {}
+    if bands:  # only the injected band: a noise-free log is coherent beyond it too
+        grid = {"f_min_hz": min(b[0] for b in bands),
+                "f_max_hz": min(max(b[1] for b in bands), 0.4 / dt)}
+    w = [b.warm for b in blocks]
+    us = [b.u[k:] for b, k in zip(blocks, w, strict=True)]
+    ys = [b.rate[k:] for b, k in zip(blocks, w, strict=True)]
+    try:
+        out["plant"] = frf(us, ys, dt, names=(f"u_{axis}", rate), **grid)
+    except MavsidError:
+        pass
+    mixer = [b for b in blocks if np.any(b.injection != 0)]
+    if mixer:
+        cs = [-(b.u - _lagged(b.injection, lag))[b.warm:] for b in mixer]
+        try:
+            out["loop"] = frf([b.u[b.warm:] for b in mixer], cs, dt,
+                              names=(f"u_{axis}", f"-c_{axis}"), **grid)
+        except MavsidError:
+            pass
+    injected = [int(getattr(s, "meta", {}).get("sid_axis", 0) or 0) for s in segs]
+    if any(1 <= a <= 9 for a in injected):
+        try:
+            out["closed_loop"] = frf([b.target[b.warm:] for b in blocks], ys, dt,
+                                     names=(f"target_{axis}", rate), **grid)
+        except MavsidError:
+            pass
+    return out
+
+
+def compare_response(measured: Any, freq_hz: np.ndarray, response: np.ndarray
+                     ) -> dict[str, float]:
+    """Median and largest |error| in dB and degrees of a predicted response against a
+    measured FRF over the measured one's coherent band (NaN when none)."""
+    m = measured.coherent & (measured.freq_hz >= freq_hz[0]) & (measured.freq_hz <= freq_hz[-1])
+    if not m.any():
+        return {"median_db": float("nan"), "max_db": float("nan"),
+                "median_deg": float("nan"), "max_deg": float("nan"), "band_hz": None}
+    f = measured.freq_hz[m]
+    pred = np.interp(f, freq_hz, response.real) + 1j * np.interp(f, freq_hz, response.imag)
+    ratio = measured.response[m] / pred
+    db = np.abs(20 * np.log10(np.abs(ratio)))
+    deg = np.abs(np.degrees(np.angle(ratio)))
+    return {"median_db": float(np.median(db)), "max_db": float(np.max(db)),
+            "median_deg": float(np.median(deg)), "max_deg": float(np.max(deg)),
+            "band_hz": [float(f.min()), float(f.max())]}
+
+
+def frd_margins(measured: Any) -> dict[str, float]:
+    """Gain and phase margin (python-control on an FRD) of a measured broken-loop FRF,
+    over its coherent band only."""
+    import warnings
+
+    import control
+
+    m = measured.coherent & np.isfinite(measured.response)
+    if m.sum() < 4:
+        return {"gain_db": float("nan"), "phase_deg": float("nan"),
+                "crossover_hz": float("nan")}
+    sys = control.frd(measured.response[m], 2 * np.pi * measured.freq_hz[m])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        gm, pm, _sm, _wg, wc, _ws = control.stability_margins(sys)
+    return {"gain_db": float(20 * np.log10(gm)) if np.isfinite(gm) and gm > 0 else float("inf"),
+            "phase_deg": float(pm), "crossover_hz": float(wc / (2 * np.pi))}
 
 
 # --------------------------------------------------------------------------- tune
@@ -1477,7 +1600,7 @@ def tune(result: Any, target_pm_deg: float = 50.0, samples: int = 40) -> dict[st
     gains (margins, closed loop, uncertainties), the plant FRF and TF fit for SYSTEMID data,
     gains for ``target_pm_deg`` (only when the axis's verdict is ``good``) and next-flight
     advice. The JSON form of ``mavsid tune --json``."""
-    from mavsid.frequency import fit_tf, frf
+    from mavsid.frequency import fit_tf
 
     out: dict[str, Any] = {}
     for axis, fit in result.axes.items():
@@ -1493,18 +1616,24 @@ def tune(result: Any, target_pm_deg: float = 50.0, samples: int = 40) -> dict[st
             out[axis] = entry
             continue
         entry.update(an.to_dict())
-        segs = [s for s in (*fit.train, *fit.held_out) if s.source == "sysid"]
         plant = None
-        if segs:
-            rate = AXIS_RATE[axis]
+        measured = measured_responses(fit, result.flights, lag=lag)
+        if "plant" in measured:
+            plant = measured["plant"]
+            entry["plant_frf"] = plant.to_dict()
             try:
-                plant = frf([s.inputs[:, s.input_names.index(f"u_{axis}")] for s in segs],
-                            [s.states[:, s.state_names.index(rate)] for s in segs], segs[0].dt,
-                            names=(f"u_{axis}", rate))
-                entry["plant_frf"] = plant.to_dict()
                 entry["plant_tf"] = fit_tf(plant).to_dict()
             except MavsidError as exc:
-                entry["plant_frf_note"] = str(exc)
+                entry["plant_tf_note"] = str(exc)
+        if "loop" in measured:
+            entry["loop_frf"] = measured["loop"].to_dict()
+            entry["loop_frf_margins"] = frd_margins(measured["loop"])
+            entry["loop_frf_vs_predicted"] = compare_response(
+                measured["loop"], an.freq_hz, an.loop_response)
+        if "closed_loop" in measured:
+            entry["closed_loop_frf"] = measured["closed_loop"].to_dict()
+            entry["closed_loop_frf_vs_predicted"] = compare_response(
+                measured["closed_loop"], an.freq_hz, an.closed_response)
         level = fit.verdict.level if fit.verdict is not None else "not identified"
         entry["verdict"] = level
         if level != "good":

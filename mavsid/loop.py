@@ -307,6 +307,9 @@ class AxisController:
     naming : str
         ``"ATC_RAT"`` (ArduPilot >= 3.4), ``"ATC_RAT_FILT"`` (3.5-4.0 single filter),
         ``"RATE"`` (ArduCopter <= 3.3, centidegree scale) or ``"MC"`` (PX4).
+    angle_p : float
+        The attitude loop's P (1/s) around the rate loop (``ATC_ANG_*_P``, 3.x ``STB_*_P``,
+        PX4 ``MC_*_P``): a mixer injection's broken loop includes it.
     """
 
     autopilot: str
@@ -318,6 +321,7 @@ class AxisController:
     params: Mapping[str, float] = field(default_factory=dict)
     defaults_used: tuple[str, ...] = ()
     naming: str = "ATC_RAT"
+    angle_p: float = 0.0
 
     def new_pid(self, dt: float | None = None) -> RatePID | PX4RatePID:
         """A fresh controller stepping every ``dt`` (default ``1 / loop_hz``)."""
@@ -335,6 +339,7 @@ class AxisController:
             "gyro_filter_hz": self.gyro_filter_hz,
             "notch_hz": self.notch_hz,
             "naming": self.naming,
+            "angle_p": self.angle_p,
             "params": dict(self.params),
             "defaults_used": list(self.defaults_used),
         }
@@ -359,6 +364,8 @@ _PX4_DEFAULTS = {
     "pitch": (0.15, 0.2, 0.003, 0.0, 1.0, 0.3),
     "yaw": (0.2, 0.1, 0.0, 0.0, 1.0, 0.3),
 }
+#: PX4 v1.14 attitude P defaults (MC_ROLL_P, MC_PITCH_P, MC_YAW_P)
+_PX4_ANGLE_P = {"roll": 6.5, "pitch": 6.5, "yaw": 2.8}
 _AP_LOOP_HZ = 400.0
 _AP_GYRO_FILTER_HZ = 20.0
 _PX4_GYRO_CUTOFF_HZ = 40.0
@@ -430,8 +437,9 @@ def controller_from_params(
         loop = get("IMU_GYRO_RATEMAX", _PX4_OLD_LOOP_HZ if old else _PX4_LOOP_HZ)
         gyro = get("IMU_GYRO_CUTOFF", _PX4_GYRO_CUTOFF_HZ)
         notch = float(params.get("IMU_GYRO_NF0_FRQ", params.get("IMU_GYRO_NF_FREQ", 0.0)) or 0)
+        ang = get(f"MC_{_PX4[axis]}_P", _PX4_ANGLE_P[axis])
         return AxisController("px4", axis, gains, loop or _PX4_LOOP_HZ, gyro, notch, used,
-                              tuple(defaults), "MC")
+                              tuple(defaults), "MC", ang)
     ax = _AP[axis]
     modern = any(k.startswith(f"ATC_RAT_{ax}_") for k in params)
     legacy = not modern and any(k.startswith(f"RATE_{ax}_") for k in params)
@@ -469,8 +477,10 @@ def controller_from_params(
         notch = float(params.get("INS_HNTCH_FREQ", 0.0) or 0.0)
     elif params.get("INS_NOTCH_ENABLE", 0):
         notch = float(params.get("INS_NOTCH_FREQ", 0.0) or 0.0)
+    ang_name = f"STB_{ax}_P" if legacy else f"ATC_ANG_{ax}_P"
+    ang = get(ang_name, 4.5)
     return AxisController("ardupilot", axis, gains, loop, gyro, notch, used, tuple(defaults),
-                          naming)
+                          naming, ang)
 
 
 # --------------------------------------------------------------------------- the plant
@@ -1232,6 +1242,11 @@ class LoopAnalysis:
         One-σ of each figure from the plant's parameter covariance.
     loop_response, closed_response : numpy.ndarray
         Complex ``L`` and ``T`` at ``freq_hz``.
+    mixer_loop_response : numpy.ndarray
+        The broken loop a mixer injection measures: the rate loop and the attitude loop
+        around it (``angle_p``), ``(C_fb + C_t·angle_p·dt/(1−z⁻¹))·P``.
+    mixer_margins : Mapping[str, float]
+        ``gain_db``, ``phase_deg``, ``crossover_hz`` of that loop.
     """
 
     gain_margin_db: float
@@ -1249,6 +1264,9 @@ class LoopAnalysis:
     stderr: Mapping[str, float] = field(default_factory=dict)
     loop_response: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0, complex))
     closed_response: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0, complex))
+    mixer_loop_response: np.ndarray = field(repr=False,
+                                            default_factory=lambda: np.zeros(0, complex))
+    mixer_margins: Mapping[str, float] = field(default_factory=dict)
 
     def figures(self) -> dict[str, float]:
         """The scalar figures by name."""
@@ -1268,6 +1286,7 @@ class LoopAnalysis:
                 "magnitude_db": self.magnitude_db.tolist(),
                 "phase_deg": self.phase_deg.tolist(),
             },
+            "mixer_margins": dict(self.mixer_margins),
             "loop": {
                 "frequency_hz": self.freq_hz.tolist(),
                 "magnitude_db": (20 * np.log10(np.abs(self.loop_response))).tolist(),
@@ -1294,6 +1313,12 @@ def _crossing(f: np.ndarray, mag_db: np.ndarray, level: float, rising: bool) -> 
     return float(np.exp(x0 + (level - y0) * (x1 - x0) / (y1 - y0))) if y1 != y0 else float(f[i])
 
 
+def _db(gain_margin: float) -> float:
+    """A gain margin in dB (inf when the phase never crosses -180°)."""
+    ok = np.isfinite(gain_margin) and gain_margin > 0
+    return float(20 * np.log10(gain_margin)) if ok else float("inf")
+
+
 def analyse_loop(plant_ss: Any, ctrl: AxisController, lag: int = 0,
                  freq_hz: np.ndarray | None = None) -> LoopAnalysis:
     """Margins, bandwidths and step metrics of ``ctrl`` around ``plant_ss`` (a discrete
@@ -1310,6 +1335,9 @@ def analyse_loop(plant_ss: Any, ctrl: AxisController, lag: int = 0,
     p = control.ss(plant_ss)
     cfb_ss, ct_ss = control.ss(cfb), control.ss(ct)
     loop_tf = cfb_ss * p
+    # at the mixer the attitude loop closes too: rate target = angle_p * -(integral of rate)
+    integ = control.tf([dt, 0.0], [1.0, -1.0], dt)
+    mixer_loop = (cfb + ct * ctrl.angle_p * integ) * control.tf(plant_ss)
     closed = control.feedback(p, cfb_ss) * ct_ss
     sens = control.feedback(control.ss([], [], [], [[1.0]], dt), loop_tf)
     f = np.geomspace(0.1, 0.45 / dt, 400) if freq_hz is None else np.asarray(freq_hz)
@@ -1322,6 +1350,8 @@ def analyse_loop(plant_ss: Any, ctrl: AxisController, lag: int = 0,
         t_resp = closed(np.exp(1j * w * dt))
         s_resp = sens(np.exp(1j * w * dt))
         l_resp = loop_tf(np.exp(1j * w * dt))
+        m_resp = mixer_loop(np.exp(1j * w * dt))
+        mgm, mpm, _sm, _wg, mwc, _ws = control.stability_margins(mixer_loop)
     mag = 20 * np.log10(np.abs(t_resp))
     ph = np.degrees(np.unwrap(np.angle(t_resp)))
     bw = _crossing(f, mag - mag[0], -3.0, rising=False)
@@ -1336,12 +1366,15 @@ def analyse_loop(plant_ss: Any, ctrl: AxisController, lag: int = 0,
         phase_delay = float("nan")
     rise, over = _step_metrics(closed, dt)
     return LoopAnalysis(
-        gain_margin_db=float(20 * np.log10(gm)) if np.isfinite(gm) and gm > 0 else float("inf"),
+        gain_margin_db=_db(gm),
         phase_margin_deg=float(pm), crossover_hz=float(wcp / (2 * np.pi)),
         bandwidth_hz=bw, peak_db=float(np.max(mag)), disturbance_bandwidth_hz=dbw,
         phase_delay_s=phase_delay, rise_time_s=rise, overshoot_percent=over,
         freq_hz=f, magnitude_db=mag, phase_deg=ph,
         loop_response=np.asarray(l_resp).ravel(), closed_response=np.asarray(t_resp).ravel(),
+        mixer_loop_response=np.asarray(m_resp).ravel(),
+        mixer_margins={"gain_db": _db(mgm), "phase_deg": float(mpm),
+                       "crossover_hz": float(mwc / (2 * np.pi))},
     )
 
 
@@ -1550,8 +1583,7 @@ def frd_margins(measured: Any) -> dict[str, float]:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         gm, pm, _sm, _wg, wc, _ws = control.stability_margins(sys)
-    return {"gain_db": float(20 * np.log10(gm)) if np.isfinite(gm) and gm > 0 else float("inf"),
-            "phase_deg": float(pm), "crossover_hz": float(wc / (2 * np.pi))}
+    return {"gain_db": _db(gm), "phase_deg": float(pm), "crossover_hz": float(wc / (2 * np.pi))}
 
 
 # --------------------------------------------------------------------------- tune
@@ -1577,12 +1609,17 @@ def _advice(axis: str, fit: Any, ctrl: AxisController, bandwidth_hz: float,
                        "system-identification chirp amplitude) and fly SID_AXIS "
                        f"{10 + AXES.index(axis)}")
         else:
+            f_lo, f_hi = float(plant_frf.freq_hz[0]), float(plant_frf.freq_hz[-1])
             if band[0] > 1.2 * want_lo:
-                out.append(f"{axis}: coherent only from {band[0]:.2f} Hz: set SID_F_START_HZ "
-                           f"{want_lo:g} and lengthen SID_T_REC")
+                why = ("the chirp started there" if band[0] <= 1.05 * f_lo
+                       else "coherence is lost below: raise SID_MAGNITUDE or lengthen SID_T_REC")
+                out.append(f"{axis}: coherent only from {band[0]:.2f} Hz ({why}): set "
+                           f"SID_F_START_HZ {want_lo:g}")
             if band[1] < 0.8 * want_hi:
-                out.append(f"{axis}: coherent only up to {band[1]:.1f} Hz: set SID_F_STOP_HZ "
-                           f"{want_hi:.0f} and raise SID_MAGNITUDE")
+                why = ("the chirp stopped there" if band[1] >= 0.95 * f_hi
+                       else "coherence is lost above: raise SID_MAGNITUDE")
+                out.append(f"{axis}: coherent only up to {band[1]:.1f} Hz ({why}); the loop "
+                           f"needs up to {want_hi:.0f} Hz: set SID_F_STOP_HZ {want_hi:.0f}")
     u = np.concatenate([s.inputs[:, s.input_names.index(f"u_{axis}")]
                         for s in (*fit.train, *fit.held_out)])
     peak = float(np.max(np.abs(u))) if u.size else 0.0
@@ -1629,7 +1666,7 @@ def tune(result: Any, target_pm_deg: float = 50.0, samples: int = 40) -> dict[st
             entry["loop_frf"] = measured["loop"].to_dict()
             entry["loop_frf_margins"] = frd_margins(measured["loop"])
             entry["loop_frf_vs_predicted"] = compare_response(
-                measured["loop"], an.freq_hz, an.loop_response)
+                measured["loop"], an.freq_hz, an.mixer_loop_response)
         if "closed_loop" in measured:
             entry["closed_loop_frf"] = measured["closed_loop"].to_dict()
             entry["closed_loop_frf_vs_predicted"] = compare_response(
@@ -1674,6 +1711,15 @@ def format_tune(report: Mapping[str, Any]) -> str:
             f"{pm(m['crossover_hz'], 'crossover_hz', '.2f')} Hz; closed-loop bandwidth "
             f"{pm(c['bandwidth_hz'], 'bandwidth_hz', '.2f')} Hz, peak {c['peak_db']:.1f} dB, "
             f"rise {c['rise_time_s'] * 1e3:.0f} ms, overshoot {c['overshoot_percent']:.0f} %")
+        if "loop_frf_margins" in e:
+            mm, pr = e["loop_frf_margins"], e["mixer_margins"]
+            cmp_ = e["loop_frf_vs_predicted"]
+            lines.append(
+                f"  at the mixer (rate and attitude loops): measured phase margin "
+                f"{mm['phase_deg']:.1f} deg at {mm['crossover_hz']:.2f} Hz, predicted "
+                f"{pr['phase_deg']:.1f} deg at {pr['crossover_hz']:.2f} Hz; prediction within "
+                f"{cmp_['median_db']:.1f} dB / {cmp_['median_deg']:.1f} deg (median) over "
+                f"{cmp_['band_hz'][0]:.2g}-{cmp_['band_hz'][1]:.2g} Hz")
         if e.get("suggested"):
             lines.append("  suggested: " + ", ".join(f"{k} {v:.4g}"
                                                      for k, v in e["suggested"].items()))

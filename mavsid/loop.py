@@ -1521,7 +1521,7 @@ def measured_responses(fit: Any, flights: Sequence[FlightData],
     dt = blocks[0].seg.dt
     rate = AXIS_RATE[axis]
     bands = [bd for bd in (_band(s) for s in segs) if bd is not None]
-    grid: dict[str, float] = {}
+    grid: dict[str, Any] = {}
     if bands:  # only the injected band: a noise-free log is coherent beyond it too
         grid = {"f_min_hz": min(b[0] for b in bands),
                 "f_max_hz": min(max(b[1] for b in bands), 0.4 / dt)}
@@ -1551,7 +1551,7 @@ def measured_responses(fit: Any, flights: Sequence[FlightData],
 
 
 def compare_response(measured: Any, freq_hz: np.ndarray, response: np.ndarray
-                     ) -> dict[str, float]:
+                     ) -> dict[str, Any]:
     """Median and largest |error| in dB and degrees of a predicted response against a
     measured FRF over the measured one's coherent band (NaN when none)."""
     m = measured.coherent & (measured.freq_hz >= freq_hz[0]) & (measured.freq_hz <= freq_hz[-1])

@@ -4,8 +4,10 @@
 windows of several lengths, pooled over segments, and combines the lengths into one
 composite response (as CIFER does): at each frequency every window length's estimate is
 weighted by the inverse square of its normalised random error
-``ε = sqrt(1 - γ²) / (|γ| sqrt(2 n_d))`` (``n_d`` averages; Bendat & Piersol), so that long
-windows rule at low frequency and short, many-times-averaged ones above. Only frequencies
+``ε = sqrt(1 - γ²) / (|γ| sqrt(2 n_d))`` (Bendat & Piersol), ``n_d`` the effective number of
+averages at that frequency (a chirp excites each frequency in a few windows only: the
+windows' participation ratio of input power), so that long windows rule at low frequency
+and short, many-times-averaged ones above. Only frequencies
 whose coherence reaches ``min_coherence`` (default 0.6) count as identified.
 
 :func:`fit_tf` fits ``K e^{-τ s} / (s + a)`` (gain, pole, equivalent delay bounded to a
@@ -28,6 +30,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy import optimize, signal
@@ -38,6 +41,8 @@ __all__ = ["FRF", "MIN_COHERENCE", "TFFit", "fit_tf", "frf"]
 
 #: coherence (γ²) below which a frequency is not identified
 MIN_COHERENCE = 0.6
+#: periods of a frequency a window must hold for its estimate to count there
+CYCLES = 4.0
 #: Welch window lengths (s) combined by default
 WINDOWS_S = (1.0, 2.0, 4.0, 8.0)
 
@@ -99,27 +104,53 @@ class FRF:
         }
 
 
-def _welch(us: Sequence[np.ndarray], ys: Sequence[np.ndarray], nper: int, fs: float
-           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float] | None:
-    suu = syy = 0.0
-    suy = 0.0 + 0.0j
+def _welch(us: Sequence[np.ndarray], ys: Sequence[np.ndarray], rs: Sequence[np.ndarray] | None,
+           nper: int, fs: float
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """Pooled Welch estimate of one window length: frequencies, ``H``, ``γ²`` and the
+    effective number of averages per frequency (windows weighted by their input power).
+
+    Without a reference ``H = S_uy / S_uu`` (H1), ``γ² = |S_uy|² / (S_uu S_yy)``. With a
+    reference ``r`` (an injected signal, uncorrelated with the noise the feedback puts in
+    ``u``) ``H = S_ry / S_ru`` and ``γ² = γ²_ru · γ²_ry``: closed-loop data give the plant, not
+    the inverse of the controller."""
+    acc: dict[str, Any] = {}
     n_avg = 0.0
     freq = None
-    for u, y in zip(us, ys, strict=True):
-        ok = np.isfinite(u) & np.isfinite(y)
-        u, y = u[ok], y[ok]
+    refs = rs if rs is not None else us
+    for u, y, r in zip(us, ys, refs, strict=True):
+        ok = np.isfinite(u) & np.isfinite(y) & np.isfinite(r)
+        u, y, r = u[ok], y[ok], r[ok]
         if len(u) < nper:
             continue
         kw = {"fs": fs, "nperseg": nper, "noverlap": nper // 2, "detrend": "constant"}
-        freq, puu = signal.welch(u, **kw)
-        _, pyy = signal.welch(y, **kw)
-        _, puy = signal.csd(u, y, **kw)
         k = 1 + (len(u) - nper) // (nper // 2)
-        suu, syy, suy = suu + k * puu, syy + k * pyy, suy + k * puy
+        spectra = {
+            "rr": signal.welch(r, **kw)[1], "uu": signal.welch(u, **kw)[1],
+            "yy": signal.welch(y, **kw)[1], "ru": signal.csd(r, u, **kw)[1],
+            "ry": signal.csd(r, y, **kw)[1],
+        }
+        freq = signal.welch(u, **kw)[0]
+        for key, val in spectra.items():
+            acc[key] = acc.get(key, 0.0) + k * val
+        # per-window input power: a chirp excites a frequency in few windows only
+        per = signal.spectrogram(r, fs=fs, nperseg=nper, noverlap=nper // 2,
+                                 detrend="constant")[2]
+        acc["p1"] = acc.get("p1", 0.0) + per.sum(axis=1)
+        acc["p2"] = acc.get("p2", 0.0) + (per**2).sum(axis=1)
         n_avg += k
     if freq is None or n_avg == 0:
         return None
-    return freq, np.asarray(suu), np.asarray(syy), np.asarray(suy), n_avg
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # effective number of averages at each frequency (participation ratio of the windows)
+        n_eff = np.where(acc["p2"] > 0, acc["p1"] ** 2 / acc["p2"], 1.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        h = acc["ry"] / acc["ru"]
+        coh_ry = np.abs(acc["ry"]) ** 2 / (acc["rr"] * acc["yy"])
+        coh_ru = np.abs(acc["ru"]) ** 2 / (acc["rr"] * acc["uu"])
+    coh = np.clip(coh_ry if rs is None else coh_ry * coh_ru, 0.0, 1.0)
+    return freq, np.asarray(h), np.nan_to_num(coh), np.clip(np.nan_to_num(n_eff, nan=1.0), 1.0,
+                                                              None)
 
 
 def frf(
@@ -127,6 +158,7 @@ def frf(
     y: Sequence[np.ndarray],
     dt: float,
     *,
+    reference: Sequence[np.ndarray] | None = None,
     windows_s: Sequence[float] = WINDOWS_S,
     f_min_hz: float | None = None,
     f_max_hz: float | None = None,
@@ -139,10 +171,13 @@ def frf(
     ----------
     u, y : sequence of numpy.ndarray
         Input and output per segment (same sample step ``dt``).
+    reference : sequence of numpy.ndarray, optional
+        An injected signal per segment (SYSTEMID's waveform): ``H = S_ry / S_ru``, unbiased
+        by the feedback on closed-loop data.
     windows_s : sequence of float
         Window lengths (s); those longer than the longest segment are skipped.
     f_min_hz, f_max_hz : float, optional
-        Frequency grid (default: two periods of the longest window to 0.4 × the rate).
+        Frequency grid (default: from 4 periods in the longest window to 0.4 × the rate).
     n_freq : int
         Points of the log-spaced grid.
 
@@ -156,21 +191,20 @@ def frf(
     wins = [w for w in sorted(windows_s) if w <= longest] or ([longest] if longest > 0 else [])
     estimates = []
     for w in wins:
-        got = _welch(u, y, max(8, round(w / dt)), fs)
+        got = _welch(u, y, reference, max(8, round(w / dt)), fs)
         if got is not None:
             estimates.append((w, *got))
     if not estimates:
         raise NoExcitationError("segments too short for a frequency response")
-    lo = f_min_hz or 2.0 / max(w for w, *_ in estimates)
+    lo = f_min_hz or CYCLES / max(w for w, *_ in estimates)
     hi = f_max_hz or 0.4 * fs
     grid = np.geomspace(lo, hi, n_freq)
     num = np.zeros(n_freq, complex)
     wsum = np.zeros(n_freq)
+    wmax = np.zeros(n_freq)
     cnum = np.zeros(n_freq)
-    for _, freq, suu, syy, suy, n_avg in estimates:
+    for win, freq, h, coh, n_avg in estimates:
         with np.errstate(divide="ignore", invalid="ignore"):
-            h = suy / suu
-            coh = np.clip(np.abs(suy) ** 2 / (suu * syy), 0.0, 1.0)
             err = np.sqrt(1 - coh) / (np.sqrt(coh) * np.sqrt(2 * n_avg))
         ok = np.isfinite(h) & np.isfinite(err) & (freq > 0)
         if ok.sum() < 2:
@@ -178,15 +212,19 @@ def frf(
         hi_i = np.interp(grid, freq[ok], h[ok].real) + 1j * np.interp(grid, freq[ok], h[ok].imag)
         ci = np.interp(grid, freq[ok], coh[ok])
         ei = np.interp(grid, freq[ok], err[ok])
-        inside = (grid >= freq[ok][0]) & (grid <= freq[ok][-1])
+        # a window resolves a frequency it holds several periods of (leakage otherwise)
+        inside = (grid >= max(freq[ok][0], CYCLES / win)) & (grid <= freq[ok][-1])
         w8 = np.where(inside, 1.0 / np.maximum(ei, 1e-6) ** 2, 0.0)
         num += w8 * hi_i
         cnum += w8 * ci
         wsum += w8
+        wmax = np.maximum(wmax, w8)
     with np.errstate(divide="ignore", invalid="ignore"):
         response = num / wsum
         coherence = np.where(wsum > 0, cnum / wsum, 0.0)
-        error = 1.0 / np.sqrt(wsum)
+        # the window lengths see the same data: their errors are correlated, so the
+        # composite is credited with the best single window's error, not their combination
+        error = 1.0 / np.sqrt(wmax)
     return FRF(grid, response, np.nan_to_num(coherence), error,
                tuple(w for w, *_ in estimates), *names)
 

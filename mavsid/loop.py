@@ -87,6 +87,7 @@ __all__ = [
     "replay_controller",
     "simulate_closed_loop",
     "suggest_gains",
+    "sysid_spans",
     "tune",
     "twin_signals",
 ]
@@ -1494,56 +1495,89 @@ def gain_params(ctrl: AxisController) -> dict[str, float]:
 # --------------------------------------------------------------------------- measured loop
 
 
+def sysid_spans(flight: FlightData, axis: str) -> list[tuple[int, int, int]]:
+    """Grid index ranges ``[i0, i1)`` of the flight's SYSTEMID runs on ``axis`` (cut at the
+    first gap), with their ``SID_AXIS``: 1-3 angle, 4-6 recovery, 7-9 rate, 10-12 mixer."""
+    out = []
+    t = flight.time_s
+    for run in flight.meta.get("sysid_runs", ()) or ():  # type: ignore[attr-defined]
+        sid = int(run.get("axis", 0) or 0)
+        if not 1 <= sid <= 12 or AXES[(sid - 1) % 3] != axis:
+            continue
+        i0 = int(np.searchsorted(t, float(run["start_s"])))
+        i1 = int(np.searchsorted(t, float(run["stop_s"]), side="right"))
+        for a, b in flight.blocks:
+            if a <= i0 < b:
+                i1 = min(i1, int(b))
+                break
+        if i1 - i0 > 8:
+            out.append((i0, i1, sid))
+    return out
+
+
 def measured_responses(fit: Any, flights: Sequence[FlightData],
                        signals: Sequence[TwinSignals] | None = None, lag: int = 0
                        ) -> dict[str, Any]:
-    """Frequency responses measured on the axis's SYSTEMID blocks (train and held-out):
+    """Frequency responses measured on the axis's SYSTEMID runs (whole runs, not the
+    train/validation blocks: a chirp's low frequencies need the long windows):
 
-    - ``"plant"``: controller output (mixer input) -> rate;
-    - ``"loop"``: the broken-loop response ``L = −c/u`` (``c`` the controller's part of the
-      mixer input ``u``) where the injection is at the mixer (``SID_AXIS`` 10-12);
+    - ``"plant"``: controller output (mixer input) -> rate; with the injection as reference
+      on mixer runs (:func:`mavsid.frequency.frf`), H1 otherwise;
+    - ``"loop"``: the broken loop ``L = −c/u`` (``c`` the controller's part of the mixer
+      input ``u``) where the injection is at the mixer (``SID_AXIS`` 10-12);
     - ``"closed_loop"``: rate target -> rate where the injection is in the target
       (``SID_AXIS`` 1-9).
 
-    Each is a :class:`mavsid.frequency.FRF`; absent when there is no such block.
+    Each is a :class:`mavsid.frequency.FRF` on the runs' chirp band; absent without runs.
     """
     from mavsid.frequency import frf
 
     axis = fit.axis
+    rate, u_name = AXIS_RATE[axis], f"u_{axis}"
     sigs = list(signals) if signals is not None else [twin_signals(fd) for fd in flights]
-    segs = [s for s in (*fit.train, *fit.held_out) if s.source == "sysid"]
-    blocks = sorted(_locate(segs, axis, flights, sigs), key=lambda b: b.seg.start_s)
+    mixer: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    other: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    bands, dt = [], 0.0
+    for fd, sg in zip(flights, sigs, strict=True):
+        if rate not in fd.state_names or u_name not in fd.input_names:
+            continue
+        for i0, i1, sid in sysid_spans(fd, axis):
+            runs: list[Any] = list(fd.meta.get("sysid_runs") or ())  # type: ignore[call-overload]
+            run = next(r for r in runs if int(r.get("axis", 0) or 0) == sid)
+            lo, hi = run.get("f_start_hz"), run.get("f_stop_hz")
+            if lo and hi:
+                bands.append((float(lo), float(hi)))
+            dt = fd.dt
+            y = fd.states[i0:i1, fd.state_names.index(rate)]
+            u = fd.inputs[i0:i1, fd.input_names.index(u_name)]
+            if sid >= 10 and axis in sg.injection:
+                mixer.append((u, y, _lagged(sg.injection[axis], lag)[i0:i1]))
+            elif axis in sg.target and np.all(np.isfinite(sg.target[axis][i0:i1])):
+                other.append((u, y, sg.target[axis][i0:i1]))
     out: dict[str, Any] = {}
-    if not blocks:
+    if not dt:
         return out
-    from mavsid.validation import _band
-
-    dt = blocks[0].seg.dt
-    rate = AXIS_RATE[axis]
-    bands = [bd for bd in (_band(s) for s in segs) if bd is not None]
     grid: dict[str, Any] = {}
     if bands:  # only the injected band: a noise-free log is coherent beyond it too
         grid = {"f_min_hz": min(b[0] for b in bands),
                 "f_max_hz": min(max(b[1] for b in bands), 0.4 / dt)}
-    w = [b.warm for b in blocks]
-    us = [b.u[k:] for b, k in zip(blocks, w, strict=True)]
-    ys = [b.rate[k:] for b, k in zip(blocks, w, strict=True)]
+    runs = mixer or other
     try:
-        out["plant"] = frf(us, ys, dt, names=(f"u_{axis}", rate), **grid)
+        out["plant"] = frf([r[0] for r in runs], [r[1] for r in runs], dt,
+                           reference=[r[2] for r in mixer] if mixer else None,
+                           names=(u_name, rate), **grid)
     except MavsidError:
         pass
-    mixer = [b for b in blocks if np.any(b.injection != 0)]
     if mixer:
-        cs = [-(b.u - _lagged(b.injection, lag))[b.warm:] for b in mixer]
         try:
-            out["loop"] = frf([b.u[b.warm:] for b in mixer], cs, dt,
-                              names=(f"u_{axis}", f"-c_{axis}"), **grid)
+            out["loop"] = frf([r[0] for r in mixer], [-(r[0] - r[2]) for r in mixer], dt,
+                              reference=[r[2] for r in mixer], names=(u_name, f"-c_{axis}"),
+                              **grid)
         except MavsidError:
             pass
-    injected = [int(getattr(s, "meta", {}).get("sid_axis", 0) or 0) for s in segs]
-    if any(1 <= a <= 9 for a in injected):
+    if other:
         try:
-            out["closed_loop"] = frf([b.target[b.warm:] for b in blocks], ys, dt,
+            out["closed_loop"] = frf([r[2] for r in other], [r[1] for r in other], dt,
                                      names=(f"target_{axis}", rate), **grid)
         except MavsidError:
             pass
@@ -1568,18 +1602,24 @@ def compare_response(measured: Any, freq_hz: np.ndarray, response: np.ndarray
             "band_hz": [float(f.min()), float(f.max())]}
 
 
-def frd_margins(measured: Any) -> dict[str, float]:
-    """Gain and phase margin (python-control on an FRD) of a measured broken-loop FRF,
-    over its coherent band only."""
+def frd_margins(measured: Any, freq_hz: np.ndarray | None = None,
+                response: np.ndarray | None = None) -> dict[str, float]:
+    """Gain and phase margin (python-control on an FRD) of a measured broken-loop FRF over
+    its coherent band; with ``freq_hz`` and ``response``, those of that (predicted) response
+    over the same band, for a like-for-like comparison."""
     import warnings
 
     import control
 
     m = measured.coherent & np.isfinite(measured.response)
+    nan = {"gain_db": float("nan"), "phase_deg": float("nan"), "crossover_hz": float("nan")}
     if m.sum() < 4:
-        return {"gain_db": float("nan"), "phase_deg": float("nan"),
-                "crossover_hz": float("nan")}
-    sys = control.frd(measured.response[m], 2 * np.pi * measured.freq_hz[m])
+        return nan
+    f = measured.freq_hz[m]
+    h = measured.response[m]
+    if freq_hz is not None and response is not None:
+        h = np.interp(f, freq_hz, response.real) + 1j * np.interp(f, freq_hz, response.imag)
+    sys = control.frd(h, 2 * np.pi * f)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         gm, pm, _sm, _wg, wc, _ws = control.stability_margins(sys)
@@ -1665,6 +1705,8 @@ def tune(result: Any, target_pm_deg: float = 50.0, samples: int = 40) -> dict[st
         if "loop" in measured:
             entry["loop_frf"] = measured["loop"].to_dict()
             entry["loop_frf_margins"] = frd_margins(measured["loop"])
+            entry["loop_predicted_margins"] = frd_margins(measured["loop"], an.freq_hz,
+                                                          an.mixer_loop_response)
             entry["loop_frf_vs_predicted"] = compare_response(
                 measured["loop"], an.freq_hz, an.mixer_loop_response)
         if "closed_loop" in measured:
@@ -1712,7 +1754,7 @@ def format_tune(report: Mapping[str, Any]) -> str:
             f"{pm(c['bandwidth_hz'], 'bandwidth_hz', '.2f')} Hz, peak {c['peak_db']:.1f} dB, "
             f"rise {c['rise_time_s'] * 1e3:.0f} ms, overshoot {c['overshoot_percent']:.0f} %")
         if "loop_frf_margins" in e:
-            mm, pr = e["loop_frf_margins"], e["mixer_margins"]
+            mm, pr = e["loop_frf_margins"], e["loop_predicted_margins"]
             cmp_ = e["loop_frf_vs_predicted"]
             lines.append(
                 f"  at the mixer (rate and attitude loops): measured phase margin "

@@ -82,6 +82,7 @@ __all__ = [
     "controller_tf",
     "format_tune",
     "frd_margins",
+    "margins_on_frf",
     "measured_responses",
     "plant_from_model",
     "replay_controller",
@@ -1478,6 +1479,24 @@ def suggest_gains(plant_ss: Any, ctrl: AxisController, target_pm_deg: float = 50
     return gain_params(new), result
 
 
+def margins_on_frf(plant_frf: Any, ctrl: AxisController) -> dict[str, float]:
+    """Margins of ``ctrl`` around a measured plant FRF (controller output -> rate): the loop
+    ``C_fb(e^{jωT})·P̂(f)`` over the FRF's coherent band, a check on a model's promise that
+    does not go through the model (NaN where the band holds no crossover)."""
+    m = plant_frf.coherent & np.isfinite(plant_frf.response)
+    nan = {"gain_db": float("nan"), "phase_deg": float("nan"), "crossover_hz": float("nan")}
+    if m.sum() < 8:
+        return nan
+    f, p = plant_frf.freq_hz[m], plant_frf.response[m]
+    dt = 1.0 / ctrl.loop_hz
+    cfb, _ = controller_tf(ctrl, dt)
+    loop_resp = np.asarray(cfb(np.exp(2j * np.pi * f * dt))).ravel() * p
+    band = replace(plant_frf, freq_hz=f, response=loop_resp, coherence=np.ones(f.size),
+                   error=plant_frf.error[m])
+    got = frd_margins(band)
+    return got if f[0] < got["crossover_hz"] < f[-1] else nan
+
+
 def gain_params(ctrl: AxisController) -> dict[str, float]:
     """The controller's P, I, D in the vehicle's own parameter names and units."""
     g = ctrl.gains
@@ -1729,9 +1748,29 @@ def tune(result: Any, target_pm_deg: float = 50.0, samples: int = 40) -> dict[st
                 entry["suggested"] = {k: float(v) for k, v in got[0].items()}
                 entry["suggested_loop"] = {k: v for k, v in got[1].to_dict().items()
                                            if k != "stderr"}
+                if plant is not None:
+                    k = _scale_of(got[0], ctrl)
+                    check = margins_on_frf(plant, _scaled(ctrl, k))
+                    entry["suggested_check"] = check
+                    if abs(check["phase_deg"] - target_pm_deg) > SUGGESTION_CHECK_DEG:
+                        entry["suggested_note"] = (
+                            f"on the measured frequency response these gains give "
+                            f"{check['phase_deg']:.0f} deg, not {target_pm_deg:g}: the model "
+                            "is uncertain near the new crossover; step the gains up gradually")
         entry["advice"] = _advice(axis, fit, ctrl, an.bandwidth_hz, plant)
         out[axis] = entry
     return out
+
+
+#: a suggestion whose phase margin on the measured FRF differs more than this (deg) is flagged
+SUGGESTION_CHECK_DEG = 5.0
+
+
+def _scale_of(gains: Mapping[str, float], ctrl: AxisController) -> float:
+    """The P/I/D scale :func:`suggest_gains` applied (from its P)."""
+    new_p = next(v for k, v in gains.items() if k.endswith("_P"))
+    old_p = ctrl.gains.p if ctrl.naming != "RATE" else ctrl.gains.p / _AP3_SCALE
+    return float(new_p / old_p) if old_p else 1.0
 
 
 def format_tune(report: Mapping[str, Any]) -> str:
@@ -1765,7 +1804,7 @@ def format_tune(report: Mapping[str, Any]) -> str:
         if e.get("suggested"):
             lines.append("  suggested: " + ", ".join(f"{k} {v:.4g}"
                                                      for k, v in e["suggested"].items()))
-        elif e.get("suggested_note"):
+        if e.get("suggested_note"):
             lines.append(f"  {e['suggested_note']}")
         lines += [f"  advice: {a}" for a in e.get("advice", [])]
     return "\n".join(lines)

@@ -579,6 +579,8 @@ def plant_from_model(model: Any, axis: str, dt: float | None = None) -> LinearPl
     from mavsid.estimators import library
 
     rate, u_name = AXIS_RATE[axis], f"u_{axis}"
+    if not all(hasattr(model, a) for a in ("features", "coef", "to_statespace", "_split")):
+        raise ConfigError(f"the {axis} model is not a mavsid estimators.Model: no loop model")
     if rate not in model.state_names or u_name not in model.input_names:
         raise ConfigError(f"the {axis} model does not map {u_name} to {rate}")
     if not library.is_linear(model.features):

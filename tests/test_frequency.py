@@ -158,3 +158,12 @@ def test_tune_json(capsys) -> None:
         d["closed_loop"])
     assert isinstance(d["suggested"], dict) and isinstance(d["advice"], list)
     assert main(["tune", str(FIXTURE), "--target-pm", "95"]) == 1
+
+
+def test_report_has_a_loop_section(roll_fit) -> None:
+    from mavsid.report import loop_section
+
+    text = loop_section(roll_fit)
+    assert text.startswith("<h2>loop</h2>")
+    assert "closed-loop twin on the held-out blocks" in text and "phase margin" in text
+    assert text.count("<img") == 2  # twin against measured; Bode overlay with coherence

@@ -773,11 +773,14 @@ class TwinSignals:
         SYSTEMID mixer injection (normalised) per axis; zeros outside the runs.
     sources : Mapping[str, str]
         Where each came from (``"RATE.RDes"``...).
+    rate_injection : Mapping[str, numpy.ndarray]
+        SYSTEMID rate-axis injection (rad/s, ``SID_AXIS`` 7-9, part of the rate target).
     """
 
     target: Mapping[str, np.ndarray]
     injection: Mapping[str, np.ndarray]
     sources: Mapping[str, str] = field(default_factory=dict)
+    rate_injection: Mapping[str, np.ndarray] = field(default_factory=dict)
 
 
 def _on_grid(t: np.ndarray, v: np.ndarray, grid: np.ndarray, hold: bool) -> np.ndarray:
@@ -836,7 +839,8 @@ def twin_signals(flight: FlightData, raw: Any = None) -> TwinSignals:
                 break
     injection: dict[str, np.ndarray] = {}
     runs = [r for r in flight.meta.get("sysid_runs", ()) or ()  # type: ignore[attr-defined]
-            if int(r.get("axis", 0)) in (10, 11, 12)]
+            if int(r.get("axis", 0)) in (7, 8, 9, 10, 11, 12)]
+    rate_injection: dict[str, np.ndarray] = {}
     if runs and INJECTION_CHANNEL.message in raw.messages:
         try:
             t, v = evaluate(raw, INJECTION_CHANNEL, "SYSTEMID injection")
@@ -844,14 +848,20 @@ def twin_signals(flight: FlightData, raw: Any = None) -> TwinSignals:
             t = np.zeros(0)
         if t.size >= 2:
             held = np.nan_to_num(_on_grid(t, v, grid, hold=True))
+            src = f"{INJECTION_CHANNEL.message}.{INJECTION_CHANNEL.field}"
             for r in runs:
-                axis = AXES[int(r["axis"]) - 10]
+                sid = int(r["axis"])
+                axis = AXES[(sid - 1) % 3]
                 inside = (grid >= float(r["start_s"]) - 1e-9) & (grid <= float(r["stop_s"]) + 1e-9)
-                inj = injection.setdefault(axis, np.zeros(grid.shape))
-                inj[inside] = held[inside]
-                sources[f"injection_{axis}"] = (f"{INJECTION_CHANNEL.message}."
-                                                f"{INJECTION_CHANNEL.field}")
-    return TwinSignals(targets, injection, sources)
+                if sid >= 10:
+                    inj = injection.setdefault(axis, np.zeros(grid.shape))
+                    inj[inside] = held[inside]
+                    sources[f"injection_{axis}"] = src
+                else:  # rate axes: the waveform (deg/s) is added to the rate target
+                    inj = rate_injection.setdefault(axis, np.zeros(grid.shape))
+                    inj[inside] = np.radians(held[inside])
+                    sources[f"rate_injection_{axis}"] = src
+    return TwinSignals(targets, injection, sources, rate_injection)
 
 
 # --------------------------------------------------------------------------- the twin's fit
@@ -1547,7 +1557,7 @@ def measured_responses(fit: Any, flights: Sequence[FlightData],
     - ``"loop"``: the broken loop ``L = −c/u`` (``c`` the controller's part of the mixer
       input ``u``) where the injection is at the mixer (``SID_AXIS`` 10-12);
     - ``"closed_loop"``: rate target -> rate where the injection is in the target
-      (``SID_AXIS`` 1-9).
+      (``SID_AXIS`` 1-9; with the injection as reference on rate axes 7-9).
 
     Each is a :class:`mavsid.frequency.FRF` on the runs' chirp band; absent without runs.
     """
@@ -1557,7 +1567,7 @@ def measured_responses(fit: Any, flights: Sequence[FlightData],
     rate, u_name = AXIS_RATE[axis], f"u_{axis}"
     sigs = list(signals) if signals is not None else [twin_signals(fd) for fd in flights]
     mixer: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
-    other: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    other: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]] = []
     bands, dt = [], 0.0
     for fd, sg in zip(flights, sigs, strict=True):
         if rate not in fd.state_names or u_name not in fd.input_names:
@@ -1574,7 +1584,9 @@ def measured_responses(fit: Any, flights: Sequence[FlightData],
             if sid >= 10 and axis in sg.injection:
                 mixer.append((u, y, _lagged(sg.injection[axis], lag)[i0:i1]))
             elif axis in sg.target and np.all(np.isfinite(sg.target[axis][i0:i1])):
-                other.append((u, y, sg.target[axis][i0:i1]))
+                ref = sg.rate_injection.get(axis)
+                other.append((u, y, sg.target[axis][i0:i1],
+                              ref[i0:i1] if ref is not None and 7 <= sid <= 9 else None))
     out: dict[str, Any] = {}
     if not dt:
         return out
@@ -1582,11 +1594,16 @@ def measured_responses(fit: Any, flights: Sequence[FlightData],
     if bands:  # only the injected band: a noise-free log is coherent beyond it too
         grid = {"f_min_hz": min(b[0] for b in bands),
                 "f_max_hz": min(max(b[1] for b in bands), 0.4 / dt)}
-    runs = mixer or other
+    refs = [r[3] for r in other]
+    use_ref = bool(other) and all(r is not None for r in refs)
     try:
-        out["plant"] = frf([r[0] for r in runs], [r[1] for r in runs], dt,
-                           reference=[r[2] for r in mixer] if mixer else None,
-                           names=(u_name, rate), **grid)
+        if mixer:
+            out["plant"] = frf([r[0] for r in mixer], [r[1] for r in mixer], dt,
+                               reference=[r[2] for r in mixer], names=(u_name, rate), **grid)
+        elif other:
+            out["plant"] = frf([r[0] for r in other], [r[1] for r in other], dt,
+                               reference=refs if use_ref else None,  # type: ignore[arg-type]
+                               names=(u_name, rate), **grid)
     except MavsidError:
         pass
     if mixer:
@@ -1599,6 +1616,7 @@ def measured_responses(fit: Any, flights: Sequence[FlightData],
     if other:
         try:
             out["closed_loop"] = frf([r[2] for r in other], [r[1] for r in other], dt,
+                                     reference=refs if use_ref else None,  # type: ignore[arg-type]
                                      names=(f"target_{axis}", rate), **grid)
         except MavsidError:
             pass

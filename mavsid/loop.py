@@ -380,6 +380,16 @@ def _is_px4(params: Mapping[str, float]) -> bool:
     return any(k.startswith(("MC_ROLLRATE_", "MC_PITCHRATE_", "MC_YAWRATE_")) for k in params)
 
 
+def _angle_p(params: Mapping[str, float], name: str, default: float,
+             used: dict[str, float]) -> float:
+    """The attitude P (recorded in ``used``; not a rate-controller default: the twin follows
+    the logged rate target and does not need it, only the loop analysis at the mixer)."""
+    value = params.get(name)
+    ok = value is not None and math.isfinite(float(value)) and float(value) >= 0
+    used[name if ok else f"{name} (default)"] = float(value) if ok else default  # type: ignore[arg-type]
+    return float(value) if ok else default  # type: ignore[arg-type]
+
+
 def controller_from_params(
     params: Mapping[str, float], axis: str, autopilot: str | None = None
 ) -> AxisController:
@@ -439,7 +449,7 @@ def controller_from_params(
         loop = get("IMU_GYRO_RATEMAX", _PX4_OLD_LOOP_HZ if old else _PX4_LOOP_HZ)
         gyro = get("IMU_GYRO_CUTOFF", _PX4_GYRO_CUTOFF_HZ)
         notch = float(params.get("IMU_GYRO_NF0_FRQ", params.get("IMU_GYRO_NF_FREQ", 0.0)) or 0)
-        ang = get(f"MC_{_PX4[axis]}_P", _PX4_ANGLE_P[axis])
+        ang = _angle_p(params, f"MC_{_PX4[axis]}_P", _PX4_ANGLE_P[axis], used)
         return AxisController("px4", axis, gains, loop or _PX4_LOOP_HZ, gyro, notch, used,
                               tuple(defaults), "MC", ang)
     ax = _AP[axis]
@@ -480,7 +490,7 @@ def controller_from_params(
     elif params.get("INS_NOTCH_ENABLE", 0):
         notch = float(params.get("INS_NOTCH_FREQ", 0.0) or 0.0)
     ang_name = f"STB_{ax}_P" if legacy else f"ATC_ANG_{ax}_P"
-    ang = get(ang_name, 4.5)
+    ang = _angle_p(params, ang_name, 4.5, used)
     return AxisController("ardupilot", axis, gains, loop, gyro, notch, used, tuple(defaults),
                           naming, ang)
 

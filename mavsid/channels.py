@@ -97,10 +97,12 @@ from mavsid.data import MessageTable, RawLog
 from mavsid.errors import ConfigError, MissingMessageError
 
 __all__ = [
+    "INJECTION_CHANNEL",
     "INPUT_NAMES",
     "MIXERS",
     "PRESETS",
     "STATE_NAMES",
+    "TARGET_CHANNELS",
     "Channel",
     "Mixer",
     "Preset",
@@ -437,6 +439,24 @@ PRESETS: dict[str, Preset] = {
         ),
     )
 }
+
+
+#: The rate controller's target per body rate (rad/s after conversion), the first one a log
+#: has: what the closed-loop twin (:mod:`mavsid.loop`) follows. ArduPilot RATE.RDes/PDes/YDes
+#: (deg/s), PIDR/PIDP/PIDY.Tar (rad/s, ArduPilot >= 4.0); PX4 vehicle_rates_setpoint (rad/s);
+#: MAVLink ATTITUDE_TARGET body rates (rad/s).
+TARGET_CHANNELS: dict[str, tuple[Channel, ...]] = {
+    rate: (
+        _ch("RATE", f"{des}Des", "deg/s"),
+        _ch(pid, "Tar", "rad/s"),
+        _ch("vehicle_rates_setpoint", px4, "rad/s"),
+        _ch("ATTITUDE_TARGET", f"body_{px4}_rate", "rad/s"),
+    )
+    for rate, des, pid, px4 in (("p", "R", "PIDR", "roll"), ("q", "P", "PIDP", "pitch"),
+                                ("r", "Y", "PIDY", "yaw"))
+}
+#: ArduPilot SYSTEMID's injected waveform (added to the mixer input on SID_AXIS 10-12)
+INJECTION_CHANNEL = _ch("SIDD", "Targ")
 
 
 # --------------------------------------------------------------------------- choosing

@@ -20,7 +20,7 @@ from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 from mavsid import __version__
-from mavsid.errors import MavsidError, MavsidWarning
+from mavsid.errors import ConfigError, MavsidError, MavsidWarning
 
 if TYPE_CHECKING:
     from mavsid.pipeline import FitResult, PipelineConfig
@@ -365,6 +365,45 @@ def _sink_args(args: argparse.Namespace) -> dict[str, Any]:
 
 
 SUBCOMMANDS.extend([_add_fit, _add_validate, _add_view])
+
+
+def _add_tune(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "tune", help="log -> rate-loop margins, bandwidth, suggested gains, next-flight advice",
+        description="Fit the plant per axis, put it in the vehicle's rate controller rebuilt "
+        "from the log's parameters and report margins, closed-loop bandwidth and step response "
+        "(± σ from the parameter covariance), gains for a target phase margin (only for axes "
+        "whose model is good) and what to change next flight.",
+    )
+    p.add_argument("log", metavar="LOG", help="flight log (.bin .log .tlog .ulg)")
+    p.add_argument("--target-pm", type=float, default=50.0, metavar="DEG",
+                   help="phase margin the suggested gains aim at (default 50)")
+    p.add_argument("--axis", action="append", choices=("roll", "pitch", "yaw"),
+                   help="axis to analyse (repeat for several; default all)")
+    p.add_argument("--config", metavar="FILE.toml", help="pipeline settings (see pipelines/)")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.set_defaults(handler=_tune)
+
+
+def _tune(args: argparse.Namespace) -> int:
+    import json
+
+    from mavsid.loop import format_tune, tune
+    from mavsid.pipeline import _json_safe, fit
+
+    if not 0 < args.target_pm < 90:
+        raise ConfigError(f"--target-pm {args.target_pm:g}: must lie in (0, 90) degrees")
+    result = fit([args.log], _pipeline_config(args))
+    report = tune(result, args.target_pm)
+    if args.json:
+        print(json.dumps({"axes": _json_safe(report), "log": args.log,
+                          "target_pm_deg": args.target_pm}))
+    else:
+        print(format_tune(report))
+    return 0
+
+
+SUBCOMMANDS.append(_add_tune)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -62,6 +62,7 @@ from mavsid.verdict import Verdict, judge, not_identified
 
 if TYPE_CHECKING:
     from mavsid.excitation import WindowReport
+    from mavsid.loop import ClosedLoopFit, TwinSignals
 
 __all__ = [
     "AXES",
@@ -322,6 +323,10 @@ class AxisFit:
     estimator: str = ""
     windows: tuple[WindowReport, ...] = ()
     verdict: Verdict | None = None
+    #: the closed-loop twin on the held-out blocks (:mod:`mavsid.loop`); None when it could
+    #: not run, ``closed_loop_note`` saying why
+    closed_loop: ClosedLoopFit | None = None
+    closed_loop_note: str = ""
 
     @property
     def output(self) -> str:
@@ -360,6 +365,8 @@ class AxisFit:
                     for j, s in enumerate(v.state_names)
                 },
                 "verdict": None if self.verdict is None else self.verdict.to_dict(),
+                "closed_loop": None if self.closed_loop is None else self.closed_loop.to_dict(),
+                "closed_loop_note": self.closed_loop_note,
                 "stable": v.stable,
                 "eigenvalues": (
                     None
@@ -485,6 +492,26 @@ def _validate(model: Model, segments: Sequence[Segment], cfg: PipelineConfig) ->
     )
 
 
+def _closed_loop(
+    fitted: AxisFit, flights: Sequence[FlightData], signals: dict[int, TwinSignals]
+) -> AxisFit:
+    """``fitted`` with its closed-loop twin run on the held-out blocks (or the reason not)."""
+    from mavsid.loop import closed_loop_fit, twin_signals
+
+    try:
+        sigs = []
+        for fd in flights:
+            if id(fd) not in signals:
+                signals[id(fd)] = twin_signals(fd)
+            sigs.append(signals[id(fd)])
+        j = fitted.validation.state_names.index(fitted.output)
+        cl = closed_loop_fit(fitted.model, fitted.axis, fitted.train, fitted.held_out, flights,
+                             sigs, open_loop_percent=float(fitted.validation.fit_free_run[j]))
+    except (MavsidError, ValueError, np.linalg.LinAlgError) as exc:
+        return dataclasses.replace(fitted, closed_loop_note=str(exc))
+    return dataclasses.replace(fitted, closed_loop=cl)
+
+
 def _fit_model(train: Sequence[Segment], axis: str, cfg: PipelineConfig) -> Model:
     from mavsid import estimators
 
@@ -525,6 +552,7 @@ def fit(
     flights = (first, *(_read_flight(p, same_rate) for p in logs[1:]))
     fits: dict[str, AxisFit] = {}
     verdicts: dict[str, Verdict] = {}
+    signals: dict[int, TwinSignals] = {}
     for axis in cfg.axes:
         windows, segs = _axis_segments(flights, axis, cfg)
         try:
@@ -535,6 +563,7 @@ def fit(
             verdicts[axis] = not_identified(axis, str(exc))
             continue
         fitted = AxisFit(axis, model, val, train, held_out, cfg.estimator, windows)
+        fitted = _closed_loop(fitted, flights, signals)
         verdicts[axis] = judge(axis, val, fitted.output)
         fits[axis] = dataclasses.replace(fitted, verdict=verdicts[axis])
     if not fits:
@@ -587,6 +616,7 @@ def validate_logs(
     flights = tuple(_read_flight(p, cfg) for p in logs)
     fits: dict[str, AxisFit] = {}
     verdicts: dict[str, Verdict] = {}
+    signals: dict[int, TwinSignals] = {}
     for axis, model in models.items():
         if axis not in cfg.axes:
             continue
@@ -600,6 +630,7 @@ def validate_logs(
             continue
         estimator = str(dict(getattr(model, "provenance", {}) or {}).get("estimator", ""))
         fitted = AxisFit(axis, model, val, (), segs, estimator, windows)
+        fitted = _closed_loop(fitted, flights, signals)
         verdicts[axis] = judge(axis, val, fitted.output)
         fits[axis] = dataclasses.replace(fitted, verdict=verdicts[axis])
     if not fits:
@@ -634,6 +665,22 @@ def _structure(d: Mapping[str, Any]) -> str:
         if not str(flt.get("source", "")).startswith("input lag"):
             parts.append(f"{flt.get('source') or 'filter'} {flt.get('cutoff_hz', 0):.3g} Hz")
     return "".join(f", {p}" for p in parts)
+
+
+def _closed_loop_line(f: AxisFit) -> str:
+    """The closed-loop twin's figures (or why there are none), one line."""
+    cl = f.closed_loop
+    if cl is None:
+        return f"closed loop: not run ({f.closed_loop_note or 'no rate target'})"
+
+    def pct(x: float) -> str:
+        return "n/a" if not math.isfinite(x) else f"{x:.1f}"
+
+    text = (f"closed loop %  rate {pct(cl.fit_percent)}  output {pct(cl.output_fit_percent)}  "
+            f"(baseline {pct(cl.baseline_percent)} at {cl.baseline_delay_s * 1e3:.0f} ms)")
+    if cl.defaults_used:
+        text += f"; defaults used: {', '.join(cl.defaults_used)}"
+    return text
 
 
 def format_result(result: FitResult) -> str:
@@ -673,6 +720,7 @@ def format_result(result: FitResult) -> str:
             for k in fp
         )
         lines.append(f"  fit %  {cells}")
+        lines.append(f"  {_closed_loop_line(f)}")
     verdicts = [v.line() for v in result.verdicts.values()]
     if verdicts:
         lines.append("verdict:")

@@ -20,7 +20,7 @@ import html
 import io
 import os
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -31,7 +31,7 @@ from mavsid.validation import Validation, horizon_label
 if TYPE_CHECKING:
     from mavsid.pipeline import AxisFit, FitResult
 
-__all__ = ["figure_png", "render_html", "render_html_page", "write_report"]
+__all__ = ["figure_png", "loop_section", "render_html", "render_html_page", "write_report"]
 
 _COLOURS = {"measured": "#333333", "one_step": "#2f6fde", "free_run": "#f08a12", "input": "#2a9d46"}
 
@@ -252,7 +252,137 @@ def render_html(result: FitResult) -> str:
 
 
 def write_report(result: FitResult, path: str | os.PathLike[str]) -> None:
-    """Write :func:`render_html` of ``result`` to ``path``."""
+    """Write :func:`render_html` of ``result`` to ``path``, with :func:`loop_section`."""
     text = render_html(result)
+    text = text.replace("\n</body></html>", "\n" + loop_section(result) + "\n</body></html>")
     with open(path, "w", encoding="utf-8") as f:
         f.write(text)
+
+
+# --------------------------------------------------------------------------- the loop
+
+
+def _twin_figure(fit: AxisFit) -> Figure | None:
+    cl = fit.closed_loop
+    if cl is None or not cl.blocks:
+        return None
+    fig = Figure(figsize=(11, 3.2))
+    ax = fig.subplots()
+    for i, b in enumerate(cl.blocks):
+        ax.plot(b.time_s, b.rate, color=_COLOURS["measured"], lw=0.8,
+                label="measured" if i == 0 else None)
+        ax.plot(b.time_s, b.rate_twin, color=_COLOURS["free_run"], lw=0.8,
+                label="closed-loop twin" if i == 0 else None)
+        ax.plot(b.time_s, b.baseline, color="#999999", lw=0.6, ls="--",
+                label="baseline (target, delayed)" if i == 0 else None)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel(f"{fit.output} [rad/s]")
+    ax.legend(fontsize=8, loc="upper right")
+    ax.grid(True, alpha=0.3)
+    fig.tight_layout()
+    return fig
+
+
+def _loop_bode(fit: AxisFit, entry: dict[str, Any]) -> Figure | None:
+    from mavsid import loop
+    from mavsid.frequency import TFFit
+
+    plant = entry.get("_plant_frf")
+    if plant is None:
+        return None
+    f = plant.freq_hz
+    dt = fit.model.dt
+    ss = loop.plant_statespace(fit.model, fit.axis, dt)
+    model = np.asarray(ss(np.exp(2j * np.pi * f * dt))).ravel()
+    curves = [("measured", plant.response, _COLOURS["measured"]),
+              ("time-domain model", model, _COLOURS["free_run"])]
+    tf = entry.get("plant_tf")
+    if isinstance(tf, dict):
+        fitted = TFFit(tf["gain"], tf["pole"], tf["delay_s"], tf["cost"], tuple(tf["band_hz"]))
+        curves.append(("TF fit", fitted.response(f), _COLOURS["one_step"]))
+    loop_frf = entry.get("_loop_frf")
+    fig = Figure(figsize=(11, 6))
+    cols = 2 if loop_frf is not None else 1
+    axes = fig.subplots(3, cols, sharex="col", squeeze=False,
+                        gridspec_kw={"height_ratios": [3, 2, 1.3]})
+    for label, h, colour in curves:
+        axes[0, 0].semilogx(f, 20 * np.log10(np.abs(h) + 1e-12), color=colour, label=label)
+        axes[1, 0].semilogx(f, np.degrees(np.unwrap(np.angle(h))), color=colour)
+    axes[2, 0].semilogx(f, plant.coherence, color="#7a4fd6")
+    axes[0, 0].set_title(f"plant u_{fit.axis} → {fit.output}", fontsize=10)
+    if loop_frf is not None:
+        lf = loop_frf.freq_hz
+        pred = entry["_mixer_loop"]
+        for label, h, colour in (("measured", loop_frf.response, _COLOURS["measured"]),
+                                 ("predicted (logged gains)", pred, _COLOURS["free_run"])):
+            axes[0, 1].semilogx(lf, 20 * np.log10(np.abs(h) + 1e-12), color=colour, label=label)
+            axes[1, 1].semilogx(lf, np.degrees(np.unwrap(np.angle(h))), color=colour)
+        axes[2, 1].semilogx(lf, loop_frf.coherence, color="#7a4fd6")
+        axes[0, 1].set_title("broken loop at the mixer (rate and attitude loops)", fontsize=10)
+    for c in range(cols):
+        axes[0, c].set_ylabel("|H| [dB]")
+        axes[1, c].set_ylabel("phase [deg]")
+        axes[2, c].set_ylabel("coherence")
+        axes[2, c].set_ylim(0, 1.05)
+        axes[2, c].set_xlabel("frequency [Hz]")
+        axes[0, c].legend(fontsize=8)
+        for a in axes[:, c]:
+            a.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    return fig
+
+
+def loop_section(result: FitResult, target_pm_deg: float = 50.0) -> str:
+    """The report's "loop" section: per axis the closed-loop twin against the measured rate
+    and the baseline, the margins and bandwidth with the logged gains (± σ), the Bode
+    overlay of measured FRF, time-domain model and TF fit (coherence below), the measured
+    against the predicted broken loop, suggested gains and next-flight advice."""
+    from mavsid import loop
+    from mavsid.errors import MavsidError
+
+    try:
+        report = loop.tune(result, target_pm_deg, samples=20)
+    except (MavsidError, ValueError, np.linalg.LinAlgError) as exc:
+        return f"<h2>loop</h2><p>loop analysis failed: {html.escape(str(exc))}</p>"
+    parts = ["<h2>loop</h2>",
+             '<p class="meta">The identified plant inside the vehicle\'s rate controller, '
+             "rebuilt from the log's parameters (mavsid.loop).</p>"]
+    for axis, fit in result.axes.items():
+        parts.append(f"<h3>{html.escape(axis)}</h3>")
+        cl = fit.closed_loop
+        if cl is not None:
+            parts.append(
+                f"<p>closed-loop twin on the held-out blocks: rate {_num(cl.fit_percent)} %, "
+                f"controller output {_num(cl.output_fit_percent)} %; open loop "
+                f"{_num(cl.open_loop_percent)} %; baseline (rate = target "
+                f"{cl.baseline_delay_s * 1e3:.0f} ms later) {_num(cl.baseline_percent)} %"
+                + (f"; defaults used: {html.escape(', '.join(cl.defaults_used))}"
+                   if cl.defaults_used else "") + "</p>")
+            twin = _twin_figure(fit)
+            if twin is not None:
+                parts.append(figure_png(twin))
+        else:
+            parts.append(f"<p>closed-loop twin not run: {html.escape(fit.closed_loop_note)}</p>")
+        entry: dict[str, Any] = dict(report.get(axis, {}))
+        if "error" in entry:
+            parts.append(f"<p>loop not analysed: {html.escape(str(entry['error']))}</p>")
+            continue
+        text = loop.format_tune({axis: entry})
+        parts.append(f"<pre>{html.escape(text)}</pre>")
+        measured = loop.measured_responses(fit, result.flights, lag=cl.lag_loops if cl else 0)
+        if "plant" in measured:
+            entry = {**entry, "_plant_frf": measured["plant"]}
+            if "loop" in measured:
+                ctrl = loop.controller_from_params(result.flights[0].params, axis)
+                an = loop.analyse_loop(
+                    loop.plant_statespace(fit.model, axis, 1.0 / ctrl.loop_hz), ctrl,
+                    cl.lag_loops if cl else 0, measured["loop"].freq_hz)
+                entry.update(_loop_frf=measured["loop"], _mixer_loop=an.mixer_loop_response)
+            try:
+                bode = _loop_bode(fit, entry)
+            except (MavsidError, ValueError) as exc:
+                parts.append(f"<p>no Bode overlay: {html.escape(str(exc))}</p>")
+                bode = None
+            if bode is not None:
+                parts.append(figure_png(bode))
+    return "\n".join(parts)

@@ -6,9 +6,11 @@ Per axis, each loop:
    approached with a first-order time constant ``ATC_INPUT_TC``; its rate of change is the
    body-rate feed-forward (``ATC_RATE_FF_ENAB``);
 2. angle P: ``rate_target = ATC_ANG_*_P * (angle_target - angle) + feed-forward``;
-3. rate PID (ArduPilot's ``AC_PID``): target low-passed at ``FLTT``, error = target - measured
-   (filtered gyro) low-passed at ``FLTE`` (0 = off), derivative of the filtered error low-passed
-   at ``FLTD``; ``out = P*err + I + D*derr + FF*target``, ``|I| <= IMAX``;
+3. rate PID: ArduPilot's ``AC_PID`` as :class:`mavsid.loop.RatePID` implements it (the one
+   the closed-loop twin and the loop analysis use): target low-passed at ``FLTT``, error =
+   target - measured (filtered gyro) low-passed at ``FLTE`` (0 = off), derivative of the
+   filtered error low-passed at ``FLTD``; ``out = P*err + I + D*derr + FF*target``,
+   ``|I| <= IMAX``;
 4. the mixer input ``u = out + mixer injection`` is limited to [-1, 1] (RATE.ROut/POut/YOut).
 
 Small-angle approximation: Euler-angle errors and rates are used as body-frame ones.
@@ -30,6 +32,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from mavsid.errors import ConfigError
+from mavsid.loop import RateGains, RatePID
 
 __all__ = [
     "QUAD_X",
@@ -57,20 +60,6 @@ QUAD_X = np.array(
 #: motors = _MIX @ (throttle, roll, pitch, yaw)
 _MIX = np.hstack([np.ones((4, 1)), QUAD_X])
 _MIX_INV = np.linalg.inv(_MIX)
-
-
-@dataclass(frozen=True)
-class RateGains:
-    """One axis of ``ATC_RAT_<AX>_*`` (P, I, D dimensionless per rad/s; filters in Hz)."""
-
-    p: float
-    i: float
-    d: float
-    ff: float
-    imax: float
-    fltt: float
-    fltd: float
-    flte: float
 
 
 @dataclass(frozen=True)
@@ -161,46 +150,6 @@ class ControllerParams:
         """
         spin = self.spin_min + (self.spin_max - self.spin_min) * np.asarray(motors)
         return np.round(self.pwm_min + (self.pwm_max - self.pwm_min) * spin)
-
-
-def _alpha(cutoff_hz: float, dt: float) -> float:
-    """First-order low-pass gain per step (1 = no filtering)."""
-    if cutoff_hz <= 0:
-        return 1.0
-    rc = 1.0 / (2 * np.pi * cutoff_hz)
-    return dt / (dt + rc)
-
-
-class RatePID:
-    """ArduPilot ``AC_PID``-style rate controller for one axis."""
-
-    def __init__(self, gains: RateGains, dt: float) -> None:
-        self.g = gains
-        self.dt = dt
-        self.a_t = _alpha(gains.fltt, dt)
-        self.a_e = _alpha(gains.flte, dt)
-        self.a_d = _alpha(gains.fltd, dt)
-        self.target = 0.0
-        self.error = 0.0
-        self.deriv = 0.0
-        self.integ = 0.0
-        self.reset = True
-
-    def update(self, target: float, measured: float) -> float:
-        """One step: target and measured rate (rad/s) -> normalised output."""
-        g = self.g
-        if self.reset:
-            self.target = target
-            self.error = target - measured
-            self.deriv = 0.0
-            self.reset = False
-        else:
-            self.target += self.a_t * (target - self.target)
-            err_prev = self.error
-            self.error += self.a_e * ((self.target - measured) - self.error)
-            self.deriv += self.a_d * ((self.error - err_prev) / self.dt - self.deriv)
-        self.integ = min(max(self.integ + g.i * self.error * self.dt, -g.imax), g.imax)
-        return g.p * self.error + self.integ + g.d * self.deriv + g.ff * self.target
 
 
 class AttitudeController:

@@ -1,0 +1,1840 @@
+"""The loop stage: the vehicle's rate controller rebuilt from its parameters, the identified
+plant put inside it (the closed-loop twin), and what the loop does with the logged gains.
+
+One rate-controller implementation per autopilot, shared by the simulator
+(:mod:`mavsid.synthetic.controller`), the closed-loop twin and the loop analysis:
+
+- ArduPilot ``AC_PID`` (:class:`RatePID`): target low-passed at ``FLTT``, error
+  ``target - measured`` low-passed at ``FLTE`` (0 = off), derivative of the filtered error
+  low-passed at ``FLTD``; ``out = P·err + I + D·derr + FF·target`` with ``|I| ≤ IMAX``; when
+  ``SMAX`` > 0 the P and D terms are scaled down so that their slew rate stays near ``SMAX``
+  (an approximation of ArduPilot's slew limiter, see :class:`RatePID`);
+- PX4 multicopter rate control (:class:`PX4RatePID`): ``out = K·P·err + I - K·D·ṁ + FF·target``
+  with the derivative taken on the measured rate (``ṁ``, low-passed at ``IMU_DGYRO_CUTOFF``),
+  the integrator gain ``K·I`` scaled down for large errors and limited to ``MC_*R_INT_LIM``.
+
+:func:`controller_from_params` rebuilds one axis's controller from a log's parameters
+(ArduPilot ``ATC_RAT_{RLL,PIT,YAW}_*``, the 3.x ``RATE_{RLL,PIT,YAW}_*`` names, the 3.5–4.0
+single ``FILT``, ``SCHED_LOOP_RATE``, ``INS_GYRO_FILTER``; PX4 ``MC_{ROLL,PITCH,YAW}RATE_*``,
+``MC_{RR,PR,YR}_INT_LIM``, ``IMU_GYRO_CUTOFF``, ``IMU_DGYRO_CUTOFF``, ``IMU_GYRO_RATEMAX``);
+a parameter the log lacks takes the autopilot's documented default and is listed in
+``defaults_used``.
+
+The gyro low-pass (``INS_GYRO_FILTER``, ``IMU_GYRO_CUTOFF``) and any notch sit between the
+rotating body and what the controller reads; the logged rate (``RATE.R``,
+``vehicle_angular_velocity``) is already filtered, so a plant identified from it to the
+logged rate includes them: the twin feeds the plant model's output straight to the PID.
+
+The closed-loop twin (:func:`closed_loop_fit`) drives the controller with the logged rate
+target (``RATE.RDes/PDes/YDes``, ``PIDR.Tar``, PX4 ``vehicle_rates_setpoint``) plus any
+SYSTEMID mixer injection (``SIDD.Targ`` during ``SID_AXIS`` 10–12), closes the loop through
+the identified plant at the controller's loop rate (the plant re-discretised there when the
+log is slower), and compares the simulated rate and controller output with the measured
+ones on the held-out blocks. Its baseline is "the rate follows its target after the best
+delay" (the delay chosen on the training blocks).
+
+Examples
+--------
+>>> c = controller_from_params({"ATC_RAT_RLL_P": 0.1, "ATC_RAT_RLL_I": 0.1}, "roll")
+>>> c.autopilot, c.gains.p, c.gains.d, c.loop_hz
+('ardupilot', 0.1, 0.0036, 400.0)
+>>> c.defaults_used[:3]
+('ATC_RAT_RLL_D', 'ATC_RAT_RLL_FF', 'ATC_RAT_RLL_IMAX')
+>>> pid = c.new_pid(0.0025)
+>>> round(pid.update(target=1.0, measured=0.0), 5)   # P*err + I*err*dt on the first sample
+0.10025
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, Any, Protocol
+
+import numpy as np
+from scipy import linalg
+
+from mavsid.errors import ConfigError, MavsidError
+
+if TYPE_CHECKING:
+    from mavsid.data import FlightData, Segment
+    from mavsid.estimators.model import Model
+
+__all__ = [
+    "AXIS_RATE",
+    "AxisController",
+    "ClosedLoopFit",
+    "LinearPlant",
+    "LoopAnalysis",
+    "PX4RateGains",
+    "PX4RatePID",
+    "RateGains",
+    "RatePID",
+    "TwinSignals",
+    "analyse_loop",
+    "analyse_model",
+    "baseline_fit",
+    "closed_loop_fit",
+    "compare_response",
+    "controller_from_params",
+    "controller_tf",
+    "format_tune",
+    "frd_margins",
+    "margins_on_frf",
+    "measured_responses",
+    "plant_from_model",
+    "replay_controller",
+    "simulate_closed_loop",
+    "suggest_gains",
+    "sysid_spans",
+    "tune",
+    "twin_signals",
+]
+
+AXES = ("roll", "pitch", "yaw")
+AXIS_RATE = {"roll": "p", "pitch": "q", "yaw": "r"}
+_AP = {"roll": "RLL", "pitch": "PIT", "yaw": "YAW"}
+_PX4 = {"roll": "ROLL", "pitch": "PITCH", "yaw": "YAW"}
+_PX4_LIM = {"roll": "RR", "pitch": "PR", "yaw": "YR"}
+#: ArduCopter 3.x rate PIDs act on centidegrees/s and output on the ±4500 motor scale
+_AP3_SCALE = (18000.0 / math.pi) / 4500.0
+
+
+def _alpha(cutoff_hz: float, dt: float) -> float:
+    """First-order low-pass gain per step (1 = no filtering)."""
+    if cutoff_hz <= 0:
+        return 1.0
+    rc = 1.0 / (2 * np.pi * cutoff_hz)
+    return dt / (dt + rc)
+
+
+# --------------------------------------------------------------------------- ArduPilot
+
+
+@dataclass(frozen=True)
+class RateGains:
+    """One axis of ArduPilot's ``ATC_RAT_<AX>_*`` (P, I, D per rad/s to a normalised output;
+    ``imax`` normalised; filters in Hz, 0 = off; ``smax`` the P+D slew limit, 0 = off)."""
+
+    p: float
+    i: float
+    d: float
+    ff: float
+    imax: float
+    fltt: float
+    fltd: float
+    flte: float
+    smax: float = 0.0
+
+
+#: slew-limiter constants: slew rate low-passed at this cut-off (Hz), the P+D modifier never
+#: below this fraction
+_SLEW_FILTER_HZ = 25.0
+_SLEW_MIN_MOD = 0.1
+
+
+class RatePID:
+    """ArduPilot ``AC_PID``-style rate controller for one axis.
+
+    ``SMAX`` (when > 0): the slew rate of the P+D output, low-passed at 25 Hz, above ``SMAX``
+    scales P and D by ``SMAX / slew`` (never below 0.1). ArduPilot's limiter also tracks the
+    slew peaks over a window; this keeps only the filtered rate (an approximation).
+
+    Examples
+    --------
+    >>> pid = RatePID(RateGains(0.1, 0.0, 0.0, 0.2, 0.5, 0.0, 0.0, 0.0), dt=0.01)
+    >>> [round(pid.update(1.0, 0.5), 3) for _ in range(2)]   # P*err + FF*target
+    [0.25, 0.25]
+    """
+
+    def __init__(self, gains: RateGains, dt: float) -> None:
+        self.g = gains
+        self.dt = dt
+        self.a_t = _alpha(gains.fltt, dt)
+        self.a_e = _alpha(gains.flte, dt)
+        self.a_d = _alpha(gains.fltd, dt)
+        self.a_s = _alpha(_SLEW_FILTER_HZ, dt)
+        self.target = 0.0
+        self.error = 0.0
+        self.deriv = 0.0
+        self.integ = 0.0
+        self.slew = 0.0
+        self.pd_last = 0.0
+        self.reset = True
+
+    def update(self, target: float, measured: float) -> float:
+        """One step: target and measured rate (rad/s) -> normalised output."""
+        g = self.g
+        if self.reset:
+            self.target = target
+            self.error = target - measured
+            self.deriv = 0.0
+            self.reset = False
+        else:
+            self.target += self.a_t * (target - self.target)
+            err_prev = self.error
+            self.error += self.a_e * ((self.target - measured) - self.error)
+            self.deriv += self.a_d * ((self.error - err_prev) / self.dt - self.deriv)
+        self.integ = min(max(self.integ + g.i * self.error * self.dt, -g.imax), g.imax)
+        if g.smax > 0:
+            pd = g.p * self.error + g.d * self.deriv
+            self.slew += self.a_s * (abs(pd - self.pd_last) / self.dt - self.slew)
+            self.pd_last = pd
+            mod = max(_SLEW_MIN_MOD, min(1.0, g.smax / self.slew)) if self.slew > 0 else 1.0
+            return mod * pd + self.integ + g.ff * self.target
+        return g.p * self.error + self.integ + g.d * self.deriv + g.ff * self.target
+
+    def preset(self, target: float, measured: float, output: float) -> None:
+        """Before the first :meth:`update`: set the integrator so that the first output of
+        ``update(target, measured)`` is ``output`` (within ``±IMAX``)."""
+        g = self.g
+        err = target - measured
+        i0 = output - g.p * err - g.ff * target - g.i * err * self.dt
+        self.integ = min(max(i0, -g.imax), g.imax)
+
+    def adjust_integrator(self, delta: float) -> None:
+        """Add ``delta`` to the integrator (within ``±IMAX``)."""
+        self.integ = min(max(self.integ + delta, -self.g.imax), self.g.imax)
+
+
+# --------------------------------------------------------------------------- PX4
+
+
+@dataclass(frozen=True)
+class PX4RateGains:
+    """One axis of PX4's ``MC_<AX>RATE_*``: P, I, D, FF and the gain ``K`` multiplying P, I
+    and D; ``int_lim`` the integrator limit (``MC_<AX>R_INT_LIM``); ``dgyro_hz`` the cut-off
+    of the low-pass on the measured rate's derivative (``IMU_DGYRO_CUTOFF``, 0 = off)."""
+
+    p: float
+    i: float
+    d: float
+    ff: float
+    k: float = 1.0
+    int_lim: float = 0.3
+    dgyro_hz: float = 30.0
+
+
+#: PX4 reduces the integration for rate errors approaching this (rad/s)
+_PX4_I_ERR = math.radians(400.0)
+
+
+class PX4RatePID:
+    """PX4 multicopter rate controller for one axis (derivative on measurement).
+
+    Examples
+    --------
+    >>> pid = PX4RatePID(PX4RateGains(0.2, 0.0, 0.0, 0.1, k=0.5), dt=0.004)
+    >>> round(pid.update(1.0, 0.0), 3)   # K*P*err + FF*target
+    0.2
+    """
+
+    def __init__(self, gains: PX4RateGains, dt: float) -> None:
+        from mavsid.synthetic.plant import Lowpass2p
+
+        self.g = gains
+        self.dt = dt
+        fs = 1.0 / dt
+        cut = gains.dgyro_hz if 0 < gains.dgyro_hz < 0.5 * fs else 0.0
+        self.accel_filter = Lowpass2p(cut, fs, 1)
+        self.integ = 0.0
+        self.last = 0.0
+        self.reset = True
+
+    def update(self, target: float, measured: float) -> float:
+        """One step: target and measured rate (rad/s) -> normalised torque."""
+        g = self.g
+        if self.reset:
+            self.last = measured
+            self.reset = False
+        accel = float(self.accel_filter(np.array([(measured - self.last) / self.dt]))[0])
+        self.last = measured
+        err = target - measured
+        out = g.k * g.p * err + self.integ - g.k * g.d * accel + g.ff * target
+        factor = max(0.0, 1.0 - (err / _PX4_I_ERR) ** 2)
+        i_new = self.integ + factor * g.k * g.i * err * self.dt
+        self.integ = min(max(i_new, -g.int_lim), g.int_lim)
+        return out
+
+    def preset(self, target: float, measured: float, output: float) -> None:
+        """Set the integrator so that the first output of ``update(target, measured)`` is
+        ``output`` (within the integrator limit)."""
+        g = self.g
+        err = target - measured
+        i0 = output - g.k * g.p * err - g.ff * target
+        self.integ = min(max(i0, -g.int_lim), g.int_lim)
+
+    def adjust_integrator(self, delta: float) -> None:
+        """Add ``delta`` to the integrator (within its limit)."""
+        self.integ = min(max(self.integ + delta, -self.g.int_lim), self.g.int_lim)
+
+
+class PID(Protocol):
+    """What the twin needs of a rate controller."""
+
+    def update(self, target: float, measured: float) -> float: ...
+
+    def preset(self, target: float, measured: float, output: float) -> None: ...
+
+    def adjust_integrator(self, delta: float) -> None: ...
+
+
+# --------------------------------------------------------------------------- from parameters
+
+
+@dataclass(frozen=True)
+class AxisController:
+    """One axis's rate controller as the log's parameters define it.
+
+    Attributes
+    ----------
+    autopilot : str
+        ``"ardupilot"`` or ``"px4"``.
+    axis : str
+    gains : RateGains or PX4RateGains
+        In the twin's units (rad/s in, normalised output).
+    loop_hz : float
+        Rate the controller runs at (``SCHED_LOOP_RATE``; PX4 ``IMU_GYRO_RATEMAX``).
+    gyro_filter_hz : float
+        The gyro low-pass ahead of the controller (``INS_GYRO_FILTER``, ``IMU_GYRO_CUTOFF``);
+        part of the identified plant when the plant maps to the logged (filtered) rate.
+    notch_hz : float
+        Centre of a configured static gyro notch (0: none configured).
+    params : Mapping[str, float]
+        Every parameter used, by the vehicle's own name, as the log has it (or the default).
+    defaults_used : tuple of str
+        Parameters the log lacks, taken at their documented defaults.
+    naming : str
+        ``"ATC_RAT"`` (ArduPilot >= 3.4), ``"ATC_RAT_FILT"`` (3.5-4.0 single filter),
+        ``"RATE"`` (ArduCopter <= 3.3, centidegree scale) or ``"MC"`` (PX4).
+    angle_p : float
+        The attitude loop's P (1/s) around the rate loop (``ATC_ANG_*_P``, 3.x ``STB_*_P``,
+        PX4 ``MC_*_P``): a mixer injection's broken loop includes it.
+    """
+
+    autopilot: str
+    axis: str
+    gains: RateGains | PX4RateGains
+    loop_hz: float
+    gyro_filter_hz: float = 0.0
+    notch_hz: float = 0.0
+    params: Mapping[str, float] = field(default_factory=dict)
+    defaults_used: tuple[str, ...] = ()
+    naming: str = "ATC_RAT"
+    angle_p: float = 0.0
+
+    def new_pid(self, dt: float | None = None) -> RatePID | PX4RatePID:
+        """A fresh controller stepping every ``dt`` (default ``1 / loop_hz``)."""
+        step = 1.0 / self.loop_hz if dt is None else dt
+        if isinstance(self.gains, PX4RateGains):
+            return PX4RatePID(self.gains, step)
+        return RatePID(self.gains, step)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form: autopilot, loop rate, filters, parameters and the defaults used."""
+        return {
+            "autopilot": self.autopilot,
+            "axis": self.axis,
+            "loop_hz": self.loop_hz,
+            "gyro_filter_hz": self.gyro_filter_hz,
+            "notch_hz": self.notch_hz,
+            "naming": self.naming,
+            "angle_p": self.angle_p,
+            "params": dict(self.params),
+            "defaults_used": list(self.defaults_used),
+        }
+
+
+#: ArduCopter 4.x defaults (ATC_RAT_*), per axis: P, I, D, FF, IMAX, FLTT, FLTE, FLTD, SMAX
+_AP_DEFAULTS = {
+    "roll": (0.135, 0.135, 0.0036, 0.0, 0.5, 20.0, 0.0, 20.0, 0.0),
+    "pitch": (0.135, 0.135, 0.0036, 0.0, 0.5, 20.0, 0.0, 20.0, 0.0),
+    "yaw": (0.18, 0.018, 0.0, 0.0, 0.5, 20.0, 2.5, 0.0, 0.0),
+}
+_AP_FIELDS = ("P", "I", "D", "FF", "IMAX", "FLTT", "FLTE", "FLTD", "SMAX")
+#: ArduCopter 3.3 defaults (RATE_*): P, I, D, IMAX (centi), FILT_HZ
+_AP3_DEFAULTS = {
+    "roll": (0.15, 0.1, 0.004, 1000.0, 20.0),
+    "pitch": (0.15, 0.1, 0.004, 1000.0, 20.0),
+    "yaw": (0.2, 0.02, 0.0, 1000.0, 5.0),
+}
+#: PX4 v1.14 defaults: P, I, D, FF, K, INT_LIM
+_PX4_DEFAULTS = {
+    "roll": (0.15, 0.2, 0.003, 0.0, 1.0, 0.3),
+    "pitch": (0.15, 0.2, 0.003, 0.0, 1.0, 0.3),
+    "yaw": (0.2, 0.1, 0.0, 0.0, 1.0, 0.3),
+}
+#: PX4 v1.14 attitude P defaults (MC_ROLL_P, MC_PITCH_P, MC_YAW_P)
+_PX4_ANGLE_P = {"roll": 6.5, "pitch": 6.5, "yaw": 2.8}
+_AP_LOOP_HZ = 400.0
+_AP_GYRO_FILTER_HZ = 20.0
+_PX4_GYRO_CUTOFF_HZ = 40.0
+_PX4_DGYRO_CUTOFF_HZ = 30.0
+_PX4_LOOP_HZ = 400.0  # IMU_GYRO_RATEMAX default; pre-1.11 firmware ran the loop at 250 Hz
+_PX4_OLD_LOOP_HZ = 250.0
+
+
+def _is_px4(params: Mapping[str, float]) -> bool:
+    return any(k.startswith(("MC_ROLLRATE_", "MC_PITCHRATE_", "MC_YAWRATE_")) for k in params)
+
+
+def _angle_p(params: Mapping[str, float], name: str, default: float,
+             used: dict[str, float]) -> float:
+    """The attitude P (recorded in ``used``; not a rate-controller default: the twin follows
+    the logged rate target and does not need it, only the loop analysis at the mixer)."""
+    value = params.get(name)
+    ok = value is not None and math.isfinite(float(value)) and float(value) >= 0
+    used[name if ok else f"{name} (default)"] = float(value) if ok else default  # type: ignore[arg-type]
+    return float(value) if ok else default  # type: ignore[arg-type]
+
+
+def controller_from_params(
+    params: Mapping[str, float], axis: str, autopilot: str | None = None
+) -> AxisController:
+    """Rebuild one axis's rate controller from a log's parameters.
+
+    Parameters
+    ----------
+    params : Mapping[str, float]
+        The log's parameters (``RawLog.params`` / ``FlightData.params``).
+    axis : str
+        ``roll``, ``pitch`` or ``yaw``.
+    autopilot : str, optional
+        ``"ardupilot"`` or ``"px4"``; default from the parameter names (PX4 when any
+        ``MC_*RATE_*`` is present).
+
+    Raises
+    ------
+    ConfigError
+        Unknown axis or autopilot, or a gain that is negative or not finite.
+
+    Examples
+    --------
+    >>> c = controller_from_params({"MC_ROLLRATE_P": 0.2, "MC_ROLLRATE_K": 0.5}, "roll")
+    >>> c.autopilot, c.gains.p, c.gains.k, "MC_ROLLRATE_I" in c.defaults_used
+    ('px4', 0.2, 0.5, True)
+    >>> round(controller_from_params({"RATE_RLL_P": 0.15}, "roll").gains.p, 6)  # 3.x: cdeg scale
+    0.190986
+    """
+    if axis not in AXES:
+        raise ConfigError(f"axis must be one of {', '.join(AXES)}, got {axis!r}")
+    kind = autopilot or ("px4" if _is_px4(params) else "ardupilot")
+    if kind not in ("ardupilot", "px4"):
+        raise ConfigError(f"no rate-controller model for autopilot {kind!r} (ardupilot, px4)")
+    used: dict[str, float] = {}
+    defaults: list[str] = []
+
+    def get(name: str, default: float) -> float:
+        if name in params and params[name] is not None and math.isfinite(float(params[name])):
+            value = float(params[name])
+        else:
+            value = float(default)
+            defaults.append(name)
+        if value < 0:
+            raise ConfigError(f"parameter {name} = {value:g} must be >= 0")
+        used[name] = value
+        return value
+
+    if kind == "px4":
+        pre = f"MC_{_PX4[axis]}RATE_"
+        p, i, d, ff, k, lim = _PX4_DEFAULTS[axis]
+        gains: RateGains | PX4RateGains = PX4RateGains(
+            get(pre + "P", p), get(pre + "I", i), get(pre + "D", d), get(pre + "FF", ff),
+            get(pre + "K", k), get(f"MC_{_PX4_LIM[axis]}_INT_LIM", lim),
+            get("IMU_DGYRO_CUTOFF", _PX4_DGYRO_CUTOFF_HZ),
+        )
+        old = "IMU_GYRO_RATEMAX" not in params and "IMU_GYRO_CUTOFF" not in params
+        loop = get("IMU_GYRO_RATEMAX", _PX4_OLD_LOOP_HZ if old else _PX4_LOOP_HZ)
+        gyro = get("IMU_GYRO_CUTOFF", _PX4_GYRO_CUTOFF_HZ)
+        notch = float(params.get("IMU_GYRO_NF0_FRQ", params.get("IMU_GYRO_NF_FREQ", 0.0)) or 0)
+        ang = _angle_p(params, f"MC_{_PX4[axis]}_P", _PX4_ANGLE_P[axis], used)
+        return AxisController("px4", axis, gains, loop or _PX4_LOOP_HZ, gyro, notch, used,
+                              tuple(defaults), "MC", ang)
+    ax = _AP[axis]
+    modern = any(k.startswith(f"ATC_RAT_{ax}_") for k in params)
+    legacy = not modern and any(k.startswith(f"RATE_{ax}_") for k in params)
+    if legacy:
+        p, i, d, imax, filt = _AP3_DEFAULTS[axis]
+        pre = f"RATE_{ax}_"
+        filt_name = pre + "FILT_HZ" if pre + "FILT_HZ" in params else pre + "FILT"
+        f = get(filt_name, filt)
+        gains = RateGains(
+            round(get(pre + "P", p) * _AP3_SCALE, 9), round(get(pre + "I", i) * _AP3_SCALE, 9),
+            round(get(pre + "D", d) * _AP3_SCALE, 9), 0.0,
+            round(get(pre + "IMAX", imax) / 4500.0, 9), 0.0, f, f,
+        )
+        naming = "RATE"
+    else:
+        pre = f"ATC_RAT_{ax}_"
+        vals = dict(zip(_AP_FIELDS, _AP_DEFAULTS[axis], strict=True))
+        if pre + "FLTE" not in params and pre + "FILT" in params:
+            # 3.5-4.0: one filter on the error, the derivative taken of the filtered error
+            f = get(pre + "FILT", 20.0)
+            vals.update(FLTT=0.0, FLTE=f, FLTD=0.0)
+            names: tuple[str, ...] = ("P", "I", "D", "FF", "IMAX")
+            naming = "ATC_RAT_FILT"
+        else:
+            names = _AP_FIELDS
+            naming = "ATC_RAT"
+        for n in names:
+            vals[n] = get(pre + n, vals[n])
+        gains = RateGains(vals["P"], vals["I"], vals["D"], vals["FF"], vals["IMAX"],
+                          vals["FLTT"], vals["FLTD"], vals["FLTE"], vals["SMAX"])
+    loop = get("SCHED_LOOP_RATE", _AP_LOOP_HZ) or _AP_LOOP_HZ
+    gyro = get("INS_GYRO_FILTER", _AP_GYRO_FILTER_HZ)
+    notch = 0.0
+    if params.get("INS_HNTCH_ENABLE", 0):
+        notch = float(params.get("INS_HNTCH_FREQ", 0.0) or 0.0)
+    elif params.get("INS_NOTCH_ENABLE", 0):
+        notch = float(params.get("INS_NOTCH_FREQ", 0.0) or 0.0)
+    ang_name = f"STB_{ax}_P" if legacy else f"ATC_ANG_{ax}_P"
+    ang = _angle_p(params, ang_name, 4.5, used)
+    return AxisController("ardupilot", axis, gains, loop, gyro, notch, used, tuple(defaults),
+                          naming, ang)
+
+
+# --------------------------------------------------------------------------- the plant
+
+
+@dataclass(frozen=True)
+class LinearPlant:
+    """A discrete single-output plant ``x⁺ = A x + B (u + u_offset) + E w``, ``y = C x``.
+
+    ``u`` is the axis's controller output (mixer input, normalised); ``w`` the model's other
+    inputs, taken as measured; ``u_offset`` the model's bias expressed as an input offset.
+    """
+
+    a: np.ndarray
+    b: np.ndarray
+    c: np.ndarray
+    dt: float
+    e: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    u_offset: float = 0.0
+    other_inputs: tuple[str, ...] = ()
+
+    def initial_state(self, y0: float, u0: float, w0: np.ndarray | None = None) -> np.ndarray:
+        """A state in equilibrium with the input ``u0`` (and ``w0``) as far as the plant
+        allows, moved (least norm) so that its output is ``y0``."""
+        n = self.a.shape[0]
+        forcing = self.b * (u0 + self.u_offset)
+        if w0 is not None and self.e.size:
+            forcing = forcing + self.e @ w0
+        try:
+            x = np.linalg.solve(np.eye(n) - self.a, forcing)
+            if not np.all(np.isfinite(x)) or np.linalg.cond(np.eye(n) - self.a) > 1e8:
+                raise np.linalg.LinAlgError
+        except np.linalg.LinAlgError:
+            x = np.zeros(n)
+        cc = self.c.reshape(1, n)
+        return x + (np.linalg.pinv(cc) @ np.array([y0 - float((cc @ x)[0])])).ravel()
+
+
+def _continuous_blocks(model: Model) -> tuple[np.ndarray, np.ndarray, list[int], list[int]]:
+    """Continuous-time ``(A, B_exo)`` of a linear model, with the feature indices of states
+    and of exogenous terms (inputs and bias)."""
+    states, exo, other = model._split
+    if other:
+        raise ConfigError("the closed-loop twin needs a linear model (no library terms)")
+    n = len(model.state_names)
+    a = model.A
+    b = model.coef[exo].T if exo else np.zeros((n, 0))
+    if model.continuous:
+        return a, b, states, exo
+    m = b.shape[1]
+    big = np.zeros((n + m, n + m))
+    big[:n, :n], big[:n, n:], big[n:, n:] = a, b, np.eye(m)
+    ev = np.linalg.eigvals(a)
+    if np.any(np.abs(ev.imag) > 1e-12) or np.any(ev.real <= 0):
+        raise ConfigError("the model's discrete poles have no continuous-time equivalent "
+                          "(negative or complex); the twin runs at the model's own step")
+    log = np.real(linalg.logm(big)) / model.dt
+    return log[:n, :n], log[:n, n:], states, exo
+
+
+def _at_step(model: Model, dt: float) -> Model:
+    """The linear model re-discretised (zero-order hold) at step ``dt``, delay kept in s."""
+    if not model.continuous and math.isclose(model.dt, dt, rel_tol=1e-9):
+        return model
+    a, b, states, exo = _continuous_blocks(model)
+    n, m = a.shape[0], b.shape[1]
+    big = np.zeros((n + m, n + m))
+    big[:n, :n], big[:n, n:] = a, b
+    e = linalg.expm(big * dt)
+    coef = np.zeros_like(model.coef)
+    for j in states:
+        coef[j] = e[:n, :n][:, model.state_names.index(model.features[j])]
+    for k, j in enumerate(exo):
+        coef[j] = e[:n, n + k]
+    steps = model.delay_s / dt
+    whole = math.floor(steps + 1e-9)
+    frac = steps - whole if steps - whole > 1e-9 else 0.0
+    return replace(model, coef=coef, dt=dt, continuous=False, delay=whole, delay_frac=frac,
+                   covariance=None, coef_stderr=None)
+
+
+def plant_from_model(model: Any, axis: str, dt: float | None = None) -> LinearPlant:
+    """The identified plant of ``axis`` as a :class:`LinearPlant` at step ``dt`` (default
+    the model's own): input filters and delay included, the bias as an input offset.
+
+    ``model`` is a :class:`mavsid.estimators.Model` (linear features).
+
+    Raises
+    ------
+    ConfigError
+        The model is not linear, does not predict the axis's rate from its input, or cannot
+        be re-discretised at ``dt``.
+    """
+    from mavsid.estimators import library
+
+    rate, u_name = AXIS_RATE[axis], f"u_{axis}"
+    if not all(hasattr(model, a) for a in ("features", "coef", "to_statespace", "_split")):
+        raise ConfigError(f"the {axis} model is not a mavsid estimators.Model: no loop model")
+    if rate not in model.state_names or u_name not in model.input_names:
+        raise ConfigError(f"the {axis} model does not map {u_name} to {rate}")
+    if not library.is_linear(model.features):
+        raise ConfigError("the closed-loop twin needs a linear model (no library terms)")
+    m = _at_step(model, model.dt if dt is None else dt)
+    ss = m.to_statespace()
+    ins = list(ss.input_labels)
+    row = m.state_names.index(rate)
+    a = np.asarray(ss.A, dtype=float)
+    bmat = np.asarray(ss.B, dtype=float)
+    c = np.asarray(ss.C, dtype=float)[row]
+    if np.any(np.abs(np.asarray(ss.D, dtype=float)[row]) > 0):
+        raise ConfigError("the model's output reacts to its input within the same step")
+    j = ins.index(u_name)
+    others = tuple(k for k in ins if k != u_name)
+    e = bmat[:, [ins.index(k) for k in others]] if others else np.zeros((a.shape[0], 0))
+    # bias c[rate] as the input offset that produces it: B_plant * u0 = c
+    offset = 0.0
+    if library.BIAS in m.features:
+        fb, fu = m.features.index(library.BIAS), m.features.index(u_name)
+        bu = float(m.coef[fu, row])
+        if bu != 0:
+            offset = float(m.coef[fb, row]) / bu
+    return LinearPlant(a, bmat[:, j].copy(), c, m.dt, e, offset, others)
+
+
+# --------------------------------------------------------------------------- simulation
+
+
+def simulate_closed_loop(
+    plant: LinearPlant,
+    pid: PID,
+    target: np.ndarray,
+    *,
+    injection: np.ndarray | None = None,
+    others: np.ndarray | None = None,
+    substeps: int = 1,
+    rate: np.ndarray | None = None,
+    u: np.ndarray | None = None,
+    warmup: int = 0,
+    limit: float = 1.0,
+    lag: int = 0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Close the loop: the controller follows ``target`` through ``plant``.
+
+    Each sample holds the target, injection and other inputs for ``substeps``
+    plant/controller steps (the plant's ``dt`` times ``substeps`` is the data step).
+
+    Parameters
+    ----------
+    plant : LinearPlant
+    pid : RatePID or PX4RatePID
+        A fresh controller at the plant's step.
+    target : (n,) rate target (rad/s).
+    injection : (n,), optional
+        Added to the controller output before the ``±limit`` clip (SYSTEMID mixer axes).
+    others : (n, len(plant.other_inputs)), optional
+        The model's other inputs, as measured.
+    rate, u : (n,), optional
+        Measured rate and mixer input. They set the initial conditions: the first
+        ``warmup`` samples drive the controller with the measured rate and the plant with the
+        measured input (no feedback); the integrator is then corrected so that the
+        controller's output matches the measured one, and the plant's state moved (least
+        norm) to the measured rate. Without warm-up, the plant starts in equilibrium at the
+        first sample and the integrator is preset from the first measured output.
+    warmup : int
+        Samples used for the initial conditions; the returned arrays start after them.
+    limit : float
+        The mixer input's clip.
+    lag : int
+        Controller steps between a target (and injection) sample and the step that first
+        uses it (ArduCopter: 1, see :func:`replay_controller`).
+
+    Returns
+    -------
+    rate, u : numpy.ndarray, shape (n - warmup,)
+        Simulated rate and mixer input (controller output plus injection, clipped), sampled
+        at the first sub-step of each sample.
+
+    Examples
+    --------
+    >>> plant = LinearPlant(np.array([[1.0]]), np.array([0.01]), np.array([1.0]), 0.01)
+    >>> pid = RatePID(RateGains(2.0, 0.0, 0.0, 0.0, 0.5, 0.0, 0.0, 0.0), 0.01)
+    >>> y, u = simulate_closed_loop(plant, pid, np.ones(2000))
+    >>> round(float(y[-1]), 4)   # an integrator under P control reaches its target
+    1.0
+    """
+    n = len(target)
+    inj = np.zeros(n) if injection is None else np.asarray(injection, dtype=float)
+    w = np.zeros((n, 0)) if others is None else np.asarray(others, dtype=float).reshape(n, -1)
+    a, b, c, e = plant.a, plant.b, plant.c, plant.e
+    off = plant.u_offset
+    tg = _lagged(np.repeat(np.asarray(target, dtype=float), substeps), lag)
+    ij = _lagged(np.repeat(inj, substeps), lag)
+    ew = (np.repeat(w @ e.T, substeps, axis=0) if w.shape[1]
+          else np.zeros((n * substeps, a.shape[0])))
+    ym = np.zeros(n) if rate is None else np.asarray(rate, dtype=float)
+    um = np.zeros(n) if u is None else np.asarray(u, dtype=float)
+    warmup = min(max(0, warmup), n - 1) if rate is not None and u is not None else 0
+    x = plant.initial_state(float(ym[0]), float(um[0]), w[0] if n and w.shape[1] else None)
+    if u is not None and n:
+        pid.preset(float(tg[0]), float(ym[0]), float(um[0] - ij[0]))
+    j = 0
+    if warmup:
+        outs = np.empty(warmup)
+        for k in range(warmup):
+            for s in range(substeps):
+                out = pid.update(float(tg[j]), float(ym[k]))
+                if s == 0:
+                    outs[k] = out
+                x = a @ x + b * (float(um[k]) + off) + ew[j]
+                j += 1
+        last = max(1, min(10, warmup // 2))
+        resid = (um[:warmup] - ij[: warmup * substeps: substeps]) - outs
+        pid.adjust_integrator(float(np.mean(resid[-last:])))
+        cc = c.reshape(1, -1)
+        x = x + (np.linalg.pinv(cc) @ np.array([ym[warmup] - float((cc @ x)[0])])).ravel()
+    y_out = np.empty(n - warmup)
+    u_out = np.empty(n - warmup)
+    for k in range(warmup, n):
+        for s in range(substeps):
+            y = float(c @ x)
+            uk = min(max(pid.update(float(tg[j]), y) + float(ij[j]), -limit), limit)
+            if s == 0:
+                y_out[k - warmup], u_out[k - warmup] = y, uk
+            x = a @ x + b * (uk + off) + ew[j]
+            j += 1
+    return y_out, u_out
+
+
+def _lagged(x: np.ndarray, lag: int) -> np.ndarray:
+    """``x`` delayed by ``lag`` samples, the first value held before it."""
+    if lag <= 0 or not x.size:
+        return x
+    return np.concatenate([np.full(min(lag, x.size), x[0]), x[: max(0, x.size - lag)]])
+
+
+def replay_controller(
+    ctrl: AxisController, dt: float, target: np.ndarray, rate: np.ndarray, output: np.ndarray,
+    injection: np.ndarray | None = None, lag: int = 0, substeps: int = 1,
+) -> np.ndarray:
+    """The rebuilt controller fed the *measured* rate: its output (mixer input minus the
+    injection) sample by sample, to compare with the logged one.
+
+    This checks the controller alone (its parameters, and ``lag``: ArduCopter runs the rate
+    controller at the start of each loop on the target and injection its attitude controller
+    and SYSTEMID set in the loop before, and logs them when they are set: 1 loop).
+    ``substeps`` controller steps per sample (``lag`` counts them) hold the measured rate.
+
+    Examples
+    --------
+    >>> c = controller_from_params({}, "roll")
+    >>> t = np.sin(np.arange(200) * 0.05); y = 0.9 * t
+    >>> u = replay_controller(c, 0.0025, t, y, np.zeros(200))
+    >>> u.shape
+    (200,)
+    """
+    n = len(target)
+    inj = np.zeros(n) if injection is None else np.asarray(injection, dtype=float)
+    tg = _lagged(np.repeat(np.asarray(target, dtype=float), substeps), lag)
+    ij = _lagged(np.repeat(inj, substeps), lag)[::substeps]
+    ym = np.repeat(np.asarray(rate, dtype=float), substeps)
+    pid = ctrl.new_pid(dt / substeps)
+    pid.preset(float(tg[0]), float(rate[0]), float(output[0] - ij[0]))
+    out = np.array([pid.update(float(a), float(b)) for a, b in zip(tg, ym, strict=True)])
+    out = out[::substeps]
+    # the first output has no derivative term and an unfiltered error: the integrator takes
+    # the offset that leaves, measured once the controller's filters have settled
+    settle = min(round(SETTLE_S / dt), n // 2)
+    early = slice(settle, min(settle + 20, n))
+    return out + float(np.mean((output - ij - out)[early]))
+
+
+#: time (s) after which the controller's own filters (FLTE 2.5 Hz: 64 ms) have settled
+SETTLE_S = 0.25
+
+
+# --------------------------------------------------------------------------- log signals
+
+
+@dataclass(frozen=True)
+class TwinSignals:
+    """What the twin needs from a log besides states and inputs, on a flight's time grid.
+
+    Attributes
+    ----------
+    target : Mapping[str, numpy.ndarray]
+        Rate target (rad/s) per axis the log has one for.
+    injection : Mapping[str, numpy.ndarray]
+        SYSTEMID mixer injection (normalised) per axis; zeros outside the runs.
+    sources : Mapping[str, str]
+        Where each came from (``"RATE.RDes"``...).
+    rate_injection : Mapping[str, numpy.ndarray]
+        SYSTEMID rate-axis injection (rad/s, ``SID_AXIS`` 7-9, part of the rate target).
+    """
+
+    target: Mapping[str, np.ndarray]
+    injection: Mapping[str, np.ndarray]
+    sources: Mapping[str, str] = field(default_factory=dict)
+    rate_injection: Mapping[str, np.ndarray] = field(default_factory=dict)
+
+
+def _on_grid(t: np.ndarray, v: np.ndarray, grid: np.ndarray, hold: bool) -> np.ndarray:
+    """Samples put on ``grid``: interpolated or held; NaN outside their span."""
+    order = np.argsort(t, kind="stable")
+    t, v = t[order], v[order]
+    keep = np.concatenate([[True], np.diff(t) > 0]) if t.size else np.zeros(0, bool)
+    t, v = t[keep], v[keep]
+    if t.size < 2:
+        return np.full(grid.shape, np.nan)
+    if hold:
+        i = np.searchsorted(t, grid + 1e-9, side="right") - 1
+        out = v[np.clip(i, 0, None)].astype(float)
+    else:
+        out = np.interp(grid, t, v)
+    out[(grid < t[0] - 1e-9) | (grid > t[-1] + 1e-9)] = np.nan
+    return out
+
+
+def twin_signals(flight: FlightData, raw: Any = None) -> TwinSignals:
+    """Rate targets and SYSTEMID mixer injections of ``flight``, from its log (re-read for
+    the few messages needed unless ``raw`` is given).
+
+    Targets come from the first of :data:`mavsid.channels.TARGET_CHANNELS` the log has;
+    mixer injections from ``SIDD.Targ`` during the SYSTEMID runs on ``SID_AXIS`` 10-12.
+    """
+    from mavsid.channels import INJECTION_CHANNEL, TARGET_CHANNELS, evaluate
+
+    if raw is None:
+        from mavsid.readers import read_log
+
+        path = flight.source.path
+        if not path or not os.path.exists(path):
+            return TwinSignals({}, {})
+        wanted = {ch.message for chans in TARGET_CHANNELS.values() for ch in chans}
+        wanted.add(INJECTION_CHANNEL.message)
+        import warnings
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            raw = read_log(path, messages=sorted(wanted))
+    grid = flight.time_s
+    targets: dict[str, np.ndarray] = {}
+    sources: dict[str, str] = {}
+    for axis in AXES:
+        for ch in TARGET_CHANNELS[AXIS_RATE[axis]]:
+            if ch.message not in raw.messages or not len(raw.messages[ch.message]):
+                continue
+            try:
+                t, v = evaluate(raw, ch, f"target {axis}")
+            except MavsidError:
+                continue
+            if t.size >= 2:
+                targets[axis] = _on_grid(t, v, grid, hold=True)
+                sources[f"target_{axis}"] = f"{ch.message}.{ch.field}"
+                break
+    injection: dict[str, np.ndarray] = {}
+    runs = [r for r in flight.meta.get("sysid_runs", ()) or ()  # type: ignore[attr-defined]
+            if int(r.get("axis", 0)) in (7, 8, 9, 10, 11, 12)]
+    rate_injection: dict[str, np.ndarray] = {}
+    if runs and INJECTION_CHANNEL.message in raw.messages:
+        try:
+            t, v = evaluate(raw, INJECTION_CHANNEL, "SYSTEMID injection")
+        except MavsidError:
+            t = np.zeros(0)
+        if t.size >= 2:
+            held = np.nan_to_num(_on_grid(t, v, grid, hold=True))
+            src = f"{INJECTION_CHANNEL.message}.{INJECTION_CHANNEL.field}"
+            for r in runs:
+                sid = int(r["axis"])
+                axis = AXES[(sid - 1) % 3]
+                inside = (grid >= float(r["start_s"]) - 1e-9) & (grid <= float(r["stop_s"]) + 1e-9)
+                if sid >= 10:
+                    inj = injection.setdefault(axis, np.zeros(grid.shape))
+                    inj[inside] = held[inside]
+                    sources[f"injection_{axis}"] = src
+                else:  # rate axes: the waveform (deg/s) is added to the rate target
+                    inj = rate_injection.setdefault(axis, np.zeros(grid.shape))
+                    inj[inside] = np.radians(held[inside])
+                    sources[f"rate_injection_{axis}"] = src
+    return TwinSignals(targets, injection, sources, rate_injection)
+
+
+# --------------------------------------------------------------------------- the twin's fit
+
+
+@dataclass(frozen=True)
+class TwinBlock:
+    """One held-out block: measured and simulated rate and controller output."""
+
+    time_s: np.ndarray
+    target: np.ndarray
+    rate: np.ndarray
+    rate_twin: np.ndarray
+    output: np.ndarray
+    output_twin: np.ndarray
+    baseline: np.ndarray
+
+
+@dataclass(frozen=True)
+class ClosedLoopFit:
+    """How well the closed-loop twin reproduces the held-out blocks of one axis.
+
+    Attributes
+    ----------
+    fit_percent : float
+        Fit % of the simulated rate against the measured one (NRMSE, as elsewhere).
+    output_fit_percent : float
+        Fit % of the simulated controller output (mixer input minus any SYSTEMID
+        injection, which both share) against the measured one.
+    baseline_percent : float
+        Fit % of "the rate follows its target after ``baseline_delay_s``".
+    baseline_delay_s : float
+        The baseline's delay, chosen on the training blocks.
+    open_loop_percent : float
+        The open-loop free-run fit % of the same blocks, for comparison.
+    defaults_used : tuple of str
+        Controller parameters the log lacks, taken at documented defaults.
+    controller : Mapping
+        :meth:`AxisController.to_dict`.
+    substeps : int
+        Controller steps per data sample (the plant re-discretised when > 1).
+    lag_loops : int
+        Controller loops between a logged target (and injection) and its use.
+    target_source, injection_source : str
+    blocks : tuple of TwinBlock
+    """
+
+    fit_percent: float
+    output_fit_percent: float
+    baseline_percent: float
+    baseline_delay_s: float
+    defaults_used: tuple[str, ...] = ()
+    open_loop_percent: float = float("nan")
+    controller: Mapping[str, Any] = field(default_factory=dict)
+    substeps: int = 1
+    lag_loops: int = 0
+    target_source: str = ""
+    injection_source: str = ""
+    blocks: tuple[TwinBlock, ...] = field(default=(), repr=False)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form (without the per-block arrays)."""
+        return {
+            "fit_percent": self.fit_percent,
+            "output_fit_percent": self.output_fit_percent,
+            "baseline_percent": self.baseline_percent,
+            "baseline_delay_s": self.baseline_delay_s,
+            "open_loop_percent": self.open_loop_percent,
+            "defaults_used": list(self.defaults_used),
+            "controller": dict(self.controller),
+            "substeps": self.substeps,
+            "lag_loops": self.lag_loops,
+            "target_source": self.target_source,
+            "injection_source": self.injection_source,
+            "blocks": [[float(b.time_s[0]), float(b.time_s[-1])] for b in self.blocks],
+        }
+
+
+def _pooled_fit(y: Sequence[np.ndarray], yhat: Sequence[np.ndarray]) -> float:
+    from mavsid.validation import fit_percent
+
+    if not y:
+        return float("nan")
+    return float(fit_percent(np.concatenate(y), np.concatenate(yhat)))
+
+
+#: longest delay (s) the baseline tries
+BASELINE_MAX_DELAY_S = 0.5
+
+
+def baseline_fit(
+    train: Sequence[tuple[np.ndarray, np.ndarray]],
+    held_out: Sequence[tuple[np.ndarray, np.ndarray]],
+    dt: float,
+    max_delay_s: float = BASELINE_MAX_DELAY_S,
+) -> tuple[float, float, list[np.ndarray]]:
+    """"The rate follows its target after the best delay": the delay (whole samples up to
+    ``max_delay_s``) that fits the training blocks best, and the fit % it gives on the
+    held-out ones.
+
+    Parameters
+    ----------
+    train, held_out : sequence of (target, rate) pairs, each (n_i,)
+    dt : float
+
+    Returns
+    -------
+    fit_percent, delay_s, predictions (one per held-out block, NaN before the delay)
+
+    Examples
+    --------
+    >>> t = np.sin(np.arange(400) * 0.05)
+    >>> y = np.concatenate([[0.0] * 3, t[:-3]])       # the target, 3 samples late
+    >>> fit, delay, _ = baseline_fit([(t, y)], [(t, y)], dt=0.01)
+    >>> round(fit, 6), delay
+    (100.0, 0.03)
+    """
+    from mavsid.validation import _fit_sums
+
+    def shifted(x: np.ndarray, d: int) -> np.ndarray:
+        out = np.full(x.shape, np.nan)
+        out[d:] = x[: len(x) - d] if d else x
+        return out
+
+    longest = max((len(t) for t, _ in (*train, *held_out)), default=0)
+    max_d = max(0, min(round(max_delay_s / dt), longest - 2))
+    best, best_d = -np.inf, 0
+    pool = train or held_out
+    for d in range(max_d + 1):
+        err = norm = 0.0
+        for t, y in pool:
+            e, n = _fit_sums(y, shifted(t, d))
+            err, norm = err + float(e[0]), norm + float(n[0])
+        score = -err / norm if norm > 0 else -np.inf
+        if score > best:
+            best, best_d = score, d
+    preds = [shifted(t, best_d) for t, _ in held_out]
+    fit = _pooled_fit([y for _, y in held_out], preds)
+    return fit, best_d * dt, preds
+
+
+def _flight_index(flight: FlightData, seg: Segment) -> int | None:
+    """Index of the segment's first sample on the flight's grid (None when not from it)."""
+    if seg.log and flight.source.path and os.fspath(seg.log) != os.fspath(flight.source.path):
+        return None
+    t = flight.time_s
+    i = int(np.searchsorted(t, seg.time_s[0] - 1e-9))
+    if i >= t.size or i + len(seg) > t.size:
+        return None
+    if not np.allclose(t[i:i + len(seg)], seg.time_s, atol=1e-6 * max(flight.dt, 1e-9)):
+        return None
+    return i
+
+
+@dataclass(frozen=True)
+class _Block:
+    """A segment located on its flight, with up to ``warm`` samples before it."""
+
+    seg: Segment
+    ctrl: AxisController
+    warm: int
+    target: np.ndarray
+    injection: np.ndarray
+    rate: np.ndarray
+    u: np.ndarray
+    inputs: np.ndarray
+    input_names: tuple[str, ...]
+
+
+#: measured samples before a block (s) used for the twin's initial conditions
+WARMUP_S = 0.5
+
+
+#: target/injection lags (controller loops) tried
+LAGS = (0, 1, 2)
+#: ArduCopter uses a target one loop after logging it (see :func:`replay_controller`)
+_DEFAULT_LAG = {"ardupilot": 1, "px4": 0}
+
+
+def closed_loop_fit(
+    model: Any,
+    axis: str,
+    train: Sequence[Segment],
+    held_out: Sequence[Segment],
+    flights: Sequence[FlightData],
+    signals: Sequence[TwinSignals] | None = None,
+    open_loop_percent: float = float("nan"),
+) -> ClosedLoopFit:
+    """Run the closed-loop twin of ``axis`` on the held-out blocks.
+
+    The controller is rebuilt from the parameters of the flight each block comes from; it
+    follows the logged rate target (plus the SYSTEMID mixer injection) through the plant
+    model at the controller's loop rate, from the measured rate and controller output at
+    the block's start. The lag between a logged target and its use (0-2 loops) is the one
+    whose controller replay (:func:`replay_controller`) matches the training blocks best
+    (without training blocks: ArduPilot's 1 loop, PX4's 0).
+
+    Raises
+    ------
+    ConfigError
+        No rate target in the logs, a model the twin cannot run, or no block on a flight's
+        grid.
+    """
+    from mavsid.validation import fit_percent
+
+    sigs = list(signals) if signals is not None else [twin_signals(fd) for fd in flights]
+    tr = _locate(train, axis, flights, sigs)
+    val = _locate(held_out, axis, flights, sigs)
+    if not val:
+        raise ConfigError(f"{axis}: no rate target logged for the held-out blocks "
+                          "(RATE.RDes, PIDR.Tar or vehicle_rates_setpoint)")
+    ctrl = val[0].ctrl
+    dt = val[0].seg.dt
+    substeps = max(1, round(ctrl.loop_hz * dt))
+    lag = _DEFAULT_LAG[ctrl.autopilot]
+    if tr:
+        scores = []
+        for cand in LAGS:
+            out = [(b.u - _lagged(np.repeat(b.injection, substeps), cand)[::substeps],
+                    replay_controller(b.ctrl, dt, b.target, b.rate, b.u, b.injection, cand,
+                                      substeps))
+                   for b in tr]
+            out = [(m[b.warm:], r[b.warm:]) for b, (m, r) in zip(tr, out, strict=True)]
+            scores.append(_pooled_fit([o[0] for o in out], [o[1] for o in out]))
+        if np.any(np.isfinite(scores)):
+            lag = LAGS[int(np.nanargmax(scores))]
+    try:
+        plant = plant_from_model(model, axis, dt / substeps)
+    except ConfigError:
+        if substeps == 1:
+            raise
+        substeps = 1
+        plant = plant_from_model(model, axis, dt)
+    ys, yts, us, uts, blocks = [], [], [], [], []
+    for b in val:
+        y_sim, u_sim = simulate_closed_loop(
+            plant, b.ctrl.new_pid(dt / substeps), b.target, injection=b.injection,
+            others=_others(b, plant), substeps=substeps, rate=b.rate, u=b.u, warmup=b.warm,
+            lag=lag,
+        )
+        w = b.warm
+        inj = _lagged(np.repeat(b.injection, substeps), lag)[::substeps][w:]
+        ys.append(b.rate[w:])
+        yts.append(y_sim)
+        us.append(b.u[w:] - inj)
+        uts.append(u_sim - inj)
+        blocks.append((b.seg.time_s, b.target[w:], b.rate[w:], y_sim, b.u[w:], u_sim))
+    b_fit, b_delay, b_pred = baseline_fit([(b.target[b.warm:], b.rate[b.warm:]) for b in tr],
+                                          [(b.target[b.warm:], b.rate[b.warm:]) for b in val],
+                                          dt)
+    twin_blocks = tuple(
+        TwinBlock(t, tg, y, ysim, u, usim, bp)
+        for (t, tg, y, ysim, u, usim), bp in zip(blocks, b_pred, strict=True)
+    )
+    k = flights.index(next(fd for fd in flights if _flight_index(fd, val[0].seg) is not None))
+    return ClosedLoopFit(
+        fit_percent=_pooled_fit(ys, yts),
+        output_fit_percent=float(fit_percent(np.concatenate(us), np.concatenate(uts))),
+        baseline_percent=b_fit,
+        baseline_delay_s=b_delay,
+        defaults_used=ctrl.defaults_used,
+        open_loop_percent=open_loop_percent,
+        controller=ctrl.to_dict(),
+        substeps=substeps,
+        lag_loops=lag,
+        target_source=sigs[k].sources.get(f"target_{axis}", ""),
+        injection_source=sigs[k].sources.get(f"injection_{axis}", ""),
+        blocks=twin_blocks,
+    )
+
+
+def _others(b: _Block, plant: LinearPlant) -> np.ndarray | None:
+    """The model's other inputs, as measured over the block and its warm-up."""
+    if not plant.other_inputs:
+        return None
+    return np.column_stack([b.inputs[:, b.input_names.index(n)] for n in plant.other_inputs])
+
+
+def _locate(segments: Sequence[Segment], axis: str, flights: Sequence[FlightData],
+            sigs: Sequence[TwinSignals]) -> list[_Block]:
+    """The segments found on a flight with a rate target, with their twin signals and the
+    measured samples before them (within the flight's contiguous block)."""
+    rate, u_name = AXIS_RATE[axis], f"u_{axis}"
+    out = []
+    for seg in segments:
+        for k, fd in enumerate(flights):
+            i = _flight_index(fd, seg)
+            if i is None or axis not in sigs[k].target or u_name not in fd.input_names:
+                continue
+            first = max((int(a) for a, _ in fd.blocks if a <= i), default=0)
+            warm = min(i - first, round(WARMUP_S / fd.dt))
+            sl = slice(i - warm, i + len(seg))
+            tgt = sigs[k].target[axis][sl]
+            ok = np.isfinite(tgt)
+            if not ok[warm:].all():
+                break
+            if not ok[:warm].all():  # no target before the block: no warm-up
+                warm = 0
+                sl = slice(i, i + len(seg))
+                tgt = tgt[-len(seg):]
+            inj_full = sigs[k].injection.get(axis)
+            inj = inj_full[sl] if inj_full is not None else np.zeros(len(tgt))
+            ctrl = controller_from_params(fd.params, axis, _autopilot(fd))
+            out.append(_Block(
+                seg, ctrl, warm, tgt, inj, fd.states[sl, fd.state_names.index(rate)],
+                fd.inputs[sl, fd.input_names.index(u_name)], fd.inputs[sl], fd.input_names,
+            ))
+            break
+    return out
+
+
+def _autopilot(flight: FlightData) -> str | None:
+    """``"px4"`` or ``"ardupilot"`` from the flight's metadata, None when unknown."""
+    ap = str(flight.meta.get("autopilot") or "").lower()
+    if "px4" in ap:
+        return "px4"
+    if "ardupilot" in ap or "apm" in ap:
+        return "ardupilot"
+    if flight.source.format == "ulog":
+        return "px4"
+    return None
+
+
+# --------------------------------------------------------------------------- loop analysis
+
+
+def _first_order_z(cutoff_hz: float, dt: float) -> tuple[list[float], list[float]]:
+    """The ``_alpha`` low pass as ``(num, den)`` in z⁻¹ (unity when off)."""
+    a = _alpha(cutoff_hz, dt)
+    return ([a, 0.0], [1.0, -(1.0 - a)]) if a < 1.0 else ([1.0], [1.0])
+
+
+def controller_tf(ctrl: AxisController, dt: float | None = None) -> tuple[Any, Any]:
+    """Discrete transfer functions of the rate controller at its loop step: ``(C_fb, C_t)``,
+    output per measured rate (negated: ``u = C_t·target − C_fb·rate``) and per target.
+
+    They are exactly :class:`RatePID` / :class:`PX4RatePID` without limits (integrator
+    ``I·dt/(1 − z⁻¹)``, derivative ``(1 − z⁻¹)/dt``, first-order filters ``α/(1 − (1−α)z⁻¹)``,
+    PX4's biquad on the derivative).
+
+    Examples
+    --------
+    >>> cfb, ct = controller_tf(controller_from_params({}, "roll"))
+    >>> round(float(abs(cfb(np.exp(1j * 2 * np.pi * 1.0 * 0.0025)))), 3)   # |C| at 1 Hz
+    0.136
+    """
+    import control
+
+    step = 1.0 / ctrl.loop_hz if dt is None else dt
+    one = control.tf([1.0], [1.0], step)
+    integ = control.tf([step, 0.0], [1.0, -1.0], step)  # dt / (1 - z^-1)
+    deriv = control.tf([1.0, -1.0], [step, 0.0], step)  # (1 - z^-1) / dt
+    g = ctrl.gains
+    if isinstance(g, PX4RateGains):
+        from mavsid.synthetic.plant import lowpass2p_coefficients
+
+        fd = one
+        if 0 < g.dgyro_hz < 0.5 / step:
+            b, a = lowpass2p_coefficients(g.dgyro_hz, 1.0 / step)
+            fd = control.tf(list(b), list(a), step)
+        pi = g.k * g.p * one + g.k * g.i * integ
+        return pi + g.k * g.d * fd * deriv, pi + g.ff * one
+    ft = control.tf(*_first_order_z(g.fltt, step), step)
+    fe = control.tf(*_first_order_z(g.flte, step), step)
+    fd = control.tf(*_first_order_z(g.fltd, step), step)
+    pid = fe * (g.p * one + g.i * integ + g.d * fd * deriv)
+    return pid, pid * ft + g.ff * ft
+
+
+@dataclass(frozen=True)
+class LoopAnalysis:
+    """The rate loop of one axis with given gains.
+
+    Attributes
+    ----------
+    gain_margin_db, phase_margin_deg, crossover_hz : float
+        Of the loop transfer ``L = C_fb·P`` (crossover: where ``|L| = 1``).
+    bandwidth_hz : float
+        −3 dB bandwidth of the closed loop from rate target to rate.
+    peak_db : float
+        Largest closed-loop gain.
+    disturbance_bandwidth_hz : float
+        Where the sensitivity ``1/(1+L)`` reaches −3 dB.
+    phase_delay_s : float
+        Phase delay of the closed loop at twice the −180° frequency (``-phase/ω``, at the
+        bandwidth when that is not reached).
+    rise_time_s, overshoot_percent : float
+        Of the closed-loop step response.
+    freq_hz, magnitude_db, phase_deg : numpy.ndarray
+        The closed-loop response from rate target to rate.
+    stderr : Mapping[str, float]
+        One-σ of each figure from the plant's parameter covariance.
+    loop_response, closed_response : numpy.ndarray
+        Complex ``L`` and ``T`` at ``freq_hz``.
+    mixer_loop_response : numpy.ndarray
+        The broken loop a mixer injection measures: the rate loop and the attitude loop
+        around it (``angle_p``), ``(C_fb + C_t·angle_p·dt/(1−z⁻¹))·P``.
+    mixer_margins : Mapping[str, float]
+        ``gain_db``, ``phase_deg``, ``crossover_hz`` of that loop.
+    """
+
+    gain_margin_db: float
+    phase_margin_deg: float
+    crossover_hz: float
+    bandwidth_hz: float
+    peak_db: float
+    disturbance_bandwidth_hz: float
+    phase_delay_s: float
+    rise_time_s: float
+    overshoot_percent: float
+    freq_hz: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+    magnitude_db: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+    phase_deg: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+    stderr: Mapping[str, float] = field(default_factory=dict)
+    loop_response: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0, complex))
+    closed_response: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0, complex))
+    mixer_loop_response: np.ndarray = field(repr=False,
+                                            default_factory=lambda: np.zeros(0, complex))
+    mixer_margins: Mapping[str, float] = field(default_factory=dict)
+
+    def figures(self) -> dict[str, float]:
+        """The scalar figures by name."""
+        return {k: float(getattr(self, k)) for k in _FIGURES}
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON form ``mavsid tune --json`` gives per axis (margins, closed loop)."""
+        return {
+            "margins": {"gain_db": self.gain_margin_db, "phase_deg": self.phase_margin_deg,
+                        "crossover_hz": self.crossover_hz},
+            "closed_loop": {
+                "bandwidth_hz": self.bandwidth_hz, "peak_db": self.peak_db,
+                "disturbance_bandwidth_hz": self.disturbance_bandwidth_hz,
+                "phase_delay_s": self.phase_delay_s, "rise_time_s": self.rise_time_s,
+                "overshoot_percent": self.overshoot_percent,
+                "frequency_hz": self.freq_hz.tolist(),
+                "magnitude_db": self.magnitude_db.tolist(),
+                "phase_deg": self.phase_deg.tolist(),
+            },
+            "mixer_margins": dict(self.mixer_margins),
+            "loop": {
+                "frequency_hz": self.freq_hz.tolist(),
+                "magnitude_db": (20 * np.log10(np.abs(self.loop_response))).tolist(),
+                "phase_deg": np.degrees(np.unwrap(np.angle(self.loop_response))).tolist(),
+            },
+            "stderr": dict(self.stderr),
+        }
+
+
+_FIGURES = ("gain_margin_db", "phase_margin_deg", "crossover_hz", "bandwidth_hz", "peak_db",
+            "disturbance_bandwidth_hz", "phase_delay_s", "rise_time_s", "overshoot_percent")
+
+
+def _crossing(f: np.ndarray, mag_db: np.ndarray, level: float, rising: bool) -> float:
+    """First frequency where ``mag_db`` crosses ``level`` (log-interpolated), NaN if never."""
+    above = mag_db >= level
+    now, before = (above[1:], above[:-1]) if rising else (~above[1:], ~above[:-1])
+    idx = np.flatnonzero(now & ~before)
+    if not idx.size:
+        return float("nan")
+    i = int(idx[0])
+    x0, x1 = np.log(f[i]), np.log(f[i + 1])
+    y0, y1 = mag_db[i], mag_db[i + 1]
+    return float(np.exp(x0 + (level - y0) * (x1 - x0) / (y1 - y0))) if y1 != y0 else float(f[i])
+
+
+def _db(gain_margin: float) -> float:
+    """A gain margin in dB (inf when the phase never crosses -180°)."""
+    ok = np.isfinite(gain_margin) and gain_margin > 0
+    return float(20 * np.log10(gain_margin)) if ok else float("inf")
+
+
+def analyse_loop(plant_ss: Any, ctrl: AxisController, lag: int = 0,
+                 freq_hz: np.ndarray | None = None) -> LoopAnalysis:
+    """Margins, bandwidths and step metrics of ``ctrl`` around ``plant_ss`` (a discrete
+    python-control system at the controller's loop step, rate per controller output).
+
+    ``lag`` loops of delay on the target path (see :func:`replay_controller`).
+    """
+    import control
+
+    dt = float(plant_ss.dt)
+    cfb, ct = controller_tf(ctrl, dt)
+    if lag:
+        ct = ct * control.tf([1.0], [1.0] + [0.0] * lag, dt)
+    p = control.ss(plant_ss)
+    cfb_ss, ct_ss = control.ss(cfb), control.ss(ct)
+    loop_tf = cfb_ss * p
+    # at the mixer the attitude loop closes too: rate target = angle_p * -(integral of rate)
+    integ = control.tf([dt, 0.0], [1.0, -1.0], dt)
+    mixer_loop = (cfb + ct * ctrl.angle_p * integ) * control.tf(plant_ss)
+    closed = control.feedback(p, cfb_ss) * ct_ss
+    sens = control.feedback(control.ss([], [], [], [[1.0]], dt), loop_tf)
+    f = np.geomspace(0.1, 0.45 / dt, 400) if freq_hz is None else np.asarray(freq_hz)
+    w = 2 * np.pi * f
+    import warnings
+
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # python-control's method fall-backs
+        gm, pm, _sm, _wcg, wcp, _wcs = control.stability_margins(loop_tf)
+        t_resp = closed(np.exp(1j * w * dt))
+        s_resp = sens(np.exp(1j * w * dt))
+        l_resp = loop_tf(np.exp(1j * w * dt))
+        m_resp = mixer_loop(np.exp(1j * w * dt))
+        mgm, mpm, _sm, _wg, mwc, _ws = control.stability_margins(mixer_loop)
+    mag = 20 * np.log10(np.abs(t_resp))
+    ph = np.degrees(np.unwrap(np.angle(t_resp)))
+    bw = _crossing(f, mag - mag[0], -3.0, rising=False)
+    dbw = _crossing(f, 20 * np.log10(np.abs(s_resp)), -3.0, rising=True)
+    i180 = np.flatnonzero(ph <= -180.0)
+    if i180.size:
+        f2 = 2 * f[i180[0]] if 2 * f[i180[0]] <= f[-1] else f[i180[0]]
+        phase_delay = float(-np.interp(f2, f, ph) / (360 * f2))
+    elif np.isfinite(bw):
+        phase_delay = float(-np.interp(bw, f, ph) / (360 * bw))
+    else:
+        phase_delay = float("nan")
+    rise, over = _step_metrics(closed, dt)
+    return LoopAnalysis(
+        gain_margin_db=_db(gm),
+        phase_margin_deg=float(pm), crossover_hz=float(wcp / (2 * np.pi)),
+        bandwidth_hz=bw, peak_db=float(np.max(mag)), disturbance_bandwidth_hz=dbw,
+        phase_delay_s=phase_delay, rise_time_s=rise, overshoot_percent=over,
+        freq_hz=f, magnitude_db=mag, phase_deg=ph,
+        loop_response=np.asarray(l_resp).ravel(), closed_response=np.asarray(t_resp).ravel(),
+        mixer_loop_response=np.asarray(m_resp).ravel(),
+        mixer_margins={"gain_db": _db(mgm), "phase_deg": float(mpm),
+                       "crossover_hz": float(mwc / (2 * np.pi))},
+    )
+
+
+def _step_metrics(closed: Any, dt: float, horizon_s: float = 2.0) -> tuple[float, float]:
+    """10-90 % rise time (s) and overshoot (%) of the closed loop's unit step."""
+    import control
+
+    t = np.arange(0.0, horizon_s, dt)
+    y = np.asarray(control.step_response(closed, T=t).outputs, dtype=float).ravel()
+    final = float(np.mean(y[-max(1, len(y) // 10):]))
+    if not np.all(np.isfinite(y)) or abs(final) < 1e-9:
+        return float("nan"), float("nan")
+    r = y / final
+    i10, i90 = np.flatnonzero(r >= 0.1), np.flatnonzero(r >= 0.9)
+    rise = float(t[i90[0]] - t[i10[0]]) if i10.size and i90.size else float("nan")
+    return rise, float(max(0.0, 100.0 * (np.max(r) - 1.0)))
+
+
+def plant_statespace(model: Any, axis: str, dt: float) -> Any:
+    """The axis's plant (controller output -> rate) as a discrete python-control system at
+    step ``dt`` (filters and delay included; bias and other inputs left out)."""
+    import control
+
+    pl = plant_from_model(model, axis, dt)
+    return control.ss(pl.a, pl.b.reshape(-1, 1), pl.c.reshape(1, -1), 0.0, dt)
+
+
+def analyse_model(model: Any, axis: str, ctrl: AxisController, lag: int = 0,
+                  samples: int = 40, seed: int = 0) -> LoopAnalysis:
+    """:func:`analyse_loop` of the identified plant, with one-σ uncertainties from
+    ``samples`` draws of the model's coefficients from their covariance."""
+    dt = 1.0 / ctrl.loop_hz
+    base = analyse_loop(plant_statespace(model, axis, dt), ctrl, lag)
+    cov = getattr(model, "covariance", None)
+    rate = AXIS_RATE[axis]
+    if cov is None or samples < 2 or rate not in model.state_names:
+        return base
+    j = model.state_names.index(rate)
+    c = np.nan_to_num(np.asarray(cov[j], dtype=float))
+    rng = np.random.default_rng(seed)
+    draws = []
+    for _ in range(samples):
+        coef = model.coef.copy()
+        coef[:, j] = rng.multivariate_normal(model.coef[:, j], c, check_valid="ignore")
+        try:
+            m = replace(model, coef=coef)
+            draws.append(analyse_loop(plant_statespace(m, axis, dt), ctrl, lag,
+                                      base.freq_hz).figures())
+        except (MavsidError, ValueError, np.linalg.LinAlgError):
+            continue
+    if len(draws) < 2:
+        return base
+    err = {k: float(np.nanstd([d[k] for d in draws if np.isfinite(d[k])] or [np.nan]))
+           for k in _FIGURES}
+    return replace(base, stderr=err)
+
+
+def _scaled(ctrl: AxisController, k: float) -> AxisController:
+    g = ctrl.gains
+    if isinstance(g, PX4RateGains):
+        return replace(ctrl, gains=replace(g, p=g.p * k, i=g.i * k, d=g.d * k))
+    return replace(ctrl, gains=replace(g, p=g.p * k, i=g.i * k, d=g.d * k))
+
+
+def suggest_gains(plant_ss: Any, ctrl: AxisController, target_pm_deg: float = 50.0,
+                  lag: int = 0) -> tuple[dict[str, float], LoopAnalysis] | None:
+    """P, I and D scaled together (ratios and filters kept) so that the loop's phase margin
+    is ``target_pm_deg``; the vehicle's parameter names and units, and the predicted loop.
+    None when no scale in [0.05, 20] reaches it with a stable loop."""
+    import warnings
+
+    import control
+
+    p = control.ss(plant_ss)
+    dt = float(plant_ss.dt)
+
+    def pm(k: float) -> float:
+        cfb, _ = controller_tf(_scaled(ctrl, k), dt)
+        loop_tf = control.ss(cfb) * p
+        if np.any(np.abs(control.feedback(loop_tf, 1).poles()) >= 1.0):
+            return -1e9  # unstable closed loop
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            margin = control.stability_margins(loop_tf)[1]
+        return float(margin) if np.isfinite(margin) else 1e9
+
+    ks = np.geomspace(0.05, 20.0, 25)
+    vals = np.array([pm(k) for k in ks])
+    ok = np.flatnonzero((vals[:-1] >= target_pm_deg) & (vals[1:] < target_pm_deg))
+    if not ok.size:
+        return None
+    lo, hi = float(ks[ok[0]]), float(ks[ok[0] + 1])
+    for _ in range(20):
+        mid = np.sqrt(lo * hi)
+        lo, hi = (mid, hi) if pm(mid) >= target_pm_deg else (lo, mid)
+    new = _scaled(ctrl, lo)
+    result = analyse_loop(plant_ss, new, lag)
+    if not (np.isfinite(result.phase_margin_deg) and result.gain_margin_db > 0):
+        return None
+    return gain_params(new), result
+
+
+def margins_on_frf(plant_frf: Any, ctrl: AxisController) -> dict[str, float]:
+    """Margins of ``ctrl`` around a measured plant FRF (controller output -> rate): the loop
+    ``C_fb(e^{jωT})·P̂(f)`` over the FRF's coherent band, a check on a model's promise that
+    does not go through the model (NaN where the band holds no crossover)."""
+    m = plant_frf.coherent & np.isfinite(plant_frf.response)
+    nan = {"gain_db": float("nan"), "phase_deg": float("nan"), "crossover_hz": float("nan")}
+    if m.sum() < 8:
+        return nan
+    f, p = plant_frf.freq_hz[m], plant_frf.response[m]
+    dt = 1.0 / ctrl.loop_hz
+    cfb, _ = controller_tf(ctrl, dt)
+    loop_resp = np.asarray(cfb(np.exp(2j * np.pi * f * dt))).ravel() * p
+    band = replace(plant_frf, freq_hz=f, response=loop_resp, coherence=np.ones(f.size),
+                   error=plant_frf.error[m])
+    got = frd_margins(band)
+    return got if f[0] < got["crossover_hz"] < f[-1] else nan
+
+
+def gain_params(ctrl: AxisController) -> dict[str, float]:
+    """The controller's P, I, D in the vehicle's own parameter names and units."""
+    g = ctrl.gains
+    if ctrl.autopilot == "px4":
+        pre = f"MC_{_PX4[ctrl.axis]}RATE_"
+        k = g.k if isinstance(g, PX4RateGains) else 1.0
+        return {pre + "P": g.p, pre + "I": g.i, pre + "D": g.d, pre + "K": k}
+    ax = _AP[ctrl.axis]
+    if ctrl.naming == "RATE":
+        return {f"RATE_{ax}_{n}": round(v / _AP3_SCALE, 6)
+                for n, v in (("P", g.p), ("I", g.i), ("D", g.d))}
+    return {f"ATC_RAT_{ax}_{n}": round(v, 6) for n, v in (("P", g.p), ("I", g.i), ("D", g.d))}
+
+
+# --------------------------------------------------------------------------- measured loop
+
+
+def sysid_spans(flight: FlightData, axis: str) -> list[tuple[int, int, int]]:
+    """Grid index ranges ``[i0, i1)`` of the flight's SYSTEMID runs on ``axis`` (cut at the
+    first gap), with their ``SID_AXIS``: 1-3 angle, 4-6 recovery, 7-9 rate, 10-12 mixer."""
+    out = []
+    t = flight.time_s
+    for run in flight.meta.get("sysid_runs", ()) or ():  # type: ignore[attr-defined]
+        sid = int(run.get("axis", 0) or 0)
+        if not 1 <= sid <= 12 or AXES[(sid - 1) % 3] != axis:
+            continue
+        i0 = int(np.searchsorted(t, float(run["start_s"])))
+        i1 = int(np.searchsorted(t, float(run["stop_s"]), side="right"))
+        for a, b in flight.blocks:
+            if a <= i0 < b:
+                i1 = min(i1, int(b))
+                break
+        if i1 - i0 > 8:
+            out.append((i0, i1, sid))
+    return out
+
+
+def measured_responses(fit: Any, flights: Sequence[FlightData],
+                       signals: Sequence[TwinSignals] | None = None, lag: int = 0
+                       ) -> dict[str, Any]:
+    """Frequency responses measured on the axis's SYSTEMID runs (whole runs, not the
+    train/validation blocks: a chirp's low frequencies need the long windows):
+
+    - ``"plant"``: controller output (mixer input) -> rate; with the injection as reference
+      on mixer runs (:func:`mavsid.frequency.frf`), H1 otherwise;
+    - ``"loop"``: the broken loop ``L = −c/u`` (``c`` the controller's part of the mixer
+      input ``u``) where the injection is at the mixer (``SID_AXIS`` 10-12);
+    - ``"closed_loop"``: rate target -> rate where the injection is in the target
+      (``SID_AXIS`` 1-9; with the injection as reference on rate axes 7-9).
+
+    Each is a :class:`mavsid.frequency.FRF` on the runs' chirp band; absent without runs.
+    """
+    from mavsid.frequency import frf
+
+    axis = fit.axis
+    rate, u_name = AXIS_RATE[axis], f"u_{axis}"
+    sigs = list(signals) if signals is not None else [twin_signals(fd) for fd in flights]
+    mixer: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    other: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]] = []
+    bands, dt = [], 0.0
+    for fd, sg in zip(flights, sigs, strict=True):
+        if rate not in fd.state_names or u_name not in fd.input_names:
+            continue
+        for i0, i1, sid in sysid_spans(fd, axis):
+            runs: list[Any] = list(fd.meta.get("sysid_runs") or ())  # type: ignore[call-overload]
+            run = next(r for r in runs if int(r.get("axis", 0) or 0) == sid)
+            lo, hi = run.get("f_start_hz"), run.get("f_stop_hz")
+            if lo and hi:
+                bands.append((float(lo), float(hi)))
+            dt = fd.dt
+            y = fd.states[i0:i1, fd.state_names.index(rate)]
+            u = fd.inputs[i0:i1, fd.input_names.index(u_name)]
+            if sid >= 10 and axis in sg.injection:
+                mixer.append((u, y, _lagged(sg.injection[axis], lag)[i0:i1]))
+            elif axis in sg.target and np.all(np.isfinite(sg.target[axis][i0:i1])):
+                ref = sg.rate_injection.get(axis)
+                other.append((u, y, sg.target[axis][i0:i1],
+                              ref[i0:i1] if ref is not None and 7 <= sid <= 9 else None))
+    out: dict[str, Any] = {}
+    if not dt:
+        return out
+    grid: dict[str, Any] = {}
+    if bands:  # only the injected band: a noise-free log is coherent beyond it too
+        grid = {"f_min_hz": min(b[0] for b in bands),
+                "f_max_hz": min(max(b[1] for b in bands), 0.4 / dt)}
+    refs = [r[3] for r in other]
+    use_ref = bool(other) and all(r is not None for r in refs)
+    try:
+        if mixer:
+            out["plant"] = frf([r[0] for r in mixer], [r[1] for r in mixer], dt,
+                               reference=[r[2] for r in mixer], names=(u_name, rate), **grid)
+        elif other:
+            out["plant"] = frf([r[0] for r in other], [r[1] for r in other], dt,
+                               reference=refs if use_ref else None,  # type: ignore[arg-type]
+                               names=(u_name, rate), **grid)
+    except MavsidError:
+        pass
+    if mixer:
+        try:
+            out["loop"] = frf([r[0] for r in mixer], [-(r[0] - r[2]) for r in mixer], dt,
+                              reference=[r[2] for r in mixer], names=(u_name, f"-c_{axis}"),
+                              **grid)
+        except MavsidError:
+            pass
+    if other:
+        try:
+            out["closed_loop"] = frf([r[2] for r in other], [r[1] for r in other], dt,
+                                     reference=refs if use_ref else None,  # type: ignore[arg-type]
+                                     names=(f"target_{axis}", rate), **grid)
+        except MavsidError:
+            pass
+    return out
+
+
+def compare_response(measured: Any, freq_hz: np.ndarray, response: np.ndarray
+                     ) -> dict[str, Any]:
+    """Median and largest |error| in dB and degrees of a predicted response against a
+    measured FRF over the measured one's coherent band (NaN when none)."""
+    m = measured.coherent & (measured.freq_hz >= freq_hz[0]) & (measured.freq_hz <= freq_hz[-1])
+    if not m.any():
+        return {"median_db": float("nan"), "max_db": float("nan"),
+                "median_deg": float("nan"), "max_deg": float("nan"), "band_hz": None}
+    f = measured.freq_hz[m]
+    pred = np.interp(f, freq_hz, response.real) + 1j * np.interp(f, freq_hz, response.imag)
+    ratio = measured.response[m] / pred
+    db = np.abs(20 * np.log10(np.abs(ratio)))
+    deg = np.abs(np.degrees(np.angle(ratio)))
+    return {"median_db": float(np.median(db)), "max_db": float(np.max(db)),
+            "median_deg": float(np.median(deg)), "max_deg": float(np.max(deg)),
+            "band_hz": [float(f.min()), float(f.max())]}
+
+
+def frd_margins(measured: Any, freq_hz: np.ndarray | None = None,
+                response: np.ndarray | None = None) -> dict[str, float]:
+    """Gain and phase margin (python-control on an FRD) of a measured broken-loop FRF over
+    its coherent band; with ``freq_hz`` and ``response``, those of that (predicted) response
+    over the same band, for a like-for-like comparison."""
+    import warnings
+
+    import control
+
+    m = measured.coherent & np.isfinite(measured.response)
+    nan = {"gain_db": float("nan"), "phase_deg": float("nan"), "crossover_hz": float("nan")}
+    if m.sum() < 4:
+        return nan
+    f = measured.freq_hz[m]
+    h = measured.response[m]
+    if freq_hz is not None and response is not None:
+        h = np.interp(f, freq_hz, response.real) + 1j * np.interp(f, freq_hz, response.imag)
+    sys = control.frd(h, 2 * np.pi * f)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        gm, pm, _sm, _wg, wc, _ws = control.stability_margins(sys)
+    return {"gain_db": _db(gm), "phase_deg": float(pm), "crossover_hz": float(wc / (2 * np.pi))}
+
+
+# --------------------------------------------------------------------------- tune
+
+
+def _advice(axis: str, fit: Any, ctrl: AxisController, bandwidth_hz: float,
+            plant_frf: Any) -> list[str]:
+    """What to change next flight, from what this one showed."""
+    out: list[str] = []
+    rate_hz = 1.0 / fit.validation.dt
+    if np.isfinite(bandwidth_hz) and rate_hz < 5 * bandwidth_hz:
+        out.append(
+            f"{axis}: the log's {rate_hz:.0f} Hz cannot resolve a {bandwidth_hz:.1f} Hz rate "
+            "loop: log rates at the loop rate (ArduPilot LOG_BITMASK ATTITUDE_FAST and "
+            "PID, or INS_RAW_LOG_OPT; PX4 SDLOG_PROFILE 'high rate' / 'system identification')")
+    if plant_frf is not None:
+        band = plant_frf.band()
+        want_lo = 0.5
+        want_hi = min(0.4 * rate_hz, max(3 * bandwidth_hz if np.isfinite(bandwidth_hz) else 20.0,
+                                          20.0))
+        if band is None:
+            out.append(f"{axis}: no coherent band: raise SID_MAGNITUDE (PX4: the "
+                       "system-identification chirp amplitude) and fly SID_AXIS "
+                       f"{10 + AXES.index(axis)}")
+        else:
+            f_lo, f_hi = float(plant_frf.freq_hz[0]), float(plant_frf.freq_hz[-1])
+            if band[0] > 1.2 * want_lo:
+                why = ("the chirp started there" if band[0] <= 1.05 * f_lo
+                       else "coherence is lost below: raise SID_MAGNITUDE or lengthen SID_T_REC")
+                out.append(f"{axis}: coherent only from {band[0]:.2f} Hz ({why}): set "
+                           f"SID_F_START_HZ {want_lo:g}")
+            if band[1] < 0.8 * want_hi:
+                why = ("the chirp stopped there" if band[1] >= 0.95 * f_hi
+                       else "coherence is lost above: raise SID_MAGNITUDE")
+                out.append(f"{axis}: coherent only up to {band[1]:.1f} Hz ({why}); the loop "
+                           f"needs up to {want_hi:.0f} Hz: set SID_F_STOP_HZ {want_hi:.0f}")
+    u = np.concatenate([s.inputs[:, s.input_names.index(f"u_{axis}")]
+                        for s in (*fit.train, *fit.held_out)])
+    peak = float(np.max(np.abs(u))) if u.size else 0.0
+    if peak > 0.8:
+        out.append(f"{axis}: the controller output reached {peak:.2f} of full scale: lower "
+                   "SID_MAGNITUDE")
+    if ctrl.defaults_used:
+        out.append(f"{axis}: the log lacks {', '.join(ctrl.defaults_used)} (defaults assumed): "
+                   "log the parameters")
+    return out
+
+
+def tune(result: Any, target_pm_deg: float = 50.0, samples: int = 40) -> dict[str, Any]:
+    """Per fitted axis of a :class:`mavsid.pipeline.FitResult`: the loop with the logged
+    gains (margins, closed loop, uncertainties), the plant FRF and TF fit for SYSTEMID data,
+    gains for ``target_pm_deg`` (only when the axis's verdict is ``good``) and next-flight
+    advice. The JSON form of ``mavsid tune --json``."""
+    from mavsid.frequency import fit_tf
+
+    out: dict[str, Any] = {}
+    for axis, fit in result.axes.items():
+        entry: dict[str, Any] = {}
+        fd = result.flights[0]
+        ctrl = controller_from_params(fd.params, axis, _autopilot(fd))
+        lag = fit.closed_loop.lag_loops if fit.closed_loop is not None else 0
+        entry["controller"] = ctrl.to_dict()
+        try:
+            an = analyse_model(fit.model, axis, ctrl, lag, samples=samples)
+        except (MavsidError, ValueError, np.linalg.LinAlgError) as exc:
+            entry["error"] = str(exc)
+            out[axis] = entry
+            continue
+        entry.update(an.to_dict())
+        plant = None
+        measured = measured_responses(fit, result.flights, lag=lag)
+        if "plant" in measured:
+            plant = measured["plant"]
+            entry["plant_frf"] = plant.to_dict()
+            try:
+                entry["plant_tf"] = fit_tf(plant).to_dict()
+            except MavsidError as exc:
+                entry["plant_tf_note"] = str(exc)
+        if "loop" in measured:
+            entry["loop_frf"] = measured["loop"].to_dict()
+            entry["loop_frf_margins"] = frd_margins(measured["loop"])
+            entry["loop_predicted_margins"] = frd_margins(measured["loop"], an.freq_hz,
+                                                          an.mixer_loop_response)
+            entry["loop_frf_vs_predicted"] = compare_response(
+                measured["loop"], an.freq_hz, an.mixer_loop_response)
+        if "closed_loop" in measured:
+            entry["closed_loop_frf"] = measured["closed_loop"].to_dict()
+            entry["closed_loop_frf_vs_predicted"] = compare_response(
+                measured["closed_loop"], an.freq_hz, an.closed_response)
+        level = fit.verdict.level if fit.verdict is not None else "not identified"
+        entry["verdict"] = level
+        if level != "good":
+            entry["suggested"] = {}
+            entry["suggested_note"] = f"no gains suggested: the plant model is {level}"
+        else:
+            got = suggest_gains(plant_statespace(fit.model, axis, 1.0 / ctrl.loop_hz), ctrl,
+                                target_pm_deg, lag)
+            if got is None:
+                entry["suggested"] = {}
+                entry["suggested_note"] = (f"no P/I/D scale gives {target_pm_deg:g} deg phase "
+                                           "margin with a stable loop")
+            else:
+                entry["suggested"] = {k: float(v) for k, v in got[0].items()}
+                entry["suggested_loop"] = {k: v for k, v in got[1].to_dict().items()
+                                           if k != "stderr"}
+                if plant is not None:
+                    k = _scale_of(got[0], ctrl)
+                    check = margins_on_frf(plant, _scaled(ctrl, k))
+                    entry["suggested_check"] = check
+                    if abs(check["phase_deg"] - target_pm_deg) > SUGGESTION_CHECK_DEG:
+                        entry["suggested_note"] = (
+                            f"on the measured frequency response these gains give "
+                            f"{check['phase_deg']:.0f} deg, not {target_pm_deg:g}: the model "
+                            "is uncertain near the new crossover; step the gains up gradually")
+        entry["advice"] = _advice(axis, fit, ctrl, an.bandwidth_hz, plant)
+        out[axis] = entry
+    return out
+
+
+#: a suggestion whose phase margin on the measured FRF differs more than this (deg) is flagged
+SUGGESTION_CHECK_DEG = 5.0
+
+
+def _scale_of(gains: Mapping[str, float], ctrl: AxisController) -> float:
+    """The P/I/D scale :func:`suggest_gains` applied (from its P)."""
+    new_p = next(v for k, v in gains.items() if k.endswith("_P"))
+    old_p = ctrl.gains.p if ctrl.naming != "RATE" else ctrl.gains.p / _AP3_SCALE
+    return float(new_p / old_p) if old_p else 1.0
+
+
+def format_tune(report: Mapping[str, Any]) -> str:
+    """The text ``mavsid tune`` prints."""
+    lines = []
+    for axis, e in report.items():
+        if "error" in e:
+            lines.append(f"{axis}: loop not analysed: {e['error']}")
+            continue
+        m, c, sd = e["margins"], e["closed_loop"], e.get("stderr", {})
+
+        def pm(v: float, key: str, fmt: str = ".1f", sd: Mapping[str, float] = sd) -> str:
+            s = sd.get(key)
+            return f"{v:{fmt}}" + (f" ± {s:{fmt}}" if s is not None and np.isfinite(s) else "")
+
+        lines.append(
+            f"{axis}: phase margin {pm(m['phase_deg'], 'phase_margin_deg')} deg, gain margin "
+            f"{pm(m['gain_db'], 'gain_margin_db')} dB, crossover "
+            f"{pm(m['crossover_hz'], 'crossover_hz', '.2f')} Hz; closed-loop bandwidth "
+            f"{pm(c['bandwidth_hz'], 'bandwidth_hz', '.2f')} Hz, peak {c['peak_db']:.1f} dB, "
+            f"rise {c['rise_time_s'] * 1e3:.0f} ms, overshoot {c['overshoot_percent']:.0f} %")
+        if "loop_frf_margins" in e:
+            mm, pr = e["loop_frf_margins"], e["loop_predicted_margins"]
+            cmp_ = e["loop_frf_vs_predicted"]
+            lines.append(
+                f"  at the mixer (rate and attitude loops): measured phase margin "
+                f"{mm['phase_deg']:.1f} deg at {mm['crossover_hz']:.2f} Hz, predicted "
+                f"{pr['phase_deg']:.1f} deg at {pr['crossover_hz']:.2f} Hz; prediction within "
+                f"{cmp_['median_db']:.1f} dB / {cmp_['median_deg']:.1f} deg (median) over "
+                f"{cmp_['band_hz'][0]:.2g}-{cmp_['band_hz'][1]:.2g} Hz")
+        if e.get("suggested"):
+            lines.append("  suggested: " + ", ".join(f"{k} {v:.4g}"
+                                                     for k, v in e["suggested"].items()))
+        if e.get("suggested_note"):
+            lines.append(f"  {e['suggested_note']}")
+        lines += [f"  advice: {a}" for a in e.get("advice", [])]
+    return "\n".join(lines)

@@ -1,0 +1,234 @@
+"""The loop stage: one rate controller shared with the simulator, rebuilt from log parameters,
+and the closed-loop twin (simulated flights with a known plant, the SITL flight, a real log)."""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from helpers import shared_path
+
+from mavsid import loop
+from mavsid.synthetic import controller as sim_controller
+from mavsid.synthetic.flight import Scenario, fly
+from mavsid.synthetic.plant import PlantParams, discretise, lowpass2p_coefficients
+from mavsid.validation import fit_percent
+
+
+def test_simulator_flies_the_loop_controller() -> None:
+    # one implementation: the simulator's rate PID is the loop stage's
+    assert sim_controller.RatePID is loop.RatePID
+    assert sim_controller.RateGains is loop.RateGains
+
+
+def true_plant(p: PlantParams, axis: int, dt: float) -> loop.LinearPlant:
+    """The simulator's plant of one uncoupled axis as a LinearPlant: delay line, rate and
+    motor lag (exact ZOH), then the gyro biquad, whose output the controller reads."""
+    disc = discretise(p, dt)
+    keep = [axis, 3 + axis] if disc.n_state == 6 else [axis]
+    phi = disc.phi[np.ix_(keep, keep)]
+    g_prev = disc.gamma_prev[keep, axis]
+    g_now = disc.gamma_now[keep, axis]
+    n_p, d = len(keep), disc.delay_steps
+    # state: plant (n_p), biquad d1 d2, past inputs u[k-1] .. u[k-d-1]
+    n = n_p + 2 + d + 1
+    a = np.zeros((n, n))
+    b = np.zeros(n)
+    bq, aq = lowpass2p_coefficients(p.gyro_filter_hz, 1.0 / dt)
+    hist = n_p + 2
+    a[:n_p, :n_p] = phi
+    a[:n_p, hist + d] += g_prev  # u[k-d-1]
+    if d == 0:
+        b[:n_p] += g_now
+    else:
+        a[:n_p, hist + d - 1] += g_now  # u[k-d]
+    # biquad (direct form II): d0 = rate - a1 d1 - a2 d2; d2' = d1; d1' = d0
+    a[n_p, 0], a[n_p, n_p], a[n_p, n_p + 1] = 1.0, -aq[1], -aq[2]
+    a[n_p + 1, n_p] = 1.0
+    b[hist] = 1.0  # u[k] becomes u[k-1]
+    for i in range(1, d + 1):
+        a[hist + i, hist + i - 1] = 1.0
+    c = np.zeros(n)
+    c[0] = bq[0]
+    c[n_p] = bq[1] - bq[0] * aq[1]
+    c[n_p + 1] = bq[2] - bq[0] * aq[2]
+    return loop.LinearPlant(a, b, c, dt)
+
+
+@pytest.mark.parametrize("manoeuvre", ["sysid", "doublet"])
+def test_twin_with_the_true_plant_reproduces_a_simulated_flight(manoeuvre: str) -> None:
+    # noise-free vehicle: the twin, given the true plant, the logged rate target and the
+    # injection, must give back the filtered gyro and the mixer input to rounding error
+    sc = Scenario(manoeuvre=manoeuvre, axis="roll", seed=3, duration_s=None if manoeuvre ==
+                  "sysid" else 12.0, plant=PlantParams().scaled_noise(0.0))
+    fl = fly(sc)
+    assert np.max(np.abs(fl.u - fl.u_eff)) < 1e-12  # no motor saturation in this flight
+    plant = true_plant(sc.plant, 0, fl.dt)
+    ctrl = loop.controller_from_params(fl.params(), "roll")
+    assert ctrl.defaults_used == ("ATC_RAT_RLL_SMAX",)
+    injection = fl.u[:, 0] - fl.pid_out[:, 0]
+    y, u = loop.simulate_closed_loop(plant, ctrl.new_pid(fl.dt), fl.rate_target[:, 0],
+                                     injection=injection)
+    scale_y, scale_u = np.ptp(fl.gyro[:, 0]), np.ptp(fl.u[:, 0])
+    assert scale_y > 0.1 and scale_u > 0.01
+    assert np.max(np.abs(y - fl.gyro[:, 0])) < 1e-9 * scale_y
+    assert np.max(np.abs(u - fl.u[:, 0])) < 1e-9 * scale_u
+
+
+def test_controller_from_params_lists_the_defaults_it_used() -> None:
+    full = {f"ATC_RAT_PIT_{k}": v for k, v in zip(
+        ("P", "I", "D", "FF", "IMAX", "FLTT", "FLTE", "FLTD", "SMAX"),
+        (0.2, 0.15, 0.004, 0.01, 0.4, 15.0, 5.0, 25.0, 10.0), strict=True)}
+    full.update(SCHED_LOOP_RATE=800.0, INS_GYRO_FILTER=40.0)
+    c = loop.controller_from_params(full, "pitch")
+    assert c.defaults_used == ()
+    assert (c.gains.p, c.gains.flte, c.gains.fltd, c.gains.smax, c.loop_hz) == (
+        0.2, 5.0, 25.0, 10.0, 800.0)
+    c = loop.controller_from_params({"ATC_RAT_YAW_P": 0.3}, "yaw")
+    assert "ATC_RAT_YAW_I" in c.defaults_used and "SCHED_LOOP_RATE" in c.defaults_used
+    assert "ATC_RAT_YAW_P" not in c.defaults_used
+    # 3.5-4.0: one FILT on the error
+    c = loop.controller_from_params({"ATC_RAT_RLL_P": 0.1, "ATC_RAT_RLL_FILT": 30.0}, "roll")
+    assert (c.naming, c.gains.flte, c.gains.fltt, c.gains.fltd) == ("ATC_RAT_FILT", 30.0, 0, 0)
+    # 3.x: centidegree gains and a ±4500 output
+    c = loop.controller_from_params({"RATE_PIT_P": 0.15, "RATE_PIT_IMAX": 4500.0}, "pitch")
+    assert c.naming == "RATE" and c.gains.imax == pytest.approx(1.0)
+    assert c.gains.p == pytest.approx(0.15 * 18000 / np.pi / 4500, rel=1e-6)
+    # PX4
+    c = loop.controller_from_params({"MC_PITCHRATE_P": 0.1, "MC_PITCHRATE_K": 2.0,
+                                     "MC_PR_INT_LIM": 0.2, "IMU_GYRO_RATEMAX": 1000.0}, "pitch")
+    assert c.autopilot == "px4" and c.loop_hz == 1000.0
+    assert isinstance(c.gains, loop.PX4RateGains) and c.gains.int_lim == 0.2
+    assert "MC_PITCHRATE_I" in c.defaults_used and "MC_PITCHRATE_K" not in c.defaults_used
+    with pytest.raises(loop.ConfigError, match="ATC_RAT_RLL_P"):
+        loop.controller_from_params({"ATC_RAT_RLL_P": -1.0}, "roll")
+
+
+def test_px4_pid_terms() -> None:
+    # K multiplies P, I and D; the derivative acts on the measurement, not the target; the
+    # integration shrinks as (1 - (err / 400 deg/s)^2) and stops at MC_*R_INT_LIM
+    k, p, i, d, ff, dt = 0.5, 0.2, 1.0, 0.01, 0.1, 0.01
+    pid = loop.PX4RatePID(loop.PX4RateGains(p, i, d, ff, k=k, int_lim=0.05, dgyro_hz=0.0), dt)
+
+    def factor(err: float) -> float:
+        return 1 - (err / np.radians(400)) ** 2
+
+    assert pid.update(1.0, 0.0) == pytest.approx(k * p + ff)
+    i1 = factor(1.0) * k * i * 1.0 * dt
+    assert pid.update(2.0, 0.0) == pytest.approx(k * p * 2 + i1 + ff * 2)  # no derivative kick
+    i2 = i1 + factor(2.0) * k * i * 2.0 * dt
+    assert pid.update(2.0, 0.1) == pytest.approx(k * p * 1.9 + i2 - k * d * 10.0 + ff * 2)
+    for _ in range(100):
+        pid.update(2.0, 0.0)
+    assert pid.integ == pytest.approx(0.05)
+
+
+def test_smax_limits_the_pd_slew() -> None:
+    g = loop.RateGains(p=0.2, i=0.0, d=0.01, ff=0.0, imax=0.5, fltt=0.0, fltd=0.0, flte=0.0)
+    t = np.sign(np.sin(np.arange(800) * 2 * np.pi * 8 / 400))  # an 8 Hz square wave target
+    pid = loop.RatePID(g, 0.0025)
+    free = np.array([pid.update(x, 0.0) for x in t])
+    pid = loop.RatePID(replace(g, smax=5.0), 0.0025)
+    limited = np.array([pid.update(x, 0.0) for x in t])
+    assert np.std(limited) < 0.8 * np.std(free)
+    pid = loop.RatePID(replace(g, smax=1e6), 0.0025)  # a limit never reached changes nothing
+    assert np.allclose([pid.update(x, 0.0) for x in t], free)
+
+
+@pytest.fixture(scope="module")
+def sitl_fit():
+    from mavsid import pipeline
+
+    path = shared_path("sitl", "flightA_mixer.BIN")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return pipeline.fit([str(path)])
+
+
+def test_sitl_controller_replay_matches_the_logged_pid(sitl_fit) -> None:
+    # the rebuilt controller fed the logged rate reproduces the logged output on the
+    # training blocks (the controller alone, parameters and timing)
+    res = sitl_fit
+    for axis in ("roll", "pitch", "yaw"):
+        f = res.axes[axis]
+        sigs = [loop.twin_signals(fd) for fd in res.flights]
+        blocks = loop._locate(f.train[:1], axis, res.flights, sigs)
+        lag = f.closed_loop.lag_loops
+        assert lag == 1  # ArduCopter's rate controller uses the previous loop's target
+        for b in blocks:
+            out = loop.replay_controller(b.ctrl, b.seg.dt, b.target, b.rate, b.u, b.injection,
+                                         lag)
+            measured = b.u - loop._lagged(b.injection, lag)
+            assert fit_percent(measured[b.warm:], out[b.warm:]) > 99.0
+
+
+def test_sitl_twin_predicts_held_out_blocks(sitl_fit) -> None:
+    res = sitl_fit
+    for axis in ("roll", "pitch", "yaw"):
+        cl = res.axes[axis].closed_loop
+        assert cl is not None, res.axes[axis].closed_loop_note
+        assert cl.defaults_used == ()
+        assert cl.target_source.startswith("RATE.") and cl.injection_source == "SIDD.Targ"
+        # the rate target does not carry the mixer chirp: the baseline cannot follow it
+        assert cl.fit_percent > cl.baseline_percent + 50
+    # measured (mavsid fit on the SITL flight): roll 96.9 %, pitch 96.7 %, yaw 99.4 %
+    assert res.axes["roll"].closed_loop.fit_percent > 95.0
+    assert res.axes["pitch"].closed_loop.fit_percent > 95.0
+    assert res.axes["yaw"].closed_loop.fit_percent > 98.0
+
+
+@pytest.mark.xfail(strict=True, reason="issue 11 goal (97 %) not reached: roll 96.9, pitch 96.7")
+def test_sitl_twin_reaches_the_issue_goal(sitl_fit) -> None:
+    assert all(sitl_fit.axes[a].closed_loop.fit_percent >= 97.0 for a in sitl_fit.axes)
+
+
+def test_fixture_twin_beats_open_loop_and_baseline() -> None:
+    # the simulator's own logs (200 Hz RATE, 400 Hz loop: the plant re-discretised, 2 steps)
+    from pathlib import Path
+
+    from mavsid import pipeline
+
+    path = Path(__file__).resolve().parents[1] / "fixtures" / "sysid_roll.bin"
+    res = pipeline.fit([str(path)], pipeline.PipelineConfig(axes=("roll",)))
+    cl = res.axes["roll"].closed_loop
+    assert cl is not None and cl.substeps == 2 and cl.lag_loops == 0
+    assert cl.fit_percent > 93.0 and cl.fit_percent > cl.open_loop_percent
+    assert cl.baseline_percent < 0 < cl.fit_percent
+    d = res.axes["roll"].to_dict()["closed_loop"]
+    assert set(d) >= {"fit_percent", "output_fit_percent", "baseline_percent",
+                      "baseline_delay_s", "defaults_used"}
+
+
+def test_real_px4_log_controller_and_twin() -> None:
+    # a real PX4 v1.14 flight (50 Hz logging, hover-ish): the PX4 controller rebuilt from the
+    # log's MC_*RATE_* reproduces the logged torque setpoint from the logged rate and rate
+    # setpoint (measured 90 / 85 / 90 % roll / pitch / yaw over the airborne flight)
+    from mavsid import pipeline
+    from mavsid.align import load_flight
+
+    path = shared_path("public", "Auterion__px4-ulog-rs", "quadrotor_local.ulg")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fd = load_flight(path)
+    sig = loop.twin_signals(fd)
+    air = np.flatnonzero(fd.flags["airborne"])
+    a, b = air[0] + 50, air[-1] - 50
+    for axis, rate, least in (("roll", "p", 85.0), ("pitch", "q", 80.0), ("yaw", "r", 85.0)):
+        c = loop.controller_from_params(fd.params, axis)
+        assert c.autopilot == "px4" and c.defaults_used == ()
+        u = fd.inputs[a:b, fd.input_names.index(f"u_{axis}")]
+        sub = round(c.loop_hz * fd.dt)
+        out = loop.replay_controller(c, fd.dt, sig.target[axis][a:b],
+                                     fd.states[a:b, fd.state_names.index(rate)], u, None, 0, sub)
+        assert fit_percent(u, out) > least
+    # the twin on the one axis mavsid fits there (yaw) beats "the rate follows its target
+    # after the best delay" by 13 points (-35.8 % against -49.2 %): both are poor, the
+    # open-loop model itself being poor (free run -272 %)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = pipeline.fit([str(path)], pipeline.PipelineConfig(axes=("yaw",)))
+    cl = res.axes["yaw"].closed_loop
+    assert cl is not None
+    assert cl.fit_percent > cl.baseline_percent + 10.0

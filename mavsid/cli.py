@@ -235,7 +235,8 @@ def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
 
     cfg = load_config(args.config) if args.config else PipelineConfig()
     axes = tuple(dict.fromkeys(args.axis)) if args.axis else None
-    return cfg.with_overrides(axes=axes, estimator=getattr(args, "estimator", None))
+    return cfg.with_overrides(axes=axes, estimator=getattr(args, "estimator", None),
+                              allow_unstable=getattr(args, "allow_unstable", None) or None)
 
 
 def _write_outputs(args: argparse.Namespace, result: FitResult) -> None:
@@ -281,6 +282,9 @@ def _add_fit(sub: argparse._SubParsersAction) -> None:
     p.add_argument("logs", nargs="+", metavar="LOG", help="flight log(s) (.bin .log .tlog .ulg)")
     p.add_argument("--estimator", choices=("ls", "ridge", "l1"), help="regression (default ls)")
     p.add_argument("-o", "--output", metavar="model.json", help="write the fitted models")
+    p.add_argument("--allow-unstable", action="store_true",
+                   help="keep a rate model identified unstable (default: refuse it and use "
+                   "the bounded fit: damping >= 0, effectiveness > 0)")
     _add_output_flags(p)
     p.set_defaults(handler=_fit)
 

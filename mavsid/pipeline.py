@@ -58,7 +58,7 @@ import numpy as np
 from mavsid.data import FlightData, Segment
 from mavsid.errors import ConfigError, MavsidError, NoExcitationError
 from mavsid.validation import AXIS_RATE, DEFAULT_HORIZONS_S, Model, Validation, validate
-from mavsid.verdict import Verdict, format_fit, judge, not_identified
+from mavsid.verdict import Verdict, format_fit, judge, unfitted
 
 if TYPE_CHECKING:
     from mavsid.excitation import WindowReport
@@ -534,7 +534,8 @@ def fit(
             model = _fit_model(train, axis, cfg)
             val = _validate(model, held_out, cfg)
         except NoExcitationError as exc:
-            verdicts[axis] = not_identified(axis, str(exc))
+            verdicts[axis] = unfitted(axis, str(exc), windows, flights,
+                                      [os.fspath(p) for p in logs])
             continue
         fitted = AxisFit(axis, model, val, train, held_out, cfg.estimator, windows)
         verdict = _judge(fitted, flights)
@@ -657,7 +658,8 @@ def validate_logs(
                 raise NoExcitationError("no segments")
             val = _validate(model, segs, cfg)
         except NoExcitationError as exc:
-            verdicts[axis] = not_identified(axis, str(exc))
+            verdicts[axis] = unfitted(axis, str(exc), windows, flights,
+                                      [os.fspath(p) for p in logs])
             continue
         estimator = str(dict(getattr(model, "provenance", {}) or {}).get("estimator", ""))
         fitted = AxisFit(axis, model, val, (), segs, estimator, windows)

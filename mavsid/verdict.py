@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 __all__ = ["FIT_FLOOR_PCT", "LEVELS", "Verdict", "format_fit", "judge", "logging_advice",
-           "not_identified"]
+           "not_identified", "unfitted"]
 
 #: The verdict levels, best first.
 LEVELS = ("good", "usable", "not identified")
@@ -356,3 +356,63 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
         return Verdict(axis, "usable", tuple(caps + good), tuple(usable), numbers,
                        tuple(dict.fromkeys(advice)))
     return Verdict(axis, "good", tuple(good), (), numbers, tuple(dict.fromkeys(advice)))
+
+
+_SID_AXIS = {"roll": 10, "pitch": 11, "yaw": 12}
+_RATE_OF = {"roll": "p", "pitch": "q", "yaw": "r"}
+
+
+def unfitted(axis: str, why: str, windows: Sequence[Any] = (), flights: Sequence[Any] = (),
+             logs: Sequence[str] = ()) -> Verdict:
+    """The ``not identified`` verdict of an axis that got no model, in one honest line.
+
+    The reason names the cause the user can act on: a log rate too slow for a rate loop
+    (with the logging setting to change), else the windows' rejections counted by kind
+    (with the command that lists them), else ``why`` (the fitting error).
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace as NS
+    >>> fd = NS(meta={"native_rate_hz": {"p": 10.0, "u_roll": 10.0}, "autopilot": "ArduPilot"})
+    >>> v = unfitted("roll", "no segments to fit", flights=[fd], logs=["a.bin"])
+    >>> v.reasons[0]
+    'rates/outputs logged at 10 Hz (Nyquist 5 Hz) cannot resolve a rate loop of 5–15 Hz bandwidth'
+    >>> v.advice[0].startswith("ArduPilot: set LOG_BITMASK")
+    True
+    """
+    from mavsid.excitation import _reason_kind
+
+    reasons: list[str] = []
+    advice: list[str] = []
+    numbers: dict[str, float | None] = {}
+    rate = _rates(flights, (_RATE_OF.get(axis, axis), f"u_{axis}"))
+    autopilot = next((str(fd.meta.get("autopilot")) for fd in flights
+                      if getattr(fd, "meta", None) and fd.meta.get("autopilot")), None)
+    if rate is not None:
+        numbers["log_rate_hz"] = rate
+        lo, hi = RATE_LOOP_BANDWIDTH_HZ
+        if rate < 2 * hi:
+            reasons.append(f"rates/outputs logged at {rate:.3g} Hz (Nyquist {rate / 2:.3g} Hz) "
+                           f"cannot resolve a rate loop of {lo:g}–{hi:g} Hz bandwidth")
+            advice.append(logging_advice(autopilot))
+    mine = [w for w in windows if getattr(w, "axis", axis) == axis]
+    where = " ".join(logs) if logs else "LOG"
+    if mine and not any(w.kept for w in mine):
+        kinds: dict[str, int] = {}
+        for w in mine:
+            rejected = [r for r in w.reasons if r.startswith("rejected")] or list(w.reasons[:1])
+            for r in rejected[:1]:
+                kinds[_reason_kind(r)] = kinds.get(_reason_kind(r), 0) + 1
+        top = ", ".join(f"{n}× {k}" for k, n in sorted(kinds.items(), key=lambda kv: -kv[1]))
+        numbers["windows_rejected"] = float(len(mine))
+        reasons.append(f"no window kept ({len(mine)} rejected: {top}; see `mavsid segments "
+                       f"{where} --axis {axis} --all`)")
+        advice.append(f"fly a SYSTEMID mixer chirp on {axis} (SID_AXIS "
+                      f"{_SID_AXIS.get(axis, '?')}) or sharp stick doublets on {axis} in a "
+                      "non-self-levelling mode (ACRO)")
+    elif not mine and not reasons:
+        reasons.append(f"no window on {axis} ({why})")
+    if not reasons:
+        reasons.append(why)
+    return Verdict(axis, "not identified", tuple(reasons), (), numbers,
+                   tuple(dict.fromkeys(advice)))

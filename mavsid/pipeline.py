@@ -553,7 +553,8 @@ def fit(
                 f"the unconstrained fit was unstable ({_worst_eig(val)}): refused, "
                 "replaced by the bounded fit", *verdict.reasons))
         verdicts[axis] = verdict
-        fits[axis] = dataclasses.replace(fitted, verdict=verdict)
+        if verdict.identified or cfg.allow_unstable:  # a model judged useless is no result
+            fits[axis] = dataclasses.replace(fitted, verdict=verdict)
     if not fits:
         names = ", ".join(os.fspath(p) for p in logs)
         problems = "; ".join(v.line() for v in verdicts.values())

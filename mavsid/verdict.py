@@ -287,7 +287,10 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
     if n_train and n_par:
         numbers["train_samples"] = float(n_train)
         numbers["params"] = float(n_par)
-        if n_train < MIN_SAMPLES_PER_PARAM * n_par:
+        if n_train < MIN_SAMPLES_PER_PARAM * n_par / 4:
+            bad.append(f"only {n_train} training samples for {n_par} parameters")
+            advice.append("fly longer excitation (a 20-s SYSTEMID chirp or 30 s of doublets)")
+        elif n_train < MIN_SAMPLES_PER_PARAM * n_par:
             caps.append(f"only {n_train} training samples for {n_par} parameters (want "
                         f"{MIN_SAMPLES_PER_PARAM} per parameter)")
             advice.append("fly longer excitation (a 20-s SYSTEMID chirp or 30 s of doublets)")

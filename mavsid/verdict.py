@@ -132,6 +132,12 @@ def format_fit(value: float | None) -> str:
     return f"{v:.1f}"
 
 
+def _pct(value: float | None) -> str:
+    """``93.4 %`` or ``diverges (< -100 %)``."""
+    text = format_fit(value)
+    return text.replace(")", " %)") if text.startswith("diverges") else f"{text} %"
+
+
 def logging_advice(autopilot: str | None) -> str:
     """Which logging setting to change to log body rates and controller outputs fast.
 
@@ -310,21 +316,26 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
 
     # parameters held at bounds
     prov = dict(getattr(model, "provenance", {}) or {})
-    active = list(prov.get("bounds_active", []) or [])
-    if active:
-        caps.append("bounded fit, bound active on " + ", ".join(map(str, active)))
+    notes: list[str] = []  # said whatever the level
+    if prov.get("bounds"):
+        active = list(prov.get("bounds_active", []) or [])
+        if active:
+            caps.append("bounded fit, bound active on " + ", ".join(map(str, active))
+                        + " (the data alone would take it past the physical limit)")
+        else:
+            notes.append("bounded fit, no bound active")
 
     # open loop
     drift = False
     if not math.isfinite(free) or free < 0:
         drift = True
         if math.isfinite(short) and short >= USABLE_SHORT_PCT and validation.stable is not False:
-            caps.append(f"free run drifts on held-out data ({format_fit(free)} %) while 0.5 s "
+            caps.append(f"free run drifts on held-out data ({_pct(free)}) while 0.5 s "
                         f"ahead reaches {short:.1f} %: unmeasured disturbances (wind, prop wash) "
                         "make an open-loop rate simulation wander")
         else:
-            bad.append(f"free run on held-out data {format_fit(free)} %, 0.5 s ahead "
-                       f"{format_fit(short)} %: the model does not predict this axis")
+            bad.append(f"free run on held-out data {_pct(free)}, 0.5 s ahead "
+                       f"{_pct(short)}: the model does not predict this axis")
     elif free < GOOD_FREE_RUN_PCT:
         caps.append(f"free run only {free:.1f} % on held-out data")
     else:
@@ -339,14 +350,16 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
         numbers["baseline_closed_loop_pct"] = None if cl_base is None else float(cl_base)
         if cl_base is not None and float(cl_fit) > float(cl_base):
             closed_ok = True
-            good.append(f"closed-loop twin {format_fit(cl_fit)} % beats the baseline "
-                        f"{format_fit(cl_base)} %")
+            good.append(f"closed-loop twin {_pct(cl_fit)} beats the baseline "
+                        f"{_pct(cl_base)}")
         else:
-            caps.append(f"closed-loop twin {format_fit(cl_fit)} % does not beat the baseline "
-                        f"{format_fit(cl_base)} %")
+            caps.append(f"closed-loop twin {_pct(cl_fit)} does not beat the baseline "
+                        f"{_pct(cl_base)}")
 
     if bad:
-        return Verdict(axis, "not identified", tuple(bad), (), numbers, tuple(dict.fromkeys(advice)))
+        bounded = [c for c in caps if c.startswith("bounded fit")]
+        return Verdict(axis, "not identified", tuple(bad + bounded + notes), (), numbers,
+                       tuple(dict.fromkeys(advice)))
     if caps:
         usable = ["one-step prediction"]
         if not drift:
@@ -355,9 +368,9 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
             usable.append("short-horizon prediction")
         if closed_ok:
             usable.append("closed-loop simulation")
-        return Verdict(axis, "usable", tuple(caps + good), tuple(usable), numbers,
+        return Verdict(axis, "usable", tuple(caps + good + notes), tuple(usable), numbers,
                        tuple(dict.fromkeys(advice)))
-    return Verdict(axis, "good", tuple(good), (), numbers, tuple(dict.fromkeys(advice)))
+    return Verdict(axis, "good", tuple(good + notes), (), numbers, tuple(dict.fromkeys(advice)))
 
 
 _SID_AXIS = {"roll": 10, "pitch": 11, "yaw": 12}

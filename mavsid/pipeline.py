@@ -688,7 +688,8 @@ def _resampling_note(model: Model, flights: Sequence[FlightData]) -> str:
     model_hz = 1.0 / model.dt
     notes = []
     for fd in flights:
-        native = dict(fd.meta.get("native_rate_hz", {}) or {})
+        found = fd.meta.get("native_rate_hz")
+        native: dict[str, Any] = dict(found) if isinstance(found, Mapping) else {}
         names = (*model.state_names, *model.input_names)
         rates = [float(native[n]) for n in names if native.get(n)]
         if not rates:

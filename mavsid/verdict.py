@@ -10,10 +10,9 @@ Every axis a user asks for gets a :class:`Verdict`, whether a model was fitted o
 
 Examples
 --------
->>> v = not_identified("pitch", "no window kept (input RMS below the noise floor)",
-...                    advice=("fly a SYSTEMID run on pitch (SID_AXIS 11)",))
+>>> v = not_identified("pitch", "no window kept", advice=("fly a SYSTEMID chirp",))
 >>> v.line()
-'pitch: not identified: no window kept (input RMS below the noise floor)'
+'pitch: not identified: no window kept — next time: fly a SYSTEMID chirp'
 >>> v.to_dict()["level"], v.identified
 ('not identified', False)
 """
@@ -306,7 +305,7 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
     # residual whiteness
     res = getattr(validation, "residuals", None)
     if res is not None and hasattr(res, "ljung_box"):
-        q, pval = res.ljung_box(min(20, int(res.lags[-1])))
+        _, pval = res.ljung_box(min(20, int(res.lags[-1])))
         r1 = float(res.autocorr[1, j]) if res.autocorr.shape[0] > 1 else math.nan
         numbers["ljung_box_p"] = float(pval[j])
         numbers["residual_lag1_autocorr"] = r1

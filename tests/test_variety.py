@@ -145,3 +145,25 @@ def test_validate_says_it_resampled_a_log_of_another_rate() -> None:
         result = validate_logs({"roll": model}, [str(FIXTURES / "noisy_sysid.bin")])
     reasons = " ".join(result.verdicts["roll"].reasons)
     assert "noisy_sysid.bin logged at 100 Hz, resampled onto the model's 200 Hz grid" in reasons
+
+
+def test_plots_survive_a_diverging_model(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """Fit % of -2e6 and free runs of 1e12 rad/s: the .rrd and the HTML are still written
+    (no million-tick axis, no 'Maximum allowed size exceeded')."""
+    from mavsid.report import render_html
+    from mavsid.viz import save_rrd
+
+    result = _fit("sysid_roll.bin")
+    f = result.axes["roll"]
+    v = f.validation
+    segs = tuple(dataclasses.replace(s, free_run=s.free_run * 1e12 + 1e9)
+                 for s in v.segments)
+    bad = dataclasses.replace(v, fit_free_run=np.full_like(v.fit_free_run, -2.245833e6),
+                              fit_vs_horizon=v.fit_vs_horizon - 2.2e8, segments=segs)
+    diverging = dataclasses.replace(result, axes={"roll": dataclasses.replace(f, validation=bad)})
+    save_rrd(diverging, tmp_path / "x.rrd", flight=False)
+    assert (tmp_path / "x.rrd").stat().st_size > 1000
+    html = render_html(diverging)
+    assert "<html" in html.lower()
+    assert "diverges" in pipeline.format_result(diverging)
+    assert "-2245833" not in pipeline.format_result(diverging)

@@ -361,9 +361,9 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
                        tuple(dict.fromkeys(advice)))
     if caps:
         usable = ["one-step prediction"]
-        if not drift:
+        if not drift and free >= GOOD_FREE_RUN_PCT:
             usable.append("open-loop simulation")
-        elif short >= USABLE_SHORT_PCT:
+        elif math.isfinite(short) and short >= USABLE_SHORT_PCT:
             usable.append("short-horizon prediction")
         if closed_ok:
             usable.append("closed-loop simulation")

@@ -18,6 +18,7 @@ TOML configuration (every key optional)::
     rate_hz = 400.0              # alignment grid; default the body-rate channel's rate
     axes = ["roll", "pitch", "yaw"]
     estimator = "ls"             # ls | ridge | l1
+    allow_unstable = false       # keep a rate model identified unstable (else bounded refit)
 
     [segments]
     source = "auto"              # auto | sysid | scan
@@ -123,6 +124,7 @@ _KEYS: dict[str, dict[str, str]] = {
         "rate_hz": "rate_hz",
         "axes": "axes",
         "estimator": "estimator",
+        "allow_unstable": "allow_unstable",
     },
     "segments": {"source": "segment_source", "block_s": "block_s", "options": "segment_options"},
     "validation": {
@@ -208,6 +210,9 @@ def _checked(v: dict[str, Any]) -> PipelineConfig:
     if "max_lag" in v:
         need(isinstance(v["max_lag"], int) and v["max_lag"] > 0, "validation.max_lag",
              f"{v['max_lag']!r} is not a positive integer")
+    if "allow_unstable" in v:
+        need(isinstance(v["allow_unstable"], bool), "pipeline.allow_unstable",
+             f"{v['allow_unstable']!r} is not true or false")
     for key in ("segment_options",):
         if key in v:
             need(isinstance(v[key], Mapping), "segments.options", "must be a table")

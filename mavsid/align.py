@@ -515,6 +515,23 @@ def sysid_runs(raw: RawLog) -> list[dict[str, Any]]:
     return runs
 
 
+def _sysid_injection(raw: RawLog, t: np.ndarray) -> np.ndarray | None:
+    """SYSTEMID's logged waveform ``SIDD.Targ`` on the grid ``t`` (interpolated inside runs,
+    0 elsewhere), or None when the log has none. Excitation judges SYSTEMID runs by it."""
+    sidd = raw.messages.get("SIDD")
+    if sidd is None or "Targ" not in sidd.columns or len(sidd) < 2:
+        return None
+    ts = np.asarray(sidd.time_s, dtype=float)
+    targ = np.nan_to_num(np.asarray(sidd.columns["Targ"], dtype=float))
+    order = np.argsort(ts, kind="stable")
+    out = np.interp(t, ts[order], targ[order], left=0.0, right=0.0)
+    gap = np.median(np.diff(ts[order])) * 3 if ts.size > 2 else 0.0
+    near = np.searchsorted(ts[order], t).clip(1, ts.size - 1)
+    far = np.minimum(np.abs(t - ts[order][near]), np.abs(t - ts[order][near - 1])) > max(gap, 0.05)
+    out[far] = 0.0  # between runs SIDD is not logged: no injection there
+    return out
+
+
 #: ArduCopter waits this long after entering SYSTEMID before injecting (SYSTEM_ID_DELAY)
 SYSTEM_ID_DELAY_S = 1.0
 
@@ -622,6 +639,9 @@ def align(
     }
     if mixer is not None:
         meta["mixer"] = mixer
+    injection = _sysid_injection(raw, t)
+    if injection is not None:
+        meta["sysid_injection"] = injection
     return FlightData(
         time_s=t,
         states=x,

@@ -183,7 +183,14 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--f-stop", type=float, default=15.0, help="SID_F_STOP_HZ (15)")
     p.add_argument("--t-rec", type=float, default=20.0, help="SID_T_REC, s (20)")
     p.add_argument("--rate-hz", type=float, default=400.0,
-                   help="RATE/SIDD logging rate, must divide 400 Hz (400)")
+                   help="RATE/SIDD logging rate, must divide 400 Hz (400); below 25 Hz "
+                   "every message is logged slowly")
+    p.add_argument("--vehicle", default="quad", choices=("quad", "heavy-x", "hexa"),
+                   help="plant: small quad (default), heavier X quad, hexacopter inertia")
+    p.add_argument("--gyro-noise", type=float, metavar="DEG_S",
+                   help="gyro white noise, deg/s RMS per 400 Hz sample (fed back)")
+    p.add_argument("--vibration", type=float, default=0.0, metavar="DEG_S",
+                   help="frame vibration amplitude on the gyro, deg/s (0)")
     p.add_argument("--faults", default="", metavar="SPEC",
                    help="damage: drop=FRACTION,reboot=SECONDS,truncate=BYTES")
     p.set_defaults(handler=_simulate)
@@ -197,13 +204,16 @@ def _simulate(args: argparse.Namespace) -> int:
         manoeuvre=args.manoeuvre, axis=args.axis, sid_axes=args.sid_axis or (),
         duration_s=args.duration, seed=args.seed, noise=args.noise, magnitude=args.magnitude,
         f_start_hz=args.f_start, f_stop_hz=args.f_stop, t_rec=args.t_rec, rate_hz=args.rate_hz,
+        vehicle=args.vehicle, gyro_noise_dps=args.gyro_noise, vibration_dps=args.vibration,
     )
     faults = Faults.parse(args.faults, seed=args.seed)
     opts = [f"-o {o}" for o in args.output] + [f"--manoeuvre {args.manoeuvre}",
                                                  f"--axis {args.axis}"]
+    if args.vehicle != "quad":
+        opts.append(f"--vehicle {args.vehicle}")
     opts += [f"--sid-axis {a}" for a in args.sid_axis or ()]
     for name in ("duration", "seed", "noise", "magnitude", "f_start", "f_stop", "t_rec",
-                 "rate_hz", "faults"):
+                 "rate_hz", "gyro_noise", "vibration", "faults"):
         value = getattr(args, name)
         if value not in (None, ""):
             opts.append(f"--{name.replace('_', '-')} {value}")
@@ -225,7 +235,8 @@ def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
 
     cfg = load_config(args.config) if args.config else PipelineConfig()
     axes = tuple(dict.fromkeys(args.axis)) if args.axis else None
-    return cfg.with_overrides(axes=axes, estimator=getattr(args, "estimator", None))
+    return cfg.with_overrides(axes=axes, estimator=getattr(args, "estimator", None),
+                              allow_unstable=getattr(args, "allow_unstable", None) or None)
 
 
 def _write_outputs(args: argparse.Namespace, result: FitResult) -> None:
@@ -271,6 +282,9 @@ def _add_fit(sub: argparse._SubParsersAction) -> None:
     p.add_argument("logs", nargs="+", metavar="LOG", help="flight log(s) (.bin .log .tlog .ulg)")
     p.add_argument("--estimator", choices=("ls", "ridge", "l1"), help="regression (default ls)")
     p.add_argument("-o", "--output", metavar="model.json", help="write the fitted models")
+    p.add_argument("--allow-unstable", action="store_true",
+                   help="keep a rate model identified unstable (default: refuse it and use "
+                   "the bounded fit: damping >= 0, effectiveness > 0)")
     _add_output_flags(p)
     p.set_defaults(handler=_fit)
 

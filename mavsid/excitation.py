@@ -13,15 +13,25 @@ rates):
     Sliding windows (``window_s`` long, every ``step_s``) inside each contiguous block, for
     axes without a SYSTEMID run (or all axes with ``scan=True``).
 
-Every window gets the same metrics and gates:
+Excitation is judged where the physics says, never from the controller output's own level
+alone: a rate controller feeds the gyro's noise back into its output, so on a noisy vehicle
+that output's "noise floor" can be as large as a SYSTEMID injection.
 
-- **input power**: RMS of the input in the band (its moving average over one period of the
-  band's lower edge removed) against the axis's *noise floor*, the 10th percentile of the
-  same quantity's 1-s RMS over the airborne flight (at least ``min_floor``): what the
-  controller output does when nobody excites it. Gate: ``power_ratio``× the floor.
-- **band coverage**: share of the ``band_hz`` band (log-frequency weighted; upper edge at
-  most 0.4× the sample rate) where the input's Welch PSD is above 10× the floor's white
-  level. Gate: ``min_coverage``.
+- **response**: RMS of the *output* (body rate) in the band (its moving average over one
+  period of the band's lower edge removed) against the output's own *noise floor*, its 1-s
+  RMS where the input has no power (the median over the airborne samples whose input 1-s
+  RMS lies in its lowest 20 %: hover, sticks centred). Gate: ``power_ratio``× the floor.
+- **injection** (SYSTEMID runs whose log has ``SIDD.Targ``): the injected waveform's RMS, its
+  band (``SID_F_START_HZ``–``SID_F_STOP_HZ``, upper edge at most 0.4× the sample rate) and
+  the output's coherence with it (weighted by the injection's PSD). Gate: ``min_coherence``.
+  Band coverage is then the share of that band where this coherence reaches
+  ``min_coherence``.
+- **input power** (reported, not gated): RMS of the input in the band against the input's
+  noise floor, the 10th percentile of its 1-s RMS over the airborne flight (at least
+  ``min_floor``).
+- **band coverage** (without an injection): share of the ``band_hz`` band (log-frequency
+  weighted; upper edge at most 0.4× the sample rate) where the input's Welch PSD is above
+  10× the input floor's white level. Gate: ``min_coverage``.
 - **conditioning**: condition number of the Gram matrix of the regressors of the model to be
   fitted, ``[rate, input]``, centred (which accounts for the constant term), the rate scaled
   by its own spread in the window and the input by the spread of all attitude inputs
@@ -29,14 +39,14 @@ Every window gets the same metrics and gates:
   small share of the window's excitation (the other axes of a one-input manoeuvre) or only
   follows the response (closed-loop feedback without independent excitation). Gate:
   ``max_condition``.
-- **coherence**: input–output magnitude-squared coherence, averaged over the band weighted by
-  the input's PSD. Gate: ``min_coherence``.
+- **coherence** (without an injection): input–output magnitude-squared coherence, averaged
+  over the band weighted by the input's PSD. Gate: ``min_coherence``.
 - **flight state**: airborne and armed over ``min_airborne`` of the window; no mode change
   inside a scan window; ``|roll|``, ``|pitch|`` within ``max_angle_deg``; the axis input and
   ``u_thrust`` saturated (``|u| >= saturation``, thrust also <= 0.02) on at most
   ``max_saturated`` of the samples.
 
-``score`` (0..1) is the geometric mean of ``min(1, log10(power ratio)/2)``, the coverage,
+``score`` (0..1) is the geometric mean of ``min(1, log10(response ratio)/2)``, the coverage,
 the coherence and ``1 - log10(condition)/2`` (each clipped to 0..1). Adjacent kept scan
 windows are merged, and a merged window's quiet head and tail (where the input stays within
 the power gate of its level in a quiet first/last 0.5 s) are trimmed; when the merged window
@@ -119,7 +129,7 @@ class ScanOptions:
     band_hz : tuple of float
         Identification band for coverage and coherence, Hz.
     power_ratio : float
-        Input RMS must reach this many noise floors.
+        The output's response must reach this many of its noise floors.
     min_floor : float
         Smallest noise floor (normalised input units): below it the log's own quantisation.
     min_coverage, min_coherence : float
@@ -212,6 +222,9 @@ class _Axis:
     y_name: str
     u_name: str
     floor: float
+    y_hp: np.ndarray | None = None  # output without content below the band (per block)
+    y_floor: float = math.nan  # output's 1-s RMS where the input has no power
+    injection: np.ndarray | None = None  # SYSTEMID's logged waveform (SIDD.Targ), 0 outside
 
 
 def _col(fd: FlightData, name: str) -> np.ndarray | None:
@@ -246,25 +259,83 @@ def _axis(fd: FlightData, name: str, opts: ScanOptions, air: np.ndarray) -> _Axi
     sel = air if air.any() else np.ones_like(air)
     floor = opts.min_floor
     u_hp = None
+    u_env = y_hp = None
+    y_floor = math.nan
     if u is not None:
-        # crude high-pass: remove the moving average over one period of the band's low edge
-        n_lo = max(3, round(1.0 / (opts.band_hz[0] * fd.dt)))
-        u_hp = np.zeros_like(u)
-        for a, b in fd.blocks:
-            u_hp[a:b] = u[a:b] - _moving(u[a:b], n_lo)
-        n1 = max(3, round(1.0 / fd.dt))
-        parts = [np.sqrt(_moving(u_hp[a:b] ** 2, n1))[sel[a:b]] for a, b in fd.blocks]
-        env = np.concatenate(parts) if parts else np.empty(0)
-        if env.size:
-            floor = max(opts.min_floor, float(np.percentile(env, 10)))
-    return _Axis(name, u, u_hp, y, y_name, u_name, floor)
+        u_hp = _highpass(fd, u, opts)
+        u_env = _envelope(fd, u_hp)
+        if u_env[sel].size:
+            floor = max(opts.min_floor, float(np.percentile(u_env[sel], 10)))
+    if y is not None:
+        y_hp = _highpass(fd, y, opts)
+        y_env = _envelope(fd, y_hp)[sel]
+        if y_env.size:
+            quiet = np.ones(y_env.size, bool)
+            if u_env is not None:  # where the input has no power
+                quiet = u_env[sel] <= np.percentile(u_env[sel], 20)
+            y_floor = max(float(np.median(y_env[quiet])), 1e-9)
+    inj = fd.meta.get("sysid_injection")
+    injection = np.asarray(inj, dtype=float) if isinstance(inj, np.ndarray) else None
+    return _Axis(name, u, u_hp, y, y_name, u_name, floor, y_hp, y_floor, injection)
 
 
-def _metrics(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions
-             ) -> dict[str, float]:
-    """Excitation metrics of samples ``[i0, i1)`` for one axis."""
+def _highpass(fd: FlightData, x: np.ndarray, opts: ScanOptions) -> np.ndarray:
+    """``x`` less its moving average over one period of the band's low edge (per block)."""
+    n_lo = max(3, round(1.0 / (opts.band_hz[0] * fd.dt)))
+    out = np.zeros_like(x)
+    for a, b in fd.blocks:
+        out[a:b] = x[a:b] - _moving(x[a:b], n_lo)
+    return out
+
+
+def _envelope(fd: FlightData, x_hp: np.ndarray) -> np.ndarray:
+    """1-s moving RMS of ``x_hp`` (per block)."""
+    n1 = max(3, round(1.0 / fd.dt))
+    out = np.zeros_like(x_hp)
+    for a, b in fd.blocks:
+        out[a:b] = np.sqrt(np.clip(_moving(x_hp[a:b] ** 2, n1), 0, None))
+    return out
+
+
+def _metrics(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions,
+             band: tuple[float, float] | None = None) -> dict[str, float]:
+    """Excitation metrics of samples ``[i0, i1)`` for one axis (``band``: a SYSTEMID run's)."""
     with np.errstate(divide="ignore", invalid="ignore"):  # constant signals give NaN, handled
-        return _metrics_raw(ax, fd, i0, i1, opts)
+        out = _metrics_raw(ax, fd, i0, i1, opts)
+        if ax.y_hp is not None and i1 - i0 >= 8:
+            out["response_rms"] = float(np.sqrt(np.mean(ax.y_hp[i0:i1] ** 2)))
+            out["response_floor"] = ax.y_floor
+            out["response_ratio"] = out["response_rms"] / ax.y_floor
+        if ax.injection is not None and ax.y is not None and i1 - i0 >= 8:
+            out.update(_injection_metrics(ax, fd, i0, i1, opts, band))
+        return out
+
+
+def _injection_metrics(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions,
+                       band: tuple[float, float] | None) -> dict[str, float]:
+    """Level, band and output coherence of SYSTEMID's logged injection in ``[i0, i1)``."""
+    assert ax.injection is not None and ax.y is not None
+    v, y = ax.injection[i0:i1], ax.y[i0:i1]
+    rms = float(np.sqrt(np.mean(v**2)))
+    if not rms > 0:
+        return {}
+    fs = 1.0 / fd.dt
+    f_lo, f_hi = band if band is not None else opts.band_hz
+    f_lo, f_hi = max(f_lo, 2.0 / ((i1 - i0) * fd.dt)), min(f_hi, 0.4 * fs)
+    out = {"injection_rms": rms, "injection_lo_hz": f_lo, "injection_hi_hz": f_hi}
+    nper = int(min(v.size, max(16, round(2.0 * fs))))
+    f, pvv = signal.welch(v, fs=fs, nperseg=nper, detrend="linear")
+    _, coh = signal.coherence(v, y, fs=fs, nperseg=nper, detrend="linear")
+    sel = (f >= f_lo) & (f <= f_hi)
+    if sel.sum() < 2 or not pvv[sel].sum() > 0:
+        out["injection_coherence"] = 0.0
+        out["injection_coverage"] = 0.0
+        return out
+    coh = np.nan_to_num(coh)
+    out["injection_coherence"] = float(np.sum(pvv[sel] * coh[sel]) / np.sum(pvv[sel]))
+    w = 1.0 / f[sel]  # log-frequency weighting
+    out["injection_coverage"] = float(np.sum(w * (coh[sel] >= opts.min_coherence)) / np.sum(w))
+    return out
 
 
 def _metrics_raw(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions
@@ -312,10 +383,12 @@ def _metrics_raw(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions
 def _score(m: Mapping[str, float]) -> float:
     if "power_ratio" not in m:
         return 0.0
+    ratio = m.get("response_ratio", m["power_ratio"])
+    inj = "injection_rms" in m
     terms = [
-        min(1.0, max(0.0, math.log10(max(m["power_ratio"], 1e-12)) / 2)),
-        m.get("coverage", 0.0),
-        m.get("coherence", 0.0),
+        min(1.0, max(0.0, math.log10(max(ratio, 1e-12)) / 2)) if math.isfinite(ratio) else 0.0,
+        m.get("injection_coverage" if inj else "coverage", 0.0),
+        m.get("injection_coherence" if inj else "coherence", 0.0),
         min(1.0, max(0.0, 1 - math.log10(max(m.get("condition", math.inf), 1.0)) / 2))
         if math.isfinite(m.get("condition", math.inf)) else 0.0,
     ]
@@ -383,10 +456,18 @@ def _gates(ax: _Axis, fd: FlightData, i0: int, i1: int, m: Mapping[str, float],
     if "power_ratio" not in m:
         out.append(f"rejected: window too short ({i1 - i0} samples)")
         return out
-    if m["power_ratio"] < opts.power_ratio:
+    ratio = m.get("response_ratio", math.nan)
+    if not math.isfinite(ratio):  # no output to judge by: the input's own level
+        if m["power_ratio"] < opts.power_ratio:
+            out.append(
+                f"rejected: input RMS {_fmt(m['input_rms'])} below {opts.power_ratio:g}× noise "
+                f"floor {_fmt(ax.floor)} ({ax.u_name})"
+            )
+    elif ratio < opts.power_ratio:
         out.append(
-            f"rejected: input RMS {_fmt(m['input_rms'])} below {opts.power_ratio:g}× noise "
-            f"floor {_fmt(ax.floor)} ({ax.u_name})"
+            f"rejected: response RMS {_fmt(m['response_rms'])} below {opts.power_ratio:g}× its "
+            f"noise floor {_fmt(m['response_floor'])} ({ax.y_name} where {ax.u_name} is quiet;"
+            f" input RMS {m['power_ratio']:.1f}× its floor)"
         )
     cond = m.get("condition", math.inf)
     if not cond <= opts.max_condition:
@@ -403,6 +484,20 @@ def _gates(ax: _Axis, fd: FlightData, i0: int, i1: int, m: Mapping[str, float],
             f"rejected: ill-conditioned regressors [{ax.y_name}, {ax.u_name}]: Gram condition "
             f"number {_fmt(cond)} above {_fmt(opts.max_condition)} ({why})"
         )
+    if "injection_rms" in m:  # SYSTEMID: the output against the logged injection
+        band = f"{m['injection_lo_hz']:.3g}–{m['injection_hi_hz']:.3g} Hz"
+        if m.get("injection_coverage", 0.0) < opts.min_coverage:
+            out.append(
+                f"rejected: {ax.y_name} is coherent with the injection (SIDD.Targ) over "
+                f"{100 * m.get('injection_coverage', 0.0):.0f} % of its {band} band "
+                f"(need {100 * opts.min_coverage:.0f} %)"
+            )
+        if m.get("injection_coherence", 0.0) < opts.min_coherence:
+            out.append(
+                f"rejected: injection (SIDD.Targ)→{ax.y_name} coherence "
+                f"{m.get('injection_coherence', 0.0):.2f} below {opts.min_coherence:g} in {band}"
+            )
+        return out
     band = f"{m.get('band_lo_hz', 0):.3g}–{m.get('band_hi_hz', 0):.3g} Hz"
     if m.get("coverage", 0.0) < opts.min_coverage:
         out.append(
@@ -418,16 +513,33 @@ def _gates(ax: _Axis, fd: FlightData, i0: int, i1: int, m: Mapping[str, float],
 
 
 def _kept_reason(ax: _Axis, m: Mapping[str, float]) -> str:
+    if "response_ratio" in m and math.isfinite(m["response_ratio"]):
+        level = (f"{ax.y_name} response RMS {_fmt(m['response_rms'])} = "
+                 f"{m['response_ratio']:.0f}× its noise floor")
+    else:
+        level = f"input RMS {_fmt(m['input_rms'])} = {m['power_ratio']:.0f}× noise floor"
+    if "injection_rms" in m:
+        return (
+            f"kept: {level}; injection (SIDD.Targ) RMS {_fmt(m['injection_rms'])} over "
+            f"{m['injection_lo_hz']:.3g}–{m['injection_hi_hz']:.3g} Hz, coherent with "
+            f"{ax.y_name} over {100 * m.get('injection_coverage', 0):.0f} % of it (mean "
+            f"{m.get('injection_coherence', 0):.2f}); Gram condition "
+            f"{_fmt(m.get('condition', math.inf))}"
+        )
     return (
-        f"kept: input RMS {_fmt(m['input_rms'])} = {m['power_ratio']:.0f}× noise floor; "
-        f"band coverage {100 * m.get('coverage', 0):.0f} %; {ax.u_name}→{ax.y_name} coherence "
-        f"{m.get('coherence', 0):.2f}; Gram condition {_fmt(m.get('condition', math.inf))}"
+        f"kept: {level}; band coverage {100 * m.get('coverage', 0):.0f} %; "
+        f"{ax.u_name}→{ax.y_name} coherence {m.get('coherence', 0):.2f}; Gram condition "
+        f"{_fmt(m.get('condition', math.inf))}"
     )
 
 
 def _report(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions, air: np.ndarray,
             source: str, meta: Mapping[str, Any]) -> WindowReport:
-    m = _metrics(ax, fd, i0, i1, opts)
+    band = None
+    sysid = meta.get("sysid") if source == "sysid" else None
+    if isinstance(sysid, Mapping) and "f_start_hz" in sysid and "f_stop_hz" in sysid:
+        band = (float(sysid["f_start_hz"]), float(sysid["f_stop_hz"]))
+    m = _metrics(ax, fd, i0, i1, opts, band)
     reasons = _gates(ax, fd, i0, i1, m, opts, air, source == "scan")
     kept = not reasons
     if kept:
@@ -736,6 +848,7 @@ _KINDS = (
     ("reaches", "attitude beyond bound"),
     ("saturated", "input saturated"),
     ("u_thrust at its limits", "thrust at its limits"),
+    ("response RMS", "response below its noise floor"),
     ("input RMS", "input RMS below noise floor"),
     ("ill-conditioned", "ill-conditioned regressors"),
     ("covers", "narrow band coverage"),

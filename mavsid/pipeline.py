@@ -18,6 +18,7 @@ TOML configuration (every key optional)::
     rate_hz = 400.0              # alignment grid; default the body-rate channel's rate
     axes = ["roll", "pitch", "yaw"]
     estimator = "ls"             # ls | ridge | l1
+    allow_unstable = false       # keep a rate model identified unstable (else bounded refit)
 
     [segments]
     source = "auto"              # auto | sysid | scan
@@ -58,7 +59,7 @@ import numpy as np
 from mavsid.data import FlightData, Segment
 from mavsid.errors import ConfigError, MavsidError, NoExcitationError
 from mavsid.validation import AXIS_RATE, DEFAULT_HORIZONS_S, Model, Validation, validate
-from mavsid.verdict import Verdict, judge, not_identified
+from mavsid.verdict import Verdict, format_fit, judge, unfitted
 
 if TYPE_CHECKING:
     from mavsid.excitation import WindowReport
@@ -109,6 +110,8 @@ class PipelineConfig:
     path: str | None = None
     presets: Mapping[str, Any] = field(default_factory=dict)
     mixers: Mapping[str, Any] = field(default_factory=dict)
+    #: Keep a rate model identified unstable (default: refuse it and offer the bounded fit).
+    allow_unstable: bool = False
 
     def with_overrides(self, **changes: Any) -> PipelineConfig:
         """A copy with the given fields replaced (``None`` values ignored)."""
@@ -122,6 +125,7 @@ _KEYS: dict[str, dict[str, str]] = {
         "rate_hz": "rate_hz",
         "axes": "axes",
         "estimator": "estimator",
+        "allow_unstable": "allow_unstable",
     },
     "segments": {"source": "segment_source", "block_s": "block_s", "options": "segment_options"},
     "validation": {
@@ -207,6 +211,9 @@ def _checked(v: dict[str, Any]) -> PipelineConfig:
     if "max_lag" in v:
         need(isinstance(v["max_lag"], int) and v["max_lag"] > 0, "validation.max_lag",
              f"{v['max_lag']!r} is not a positive integer")
+    if "allow_unstable" in v:
+        need(isinstance(v["allow_unstable"], bool), "pipeline.allow_unstable",
+             f"{v['allow_unstable']!r} is not true or false")
     for key in ("segment_options",):
         if key in v:
             need(isinstance(v[key], Mapping), "segments.options", "must be a table")
@@ -560,17 +567,79 @@ def fit(
             model = _fit_model(train, axis, cfg)
             val = _validate(model, held_out, cfg)
         except NoExcitationError as exc:
-            verdicts[axis] = not_identified(axis, str(exc))
+            verdicts[axis] = unfitted(axis, str(exc), windows, flights,
+                                      [os.fspath(p) for p in logs])
             continue
         fitted = AxisFit(axis, model, val, train, held_out, cfg.estimator, windows)
         fitted = _closed_loop(fitted, flights, signals)
-        verdicts[axis] = judge(axis, val, fitted.output)
-        fits[axis] = dataclasses.replace(fitted, verdict=verdicts[axis])
+        verdict = _judge(fitted, flights)
+        if val.stable is False and not cfg.allow_unstable:
+            bounded = _bounded_fit(fitted, cfg)
+            if bounded is None or bounded.validation.stable is False:
+                verdicts[axis] = dataclasses.replace(
+                    verdict, reasons=(*verdict.reasons, "refused (--allow-unstable keeps it); "
+                                      "the bounded fit (damping >= 0, effectiveness > 0) "
+                                      + ("is unstable too" if bounded else "failed")))
+                continue
+            bounded = dataclasses.replace(bounded, closed_loop=None, closed_loop_note="")
+            fitted = _closed_loop(bounded, flights, signals)
+            verdict = _judge(fitted, flights)
+            verdict = dataclasses.replace(verdict, reasons=(
+                f"the unconstrained fit was unstable ({_worst_eig(val)}): refused, "
+                "replaced by the bounded fit", *verdict.reasons))
+        verdicts[axis] = verdict
+        if verdict.identified or cfg.allow_unstable:  # a model judged useless is no result
+            fits[axis] = dataclasses.replace(fitted, verdict=verdict)
     if not fits:
         names = ", ".join(os.fspath(p) for p in logs)
         problems = "; ".join(v.line() for v in verdicts.values())
         raise NoExcitationError(f"{names}: nothing identifiable ({problems})")
     return FitResult(fits, flights, tuple(os.fspath(p) for p in logs), cfg, verdicts)
+
+
+def _judge(fitted: AxisFit, flights: Sequence[FlightData]) -> Verdict:
+    """The verdict on one fitted axis (the closed-loop twin's fit when it ran)."""
+    return judge(fitted.axis, fitted.validation, fitted.output, model=fitted.model,
+                 train=fitted.train, windows=fitted.windows, flights=flights,
+                 closed_loop=getattr(fitted, "closed_loop", None))
+
+
+def _worst_eig(val: Validation) -> str:
+    if val.eigenvalues is None or not len(val.eigenvalues):
+        return "no eigenvalue"
+    z = max((complex(e) for e in val.eigenvalues), key=abs)
+    return f"eigenvalue {abs(z):.4g}, pole {math.log(abs(z)) / val.dt:+.3g} 1/s"
+
+
+def _bounded_fit(fitted: AxisFit, cfg: PipelineConfig) -> AxisFit | None:
+    """The fit the physics allows: damping >= 0 (``A_d[y,y] <= 1``) and control effectiveness
+    >= 0 on the axis's own input, by bounded least squares (cvxpy, no penalty, no output-error
+    refinement, which would leave the bounds). ``provenance["bounds_active"]`` lists the
+    parameters that sit on their bound. None when the estimator fails."""
+    from mavsid import estimators
+    from mavsid.errors import SolverError
+
+    y = fitted.output
+    names = set(fitted.model.params)
+    bounds = {f"A_d[{y},{y}]": (-math.inf, 1.0)} if f"A_d[{y},{y}]" in names else {}
+    signs = {k: 1 for k in names if k.startswith(f"B_d[{y},u_{fitted.axis}")}
+    if not bounds and not signs:
+        return None
+    options = {**dict(cfg.model_options), "alpha": 0.0, "bounds": bounds, "signs": signs,
+               "refine": None}
+    try:
+        model: Model = estimators.fit_axis(list(fitted.train), axis=fitted.axis,
+                                           estimator="l1", **options)
+        val = _validate(model, fitted.held_out, cfg)
+    except (SolverError, NoExcitationError, ConfigError):
+        return None
+    active = [k for k, (_, hi) in bounds.items() if model.params[k] >= hi - 1e-6]
+    active += [k for k in signs if abs(model.params[k]) <= 1e-9]
+    prov = {**dict(getattr(model, "provenance", {}) or {}), "bounds": {
+        **{k: list(v) for k, v in bounds.items()}, **{k: [0.0, math.inf] for k in signs}},
+        "bounds_active": active}
+    model = dataclasses.replace(model, provenance=prov)  # type: ignore[type-var]
+    return dataclasses.replace(fitted, model=model, validation=val, estimator="bounded ls")
 
 
 def load_models(path: str | os.PathLike[str]) -> dict[str, Model]:
@@ -626,18 +695,49 @@ def validate_logs(
                 raise NoExcitationError("no segments")
             val = _validate(model, segs, cfg)
         except NoExcitationError as exc:
-            verdicts[axis] = not_identified(axis, str(exc))
+            verdicts[axis] = unfitted(axis, str(exc), windows, flights,
+                                      [os.fspath(p) for p in logs])
             continue
         estimator = str(dict(getattr(model, "provenance", {}) or {}).get("estimator", ""))
         fitted = AxisFit(axis, model, val, (), segs, estimator, windows)
         fitted = _closed_loop(fitted, flights, signals)
-        verdicts[axis] = judge(axis, val, fitted.output)
-        fits[axis] = dataclasses.replace(fitted, verdict=verdicts[axis])
+        verdict = _judge(fitted, flights)
+        note = _resampling_note(model, flights)
+        if note:
+            verdict = dataclasses.replace(verdict, reasons=(*verdict.reasons, note))
+        verdicts[axis] = verdict
+        fits[axis] = dataclasses.replace(fitted, verdict=verdict)
     if not fits:
         names = ", ".join(os.fspath(p) for p in logs)
         problems = "; ".join(v.line() for v in verdicts.values())
         raise NoExcitationError(f"{names}: no segment to validate on ({problems})")
     return FitResult(fits, flights, tuple(os.fspath(p) for p in logs), cfg, verdicts)
+
+
+def _resampling_note(model: Model, flights: Sequence[FlightData]) -> str:
+    """What was done to apply ``model`` to flights logged at another rate (empty if none).
+
+    A discrete-time model predicts at its own step only: each flight is aligned on the
+    model's grid, its states interpolated linearly and its inputs held (zero-order hold)
+    between their logged samples. When the log's rate channels are slower than the grid the
+    one-step fit compares the model with interpolated samples and is optimistic.
+    """
+    model_hz = 1.0 / model.dt
+    notes = []
+    for fd in flights:
+        found = fd.meta.get("native_rate_hz")
+        native: dict[str, Any] = dict(found) if isinstance(found, Mapping) else {}
+        names = (*model.state_names, *model.input_names)
+        rates = [float(native[n]) for n in names if native.get(n)]
+        if not rates:
+            continue
+        slow = min(rates)
+        if abs(slow - model_hz) > 0.05 * model_hz:
+            how = ("upsampled: states interpolated, inputs held, one-step fit optimistic"
+                   if slow < model_hz else "downsampled to the model's step")
+            notes.append(f"{os.path.basename(fd.source.path)} logged at {slow:.3g} Hz, "
+                         f"resampled onto the model's {model_hz:.3g} Hz grid ({how})")
+    return "; ".join(notes)
 
 
 def find_windows(
@@ -715,10 +815,7 @@ def format_result(result: FitResult) -> str:
                 .rstrip()
             )
         fp = d["fit_percent"]
-        cells = "  ".join(
-            f"{k.replace('_', '-')} {'n/a' if fp[k] is None else format(fp[k], '.1f')}"
-            for k in fp
-        )
+        cells = "  ".join(f"{k.replace('_', '-')} {format_fit(fp[k])}" for k in fp)
         lines.append(f"  fit %  {cells}")
         lines.append(f"  {_closed_loop_line(f)}")
     verdicts = [v.line() for v in result.verdicts.values()]

@@ -97,8 +97,9 @@ def _horizon_figure(v: Validation) -> Figure:
     ax = fig.subplots()
     h = v.horizons_s
     for j, state in enumerate(v.state_names):
-        ax.semilogx(h, v.fit_vs_horizon[:, j], "o-", label=state)
-        ax.axhline(v.fit_free_run[j], ls="--", lw=0.8, color=f"C{j}")
+        ax.semilogx(h, np.clip(v.fit_vs_horizon[:, j], -100.0, 100.0), "o-", label=state)
+        free = float(np.nan_to_num(v.fit_free_run[j], nan=-100.0))
+        ax.axhline(min(max(free, -100.0), 100.0), ls="--", lw=0.8, color=f"C{j}")
     ax.set_xlabel("prediction horizon [s]")
     ax.set_ylabel("fit [%]")
     ax.set_title("fit vs horizon (dashed: free run)", fontsize=10)

@@ -252,6 +252,32 @@ class ResidualTest:
         """Fraction of lags outside the band, per (input, output)."""
         return np.mean(np.abs(self.crosscorr) > self.band, axis=0)
 
+    def ljung_box(self, lags: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Ljung–Box statistic ``Q = n(n+2) Σ_{k=1..h} r_k² / (n-k)`` and its p-value
+        (χ² with ``h`` degrees of freedom) per output, over lags 1..``h`` (default: all).
+
+        A small p-value (< 0.01) says the residuals are not white: the model leaves
+        structure unexplained, and its σ (which assume white residuals) are optimistic.
+
+        Examples
+        --------
+        >>> rng = np.random.default_rng(1)
+        >>> e = rng.standard_normal((5000, 1))
+        >>> float(residual_test([e], [e]).ljung_box(20)[1][0]) > 0.01
+        True
+        >>> float(residual_test([np.cumsum(e, axis=0)], [e]).ljung_box(20)[1][0]) < 1e-6
+        True
+        """
+        h = int(self.lags[-1]) if lags is None else min(int(lags), int(self.lags[-1]))
+        n = float(self.n)
+        if h < 1 or n <= h + 1:
+            nan = np.full(self.autocorr.shape[1], np.nan)
+            return nan, nan
+        k = self.lags[1 : h + 1].astype(float)
+        r = np.nan_to_num(self.autocorr[1 : h + 1])
+        q = n * (n + 2) * np.sum(r**2 / (n - k)[:, None], axis=0)
+        return q, stats.chi2.sf(q, h)
+
 
 @dataclass(frozen=True)
 class FrequencyResponse:

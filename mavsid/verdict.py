@@ -10,10 +10,9 @@ Every axis a user asks for gets a :class:`Verdict`, whether a model was fitted o
 
 Examples
 --------
->>> v = not_identified("pitch", "no window kept (input RMS below the noise floor)",
-...                    advice=("fly a SYSTEMID run on pitch (SID_AXIS 11)",))
+>>> v = not_identified("pitch", "no window kept", advice=("fly a SYSTEMID chirp",))
 >>> v.line()
-'pitch: not identified: no window kept (input RMS below the noise floor)'
+'pitch: not identified: no window kept — next time: fly a SYSTEMID chirp'
 >>> v.to_dict()["level"], v.identified
 ('not identified', False)
 """
@@ -21,14 +20,29 @@ Examples
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-__all__ = ["LEVELS", "Verdict", "not_identified"]
+import numpy as np
+
+__all__ = ["FIT_FLOOR_PCT", "LEVELS", "Verdict", "format_fit", "judge", "logging_advice",
+           "not_identified", "unfitted"]
 
 #: The verdict levels, best first.
 LEVELS = ("good", "usable", "not identified")
+
+#: Fit % below this is shown as "diverges", never as a number.
+FIT_FLOOR_PCT = -100.0
+#: Free-run fit % on held-out data for ``good``.
+GOOD_FREE_RUN_PCT = 80.0
+#: Fit % at 0.5 s for a model whose free run drifts to still be ``usable``.
+USABLE_SHORT_PCT = 50.0
+#: A rate loop's bandwidth reaches ~15 Hz: channels logged slower than twice this (Nyquist
+#: below it) cannot resolve it; slower than 4x only its low-frequency part.
+RATE_LOOP_BANDWIDTH_HZ = (5.0, 15.0)
+#: Training samples per fitted parameter below which the estimate is called thin.
+MIN_SAMPLES_PER_PARAM = 200
 
 
 @dataclass(frozen=True)
@@ -69,12 +83,15 @@ class Verdict:
         return self.level != "not identified"
 
     def line(self) -> str:
-        """One line for the terminal: ``axis: level[ (for ...)]: reasons``."""
+        """One line for the terminal: ``axis: level[ (for ...)]: reasons[ — next time: ...]``
+        (the advice shown for ``not identified``)."""
         text = f"{self.axis}: {self.level}"
         if self.usable_for:
             text += f" (for {', '.join(self.usable_for)})"
         if self.reasons:
             text += ": " + "; ".join(self.reasons)
+        if self.advice and not self.identified:
+            text += " — next time: " + "; ".join(self.advice)
         return text
 
     def to_dict(self) -> dict[str, Any]:
@@ -98,8 +115,104 @@ def not_identified(axis: str, reason: str, advice: tuple[str, ...] = (),
     return Verdict(axis, "not identified", (reason,), (), numbers, advice)
 
 
-def judge(axis: str, validation: Any, output: str) -> Verdict:
-    """A first verdict from a model's validation on held-out data (stability, free run).
+def format_fit(value: float | None) -> str:
+    """A fit % for people: one decimal, ``diverges`` below :data:`FIT_FLOOR_PCT` or non-finite.
+
+    Examples
+    --------
+    >>> format_fit(93.44), format_fit(-2245833.0), format_fit(None)
+    ('93.4', 'diverges (< -100)', 'n/a')
+    """
+    if value is None:
+        return "n/a"
+    v = float(value)
+    if not math.isfinite(v) or v < FIT_FLOOR_PCT:
+        return f"diverges (< {FIT_FLOOR_PCT:.0f})"
+    return f"{v:.1f}"
+
+
+def _pct(value: float | None) -> str:
+    """``93.4 %`` or ``diverges (< -100 %)``."""
+    text = format_fit(value)
+    return text.replace(")", " %)") if text.startswith("diverges") else f"{text} %"
+
+
+def logging_advice(autopilot: str | None) -> str:
+    """Which logging setting to change to log body rates and controller outputs fast.
+
+    Examples
+    --------
+    >>> logging_advice("PX4").startswith("PX4: set SDLOG_PROFILE")
+    True
+    """
+    if autopilot and "px4" in autopilot.lower():
+        return ("PX4: set SDLOG_PROFILE to include 'high rate' (bit 1) or 'system identification'"
+                " (bit 4) so that vehicle_angular_velocity and the torque/actuator setpoints are "
+                "logged at 100 Hz or more")
+    return ("ArduPilot: set LOG_BITMASK bits ATTITUDE_FAST and ATTITUDE_MED (RATE at loop rate) "
+            "and INS_LOG_BAT_MASK=1 (gyro batches) so that RATE and its outputs are logged at "
+            "100 Hz or more")
+
+
+def _pole(z: complex, dt: float) -> float:
+    """Continuous-time real part (1/s) of a discrete eigenvalue."""
+    return math.log(max(abs(z), 1e-300)) / dt
+
+
+def _rates(flights: Sequence[Any], names: Sequence[str]) -> float | None:
+    """The slowest native logging rate (Hz) of the named channels over the flights."""
+    found = []
+    for fd in flights:
+        native = dict((getattr(fd, "meta", {}) or {}).get("native_rate_hz", {}) or {})
+        found += [float(native[n]) for n in names if native.get(n)]
+    return min(found) if found else None
+
+
+def _excitation(windows: Sequence[Any]) -> dict[str, float | None]:
+    """Band (Hz) and coherence of the kept windows (injection's when there is one)."""
+    kept = [w for w in windows if getattr(w, "kept", False)]
+    if not kept:
+        return {}
+    inj = [w for w in kept if "injection_rms" in w.metrics]
+    use = inj or kept
+    lo_key, hi_key, c_key = (("injection_lo_hz", "injection_hi_hz", "injection_coherence")
+                             if inj else ("band_lo_hz", "band_hi_hz", "coherence"))
+    span = [w.i1 - w.i0 for w in use]
+    coh = [float(w.metrics.get(c_key, math.nan)) for w in use]
+    return {
+        "band_lo_hz": min(float(w.metrics.get(lo_key, math.nan)) for w in use),
+        "band_hi_hz": max(float(w.metrics.get(hi_key, math.nan)) for w in use),
+        "coherence": float(np.average(coh, weights=span)) if all(map(math.isfinite, coh))
+        else None,
+    }
+
+
+def judge(axis: str, validation: Any, output: str, *, model: Any = None,
+          train: Sequence[Any] = (), windows: Sequence[Any] = (), flights: Sequence[Any] = (),
+          closed_loop: Any = None) -> Verdict:
+    """The verdict on one fitted axis from everything known about it.
+
+    Checks, each adding its numbers (``Verdict.numbers``) and, when it fails, a reason:
+
+    - **stability** of the identified dynamics (an unstable rate plant: ``not identified``);
+    - **log rate** of the output and input channels against a 5–15 Hz rate loop: below 30 Hz
+      (Nyquist under the loop's bandwidth) ``not identified``, below 60 Hz at best ``usable``;
+      the advice names the logging parameter to change (:func:`logging_advice`);
+    - **excitation**: band and coherence of the kept windows (the injection's for SYSTEMID);
+    - **training length** against the number of parameters;
+    - **residual whiteness**: Ljung–Box p-value of the one-step residual over 20 lags, and
+      its lag-1 autocorrelation. Reported, not gated: the logged gyro is low-passed
+      (``INS_GYRO_FILTER``), so even the true plant leaves a coloured one-step residual; a
+      small p-value says the σ are statistical only (optimistic);
+    - **bounds**: a parameter held at a physical bound (``model.provenance["bounds_active"]``)
+      caps the level at ``usable``;
+    - **open-loop fit** on held-out data: free run ≥ 80 % ``good``; a free run that drifts
+      (rate plants are nearly integrators: wind and prop wash make it wander) with a 0.5-s fit
+      ≥ 50 % is ``usable`` for short-horizon prediction; below that ``not identified``;
+    - **closed-loop fit**, when the closed-loop twin ran: ``closed_loop.fit_percent`` (the
+      twin's fit % of the measured rate) against ``closed_loop.baseline_percent`` (the rate
+      following its target after the best delay). Beating the baseline makes a drifting
+      model ``usable`` for closed-loop simulation; not beating it is a reason.
 
     Parameters
     ----------
@@ -107,21 +220,213 @@ def judge(axis: str, validation: Any, output: str) -> Verdict:
     validation : mavsid.validation.Validation
     output : str
         The state that represents the axis (its body rate).
+    model : fitted model, optional
+    train : sequence of Segment, optional
+    windows : sequence of WindowReport, optional
+        Every window considered for the axis (kept ones give band and coherence).
+    flights : sequence of FlightData, optional
+        Their ``meta["native_rate_hz"]`` and ``meta["autopilot"]``.
+    closed_loop : object, optional
+        With ``fit_percent`` and ``baseline_percent`` (``AxisFit.closed_loop``).
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace as NS
+    >>> val = NS(state_names=("p",), fit_free_run=np.array([-5e6]), fit_vs_horizon=None,
+    ...          fit_one_step=np.array([40.0]), fit_at=lambda s: np.array([-20.0]),
+    ...          stable=False, eigenvalues=np.array([1.02]), dt=0.1, residuals=None)
+    >>> v = judge("roll", val, "p")
+    >>> v.level, v.reasons[0]
+    ('not identified', 'identified dynamics are unstable: eigenvalue 1.02 (pole +0.198 1/s)')
     """
     j = validation.state_names.index(output)
     free = float(validation.fit_free_run[j])
     one = float(validation.fit_one_step[j])
-    numbers = {"fit_one_step_pct": one, "fit_free_run_pct": free}
-    if validation.stable is False:
-        worst = max(abs(complex(z)) for z in validation.eigenvalues)
-        return Verdict(axis, "not identified",
-                       (f"identified dynamics are unstable (|eigenvalue| {worst:.4g} > 1)",),
-                       numbers=numbers)
+    short = float(validation.fit_at(0.5)[j])
+    numbers: dict[str, float | None] = {
+        "fit_one_step_pct": one, "fit_0.5s_pct": short, "fit_free_run_pct": free}
+    bad: list[str] = []      # -> not identified
+    caps: list[str] = []     # -> at best usable
+    good: list[str] = []
+    advice: list[str] = []
+    dt = float(validation.dt)
+
+    # stability
+    eig = getattr(validation, "eigenvalues", None)
+    if eig is not None and len(eig):
+        worst = max((complex(z) for z in eig), key=abs)
+        numbers["max_abs_eigenvalue"] = abs(worst)
+        numbers["slowest_pole_per_s"] = _pole(worst, dt)
+        if validation.stable is False:
+            bad.append(f"identified dynamics are unstable: eigenvalue {abs(worst):.4g} "
+                       f"(pole {_pole(worst, dt):+.3g} 1/s)")
+            advice.append("refit with the physical bounds (damping >= 0; the default) or "
+                          "fly a SYSTEMID mixer chirp on this axis")
+
+    # log rate against the rate loop's bandwidth
+    u_names = tuple(getattr(model, "input_names", ()) or ()) if model is not None else ()
+    rate = _rates(flights, (output, *u_names))
+    autopilot = next((str(fd.meta.get("autopilot")) for fd in flights
+                      if getattr(fd, "meta", None) and fd.meta.get("autopilot")), None)
+    if rate is not None:
+        numbers["log_rate_hz"] = rate
+        lo, hi = RATE_LOOP_BANDWIDTH_HZ
+        if rate < 2 * hi:
+            bad.append(f"rates/outputs logged at {rate:.3g} Hz (Nyquist {rate / 2:.3g} Hz) "
+                       f"cannot resolve a rate loop of {lo:g}–{hi:g} Hz bandwidth")
+            advice.append(logging_advice(autopilot))
+        elif rate < 4 * hi:
+            caps.append(f"logged at {rate:.3g} Hz: only the slow part of a {lo:g}–{hi:g} Hz rate "
+                        "loop is resolved")
+            advice.append(logging_advice(autopilot))
+
+    # excitation
+    exc = _excitation(windows)
+    numbers.update({f"excitation_{k}": v for k, v in exc.items()})
+    if exc.get("band_lo_hz") is not None and exc.get("coherence") is not None:
+        good.append(f"excited {exc['band_lo_hz']:.2g}–{exc['band_hi_hz']:.3g} Hz, coherence "
+                    f"{exc['coherence']:.2f}")
+
+    # training length against the parameter count
+    n_train = int(sum(len(getattr(s, "time_s", ())) for s in train))
+    params = dict(getattr(model, "params", {}) or {})
+    n_par = len([k for k in params if "_d[" in k]) or len(params)
+    if n_train and n_par:
+        numbers["train_samples"] = float(n_train)
+        numbers["params"] = float(n_par)
+        if n_train < MIN_SAMPLES_PER_PARAM * n_par / 4:
+            bad.append(f"only {n_train} training samples for {n_par} parameters")
+            advice.append("fly longer excitation (a 20-s SYSTEMID chirp or 30 s of doublets)")
+        elif n_train < MIN_SAMPLES_PER_PARAM * n_par:
+            caps.append(f"only {n_train} training samples for {n_par} parameters (want "
+                        f"{MIN_SAMPLES_PER_PARAM} per parameter)")
+            advice.append("fly longer excitation (a 20-s SYSTEMID chirp or 30 s of doublets)")
+
+    # residual whiteness
+    res = getattr(validation, "residuals", None)
+    if res is not None and hasattr(res, "ljung_box"):
+        _, pval = res.ljung_box(min(20, int(res.lags[-1])))
+        r1 = float(res.autocorr[1, j]) if res.autocorr.shape[0] > 1 else math.nan
+        numbers["ljung_box_p"] = float(pval[j])
+        numbers["residual_lag1_autocorr"] = r1
+        if math.isfinite(float(pval[j])) and float(pval[j]) < 0.01:
+            good.append(f"residual not white (Ljung–Box p {float(pval[j]):.2g}): σ are "
+                        "statistical only, optimistic")
+
+    # parameters held at bounds
+    prov = dict(getattr(model, "provenance", {}) or {})
+    notes: list[str] = []  # said whatever the level
+    if prov.get("bounds"):
+        active = list(prov.get("bounds_active", []) or [])
+        if active:
+            caps.append("bounded fit, bound active on " + ", ".join(map(str, active))
+                        + " (the data alone would take it past the physical limit)")
+        else:
+            notes.append("bounded fit, no bound active")
+
+    # open loop
+    drift = False
     if not math.isfinite(free) or free < 0:
-        return Verdict(axis, "not identified",
-                       ("free run on held-out data diverges (fit below 0 %)",), numbers=numbers)
-    if free >= 80:
-        return Verdict(axis, "good", (f"free run {free:.1f} % on held-out data",),
-                       numbers=numbers)
-    return Verdict(axis, "usable", (f"free run only {free:.1f} % on held-out data",),
-                   ("one-step prediction",), numbers)
+        drift = True
+        if math.isfinite(short) and short >= USABLE_SHORT_PCT and validation.stable is not False:
+            caps.append(f"free run drifts on held-out data ({_pct(free)}) while 0.5 s "
+                        f"ahead reaches {short:.1f} %: unmeasured disturbances (wind, prop wash) "
+                        "make an open-loop rate simulation wander")
+        else:
+            bad.append(f"free run on held-out data {_pct(free)}, 0.5 s ahead "
+                       f"{_pct(short)}: the model does not predict this axis")
+    elif free < GOOD_FREE_RUN_PCT:
+        caps.append(f"free run only {free:.1f} % on held-out data")
+    else:
+        good.append(f"free run {free:.1f} % on held-out data")
+
+    # closed loop (the twin), when it ran
+    cl_fit = getattr(closed_loop, "fit_percent", None) if closed_loop is not None else None
+    cl_base = getattr(closed_loop, "baseline_percent", None) if closed_loop is not None else None
+    closed_ok = False
+    if cl_fit is not None:
+        numbers["fit_closed_loop_pct"] = float(cl_fit)
+        numbers["baseline_closed_loop_pct"] = None if cl_base is None else float(cl_base)
+        if cl_base is not None and float(cl_fit) > float(cl_base):
+            closed_ok = True
+            good.append(f"closed-loop twin {_pct(cl_fit)} beats the baseline "
+                        f"{_pct(cl_base)}")
+        else:
+            caps.append(f"closed-loop twin {_pct(cl_fit)} does not beat the baseline "
+                        f"{_pct(cl_base)}")
+
+    if bad:
+        bounded = [c for c in caps if c.startswith("bounded fit")]
+        return Verdict(axis, "not identified", tuple(bad + bounded + notes), (), numbers,
+                       tuple(dict.fromkeys(advice)))
+    if caps:
+        usable = ["one-step prediction"]
+        if not drift and free >= GOOD_FREE_RUN_PCT:
+            usable.append("open-loop simulation")
+        elif math.isfinite(short) and short >= USABLE_SHORT_PCT:
+            usable.append("short-horizon prediction")
+        if closed_ok:
+            usable.append("closed-loop simulation")
+        return Verdict(axis, "usable", tuple(caps + good + notes), tuple(usable), numbers,
+                       tuple(dict.fromkeys(advice)))
+    return Verdict(axis, "good", tuple(good + notes), (), numbers, tuple(dict.fromkeys(advice)))
+
+
+_SID_AXIS = {"roll": 10, "pitch": 11, "yaw": 12}
+_RATE_OF = {"roll": "p", "pitch": "q", "yaw": "r"}
+
+
+def unfitted(axis: str, why: str, windows: Sequence[Any] = (), flights: Sequence[Any] = (),
+             logs: Sequence[str] = ()) -> Verdict:
+    """The ``not identified`` verdict of an axis that got no model, in one honest line.
+
+    The reason names the cause the user can act on: a log rate too slow for a rate loop
+    (with the logging setting to change), else the windows' rejections counted by kind
+    (with the command that lists them), else ``why`` (the fitting error).
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace as NS
+    >>> fd = NS(meta={"native_rate_hz": {"p": 10.0, "u_roll": 10.0}, "autopilot": "ArduPilot"})
+    >>> v = unfitted("roll", "no segments to fit", flights=[fd], logs=["a.bin"])
+    >>> v.reasons[0]
+    'rates/outputs logged at 10 Hz (Nyquist 5 Hz) cannot resolve a rate loop of 5–15 Hz bandwidth'
+    >>> v.advice[0].startswith("ArduPilot: set LOG_BITMASK")
+    True
+    """
+    from mavsid.excitation import _reason_kind
+
+    reasons: list[str] = []
+    advice: list[str] = []
+    numbers: dict[str, float | None] = {}
+    rate = _rates(flights, (_RATE_OF.get(axis, axis), f"u_{axis}"))
+    autopilot = next((str(fd.meta.get("autopilot")) for fd in flights
+                      if getattr(fd, "meta", None) and fd.meta.get("autopilot")), None)
+    if rate is not None:
+        numbers["log_rate_hz"] = rate
+        lo, hi = RATE_LOOP_BANDWIDTH_HZ
+        if rate < 2 * hi:
+            reasons.append(f"rates/outputs logged at {rate:.3g} Hz (Nyquist {rate / 2:.3g} Hz) "
+                           f"cannot resolve a rate loop of {lo:g}–{hi:g} Hz bandwidth")
+            advice.append(logging_advice(autopilot))
+    mine = [w for w in windows if getattr(w, "axis", axis) == axis]
+    where = " ".join(logs) if logs else "LOG"
+    if mine and not any(w.kept for w in mine):
+        kinds: dict[str, int] = {}
+        for w in mine:
+            rejected = [r for r in w.reasons if r.startswith("rejected")] or list(w.reasons[:1])
+            for r in rejected[:1]:
+                kinds[_reason_kind(r)] = kinds.get(_reason_kind(r), 0) + 1
+        top = ", ".join(f"{n}× {k}" for k, n in sorted(kinds.items(), key=lambda kv: -kv[1]))
+        numbers["windows_rejected"] = float(len(mine))
+        reasons.append(f"no window kept ({len(mine)} rejected: {top}; see `mavsid segments "
+                       f"{where} --axis {axis} --all`)")
+        advice.append(f"fly a SYSTEMID mixer chirp on {axis} (SID_AXIS "
+                      f"{_SID_AXIS.get(axis, '?')}) or sharp stick doublets on {axis} in a "
+                      "non-self-levelling mode (ACRO)")
+    elif not mine and not reasons:
+        reasons.append(f"no window on {axis} ({why})")
+    if not reasons:
+        reasons.append(why)
+    return Verdict(axis, "not identified", tuple(reasons), (), numbers,
+                   tuple(dict.fromkeys(advice)))

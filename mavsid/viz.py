@@ -352,7 +352,9 @@ def _log_fit_plot(rec: rr.RecordingStream, axis: str, v: Validation) -> None:
     series = []
     palette = [ONE_STEP, FREE_RUN, INPUT, COHERENCE]
     for j, state in enumerate(v.state_names):
-        ys = np.r_[v.fit_vs_horizon[:, j], v.fit_free_run[j]]
+        # a diverging model's fit % (-1e7) would ask for millions of ticks: floor at -100
+        ys = np.clip(np.nan_to_num(np.r_[v.fit_vs_horizon[:, j], v.fit_free_run[j]],
+                                   nan=-100.0), -100.0, 100.0)
         series.append((f"{state} fit", xs, ys, palette[j % len(palette)]))
     decades = 10.0 ** np.arange(np.floor(np.log10(h[0])), np.ceil(np.log10(xs[-1])) + 1)
     lo = np.nanmin([*(s[2] for s in series)]) if series else 0.0
@@ -384,8 +386,10 @@ def _log_frequency_plot(rec: rr.RecordingStream, axis: str, v: Validation) -> No
         if sel.sum() < 2:
             continue
         f = fr.freq_hz[sel]
-        mag = 20 * np.log10(np.abs(fr.measured[sel]) + 1e-12)
-        mod = 20 * np.log10(np.abs(fr.model[sel]) + 1e-12)
+        mag = np.clip(np.nan_to_num(20 * np.log10(np.abs(fr.measured[sel]) + 1e-12),
+                                    nan=-200.0, posinf=200.0, neginf=-200.0), -200.0, 200.0)
+        mod = np.clip(np.nan_to_num(20 * np.log10(np.abs(fr.model[sel]) + 1e-12),
+                                    nan=-200.0, posinf=200.0, neginf=-200.0), -200.0, 200.0)
         ticks = 10.0 ** np.arange(np.floor(np.log10(f[0])), np.ceil(np.log10(f[-1])) + 1)
         lo = float(np.floor(min(mag.min(), mod.min()) / 10) * 10)
         hi = float(np.ceil(max(mag.max(), mod.max()) / 10) * 10)

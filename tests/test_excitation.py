@@ -93,13 +93,13 @@ def test_one_input_window_rejected_for_other_axes_as_ill_conditioned(doublets):
             assert any("ill-conditioned" in x for x in r.reasons), r.reasons
 
 
-def test_hover_rejected_for_low_input_power():
+def test_hover_rejected_for_low_response():
     path, truth = _fixture("hover.bin")
     assert truth["manoeuvre"] == "hover"
     reports = find_segments(load_flight(path))
     assert reports and not any(r.kept for r in reports)
     for r in reports:
-        assert any(x.startswith("rejected: input RMS") and "noise floor" in x
+        assert any(x.startswith("rejected: response RMS") and "noise floor" in x
                    for x in r.reasons), r.reasons
 
 

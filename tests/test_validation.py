@@ -169,3 +169,19 @@ def test_fit_percent_invariants(y: np.ndarray, noise: float, scale: float, shift
     assert float(fit_percent(scale * y + shift, scale * yhat + shift)) == pytest.approx(
         f, abs=1e-6 * max(1.0, abs(f))
     )
+
+
+def test_ljung_box_matches_statsmodels() -> None:
+    sm = pytest.importorskip("statsmodels.stats.diagnostic")
+    rng = np.random.default_rng(4)
+    e = rng.standard_normal(3000)
+    coloured = np.convolve(e, [1.0, 0.6, 0.3], mode="same")
+    for x in (e, coloured):
+        t = residual_test([x[:, None]], [rng.standard_normal((x.size, 1))], max_lag=30)
+        q, p = t.ljung_box(20)
+        ref = sm.acorr_ljungbox(x, lags=[20])
+        assert q[0] == pytest.approx(float(ref["lb_stat"].iloc[0]), rel=1e-9)
+        assert p[0] == pytest.approx(float(ref["lb_pvalue"].iloc[0]), rel=1e-6, abs=1e-300)
+    white = residual_test([e[:, None]], [e[:, None]]).ljung_box(20)[1][0]
+    assert white > 0.01
+    assert residual_test([coloured[:, None]], [e[:, None]]).ljung_box(20)[1][0] < 1e-10

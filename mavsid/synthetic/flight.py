@@ -391,6 +391,9 @@ def fly(sc: Scenario) -> Flight:
     acc_noise = rng.standard_normal((n, 3)) * pl.accel_noise
     dist = rng.standard_normal((n, 3)) * pl.disturbance
     bias = np.array(pl.gyro_bias)
+    if pl.vibration > 0:  # frame vibration on the raw gyro, one phase per axis
+        noise = noise + pl.vibration * np.sin(
+            2 * np.pi * pl.vibration_hz * dt * np.arange(n)[:, None] + np.array([0.0, 2.1, 4.2]))
     gyro_filter = Lowpass2p(pl.gyro_filter_hz, ctl.loop_hz, 3)
     control = AttitudeController(ctl)
     x = np.zeros(disc.n_state)

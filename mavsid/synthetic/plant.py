@@ -35,12 +35,13 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
-from scipy.linalg import expm
+from scipy.signal import butter, cont2discrete
 
 from mavsid.errors import ConfigError
 
 __all__ = [
     "AXES",
+    "VEHICLES",
     "DiscretePlant",
     "PlantParams",
     "discretise",
@@ -85,6 +86,11 @@ class PlantParams:
         ``INS_GYRO_FILTER`` cutoff (Hz) of the second-order gyro low pass; 0 disables it.
     hover_throttle : float
         ``MOT_THST_HOVER`` (0-1).
+    vibration : float
+        Amplitude (rad/s) of a frame vibration seen by the gyro (motor/propeller imbalance),
+        a sine at ``vibration_hz`` on each axis (phases differ per axis); 0 for none.
+    vibration_hz : float
+        Its frequency (Hz); above the loop's Nyquist frequency it aliases as on a real IMU.
     """
 
     damping: tuple[float, float, float] = (4.0, 4.5, 1.5)
@@ -102,6 +108,8 @@ class PlantParams:
     disturbance: float = 0.5
     gyro_filter_hz: float = 20.0
     hover_throttle: float = 0.39
+    vibration: float = 0.0
+    vibration_hz: float = 170.0
 
     def __post_init__(self) -> None:
         _triple(self.damping, "damping")
@@ -110,7 +118,7 @@ class PlantParams:
         if len(self.coupling) != 3 or any(len(row) != 3 for row in self.coupling):
             raise ConfigError("coupling must be a 3x3 matrix")
         for name in ("motor_tau_s", "delay_s", "gyro_noise", "accel_noise", "disturbance",
-                     "gyro_filter_hz"):
+                     "gyro_filter_hz", "vibration", "vibration_hz"):
             if not getattr(self, name) >= 0:
                 raise ConfigError(f"plant parameter {name} must be >= 0")
         if not 0 < self.hover_throttle < 1:
@@ -162,6 +170,20 @@ class PlantParams:
         return a, bu, e
 
 
+#: Named vehicles for ``mavsid simulate --vehicle``: the default small quad, a heavier X quad
+#: (more inertia: lower control effectiveness and damping, slower motors, a lower gyro filter)
+#: and a hexacopter (six motors: more authority than the heavy quad, yaw weaker).
+VEHICLES: dict[str, PlantParams] = {
+    "quad": PlantParams(),
+    "heavy-x": PlantParams(damping=(2.5, 2.8, 0.8), effectiveness=(95.0, 80.0, 9.0),
+                           motor_tau_s=0.03, delay_s=0.0075, gyro_filter_hz=15.0,
+                           hover_throttle=0.5),
+    "hexa": PlantParams(damping=(3.2, 3.0, 1.1), effectiveness=(130.0, 120.0, 14.0),
+                        motor_tau_s=0.022, delay_s=0.005, gyro_filter_hz=20.0,
+                        hover_throttle=0.45),
+}
+
+
 @dataclass(frozen=True)
 class DiscretePlant:
     """Exact zero-order-hold discretisation with a fractional input delay.
@@ -182,10 +204,8 @@ class DiscretePlant:
 def _zoh(a: np.ndarray, b: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
     """(e^{A t}, integral_0^t e^{A s} ds B)."""
     n, m = a.shape[0], b.shape[1]
-    big = np.zeros((n + m, n + m))
-    big[:n, :n], big[:n, n:] = a, b
-    e = expm(big * t)
-    return e[:n, :n], e[:n, n:]
+    phi, gamma, *_ = cont2discrete((a, b, np.eye(n), np.zeros((n, m))), t, method="zoh")
+    return np.asarray(phi), np.asarray(gamma)
 
 
 def discretise(p: PlantParams, dt: float) -> DiscretePlant:
@@ -212,12 +232,8 @@ def lowpass2p_coefficients(cutoff_hz: float, sample_hz: float) -> tuple[np.ndarr
     """
     if not 0 < cutoff_hz < sample_hz / 2:
         raise ConfigError(f"gyro filter cutoff {cutoff_hz} Hz must lie in (0, {sample_hz / 2})")
-    ohm = np.tan(np.pi * cutoff_hz / sample_hz)
-    c = 1.0 + 2.0 * np.cos(np.pi / 4) * ohm + ohm * ohm
-    b0 = ohm * ohm / c
-    a1 = 2.0 * (ohm * ohm - 1.0) / c
-    a2 = (1.0 - 2.0 * np.cos(np.pi / 4) * ohm + ohm * ohm) / c
-    return np.array([b0, 2 * b0, b0]), np.array([1.0, a1, a2])
+    b, a = butter(2, cutoff_hz, fs=sample_hz)  # bilinear transform, pre-warped at the cutoff
+    return np.asarray(b, dtype=float), np.asarray(a, dtype=float)
 
 
 class Lowpass2p:

@@ -21,11 +21,14 @@ Examples
 from __future__ import annotations
 
 import json
+import math
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
+
+import numpy as np  # noqa: F401  (doctest namespace)
 
 from mavsid.errors import ConfigError
 from mavsid.synthetic.dfwriter import write_dataflash
@@ -110,6 +113,9 @@ def scenario_from_options(
     t_fade_out: float = 1.0,
     rate_hz: float = 400.0,
     stick_amplitude: float = 0.3,
+    vehicle: str = "quad",
+    gyro_noise_dps: float | None = None,
+    vibration_dps: float = 0.0,
 ) -> Scenario:
     """The :class:`Scenario` the command line's options describe.
 
@@ -117,6 +123,15 @@ def scenario_from_options(
     ``manoeuvre="sysid"`` means one mixer run on ``axis``. ``magnitude`` defaults per
     injection point (0.05 mixer roll/pitch, 0.1 mixer yaw, 0.05 thrust, 5 deg angle, 20 deg/s
     rate). ``noise`` scales the default sensor noise, gyro bias and disturbance (0: none).
+    ``vehicle`` names a plant of :data:`~mavsid.synthetic.plant.VEHICLES`; ``gyro_noise_dps``
+    sets the gyro's white noise (deg/s RMS per loop sample, fed back through the rate
+    controller), after ``noise`` scaling; ``vibration_dps`` adds a frame vibration of that
+    amplitude (deg/s). ``rate_hz`` is the RATE/SIDD logging rate; below 25 Hz every other
+    message is logged at it too (a slow log throughout).
+
+    >>> sc = scenario_from_options(vehicle="heavy-x", gyro_noise_dps=3.0)
+    >>> sc.plant.effectiveness[0], round(float(np.degrees(sc.plant.gyro_noise)), 6)
+    (95.0, 3.0)
 
     >>> sc = scenario_from_options(sid_axes=[10, 12], seed=3)
     >>> [r.axis for r in sc.runs], sc.runs[1].magnitude
@@ -127,7 +142,7 @@ def scenario_from_options(
     mavsid.errors.ConfigError: --sid-axis needs --manoeuvre sysid (got 'doublet')
     """
     from mavsid.synthetic.flight import LogRates
-    from mavsid.synthetic.plant import AXES, PlantParams
+    from mavsid.synthetic.plant import AXES, VEHICLES
     from mavsid.synthetic.sysid import SID_AXES, SysIdSettings
 
     if sid_axes and manoeuvre != "sysid":
@@ -152,8 +167,20 @@ def scenario_from_options(
         runs.append(SysIdSettings(axis=sid, magnitude=mag, f_start_hz=f_start_hz,
                                   f_stop_hz=f_stop_hz, t_fade_in=t_fade_in, t_rec=t_rec,
                                   t_fade_out=t_fade_out))
+    if vehicle not in VEHICLES:
+        raise ConfigError(f"--vehicle must be one of {', '.join(VEHICLES)}, got {vehicle!r}")
+    plant = VEHICLES[vehicle].scaled_noise(noise)
+    if gyro_noise_dps is not None:
+        if not gyro_noise_dps >= 0:
+            raise ConfigError(f"--gyro-noise must be >= 0 deg/s, got {gyro_noise_dps}")
+        plant = replace(plant, gyro_noise=math.radians(gyro_noise_dps))
+    if not vibration_dps >= 0:
+        raise ConfigError(f"--vibration must be >= 0 deg/s, got {vibration_dps}")
+    plant = replace(plant, vibration=math.radians(vibration_dps))
+    slow = min(rate_hz, 10.0) if rate_hz < 25 else None
+    rates = LogRates(rate=rate_hz) if slow is None else LogRates(
+        rate=rate_hz, att=slow, imu=rate_hz, rcou=slow, rcin=slow, tlog=rate_hz)
     return Scenario(
         manoeuvre=manoeuvre, axis=axis, sysid=tuple(runs), duration_s=duration_s, seed=seed,
-        plant=PlantParams().scaled_noise(noise), rates=LogRates(rate=rate_hz),
-        stick_amplitude=stick_amplitude,
+        plant=plant, rates=rates, stick_amplitude=stick_amplitude,
     )

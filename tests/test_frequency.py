@@ -67,7 +67,6 @@ def test_frf_matches_the_true_plant_within_its_error(tmp_path, seed: int) -> Non
 def flown_loop_margins(gains: dict[str, float] | None, seed: int) -> dict[str, float]:
     """Fly a mixer-roll chirp (attitude loop off: the chirp then measures the rate loop
     alone) with the given ATC_RAT_RLL_P/I/D and return the measured loop's margins."""
-    from mavsid.frequency import frf
     from mavsid.synthetic import ControllerParams, Scenario, SysIdSettings, fly
 
     ctl = ControllerParams(ang_rll_p=0.0)

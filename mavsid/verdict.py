@@ -356,8 +356,8 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
                         f"{_pct(cl_base)}")
 
     if bad:
-        bounded = [c for c in caps if c.startswith("bounded fit")]
-        return Verdict(axis, "not identified", tuple(bad + bounded + notes), (), numbers,
+        said = [c for c in caps if c.startswith(("bounded fit", "closed-loop twin"))]
+        return Verdict(axis, "not identified", tuple(bad + said + notes), (), numbers,
                        tuple(dict.fromkeys(advice)))
     if caps:
         usable = ["one-step prediction"]

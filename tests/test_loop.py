@@ -223,12 +223,18 @@ def test_real_px4_log_controller_and_twin() -> None:
         out = loop.replay_controller(c, fd.dt, sig.target[axis][a:b],
                                      fd.states[a:b, fd.state_names.index(rate)], u, None, 0, sub)
         assert fit_percent(u, out) > least
-    # the twin on the one axis mavsid fits there (yaw) beats "the rate follows its target
-    # after the best delay" by 13 points (-35.8 % against -49.2 %): both are poor, the
-    # open-loop model itself being poor (free run -272 %)
+    # the twin on the yaw model: 136 training samples at 50 Hz give a model that predicts
+    # nothing (free run -88 %), and in the loop it loses to "the rate follows its target after
+    # the best delay" (measured -160 % against +66 %); the verdict must refuse it and carry
+    # both closed-loop figures (the model is kept here only by allow_unstable)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        res = pipeline.fit([str(path)], pipeline.PipelineConfig(axes=("yaw",)))
+        res = pipeline.fit([str(path)],
+                           pipeline.PipelineConfig(axes=("yaw",), allow_unstable=True))
     cl = res.axes["yaw"].closed_loop
     assert cl is not None
-    assert cl.fit_percent > cl.baseline_percent + 10.0
+    verdict = res.verdicts["yaw"]
+    assert verdict.level == "not identified"
+    assert verdict.numbers["fit_closed_loop_pct"] == cl.fit_percent
+    if cl.fit_percent <= cl.baseline_percent:
+        assert any("does not beat the baseline" in r for r in verdict.reasons)

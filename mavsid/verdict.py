@@ -266,19 +266,17 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
     # log rate against the rate loop's bandwidth
     u_names = tuple(getattr(model, "input_names", ()) or ()) if model is not None else ()
     rate = _rates(flights, (output, *u_names))
-    autopilot = next((str(fd.meta.get("autopilot")) for fd in flights
-                      if getattr(fd, "meta", None) and fd.meta.get("autopilot")), None)
     if rate is not None:
         numbers["log_rate_hz"] = rate
         lo, hi = RATE_LOOP_BANDWIDTH_HZ
-        if rate < 2 * hi:
-            bad.append(f"rates/outputs logged at {rate:.3g} Hz (Nyquist {rate / 2:.3g} Hz) "
-                       f"cannot resolve a rate loop of {lo:g}–{hi:g} Hz bandwidth")
-            advice.append(logging_advice(autopilot))
+        slow = _too_slow(rate, flights)
+        if slow:
+            bad.append(slow[0])
+            advice.append(slow[1])
         elif rate < 4 * hi:
             caps.append(f"logged at {rate:.3g} Hz: only the slow part of a {lo:g}–{hi:g} Hz rate "
                         "loop is resolved")
-            advice.append(logging_advice(autopilot))
+            advice.append(logging_advice(_autopilot(flights)))
 
     # excitation
     exc = _excitation(windows)
@@ -372,6 +370,22 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
     return Verdict(axis, "good", tuple(good + notes), (), numbers, tuple(dict.fromkeys(advice)))
 
 
+def _too_slow(rate: float, flights: Sequence[Any]) -> tuple[str, str] | None:
+    """(reason, advice) when ``rate`` (Hz) cannot resolve a rate loop, else None."""
+    lo, hi = RATE_LOOP_BANDWIDTH_HZ
+    if rate >= 2 * hi:
+        return None
+    reason = (f"rates/outputs logged at {rate:.3g} Hz (Nyquist {rate / 2:.3g} Hz) cannot "
+              f"resolve a rate loop of {lo:g}–{hi:g} Hz bandwidth")
+    return reason, logging_advice(_autopilot(flights))
+
+
+def _autopilot(flights: Sequence[Any]) -> str | None:
+    """The autopilot the flights' metadata names (``meta["autopilot"]``), if any."""
+    return next((str(fd.meta.get("autopilot")) for fd in flights
+                 if getattr(fd, "meta", None) and fd.meta.get("autopilot")), None)
+
+
 _SID_AXIS = {"roll": 10, "pitch": 11, "yaw": 12}
 _RATE_OF = {"roll": "p", "pitch": "q", "yaw": "r"}
 
@@ -400,15 +414,12 @@ def unfitted(axis: str, why: str, windows: Sequence[Any] = (), flights: Sequence
     advice: list[str] = []
     numbers: dict[str, float | None] = {}
     rate = _rates(flights, (_RATE_OF.get(axis, axis), f"u_{axis}"))
-    autopilot = next((str(fd.meta.get("autopilot")) for fd in flights
-                      if getattr(fd, "meta", None) and fd.meta.get("autopilot")), None)
     if rate is not None:
         numbers["log_rate_hz"] = rate
-        lo, hi = RATE_LOOP_BANDWIDTH_HZ
-        if rate < 2 * hi:
-            reasons.append(f"rates/outputs logged at {rate:.3g} Hz (Nyquist {rate / 2:.3g} Hz) "
-                           f"cannot resolve a rate loop of {lo:g}–{hi:g} Hz bandwidth")
-            advice.append(logging_advice(autopilot))
+        slow = _too_slow(rate, flights)
+        if slow:
+            reasons.append(slow[0])
+            advice.append(slow[1])
     mine = [w for w in windows if getattr(w, "axis", axis) == axis]
     where = " ".join(logs) if logs else "LOG"
     if mine and not any(w.kept for w in mine):

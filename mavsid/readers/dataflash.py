@@ -58,7 +58,7 @@ import struct
 import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import numpy as np
 
@@ -151,7 +151,7 @@ class Definition:
     format: str
     columns: tuple[str, ...]
 
-    @property
+    @cached_property
     def fields(self) -> tuple[tuple[str, int], ...]:
         """``(column name, index into format)`` in log order; a repeated name keeps its last
         position (as pymavlink does); columns beyond the format are ignored."""
@@ -172,7 +172,7 @@ class Definition:
             return f"declared length {self.length} but format {self.format!r} needs {size}"
         return None
 
-    @property
+    @cached_property
     def time_field(self) -> tuple[str, int, float] | None:
         """``(column, format index, seconds per count)`` of the boot-time field, if any."""
         return _time_field(self.name, self.format, self.fields)
@@ -321,40 +321,82 @@ class _Definitions:
 
 
 def _read_definitions(a: np.ndarray, fmt_pos: np.ndarray) -> _Definitions:
-    """Parse the FMT records at ``fmt_pos`` (already known to be complete)."""
+    """Parse the FMT records at ``fmt_pos`` (already known to be complete).
+
+    Candidates whose name or format cannot be text are dropped with numpy first, and each
+    distinct FMT payload is parsed once: a flood of header patterns or of one repeated
+    definition costs no Python work per record.
+    """
     out = _Definitions()
     out.defs.append(_FMT_DEF)
     out.by_type[_FMT_TYPE] = [(-1, 0)]
     if fmt_pos.size == 0:
         return out
-    recs = _records(a, _FMT_DEF.payload_dtype, fmt_pos + 3)
+    payload = _FMT_LEN - 3
+    # cheap first: the type is not FMT's and the name starts with a printable character
+    head = _lookup(a, fmt_pos + 5)
+    fmt_pos = fmt_pos[(head >= 0x20) & (head < 0x7F) & (_lookup(a, fmt_pos + 3) != _FMT_TYPE)]
+    raw = _record_view(a, np.dtype((np.uint8, payload)))
+    keep = np.zeros(fmt_pos.size, bool)
+    step = 1 << 16
+    for k in range(0, fmt_pos.size, step):
+        rec = raw[fmt_pos[k : k + step].astype(np.intp) + 3]
+        keep[k : k + step] = (rec[:, 0] != _FMT_TYPE) & _text_ok(rec[:, 2:6], name=True) \
+            & _text_ok(rec[:, 6:22], name=False)
+    fmt_pos = fmt_pos[keep]
+    if fmt_pos.size == 0:
+        return out
+    blobs = _records(a, np.dtype((np.void, payload)), fmt_pos + 3)
+    uniq, first, inverse = np.unique(blobs, return_index=True, return_inverse=True)
+    del blobs
+    inverse = inverse.reshape(-1)
+    recs = uniq.view(_FMT_DEF.payload_dtype).reshape(-1)
     index: dict[Definition, int] = {_FMT_DEF: 0}
-    bad: dict[int, str] = {}
-    for pos, (mtype, length, name, fmt, cols) in zip(fmt_pos.tolist(), recs.tolist(), strict=True):
-        if mtype == _FMT_TYPE:
-            continue
-        try:
-            sname = name.split(b"\0", 1)[0].decode("ascii")
-            sfmt = fmt.split(b"\0", 1)[0].decode("ascii")
-        except UnicodeDecodeError:
-            continue
-        if not sname.isprintable() or not sname.strip():
-            continue
-        out.plausible.append(pos)
+    bad: dict[int, tuple[int, str]] = {}
+    def_of = np.full(uniq.size, -1, np.int64)  # per distinct payload: index into defs
+    plausible = np.zeros(uniq.size, bool)
+    for u, (mtype, length, name, fmt, cols) in enumerate(recs.tolist()):
+        sname = name.split(b"\0", 1)[0].decode("ascii")
+        sfmt = fmt.split(b"\0", 1)[0].decode("ascii")
+        plausible[u] = True
         columns = tuple(_decode_text(cols).split(",")) if cols else ()
         d = Definition(int(mtype), sname, int(length), sfmt, columns)
         problem = d.problem()
         if problem is not None:
-            bad[d.type] = f"type {d.type} ({d.name}): {problem}"
+            at = int(first[u])
+            if d.type not in bad or at < bad[d.type][0]:
+                bad[d.type] = (at, f"type {d.type} ({d.name}): {problem}")
             continue
         if d not in index:
             index[d] = len(out.defs)
             out.defs.append(d)
-        entries = out.by_type.setdefault(d.type, [])
-        if not entries or entries[-1][1] != index[d]:
-            entries.append((pos, index[d]))
-    out.problems = [msg for t, msg in sorted(bad.items()) if t not in out.by_type]
+        def_of[u] = index[d]
+    out.plausible = fmt_pos[plausible[inverse]].tolist()
+    # where each type's definition changes, in file order
+    ids = def_of[inverse]
+    usable = ids >= 0
+    pos, ids = fmt_pos[usable].astype(np.int64), ids[usable]
+    types = a[pos + 3].astype(np.int64)
+    order = np.lexsort((pos, types))
+    pos, ids, types = pos[order], ids[order], types[order]
+    change = np.ones(pos.size, bool)
+    change[1:] = (types[1:] != types[:-1]) | (ids[1:] != ids[:-1])
+    for t, p, i in zip(types[change].tolist(), pos[change].tolist(), ids[change].tolist(),
+                       strict=True):
+        out.by_type.setdefault(t, []).append((p, i))
+    out.problems = [msg for t, (_, msg) in sorted(bad.items()) if t not in out.by_type]
     return out
+
+
+def _text_ok(chars: np.ndarray, name: bool) -> np.ndarray:
+    """Rows of ``chars`` (fixed-width byte fields) that decode as an FMT name (printable
+    ASCII, not blank) or format (ASCII) up to their first NUL."""
+    ended = np.cumsum(chars == 0, axis=1) > 0  # at or after the first NUL
+    if not name:
+        return np.all(ended | (chars < 0x80), axis=1)
+    printable = (chars >= 0x20) & (chars < 0x7F)
+    solid = printable & (chars != 0x20)
+    return np.all(ended | printable, axis=1) & np.any(~ended & solid, axis=1)
 
 
 def _lookup(table: np.ndarray, index: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
@@ -681,11 +723,14 @@ def _units(
     if "UNIT" in tables and {"Id", "Label"} <= set(tables["UNIT"]):
         for i, label in zip(tables["UNIT"]["Id"].tolist(), tables["UNIT"]["Label"].tolist(),
                             strict=True):
-            unit_of[chr(int(i) % 256)] = str(label)
+            if (key := _id_char(i)) is not None:
+                unit_of[key] = str(label)
     if "MULT" in tables and {"Id", "Mult"} <= set(tables["MULT"]):
         for i, mult in zip(tables["MULT"]["Id"].tolist(), tables["MULT"]["Mult"].tolist(),
                            strict=True):
-            mult_of[chr(int(i) % 256)] = float(f"{float(mult):.7g}")
+            value = _number(mult)
+            if (key := _id_char(i)) is not None and value is not None:
+                mult_of[key] = float(f"{value:.7g}")
     units: dict[str, dict[str, str]] = {}
     mults: dict[str, dict[str, float]] = {}
     fmtu = tables.get("FMTU", {})
@@ -697,8 +742,9 @@ def _units(
     mult_ids = fmtu.get("MultIds")
     for k, (ftype, uids) in enumerate(zip(fmtu["FmtType"].tolist(), fmtu["UnitIds"].tolist(),
                                           strict=True)):
-        target = type_names.get(int(ftype))
-        if target is None:
+        number = _number(ftype)
+        target = type_names.get(int(number)) if number is not None else None
+        if target is None or not isinstance(uids, str):
             continue
         d = defs_by_name[target]
         mids = str(mult_ids[k]) if mult_ids is not None else ""
@@ -724,6 +770,32 @@ _BUILD_TYPES = {1: "rover", 2: "copter", 3: "plane", 4: "tracker", 7: "sub", 12:
                 13: "heli"}
 
 
+def _number(value: object) -> float | None:
+    """A metadata value as a finite float, or None (a log may define PARM, MODE, VER ...
+    with another layout: strings or arrays where numbers belong).
+
+    Examples
+    --------
+    >>> _number(3), _number("2.5"), _number("fast"), _number(float("nan"))
+    (3.0, 2.5, None, None)
+    """
+    if isinstance(value, (bytes, list, tuple, np.ndarray)):
+        return None
+    try:
+        out = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError, OverflowError):
+        return None
+    return out if np.isfinite(out) else None
+
+
+def _id_char(value: object) -> str | None:
+    """A UNIT/MULT id (a character code, or the character itself in text logs)."""
+    if isinstance(value, str):
+        return value[:1] or None
+    number = _number(value)
+    return None if number is None else chr(int(number) % 256)
+
+
 def vehicle_and_firmware(
     texts: Sequence[str], tables: Mapping[str, Mapping[str, np.ndarray]]
 ) -> tuple[str | None, str | None]:
@@ -739,8 +811,8 @@ def vehicle_and_firmware(
     if firmware is None and "FWS" in ver and len(ver["FWS"]):
         firmware = str(ver["FWS"][0]) or None
     vehicle = None
-    if "BU" in ver and len(ver["BU"]):
-        vehicle = _BUILD_TYPES.get(int(ver["BU"][0]))
+    if "BU" in ver and len(ver["BU"]) and (build := _number(ver["BU"][0])) is not None:
+        vehicle = _BUILD_TYPES.get(int(build))
     if vehicle is None and firmware:
         vehicle = next((v for key, v in _VEHICLES if key in firmware), None)
     frame = next((t.split(":", 1)[1].strip() for t in texts if t.startswith("Frame:")), None)
@@ -778,8 +850,8 @@ def _modes(table: Mapping[str, np.ndarray] | None, time_s: np.ndarray | None,
     for t, m in zip(time_s.tolist(), num.tolist(), strict=True):
         if isinstance(m, str):  # text logs print the mode name
             out.append(ModeChange(float(t), by_name.get(m.upper(), -1), m.upper()))
-        else:
-            out.append(ModeChange(float(t), int(m), names.get(int(m))))
+        elif (number := _number(m)) is not None:
+            out.append(ModeChange(float(t), int(number), names.get(int(number))))
     return tuple(out)
 
 
@@ -812,7 +884,8 @@ def assemble(
     parm = meta_columns.get("PARM", {})
     if "Name" in parm and "Value" in parm:
         for name, value in zip(parm["Name"].tolist(), parm["Value"].tolist(), strict=True):
-            params[str(name)] = float(value)
+            if (number := _number(value)) is not None:  # another layout: not a number
+                params[str(name)] = number
     texts: tuple[TextMessage, ...] = ()
     msg = meta_columns.get("MSG", {})
     if "Message" in msg:
@@ -1027,6 +1100,10 @@ def _read_buffer(
     defs_by_name: dict[str, Definition] = {}
     for name, ids in by_name.items():
         parts = [(table.defs[i], *groups.pop(i)) for i in ids]
+        parts, dropped = _bounded_layouts(parts)
+        if dropped[0]:
+            notes.append(f"{name}: {dropped[0]} record(s) under {dropped[1]} other layout(s) "
+                         "not decoded (the type is redefined with ever new columns)")
         defs_by_name[name] = parts[-1][0]
         cols, t = _decode_message(a, parts)
         keys = parts[0][1] if len(parts) == 1 else np.sort(np.concatenate([p[1] for p in parts]))
@@ -1124,14 +1201,63 @@ def _held_times(
     has = src >= 0
     need, inverse = np.unique(src[has], return_inverse=True)
     t = np.empty(need.size)
-    ids = framing.defid[need]
-    for i in np.unique(ids).tolist():
-        k = np.flatnonzero(ids == i)
-        ti = _gather_times(a, table.defs[i], framing.pos[need[k]])
-        assert ti is not None
-        t[k] = ti
+    # one gather per place and kind of time field (not per definition: a log may hold
+    # thousands of definitions)
+    ids, id_of = np.unique(framing.defid[need], return_inverse=True)
+    slots: dict[tuple[int, str, float], int] = {}
+    slot_of = np.array([slots.setdefault(_time_slot(table.defs[i]), len(slots))
+                        for i in ids.tolist()], np.int64)[id_of]
+    order = np.argsort(slot_of, kind="stable")
+    bounds = np.searchsorted(slot_of[order], np.arange(len(slots) + 1))
+    for (ofs, dtype, scale), j in slots.items():
+        k = order[bounds[j] : bounds[j + 1]]
+        t[k] = _records(a, np.dtype(dtype), framing.pos[need[k]] + 3 + ofs) * scale
     out[has] = t[inverse]
     return out, (need, t)
+
+
+def _time_slot(d: Definition) -> tuple[int, str, float]:
+    """Payload offset, stored dtype and scale (s per count) of a timed definition's time."""
+    tf = d.time_field
+    assert tf is not None
+    _, i, scale = tf
+    ofs = sum(np.dtype(FORMAT_CHARS[c].dtype).itemsize for c in d.format[:i])
+    return ofs, FORMAT_CHARS[d.format[i]].dtype, scale
+
+
+_MAX_UNION = 4  # a message's merged table may hold this many times its records' own cells
+
+
+def _bounded_layouts(
+    parts: list[tuple[Definition, np.ndarray, np.ndarray, np.ndarray | None]],
+) -> tuple[list[tuple[Definition, np.ndarray, np.ndarray, np.ndarray | None]], tuple[int, int]]:
+    """The parts of one message worth merging, and (records, layouts) left out.
+
+    Merging layouts gives the union of their columns; when a type is redefined with new
+    columns again and again (damage or a hostile file), that union grows with the number
+    of definitions and the table with its square. Then only the layout (set of columns)
+    holding the most records is kept (the latest among equals).
+    """
+    if len(parts) <= 2:
+        return parts, (0, 0)
+    union: set[str] = set()
+    cells = 0
+    for d, k, _, _ in parts:
+        cols = [c for c, _ in d.fields]
+        union.update(cols)
+        cells += k.size * max(len(cols), 1)
+    rows = sum(k.size for _, k, _, _ in parts)
+    if rows * len(union) <= _MAX_UNION * cells + (1 << 16):
+        return parts, (0, 0)
+    count: dict[tuple[str, ...], int] = {}
+    latest: dict[tuple[str, ...], int] = {}
+    for j, (d, k, _, _) in enumerate(parts):
+        key = tuple(sorted(c for c, _ in d.fields))
+        count[key] = count.get(key, 0) + k.size
+        latest[key] = j
+    best = max(count, key=lambda key: (count[key], latest[key]))
+    kept = [p for p in parts if tuple(sorted(c for c, _ in p[0].fields)) == best]
+    return kept, (rows - count[best], len(count) - 1)
 
 
 def _decode_message(

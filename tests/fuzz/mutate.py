@@ -11,7 +11,7 @@ from __future__ import annotations
 import random
 import struct
 from collections.abc import Callable
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -36,7 +36,7 @@ SEEDS: dict[str, tuple[Path, int]] = {
 }
 
 
-@lru_cache(maxsize=None)
+@cache
 def seed_bytes(name: str) -> bytes:
     """The seed's bytes (its first ``SEEDS[name][1]`` bytes); FileNotFoundError when absent."""
     path, keep = SEEDS[name]

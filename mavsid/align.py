@@ -76,7 +76,13 @@ from mavsid.channels import (
 )
 from mavsid.channels import _rows as _rows
 from mavsid.data import FlightData, MessageTable, RawLog
-from mavsid.errors import ConfigError, DataQualityWarning, MavsidError, NoExcitationError
+from mavsid.errors import (
+    ConfigError,
+    DataQualityWarning,
+    MavsidError,
+    NoExcitationError,
+    naming_file,
+)
 from mavsid.readers import read_log, sniff_format
 
 __all__ = ["FLAG_MESSAGES", "align", "flight_table", "load_flight", "sysid_runs"]
@@ -149,7 +155,7 @@ def _collect(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer]
             f"{raw.source.path}: a {raw.vehicle}'s {preset.motors.message} outputs are not a "
             "multicopter's motors: no inputs (the mixer presets are for multicopters)",
             DataQualityWarning,
-            stacklevel=3,
+            stacklevel=4,
         )
     elif preset.motors is not None:
         mixer = mixer_for(preset, raw.params, {**MIXERS, **mixers})
@@ -160,7 +166,7 @@ def _collect(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer]
                 f"{preset.motors.message} unmixed as {mixer.name} (choose a preset with "
                 "another mixer if the frame differs)",
                 DataQualityWarning,
-                stacklevel=3,
+                stacklevel=4,
             )
         t, thrust = motor_thrusts(raw, preset, mixer)
         u = mixer.unmix(thrust)
@@ -335,7 +341,7 @@ def _one_boot(path: str, states: list[_Series], inputs: list[_Series]
             f"concatenated logs): only boot {k + 1} of {len(ref_boots)} is used "
             f"({boot['start_s']:.1f}–{boot['stop_s']:.1f} s, {boot['reason']})",
             DataQualityWarning,
-            stacklevel=3,
+            stacklevel=4,
         )
 
     def fix(s: _Series) -> _Series:
@@ -727,6 +733,8 @@ def align(
 ) -> FlightData:
     """Put a log's states and inputs on one uniform grid (see the module docstring).
 
+    Every error it raises names the log's file.
+
     Parameters
     ----------
     raw : RawLog
@@ -749,6 +757,18 @@ def align(
     NoExcitationError
         The channels never overlap in time (nothing to align).
     """
+    try:
+        return _align(raw, preset, rate_hz, presets, mixers, max_gap, min_input_rate_hz)
+    except MavsidError as exc:
+        named = naming_file(exc, raw.source.path)
+        if named is exc:
+            raise
+        raise named from exc
+
+
+def _align(raw: RawLog, preset: Preset | str | None, rate_hz: float | None,
+           presets: Mapping[str, Preset] | None, mixers: Mapping[str, Mixer] | None,
+           max_gap: float, min_input_rate_hz: float) -> FlightData:
     preset = _resolve_preset(raw, preset, presets)
     states, inputs, mixer = _collect(raw, preset, mixers or {})
     if not states:
@@ -774,7 +794,7 @@ def align(
         warnings.warn(
             f"{raw.source.path}: samples excluded (never interpolated over): {shown}",
             DataQualityWarning,
-            stacklevel=2,
+            stacklevel=3,
         )
     t, blocks, dt = _grid(series, ref, rate_hz, max_gap, raw.source.path)
     if not t.size:
@@ -799,7 +819,7 @@ def align(
                 f"(below {min_input_rate_hz:g} Hz): dynamics above {rates[s.name] / 2:.1f} Hz "
                 "cannot be identified from them",
                 DataQualityWarning,
-                stacklevel=2,
+                stacklevel=3,
             )
     input_names = tuple(s.name for s in inputs)
     flags, flag_notes = _flags(raw, t, u, input_names)

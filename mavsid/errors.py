@@ -37,6 +37,7 @@ __all__ = [
     "SolverError",
     "escape",
     "escape_lines",
+    "naming_file",
 ]
 
 
@@ -128,6 +129,7 @@ class MissingMessageError(MavsidError, KeyError):
     def __init__(self, name: str, available: Iterable[str] = (), what: str = "message",
                  path: object = None) -> None:
         self.name = name
+        self.what = what
         self.available = sorted(available)
         self.path = None if path is None else str(path)
         shown = ", ".join(self.available[:40])
@@ -140,6 +142,34 @@ class MissingMessageError(MavsidError, KeyError):
 
     def __str__(self) -> str:  # KeyError would quote the whole message
         return escape(self.text)
+
+
+def naming_file(exc: MavsidError, path: object) -> MavsidError:
+    """``exc``, or an error of the same type whose text starts with ``path`` when it does
+    not name that file yet (the library's entry points use it: every error names the file).
+
+    Examples
+    --------
+    >>> str(naming_file(MissingMessageError("ATT.Roll", what="field"), "a.bin"))
+    "a.bin: log has no field 'ATT.Roll'"
+    >>> str(naming_file(NoExcitationError("a.bin: nothing"), "a.bin"))
+    'a.bin: nothing'
+    """
+    where = str(path)
+    if not where or where in str(exc):
+        return exc
+    new: MavsidError
+    if isinstance(exc, MissingMessageError):
+        new = MissingMessageError(exc.name, exc.available, exc.what, path=where)
+    elif isinstance(exc, LogFormatError):
+        new = LogFormatError(exc.reason, path=where, offset=exc.offset)
+    else:
+        try:
+            new = type(exc)(f"{where}: {exc}")
+        except TypeError:  # a subclass with another signature: leave it
+            return exc
+    new.__cause__ = exc.__cause__
+    return new
 
 
 class NoExcitationError(MavsidError, ValueError):

@@ -19,12 +19,12 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+from helpers import require_shared
 
 from fuzz import hostile
 from fuzz.budget import subprocess_cases
 from fuzz.mutate import FIXTURES, MUTATORS, SEEDS, available_seeds, mutate, seed_bytes, suffix
 from fuzz.runner import ROOT, run_case
-from helpers import require_shared
 
 S_PER_MB = 10.0
 #: fixed cost allowed on top of 10 s/MB: a fresh interpreter importing numpy/scipy/pymavlink

@@ -13,12 +13,12 @@ import tempfile
 import warnings
 
 import pytest
+from helpers import require_shared
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from fuzz.budget import in_process_examples
 from fuzz.mutate import MUTATORS, SEEDS, available_seeds, mutate, suffix
-from helpers import require_shared
 from mavsid.align import align
 from mavsid.errors import MavsidError
 from mavsid.info import format_summary, summarize

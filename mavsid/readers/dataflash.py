@@ -261,6 +261,28 @@ def _index_dtype(n: int) -> type[np.signedinteger]:
     return np.int32 if n < 2**31 - 1024 else np.int64
 
 
+_RELEASE_MIN = 1 << 22  # bytes of file pages worth a madvise call
+_SPAN_BYTES = 1 << 24  # file bytes one gather slice may span
+
+
+def _release(a: np.ndarray, lo: int, hi: int) -> None:
+    """Tell the kernel that bytes ``lo..hi`` of the memory-mapped file ``a`` are not needed
+    for now: their pages leave the process's resident set (they stay in the page cache and
+    come back on the next touch, a minor fault). Without it, reading every record maps the
+    whole file into the process, on top of the arrays decoded from it."""
+    base = a.base.obj if isinstance(a.base, memoryview) else a.base
+    if not isinstance(base, mmap.mmap) or not hasattr(mmap, "MADV_DONTNEED"):
+        return
+    lo = max(lo, 0) // mmap.PAGESIZE * mmap.PAGESIZE
+    hi = min(hi, len(base))
+    if hi - lo < _RELEASE_MIN:
+        return
+    try:
+        base.madvise(mmap.MADV_DONTNEED, lo, hi - lo)
+    except (OSError, ValueError):  # not supported here: only memory use differs
+        pass
+
+
 def _find_headers(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Offsets of every ``0xA3 0x95`` byte pair followed by a type byte, ascending, and
     those type bytes.
@@ -285,6 +307,8 @@ def _find_headers(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         hits.sort(kind="stable")
         found.append(hits + dt(start))  # chunks come in order
         types.append(seg[hits + 2])
+        if (start // _CHUNK) % 16 == 15:
+            _release(a, start - 15 * _CHUNK, start)
     return np.concatenate(found), np.concatenate(types)
 
 
@@ -692,13 +716,24 @@ def _gather_into(
     fields = [(f, None if ch in _PLAIN and col.dtype != object else ch, col)
               for c, (f, ch, _, _) in layout.items() if (col := out.get(c)) is not None]
     step = max(1, _GATHER_BYTES // max(d.payload_dtype.itemsize, 1))
-    for k in range(0, pos.size, step):
-        recs = _records(a, d.payload_dtype, pos[k : k + step] + 3)
+    done = 0  # file bytes before this are not needed again for this definition
+    k = 0
+    while k < pos.size:
+        # a slice of records that fits a cache and spans a bounded stretch of the file
+        # (each record touched maps file pages into the process until released)
+        stop = min(k + step, int(np.searchsorted(pos, pos[k] + _SPAN_BYTES)))
+        stop = max(stop, k + 1)
+        recs = _records(a, d.payload_dtype, pos[k:stop] + 3)
         for f, ch, col in fields:
             if ch is None:
-                col[k : k + step] = recs[f]
+                col[k:stop] = recs[f]
             else:
-                _column_into(recs[f], ch, d.name, col[k : k + step])
+                _column_into(recs[f], ch, d.name, col[k:stop])
+        k = stop
+        if k < pos.size and int(pos[k]) - done >= _RELEASE_MIN:
+            _release(a, done, int(pos[k]))
+            done = int(pos[k])
+    _release(a, done, a.size)
     return out
 
 
@@ -1009,6 +1044,7 @@ def _read_buffer(
     fmt_pos = fmt_pos[fmt_pos <= n - _FMT_LEN]
     table = _read_definitions(a, fmt_pos)
     framing = _frame(a, cand, types, table)
+    _release(a, 0, n)
     # definitions only from FMT records that are part of the log (rarely differs)
     fmt_kept = framing.pos[framing.defid == 0]
     if not np.isin(np.array(table.plausible, np.int64), fmt_kept).all():
@@ -1061,6 +1097,7 @@ def _read_buffer(
             k, pos, t = k[keep], pos[keep], t[keep]
         groups[i] = (k, pos, t)
     del members
+    _release(a, 0, n)
     # records without a time field hold the time of the latest timed record before them
     untimed = [i for i in groups if not timed[i]]
     src: tuple[np.ndarray, np.ndarray] = (np.zeros(0, idx_dt), np.zeros(0))

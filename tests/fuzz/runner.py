@@ -40,6 +40,13 @@ try:
     elif op == "fit":
         from mavsid.pipeline import PipelineConfig, fit
         fit([path], PipelineConfig())
+    elif op == "arrays":  # the size of the arrays read_log returns (for benchmarks)
+        from mavsid.readers import read_log
+        log = read_log(path)
+        total = sum(c.nbytes for t in log.messages.values() for c in t.columns.values())
+        total += sum(t.time_s.nbytes for t in log.messages.values())
+        print(json.dumps({"outcome": "ok", "detail": f"{total / 1e6:.0f} MB of arrays"}))
+        sys.exit(0)
     else:
         raise SystemExit("unknown op " + op)
     print(json.dumps({"outcome": "ok"}))
@@ -56,6 +63,7 @@ class Outcome:
     wall_s: float
     peak_rss_mb: float
     returncode: int
+    cpu_s: float = float("nan")  # user + system time of the child
 
 
 def run_case(op: str, path: Path, timeout_s: float) -> Outcome:
@@ -78,6 +86,7 @@ def run_case(op: str, path: Path, timeout_s: float) -> Outcome:
         err.seek(0)
         stdout, stderr = out.read(), err.read()
     rss_mb = usage.ru_maxrss / 1024  # kB on Linux
+    cpu = usage.ru_utime + usage.ru_stime
     code = proc.returncode
     if code == -9 and wall >= timeout_s:
         return Outcome(False, f"timeout after {timeout_s:.0f} s", wall, rss_mb, code)
@@ -87,7 +96,7 @@ def run_case(op: str, path: Path, timeout_s: float) -> Outcome:
         return Outcome(False, f"exit {code}: {tail}", wall, rss_mb, code)
     res = json.loads(lines[0])
     if res["outcome"] == "ok":
-        return Outcome(True, "ok", wall, rss_mb, 0)
+        return Outcome(True, res.get("detail", "ok"), wall, rss_mb, 0, cpu)
     msg = res["message"]
     one_line = "\n" not in msg and "\r" not in msg
-    return Outcome(one_line, f"{res['kind']}: {msg}", wall, rss_mb, 0)
+    return Outcome(one_line, f"{res['kind']}: {msg}", wall, rss_mb, 0, cpu)

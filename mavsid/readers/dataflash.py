@@ -727,6 +727,8 @@ def _gather_into(
         for f, ch, col in fields:
             if ch is None:
                 col[k:stop] = recs[f]
+                if col.dtype.kind == "f":
+                    _quiet_nans(col[k:stop])
             else:
                 _column_into(recs[f], ch, d.name, col[k:stop])
         k = stop
@@ -735,6 +737,22 @@ def _gather_into(
             done = int(pos[k])
     _release(a, done, a.size)
     return out
+
+
+def _quiet_nans(v: np.ndarray) -> None:
+    """Replace signalling NaNs (a damaged float's bit pattern) by quiet NaN in place, as
+    Python's ``struct`` does: numpy would warn ("invalid value") on every later cast.
+
+    Examples
+    --------
+    >>> v = np.frombuffer(b"\\x01\\x00\\x80\\x7f", "<f4").copy()  # a signalling NaN
+    >>> _quiet_nans(v); bool(v.view("<u4")[0] == np.float32("nan").view("<u4"))
+    True
+    """
+    with np.errstate(invalid="ignore"):
+        bad = v != v
+    if bad.any():
+        v[bad] = np.nan
 
 
 def _gather_times(a: np.ndarray, d: Definition, pos: np.ndarray) -> np.ndarray | None:

@@ -224,7 +224,7 @@ def read(
 _LINES_PER_SLICE = 1 << 16  # records split and held before they are converted to columns
 
 
-_SLICE_CHARS = 1 << 20  # text split into lines at a time
+_SLICE_CHARS = 1 << 18  # text split into lines at a time
 
 
 def _numbered_lines(body: str, prefix: str | None = None) -> Iterator[tuple[int, str]]:

@@ -801,6 +801,8 @@ def _align(raw: RawLog, preset: Preset | str | None, rate_hz: float | None,
         raise NoExcitationError(
             f"{raw.source.path}: the channels of preset {preset.name} "
             f"({', '.join(sorted({s.source for s in series}))}) never overlap for two samples"
+            + (f" ({sum(sum(w.values()) for w in excluded.values())} sample(s) excluded as "
+               "never measured or mistimed)" if excluded else "")
         )
     x = np.empty((t.size, len(states)))
     for j, s in enumerate(states):

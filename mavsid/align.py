@@ -170,14 +170,10 @@ def _collect(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer]
             )
         t, thrust = motor_thrusts(raw, preset, mixer)
         u = mixer.unmix(thrust)
-        late = time_outliers(t)
+        late, bad_t = _mistimed(t)
         excluded: tuple[tuple[str, int], ...] = ()
-        bad_t = np.empty(0)
         if late.any():
             excluded = (("mistimed", int(late.sum())),)
-            kept = np.flatnonzero(~late)
-            before = np.searchsorted(kept, np.flatnonzero(late)) - 1
-            bad_t = t[kept[before[before >= 0]]]
             t, u = t[~late], u[~late]
         for j, name in enumerate(INPUT_NAMES):
             inputs.append(_Series(name, f"{preset.motors.message} ({mixer.name} mixer)", t,
@@ -292,15 +288,23 @@ def _screen(raw: RawLog, ch: Channel, name: str, t: np.ndarray, v: np.ndarray
         excluded.append((f"outside {lo:.4g}..{hi:.4g}", int(wrong.sum())))
         bad.append(t[wrong])
         t, v = t[~wrong], v[~wrong]
-    late = time_outliers(t)
+    late, late_t = _mistimed(t)
     if late.any():
         excluded.append(("mistimed", int(late.sum())))
-        k = np.flatnonzero(late)
-        prev = np.flatnonzero(~late)
-        before = np.searchsorted(prev, k) - 1  # the kept record before each mistimed one
-        bad.append(t[prev[before[before >= 0]]])
+        bad.append(late_t)
         t, v = t[~late], v[~late]
     return t, v, np.concatenate(bad), tuple(excluded)
+
+
+def _mistimed(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`time_outliers` of ``t`` and, for each, the time of the kept record before it
+    (where the grid must leave a gap: a sample is missing there)."""
+    late = time_outliers(t)
+    if not late.any():
+        return late, np.empty(0)
+    kept = np.flatnonzero(~late)
+    before = np.searchsorted(kept, np.flatnonzero(late)) - 1
+    return late, t[kept[before[before >= 0]]]
 
 
 #: a step back in time larger than this (s) is a reboot or the start of a concatenated log

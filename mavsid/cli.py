@@ -70,7 +70,7 @@ def _info(args: argparse.Namespace) -> int:
     from mavsid.readers import read_log
 
     summary = summarize(read_log(args.log, **_dialect(args)))
-    print(json.dumps(summary, indent=1, ensure_ascii=False) if args.json
+    print(json.dumps(summary, indent=1, ensure_ascii=True) if args.json
           else escape_lines(format_summary(summary)))
     return 0
 
@@ -145,7 +145,7 @@ def _segments(args: argparse.Namespace) -> int:
     reports = find_segments(flight, args.axis, scan=True if args.scan else None,
                             options=ScanOptions(window_s=args.window))
     if args.json:
-        print(json.dumps([r.to_dict() for r in reports], indent=1, ensure_ascii=False))
+        print(json.dumps([r.to_dict() for r in reports], indent=1, ensure_ascii=True))
     else:
         span = flight.time_s[-1] - flight.time_s[0]
         print(escape(f"{args.log}: preset {flight.preset}, {1 / flight.dt:.0f} Hz, "
@@ -245,7 +245,7 @@ def _print_result(args: argparse.Namespace, result: FitResult) -> None:
     from mavsid.pipeline import format_result
 
     if args.json:
-        print(json.dumps(result.to_dict(), indent=1, ensure_ascii=False, allow_nan=False))
+        print(json.dumps(result.to_dict(), indent=1, ensure_ascii=True, allow_nan=False))
     else:
         print(escape_lines(format_result(result)))
         for flag, path in (("rrd", args.rrd), ("report", args.report)):

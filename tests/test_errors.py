@@ -53,6 +53,9 @@ def test_log_text_reaching_the_terminal_is_escaped(tmp_path, capsys) -> None:
         assert not any(c in text for c in "\x1b\x07\r\x9b\u202e"), repr(text)
     assert "V\\x1b[2J" in out.out and "deg\\x1b" in out.out
     assert "\\nsecond line" in out.out  # the text's newline shown, not obeyed
+    assert main(["info", "--json", str(path)]) == 0  # JSON: ASCII, controls escaped
+    out = capsys.readouterr()
+    assert out.out.isascii() and "\\u001b[2J" in out.out and "\\u009b" in out.out
 
 
 def test_errors_are_one_escaped_line() -> None:

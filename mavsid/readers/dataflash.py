@@ -700,14 +700,42 @@ def _column_into(raw: np.ndarray, ch: str, message: str, out: np.ndarray) -> Non
         out[...] = raw
 
 
+_BLOCK_BYTES = 1 << 26  # file bytes decoded (for every message) before their pages go back
+
+
+def _gather_by_block(
+    a: np.ndarray, jobs: Mapping[str, tuple[Definition, np.ndarray]]
+) -> dict[str, dict[str, np.ndarray]]:
+    """:func:`_gather_into` for several messages (name -> definition and ascending record
+    offsets), a block of the file at a time for all of them, each block's pages released
+    once it is done (so the file is mapped into the process about once, a block at a time,
+    instead of once per message type)."""
+    outs = {name: {c: np.empty((pos.size, *shape), dt)
+                   for c, (_, _, dt, shape) in _layout(d).items()}
+            for name, (d, pos) in jobs.items()}
+    done = dict.fromkeys(jobs, 0)
+    for lo in range(0, a.size, _BLOCK_BYTES):
+        for name, (d, pos) in jobs.items():
+            k = done[name]
+            stop = int(np.searchsorted(pos, lo + _BLOCK_BYTES))
+            if stop > k:
+                _gather_into(a, d, pos[k:stop], {c: v[k:stop] for c, v in outs[name].items()},
+                             release=False)
+                done[name] = stop
+        _release(a, lo, lo + _BLOCK_BYTES)
+    return outs
+
+
 def _gather_into(
-    a: np.ndarray, d: Definition, pos: np.ndarray, out: dict[str, np.ndarray] | None = None
+    a: np.ndarray, d: Definition, pos: np.ndarray, out: dict[str, np.ndarray] | None = None,
+    release: bool = True,
 ) -> dict[str, np.ndarray]:
     """Decode the records of definition ``d`` at offsets ``pos`` into ``out`` (arrays of
     ``pos.size`` rows, allocated when not given).
 
     Records are copied out of the file in slices that fit a CPU cache, then each field
-    is written straight into its column.
+    is written straight into its column. With ``release``, the file's pages are handed back
+    as the records are passed (see :func:`_release`).
     """
     layout = _layout(d)
     if out is None:
@@ -732,10 +760,11 @@ def _gather_into(
             else:
                 _column_into(recs[f], ch, d.name, col[k:stop])
         k = stop
-        if k < pos.size and int(pos[k]) - done >= _RELEASE_MIN:
+        if release and k < pos.size and int(pos[k]) - done >= _RELEASE_MIN:
             _release(a, done, int(pos[k]))
             done = int(pos[k])
-    _release(a, done, a.size)
+    if release:
+        _release(a, done, a.size)
     return out
 
 
@@ -1153,6 +1182,7 @@ def _read_buffer(
     meta_columns: dict[str, dict[str, np.ndarray]] = {}
     meta_times: dict[str, np.ndarray] = {}
     defs_by_name: dict[str, Definition] = {}
+    all_parts = {}
     for name, ids in by_name.items():
         parts = [(table.defs[i], *groups.pop(i)) for i in ids]
         parts, dropped = _bounded_layouts(parts)
@@ -1160,7 +1190,18 @@ def _read_buffer(
             notes.append(f"{name}: {dropped[0]} record(s) under {dropped[1]} other layout(s) "
                          "not decoded (the type is redefined with ever new columns)")
         defs_by_name[name] = parts[-1][0]
-        cols, t = _decode_message(a, parts)
+        all_parts[name] = parts
+    # messages of one layout: decoded a stretch of the file at a time (each file page is
+    # mapped into the process once, then handed back); the others one by one
+    single = {name: parts[0] for name, parts in all_parts.items() if len(parts) == 1}
+    prefilled = _gather_by_block(a, {name: (d, pos) for name, (d, _, pos, _) in single.items()})
+    for name, parts in all_parts.items():
+        if name in prefilled:
+            d, _, _, t = parts[0]
+            cols = prefilled.pop(name)
+            t = _times_of(d, cols) if t is None else t
+        else:
+            cols, t = _decode_message(a, parts)
         keys = parts[0][1] if len(parts) == 1 else np.sort(np.concatenate([p[1] for p in parts]))
         timeline[keys.astype(np.intp)] = t
         del parts, keys

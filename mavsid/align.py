@@ -14,15 +14,26 @@ log's content unless given) and
   latest input sample at or before it, never a value in between);
 - splits the grid into blocks wherever any channel pauses for more than ``max_gap``
   of its own sample intervals: nothing is interpolated or held across a gap;
+- excludes samples that were never measured: non-finite values (NaN, ±inf) and values no
+  multicopter reports (a body rate beyond ``MAX_RATE_RAD_S``, roll or pitch beyond ±π, yaw
+  outside −π..2π) and samples whose time stamp lies far off their neighbours' (a
+  far-future ``TimeUS`` or ``time_boot_ms``): none is interpolated over (the grid has a gap
+  there), each is counted in ``FlightData.meta["excluded_samples"]`` (channel -> count) and
+  warned about once (:class:`~mavsid.errors.DataQualityWarning`);
+- never builds a grid larger than the samples justify: points are laid only where every
+  channel has data, and at most ``MAX_GRID_PER_SAMPLE`` points per sample of the densest
+  channel (a larger ``rate_hz`` is a :class:`~mavsid.errors.ConfigError`);
 - carries per-sample flags ``armed`` and ``airborne`` (bool) and ``mode`` (int, -1 before
   the first mode message), from the log's events (DataFlash EV/ARM, MAVLink HEARTBEAT and
   EXTENDED_SYS_STATE, PX4 actuator_armed / vehicle_land_detected);
 - warns (:class:`~mavsid.errors.DataQualityWarning`) when an input is logged too slowly
   for attitude dynamics (below ``min_input_rate_hz``, e.g. 10 Hz RCOU).
 
-``FlightData.meta`` holds the native rate of every channel, the mixer used, and the
-ArduPilot SYSTEMID runs (``meta["sysid_runs"]``, from SIDS/SIDD or, in a .tlog, from the
-SYSTEMID mode and the SID_* parameter values sent before it).
+``FlightData.meta`` holds the native rate of every channel, the mixer used, the samples
+excluded (``excluded_samples``: channel -> count of non-finite, impossible or mistimed
+samples), which boot was used (``boot``: ``used``, ``of``, ``start_s``, ``stop_s``,
+``reason``) and the ArduPilot SYSTEMID runs (``meta["sysid_runs"]``, from SIDS/SIDD or, in
+a .tlog, from the SYSTEMID mode and the SID_* parameter values sent before it).
 
 Examples
 --------
@@ -43,7 +54,7 @@ import itertools
 import os
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -63,8 +74,15 @@ from mavsid.channels import (
     motor_thrusts,
     preset_messages,
 )
+from mavsid.channels import _rows as _rows
 from mavsid.data import FlightData, MessageTable, RawLog
-from mavsid.errors import ConfigError, DataQualityWarning, MavsidError, NoExcitationError
+from mavsid.errors import (
+    ConfigError,
+    DataQualityWarning,
+    MavsidError,
+    NoExcitationError,
+    naming_file,
+)
 from mavsid.readers import read_log, sniff_format
 
 __all__ = ["FLAG_MESSAGES", "align", "flight_table", "load_flight", "sysid_runs"]
@@ -73,6 +91,14 @@ __all__ = ["FLAG_MESSAGES", "align", "flight_table", "load_flight", "sysid_runs"
 MAX_GAP_SAMPLES = 4.0
 #: inputs logged slower than this cannot show attitude dynamics (a 10 Hz input sees < 5 Hz)
 MIN_INPUT_RATE_HZ = 20.0
+#: no multicopter gyro reports more (4000 deg/s, twice the usual full scale)
+MAX_RATE_RAD_S = float(np.deg2rad(4000.0))
+#: grid points allowed per sample of the densest channel (a hard cap on the grid's size)
+MAX_GRID_PER_SAMPLE = 50
+#: a sample is mistimed when it lies further than this from the median time of the
+#: ``2 * _OUTLIER_HALF + 1`` records around it (and further than many sample intervals)
+TIME_OUTLIER_S = 10.0
+_OUTLIER_HALF = 16
 
 
 @dataclass(frozen=True)
@@ -83,6 +109,10 @@ class _Series:
     source: str  # "MESSAGE.field" for messages and warnings
     t: np.ndarray
     v: np.ndarray
+    #: times of excluded samples (never measured or mistimed): the grid leaves a gap there
+    bad_t: np.ndarray = field(default_factory=lambda: np.empty(0))
+    #: how many samples were excluded, and why
+    excluded: tuple[tuple[str, int], ...] = ()
 
     @property
     def median_dt(self) -> float:
@@ -125,7 +155,7 @@ def _collect(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer]
             f"{raw.source.path}: a {raw.vehicle}'s {preset.motors.message} outputs are not a "
             "multicopter's motors: no inputs (the mixer presets are for multicopters)",
             DataQualityWarning,
-            stacklevel=3,
+            stacklevel=4,
         )
     elif preset.motors is not None:
         mixer = mixer_for(preset, raw.params, {**MIXERS, **mixers})
@@ -136,13 +166,18 @@ def _collect(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer]
                 f"{preset.motors.message} unmixed as {mixer.name} (choose a preset with "
                 "another mixer if the frame differs)",
                 DataQualityWarning,
-                stacklevel=3,
+                stacklevel=4,
             )
         t, thrust = motor_thrusts(raw, preset, mixer)
         u = mixer.unmix(thrust)
+        late, bad_t = _mistimed(t)
+        excluded: tuple[tuple[str, int], ...] = ()
+        if late.any():
+            excluded = (("mistimed", int(late.sum())),)
+            t, u = t[~late], u[~late]
         for j, name in enumerate(INPUT_NAMES):
             inputs.append(_Series(name, f"{preset.motors.message} ({mixer.name} mixer)", t,
-                                  u[:, j]))
+                                  u[:, j], bad_t, excluded))
     else:
         inputs = _channel_series(raw, preset, INPUT_NAMES, preset.inputs, need_samples=False)
     return states, inputs, mixer_name
@@ -166,8 +201,9 @@ def _channel_series(raw: RawLog, preset: Preset, names: Sequence[str],
             if ch.optional:
                 continue
             raise
+        t, v, bad_t, excluded = _screen(raw, ch, name, t, v)
         if t.size >= 2:
-            out.append(_Series(name, f"{ch.message}.{ch.field}", t, v))
+            out.append(_Series(name, f"{ch.message}.{ch.field}", t, v, bad_t, excluded))
         elif need_samples and not ch.optional:
             table = raw[ch.message]
             timed = int(np.count_nonzero(np.isfinite(np.asarray(table.time_s, dtype=float))))
@@ -176,6 +212,99 @@ def _channel_series(raw: RawLog, preset: Preset, names: Sequence[str],
                 f"time stamp and {t.size} usable: nothing to put on a time grid"
             )
     return out
+
+
+#: physically possible range of each state (SI units, after conversion)
+_STATE_LIMITS: dict[str, tuple[float, float]] = {
+    "p": (-MAX_RATE_RAD_S, MAX_RATE_RAD_S),
+    "q": (-MAX_RATE_RAD_S, MAX_RATE_RAD_S),
+    "r": (-MAX_RATE_RAD_S, MAX_RATE_RAD_S),
+    "roll": (-np.pi - 1e-3, np.pi + 1e-3),
+    "pitch": (-np.pi - 1e-3, np.pi + 1e-3),
+    "yaw": (-np.pi - 1e-3, 2 * np.pi + 1e-3),  # ArduPilot logs 0..360 degrees
+}
+
+
+def time_outliers(t: np.ndarray, half: int = _OUTLIER_HALF,
+                  limit_s: float = TIME_OUTLIER_S) -> np.ndarray:
+    """Mask of samples (record order) whose time lies far from that of the records around
+    them: more than ``limit_s`` and more than ``4 * half`` sample intervals from the median of
+    the ``2 * half + 1`` records centred on it (the nearest ones, at either end).
+
+    A run of time stamps that only increases is never flagged (each is its own window's
+    median), nor is a reboot (time restarting, for more than ``half`` records); a run of up
+    to ``half`` records far in the future (or past) is. Only records next to a large jump
+    are examined, so the cost is linear.
+
+    Examples
+    --------
+    >>> t = np.arange(100) * 0.01
+    >>> t[40:45] = 2.0**32 / 1000  # time_boot_ms of 2^32 - 1 in five records
+    >>> np.flatnonzero(time_outliers(t)).tolist()
+    [40, 41, 42, 43, 44]
+    >>> t = np.concatenate([np.arange(50) * 0.1, 1000 + np.arange(50) * 0.1])  # a pause
+    >>> int(time_outliers(t).sum())
+    0
+    """
+    out = np.zeros(t.size, dtype=bool)
+    if t.size < 3:
+        return out
+    d = np.diff(t)
+    pos = d[d > 0]
+    step = float(np.median(pos)) if pos.size else 0.0
+    limit = max(limit_s, 4 * half * step)
+    jumps = np.flatnonzero(np.abs(d) > limit)
+    if not jumps.size:
+        return out
+    # the records within ``half`` of a jump, each against its window's median
+    near = np.unique((jumps[:, None] + np.arange(-half + 1, half + 1)).ravel())
+    near = near[(near >= 0) & (near < t.size)]
+    width = min(2 * half + 1, t.size)  # near either end, the window is shifted inwards
+    first = np.clip(near - half, 0, t.size - width)
+    med = np.median(np.lib.stride_tricks.sliding_window_view(t, width)[first], axis=1)
+    out[near] = np.abs(t[near] - med) > limit
+    return out
+
+
+def _screen(raw: RawLog, ch: Channel, name: str, t: np.ndarray, v: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[tuple[str, int], ...]]:
+    """A channel's samples without the mistimed and the physically impossible ones; the times
+    where samples are missing (the non-finite ones :func:`evaluate` dropped, the impossible
+    ones, and, for mistimed ones, the neighbour's) and the counts of each kind."""
+    table = raw[ch.message]
+    t_all = np.asarray(table.time_s, dtype=np.float64)
+    rows = _rows(table, ch.instance)
+    if rows is not None:
+        t_all = t_all[rows]
+    t_all = t_all[np.isfinite(t_all)]
+    excluded: list[tuple[str, int]] = []
+    bad = [np.empty(0)]
+    if t_all.size > t.size:  # non-finite values evaluate() left out
+        excluded.append(("non-finite", int(t_all.size - t.size)))
+        bad.append(t_all[~np.isin(t_all, t)])
+    lo, hi = _STATE_LIMITS.get(name, (-np.inf, np.inf))
+    wrong = (v < lo) | (v > hi)
+    if wrong.any():
+        excluded.append((f"outside {lo:.4g}..{hi:.4g}", int(wrong.sum())))
+        bad.append(t[wrong])
+        t, v = t[~wrong], v[~wrong]
+    late, late_t = _mistimed(t)
+    if late.any():
+        excluded.append(("mistimed", int(late.sum())))
+        bad.append(late_t)
+        t, v = t[~late], v[~late]
+    return t, v, np.concatenate(bad), tuple(excluded)
+
+
+def _mistimed(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`time_outliers` of ``t`` and, for each, the time of the kept record before it
+    (where the grid must leave a gap: a sample is missing there)."""
+    late = time_outliers(t)
+    if not late.any():
+        return late, np.empty(0)
+    kept = np.flatnonzero(~late)
+    before = np.searchsorted(kept, np.flatnonzero(late)) - 1
+    return late, t[kept[before[before >= 0]]]
 
 
 #: a step back in time larger than this (s) is a reboot or the start of a concatenated log
@@ -190,26 +319,33 @@ def _boots(t: np.ndarray) -> list[slice]:
 
 
 def _one_boot(path: str, states: list[_Series], inputs: list[_Series]
-              ) -> tuple[list[_Series], list[_Series]]:
+              ) -> tuple[list[_Series], list[_Series], dict[str, Any]]:
     """Keep one boot of a log whose clock restarts, then sort by time and unwrap yaw.
 
     The boot is the longest one of the reference channel (body rate, else attitude); every
     channel keeps its records of that boot (its last boot when it has fewer).
     """
-    by_name = {s.name: s for s in states}
-    ref = next(by_name[n] for n in ("p", "q", "r", "roll", "pitch", "yaw") if n in by_name)
+    ref = _reference(states)
     ref_boots = _boots(ref.t)
     k = 0
+    boot: dict[str, Any] = {"used": 1, "of": 1, "start_s": float(np.min(ref.t)),
+                            "stop_s": float(np.max(ref.t)), "reason": "the log has one boot"}
     if len(ref_boots) > 1:
-        spans = [float(np.ptp(ref.t[b])) if b.stop - b.start > 1 else 0.0 for b in ref_boots]
-        k = int(np.argmax(spans))
+        # the boot with the most time covered by samples (not its span: one mistimed
+        # sample must not make a boot look long)
+        covered = [_covered_s(np.sort(ref.t[b])) for b in ref_boots]
+        k = int(np.argmax(covered))
         b = ref_boots[k]
+        boot = {"used": k + 1, "of": len(ref_boots), "start_s": float(np.min(ref.t[b])),
+                "stop_s": float(np.max(ref.t[b])),
+                "reason": f"the longest: {covered[k]:.1f} s of {ref.source} samples "
+                          f"(next longest {sorted(covered)[-2]:.1f} s)"}
         warnings.warn(
             f"{path}: the log's clock restarts {len(ref_boots) - 1} time(s) (reboot or "
             f"concatenated logs): only boot {k + 1} of {len(ref_boots)} is used "
-            f"({ref.t[b.start]:.1f}–{ref.t[b.stop - 1]:.1f} s)",
+            f"({boot['start_s']:.1f}–{boot['stop_s']:.1f} s, {boot['reason']})",
             DataQualityWarning,
-            stacklevel=3,
+            stacklevel=4,
         )
 
     def fix(s: _Series) -> _Series:
@@ -220,9 +356,34 @@ def _one_boot(path: str, states: list[_Series], inputs: list[_Series]
         t, v = _dedupe(t[order], v[order])
         if s.name == "yaw":
             v = np.unwrap(v)
-        return _Series(s.name, s.source, t, v)
+        bad_t = s.bad_t[(s.bad_t >= t[0]) & (s.bad_t <= t[-1])] if t.size else s.bad_t[:0]
+        return _Series(s.name, s.source, t, v, np.sort(bad_t), s.excluded)
 
-    return [fix(s) for s in states], [fix(s) for s in inputs]
+    return [fix(s) for s in states], [fix(s) for s in inputs], boot
+
+
+def _reference(states: Sequence[_Series]) -> _Series:
+    """The channel that sets the grid: a body rate, else an attitude angle."""
+    by_name = {s.name: s for s in states}
+    for n in ("p", "q", "r", "roll", "pitch", "yaw"):
+        if n in by_name:
+            return by_name[n]
+    raise ValueError("no state channel")  # callers check first
+
+
+def _covered_s(t: np.ndarray, max_gap: float = MAX_GAP_SAMPLES) -> float:
+    """Time (s) covered by sorted samples ``t``: the sum of their intervals that are no gap.
+
+    Examples
+    --------
+    >>> round(_covered_s(np.array([0.0, 0.1, 0.2, 1e6, 1e6 + 0.1])), 6)
+    0.3
+    """
+    d = np.diff(t)
+    pos = d[d > 0]
+    if not pos.size:
+        return 0.0
+    return float(d[(d > 0) & (d <= max_gap * float(np.median(pos)))].sum())
 
 
 def _gaps(series: list[_Series], max_gap: float) -> np.ndarray:
@@ -232,6 +393,9 @@ def _gaps(series: list[_Series], max_gap: float) -> np.ndarray:
         d = np.diff(s.t)
         i = np.flatnonzero(d > max_gap * s.median_dt)
         spans.append(np.column_stack([s.t[i], s.t[i + 1]]))
+        if s.bad_t.size and s.t.size >= 2:  # between the kept samples around an excluded one
+            j = np.clip(np.searchsorted(s.t, s.bad_t, side="right"), 1, s.t.size - 1)
+            spans.append(np.column_stack([s.t[j - 1], s.t[j]]))
     if not spans:
         return np.empty((0, 2))
     g = np.concatenate(spans)
@@ -247,9 +411,14 @@ def _gaps(series: list[_Series], max_gap: float) -> np.ndarray:
     return np.asarray(merged)
 
 
-def _grid(series: list[_Series], ref: _Series, rate_hz: float | None, max_gap: float
-          ) -> tuple[np.ndarray, np.ndarray, float]:
-    """Uniform grid times, ``[start, stop)`` blocks and the step."""
+def _grid(series: list[_Series], ref: _Series, rate_hz: float | None, max_gap: float,
+          path: str = "") -> tuple[np.ndarray, np.ndarray, float]:
+    """Uniform grid times, ``[start, stop)`` blocks and the step.
+
+    The grid is laid only where no channel has a gap (points inside a gap are never
+    made), so its size follows the samples, whatever their time stamps claim; more than
+    ``MAX_GRID_PER_SAMPLE`` points per sample of the densest channel is a ConfigError.
+    """
     gaps = _gaps(series, max_gap)
     if rate_hz is None:
         d = np.diff(ref.t)
@@ -264,7 +433,24 @@ def _grid(series: list[_Series], ref: _Series, rate_hz: float | None, max_gap: f
     if not np.isfinite(dt) or dt <= 0 or stop - start < dt:
         return np.empty(0), np.empty((0, 2), dtype=np.int64), dt
     n = int(np.floor((stop - start) / dt + 1e-9)) + 1
-    t = start + dt * np.arange(n)
+    # grid indices of the stretches between gaps, counted before anything is allocated
+    inner = gaps[(gaps[:, 1] > start) & (gaps[:, 0] < stop)]
+    lo_t = np.concatenate([[start], inner[:, 1]])
+    hi_t = np.concatenate([inner[:, 0], [stop]])
+    k_lo = np.clip(np.floor((lo_t - start) / dt) - 1, 0, n)
+    k_hi = np.clip(np.ceil((hi_t - start) / dt) + 1, -1, n - 1)
+    counts = np.maximum(k_hi - k_lo + 1, 0).astype(np.int64)
+    total = int(counts.sum())
+    samples = max(s.t.size for s in series)
+    if total > MAX_GRID_PER_SAMPLE * samples + 1000:
+        raise ConfigError(
+            f"{path}: a grid step of {dt:.3g} s gives {total} points for at most {samples} "
+            f"samples per channel (more than {MAX_GRID_PER_SAMPLE} per sample): choose a "
+            "lower rate_hz"
+        )
+    starts = np.repeat(k_lo.astype(np.int64) - np.cumsum(counts) + counts, counts)
+    k = np.unique(np.arange(total, dtype=np.int64) + starts)
+    t = start + dt * k
     t = t[t <= stop]
     # index of the first gap starting at or after each time; inside a gap when that gap's
     # predecessor has not ended yet
@@ -568,6 +754,8 @@ def align(
 ) -> FlightData:
     """Put a log's states and inputs on one uniform grid (see the module docstring).
 
+    Every error it raises names the log's file.
+
     Parameters
     ----------
     raw : RawLog
@@ -590,21 +778,52 @@ def align(
     NoExcitationError
         The channels never overlap in time (nothing to align).
     """
+    try:
+        return _align(raw, preset, rate_hz, presets, mixers, max_gap, min_input_rate_hz)
+    except MavsidError as exc:
+        named = naming_file(exc, raw.source.path)
+        if named is exc:
+            raise
+        raise named from exc
+
+
+def _align(raw: RawLog, preset: Preset | str | None, rate_hz: float | None,
+           presets: Mapping[str, Preset] | None, mixers: Mapping[str, Mixer] | None,
+           max_gap: float, min_input_rate_hz: float) -> FlightData:
     preset = _resolve_preset(raw, preset, presets)
     states, inputs, mixer = _collect(raw, preset, mixers or {})
     if not states:
         raise NoExcitationError(f"{raw.source.path}: no state samples for preset {preset.name}")
-    states, inputs = _one_boot(raw.source.path, states, inputs)
+    states, inputs, boot = _one_boot(raw.source.path, states, inputs)
     states = [s for s in states if s.t.size >= 2]
     inputs = [s for s in inputs if s.t.size >= 2]
-    by_name = {s.name: s for s in states}
-    ref = next(by_name[n] for n in ("p", "q", "r", "roll", "pitch", "yaw") if n in by_name)
+    if not states:
+        raise NoExcitationError(
+            f"{raw.source.path}: no state channel of preset {preset.name} has two samples "
+            "with distinct time stamps: nothing to put on a time grid"
+        )
+    ref = _reference(states)
     series = states + inputs
-    t, blocks, dt = _grid(series, ref, rate_hz, max_gap)
+    excluded = {s.name: dict(s.excluded) for s in series if s.excluded}
+    if excluded:
+        groups: dict[tuple[str, tuple[tuple[str, int], ...]], list[str]] = {}
+        for s in series:
+            if s.excluded:
+                groups.setdefault((s.source.split(".")[0], s.excluded), []).append(s.name)
+        shown = "; ".join(f"{src} " + ", ".join(f"{n} {why}" for why, n in why_n)
+                          + f" ({'/'.join(names)})" for (src, why_n), names in groups.items())
+        warnings.warn(
+            f"{raw.source.path}: samples excluded (never interpolated over): {shown}",
+            DataQualityWarning,
+            stacklevel=3,
+        )
+    t, blocks, dt = _grid(series, ref, rate_hz, max_gap, raw.source.path)
     if not t.size:
         raise NoExcitationError(
             f"{raw.source.path}: the channels of preset {preset.name} "
             f"({', '.join(sorted({s.source for s in series}))}) never overlap for two samples"
+            + (f" ({sum(sum(w.values()) for w in excluded.values())} sample(s) excluded as "
+               "never measured or mistimed)" if excluded else "")
         )
     x = np.empty((t.size, len(states)))
     for j, s in enumerate(states):
@@ -623,7 +842,7 @@ def align(
                 f"(below {min_input_rate_hz:g} Hz): dynamics above {rates[s.name] / 2:.1f} Hz "
                 "cannot be identified from them",
                 DataQualityWarning,
-                stacklevel=2,
+                stacklevel=3,
             )
     input_names = tuple(s.name for s in inputs)
     flags, flag_notes = _flags(raw, t, u, input_names)
@@ -632,6 +851,9 @@ def align(
         "native_rate_hz": {s.name: round(rates[s.name], 3) for s in series},
         "sources": {s.name: s.source for s in series},
         "sysid_runs": sysid_runs(raw),
+        "excluded_samples": {name: sum(why.values()) for name, why in excluded.items()},
+        "excluded_reasons": excluded,
+        "boot": boot,
         "mode_names": {m.mode: m.name for m in raw.modes if m.name},
         "flag_notes": flag_notes,
         "vehicle": raw.vehicle,

@@ -20,7 +20,7 @@ from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 from mavsid import __version__
-from mavsid.errors import ConfigError, MavsidError, MavsidWarning
+from mavsid.errors import ConfigError, MavsidError, MavsidWarning, escape, escape_lines
 
 if TYPE_CHECKING:
     from mavsid.pipeline import FitResult, PipelineConfig
@@ -33,7 +33,7 @@ Handler = Callable[[argparse.Namespace], int]
 def _show_warning(message, category, filename, lineno, file=None, line=None):
     """Print mavsid's warnings as one plain line, others as Python would."""
     if issubclass(category, MavsidWarning):
-        print(f"warning: {message}", file=sys.stderr)
+        print(f"warning: {escape(message)}", file=sys.stderr)
     else:
         _default_showwarning(message, category, filename, lineno, file, line)
 
@@ -70,8 +70,8 @@ def _info(args: argparse.Namespace) -> int:
     from mavsid.readers import read_log
 
     summary = summarize(read_log(args.log, **_dialect(args)))
-    print(json.dumps(summary, indent=1, ensure_ascii=False) if args.json
-          else format_summary(summary))
+    print(json.dumps(summary, indent=1, ensure_ascii=True) if args.json
+          else escape_lines(format_summary(summary)))
     return 0
 
 
@@ -145,12 +145,12 @@ def _segments(args: argparse.Namespace) -> int:
     reports = find_segments(flight, args.axis, scan=True if args.scan else None,
                             options=ScanOptions(window_s=args.window))
     if args.json:
-        print(json.dumps([r.to_dict() for r in reports], indent=1, ensure_ascii=False))
+        print(json.dumps([r.to_dict() for r in reports], indent=1, ensure_ascii=True))
     else:
         span = flight.time_s[-1] - flight.time_s[0]
-        print(f"{args.log}: preset {flight.preset}, {1 / flight.dt:.0f} Hz, {span:.1f} s, "
-              f"{len(flight.blocks)} block(s)")
-        print(format_reports(reports, show_all=args.all))
+        print(escape(f"{args.log}: preset {flight.preset}, {1 / flight.dt:.0f} Hz, "
+                     f"{span:.1f} s, {len(flight.blocks)} block(s)"))
+        print(escape_lines(format_reports(reports, show_all=args.all)))
     return 0
 
 
@@ -256,9 +256,9 @@ def _print_result(args: argparse.Namespace, result: FitResult) -> None:
     from mavsid.pipeline import format_result
 
     if args.json:
-        print(json.dumps(result.to_dict(), indent=1, ensure_ascii=False, allow_nan=False))
+        print(json.dumps(result.to_dict(), indent=1, ensure_ascii=True, allow_nan=False))
     else:
-        print(format_result(result))
+        print(escape_lines(format_result(result)))
         for flag, path in (("rrd", args.rrd), ("report", args.report)):
             if path:
                 print(f"wrote {path}" + (f" (open it with: rerun {path})" if flag == "rrd" else ""))
@@ -451,7 +451,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except MavsidError as exc:
         if args.debug:
             traceback.print_exc()
-        print(f"mavsid: error: {exc}", file=sys.stderr)
+        print(f"mavsid: error: {escape(exc)}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("mavsid: interrupted", file=sys.stderr)

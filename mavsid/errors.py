@@ -12,10 +12,18 @@ Examples
 'flight.bin: no DataFlash records found (at byte 0)'
 >>> isinstance(err, ValueError) and isinstance(err, MavsidError)
 True
+
+Text that comes from a log (message and field names, units, texts, a file name) may hold
+control characters; every error's text is escaped (:func:`escape`), so it is one line that
+cannot move the cursor, recolour or clear a terminal:
+
+>>> str(LogFormatError("bad name 'A\\x1b[2J\\rB\\nC'", path="x.bin"))
+"x.bin: bad name 'A\\\\x1b[2J\\\\rB\\\\nC'"
 """
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterable
 
 __all__ = [
@@ -27,11 +35,61 @@ __all__ = [
     "MissingMessageError",
     "NoExcitationError",
     "SolverError",
+    "escape",
+    "escape_lines",
+    "naming_file",
 ]
 
 
+# C0 and C1 controls, DEL, and the invisible format characters that reorder or hide text
+# (bidirectional overrides and isolates, zero-width characters, line/paragraph separators)
+_UNSAFE = re.compile("[\x00-\x1f\x7f-\x9f\u200b-\u200f\u2028-\u202e\u2060-\u2069\ufeff]")
+_NAMED = {"\n": "\\n", "\r": "\\r", "\t": "\\t"}
+
+
+def _escaped(match: re.Match[str]) -> str:
+    ch = match.group()
+    if ch in _NAMED:
+        return _NAMED[ch]
+    code = ord(ch)
+    return f"\\x{code:02x}" if code < 0x100 else f"\\u{code:04x}"
+
+
+def escape(text: object) -> str:
+    """``text`` as one line safe for a terminal: control characters (newlines, carriage
+    returns, escape sequences, C1 controls, bidirectional overrides) shown as ``\\n``,
+    ``\\x1b`` ... Use it on every text from a log that is printed.
+
+    Examples
+    --------
+    >>> escape("ATT\\x1b[31m\\r\\n")
+    'ATT\\\\x1b[31m\\\\r\\\\n'
+    >>> escape("plain text, °C, Ω") == "plain text, °C, Ω"
+    True
+    """
+    return _UNSAFE.sub(_escaped, str(text))
+
+
+def escape_lines(text: str) -> str:
+    """Multi-line output (``mavsid info`` ...) with each line :func:`escape`-d: its own
+    newlines kept, anything else that would move the cursor escaped.
+
+    Examples
+    --------
+    >>> escape_lines("a\\rb\\nc")
+    'a\\\\rb\\nc'
+    """
+    return "\n".join(escape(line) for line in text.split("\n"))
+
+
 class MavsidError(Exception):
-    """Base class of every error mavsid raises on purpose."""
+    """Base class of every error mavsid raises on purpose.
+
+    Its text is :func:`escape`-d: one line, whatever the log put into it.
+    """
+
+    def __str__(self) -> str:
+        return escape(super().__str__())
 
 
 class LogFormatError(MavsidError, ValueError):
@@ -71,6 +129,7 @@ class MissingMessageError(MavsidError, KeyError):
     def __init__(self, name: str, available: Iterable[str] = (), what: str = "message",
                  path: object = None) -> None:
         self.name = name
+        self.what = what
         self.available = sorted(available)
         self.path = None if path is None else str(path)
         shown = ", ".join(self.available[:40])
@@ -82,7 +141,35 @@ class MissingMessageError(MavsidError, KeyError):
         super().__init__(self.text)
 
     def __str__(self) -> str:  # KeyError would quote the whole message
-        return self.text
+        return escape(self.text)
+
+
+def naming_file(exc: MavsidError, path: object) -> MavsidError:
+    """``exc``, or an error of the same type whose text starts with ``path`` when it does
+    not name that file yet (the library's entry points use it: every error names the file).
+
+    Examples
+    --------
+    >>> str(naming_file(MissingMessageError("ATT.Roll", what="field"), "a.bin"))
+    "a.bin: log has no field 'ATT.Roll'"
+    >>> str(naming_file(NoExcitationError("a.bin: nothing"), "a.bin"))
+    'a.bin: nothing'
+    """
+    where = str(path)
+    if not where or where in str(exc):
+        return exc
+    new: MavsidError
+    if isinstance(exc, MissingMessageError):
+        new = MissingMessageError(exc.name, exc.available, exc.what, path=where)
+    elif isinstance(exc, LogFormatError):
+        new = LogFormatError(exc.reason, path=where, offset=exc.offset)
+    else:
+        try:
+            new = type(exc)(f"{where}: {exc}")
+        except TypeError:  # a subclass with another signature: leave it
+            return exc
+    new.__cause__ = exc.__cause__
+    return new
 
 
 class NoExcitationError(MavsidError, ValueError):

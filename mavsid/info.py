@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from mavsid.data import MessageTable, RawLog
+from mavsid.errors import escape
 
 __all__ = ["format_summary", "median_rate_hz", "summarize"]
 
@@ -155,35 +156,39 @@ def _fmt_time(t: float | None) -> str:
 def format_summary(summary: Mapping[str, Any], max_fields: int | None = None) -> str:
     """The text ``mavsid info`` prints for a :func:`summarize` dict.
 
-    ``max_fields`` shortens long field lists (None: all).
+    ``max_fields`` shortens long field lists (None: all). Text from the log (names, units,
+    notes, the firmware) is escaped: control characters are shown, never sent to the
+    terminal (:func:`mavsid.errors.escape`).
     """
     s = summary
+    e = escape
     lines = [
-        f"{s['path']}",
-        f"  format      {s['format']} ({s['size_bytes']} bytes), autopilot {s['autopilot']}",
-        f"  firmware    {s['firmware'] or '?'}",
-        f"  vehicle     {s['vehicle'] or '?'}",
+        f"{e(s['path'])}",
+        f"  format      {e(s['format'])} ({s['size_bytes']} bytes), autopilot "
+        f"{e(s['autopilot'])}",
+        f"  firmware    {e(s['firmware'] or '?')}",
+        f"  vehicle     {e(s['vehicle'] or '?')}",
         f"  time        {_fmt_time(s['start_s'])} .. {_fmt_time(s['end_s'])}"
         f" (duration {_fmt_time(s['duration_s'])})",
         f"  parameters  {s['param_count']}, texts {s['text_count']}, "
         f"skipped bytes {s['skipped_bytes']}",
     ]
     lines.append(f"  messages    {len(s['messages'])} types")
-    width = max((len(n) for n in s["messages"]), default=4)
+    width = max((len(e(n)) for n in s["messages"]), default=4)
     for name, m in s["messages"].items():
         rate = "    ?   " if m["rate_hz"] is None else f"{m['rate_hz']:8.2f}"
-        fields = [f if u is None else f"{f}[{u}]" for f, u in m["fields"].items()]
+        fields = [e(f) if u is None else f"{e(f)}[{e(u)}]" for f, u in m["fields"].items()]
         if max_fields is not None and len(fields) > max_fields:
             fields = [*fields[:max_fields], f"... ({len(m['fields'])} fields)"]
-        lines.append(f"    {name:<{width}} {m['count']:>8} {rate} Hz  {' '.join(fields)}")
+        lines.append(f"    {e(name):<{width}} {m['count']:>8} {rate} Hz  {' '.join(fields)}")
     lines.append(f"  modes       {len(s['modes'])} changes")
     for m in s["modes"]:
-        lines.append(f"    {_fmt_time(m['time_s']):>12}  {m['mode']:>3} {m['name'] or '?'}")
+        lines.append(f"    {_fmt_time(m['time_s']):>12}  {m['mode']:>3} {e(m['name'] or '?')}")
     lines.append(f"  SYSTEMID    {len(s['sysid_runs'])} runs")
     for run in s["sysid_runs"]:
-        settings = " ".join(f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={v}"
+        settings = " ".join(f"{e(k)}={v:.6g}" if isinstance(v, float) else f"{e(k)}={e(v)}"
                             for k, v in run.items() if k != "time_s")
         lines.append(f"    {_fmt_time(run['time_s']):>12}  {settings}")
     for note in s["notes"]:
-        lines.append(f"  note: {note}")
+        lines.append(f"  note: {e(note)}")
     return "\n".join(lines)

@@ -512,3 +512,90 @@ def test_redefined_layouts_give_every_written_value(tmp_path_factory, blocks, se
                 assert got == "", (k, col)
             else:
                 assert np.all(np.isnan(got)), (k, col)
+
+
+# --------------------------------------------------------------------------- hostile files
+# (issue 13: each builds the file; time and memory are measured in tests/fuzz)
+
+
+def test_fmt_churn_keeps_one_layout_and_says_so(tmp_path: Path) -> None:
+    """A type redefined with new columns before every record: the merged table would grow
+    with the square of the count; one layout is kept, the rest counted."""
+    from fuzz import hostile
+
+    path = tmp_path / "churn.bin"
+    path.write_bytes(hostile.fmt_churn(60_000))
+    n = len(path.read_bytes()) // (89 + 15)
+    with pytest.warns(DataQualityWarning, match=r"CHN: \d+ record\(s\) under \d+ other layout"):
+        log = read_log(path)
+    table = log["CHN"]
+    assert len(table.columns) == 2 and len(table) == 1  # the latest layout, its one record
+    (name,) = [c for c in table.columns if c != "TimeUS"]
+    assert table[name].tolist() == [float(name[1:])] and int(name[1:]) in (n - 1, n)
+
+
+def test_fmt_churn_with_two_alternating_layouts_is_merged(tmp_path: Path) -> None:
+    """Redefinitions that do not grow the union of columns keep every record."""
+    data = bytearray()
+    for k in range(3000):
+        fmt = "Qf" if k % 2 else "Qi"
+        data += build_fmt(0x81, "ALT", fmt, "TimeUS,V") + build_record(0x81, fmt, k, k)
+    path = tmp_path / "alt.bin"
+    path.write_bytes(bytes(data))
+    log = read_log(path)
+    assert log["ALT"]["V"].tolist() == [float(k) for k in range(3000)]
+
+
+def test_header_flood_is_no_log(tmp_path: Path) -> None:
+    from fuzz import hostile
+
+    path = tmp_path / "flood.bin"
+    path.write_bytes(hostile.header_flood(3_000_000))
+    with pytest.raises(LogFormatError, match=r"flood\.bin: no DataFlash records"):
+        read_log(path)
+
+
+def test_header_flood_inside_a_log_is_skipped(tmp_path: Path) -> None:
+    from fuzz import hostile
+
+    good = hostile.header_and_records(500)
+    path = tmp_path / "flooded.bin"
+    path.write_bytes(good + hostile.header_flood(300_000) + good[89:])
+    with pytest.warns(DataQualityWarning, match="skipped"):
+        log = read_log(path)
+    assert log["TST"]["V"].tolist() == [float(k) for k in range(500)] * 2
+
+
+def test_metadata_with_another_layout_is_salvaged(tmp_path: Path) -> None:
+    """PARM, MODE and VER defined with strings where numbers belong: no ValueError; the
+    values that are numbers are kept."""
+    from fuzz import hostile
+
+    path = tmp_path / "meta.bin"
+    path.write_bytes(hostile.metadata_redefined()
+                     + build_fmt(0x85, "MULT", "QZZ", "TimeUS,Id,Mult")
+                     + build_record(0x85, "QZZ", 5, "x", "y"))
+    log = read_log(path)
+    assert log.params == {}  # "fast" is no number
+    assert log.firmware == "ArduCopter V4"
+    assert [m.name for m in log.modes] == ["LOITER"]
+    assert log["TST"]["V"].tolist() == [float(k) for k in range(10)]
+    # numbers in text are still numbers
+    data = (build_fmt(0x81, "PARM", "QNZ", "TimeUS,Name,Value")
+            + build_record(0x81, "QNZ", 1, "RATE_P", "0.25"))
+    path.write_bytes(data)
+    assert read_log(path).params == {"RATE_P": 0.25}
+
+
+def test_signalling_nan_is_read_as_nan_without_warnings(tmp_path: Path) -> None:
+    """A flipped bit may make a float a signalling NaN: numpy warns on every later cast
+    (issue 13, item 11); the reader gives a quiet NaN as pymavlink does."""
+    snan = np.frombuffer(b"\x01\x00\x80\x7f", "<f4")[0]
+    data = build_fmt(0x81, "TST", "Qf", "TimeUS,V") + build_record(0x81, "Qf", 1, 1.0)
+    data += bytes((0xA3, 0x95, 0x81)) + (2).to_bytes(8, "little") + snan.tobytes()
+    path = tmp_path / "snan.bin"
+    path.write_bytes(data)
+    v = read_log(path)["TST"]["V"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        assert np.isnan(v.astype(np.float64)[1])

@@ -99,3 +99,26 @@ def test_nothing_decodable_is_a_log_format_error(tmp_path, text):
     path.write_text(text)
     with pytest.raises(LogFormatError, match=r"empty\.log"):
         dftext.read(path)
+
+
+def test_text_flood_is_read_in_bounded_memory(tmp_path) -> None:
+    """Floods of short lines (undefined types, too few values) are skipped; the defined
+    records still read; Python's memory stays a small multiple of the file (it was ~25x:
+    one list per line). Process memory and time are measured in tests/fuzz."""
+    import tracemalloc
+
+    from fuzz import hostile
+
+    path = tmp_path / "flood.log"
+    path.write_bytes(hostile.text_flood(2_000_000)
+                     + b"".join(b"TST, %d, %d.5\n" % (k * 1000, k) for k in range(10)))
+    tracemalloc.start()
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", DataQualityWarning)
+            log = read_log(path)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert log["TST"]["V"].tolist() == [k + 0.5 for k in range(10)]
+    assert peak < 3 * 2_000_000 + 8_000_000  # (+ one slice of lines) it was ~25x the file

@@ -21,7 +21,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from mavsid.data import RawLog
-from mavsid.errors import ConfigError, LogFormatError
+from mavsid.errors import ConfigError, LogFormatError, MavsidError, naming_file
 
 __all__ = ["READERS", "read_log", "sniff_format"]
 
@@ -128,5 +128,12 @@ def read_log(
     if "dialect" in options and fmt != "tlog":
         raise ConfigError(f"{path}: a MAVLink dialect applies to .tlog files only, not {fmt}")
     module = importlib.import_module(READERS[fmt])
-    result: RawLog = module.read(path, messages=messages, start=start, stop=stop, **options)
+    try:
+        result: RawLog = module.read(path, messages=messages, start=start, stop=stop,
+                                     **options)
+    except MavsidError as exc:  # every error names the file
+        named = naming_file(exc, os.fspath(path))
+        if named is exc:
+            raise
+        raise named from exc
     return result

@@ -58,7 +58,7 @@ import struct
 import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import numpy as np
 
@@ -151,7 +151,7 @@ class Definition:
     format: str
     columns: tuple[str, ...]
 
-    @property
+    @cached_property
     def fields(self) -> tuple[tuple[str, int], ...]:
         """``(column name, index into format)`` in log order; a repeated name keeps its last
         position (as pymavlink does); columns beyond the format are ignored."""
@@ -172,7 +172,7 @@ class Definition:
             return f"declared length {self.length} but format {self.format!r} needs {size}"
         return None
 
-    @property
+    @cached_property
     def time_field(self) -> tuple[str, int, float] | None:
         """``(column, format index, seconds per count)`` of the boot-time field, if any."""
         return _time_field(self.name, self.format, self.fields)
@@ -261,6 +261,28 @@ def _index_dtype(n: int) -> type[np.signedinteger]:
     return np.int32 if n < 2**31 - 1024 else np.int64
 
 
+_RELEASE_MIN = 1 << 22  # bytes of file pages worth a madvise call
+_SPAN_BYTES = 1 << 24  # file bytes one gather slice may span
+
+
+def _release(a: np.ndarray, lo: int, hi: int) -> None:
+    """Tell the kernel that bytes ``lo..hi`` of the memory-mapped file ``a`` are not needed
+    for now: their pages leave the process's resident set (they stay in the page cache and
+    come back on the next touch, a minor fault). Without it, reading every record maps the
+    whole file into the process, on top of the arrays decoded from it."""
+    base = a.base.obj if isinstance(a.base, memoryview) else a.base
+    if not isinstance(base, mmap.mmap) or not hasattr(mmap, "MADV_DONTNEED"):
+        return
+    lo = max(lo, 0) // mmap.PAGESIZE * mmap.PAGESIZE
+    hi = min(hi, len(base))
+    if hi - lo < _RELEASE_MIN:
+        return
+    try:
+        base.madvise(mmap.MADV_DONTNEED, lo, hi - lo)
+    except (OSError, ValueError):  # not supported here: only memory use differs
+        pass
+
+
 def _find_headers(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Offsets of every ``0xA3 0x95`` byte pair followed by a type byte, ascending, and
     those type bytes.
@@ -285,6 +307,8 @@ def _find_headers(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         hits.sort(kind="stable")
         found.append(hits + dt(start))  # chunks come in order
         types.append(seg[hits + 2])
+        if (start // _CHUNK) % 16 == 15:
+            _release(a, start - 15 * _CHUNK, start)
     return np.concatenate(found), np.concatenate(types)
 
 
@@ -321,40 +345,82 @@ class _Definitions:
 
 
 def _read_definitions(a: np.ndarray, fmt_pos: np.ndarray) -> _Definitions:
-    """Parse the FMT records at ``fmt_pos`` (already known to be complete)."""
+    """Parse the FMT records at ``fmt_pos`` (already known to be complete).
+
+    Candidates whose name or format cannot be text are dropped with numpy first, and each
+    distinct FMT payload is parsed once: a flood of header patterns or of one repeated
+    definition costs no Python work per record.
+    """
     out = _Definitions()
     out.defs.append(_FMT_DEF)
     out.by_type[_FMT_TYPE] = [(-1, 0)]
     if fmt_pos.size == 0:
         return out
-    recs = _records(a, _FMT_DEF.payload_dtype, fmt_pos + 3)
+    payload = _FMT_LEN - 3
+    # cheap first: the type is not FMT's and the name starts with a printable character
+    head = _lookup(a, fmt_pos + 5)
+    fmt_pos = fmt_pos[(head >= 0x20) & (head < 0x7F) & (_lookup(a, fmt_pos + 3) != _FMT_TYPE)]
+    raw = _record_view(a, np.dtype((np.uint8, payload)))
+    keep = np.zeros(fmt_pos.size, bool)
+    step = 1 << 16
+    for k in range(0, fmt_pos.size, step):
+        rec = raw[fmt_pos[k : k + step].astype(np.intp) + 3]
+        keep[k : k + step] = (rec[:, 0] != _FMT_TYPE) & _text_ok(rec[:, 2:6], name=True) \
+            & _text_ok(rec[:, 6:22], name=False)
+    fmt_pos = fmt_pos[keep]
+    if fmt_pos.size == 0:
+        return out
+    blobs = _records(a, np.dtype((np.void, payload)), fmt_pos + 3)
+    uniq, first, inverse = np.unique(blobs, return_index=True, return_inverse=True)
+    del blobs
+    inverse = inverse.reshape(-1)
+    recs = uniq.view(_FMT_DEF.payload_dtype).reshape(-1)
     index: dict[Definition, int] = {_FMT_DEF: 0}
-    bad: dict[int, str] = {}
-    for pos, (mtype, length, name, fmt, cols) in zip(fmt_pos.tolist(), recs.tolist(), strict=True):
-        if mtype == _FMT_TYPE:
-            continue
-        try:
-            sname = name.split(b"\0", 1)[0].decode("ascii")
-            sfmt = fmt.split(b"\0", 1)[0].decode("ascii")
-        except UnicodeDecodeError:
-            continue
-        if not sname.isprintable() or not sname.strip():
-            continue
-        out.plausible.append(pos)
+    bad: dict[int, tuple[int, str]] = {}
+    def_of = np.full(uniq.size, -1, np.int64)  # per distinct payload: index into defs
+    plausible = np.zeros(uniq.size, bool)
+    for u, (mtype, length, name, fmt, cols) in enumerate(recs.tolist()):
+        sname = name.split(b"\0", 1)[0].decode("ascii")
+        sfmt = fmt.split(b"\0", 1)[0].decode("ascii")
+        plausible[u] = True
         columns = tuple(_decode_text(cols).split(",")) if cols else ()
         d = Definition(int(mtype), sname, int(length), sfmt, columns)
         problem = d.problem()
         if problem is not None:
-            bad[d.type] = f"type {d.type} ({d.name}): {problem}"
+            at = int(first[u])
+            if d.type not in bad or at < bad[d.type][0]:
+                bad[d.type] = (at, f"type {d.type} ({d.name}): {problem}")
             continue
         if d not in index:
             index[d] = len(out.defs)
             out.defs.append(d)
-        entries = out.by_type.setdefault(d.type, [])
-        if not entries or entries[-1][1] != index[d]:
-            entries.append((pos, index[d]))
-    out.problems = [msg for t, msg in sorted(bad.items()) if t not in out.by_type]
+        def_of[u] = index[d]
+    out.plausible = fmt_pos[plausible[inverse]].tolist()
+    # where each type's definition changes, in file order
+    ids = def_of[inverse]
+    usable = ids >= 0
+    pos, ids = fmt_pos[usable].astype(np.int64), ids[usable]
+    types = a[pos + 3].astype(np.int64)
+    order = np.lexsort((pos, types))
+    pos, ids, types = pos[order], ids[order], types[order]
+    change = np.ones(pos.size, bool)
+    change[1:] = (types[1:] != types[:-1]) | (ids[1:] != ids[:-1])
+    for t, p, i in zip(types[change].tolist(), pos[change].tolist(), ids[change].tolist(),
+                       strict=True):
+        out.by_type.setdefault(t, []).append((p, i))
+    out.problems = [msg for t, (_, msg) in sorted(bad.items()) if t not in out.by_type]
     return out
+
+
+def _text_ok(chars: np.ndarray, name: bool) -> np.ndarray:
+    """Rows of ``chars`` (fixed-width byte fields) that decode as an FMT name (printable
+    ASCII, not blank) or format (ASCII) up to their first NUL."""
+    ended = np.cumsum(chars == 0, axis=1) > 0  # at or after the first NUL
+    if not name:
+        return np.all(ended | (chars < 0x80), axis=1)
+    printable = (chars >= 0x20) & (chars < 0x7F)
+    solid = printable & (chars != 0x20)
+    return np.all(ended | printable, axis=1) & np.any(~ended & solid, axis=1)
 
 
 def _lookup(table: np.ndarray, index: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
@@ -634,14 +700,42 @@ def _column_into(raw: np.ndarray, ch: str, message: str, out: np.ndarray) -> Non
         out[...] = raw
 
 
+_BLOCK_BYTES = 1 << 26  # file bytes decoded (for every message) before their pages go back
+
+
+def _gather_by_block(
+    a: np.ndarray, jobs: Mapping[str, tuple[Definition, np.ndarray]]
+) -> dict[str, dict[str, np.ndarray]]:
+    """:func:`_gather_into` for several messages (name -> definition and ascending record
+    offsets), a block of the file at a time for all of them, each block's pages released
+    once it is done (so the file is mapped into the process about once, a block at a time,
+    instead of once per message type)."""
+    outs = {name: {c: np.empty((pos.size, *shape), dt)
+                   for c, (_, _, dt, shape) in _layout(d).items()}
+            for name, (d, pos) in jobs.items()}
+    done = dict.fromkeys(jobs, 0)
+    for lo in range(0, a.size, _BLOCK_BYTES):
+        for name, (d, pos) in jobs.items():
+            k = done[name]
+            stop = int(np.searchsorted(pos, lo + _BLOCK_BYTES))
+            if stop > k:
+                _gather_into(a, d, pos[k:stop], {c: v[k:stop] for c, v in outs[name].items()},
+                             release=False)
+                done[name] = stop
+        _release(a, lo, lo + _BLOCK_BYTES)
+    return outs
+
+
 def _gather_into(
-    a: np.ndarray, d: Definition, pos: np.ndarray, out: dict[str, np.ndarray] | None = None
+    a: np.ndarray, d: Definition, pos: np.ndarray, out: dict[str, np.ndarray] | None = None,
+    release: bool = True,
 ) -> dict[str, np.ndarray]:
     """Decode the records of definition ``d`` at offsets ``pos`` into ``out`` (arrays of
     ``pos.size`` rows, allocated when not given).
 
     Records are copied out of the file in slices that fit a CPU cache, then each field
-    is written straight into its column.
+    is written straight into its column. With ``release``, the file's pages are handed back
+    as the records are passed (see :func:`_release`).
     """
     layout = _layout(d)
     if out is None:
@@ -650,14 +744,44 @@ def _gather_into(
     fields = [(f, None if ch in _PLAIN and col.dtype != object else ch, col)
               for c, (f, ch, _, _) in layout.items() if (col := out.get(c)) is not None]
     step = max(1, _GATHER_BYTES // max(d.payload_dtype.itemsize, 1))
-    for k in range(0, pos.size, step):
-        recs = _records(a, d.payload_dtype, pos[k : k + step] + 3)
+    done = 0  # file bytes before this are not needed again for this definition
+    k = 0
+    while k < pos.size:
+        # a slice of records that fits a cache and spans a bounded stretch of the file
+        # (each record touched maps file pages into the process until released)
+        stop = min(k + step, int(np.searchsorted(pos, pos[k] + _SPAN_BYTES)))
+        stop = max(stop, k + 1)
+        recs = _records(a, d.payload_dtype, pos[k:stop] + 3)
         for f, ch, col in fields:
             if ch is None:
-                col[k : k + step] = recs[f]
+                col[k:stop] = recs[f]
+                if col.dtype.kind == "f":
+                    _quiet_nans(col[k:stop])
             else:
-                _column_into(recs[f], ch, d.name, col[k : k + step])
+                _column_into(recs[f], ch, d.name, col[k:stop])
+        k = stop
+        if release and k < pos.size and int(pos[k]) - done >= _RELEASE_MIN:
+            _release(a, done, int(pos[k]))
+            done = int(pos[k])
+    if release:
+        _release(a, done, a.size)
     return out
+
+
+def _quiet_nans(v: np.ndarray) -> None:
+    """Replace signalling NaNs (a damaged float's bit pattern) by quiet NaN in place, as
+    Python's ``struct`` does: numpy would warn ("invalid value") on every later cast.
+
+    Examples
+    --------
+    >>> v = np.frombuffer(b"\\x01\\x00\\x80\\x7f", "<f4").copy()  # a signalling NaN
+    >>> _quiet_nans(v); bool(v.view("<u4")[0] == np.float32("nan").view("<u4"))
+    True
+    """
+    with np.errstate(invalid="ignore"):
+        bad = v != v
+    if bad.any():
+        v[bad] = np.nan
 
 
 def _gather_times(a: np.ndarray, d: Definition, pos: np.ndarray) -> np.ndarray | None:
@@ -681,11 +805,14 @@ def _units(
     if "UNIT" in tables and {"Id", "Label"} <= set(tables["UNIT"]):
         for i, label in zip(tables["UNIT"]["Id"].tolist(), tables["UNIT"]["Label"].tolist(),
                             strict=True):
-            unit_of[chr(int(i) % 256)] = str(label)
+            if (key := _id_char(i)) is not None:
+                unit_of[key] = str(label)
     if "MULT" in tables and {"Id", "Mult"} <= set(tables["MULT"]):
         for i, mult in zip(tables["MULT"]["Id"].tolist(), tables["MULT"]["Mult"].tolist(),
                            strict=True):
-            mult_of[chr(int(i) % 256)] = float(f"{float(mult):.7g}")
+            value = _number(mult)
+            if (key := _id_char(i)) is not None and value is not None:
+                mult_of[key] = float(f"{value:.7g}")
     units: dict[str, dict[str, str]] = {}
     mults: dict[str, dict[str, float]] = {}
     fmtu = tables.get("FMTU", {})
@@ -697,8 +824,9 @@ def _units(
     mult_ids = fmtu.get("MultIds")
     for k, (ftype, uids) in enumerate(zip(fmtu["FmtType"].tolist(), fmtu["UnitIds"].tolist(),
                                           strict=True)):
-        target = type_names.get(int(ftype))
-        if target is None:
+        number = _number(ftype)
+        target = type_names.get(int(number)) if number is not None else None
+        if target is None or not isinstance(uids, str):
             continue
         d = defs_by_name[target]
         mids = str(mult_ids[k]) if mult_ids is not None else ""
@@ -724,6 +852,32 @@ _BUILD_TYPES = {1: "rover", 2: "copter", 3: "plane", 4: "tracker", 7: "sub", 12:
                 13: "heli"}
 
 
+def _number(value: object) -> float | None:
+    """A metadata value as a finite float, or None (a log may define PARM, MODE, VER ...
+    with another layout: strings or arrays where numbers belong).
+
+    Examples
+    --------
+    >>> _number(3), _number("2.5"), _number("fast"), _number(float("nan"))
+    (3.0, 2.5, None, None)
+    """
+    if isinstance(value, (bytes, list, tuple, np.ndarray)):
+        return None
+    try:
+        out = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError, OverflowError):
+        return None
+    return out if np.isfinite(out) else None
+
+
+def _id_char(value: object) -> str | None:
+    """A UNIT/MULT id (a character code, or the character itself in text logs)."""
+    if isinstance(value, str):
+        return value[:1] or None
+    number = _number(value)
+    return None if number is None else chr(int(number) % 256)
+
+
 def vehicle_and_firmware(
     texts: Sequence[str], tables: Mapping[str, Mapping[str, np.ndarray]]
 ) -> tuple[str | None, str | None]:
@@ -739,8 +893,8 @@ def vehicle_and_firmware(
     if firmware is None and "FWS" in ver and len(ver["FWS"]):
         firmware = str(ver["FWS"][0]) or None
     vehicle = None
-    if "BU" in ver and len(ver["BU"]):
-        vehicle = _BUILD_TYPES.get(int(ver["BU"][0]))
+    if "BU" in ver and len(ver["BU"]) and (build := _number(ver["BU"][0])) is not None:
+        vehicle = _BUILD_TYPES.get(int(build))
     if vehicle is None and firmware:
         vehicle = next((v for key, v in _VEHICLES if key in firmware), None)
     frame = next((t.split(":", 1)[1].strip() for t in texts if t.startswith("Frame:")), None)
@@ -778,8 +932,8 @@ def _modes(table: Mapping[str, np.ndarray] | None, time_s: np.ndarray | None,
     for t, m in zip(time_s.tolist(), num.tolist(), strict=True):
         if isinstance(m, str):  # text logs print the mode name
             out.append(ModeChange(float(t), by_name.get(m.upper(), -1), m.upper()))
-        else:
-            out.append(ModeChange(float(t), int(m), names.get(int(m))))
+        elif (number := _number(m)) is not None:
+            out.append(ModeChange(float(t), int(number), names.get(int(number))))
     return tuple(out)
 
 
@@ -812,7 +966,8 @@ def assemble(
     parm = meta_columns.get("PARM", {})
     if "Name" in parm and "Value" in parm:
         for name, value in zip(parm["Name"].tolist(), parm["Value"].tolist(), strict=True):
-            params[str(name)] = float(value)
+            if (number := _number(value)) is not None:  # another layout: not a number
+                params[str(name)] = number
     texts: tuple[TextMessage, ...] = ()
     msg = meta_columns.get("MSG", {})
     if "Message" in msg:
@@ -936,6 +1091,7 @@ def _read_buffer(
     fmt_pos = fmt_pos[fmt_pos <= n - _FMT_LEN]
     table = _read_definitions(a, fmt_pos)
     framing = _frame(a, cand, types, table)
+    _release(a, 0, n)
     # definitions only from FMT records that are part of the log (rarely differs)
     fmt_kept = framing.pos[framing.defid == 0]
     if not np.isin(np.array(table.plausible, np.int64), fmt_kept).all():
@@ -988,6 +1144,7 @@ def _read_buffer(
             k, pos, t = k[keep], pos[keep], t[keep]
         groups[i] = (k, pos, t)
     del members
+    _release(a, 0, n)
     # records without a time field hold the time of the latest timed record before them
     untimed = [i for i in groups if not timed[i]]
     src: tuple[np.ndarray, np.ndarray] = (np.zeros(0, idx_dt), np.zeros(0))
@@ -1025,10 +1182,26 @@ def _read_buffer(
     meta_columns: dict[str, dict[str, np.ndarray]] = {}
     meta_times: dict[str, np.ndarray] = {}
     defs_by_name: dict[str, Definition] = {}
+    all_parts = {}
     for name, ids in by_name.items():
         parts = [(table.defs[i], *groups.pop(i)) for i in ids]
+        parts, dropped = _bounded_layouts(parts)
+        if dropped[0]:
+            notes.append(f"{name}: {dropped[0]} record(s) under {dropped[1]} other layout(s) "
+                         "not decoded (the type is redefined with ever new columns)")
         defs_by_name[name] = parts[-1][0]
-        cols, t = _decode_message(a, parts)
+        all_parts[name] = parts
+    # messages of one layout: decoded a stretch of the file at a time (each file page is
+    # mapped into the process once, then handed back); the others one by one
+    single = {name: parts[0] for name, parts in all_parts.items() if len(parts) == 1}
+    prefilled = _gather_by_block(a, {name: (d, pos) for name, (d, _, pos, _) in single.items()})
+    for name, parts in all_parts.items():
+        if name in prefilled:
+            d, _, _, t = parts[0]
+            cols = prefilled.pop(name)
+            t = _times_of(d, cols) if t is None else t
+        else:
+            cols, t = _decode_message(a, parts)
         keys = parts[0][1] if len(parts) == 1 else np.sort(np.concatenate([p[1] for p in parts]))
         timeline[keys.astype(np.intp)] = t
         del parts, keys
@@ -1124,14 +1297,63 @@ def _held_times(
     has = src >= 0
     need, inverse = np.unique(src[has], return_inverse=True)
     t = np.empty(need.size)
-    ids = framing.defid[need]
-    for i in np.unique(ids).tolist():
-        k = np.flatnonzero(ids == i)
-        ti = _gather_times(a, table.defs[i], framing.pos[need[k]])
-        assert ti is not None
-        t[k] = ti
+    # one gather per place and kind of time field (not per definition: a log may hold
+    # thousands of definitions)
+    ids, id_of = np.unique(framing.defid[need], return_inverse=True)
+    slots: dict[tuple[int, str, float], int] = {}
+    slot_of = np.array([slots.setdefault(_time_slot(table.defs[i]), len(slots))
+                        for i in ids.tolist()], np.int64)[id_of]
+    order = np.argsort(slot_of, kind="stable")
+    bounds = np.searchsorted(slot_of[order], np.arange(len(slots) + 1))
+    for (ofs, dtype, scale), j in slots.items():
+        k = order[bounds[j] : bounds[j + 1]]
+        t[k] = _records(a, np.dtype(dtype), framing.pos[need[k]] + 3 + ofs) * scale
     out[has] = t[inverse]
     return out, (need, t)
+
+
+def _time_slot(d: Definition) -> tuple[int, str, float]:
+    """Payload offset, stored dtype and scale (s per count) of a timed definition's time."""
+    tf = d.time_field
+    assert tf is not None
+    _, i, scale = tf
+    ofs = sum(np.dtype(FORMAT_CHARS[c].dtype).itemsize for c in d.format[:i])
+    return ofs, FORMAT_CHARS[d.format[i]].dtype, scale
+
+
+_MAX_UNION = 4  # a message's merged table may hold this many times its records' own cells
+
+
+def _bounded_layouts(
+    parts: list[tuple[Definition, np.ndarray, np.ndarray, np.ndarray | None]],
+) -> tuple[list[tuple[Definition, np.ndarray, np.ndarray, np.ndarray | None]], tuple[int, int]]:
+    """The parts of one message worth merging, and (records, layouts) left out.
+
+    Merging layouts gives the union of their columns; when a type is redefined with new
+    columns again and again (damage or a hostile file), that union grows with the number
+    of definitions and the table with its square. Then only the layout (set of columns)
+    holding the most records is kept (the latest among equals).
+    """
+    if len(parts) <= 2:
+        return parts, (0, 0)
+    union: set[str] = set()
+    cells = 0
+    for d, k, _, _ in parts:
+        cols = [c for c, _ in d.fields]
+        union.update(cols)
+        cells += k.size * max(len(cols), 1)
+    rows = sum(k.size for _, k, _, _ in parts)
+    if rows * len(union) <= _MAX_UNION * cells + (1 << 16):
+        return parts, (0, 0)
+    count: dict[tuple[str, ...], int] = {}
+    latest: dict[tuple[str, ...], int] = {}
+    for j, (d, k, _, _) in enumerate(parts):
+        key = tuple(sorted(c for c, _ in d.fields))
+        count[key] = count.get(key, 0) + k.size
+        latest[key] = j
+    best = max(count, key=lambda key: (count[key], latest[key]))
+    kept = [p for p in parts if tuple(sorted(c for c, _ in p[0].fields)) == best]
+    return kept, (rows - count[best], len(count) - 1)
 
 
 def _decode_message(

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import os
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 
 import numpy as np
 
@@ -117,54 +117,81 @@ def read(
     if first < 0:
         raise LogFormatError("no FMT line: not a DataFlash text log", path=spath)
     banner = [ln.strip() for ln in text[:first].splitlines() if ln.strip()]
-    lines = text[first:].split("\n")
+    body = text[first:]
+    del text, raw
 
-    # split every line once; group line numbers by message name, in file order
+    # pass 1: the definitions (FMT lines), so that pass 2 keeps only records it can decode
     defs: dict[str, list[tuple[int, Definition]]] = {}
-    records: dict[str, list[tuple[int, list[str]]]] = {}
     bad_lines = 0
-    for k, line in enumerate(lines):
-        fields = line.rstrip().split(delim)
-        if len(fields) < 2:
+    for k, line in _numbered_lines(body, "FMT" + delim):
+        fields = _split(line, delim)
+        d = _definition(fields, delim) if fields[0] == "FMT" else None
+        if d is None:
+            bad_lines += fields[0] == "FMT"
             continue
-        if len(fields) == 5 and fields[-1] == ",":  # an FMT line with empty format and columns
-            fields[-1:] = ["", ""]
-        name = fields[0]
-        if name == "FMT":
-            d = _definition(fields, delim)
-            if d is None:
-                bad_lines += 1
-                continue
-            defs.setdefault(d.name, []).append((k, d))
-        records.setdefault(name, []).append((k, fields))
+        defs.setdefault(d.name, []).append((k, d))
     defs.setdefault("FMT", []).insert(0, (-1, Definition(128, "FMT", 89, "BBnNZ", (
         "Type", "Length", "Name", "Format", "Columns"))))
 
+    # pass 2: the records, a slice of lines at a time, each message's lines converted to
+    # columns at once (memory follows the values, not one Python list per line)
     wanted = None if messages is None else set(messages)
-    n_lines = len(lines)
-    timeline = np.full(n_lines, np.nan)
-    timed_line = np.zeros(n_lines, bool)
-    decoded: dict[str, tuple[np.ndarray, dict[str, np.ndarray], Definition]] = {}
+    pieces: dict[str, list[tuple[np.ndarray, dict[str, np.ndarray]]]] = {}
     undefined = 0
-    for name, recs in records.items():
-        if name not in defs:
-            undefined += len(recs)
+    records: dict[str, list[tuple[int, list[str]]]] = {}
+
+    def flush() -> None:
+        nonlocal bad_lines
+        for name, recs in records.items():
+            cols, line_no, _, bad = _decode(recs, defs[name])
+            bad_lines += bad
+            pieces.setdefault(name, []).append((line_no, cols))
+        records.clear()
+
+    count = 0
+    for k, line in _numbered_lines(body):
+        fields = _split(line, delim)
+        if len(fields) < 2:
             continue
-        cols, line_no, d, bad = _decode(recs, defs[name])
-        bad_lines += bad
-        if d.time_field is not None:
-            tname, _, scale = d.time_field
-            timeline[line_no] = cols[tname].astype(np.float64) * scale
-            timed_line[line_no] = True
-        decoded[name] = (line_no, cols, d)
+        name = fields[0]
+        if name not in defs:
+            undefined += 1
+            continue
+        if name == "FMT" and _definition(fields, delim) is None:
+            continue  # counted in pass 1
+        records.setdefault(name, []).append((k, fields))
+        count += 1
+        if count >= _LINES_PER_SLICE:
+            flush()
+            count = 0
+    flush()
+    decoded: dict[str, tuple[np.ndarray, dict[str, np.ndarray], Definition]] = {}
+    for name, parts in pieces.items():
+        d = defs[name][-1][1]
+        line_no = np.concatenate([ln for ln, _ in parts])
+        cols = {c: np.concatenate([p[c] for _, p in parts]) for c in parts[0][1]}
+        del parts[:]
+        if line_no.size:
+            decoded[name] = (line_no, cols, d)
+    pieces.clear()
     if not decoded:
         raise LogFormatError("no decodable DataFlash text records", path=spath)
+    # the records' times in file order (only decoded lines: others have none to give)
+    where = np.sort(np.concatenate([line_no for line_no, _, _ in decoded.values()]))
+    timeline = np.full(where.size, np.nan)
+    timed_line = np.zeros(where.size, bool)
+    for line_no, cols, d in decoded.values():
+        if d.time_field is not None:
+            tname, _, scale = d.time_field
+            at = np.searchsorted(where, line_no)
+            timeline[at] = cols[tname].astype(np.float64) * scale
+            timed_line[at] = True
     held = hold_forward(timeline, timed_line)
 
     columns, times, defs_by_name = {}, {}, {}
     for name, (line_no, cols, d) in decoded.items():
         defs_by_name[name] = d
-        times[name] = held[line_no]
+        times[name] = held[np.searchsorted(where, line_no)]
         columns[name] = cols
     meta_columns, meta_times = dict(columns), dict(times)
     if wanted is not None or start is not None or stop is not None:
@@ -182,16 +209,45 @@ def read(
         notes.append(f"skipped {bad_lines} line(s) with missing or unparsable values")
     if undefined:
         notes.append(f"skipped {undefined} line(s) of message types without FMT")
-    steps = backwards_steps(timeline, np.arange(n_lines))
+    steps = backwards_steps(timeline, where)
     if steps:
         shown = ", ".join(f"line {w + 1} ({t0:.3f} s -> {t1:.3f} s)" for w, t0, t1 in steps[:5])
         notes.append(f"time goes backwards {len(steps)} time(s) (reboot or concatenated logs): "
                      f"{shown}")
-    source = SourceInfo(spath, "dataflash-text", len(raw), skipped_bytes=0, notes=tuple(notes))
+    source = SourceInfo(spath, "dataflash-text", size, skipped_bytes=0, notes=tuple(notes))
     if notes:
         warnings.warn(f"{spath}: " + "; ".join(notes), DataQualityWarning, stacklevel=2)
     return assemble(source, columns, times, defs_by_name, wanted, meta_columns, meta_times,
                     banner=banner)
+
+
+_LINES_PER_SLICE = 1 << 16  # records split and held before they are converted to columns
+
+
+_SLICE_CHARS = 1 << 18  # text split into lines at a time
+
+
+def _numbered_lines(body: str, prefix: str | None = None) -> Iterator[tuple[int, str]]:
+    """``(line number, line)`` of ``body`` split at newlines, a slice of the text at a time
+    (only the slice's lines exist at once); with ``prefix``, only the lines starting so."""
+    k, at, n = 0, 0, len(body)
+    while at <= n:
+        nl = body.find("\n", min(at + _SLICE_CHARS, n))
+        end = n if nl < 0 else nl
+        lines = body[at:end].split("\n")
+        if prefix is None:
+            yield from enumerate(lines, k)
+        else:
+            yield from ((j, ln) for j, ln in enumerate(lines, k) if ln.startswith(prefix))
+        k += len(lines)
+        at = end + 1
+
+
+def _split(line: str, delim: str) -> list[str]:
+    fields = line.rstrip().split(delim)
+    if len(fields) == 5 and fields[-1] == ",":  # an FMT line with empty format and columns
+        fields[-1:] = ["", ""]
+    return fields
 
 
 def _definition(fields: list[str], delim: str) -> Definition | None:

@@ -1,0 +1,112 @@
+"""Builders of hostile logs (issue 13): each returns the bytes of one file that once made
+mavsid crash, hang or exhaust memory. Used by the fuzz tests and ``benchmarks/bench_hostile.py``.
+"""
+
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+
+import numpy as np
+
+from mavsid.readers.dataflash import build_fmt, build_record
+
+ROOT = Path(__file__).resolve().parents[2]
+FIXTURES = ROOT / "fixtures"
+
+
+def fmt_churn(size: int) -> bytes:
+    """One type redefined (another layout and column names each time) before every record."""
+    out = bytearray()
+    k = 0
+    while len(out) < size:
+        out += build_fmt(0x81, "CHN", "Qf", f"TimeUS,V{k}")
+        out += build_record(0x81, "Qf", 1000 * k, float(k))
+        k += 1
+    return bytes(out)
+
+
+def header_flood(size: int) -> bytes:
+    """``A3 95 80`` (a DataFlash FMT header) repeated."""
+    return b"\xa3\x95\x80" * (size // 3)
+
+
+def text_flood(size: int) -> bytes:
+    """A text log of one FMT line and then short records, many of undefined types."""
+    head = b"FMT, 128, 89, FMT, BBnNZ, Type,Length,Name,Format,Columns\n" \
+           b"FMT, 129, 15, TST, Qf, TimeUS,V\n"
+    body = b"A,1\nTST,1\nB\n" * ((size - len(head)) // 12)
+    return head + body
+
+
+def header_and_records(n: int = 2000) -> bytes:
+    """A small valid log (TST at 100 Hz) used as a base by other builders."""
+    out = bytearray(build_fmt(0x81, "TST", "Qf", "TimeUS,V"))
+    for k in range(n):
+        out += build_record(0x81, "Qf", 10_000 * k, float(k))
+    return bytes(out)
+
+
+def metadata_redefined() -> bytes:
+    """MODE, PARM and VER defined with layouts unlike ArduPilot's (strings for numbers,
+    missing fields)."""
+    out = bytearray()
+    out += build_fmt(0x81, "PARM", "QZZ", "TimeUS,Name,Value")
+    out += build_fmt(0x82, "MODE", "QZ", "TimeUS,Mode")
+    out += build_fmt(0x83, "VER", "QZZ", "TimeUS,BU,FWS")
+    out += build_fmt(0x84, "TST", "Qf", "TimeUS,V")
+    out += build_record(0x81, "QZZ", 1, "RATE_P", "fast")
+    out += build_record(0x82, "QZ", 2, "LOITER")
+    out += build_record(0x83, "QZZ", 3, "copter", "ArduCopter V4")
+    for k in range(10):
+        out += build_record(0x84, "Qf", 10_000 * k, float(k))
+    return bytes(out)
+
+
+def set_tlog_field(data: bytes, msg_name: str, field: str, values: dict[int, float]) -> bytes:
+    """A copy of a .tlog with ``field`` of the ``k``-th ``msg_name`` frames (keys of
+    ``values``) set, frames re-encoded by pymavlink so that their CRC is valid."""
+    from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+    mav = mavlink.MAVLink(None)
+    mav.robust_parsing = True
+    out = bytearray()
+    pos, k = 0, 0
+    while pos + 8 < len(data):
+        stx = data[pos + 8]
+        if stx == 0xFD:
+            n = 8 + 10 + data[pos + 9] + 2 + (13 if data[pos + 10] & 1 else 0)
+        else:
+            n = 8 + 6 + data[pos + 9] + 2
+        frame = data[pos + 8 : pos + n]
+        msgs = mav.parse_buffer(bytes(frame)) or []
+        if msgs and msgs[0].get_type() == msg_name:
+            if k in values:
+                m = msgs[0]
+                setattr(m, field, values[k])
+                enc = mavlink.MAVLink(None, srcSystem=m.get_srcSystem(),
+                                      srcComponent=m.get_srcComponent())
+                enc.seq = m.get_seq()
+                frame = m.pack(enc)
+            k += 1
+        out += data[pos : pos + 8] + frame
+        pos += n
+    out += data[pos:]
+    return bytes(out)
+
+
+def dataflash_time_outlier(base: bytes, name: str | None, value: int, last: int = 1) -> bytes:
+    """A copy of a .bin with ``TimeUS`` of the ``last`` final records of ``name`` (of every
+    type with a leading ``TimeUS`` when None) set to ``value``."""
+    from mavsid.readers.dataflash import _find_headers, _read_definitions
+
+    a = np.frombuffer(base, np.uint8)
+    cand, types = _find_headers(a)
+    table = _read_definitions(a, cand[types == 0x80][cand[types == 0x80] <= a.size - 89])
+    out = bytearray(base)
+    for d in table.defs:
+        if (name is None or d.name == name) and d.columns[:1] == ("TimeUS",) \
+                and d.format[:1] == "Q":
+            for p in cand[types == d.type][-last:].tolist():
+                out[p + 3 : p + 11] = struct.pack("<Q", value)
+    return bytes(out)

@@ -676,22 +676,42 @@ def validate_logs(
 ) -> FitResult:
     """Validate saved models on other flights: every segment found is held out.
 
-    Unless the config fixes ``rate_hz``, the flights are aligned at the models' own rate
-    (a discrete-time model predicts only at the step it was fitted at).
+    Unless the config fixes ``rate_hz``, the flights are aligned at the first log's own rate
+    (later logs at the same rate) and a model fitted at another rate is re-discretised to it
+    (:meth:`~mavsid.estimators.model.Model.resampled`; the verdict says so), so that the
+    one-step and multi-step fits compare the model with samples the log really holds. A
+    model that cannot be re-discretised is run on the model's grid instead, the flight's
+    samples interpolated (also said).
     """
     cfg = config or PipelineConfig()
-    if cfg.rate_hz is None and models:
-        rates = {round(1.0 / m.dt, 6) for m in models.values()}
-        if len(rates) > 1:
-            raise ConfigError(f"models of different rates ({sorted(rates)} Hz) in one file")
-        cfg = dataclasses.replace(cfg, rate_hz=rates.pop())
-    flights = tuple(_read_flight(p, cfg) for p in logs)
+    if not logs:
+        raise ConfigError("no log given")
+    first = _read_flight(logs[0], cfg)
+    same_rate = cfg if cfg.rate_hz is not None else cfg.with_overrides(rate_hz=1.0 / first.dt)
+    native = (first, *(_read_flight(p, same_rate) for p in logs[1:]))
+    on_model_grid: dict[float, tuple[FlightData, ...]] = {}
     fits: dict[str, AxisFit] = {}
     verdicts: dict[str, Verdict] = {}
     signals: dict[int, TwinSignals] = {}
     for axis, model in models.items():
         if axis not in cfg.axes:
             continue
+        flights, note = native, ""
+        if not np.isclose(model.dt, first.dt, rtol=1e-3):
+            fitted_hz = 1.0 / model.dt
+            try:
+                resampled = getattr(model, "resampled", None)
+                if resampled is None:
+                    raise ConfigError("the model cannot be re-discretised")
+                model = resampled(first.dt)
+                note = (f"model re-discretised from {fitted_hz:.3g} Hz to the log's "
+                        f"{1 / first.dt:.3g} Hz (delay kept in seconds)")
+            except ConfigError as exc:
+                if model.dt not in on_model_grid:
+                    grid = cfg.with_overrides(rate_hz=fitted_hz)
+                    on_model_grid[model.dt] = tuple(_read_flight(p, grid) for p in logs)
+                flights = on_model_grid[model.dt]
+                note = "; ".join(filter(None, [str(exc), _resampling_note(model, flights)]))
         windows, segs = _axis_segments(flights, axis, cfg)
         try:
             if not segs:
@@ -705,7 +725,6 @@ def validate_logs(
         fitted = AxisFit(axis, model, val, (), segs, estimator, windows)
         fitted = _closed_loop(fitted, flights, signals)
         verdict = _judge(fitted, flights)
-        note = _resampling_note(model, flights)
         if note:
             verdict = dataclasses.replace(verdict, reasons=(*verdict.reasons, note))
         verdicts[axis] = verdict
@@ -714,7 +733,7 @@ def validate_logs(
         names = ", ".join(os.fspath(p) for p in logs)
         problems = "; ".join(v.line() for v in verdicts.values())
         raise NoExcitationError(f"{names}: no segment to validate on ({problems})")
-    return FitResult(fits, flights, tuple(os.fspath(p) for p in logs), cfg, verdicts)
+    return FitResult(fits, native, tuple(os.fspath(p) for p in logs), cfg, verdicts)
 
 
 def _resampling_note(model: Model, flights: Sequence[FlightData]) -> str:

@@ -138,12 +138,41 @@ def test_unstable_everywhere_is_an_error_naming_the_eigenvalue(monkeypatch) -> N
     assert kept.axes["roll"].verdict.level == "not identified"
 
 
-def test_validate_says_it_resampled_a_log_of_another_rate() -> None:
-    model = _fit("sysid_roll.bin").axes["roll"].model  # 200 Hz
+def test_validate_re_discretises_a_model_for_a_log_of_another_rate() -> None:
+    """A 200 Hz model on a 100 Hz log runs at the log's own step (not on interpolated
+    samples, which made the one-step fit look better than the log supports)."""
+    model = _fit("sysid_roll.bin").axes["roll"].model
+    assert 1 / model.dt == pytest.approx(200.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = validate_logs({"roll": model}, [str(FIXTURES / "noisy_sysid.bin")])
+    f = result.axes["roll"]
+    assert 1 / f.model.dt == pytest.approx(100.0)
+    assert all(s.dt == pytest.approx(0.01) for s in f.held_out)
+    reasons = " ".join(result.verdicts["roll"].reasons)
+    assert "re-discretised from 200 Hz to the log's 100 Hz" in reasons
+    # the same physics: continuous-time damping and effectiveness, delay in seconds
+    for name in ("A[p,p]", "B[p,u_roll]"):
+        assert f.model.params[name] == pytest.approx(model.params[name], rel=1e-6)
+    assert f.model.delay_s == pytest.approx(model.delay_s)
+    # the two simulated vehicles share the roll plant: the model predicts the other log
+    truth = _truth("noisy_sysid.bin")["axes"]["roll"]
+    assert abs(f.model.params["B[p,u_roll]"] / truth["effectiveness"] - 1) < B_TOLERANCE
+    assert f.validation.fit_free_run[0] > 80.0
+
+
+def test_validate_says_so_when_a_model_cannot_be_re_discretised() -> None:
+    """A_d < 0 has no continuous-time equivalent: the log goes onto the model's grid,
+    its samples interpolated, and the verdict says both."""
+    from mavsid.estimators.model import Model
+
+    model = Model(("p",), ("u_roll",), ("p", "u_roll", "1"),
+                  np.array([[-0.2], [0.9], [0.0]]), dt=0.005)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         result = validate_logs({"roll": model}, [str(FIXTURES / "noisy_sysid.bin")])
     reasons = " ".join(result.verdicts["roll"].reasons)
+    assert "no continuous-time equivalent" in reasons
     assert "noisy_sysid.bin logged at 100 Hz, resampled onto the model's 200 Hz grid" in reasons
 
 

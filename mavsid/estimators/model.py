@@ -394,6 +394,69 @@ class Model:
             out[i] = corr * np.outer(s, s)
         return out
 
+    def resampled(self, dt: float) -> Model:
+        """The same dynamics at another sample time ``dt`` (s), for data logged at another rate.
+
+        A linear discrete model ``x[k+1] = A_d x[k] + B_d u[k-d] + c_d`` is taken back to
+        continuous time (zero-order hold inverted, as the reported ``A``, ``B``, ``c`` are) and
+        discretised again at ``dt``; the delay is kept in seconds (whole plus fractional
+        samples of the new step) and the input filters, defined in Hz, are unchanged. A
+        continuous-time model only changes its step. Standard errors are not carried over
+        (they belong to the fitted coefficients); ``provenance['resampled_from_dt']`` records
+        the original step.
+
+        Raises
+        ------
+        ConfigError
+            A nonlinear library model, or a discrete model with no continuous equivalent
+            (an eigenvalue of ``A_d`` on or left of the imaginary axis's image, <= 0).
+
+        Examples
+        --------
+        >>> m = Model(("p",), ("u_roll",), ("p", "u_roll", "1"),
+        ...           np.array([[0.99], [0.5], [0.0]]), dt=0.01, delay=2)
+        >>> slow = m.resampled(0.04)
+        >>> round(slow.params["A_d[p,p]"], 6), round(0.99 ** 4, 6)
+        (0.960596, 0.960596)
+        >>> round(slow.params["B[p,u_roll]"], 3) == round(m.params["B[p,u_roll]"], 3)
+        True
+        >>> slow.delay, slow.delay_frac
+        (0, 0.5)
+        """
+        dt = float(dt)
+        if not dt > 0:
+            raise ConfigError(f"sample time must be > 0 s, got {dt:g}")
+        total = (self.delay + self.delay_frac) * self.dt / dt
+        whole = int(np.floor(total + 1e-9))
+        frac = round(total - whole, 9) % 1.0
+        prov = {**dict(self.provenance), "resampled_from_dt": self.dt}
+        if self.continuous:
+            return replace(self, dt=dt, delay=whole, delay_frac=frac, covariance=None,
+                           coef_stderr=None, provenance=prov)
+        if not library.is_linear(self.features):
+            raise ConfigError("a nonlinear library model cannot be re-discretised; refit it at "
+                              f"{1 / dt:.3g} Hz")
+        states, exo, _ = self._split
+        n, q = len(self.state_names), len(exo)
+        big = np.zeros((n + q, n + q))
+        for j in states:
+            big[:n, self.state_names.index(self.features[j])] = self.coef[j]
+        big[:n, n:] = self.coef[exo].T
+        big[n:, n:] = np.eye(q)
+        ev = np.linalg.eigvals(big[:n, :n])
+        if np.any(np.abs(ev.imag) > 1e-12) or np.any(ev.real <= 0):
+            raise ConfigError(f"the {1 / self.dt:.3g} Hz model has no continuous-time "
+                              f"equivalent (eigenvalues {np.round(ev, 4).tolist()}); refit it at "
+                              f"{1 / dt:.3g} Hz")
+        cont = np.real(linalg.logm(big)) / self.dt
+        again = linalg.expm(cont * dt)
+        coef = np.zeros_like(self.coef)
+        for j in states:
+            coef[j] = again[:n, self.state_names.index(self.features[j])]
+        coef[exo] = again[:n, n:].T
+        return replace(self, coef=coef, dt=dt, delay=whole, delay_frac=frac, covariance=None,
+                       coef_stderr=None, sigma=None, provenance=prov)
+
     # ----------------------------------------------------------------- rollouts
 
     def _check_segment(self, segment: Segment) -> None:

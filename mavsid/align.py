@@ -207,9 +207,15 @@ def _channel_series(raw: RawLog, preset: Preset, names: Sequence[str],
         elif need_samples and not ch.optional:
             table = raw[ch.message]
             timed = int(np.count_nonzero(np.isfinite(np.asarray(table.time_s, dtype=float))))
+            why = ""
+            if timed == 0 and not any(
+                    np.isfinite(np.asarray(m.time_s, dtype=float)).any()
+                    for m in raw.messages.values() if len(m)):
+                why = (" (the log has no clock: no boot-time field such as TimeUS/TimeMS and "
+                       "no GPS fix to time its records by)")
             raise NoExcitationError(
                 f"{raw.source.path}: {ch.message} has {len(table)} record(s), {timed} with a "
-                f"time stamp and {t.size} usable: nothing to put on a time grid"
+                f"time stamp and {t.size} usable: nothing to put on a time grid{why}"
             )
     return out
 

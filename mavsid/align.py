@@ -62,6 +62,7 @@ import numpy as np
 from mavsid.channels import (
     INPUT_NAMES,
     MIXERS,
+    PRESETS,
     STATE_NAMES,
     STATE_UNITS,
     Channel,
@@ -69,6 +70,7 @@ from mavsid.channels import (
     Preset,
     choose_preset,
     evaluate,
+    frame_of,
     get_preset,
     mixer_for,
     motor_thrusts,
@@ -80,6 +82,7 @@ from mavsid.errors import (
     ConfigError,
     DataQualityWarning,
     MavsidError,
+    MissingMessageError,
     NoExcitationError,
     naming_file,
 )
@@ -143,6 +146,41 @@ def _resolve_preset(raw: RawLog, preset: Preset | str | None,
     return choose_preset(raw, presets)
 
 
+def _first_fitting(raw: RawLog, preset: Preset | str | None,
+                   presets: Mapping[str, Preset] | None, mixers: Mapping[str, Mixer]
+                   ) -> tuple[Preset, tuple[list[_Series], list[_Series], str | None]]:
+    """The preset to use and its channels: the one asked for, else the first applicable one
+    whose channels the log really holds (a preset applies by its messages; a field renamed
+    between firmware versions shows only when it is read, and then the next one is tried).
+
+    Raises
+    ------
+    MissingMessageError
+        No preset fits: every applicable preset's missing message or field, and what the
+        log has.
+    """
+    if preset is not None:
+        chosen = _resolve_preset(raw, preset, presets)
+        return chosen, _collect(raw, chosen, mixers)
+    candidates = [p for p in (*(presets or {}).values(), *PRESETS.values())
+                  if p.applies_to(raw)]
+    if not candidates:
+        choose_preset(raw, presets)  # raises, naming what a preset needs
+    tried: list[str] = []
+    for cand in candidates:
+        try:
+            got = _collect(raw, cand, mixers)
+        except MissingMessageError as exc:
+            tried.append(f"{cand.name} needs {exc.what} {exc.name}")
+            continue
+        if tried:
+            warnings.warn(f"{raw.source.path}: preset {cand.name} used: " + "; ".join(tried),
+                          DataQualityWarning, stacklevel=5)
+        return cand, got
+    raise MissingMessageError("; ".join(tried), available=raw.messages, what="fitting preset",
+                              path=raw.source.path)
+
+
 def _collect(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer]
              ) -> tuple[list[_Series], list[_Series], str | None]:
     """States and inputs of the preset, as native series (record order) in canonical order."""
@@ -158,13 +196,14 @@ def _collect(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer]
             stacklevel=4,
         )
     elif preset.motors is not None:
-        mixer = mixer_for(preset, raw.params, {**MIXERS, **mixers})
+        n_motors = _motor_count(raw, preset)
+        mixer = mixer_for(preset, raw.params, {**MIXERS, **mixers}, n_motors)
         mixer_name = mixer.name
-        if preset.mixer == "auto" and not {"FRAME_CLASS", "FRAME_TYPE"} <= set(raw.params):
+        _, frame_source = frame_of(raw.params, n_motors)
+        if preset.mixer == "auto" and frame_source != "FRAME_CLASS/FRAME_TYPE":
             warnings.warn(
-                f"{raw.source.path}: no FRAME_CLASS/FRAME_TYPE parameters in the log: "
-                f"{preset.motors.message} unmixed as {mixer.name} (choose a preset with "
-                "another mixer if the frame differs)",
+                f"{raw.source.path}: {frame_source}: {preset.motors.message} unmixed as "
+                f"{mixer.name} (choose a preset with another mixer if the frame differs)",
                 DataQualityWarning,
                 stacklevel=4,
             )
@@ -207,9 +246,15 @@ def _channel_series(raw: RawLog, preset: Preset, names: Sequence[str],
         elif need_samples and not ch.optional:
             table = raw[ch.message]
             timed = int(np.count_nonzero(np.isfinite(np.asarray(table.time_s, dtype=float))))
+            why = ""
+            if timed == 0 and not any(
+                    np.isfinite(np.asarray(m.time_s, dtype=float)).any()
+                    for m in raw.messages.values() if len(m)):
+                why = (" (the log has no clock: no boot-time field such as TimeUS/TimeMS and "
+                       "no GPS fix to time its records by)")
             raise NoExcitationError(
                 f"{raw.source.path}: {ch.message} has {len(table)} record(s), {timed} with a "
-                f"time stamp and {t.size} usable: nothing to put on a time grid"
+                f"time stamp and {t.size} usable: nothing to put on a time grid{why}"
             )
     return out
 
@@ -518,6 +563,16 @@ def _main_sysid(raw: RawLog) -> int | None:
     return int(ids[np.argmax(counts)])
 
 
+def _motor_count(raw: RawLog, preset: Preset) -> int | None:
+    """How many motor outputs a per-motor message holds (``MOT`` Mot1..MotN); None when the
+    message always has a fixed set (RCOU's 8 or more channels say nothing of the frame)."""
+    ch = preset.motors
+    if ch is None or ch.message != "MOT" or ch.message not in raw.messages:
+        return None
+    fields = raw.messages[ch.message].fields
+    return sum(1 for i in range(1, 13) if f"Mot{i}" in fields) or None
+
+
 def _armed_events(raw: RawLog) -> list[tuple[float, bool]]:
     ev: list[tuple[float, bool]] = []
     got = _col(raw, "EV", "Id")
@@ -790,8 +845,7 @@ def align(
 def _align(raw: RawLog, preset: Preset | str | None, rate_hz: float | None,
            presets: Mapping[str, Preset] | None, mixers: Mapping[str, Mixer] | None,
            max_gap: float, min_input_rate_hz: float) -> FlightData:
-    preset = _resolve_preset(raw, preset, presets)
-    states, inputs, mixer = _collect(raw, preset, mixers or {})
+    preset, (states, inputs, mixer) = _first_fitting(raw, preset, presets, mixers or {})
     if not states:
         raise NoExcitationError(f"{raw.source.path}: no state samples for preset {preset.name}")
     states, inputs, boot = _one_boot(raw.source.path, states, inputs)

@@ -108,6 +108,7 @@ __all__ = [
     "Preset",
     "choose_preset",
     "evaluate",
+    "frame_of",
     "get_preset",
     "load_presets",
     "mixer_for",
@@ -383,7 +384,7 @@ PRESETS: dict[str, Preset] = {
         Preset(
             "ardupilot-rcou", _DF,
             states={**_ATT, **_IMU_GYRO},
-            motors=_ch("RCOU", "C{i}|Chan{i}", "pwm"),
+            motors=_ch("RCOU", "C{i}|Chan{i}|Ch{i}", "pwm"),
             description="ArduPilot: ATT (+ IMU gyro); RCOU motor PWMs through the frame mixer",
         ),
         Preset(
@@ -514,18 +515,54 @@ def preset_messages(fmt: str | None = None, presets: Iterable[Preset] = ()) -> t
     return tuple(out)
 
 
-def mixer_for(preset: Preset, params: Mapping[str, float], mixers: Mapping[str, Mixer] = MIXERS
-              ) -> Mixer:
-    """The mixer a preset uses: its own, else from FRAME_CLASS/FRAME_TYPE, else quad-X.
+#: Motor count -> ArduPilot FRAME_CLASS (for logs older than FRAME_CLASS, ArduCopter < 3.5,
+#: whose frame class was the firmware build).
+_CLASS_BY_MOTORS = {4: 1, 6: 2, 8: 3}
+
+
+def frame_of(params: Mapping[str, float], n_motors: int | None = None
+             ) -> tuple[tuple[int, int], str]:
+    """ArduPilot ``(FRAME_CLASS, FRAME_TYPE)`` and where it came from.
+
+    ArduCopter >= 3.5 logs ``FRAME_CLASS``/``FRAME_TYPE``; 3.2-3.4 only ``FRAME`` (the
+    orientation, numbered as ``FRAME_TYPE`` is: 0 plus, 1 X, ...), the class being the build
+    (quad, hexa, octa): then taken from the motor outputs logged (``n_motors``), else quad.
+
+    Examples
+    --------
+    >>> frame_of({"FRAME_CLASS": 2, "FRAME_TYPE": 0})
+    ((2, 0), 'FRAME_CLASS/FRAME_TYPE')
+    >>> frame_of({"FRAME": 0}, n_motors=6)
+    ((2, 0), 'FRAME (ArduCopter < 3.5) and 6 motor outputs')
+    >>> frame_of({})
+    ((1, 1), 'no frame parameters (FRAME_CLASS/FRAME_TYPE or FRAME): quad-X assumed')
+    """
+    if "FRAME_CLASS" in params:
+        return (int(params["FRAME_CLASS"]), int(params.get("FRAME_TYPE", 1))), \
+            "FRAME_CLASS/FRAME_TYPE"
+    if "FRAME" in params:
+        cls = _CLASS_BY_MOTORS.get(n_motors or 0)
+        where = (f"FRAME (ArduCopter < 3.5) and {n_motors} motor outputs" if cls else
+                 "FRAME (ArduCopter < 3.5), class unknown: quad assumed")
+        return (cls or 1, int(params["FRAME"])), where
+    return (1, 1), "no frame parameters (FRAME_CLASS/FRAME_TYPE or FRAME): quad-X assumed"
+
+
+def mixer_for(preset: Preset, params: Mapping[str, float], mixers: Mapping[str, Mixer] = MIXERS,
+              n_motors: int | None = None) -> Mixer:
+    """The mixer a preset uses: its own, else from the frame parameters (:func:`frame_of`),
+    else quad-X.
 
     Examples
     --------
     >>> mixer_for(PRESETS["mavlink-servo"], {"FRAME_CLASS": 1, "FRAME_TYPE": 0}).name
     'quad-plus'
+    >>> mixer_for(PRESETS["ardupilot-rcou"], {"FRAME": 1}).name   # ArduCopter 3.3
+    'quad-x'
     """
     name = preset.mixer
     if name == "auto":
-        key = (int(params.get("FRAME_CLASS", 1)), int(params.get("FRAME_TYPE", 1)))
+        key, _ = frame_of(params, n_motors)
         name = _AP_FRAMES.get(key, "quad-x")
     try:
         return mixers[name]
@@ -681,7 +718,9 @@ def pwm_to_thrust(pwm: np.ndarray, params: Mapping[str, float]) -> np.ndarray:
     ``actuator = (pwm - MOT_PWM_MIN) / (MOT_PWM_MAX - MOT_PWM_MIN)``, then the spin range
     ``r = (actuator - MOT_SPIN_MIN) / (MOT_SPIN_MAX - MOT_SPIN_MIN)`` and the thrust curve
     ``thrust = (1 - MOT_THST_EXPO)·r + MOT_THST_EXPO·r²`` (battery scaling ignored). A PWM
-    range of 0 (ArduPilot's "use RC3 range") falls back to 1000..2000 µs.
+    range of 0 (ArduPilot's "use RC3 range"), or none (ArduCopter < 3.5), takes
+    ``RC3_MIN``/``RC3_MAX``, else 1000..2000 µs; ``MOT_SPIN_MIN`` absent (ArduCopter < 3.4)
+    takes ``THR_MIN``/1000.
 
     Examples
     --------
@@ -689,9 +728,12 @@ def pwm_to_thrust(pwm: np.ndarray, params: Mapping[str, float]) -> np.ndarray:
     [0.0, 1.0]
     """
     lo, hi = params.get("MOT_PWM_MIN", 0.0), params.get("MOT_PWM_MAX", 0.0)
+    if not hi > lo > 0:  # ArduCopter < 3.5 (and MOT_PWM_* = 0): the throttle channel's range
+        lo, hi = params.get("RC3_MIN", 0.0), params.get("RC3_MAX", 0.0)
     if not hi > lo > 0:
         lo, hi = 1000.0, 2000.0
-    spin_min = params.get("MOT_SPIN_MIN", 0.15)
+    # ArduCopter < 3.4: THR_MIN (0-1000) is the lowest throttle in flight
+    spin_min = params.get("MOT_SPIN_MIN", params.get("THR_MIN", 150.0) / 1000.0)
     spin_max = params.get("MOT_SPIN_MAX", 0.95)
     expo = params.get("MOT_THST_EXPO", 0.65)
     actuator = (np.asarray(pwm, dtype=float) - lo) / (hi - lo)

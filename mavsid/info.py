@@ -4,7 +4,9 @@ Works on any :class:`~mavsid.data.RawLog` (every reader's output). :func:`summar
 JSON-safe dict (``mavsid info --json``), :func:`format_summary` the text a person reads.
 
 Rates are medians: for each message type the median interval between samples (per instance
-when the type has an instance column, so two IMUs logged together count as one rate), as Hz.
+when the type has an instance column, so two IMUs logged together count as one rate), as Hz,
+for types sampled periodically only; parameters, events, texts and definitions are counted
+and shown with ``-`` (see :func:`median_rate_hz`).
 SYSTEMID runs are the ArduPilot SIDS records, one per run, with their settings as logged.
 
 Examples
@@ -32,7 +34,7 @@ import numpy as np
 from mavsid.data import MessageTable, RawLog
 from mavsid.errors import escape
 
-__all__ = ["format_summary", "median_rate_hz", "summarize"]
+__all__ = ["EVENT_TYPES", "format_summary", "median_rate_hz", "summarize"]
 
 _INSTANCE_FIELDS = ("I", "Instance", "C", "Id")
 
@@ -53,8 +55,21 @@ def _instance_column(table: MessageTable) -> str | None:
                  and table[n].dtype.kind in "iu"), None)
 
 
-def median_rate_hz(table: MessageTable) -> float:
-    """Median sample rate (Hz) of one message type, per instance when it has instances.
+#: Record types that are written on events, never sampled (counted, not given a rate).
+EVENT_TYPES = frozenset({"FMT", "FMTU", "UNIT", "MULT", "PARM", "PARAM_VALUE", "MSG", "EV",
+                         "MODE", "CMD", "ERR", "ARM", "EVT", "VER", "STATUSTEXT", "SIDS",
+                         "MISSION_ITEM_INT", "MISSION_ITEM", "COMMAND_LONG", "COMMAND_ACK"})
+
+
+def median_rate_hz(table: MessageTable, span_s: float | None = None) -> float:
+    """Median sample rate (Hz) of one message type, per instance when it has instances; NaN
+    for a type that is not sampled periodically.
+
+    Periodic: not an event type (:data:`EVENT_TYPES`), at least 4 samples, and sampled at
+    its median rate (intervals up to 3 median ones) for at least 0.5 s (half of ``span_s``,
+    the log's span, when that is shorter): a burst of records written together —
+    definitions, parameters, texts at boot — has a huge median rate over a few
+    milliseconds; a type logged only now and then (SYSTEMID runs) keeps its rate.
 
     Examples
     --------
@@ -62,7 +77,12 @@ def median_rate_hz(table: MessageTable) -> float:
     >>> tab = MessageTable("IMU", {"I": np.tile([0, 1], 10)}, t, {"I": "instance"})
     >>> round(median_rate_hz(tab), 6)
     10.0
+    >>> burst = np.r_[np.arange(0.0, 0.01, 0.001), 50.0]  # ten at boot, one later
+    >>> median_rate_hz(MessageTable("CMD", {}, burst)), median_rate_hz(MessageTable("X", {}, burst))
+    (nan, nan)
     """
+    if table.name in EVENT_TYPES:
+        return float("nan")
     t = np.asarray(table.time_s, np.float64)
     inst = _instance_column(table)
     groups = [t] if inst is None else [t[table[inst] == v] for v in np.unique(table[inst])]
@@ -71,8 +91,13 @@ def median_rate_hz(table: MessageTable) -> float:
         g = g[np.isfinite(g)]
         d = np.diff(g)
         d = d[d > 0]
-        if d.size:
-            rates.append(1.0 / float(np.median(d)))
+        if d.size < 3:
+            continue
+        step = float(np.median(d))
+        covered = np.count_nonzero(d <= 3 * step) * step  # time sampled at that rate, s
+        if covered < (min(0.5, 0.5 * span_s) if span_s else 0.5):
+            continue
+        rates.append(1.0 / step)
     return float(np.median(rates)) if rates else float("nan")
 
 
@@ -125,7 +150,8 @@ def summarize(log: RawLog) -> dict[str, Any]:
         table = log.messages[name]
         messages[name] = {
             "count": len(table),
-            "rate_hz": _num(median_rate_hz(table), 6),
+            "rate_hz": _num(median_rate_hz(
+                table, None if start is None or end is None else end - start), 6),
             "fields": {f: table.unit(f) for f in table.fields},
         }
     return {
@@ -176,7 +202,7 @@ def format_summary(summary: Mapping[str, Any], max_fields: int | None = None) ->
     lines.append(f"  messages    {len(s['messages'])} types")
     width = max((len(e(n)) for n in s["messages"]), default=4)
     for name, m in s["messages"].items():
-        rate = "    ?   " if m["rate_hz"] is None else f"{m['rate_hz']:8.2f}"
+        rate = "    -   " if m["rate_hz"] is None else f"{m['rate_hz']:8.2f}"
         fields = [e(f) if u is None else f"{e(f)}[{e(u)}]" for f, u in m["fields"].items()]
         if max_fields is not None and len(fields) > max_fields:
             fields = [*fields[:max_fields], f"... ({len(m['fields'])} fields)"]

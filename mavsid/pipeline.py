@@ -522,6 +522,18 @@ def _closed_loop(
     return dataclasses.replace(fitted, closed_loop=cl)
 
 
+def _missing_rate(axis: str, flights: Sequence[FlightData]) -> str:
+    """Why ``axis`` cannot be modelled for want of its body rate (empty when it is logged)."""
+    rate = AXIS_RATE.get(axis, "")
+    lacking = [fd for fd in flights if rate and rate not in fd.state_names]
+    if not lacking:
+        return ""
+    fd = lacking[0]
+    return (f"no body rate {rate} in {os.path.basename(fd.source.path)} (preset {fd.preset}: "
+            "attitude angles only): the rate dynamics need a gyro log (ArduPilot RATE or IMU, "
+            "PX4 vehicle_angular_velocity)")
+
+
 def _fit_model(train: Sequence[Segment], axis: str, cfg: PipelineConfig) -> Model:
     from mavsid import estimators
 
@@ -565,6 +577,11 @@ def fit(
     signals: dict[int, TwinSignals] = {}
     for axis in cfg.axes:
         windows, segs = _axis_segments(flights, axis, cfg)
+        missing = _missing_rate(axis, flights)
+        if missing:
+            verdicts[axis] = unfitted(axis, missing, windows, flights,
+                                      [os.fspath(p) for p in logs])
+            continue
         try:
             train, held_out = split_segments(segs, cfg.block_s)
             model = _fit_model(train, axis, cfg)
@@ -713,7 +730,10 @@ def validate_logs(
                 flights = on_model_grid[model.dt]
                 note = "; ".join(filter(None, [str(exc), _resampling_note(model, flights)]))
         windows, segs = _axis_segments(flights, axis, cfg)
+        missing = _missing_rate(axis, flights)
         try:
+            if missing:
+                raise NoExcitationError(missing)
             if not segs:
                 raise NoExcitationError("no segments")
             val = _validate(model, segs, cfg)

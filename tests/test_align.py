@@ -274,7 +274,7 @@ def test_servo_outputs_of_a_plane_are_not_unmixed():
         fd = align(raw)
     assert fd.input_names == () and fd.inputs.shape == (t.size, 0)
     copter = RawLog(raw.source, raw.messages, vehicle="copter QUAD/X")
-    with pytest.warns(DataQualityWarning, match="no FRAME_CLASS/FRAME_TYPE .* quad-x"):
+    with pytest.warns(DataQualityWarning, match="no frame parameters .* quad-x"):
         assert align(copter).input_names == ("u_roll", "u_pitch", "u_yaw", "u_thrust")
 
 

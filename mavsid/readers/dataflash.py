@@ -57,7 +57,7 @@ import re
 import struct
 import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property, lru_cache
 
 import numpy as np
@@ -937,6 +937,64 @@ def _modes(table: Mapping[str, np.ndarray] | None, time_s: np.ndarray | None,
     return tuple(out)
 
 
+#: Untimed types that head every log (definitions, units, parameters, texts): placed at the
+#: first timed record like events, but not worth a note.
+_HEADER_TYPES = frozenset({"FMT", "FMTU", "UNIT", "MULT", "PARM", "MSG", "VER"})
+#: Untimed event records (old logs): placed at the first timed record when written before it.
+#: Sampled data (ATT...) written before any clock stays untimed.
+_EVENT_TYPES = frozenset({"EV", "MODE", "ERR", "CMD", "ARM", "EVT"})
+
+
+def _backfill(
+    times: Mapping[str, np.ndarray],
+    meta_times: Mapping[str, np.ndarray],
+    defs_by_name: Mapping[str, Definition],
+) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], int]:
+    """Event and header records of untimed types written before the first timed record get
+    its time.
+
+    An untimed record takes the time of the latest timed record before it (see
+    :func:`hold_forward`); those at the head of the log have none and would be lost — an
+    ARM event there would leave the whole flight "disarmed". The nearest timed record is
+    the first one. Returns both time tables and how many records were placed.
+
+    Examples
+    --------
+    >>> d = {"EV": Definition(13, "EV", 4, "B", ("Id",)),
+    ...      "ATT": Definition(1, "ATT", 11, "Ih", ("TimeMS", "Roll"))}
+    >>> t = {"EV": np.array([np.nan, 5.0]), "ATT": np.array([2.0, 5.0])}
+    >>> new, _, n = _backfill(t, t, d)
+    >>> new["EV"].tolist(), n
+    ([2.0, 5.0], 1)
+    """
+    finite = [float(np.nanmin(v)) for v in meta_times.values()
+              if np.size(v) and np.isfinite(v).any()]
+    if not finite:
+        return dict(times), dict(meta_times), 0
+    first = min(finite)
+    placed = 0
+
+    def fill(table: Mapping[str, np.ndarray], count: bool) -> dict[str, np.ndarray]:
+        nonlocal placed
+        out = {}
+        for name, t in table.items():
+            d = defs_by_name.get(name)
+            t = np.asarray(t, dtype=float)
+            head = ~np.logical_or.accumulate(np.isfinite(t)) if t.size else np.zeros(0, bool)
+            if (d is not None and d.time_field is None and head.any()
+                    and name in _HEADER_TYPES | _EVENT_TYPES):
+                t = np.where(head, first, t)
+                if count and name in _EVENT_TYPES:
+                    placed += int(head.sum())
+            out[name] = t
+        return out
+
+    meta = fill(meta_times, True)
+    own = meta if times is meta_times else {
+        k: fill({k: v}, k not in meta_times)[k] for k, v in times.items()}
+    return own, meta, placed
+
+
 def assemble(
     source: SourceInfo,
     columns: Mapping[str, Mapping[str, np.ndarray]],
@@ -955,6 +1013,12 @@ def assemble(
     """
     meta_columns = meta_columns if meta_columns is not None else columns
     meta_times = meta_times if meta_times is not None else times
+    times, meta_times, placed = _backfill(times, meta_times, defs_by_name)
+    if placed:
+        note = (f"{placed} record(s) without a time field written before the first timed "
+                "record (e.g. an ARM event or the first MODE) placed at that record's time")
+        source = replace(source, notes=(*source.notes, note))
+        warnings.warn(f"{source.path}: {note}", DataQualityWarning, stacklevel=3)
     units, mults = _units(meta_columns, defs_by_name)
     messages = {
         name: MessageTable(name, dict(cols), times[name], units.get(name, {}),

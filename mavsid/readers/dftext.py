@@ -186,7 +186,11 @@ def read(
             at = np.searchsorted(where, line_no)
             timeline[at] = cols[tname].astype(np.float64) * scale
             timed_line[at] = True
-    held = hold_forward(timeline, timed_line)
+    gps_note = ""
+    if timed_line.any():
+        held = hold_forward(timeline, timed_line)
+    else:
+        held, gps_note = _gps_clock(decoded, where)
 
     columns, times, defs_by_name = {}, {}, {}
     for name, (line_no, cols, d) in decoded.items():
@@ -204,7 +208,7 @@ def read(
                 columns[name] = {k: v[keep] for k, v in columns[name].items()}
                 times[name] = times[name][keep]
 
-    notes = []
+    notes = [gps_note] if gps_note else []
     if bad_lines:
         notes.append(f"skipped {bad_lines} line(s) with missing or unparsable values")
     if undefined:
@@ -219,6 +223,48 @@ def read(
         warnings.warn(f"{spath}: " + "; ".join(notes), DataQualityWarning, stacklevel=2)
     return assemble(source, columns, times, defs_by_name, wanted, meta_columns, meta_times,
                     banner=banner)
+
+
+def _gps_clock(
+    decoded: dict[str, tuple[np.ndarray, dict[str, np.ndarray], Definition]], where: np.ndarray
+) -> tuple[np.ndarray, str]:
+    """Times for a log with no boot-time field at all (ArduCopter 3.0/3.1 text logs): the
+    GPS receiver's time of week at each 3D fix, every record interpolated by its place in
+    the file between fixes; records outside the fixes stay untimed (NaN).
+
+    Examples
+    --------
+    >>> gps = {"Status": np.array([1, 3, 3]), "Time": np.array([0, 1000, 2000])}
+    >>> t, note = _gps_clock({"GPS": (np.array([1, 4, 8]), gps, None)},  # type: ignore[dict-item]
+    ...                      np.array([1, 2, 4, 6, 8, 9]))
+    >>> t.tolist()
+    [nan, nan, 1.0, 1.5, 2.0, nan]
+    >>> note.startswith("no boot-time field")
+    True
+    """
+    none = np.full(where.size, np.nan)
+    gps = decoded.get("GPS")
+    if gps is None:
+        return none, ""
+    line_no, cols, _ = gps
+    clock = next((c for c in ("TimeMS", "Time", "GMS") if c in cols), None)
+    if clock is None or "Status" not in cols:
+        return none, ""
+    ms = cols[clock].astype(np.float64)
+    fix = (cols["Status"].astype(np.float64) >= 3) & (ms > 0)
+    lines, secs = line_no[fix], ms[fix] * 1e-3
+    if secs.size:  # keep a strictly increasing run of fixes (a week rollover ends it)
+        keep = secs > np.maximum.accumulate(np.concatenate([[-np.inf], secs[:-1]]))
+        lines, secs = lines[keep], secs[keep]
+    if secs.size < 2:
+        return none, ""
+    pos = where.astype(np.float64)
+    out = np.interp(pos, lines.astype(np.float64), secs)
+    out[(pos < lines[0]) | (pos > lines[-1])] = np.nan
+    note = (f"no boot-time field (TimeUS/TimeMS) in this log: records timed by the GPS time "
+            f"of week of {secs.size} 3D fixes, interpolated by their place in the file; "
+            "records outside the fixes are untimed")
+    return out, note
 
 
 _LINES_PER_SLICE = 1 << 16  # records split and held before they are converted to columns

@@ -1,0 +1,151 @@
+"""Logs of older firmware: their clocks, names and parameters (issue: every generation runs).
+
+Facts are checked against pymavlink where it reads the log, and on hand-built logs with one
+fact each where no shared log has it.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+from helpers import shared_path
+
+from mavsid.align import _armed_events, align
+from mavsid.channels import pwm_to_thrust
+from mavsid.data import MessageTable, RawLog, SourceInfo
+from mavsid.errors import DataQualityWarning, MissingMessageError, NoExcitationError
+from mavsid.info import summarize
+from mavsid.pipeline import fit
+from mavsid.readers import read_log
+
+_OLD_COPTER = ("tradheli_brownout.log", "mechanical_fail.log", "robert_lefebvre_octo_PM.log")
+
+
+def _quiet_read(path, **kw):  # type: ignore[no-untyped-def]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return read_log(path, **kw)
+
+
+def test_copter_31_text_log_is_timed_by_gps_like_pymavlink() -> None:
+    """ArduCopter 3.1: no boot-time field on ATT; GPS.TimeMS is the only clock. pymavlink
+    holds the last GPS time (two ATT per 5 Hz fix share one stamp); mavsid interpolates by
+    the record's place in the file: the two agree to within one GPS interval."""
+    from pymavlink import DFReader
+
+    path = shared_path("public", "ArduPilot__ardupilot", "mechanical_fail.log")
+    ref = DFReader.DFReader_text(str(path))
+    att, gps = [], []
+    while (m := ref.recv_match(type=["ATT", "GPS"])) is not None:
+        (att if m.get_type() == "ATT" else gps).append(m._timestamp)
+    raw = _quiet_read(path, messages=["ATT", "GPS"])
+    ours = raw["ATT"].time_s
+    assert np.isfinite(ours).all() and len(ours) == len(att)
+    # the clocks differ by a constant (pymavlink's epoch; it also skips the 7.4 s jump of
+    # GPS.TimeMS at the second fix, mavsid keeps it): compare after the median offset
+    d = ours - np.asarray(att)
+    d = np.abs(d - np.median(d))[10:]
+    assert np.median(d) < 0.15 and np.percentile(d, 95) <= 0.25
+    assert np.all(np.diff(ours) >= 0)
+    assert any("GPS time of week" in n for n in raw.source.notes)
+
+
+@pytest.mark.parametrize("name", _OLD_COPTER)
+def test_old_copter_logs_reach_a_verdict(name: str) -> None:
+    """3.0/3.1 logs (angles at 10 Hz, no body rates or outputs): a reason, not a time error."""
+    path = shared_path("public", "ArduPilot__ardupilot", name)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(NoExcitationError, match="nothing identifiable") as info:
+            fit([str(path)])
+    assert "time grid" not in str(info.value)
+
+
+def test_a_log_without_any_clock_says_so() -> None:
+    path = shared_path("public", "ArduPilot__ardupilot", "underpowered.log")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(NoExcitationError, match="the log has no clock"):
+            fit([str(path)])
+
+
+def test_arm_event_before_the_first_timed_record_is_kept(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """EV 10 (armed) written before any TimeMS record: placed at the first one, noted."""
+    lines = ["FMT, 128, 89, FMT, BBnNZ, Type,Length,Name,Format,Columns",
+             "FMT, 13, 4, EV, B, Id",
+             "FMT, 1, 11, ATT, Ih, TimeMS,Roll",
+             "EV, 10"]
+    lines += [f"ATT, {1000 + 100 * k}, {k}" for k in range(20)]
+    lines += ["EV, 11", "ATT, 3000, 0"]
+    path = tmp_path / "arm_first.log"
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.warns(DataQualityWarning, match="before the first timed record"):
+        raw = read_log(path)
+    assert raw["EV"].time_s.tolist() == [1.0, 2.9]
+    assert _armed_events(raw) == [(1.0, True), (2.9, False)]
+
+
+def _rcou_raw(channel: str) -> RawLog:
+    t = np.arange(0, 4, 0.01)
+    att = MessageTable("ATT", {"Roll": np.zeros(t.size), "Pitch": np.zeros(t.size),
+                               "Yaw": np.zeros(t.size)}, t)
+    imu = MessageTable("IMU", {k: np.zeros(t.size) for k in ("GyrX", "GyrY", "GyrZ")}, t)
+    pwm = {f"{channel}{i}": np.full(t.size, 1500.0) for i in range(1, 9)}
+    return RawLog(SourceInfo("old.bin", "dataflash", 0),
+                  {"ATT": att, "IMU": imu, "RCOU": MessageTable("RCOU", pwm, t)},
+                  params={"FRAME": 1.0, "RC3_MIN": 1100.0, "RC3_MAX": 1900.0})
+
+
+@pytest.mark.parametrize("channel", ["C", "Chan", "Ch"])
+def test_rcou_channels_of_every_generation(channel: str) -> None:
+    """RCOU.C1 (4.x), Chan1 (3.4-3.6), Ch1 (3.3): all unmixed as motor outputs."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fd = align(_rcou_raw(channel))
+    assert fd.input_names == ("u_roll", "u_pitch", "u_yaw", "u_thrust")
+    assert fd.meta["mixer"] == "quad-x"
+
+
+def test_old_throttle_range_and_minimum() -> None:
+    """ArduCopter < 3.5 has no MOT_PWM_MIN/MAX (RC3_MIN/MAX) nor MOT_SPIN_MIN (THR_MIN)."""
+    old = {"RC3_MIN": 1100.0, "RC3_MAX": 1900.0, "THR_MIN": 100.0, "MOT_THST_EXPO": 0.0}
+    assert pwm_to_thrust(np.array([1100.0, 1180.0, 1900.0]), old).tolist() == pytest.approx(
+        [0.0, 0.0, 1.0])
+    mid = 1100.0 + 800.0 * (0.1 + 0.85 * 0.5)  # half way up the spin range 0.1..0.95
+    assert pwm_to_thrust(np.array([mid]), old)[0] == pytest.approx(0.5)
+
+
+def test_a_renamed_field_falls_back_to_the_next_preset() -> None:
+    """RATE present but without ROut/POut/YOut (another layout): the RCOU preset is used;
+    when nothing fits, the error names what each preset needed."""
+    raw = _rcou_raw("C")
+    t = raw["ATT"].time_s
+    rate = MessageTable("RATE", {k: np.zeros(t.size) for k in ("R", "P", "Y", "RollOut")}, t)
+    both = RawLog(raw.source, {**raw.messages, "RATE": rate}, params=raw.params)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert align(both).preset == "ardupilot-rcou"
+    rcou = MessageTable("RCOU", {"Out1": np.zeros(t.size)}, t)
+    neither = RawLog(raw.source, {**both.messages, "RCOU": rcou}, params=raw.params)
+    with pytest.warns(DataQualityWarning, match="preset ardupilot-att used") as caught:
+        fd = align(neither)
+    assert fd.preset == "ardupilot-att" and fd.input_names == ()
+    text = " ".join(str(w.message) for w in caught)
+    assert "ardupilot-rate needs field RATE.ROut" in text and "ardupilot-rcou needs" in text
+    # no preset at all fits: the error lists every one's need and what the log has
+    bare = RawLog(raw.source, {"RATE": rate}, params=raw.params)
+    with pytest.raises(MissingMessageError, match="it has: RATE"):
+        align(bare)
+
+
+def test_info_gives_rates_for_sampled_types_only() -> None:
+    """Definitions, units, parameters, texts written in a burst at boot: counted, no rate
+    (they showed 10 000-100 000 Hz); sampled types keep theirs."""
+    path = shared_path("public", "ArduPilot__MethodicConfigurator", "backend_log_80k.bin")
+    s = summarize(_quiet_read(path))["messages"]
+    for name in ("FMT", "FMTU", "PARM", "MSG", "FNCE"):
+        assert s[name]["rate_hz"] is None and s[name]["count"] > 0, name
+    assert s["IMU"]["rate_hz"] == pytest.approx(25.0, rel=0.05)
+    assert s["ATT"]["rate_hz"] == pytest.approx(10.0, rel=0.05)

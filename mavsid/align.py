@@ -52,9 +52,10 @@ from __future__ import annotations
 
 import itertools
 import os
+import re
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -219,7 +220,83 @@ def _collect(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer]
                                   u[:, j], bad_t, excluded))
     else:
         inputs = _channel_series(raw, preset, INPUT_NAMES, preset.inputs, need_samples=False)
+    states, inputs = _checked_scales(raw, states, inputs)
     return states, inputs, mixer_name
+
+
+#: IMU gyro field per body rate: the independent measurement a rate channel is checked by
+_GYRO = {"p": "GyrX", "q": "GyrY", "r": "GyrZ"}
+#: ArduCopter 3.4-dev logged RATE in centidegrees/s and its outputs on a ±4500 scale
+_CENTI = 0.01
+_OUT_SCALE = 4500.0
+
+
+def _checked_scales(raw: RawLog, states: list[_Series], inputs: list[_Series]
+                    ) -> tuple[list[_Series], list[_Series]]:
+    """ArduPilot RATE channels whose scale the evidence contradicts, rescaled and said so.
+
+    Development builds of ArduCopter 3.4 logged ``RATE.R/P/Y`` in centidegrees per second and
+    ``ROut/POut/YOut`` on a ±4500 scale, without unit records. The evidence, in order: the
+    IMU gyro of the same log (a rate 100× the gyro is in centidegrees), else the range (a
+    body rate beyond 35 rad/s — 2000 deg/s, every gyro's limit — cannot be deg/s); controller
+    outputs beyond ±10 (normally ±1) are on the ±4500 scale. Each rescale is a warning and
+    lands in the series' source (so ``fit`` shows it); nothing is rescaled silently.
+    """
+    notes: list[str] = []
+    rates = [s for s in states if s.source.startswith("RATE.") and s.name in _GYRO
+             and s.v.size >= 10]
+    centi, why = False, ""
+    checked = []
+    for s in rates:  # by the IMU gyro, on the axis the gyro sees moving most
+        gyro = _col(raw, "IMU", _GYRO[s.name])
+        if gyro is None:
+            continue
+        ok = np.isfinite(gyro[0]) & np.isfinite(gyro[1])
+        if ok.sum() < 10:
+            continue
+        ref = np.interp(s.t, gyro[0][ok], gyro[1][ok].astype(float))
+        ref_rms = float(np.sqrt(np.mean(ref**2)))
+        checked.append((ref_rms, float(np.sqrt(np.mean(s.v**2))) / max(ref_rms, 1e-12), s))
+    if checked:
+        _, ratio, s = max(checked, key=lambda c: c[0])
+        if 30.0 < ratio < 300.0:
+            centi = True
+            why = (f"RATE body rates are {ratio:.0f}× the IMU gyro ({s.source} against "
+                   f"IMU.{_GYRO[s.name]}): logged in centidegrees/s (ArduCopter 3.4-dev), "
+                   "scaled by 0.01")
+    elif rates:
+        top = max(float(np.percentile(np.abs(s.v), 99)) for s in rates)
+        dev34 = bool(re.search(r"V3\.4[.\d]*-dev", raw.firmware or ""))
+        declared = bool(raw.messages["RATE"].units)
+        if top > 35.0:
+            centi = True
+            why = (f"RATE body rates reach {top:.0f} rad/s read as deg/s, beyond any gyro: "
+                   "taken as centidegrees/s (ArduCopter 3.4-dev), scaled by 0.01 (no IMU in "
+                   "the log to confirm)")
+        elif dev34 and not declared:
+            centi = True
+            why = (f"{raw.firmware} logged RATE in centidegrees/s (firmware table; no IMU in "
+                   "the log to confirm), scaled by 0.01")
+        elif not declared:
+            notes.append("RATE body rates taken as deg/s: the log declares no units and has no "
+                         "IMU gyro to check them by")
+    out_states = states
+    if centi:
+        notes.append(why)
+        out_states = [replace(s, v=s.v * _CENTI, source=f"{s.source} (centideg/s, inferred)")
+                      if any(s is r for r in rates) else s for s in states]
+    outs = [s for s in inputs if s.source in ("RATE.ROut", "RATE.POut", "RATE.YOut")
+            and s.v.size >= 10]
+    top_out = max((float(np.percentile(np.abs(s.v), 99)) for s in outs), default=0.0)
+    out_inputs = inputs
+    if top_out > 10.0 or (centi and outs and "firmware table" in why):
+        notes.append(f"RATE.ROut/POut/YOut reach {top_out:.0f} (normally within ±1): on the "
+                     "±4500 scale of ArduCopter 3.4-dev, divided by 4500")
+        out_inputs = [replace(s, v=s.v / _OUT_SCALE, source=f"{s.source} (/4500, inferred)")
+                      if any(s is o for o in outs) else s for s in inputs]
+    if notes:
+        warnings.warn(f"{raw.source.path}: " + "; ".join(notes), DataQualityWarning, stacklevel=5)
+    return out_states, out_inputs
 
 
 def _channel_series(raw: RawLog, preset: Preset, names: Sequence[str],

@@ -57,7 +57,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from mavsid.data import FlightData, Segment
-from mavsid.errors import ConfigError, MavsidError, NoExcitationError
+from mavsid.errors import ConfigError, MavsidError, NoExcitationError, escape
 from mavsid.validation import AXIS_RATE, DEFAULT_HORIZONS_S, Model, Validation, validate
 from mavsid.verdict import Verdict, format_fit, judge, unfitted
 
@@ -825,6 +825,15 @@ def _closed_loop_line(f: AxisFit) -> str:
     return text
 
 
+def _si_unit(fd: FlightData, name: str) -> str:
+    """The SI unit a flight channel is held in."""
+    if name in fd.state_names:
+        return fd.state_units[fd.state_names.index(name)]
+    if name in fd.input_names:
+        return fd.input_units[fd.input_names.index(name)]
+    return "?"
+
+
 def format_result(result: FitResult) -> str:
     """The compact per-axis table ``mavsid fit`` prints: parameters ± σ, fit % on held-out
     data at one step, 0.5 s and free run.
@@ -847,6 +856,12 @@ def format_result(result: FitResult) -> str:
         if excluded:
             lines.append(f"{fd.source.path}: samples excluded, never fitted: "
                          + ", ".join(f"{k} {v}" for k, v in excluded.items()))
+        sources: Any = fd.meta.get("sources") or {}
+        used = [n for ax in result.axes.values() for n in (ax.output, f"u_{ax.axis}")]
+        if sources:  # where each channel came from (and any scale inferred), in SI units
+            lines.append(f"{fd.source.path}: preset {fd.preset}; " + ", ".join(
+                f"{n} [{_si_unit(fd, n)}] <- {escape(str(sources[n]))}"
+                for n in dict.fromkeys(used) if n in sources))
     for axis, f in result.axes.items():
         d = f.to_dict()
         train_s = sum(s.stop_s - s.start_s for s in f.train)

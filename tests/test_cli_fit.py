@@ -77,7 +77,9 @@ def test_fit_text_table() -> None:
     proc = run("fit", str(FIXTURES / "sysid_roll.bin"))
     assert proc.returncode == 0, proc.stderr
     lines = proc.stdout.splitlines()
-    assert lines[1].startswith("roll (p; ls;")
+    # where each channel came from, in which SI unit, then the axis
+    assert "p [rad/s] <- RATE.R" in lines[1] and "u_roll [1] <- RATE.ROut" in lines[1]
+    assert lines[2].startswith("roll (p; ls;")
     assert any(line.strip().startswith("B[p,u_roll]") and "±" in line for line in lines)
     assert any(line.strip().startswith("fit %  one-step") and "free-run" in line
                for line in lines)

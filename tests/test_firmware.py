@@ -149,3 +149,46 @@ def test_info_gives_rates_for_sampled_types_only() -> None:
         assert s[name]["rate_hz"] is None and s[name]["count"] > 0, name
     assert s["IMU"]["rate_hz"] == pytest.approx(25.0, rel=0.05)
     assert s["ATT"]["rate_hz"] == pytest.approx(10.0, rel=0.05)
+
+
+def _scaled_like_34dev(raw: RawLog, keep_imu: bool = True,
+                       firmware: str | None = None) -> RawLog:
+    rate = raw["RATE"]
+    cols = dict(rate.columns)
+    for k in ("R", "P", "Y", "RDes", "PDes", "YDes"):
+        cols[k] = cols[k] * 100.0  # centidegrees/s
+    for k in ("ROut", "POut", "YOut"):
+        cols[k] = cols[k] * 4500.0
+    msgs = {**raw.messages, "RATE": MessageTable("RATE", cols, rate.time_s)}
+    if not keep_imu:
+        msgs.pop("IMU", None)
+    return RawLog(raw.source, msgs, params=raw.params, texts=raw.texts, modes=raw.modes,
+                  autopilot=raw.autopilot, vehicle=raw.vehicle,
+                  firmware=firmware or raw.firmware)
+
+
+@pytest.mark.parametrize("keep_imu", [True, False], ids=["by-imu", "by-firmware"])
+def test_centidegree_rates_of_copter_34_dev_are_found_and_said(keep_imu: bool) -> None:
+    """RATE in centideg/s and outputs on ±4500 (ArduCopter 3.4-dev, no unit records): the
+    scale is decided from the IMU gyro (or the firmware string) and stated; the flight
+    equals the one aligned from the same log in deg/s and ±1."""
+    from helpers import FIXTURES
+
+    raw = _quiet_read(FIXTURES / "sysid_roll.bin")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ref = align(raw)
+    with pytest.warns(DataQualityWarning, match="centidegrees/s") as caught:
+        got = align(_scaled_like_34dev(raw, keep_imu, None if keep_imu else
+                                       "ArduCopter V3.4-dev (e707341b)"))
+    text = " ".join(str(w.message) for w in caught)
+    assert ("against IMU" in text) == keep_imu and "divided by 4500" in text
+    assert ("firmware table" in text) == (not keep_imu)
+    assert got.state_names == ref.state_names and got.input_names == ref.input_names
+    # float32 storage: equal to its precision
+    np.testing.assert_allclose(got.states, ref.states, rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(got.inputs, ref.inputs, rtol=1e-6, atol=1e-9)
+    assert "inferred" in got.meta["sources"]["p"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DataQualityWarning)
+        align(raw)  # the same log in its right units: nothing to say

@@ -13,7 +13,10 @@ mavsid ...
 from __future__ import annotations
 
 import argparse
+import contextlib
+import signal
 import sys
+import time
 import traceback
 import warnings
 from collections.abc import Callable, Sequence
@@ -21,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 from mavsid import __version__
 from mavsid.errors import ConfigError, MavsidError, MavsidWarning, escape, escape_lines
+from mavsid.outputs import atomic_path, check_outputs
 
 if TYPE_CHECKING:
     from mavsid.pipeline import FitResult, PipelineConfig
@@ -92,6 +96,7 @@ def _extract(args: argparse.Namespace) -> int:
     from mavsid.export import write
     from mavsid.readers import read_log
 
+    check_outputs([args.output], [args.log])
     names = [m.strip() for m in args.messages.split(",") if m.strip()] if args.messages else None
     if args.aligned:
         from mavsid.align import flight_table, load_flight
@@ -99,14 +104,16 @@ def _extract(args: argparse.Namespace) -> int:
 
         flight = load_flight(args.log)
         table = flight_table(flight, args.start, args.stop)
-        out = write(RawLog(flight.source, {"FlightData": table}), args.output, ["FlightData"])
-        print(f"wrote {out} (FlightData: {len(table)} samples at {1 / flight.dt:.0f} Hz, "
+        with atomic_path(args.output) as tmp:
+            write(RawLog(flight.source, {"FlightData": table}), tmp, ["FlightData"])
+        print(f"wrote {args.output} (FlightData: {len(table)} samples at {1 / flight.dt:.0f} Hz, "
               f"preset {flight.preset})")
         return 0
     log = read_log(args.log, messages=names, start=args.start, stop=args.stop, **_dialect(args))
-    out = write(log, args.output, names)
+    with atomic_path(args.output) as tmp:
+        write(log, tmp, names)
     n = len(names) if names is not None else len(log.messages)
-    print(f"wrote {out} ({n} message type(s))")
+    print(f"wrote {args.output} ({n} message type(s))")
     return 0
 
 
@@ -243,11 +250,13 @@ def _write_outputs(args: argparse.Namespace, result: FitResult) -> None:
     if args.rrd:
         from mavsid.viz import save_rrd
 
-        save_rrd(result, args.rrd)
+        with atomic_path(args.rrd) as tmp:
+            save_rrd(result, tmp)
     if args.report:
         from mavsid.report import write_report
 
-        write_report(result, args.report)
+        with atomic_path(args.report) as tmp:
+            write_report(result, tmp)
 
 
 def _print_result(args: argparse.Namespace, result: FitResult) -> None:
@@ -261,7 +270,8 @@ def _print_result(args: argparse.Namespace, result: FitResult) -> None:
         print(escape_lines(format_result(result)))
         for flag, path in (("rrd", args.rrd), ("report", args.report)):
             if path:
-                print(f"wrote {path}" + (f" (open it with: rerun {path})" if flag == "rrd" else ""))
+                print(f"wrote {path}" + (f" (open it with: rerun --bind 127.0.0.1 {path})"
+                                         if flag == "rrd" else ""))
 
 
 def _add_output_flags(p: argparse.ArgumentParser) -> None:
@@ -294,9 +304,10 @@ def _fit(args: argparse.Namespace) -> int:
 
     from mavsid.pipeline import fit
 
+    check_outputs([args.output, args.rrd, args.report], args.logs)
     result = fit(args.logs, _pipeline_config(args))
     if args.output:
-        with open(args.output, "w", encoding="utf-8") as f:
+        with atomic_path(args.output) as tmp, open(tmp, "w", encoding="utf-8") as f:
             json.dump(result.models_dict(), f, indent=1)
     _write_outputs(args, result)
     _print_result(args, result)
@@ -318,6 +329,7 @@ def _add_validate(sub: argparse._SubParsersAction) -> None:
 def _validate(args: argparse.Namespace) -> int:
     from mavsid.pipeline import load_models, validate_logs
 
+    check_outputs([args.rrd, args.report], [args.model, *args.logs])
     result = validate_logs(load_models(args.model), args.logs, _pipeline_config(args))
     _write_outputs(args, result)
     _print_result(args, result)
@@ -325,47 +337,69 @@ def _validate(args: argparse.Namespace) -> int:
 
 
 def _add_view(sub: argparse._SubParsersAction) -> None:
-    import rerun as rr
-
     p = sub.add_parser(
         "view", help="show a log (and a model's predictions) in the rerun viewer",
         description="Log the flight, its segments and, with --model, the model's one-step and "
-        "free-run predictions to rerun. A served viewer (--serve) listens on 127.0.0.1 "
-        "unless --bind says otherwise.",
+        "free-run predictions to rerun: a native viewer by default, or a web viewer "
+        "(--serve), a running viewer (--connect), a file (--save) or stdout (--stdout). A "
+        "viewer mavsid starts listens on 127.0.0.1 (unless --bind says otherwise), on free "
+        "ports.",
     )
     p.add_argument("log", metavar="LOG", help="flight log (.bin .log .tlog .ulg)")
     p.add_argument("--model", metavar="model.json", help="models written by mavsid fit -o")
     p.add_argument("--config", metavar="FILE.toml", help="pipeline settings (see pipelines/)")
     p.add_argument("--axis", action="append", choices=("roll", "pitch", "yaw"),
                    help="axis to show (repeat for several)")
-    rr.script_add_args(p)
-    p.add_argument("--spawn", action="store_true", help="spawn a native viewer (the default)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--spawn", action="store_true",
+                       help="start a native rerun viewer (the default)")
+    where.add_argument("--serve", action="store_true",
+                       help="serve a web viewer and print its address; Ctrl-C stops it")
+    where.add_argument("--connect", action="store_true",
+                       help="send to a viewer you started (see --url)")
+    where.add_argument("--save", metavar="OUT.rrd", help="write a recording instead")
+    where.add_argument("--stdout", action="store_true",
+                       help="write the recording to stdout (pipe it into `rerun -`)")
+    where.add_argument("--headless", action="store_true",
+                       help="log nowhere (check that the log can be shown)")
+    p.add_argument("--url", metavar="URL", default="rerun+http://127.0.0.1:9876/proxy",
+                   help="viewer address for --connect (default %(default)s)")
     p.add_argument("--bind", default="127.0.0.1",
-                   help="address a served viewer listens on (default 127.0.0.1)")
+                   help="address a viewer mavsid starts listens on (default 127.0.0.1; "
+                   "0.0.0.0 offers the flight to the network)")
     p.set_defaults(handler=_view)
 
 
 def _view(args: argparse.Namespace) -> int:
-    import rerun as rr
-
     from mavsid import viz
     from mavsid.pipeline import find_windows, load_models, validate_logs
 
+    check_outputs([args.save], [args.log, *([args.model] if args.model else [])])
     cfg = _pipeline_config(args)
     rec = viz.new_recording()
-    if args.model:
-        result = validate_logs(load_models(args.model), [args.log], cfg)
-        served = viz.open_sink(rec, viz.blueprint(list(result.axes)), **_sink_args(args))
-        viz.log_fit_result(rec, result)
-    else:
-        flight, windows = find_windows(args.log, cfg)
-        served = viz.open_sink(rec, viz.blueprint([], with_flight=True), **_sink_args(args))
-        viz.log_flight_windows(rec, flight, windows)
-    rec.flush()
-    if served is not None:
-        print(f"web viewer: {served.url} (Ctrl-C to stop)")
+    sink = _sink_args(args)
+    save = sink.pop("save")
+    with contextlib.ExitStack() as stack:
+        if save:
+            sink["save"] = stack.enter_context(atomic_path(save))
+        if args.model:
+            result = validate_logs(load_models(args.model), [args.log], cfg)
+            served = viz.open_sink(rec, viz.blueprint(list(result.axes)), **sink)
+            viz.log_fit_result(rec, result)
+        else:
+            flight, windows = find_windows(args.log, cfg)
+            served = viz.open_sink(rec, viz.blueprint([], with_flight=True), **sink)
+            viz.log_flight_windows(rec, flight, windows)
+        rec.flush()
+        if save:
+            rec.disconnect()
+    if served is not None and args.serve:
+        print(f"web viewer: {served.url} (Ctrl-C to stop)", flush=True)
         try:
-            rr.script_teardown(args)
+            while served.process.poll() is None:
+                time.sleep(0.5)
+        except KeyboardInterrupt:
+            pass
         finally:
             served.close()
     if args.save:
@@ -446,6 +480,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     handler: Handler = args.handler
     warnings.showwarning = _show_warning
+    previous = signal.getsignal(signal.SIGTERM)
+    signal.signal(signal.SIGTERM, _terminate)  # like Ctrl-C: outputs and children cleaned up
     try:
         return handler(args)
     except MavsidError as exc:
@@ -458,6 +494,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
     finally:
         warnings.showwarning = _default_showwarning
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _terminate(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
 
 
 if __name__ == "__main__":  # pragma: no cover

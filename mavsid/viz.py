@@ -31,9 +31,13 @@ whole :class:`~mavsid.pipeline.FitResult` to an ``.rrd`` file.
 
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
+import socket
 import subprocess
 import sys
+import time
 import urllib.parse
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -56,6 +60,7 @@ __all__ = [
     "TIMELINE",
     "Served",
     "blueprint",
+    "free_port",
     "log_attitude",
     "log_fit_result",
     "log_flight",
@@ -67,6 +72,8 @@ __all__ = [
     "open_sink",
     "save_rrd",
     "serve_command",
+    "viewer_command",
+    "wait_listening",
 ]
 
 APPLICATION_ID = "mavsid"
@@ -602,30 +609,90 @@ def save_rrd(
 
 @dataclass(frozen=True)
 class Served:
-    """A web viewer and gRPC proxy run by the rerun CLI for :func:`open_sink`."""
+    """A rerun process started by :func:`open_sink` (web viewer and gRPC proxy, or a native
+    viewer) and the ports it listens on."""
 
     url: str
     process: subprocess.Popen[bytes]
+    ports: tuple[int, ...] = ()
 
     def close(self) -> None:
-        """Stop the server process."""
-        self.process.terminate()
-        try:
-            self.process.wait(timeout=10)
-        except subprocess.TimeoutExpired:  # pragma: no cover
-            self.process.kill()
+        """Stop the server and every process it started (``python -m rerun_cli`` runs the
+        viewer binary as a child: the whole process group goes), freeing its ports."""
+        for sig in (signal.SIGTERM, signal.SIGKILL):
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(self.process.pid, sig)
+            try:
+                self.process.wait(timeout=10)
+                break
+            except subprocess.TimeoutExpired:  # pragma: no cover
+                continue
 
 
-def serve_command(bind: str, grpc_port: int = 9876, web_port: int = 9090) -> list[str]:
+def free_port(bind: str = "127.0.0.1") -> int:
+    """A TCP port free on ``bind`` now (the OS's choice).
+
+    Examples
+    --------
+    >>> 1024 <= free_port() <= 65535
+    True
+    """
+    family = socket.AF_INET6 if ":" in bind else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as sock:
+        sock.bind((bind, 0))
+        return int(sock.getsockname()[1])
+
+
+def serve_command(bind: str, grpc_port: int, web_port: int) -> list[str]:
     """The rerun CLI command that hosts the web viewer and the gRPC proxy on ``bind``.
 
     Examples
     --------
-    >>> serve_command("127.0.0.1")[-7:]
-    ['--serve-web', '--bind', '127.0.0.1', '--port', '9876', '--web-viewer-port', '9090']
+    >>> serve_command("127.0.0.1", 40001, 40002)[-7:]
+    ['--serve-web', '--bind', '127.0.0.1', '--port', '40001', '--web-viewer-port', '40002']
     """
     return [sys.executable, "-m", "rerun_cli", "--serve-web", "--bind", bind,
             "--port", str(grpc_port), "--web-viewer-port", str(web_port)]
+
+
+def viewer_command(bind: str, port: int) -> list[str]:
+    """The rerun CLI command for a native viewer whose gRPC server listens on ``bind`` only
+    (the SDK's ``spawn`` would listen on every interface).
+
+    Examples
+    --------
+    >>> viewer_command("127.0.0.1", 40003)[-4:]
+    ['--bind', '127.0.0.1', '--port', '40003']
+    """
+    return [sys.executable, "-m", "rerun_cli", "--bind", bind, "--port", str(port)]
+
+
+def _client_host(bind: str) -> str:
+    host = "127.0.0.1" if bind in ("0.0.0.0", "::", "") else bind
+    return f"[{host}]" if ":" in host else host
+
+
+def wait_listening(process: subprocess.Popen[bytes], host: str, port: int,
+                   timeout_s: float = 20.0) -> None:
+    """Return once ``host:port`` accepts connections; raise if the process exits first or
+    the time runs out (never send data to a server that is not ours)."""
+    from mavsid.errors import ConfigError
+
+    deadline = time.monotonic() + timeout_s
+    plain = host.strip("[]")
+    while time.monotonic() < deadline:
+        if process.poll() is not None:
+            raise ConfigError(f"the rerun server exited (code {process.returncode}) before "
+                              f"listening on {host}:{port}")
+        try:
+            with socket.create_connection((plain, port), timeout=0.5):
+                return
+        except OSError:
+            time.sleep(0.1)
+    with contextlib.suppress(ProcessLookupError, PermissionError):
+        os.killpg(process.pid, signal.SIGTERM)
+    raise ConfigError(f"the rerun server did not listen on {host}:{port} within "
+                      f"{timeout_s:.0f} s")
 
 
 def open_sink(
@@ -640,29 +707,36 @@ def open_sink(
     headless: bool = False,
     bind: str = "127.0.0.1",
 ) -> Served | None:
-    """Send ``rec`` where rerun's standard script flags say (``rr.script_add_args``).
+    """Send ``rec`` where the ``view`` flags say.
 
-    Like ``rr.script_setup``, with two differences: the recording is the one given, not the
-    global one; and ``serve`` runs the rerun CLI's web viewer and gRPC proxy listening on
-    ``bind`` only (default 127.0.0.1: flight data is not published to the network unless
-    asked; the SDK's own ``serve_grpc``/``serve_web_viewer`` listen on every interface).
-    Returns the running server for ``serve`` (call :meth:`Served.close` when done).
+    ``serve`` runs the rerun CLI's web viewer and gRPC proxy, ``spawn`` (the default) a
+    native viewer; both listen on ``bind`` only (default 127.0.0.1: flight data is not
+    published to the network unless asked) on ports free at the time, and data is sent only
+    once the process mavsid started listens (a port held by another process is never sent
+    to). Returns the process started (call :meth:`Served.close` when done; a spawned
+    viewer is left running for the user).
     """
     if stdout:
         rec.stdout(default_blueprint=bp)
     elif serve:
-        cmd = serve_command(bind)
-        process = subprocess.Popen(cmd)
-        host = "127.0.0.1" if bind in ("0.0.0.0", "::", "") else bind
-        host = f"[{host}]" if ":" in host else host
-        grpc = f"rerun+http://{host}:{cmd[-3]}/proxy"
+        grpc_port, web_port = free_port(bind), free_port(bind)
+        process = subprocess.Popen(serve_command(bind, grpc_port, web_port),
+                                   start_new_session=True)
+        host = _client_host(bind)
+        wait_listening(process, host, grpc_port)
+        grpc = f"rerun+http://{host}:{grpc_port}/proxy"
         rec.connect_grpc(grpc, default_blueprint=bp)
-        web = f"http://{host}:{cmd[-1]}/?url={urllib.parse.quote(grpc, safe='')}"
-        return Served(web, process)
+        web = f"http://{host}:{web_port}/?url={urllib.parse.quote(grpc, safe='')}"
+        return Served(web, process, (grpc_port, web_port))
     elif connect:
         rec.connect_grpc(url, default_blueprint=bp)
     elif save is not None:
         rec.save(save, default_blueprint=bp)
     elif not headless:
-        rec.spawn(default_blueprint=bp)
+        port = free_port(bind)
+        process = subprocess.Popen(viewer_command(bind, port), start_new_session=True)
+        host = _client_host(bind)
+        wait_listening(process, host, port)
+        rec.connect_grpc(f"rerun+http://{host}:{port}/proxy", default_blueprint=bp)
+        return Served(f"rerun+http://{host}:{port}/proxy", process, (port,))
     return None

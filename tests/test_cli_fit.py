@@ -14,7 +14,7 @@ import pytest
 from helpers import FIXTURES
 from rerun.chunk import RrdReader
 
-from mavsid import cli, viz
+from mavsid import cli
 
 
 @dataclass
@@ -146,28 +146,63 @@ def test_view_with_model(fitted, tmp_path: Path) -> None:  # type: ignore[no-unt
     assert {"/axes/roll/p/one_step", "/axes/roll/p/free_run"} <= entities
 
 
-def test_view_has_rerun_flags_and_binds_localhost(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+def test_view_flags_are_mavsids_own(capsys) -> None:  # type: ignore[no-untyped-def]
     args = cli.build_parser().parse_args(["view", "x.bin", "--serve"])
     assert args.serve and args.bind == "127.0.0.1"
     for flag in ("headless", "connect", "save", "stdout", "url", "spawn"):
         assert hasattr(args, flag)
-    started: list[list[str]] = []
-    connected: list[str] = []
+    with pytest.raises(SystemExit):
+        cli.main(["view", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "0.0.0.0 offers the flight to the network" in text and "Rerun" not in text
 
-    class FakeProcess:
-        def __init__(self, cmd: list[str]) -> None:
-            started.append(cmd)
 
-    rec = viz.new_recording()
-    monkeypatch.setattr(viz.subprocess, "Popen", FakeProcess)
-    monkeypatch.setattr(rec, "connect_grpc", lambda url, **kw: connected.append(url))
-    served = viz.open_sink(rec, viz.blueprint(["roll"]), serve=True)
-    assert served is not None
-    # the rerun CLI serves both the web viewer and the gRPC proxy, on 127.0.0.1 only
-    cmd = started[-1]
-    assert "--serve-web" in cmd and cmd[cmd.index("--bind") + 1] == "127.0.0.1"
-    assert connected[-1] == "rerun+http://127.0.0.1:9876/proxy"
-    assert served.url.startswith("http://127.0.0.1:9090/?url=rerun%2Bhttp")
-    viz.open_sink(rec, viz.blueprint(["roll"]), serve=True, bind="0.0.0.0")
-    assert started[-1][started[-1].index("--bind") + 1] == "0.0.0.0"
-    assert connected[-1] == "rerun+http://127.0.0.1:9876/proxy"
+def _listening(port: int) -> list[str]:
+    """Local addresses (hex, as in /proc/net/tcp*) listening on ``port``."""
+    out = []
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        with contextlib.suppress(OSError), open(table) as f:
+            for line in f.read().splitlines()[1:]:
+                local, state = line.split()[1], line.split()[3]
+                addr, hexport = local.rsplit(":", 1)
+                if state == "0A" and int(hexport, 16) == port:
+                    out.append(addr)
+    return out
+
+
+@pytest.mark.skipif(not Path("/proc/net/tcp").exists(), reason="needs Linux /proc/net/tcp")
+def test_served_viewer_listens_on_localhost_only_and_stops_on_sigterm() -> None:
+    """`view --serve`: the rerun server listens on 127.0.0.1 only, on free ports (not the
+    fixed 9876/9090 another process may hold), and SIGTERM stops it and frees both ports."""
+    import re
+    import signal
+    import time
+    import urllib.parse
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "mavsid.cli", "view", str(FIXTURES / "sysid_roll.bin"), "--serve"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None
+        line = ""
+        deadline = time.monotonic() + 120
+        while "web viewer:" not in line and time.monotonic() < deadline:
+            line = proc.stdout.readline()
+            if not line and proc.poll() is not None:
+                break
+        assert "web viewer:" in line, proc.stderr.read() if proc.stderr else ""
+        web = urllib.parse.urlsplit(line.split()[2])
+        grpc = re.search(r":(\d+)/proxy", urllib.parse.unquote(web.query))
+        assert web.hostname == "127.0.0.1" and grpc is not None
+        ports = (int(web.port or 0), int(grpc.group(1)))
+        loopback = {"0100007F", "00000000000000000000000001000000"}
+        for port in ports:
+            addrs = _listening(port)
+            assert addrs and set(addrs) <= loopback, (port, addrs)
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=30) in (0, 130)
+        time.sleep(0.5)
+        assert all(not _listening(port) for port in ports)
+    finally:
+        if proc.poll() is None:
+            proc.kill()

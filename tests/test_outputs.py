@@ -1,0 +1,85 @@
+"""Outputs never replace an input, are checked before the work, and are written atomically."""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import io
+import os
+import shutil
+from pathlib import Path
+
+import pytest
+from helpers import FIXTURES
+
+from mavsid import cli
+
+
+def _run(*argv: str) -> tuple[int, str]:
+    err = io.StringIO()
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        code = cli.main(list(argv))
+    return code, err.getvalue()
+
+
+def _digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+@pytest.fixture()
+def log(tmp_path: Path) -> Path:
+    dst = tmp_path / "flight.bin"
+    shutil.copy(FIXTURES / "sysid_roll.bin", dst)
+    return dst
+
+
+@pytest.mark.parametrize("flag", ["-o", "--rrd", "--report"])
+def test_fit_never_overwrites_its_log(log: Path, flag: str) -> None:
+    before = _digest(log)
+    code, err = _run("fit", str(log), flag, str(log))
+    assert code == 1 and "is an input of this command" in err and str(log) in err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert _digest(log) == before
+
+
+def test_a_link_to_the_log_is_the_log(log: Path, tmp_path: Path) -> None:
+    link = tmp_path / "model.json"
+    os.symlink(log, link)
+    hard = tmp_path / "hard.json"
+    os.link(log, hard)
+    before = _digest(log)
+    for out in (link, hard):
+        code, err = _run("fit", str(log), "-o", str(out))
+        assert code == 1 and "is an input" in err
+    assert _digest(log) == before
+
+
+def test_extract_and_view_never_overwrite_their_log(log: Path) -> None:
+    before = _digest(log)
+    for argv in (("extract", str(log), "-o", str(log)),
+                 ("view", str(log), "--save", str(log))):
+        code, err = _run(*argv)
+        assert code == 1 and "is an input" in err, argv
+    assert _digest(log) == before
+
+
+def test_unwritable_outputs_stop_before_the_fit(log: Path, tmp_path: Path) -> None:
+    missing = tmp_path / "no" / "such" / "dir" / "fit.html"
+    code, err = _run("fit", str(log), "--report", str(missing))
+    assert code == 1 and "does not exist" in err and str(missing) in err
+    code, err = _run("fit", str(log), "-o", str(tmp_path))
+    assert code == 1 and "is a directory" in err
+
+
+def test_a_failed_fit_leaves_the_old_output_alone(tmp_path: Path) -> None:
+    """Outputs are replaced only when complete: a run that fails keeps the previous file,
+    and no temporary file is left beside it."""
+    out = tmp_path / "model.json"
+    out.write_text("previous")
+    code, _ = _run("fit", str(FIXTURES / "hover.bin"), "-o", str(out))
+    assert code == 1
+    assert out.read_text() == "previous"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["model.json"]
+    code, _ = _run("fit", str(FIXTURES / "sysid_roll.bin"), "-o", str(out))
+    assert code == 0 and out.read_text().startswith("{")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["model.json"]

@@ -290,7 +290,9 @@ def _add_fit(sub: argparse._SubParsersAction) -> None:
         "and validate on the held-out ones (one-step, 0.5 s and free-run fit %).",
     )
     p.add_argument("logs", nargs="+", metavar="LOG", help="flight log(s) (.bin .log .tlog .ulg)")
-    p.add_argument("--estimator", choices=("ls", "ridge", "l1"), help="regression (default ls)")
+    p.add_argument("--estimator", choices=("ls", "ridge", "l1", "stlsq"),
+                   help="regression: least squares (default), ridge, L1 (cvxpy) or stlsq "
+                   "(sequential thresholded least squares, SINDy-style sparse)")
     p.add_argument("-o", "--output", metavar="model.json", help="write the fitted models")
     p.add_argument("--allow-unstable", action="store_true",
                    help="keep a rate model identified unstable (default: refuse it and use "
@@ -318,7 +320,11 @@ def _fit(args: argparse.Namespace) -> int:
 
 def _add_validate(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
-        "validate", help="apply saved models to another flight (all its segments held out)"
+        "validate", help="apply saved models to another flight (all its segments held out)",
+        description="Apply the models of `mavsid fit -o` to other flights: every excited "
+        "segment of theirs is held out; fit % at one step, 0.5 s and free run, residual "
+        "checks, the closed-loop twin and a verdict per axis. A model fitted at another rate "
+        "is re-discretised to the log's (said in the verdict).",
     )
     p.add_argument("model", metavar="MODEL", help="model.json written by mavsid fit -o")
     p.add_argument("logs", nargs="+", metavar="LOG", help="flight log(s) to validate on")
@@ -470,6 +476,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code."""
+    for stream in (sys.stdout, sys.stderr):  # a non-UTF-8 terminal gets escapes, not a crash
+        reconfigure = getattr(stream, "reconfigure", None)
+        if reconfigure is not None:
+            with contextlib.suppress(ValueError, OSError):
+                reconfigure(errors="backslashreplace")
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.version:
@@ -488,6 +499,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.debug:
             traceback.print_exc()
         print(f"mavsid: error: {escape(exc)}", file=sys.stderr)
+        for line in exc.details:
+            print(f"  {escape(line)}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("mavsid: interrupted", file=sys.stderr)

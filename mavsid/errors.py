@@ -85,8 +85,11 @@ def escape_lines(text: str) -> str:
 class MavsidError(Exception):
     """Base class of every error mavsid raises on purpose.
 
-    Its text is :func:`escape`-d: one line, whatever the log put into it.
+    Its text is :func:`escape`-d: one line, whatever the log put into it. ``details``
+    holds further lines the command line prints below it (empty by default).
     """
+
+    details: tuple[str, ...] = ()
 
     def __str__(self) -> str:
         return escape(super().__str__())

@@ -522,6 +522,38 @@ def _closed_loop(
     return dataclasses.replace(fitted, closed_loop=cl)
 
 
+def _nothing(logs: Sequence[str | os.PathLike[str]], verdicts: Mapping[str, Verdict],
+             what: str) -> NoExcitationError:
+    """The error for a run with no model: one line naming the logs and each axis's first
+    reason; every reason and the advice (once, not per axis) as ``details`` lines that the
+    command line prints below it.
+
+    Examples
+    --------
+    >>> from mavsid.verdict import not_identified
+    >>> v = {a: not_identified(a, "no window kept", advice=("fly a chirp",))
+    ...      for a in ("roll", "pitch")}
+    >>> e = _nothing(["a.bin"], v, "nothing identifiable")
+    >>> str(e).split("; see ")
+    ['a.bin: nothing identifiable (roll: no window kept; pitch: no window kept)', \
+'`mavsid segments a.bin --all`']
+    >>> e.details[-1]
+    'next time: fly a chirp'
+    """
+    names = ", ".join(os.fspath(p) for p in logs)
+    short = "; ".join(f"{a}: {v.reasons[0] if v.reasons else v.level}"
+                      for a, v in verdicts.items())
+    first = os.fspath(logs[0]) if logs else "LOG"
+    exc = NoExcitationError(f"{names}: {what} ({short}); see `mavsid segments {first} --all`")
+    lines = [f"{a}: {v.level}: " + "; ".join(v.reasons) for a, v in verdicts.items()
+             if len(v.reasons) > 1]
+    advice = list(dict.fromkeys(x for v in verdicts.values() for x in v.advice))
+    if advice:
+        lines.append("next time: " + "; ".join(advice))
+    exc.details = tuple(lines)
+    return exc
+
+
 def _missing_rate(axis: str, flights: Sequence[FlightData]) -> str:
     """Why ``axis`` cannot be modelled for want of its body rate (empty when it is logged)."""
     rate = AXIS_RATE.get(axis, "")
@@ -611,9 +643,7 @@ def fit(
         if verdict.identified or cfg.allow_unstable:  # a model judged useless is no result
             fits[axis] = dataclasses.replace(fitted, verdict=verdict)
     if not fits:
-        names = ", ".join(os.fspath(p) for p in logs)
-        problems = "; ".join(v.line() for v in verdicts.values())
-        raise NoExcitationError(f"{names}: nothing identifiable ({problems})")
+        raise _nothing(logs, verdicts, "nothing identifiable")
     return FitResult(fits, flights, tuple(os.fspath(p) for p in logs), cfg, verdicts)
 
 
@@ -750,9 +780,7 @@ def validate_logs(
         verdicts[axis] = verdict
         fits[axis] = dataclasses.replace(fitted, verdict=verdict)
     if not fits:
-        names = ", ".join(os.fspath(p) for p in logs)
-        problems = "; ".join(v.line() for v in verdicts.values())
-        raise NoExcitationError(f"{names}: no segment to validate on ({problems})")
+        raise _nothing(logs, verdicts, "no segment to validate on")
     return FitResult(fits, native, tuple(os.fspath(p) for p in logs), cfg, verdicts)
 
 

@@ -206,3 +206,39 @@ def test_served_viewer_listens_on_localhost_only_and_stops_on_sigterm() -> None:
     finally:
         if proc.poll() is None:
             proc.kill()
+
+
+def test_a_non_utf8_terminal_gets_escapes_not_a_traceback() -> None:
+    """LANG=C / an ASCII stdout: "→" and "×" in the output must not crash the command."""
+    import os
+
+    env = {**os.environ, "PYTHONIOENCODING": "ascii", "LANG": "C", "LC_ALL": "C"}
+    outs = []
+    for argv, code in ((["segments", str(FIXTURES / "sysid_roll.bin")], 0),
+                       (["fit", str(FIXTURES / "hover.bin")], 1)):
+        proc = subprocess.run([sys.executable, "-m", "mavsid.cli", *argv], env=env,
+                              capture_output=True, text=True, encoding="ascii",
+                              errors="strict", timeout=300)
+        assert "Traceback" not in proc.stderr and "UnicodeEncodeError" not in proc.stderr
+        assert proc.returncode == code, proc.stderr
+        outs.append(proc.stdout + proc.stderr)
+    assert "\\xd7" in outs[0] and "\\u2013" in outs[0]  # × and – escaped
+
+
+def test_nothing_identifiable_is_one_line_then_details() -> None:
+    proc = run("fit", str(FIXTURES / "hover.bin"))
+    assert proc.returncode == 1
+    first, *rest = proc.stderr.splitlines()
+    assert first.startswith("mavsid: error: ") and "nothing identifiable (roll: " in first
+    assert "mavsid segments" in first and "--all" in first
+    assert rest and all(line.startswith("  ") for line in rest)
+    assert sum(line.strip().startswith("next time:") for line in rest) == 1  # advice once
+
+
+def test_validate_and_fit_help_describe_themselves(capsys) -> None:  # type: ignore[no-untyped-def]
+    with pytest.raises(SystemExit):
+        cli.main(["validate", "--help"])
+    assert "re-discretised" in " ".join(capsys.readouterr().out.split())
+    with pytest.raises(SystemExit):
+        cli.main(["fit", "--help"])
+    assert "stlsq" in capsys.readouterr().out

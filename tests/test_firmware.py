@@ -192,3 +192,26 @@ def test_centidegree_rates_of_copter_34_dev_are_found_and_said(keep_imu: bool) -
     with warnings.catch_warnings():
         warnings.simplefilter("error", DataQualityWarning)
         align(raw)  # the same log in its right units: nothing to say
+
+
+def test_the_readme_preset_file_loads_and_fits(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """The TOML preset example of the README is valid, and its preset reads a fixture."""
+    import re
+    from pathlib import Path
+
+    from helpers import FIXTURES
+
+    from mavsid.channels import load_presets
+
+    readme = (Path(__file__).parent.parent / "README.md").read_text()
+    block = re.search(r"```toml\n(.*?)```", readme, re.S)
+    assert block is not None
+    path = tmp_path / "presets.toml"
+    path.write_text(block.group(1))
+    presets, mixers = load_presets(path)
+    assert set(presets) == {"my-quad", "my-hexa-pwm"} and "my-hexa" in mixers
+    raw = _quiet_read(FIXTURES / "sysid_roll.bin")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fd = align(raw, presets["my-quad"])
+    assert fd.preset == "my-quad" and fd.input_names == ("u_roll",)

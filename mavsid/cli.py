@@ -498,9 +498,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except MavsidError as exc:
         if args.debug:
             traceback.print_exc()
+        if exc.details:  # the why, as a successful run shows its verdicts: on stdout
+            print("verdict:")
+            for line in exc.details:
+                print(f"  {escape(line)}")
         print(f"mavsid: error: {escape(exc)}", file=sys.stderr)
-        for line in exc.details:
-            print(f"  {escape(line)}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("mavsid: interrupted", file=sys.stderr)

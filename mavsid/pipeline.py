@@ -525,8 +525,8 @@ def _closed_loop(
 def _nothing(logs: Sequence[str | os.PathLike[str]], verdicts: Mapping[str, Verdict],
              what: str) -> NoExcitationError:
     """The error for a run with no model: one line naming the logs and each axis's first
-    reason; every reason and the advice (once, not per axis) as ``details`` lines that the
-    command line prints below it.
+    reason; each axis's verdict and the advice (once, not per axis) as ``details`` lines
+    (the command line prints them on stdout, as it prints a fit's verdicts).
 
     Examples
     --------
@@ -545,8 +545,7 @@ def _nothing(logs: Sequence[str | os.PathLike[str]], verdicts: Mapping[str, Verd
                       for a, v in verdicts.items())
     first = os.fspath(logs[0]) if logs else "LOG"
     exc = NoExcitationError(f"{names}: {what} ({short}); see `mavsid segments {first} --all`")
-    lines = [f"{a}: {v.level}: " + "; ".join(v.reasons) for a, v in verdicts.items()
-             if len(v.reasons) > 1]
+    lines = [f"{a}: {v.level}: " + "; ".join(v.reasons) for a, v in verdicts.items()]
     advice = list(dict.fromkeys(x for v in verdicts.values() for x in v.advice))
     if advice:
         lines.append("next time: " + "; ".join(advice))

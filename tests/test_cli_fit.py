@@ -225,14 +225,16 @@ def test_a_non_utf8_terminal_gets_escapes_not_a_traceback() -> None:
     assert "\\xd7" in outs[0] and "\\u2013" in outs[0]  # × and – escaped
 
 
-def test_nothing_identifiable_is_one_line_then_details() -> None:
+def test_nothing_identifiable_is_one_line_and_the_verdicts() -> None:
     proc = run("fit", str(FIXTURES / "hover.bin"))
     assert proc.returncode == 1
-    first, *rest = proc.stderr.splitlines()
-    assert first.startswith("mavsid: error: ") and "nothing identifiable (roll: " in first
-    assert "mavsid segments" in first and "--all" in first
-    assert rest and all(line.startswith("  ") for line in rest)
-    assert sum(line.strip().startswith("next time:") for line in rest) == 1  # advice once
+    (line,) = proc.stderr.splitlines()
+    assert line.startswith("mavsid: error: ") and "nothing identifiable (roll: " in line
+    assert "mavsid segments" in line and "--all" in line
+    head, *rest = proc.stdout.splitlines()
+    assert head == "verdict:" and all(x.startswith("  ") for x in rest)
+    assert {x.split(":")[0].strip() for x in rest[:3]} == {"roll", "pitch", "yaw"}
+    assert sum(x.strip().startswith("next time:") for x in rest) == 1  # advice once
 
 
 def test_validate_and_fit_help_describe_themselves(capsys) -> None:  # type: ignore[no-untyped-def]

@@ -225,3 +225,31 @@ def test_info_json_agrees_with_pyulog() -> None:
     )
     assert summary["notes"][0] == f"{len(ref.dropouts)} dropouts, " \
         f"{sum(d.duration for d in ref.dropouts)} ms in all"
+
+
+def test_self_containing_formats_are_one_typed_error(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """pyulog expands nested formats recursively: a format containing itself (directly or
+    through another) was a RecursionError out of it; now one LogFormatError naming the
+    file and the chain."""
+    from fuzz import hostile
+
+    from mavsid.errors import LogFormatError
+
+    for name, chain in (("ulog_self_reference", "loop -> loop"),
+                        ("ulog_mutual_reference", "ping -> pong -> ping")):
+        path = tmp_path / f"{name}.ulg"
+        path.write_bytes(getattr(hostile, name)())
+        with pytest.raises(LogFormatError, match=chain) as err:
+            read_log(path)
+        assert str(path) in str(err.value)
+
+
+def test_a_damaged_parameter_type_is_skipped_and_counted(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    from fuzz import hostile
+
+    path = tmp_path / "param.ulg"
+    path.write_bytes(hostile.ulog_damaged_parameter())
+    with pytest.warns(DataQualityWarning, match="1 parameter value"):
+        raw = read_log(path)
+    assert raw.params == {"MC_ROLL_P": 6.5}
+    assert len(raw["att"]) == 50

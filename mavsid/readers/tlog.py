@@ -262,7 +262,8 @@ def _scan(buf: NDArray[np.uint8], size: int, defs: dict[int, MessageDef]) -> _Fr
     """Find every valid record in ``buf[:size]`` (``buf`` is zero-padded beyond ``size``)."""
     ids = np.array(sorted(defs), dtype=np.int64)
     extras = np.array([defs[i].crc_extra for i in ids.tolist()], dtype=np.uint8)
-    blocks = [_scan_block(buf, size, lo, min(lo + _BLOCK, size), ids, extras)
+    longest = np.array([defs[i].dtype.itemsize for i in ids.tolist()], dtype=np.int64)
+    blocks = [_scan_block(buf, size, lo, min(lo + _BLOCK, size), ids, extras, longest)
               for lo in range(0, size, _BLOCK)]  # fmt: skip
     start, end, hdr, mlen, msgid, sysid, compid, odd_start, odd_end = (
         np.concatenate(parts) for parts in zip(*blocks, strict=True)
@@ -300,6 +301,7 @@ def _scan_block(
     hi: int,
     ids: NDArray[np.int64],
     extras: NDArray[np.uint8],
+    longest: NDArray[np.int64],
 ) -> tuple[NDArray[np.int64], ...]:
     """Candidate records starting in ``[lo, hi)``: the CRC-valid ones (start, end, header
     length, payload length, msgid, sysid, compid) and the well-formed ones of unknown id
@@ -309,7 +311,7 @@ def _scan_block(
     every = np.flatnonzero(magic >= _MAGIC_V2)  # 0xFD, 0xFE (or 0xFF, dropped next)
     every = lo + every[magic[every] != 0xFF].astype(np.int64)
     own = int(np.searchsorted(every, hi))
-    slices = [_check(buf, size, every[a : min(a + _SLICE, own)], every, ids, extras)
+    slices = [_check(buf, size, every[a : min(a + _SLICE, own)], every, ids, extras, longest)
               for a in range(0, own, _SLICE)]  # fmt: skip
     if not slices:
         empty = np.zeros(0, dtype=np.int64)
@@ -327,9 +329,12 @@ def _check(
     every: NDArray[np.int64],
     ids: NDArray[np.int64],
     extras: NDArray[np.uint8],
+    longest: NDArray[np.int64],
 ) -> tuple[NDArray[np.int64], ...]:
     """:func:`_scan_block` for the candidates ``s`` (sorted), ``every`` being all candidate
-    starts around them (for the chain check)."""
+    starts around them (for the chain check). A known id whose payload is longer than its
+    message (a MAVLink 2 payload may be shorter, truncated, never longer) is no frame: that
+    costs no CRC (a flood of 0xFE bytes is 0xFE-long "frames" of id 254, 9 bytes long)."""
     head = _windows(buf, s + _PREFIX, 10)
     v2 = head[:, 0] == _MAGIC_V2
     incompat = np.where(v2, head[:, 2], 0).astype(np.int64)
@@ -345,7 +350,8 @@ def _check(
         head[:, 5],
     )
     pos = np.minimum(np.searchsorted(ids, msgid), ids.size - 1)
-    known = ids[pos] == msgid
+    listed = ids[pos] == msgid
+    known = listed & (mlen <= longest[pos])
     chained = (end == size) | _member(end, every)
 
     # CRC first of the candidates that chain into another candidate (or the file's end),
@@ -356,7 +362,7 @@ def _check(
     rest = np.flatnonzero(known & ~chained)
     rest = rest[~_inside(s[rest], s[ok], end[ok])]
     ok[rest] = _crc_ok(buf, s, hdr, mlen, crc_extra, rest)
-    odd = ~known & chained
+    odd = ~listed & chained  # well-formed frames of ids the dialect does not have
     sysid = np.where(v2, head[:, 5], head[:, 3]).astype(np.int64)
     compid = np.where(v2, head[:, 6], head[:, 4]).astype(np.int64)
     return (s[ok], end[ok], hdr[ok], mlen[ok], msgid[ok], sysid[ok], compid[ok],

@@ -36,9 +36,11 @@ import contextlib
 import io
 import os
 import re
+import signal
 import struct
+import threading
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from typing import Any
 
 import numpy as np
@@ -74,19 +76,124 @@ def table_name(topic: str, multi_id: int) -> str:
     return topic if multi_id == 0 else f"{topic}[{multi_id}]"
 
 
+#: Time pyulog may take: a fixed part plus this much per MB of file (far above its ~1 µs per
+#: message) before the read is abandoned as hostile.
+_PARSE_S, _PARSE_S_PER_MB = 20.0, 5.0
+#: Definitions are read from the head of the file only (real ones take a few hundred kB).
+_DEFINITIONS_MAX_BYTES = 64 << 20
+
+
+def _format_cycle(path: str | os.PathLike[str]) -> list[str] | None:
+    """A chain of message formats that contain themselves (``a`` → ``b`` → ``a``), found in
+    the definitions at the head of the file; None when there is none.
+
+    pyulog expands nested formats recursively: a format that contains itself, directly or
+    through others, is a RecursionError (or an endless loop) there, so it is refused first.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> def msg(kind, text):
+    ...     return struct.pack("<HB", len(text), ord(kind)) + text.encode()
+    >>> body = msg("F", "a:uint64_t timestamp;b x;") + msg("F", "b:a y[2];")
+    >>> with tempfile.NamedTemporaryFile(suffix=".ulg", delete=False) as f:
+    ...     _ = f.write(b"ULog" + bytes(12) + body)
+    >>> _format_cycle(f.name)
+    ['a', 'b', 'a']
+    """
+    with open(path, "rb") as f:
+        head = f.read(_DEFINITIONS_MAX_BYTES)
+    graph: dict[str, set[str]] = {}
+    pos = 16
+    while pos + 3 <= len(head):
+        size, kind = struct.unpack_from("<HB", head, pos)
+        payload = head[pos + 3 : pos + 3 + size]
+        pos += 3 + size
+        if kind in (ord("A"), ord("D"), ord("L")):  # the data section has begun
+            break
+        if kind != ord("F"):
+            continue
+        name, _, fields = payload.decode("ascii", "replace").partition(":")
+        types = {f.strip().split(" ")[0].split("[")[0] for f in fields.split(";") if f.strip()}
+        graph.setdefault(name, set()).update(types)
+    state: dict[str, int] = {}  # 1: on the current path, 2: done
+
+    def visit(node: str, chain: list[str]) -> list[str] | None:
+        state[node] = 1
+        for nxt in sorted(graph.get(node, ())):
+            if state.get(nxt) == 1:
+                return [*chain, node, nxt][[*chain, node].index(nxt):]
+            if nxt in graph and state.get(nxt) is None and (got := visit(nxt, [*chain, node])):
+                return got
+        state[node] = 2
+        return None
+
+    for start in sorted(graph):
+        if state.get(start) is None and (cycle := visit(start, [])):
+            return cycle
+    return None
+
+
+@contextlib.contextmanager
+def _time_limit(seconds: float) -> Iterator[None]:
+    """Raise TimeoutError in the block after ``seconds`` (main thread on POSIX; elsewhere no
+    limit can be set on a running parser, and the block runs unbounded)."""
+    if (not hasattr(signal, "setitimer")
+            or threading.current_thread() is not threading.main_thread()):
+        yield
+        return
+
+    def expire(signum: int, frame: object) -> None:
+        raise TimeoutError
+
+    previous = signal.signal(signal.SIGALRM, expire)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+
+
 def _parse(path: str | os.PathLike[str], topics: list[str] | None) -> tuple[Any, list[str]]:
-    """Run pyulog; returns the ULog and the lines pyulog printed (its diagnostics)."""
+    """Run pyulog, bounded: returns the ULog and the lines pyulog printed (its diagnostics).
+
+    Third-party parsing of an untrusted file: self-containing formats are refused before it
+    runs, it gets a time limit proportional to the file, and whatever it raises becomes one
+    :class:`~mavsid.errors.LogFormatError` naming the file.
+    """
     from pyulog import ULog
     from pyulog.core import ULogException
 
+    try:
+        cycle = _format_cycle(path)
+        size_mb = os.path.getsize(path) / 1e6
+    except OSError as exc:
+        raise LogFormatError(f"cannot read: {exc.strerror or exc}", path=path) from None
+    if cycle:
+        raise LogFormatError("message format " + " -> ".join(cycle) + " contains itself "
+                             "(a damaged or hostile definition)", path=path)
+    limit = _PARSE_S + _PARSE_S_PER_MB * size_mb
     printed = io.StringIO()
     try:
-        with contextlib.redirect_stdout(printed):
+        with contextlib.redirect_stdout(printed), _time_limit(limit):
             ulog = ULog(os.fspath(path), topics, disable_str_exceptions=True)
     except OSError as exc:
         raise LogFormatError(f"cannot read: {exc.strerror or exc}", path=path) from None
+    except TimeoutError:
+        raise LogFormatError(f"pyulog did not finish within {limit:.0f} s (a damaged or "
+                             "hostile file)", path=path) from None
     except (ULogException, ValueError, IndexError, KeyError, struct.error, EOFError) as exc:
         raise LogFormatError(f"not a readable ULog ({exc})", path=path) from None
+    except RecursionError:
+        raise LogFormatError("not a readable ULog (definitions nested without end)",
+                             path=path) from None
+    except MemoryError:
+        raise LogFormatError("not a readable ULog (pyulog ran out of memory)",
+                             path=path) from None
+    except Exception as exc:  # any failure of the third-party parser
+        raise LogFormatError(f"not a readable ULog ({type(exc).__name__}: {exc})",
+                             path=path) from None
     lines = [line.strip() for line in printed.getvalue().splitlines() if line.strip()]
     return ulog, lines
 
@@ -125,12 +232,31 @@ def _modes(table: MessageTable | None) -> list[ModeChange]:
     ]
 
 
-def _params(ulog: Any) -> tuple[dict[str, float], int]:
-    """Initial parameters with later changes applied; and the number of changes."""
-    params = {str(k): float(v) for k, v in ulog.initial_parameters.items()}
-    for _, name, value in ulog.changed_parameters:
-        params[str(name)] = float(value)
-    return params, len(ulog.changed_parameters)
+def _number(value: Any) -> float | None:
+    """A parameter's value as float; None for what is not a number (a damaged type string
+    leaves pyulog with raw bytes)."""
+    if isinstance(value, (bytes, bytearray, str)) or isinstance(value, bool):
+        return None
+    try:
+        return float(value)
+    except (TypeError, ValueError, OverflowError):
+        return None
+
+
+def _params(ulog: Any) -> tuple[dict[str, float], int, int]:
+    """Initial parameters with later changes applied; the number of changes; and how many
+    values were not numbers (skipped)."""
+    params: dict[str, float] = {}
+    bad = 0
+    entries = [(k, v) for k, v in ulog.initial_parameters.items()]
+    entries += [(name, value) for _, name, value in ulog.changed_parameters]
+    for name, value in entries:
+        number = _number(value)
+        if number is None:
+            bad += 1
+        else:
+            params[str(name)] = number
+    return params, len(ulog.changed_parameters), bad
 
 
 def _firmware(info: dict[str, Any]) -> str | None:
@@ -212,7 +338,7 @@ def read(
         name = table_name(d.name, d.multi_id)
         units = {k: "us" for k in ("timestamp", "timestamp_sample") if k in d.data}
         tables[name] = MessageTable(name, d.data, _time_s(d.data), units)
-    params, n_changes = _params(ulog)
+    params, n_changes, bad_params = _params(ulog)
     texts = _texts(ulog)
     modes = _modes(tables.get(_MODE_TOPIC))
     if start is not None or stop is not None:
@@ -225,6 +351,9 @@ def read(
         tables = {n: t for n, t in tables.items() if n in wanted or _base(n) in wanted}
 
     notes = _notes(ulog, tables, n_changes)
+    if bad_params:
+        notes.append(f"{bad_params} parameter value(s) of an unreadable type skipped")
+        warnings.warn(f"{path}: {notes[-1]}", DataQualityWarning, stacklevel=2)
     problems = list(dict.fromkeys(printed))
     if ulog.file_corruption or problems:
         detail = "; ".join(problems[:3])

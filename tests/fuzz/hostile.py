@@ -110,3 +110,51 @@ def dataflash_time_outlier(base: bytes, name: str | None, value: int, last: int 
             for p in cand[types == d.type][-last:].tolist():
                 out[p + 3 : p + 11] = struct.pack("<Q", value)
     return bytes(out)
+
+
+# --------------------------------------------------------------------------- ULog
+
+def _ulog_msg(kind: bytes, payload: bytes) -> bytes:
+    return struct.pack("<HB", len(payload), kind[0]) + payload
+
+
+def ulog_file(formats: list[str], params: list[tuple[str, bytes]] = (),  # type: ignore[assignment]
+              topic: str | None = "att", samples: int = 50, also: tuple[str, ...] = ()) -> bytes:
+    """A small valid ULog (version 1): ``formats`` ("name:type field;..."), parameters
+    ``(key, 4 value bytes)`` with key "type NAME", and ``samples`` records of ``topic``
+    (whose format must be ``uint64_t timestamp;float roll;``) at 100 Hz."""
+    out = bytearray(b"ULog\x01\x12\x35\x01" + struct.pack("<Q", 0))
+    out += _ulog_msg(b"B", bytes(40))
+    for f in formats:
+        out += _ulog_msg(b"F", f.encode())
+    for key, value in params:
+        out += _ulog_msg(b"P", bytes([len(key)]) + key.encode() + value)
+    if topic is not None:
+        out += _ulog_msg(b"A", struct.pack("<BH", 0, 0) + topic.encode())
+    for i, name in enumerate(also, start=1):  # subscribed too, with one 16-byte record each
+        out += _ulog_msg(b"A", struct.pack("<BH", 0, i) + name.encode())
+        out += _ulog_msg(b"D", struct.pack("<H", i) + bytes(16))
+    if topic is not None:
+        for k in range(samples):
+            out += _ulog_msg(b"D", struct.pack("<HQf", 0, 10_000 * k, 0.01 * k))
+    return bytes(out)
+
+
+ATT_FORMAT = "att:uint64_t timestamp;float roll;"
+
+
+def ulog_self_reference() -> bytes:
+    """A format whose field has its own type (pyulog: RecursionError)."""
+    return ulog_file([ATT_FORMAT, "loop:uint64_t timestamp;loop inner;"], also=("loop",))
+
+
+def ulog_mutual_reference() -> bytes:
+    """Two formats that contain each other."""
+    return ulog_file([ATT_FORMAT, "ping:uint64_t timestamp;pong x;", "pong:ping y;"],
+                     also=("ping",))
+
+
+def ulog_damaged_parameter() -> bytes:
+    """A parameter whose type string was damaged ("flxat"): its value is raw bytes."""
+    return ulog_file([ATT_FORMAT], [("float MC_ROLL_P", struct.pack("<f", 6.5)),
+                                    ("flxat MC_PITCH_P", struct.pack("<f", 6.5))])

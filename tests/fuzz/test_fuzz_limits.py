@@ -88,6 +88,11 @@ HOSTILE: dict[str, tuple[str, str, Callable[[], bytes]]] = {
         _fixture_tlog(), "ATTITUDE", "time_boot_ms", {k: 1000 for k in range(100_000)})),
     "minus_inf_attitude": ("fit", ".tlog", lambda: hostile.set_tlog_field(
         _fixture_tlog(), "ATTITUDE", "rollspeed", {k: -math.inf for k in range(0, 10**5, 7)})),
+    "ulog_self_reference": ("read", ".ulg", hostile.ulog_self_reference),
+    "ulog_mutual_reference": ("info", ".ulg", hostile.ulog_mutual_reference),
+    "ulog_damaged_parameter": ("info", ".ulg", hostile.ulog_damaged_parameter),
+    "tlog_fe_flood": ("read", ".tlog", lambda: b"\xfe" * 10_000_000),
+    "tlog_fd_flood": ("read", ".tlog", lambda: b"\xfd" * 10_000_000),
 }
 
 

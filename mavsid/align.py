@@ -989,6 +989,7 @@ def _align(raw: RawLog, preset: Preset | str | None, rate_hz: float | None,
         "flag_notes": flag_notes,
         "vehicle": raw.vehicle,
         "autopilot": raw.autopilot,
+        "firmware": raw.firmware,
     }
     if mixer is not None:
         meta["mixer"] = mixer

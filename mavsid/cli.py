@@ -460,6 +460,62 @@ def _tune(args: argparse.Namespace) -> int:
 SUBCOMMANDS.append(_add_tune)
 
 
+def _add_batch(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "batch", help="fit many logs on Dask (locally, or on a cluster) into Parquet tables",
+        description="One `mavsid fit` per log on a dask.distributed cluster: a local cluster "
+        "of worker processes by default (listening on 127.0.0.1), or the scheduler at "
+        "--scheduler. Results (per log x axis, per log, per segment) go to Parquet after "
+        "each log, atomically; a rerun skips logs already in the tables with the same "
+        "settings; a failing log is a row with its error.",
+    )
+    p.add_argument("inputs", nargs="+", metavar="LOG|DIR",
+                   help="logs, or folders searched for .bin .log .tlog .ulg")
+    p.add_argument("-o", "--output", default="results.parquet", metavar="OUT.parquet",
+                   help="results table (also OUT.logs.parquet, OUT.segments.parquet)")
+    p.add_argument("--config", metavar="FILE.toml", help="pipeline settings (see pipelines/)")
+    p.add_argument("--workers", type=int, metavar="N",
+                   help="worker processes of the local cluster (default: cores)")
+    p.add_argument("--scheduler", metavar="tcp://HOST:PORT",
+                   help="a running dask scheduler to use instead of a local cluster")
+    p.add_argument("--vehicles", metavar="MAP.csv",
+                   help="CSV log,vehicle[,date]: each log's aircraft (default: its folder)")
+    p.add_argument("--report", metavar="OUT.html",
+                   help="write the trends page (parameters against flight date, change points)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(handler=_batch, axis=None)
+
+
+def _batch(args: argparse.Namespace) -> int:
+    from mavsid.batch import _paths, run_batch, trends, write_trends_html
+
+    if not args.output.endswith(".parquet"):
+        raise ConfigError(f"{args.output}: the results table must be a .parquet file")
+    outs = list(_paths(args.output).values())
+    check_outputs([*outs, args.report], args.inputs)
+    if args.workers is not None and args.workers < 1:
+        raise ConfigError(f"--workers {args.workers}: must be at least 1")
+    tables = run_batch(args.inputs, args.output, _pipeline_config(args), workers=args.workers,
+                       scheduler=args.scheduler, vehicles=args.vehicles,
+                       progress=not args.quiet and sys.stderr.isatty())
+    logs = tables["logs"]
+    counts = logs["status"].value_counts().to_dict() if len(logs) else {}
+    print(f"{len(logs)} log(s): " + ", ".join(f"{v} {k}" for k, v in sorted(counts.items()))
+          + f"; wrote {outs[0]}")
+    found = trends(tables["axes"])
+    for row in found[found["changed"]].to_dict("records") if len(found) else []:
+        print(escape(f"change: {row['vehicle']} {row['axis']} {row['param']} "
+                     f"{row['before']:.4g} -> {row['after']:.4g} after {row['change_after']} "
+                     f"({row['z']:.1f} standard errors)"))
+    if args.report:
+        write_trends_html(tables, args.report)
+        print(f"wrote {args.report}")
+    return 0
+
+
+SUBCOMMANDS.append(_add_batch)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every subcommand."""
     parser = argparse.ArgumentParser(

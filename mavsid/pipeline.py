@@ -550,6 +550,7 @@ def _nothing(logs: Sequence[str | os.PathLike[str]], verdicts: Mapping[str, Verd
     if advice:
         lines.append("next time: " + "; ".join(advice))
     exc.details = tuple(lines)
+    exc.verdicts = dict(verdicts)  # type: ignore[attr-defined]
     return exc
 
 

@@ -1,0 +1,113 @@
+"""`mavsid batch` on a real dask LocalCluster of 2 worker processes.
+
+Checks against single `mavsid fit` runs (the library call behind both), broken logs kept as
+rows, resuming without redoing work, and a simulated fleet whose one aircraft's control
+effectiveness steps down (a quad's plant replaced by a hexacopter's: 180 -> 130 rad/s² per
+unit on roll) being flagged, while an unchanged aircraft is not.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import shutil
+import warnings
+from pathlib import Path
+
+import pytest
+from helpers import FIXTURES, shared_path
+
+from mavsid import cli
+from mavsid.batch import read_tables, run_batch, trends
+from mavsid.pipeline import fit
+
+pytestmark = pytest.mark.filterwarnings("ignore")
+
+
+@pytest.fixture(scope="module")
+def fleet(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    d = tmp_path_factory.mktemp("fleet")
+    for name in ("sysid_roll.bin", "doublets.bin", "hover.bin"):
+        shutil.copy(FIXTURES / name, d / name)
+    shutil.copy(shared_path("public", "ArduPilot__ardupilot", "nan.log"), d / "nan.log")
+    (d / "broken.bin").write_bytes((FIXTURES / "sysid_roll.bin").read_bytes()[:3000])
+    (d / "notes.txt").write_text("not a log: not picked up")
+    return d
+
+
+def test_batch_equals_single_fits_records_failures_and_resumes(fleet: Path,
+                                                               tmp_path: Path) -> None:
+    out = tmp_path / "res.parquet"
+    seen: list[str] = []
+    tables = run_batch([fleet], out, workers=2, on_done=lambda row: seen.append(row["log"]))
+    logs = tables["logs"].set_index("log")
+    assert len(logs) == 5 and len(seen) == 5
+    assert logs.loc[str(fleet / "broken.bin"), "status"] == "failed"
+    assert str(fleet / "broken.bin") in logs.loc[str(fleet / "broken.bin"), "error"]
+    assert logs.loc[str(fleet / "hover.bin"), "status"] == "nothing identified"
+    assert logs.loc[str(fleet / "sysid_roll.bin"), "status"] == "ok"
+    # the same numbers as a single fit of each log
+    axes = tables["axes"]
+    for name in ("sysid_roll.bin", "doublets.bin"):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            single = fit([str(fleet / name)])
+        for axis, f in single.axes.items():
+            row = axes[(axes["log"] == str(fleet / name)) & (axes["axis"] == axis)].iloc[0]
+            assert row["level"] == single.verdicts[axis].level
+            for p, value in f.model.params.items():
+                assert row[f"p:{p}"] == pytest.approx(value, rel=1e-9, abs=1e-12)
+    assert set(tables["segments"]["role"]) == {"train", "validation"}
+    # a rerun does no work; a new log is the only one fitted
+    seen.clear()
+    again = run_batch([fleet], out, workers=2, on_done=lambda row: seen.append(row["log"]))
+    assert seen == [] and len(again["logs"]) == 5
+    shutil.copy(FIXTURES / "sysid_pitch.bin", fleet / "sysid_pitch.bin")
+    third = run_batch([fleet], out, workers=2, on_done=lambda row: seen.append(row["log"]))
+    assert seen == [str(fleet / "sysid_pitch.bin")] and len(third["logs"]) == 6
+    assert read_tables(out)["logs"]["schema_version"].eq(1).all()
+
+
+def _simulate(path: Path, vehicle: str, seed: int) -> None:
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert cli.main(["simulate", "-o", str(path), "--vehicle", vehicle, "--sid-axis", "10",
+                         "--t-rec", "10", "--rate-hz", "200", "--seed", str(seed)]) == 0
+
+
+def test_a_step_in_one_aircrafts_effectiveness_is_flagged(tmp_path: Path) -> None:
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    plan = [("A", "quad"), ("A", "quad"), ("A", "hexa"), ("A", "hexa"),
+            ("B", "quad"), ("B", "quad"), ("B", "quad"), ("B", "quad")]
+    lines = ["log,vehicle,date"]
+    for k, (craft, vehicle) in enumerate(plan):
+        path = logs / f"{craft}{k}.bin"
+        _simulate(path, vehicle, seed=20 + k)
+        lines.append(f"{path},{craft},2026-0{1 + k % 4}-1{k}")
+    mapping = tmp_path / "fleet.csv"
+    mapping.write_text("\n".join(lines) + "\n")
+    out, html = tmp_path / "fleet.parquet", tmp_path / "trends.html"
+    err = io.StringIO()
+    with contextlib.redirect_stdout(io.StringIO()) as printed, contextlib.redirect_stderr(err):
+        code = cli.main(["batch", str(logs), "-o", str(out), "--workers", "2",
+                         "--vehicles", str(mapping), "--report", str(html), "--quiet"])
+    assert code == 0, err.getvalue()
+    found = trends(read_tables(out)["axes"])
+    flagged = found[found["changed"]]
+    assert set(flagged["vehicle"]) == {"A"}
+    b = flagged[flagged["param"] == "B[p,u_roll]"].iloc[0]
+    assert b["before"] == pytest.approx(180.0, rel=0.08) and b["after"] == pytest.approx(
+        130.0, rel=0.08)
+    assert "change: A roll B[p,u_roll]" in printed.getvalue()
+    assert "Change points" in html.read_text()
+
+
+def test_batch_refuses_bad_outputs_and_workers(fleet: Path) -> None:
+    err = io.StringIO()
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        assert cli.main(["batch", str(fleet / "nan.log"), "-o", str(fleet / "nan.log")]) == 1
+        assert cli.main(["batch", str(fleet), "-o", str(fleet / "x.parquet"),
+                         "--workers", "0"]) == 1
+    lines = err.getvalue().splitlines()
+    assert len(lines) == 2 and "must be a .parquet file" in lines[0]
+    assert "--workers 0" in lines[1]

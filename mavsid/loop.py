@@ -589,20 +589,18 @@ def plant_from_model(model: Any, axis: str, dt: float | None = None) -> LinearPl
     from mavsid.estimators import library
 
     rate, u_name = AXIS_RATE[axis], f"u_{axis}"
-    if not all(hasattr(model, a) for a in ("features", "coef", "to_statespace", "_split")):
+    if not all(hasattr(model, a) for a in ("features", "coef", "statespace_matrices",
+                                           "_split")):
         raise ConfigError(f"the {axis} model is not a mavsid estimators.Model: no loop model")
     if rate not in model.state_names or u_name not in model.input_names:
         raise ConfigError(f"the {axis} model does not map {u_name} to {rate}")
     if not library.is_linear(model.features):
         raise ConfigError("the closed-loop twin needs a linear model (no library terms)")
     m = _at_step(model, model.dt if dt is None else dt)
-    ss = m.to_statespace()
-    ins = list(ss.input_labels)
+    a, bmat, cmat, dmat, ins, _ = m.statespace_matrices()  # numpy: no python-control here
     row = m.state_names.index(rate)
-    a = np.asarray(ss.A, dtype=float)
-    bmat = np.asarray(ss.B, dtype=float)
-    c = np.asarray(ss.C, dtype=float)[row]
-    if np.any(np.abs(np.asarray(ss.D, dtype=float)[row]) > 0):
+    c = np.asarray(cmat, dtype=float)[row]
+    if np.any(np.abs(np.asarray(dmat, dtype=float)[row]) > 0):
         raise ConfigError("the model's output reacts to its input within the same step")
     j = ins.index(u_name)
     others = tuple(k for k in ins if k != u_name)

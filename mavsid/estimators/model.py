@@ -152,6 +152,27 @@ def _none_to_nan(obj: Any) -> Any:
     return np.nan if obj is None else obj
 
 
+_SS = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+def _series(first: _SS, then: _SS) -> _SS:
+    """``then`` driven by the output of ``first`` (states of ``first`` first)."""
+    a1, b1, c1, d1 = first
+    a2, b2, c2, d2 = then
+    n1, n2 = a1.shape[0], a2.shape[0]
+    a = np.block([[a1, np.zeros((n1, n2))], [b2 @ c1, a2]])
+    b = np.vstack([b1, b2 @ d1])
+    c = np.hstack([d2 @ c1, c2])
+    return a, b, c, d2 @ d1
+
+
+def _block_diagonal(one: _SS, n: int) -> _SS:
+    """``n`` independent copies of a single-input single-output system, side by side."""
+    if n == 1:
+        return one
+    return tuple(linalg.block_diag(*([x] * n)) for x in one)
+
+
 @dataclass(frozen=True)
 class Model:
     """A fitted attitude-dynamics model.
@@ -611,9 +632,52 @@ class Model:
 
     # ----------------------------------------------------------------- export
 
+    def statespace_matrices(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                           list[str], float]:
+        """``(A, B, C, D, input_names, dt)`` of the linear part with the input filters in
+        series and (discrete time) the input delay as extra states; numpy only (what
+        :meth:`to_statespace` hands to python-control). ``dt`` is 0 for continuous time.
+
+        Examples
+        --------
+        >>> m = Model(("p",), ("u_roll",), ("p", "u_roll"), np.array([[0.9], [0.5]]),
+        ...           dt=0.01, delay=2)
+        >>> a, b, c, d, ins, dt = m.statespace_matrices()
+        >>> a.shape, ins, dt
+        ((3, 3), ['u_roll'], 0.01)
+        """
+        if not library.is_linear(self.features):
+            raise ConfigError("to_statespace needs a linear model; this one has library terms")
+        _, exo, _ = self._split
+        ins = [j for j in exo if self.features[j] != library.BIAS]
+        m = len(self.state_names)
+        plant = (self.A, self.coef[ins].T if ins else np.zeros((m, 0)), np.eye(m),
+                 np.zeros((m, len(ins))))
+        in_names = [self.features[j] for j in ins]
+        dt = 0.0 if self.continuous else float(self.dt)
+        nin = len(in_names)
+        chain = None
+        for flt in self.filters:
+            if self.continuous:
+                num, den = signal.butter(flt.order, 2 * np.pi * flt.cutoff_hz, analog=True)
+                one = tuple(np.atleast_2d(x) for x in signal.tf2ss(num, den))
+            else:
+                one = tuple(np.atleast_2d(x) for x in flt.statespace(self.dt))
+            block = _block_diagonal(one, nin)  # type: ignore[arg-type]
+            chain = block if chain is None else _series(chain, block)
+        if not self.continuous and (self.delay > 0 or self.delay_frac > 0) and nin:
+            f = self.delay_frac
+            num_d = [1.0 - f, f] if f > 0 else [1.0]
+            den_d = [1.0] + [0.0] * (self.delay + (1 if f > 0 else 0))
+            one = tuple(np.atleast_2d(x) for x in signal.tf2ss(num_d, den_d))
+            block = _block_diagonal(one, nin)  # type: ignore[arg-type]
+            chain = block if chain is None else _series(chain, block)
+        a, b, c, d = plant if chain is None else _series(chain, plant)
+        return a, b, c, d, in_names, dt
+
     def to_statespace(self) -> Any:
-        """A python-control ``StateSpace`` of the linear part, with the input filters in series
-        and (discrete time) the input delay as extra states.
+        """A python-control ``StateSpace`` of :meth:`statespace_matrices` (labelled inputs
+        and outputs).
 
         The bias ``c`` is left out (it is an operating-point offset). Continuous-time models
         do not include the delay (``control.pade`` approximates it). Raises ``ConfigError``
@@ -622,35 +686,8 @@ class Model:
         """
         import control
 
-        if not library.is_linear(self.features):
-            raise ConfigError("to_statespace needs a linear model; this one has library terms")
-        _, exo, _ = self._split
-        ins = [j for j in exo if self.features[j] != library.BIAS]
-        a = self.A
-        b = self.coef[ins].T if ins else np.zeros((len(self.state_names), 0))
-        in_names = [self.features[j] for j in ins]
-        dt: float | bool = 0 if self.continuous else self.dt
-        plant = control.ss(a, b, np.eye(len(self.state_names)), 0, dt,
-                           inputs=in_names, outputs=list(self.state_names))
-        nin = len(in_names)
-        chain = None
-        for flt in self.filters:
-            if self.continuous:
-                num, den = signal.butter(flt.order, 2 * np.pi * flt.cutoff_hz, analog=True)
-                tf = control.ss(control.tf(num, den, dt))
-            else:
-                tf = control.ss(*flt.statespace(self.dt), dt)
-            blockdiag = control.append(*([tf] * nin)) if nin > 1 else tf
-            chain = blockdiag if chain is None else control.series(chain, blockdiag)
-        if not self.continuous and (self.delay > 0 or self.delay_frac > 0) and nin:
-            f = self.delay_frac
-            num_d = [1.0 - f, f] if f > 0 else [1.0]
-            z = control.tf(num_d, [1.0] + [0.0] * (self.delay + (1 if f > 0 else 0)), dt)
-            dl = control.ss(z)
-            blockdiag = control.append(*([dl] * nin)) if nin > 1 else dl
-            chain = blockdiag if chain is None else control.series(chain, blockdiag)
-        sys = plant if chain is None else control.series(chain, plant)
-        return control.ss(sys.A, sys.B, sys.C, sys.D, dt, inputs=in_names,
+        a, b, c, d, in_names, dt = self.statespace_matrices()
+        return control.ss(a, b, c, d, dt if dt else 0, inputs=in_names,
                           outputs=list(self.state_names))
 
     def to_dict(self) -> dict[str, Any]:

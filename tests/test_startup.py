@@ -1,0 +1,36 @@
+"""Heavy libraries are imported where they are used (no timing here: see
+benchmarks/bench_startup.py). Each case runs in a fresh interpreter and lists the modules
+loaded."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+from helpers import FIXTURES
+
+HEAVY = ("rerun", "matplotlib", "cvxpy", "control", "dask", "distributed", "statsmodels")
+
+
+def _loaded(code: str) -> set[str]:
+    probe = (f"import sys, json, contextlib, io, warnings\nwarnings.simplefilter('ignore')\n"
+             f"{code}\nprint(json.dumps(sorted(m for m in {list(HEAVY)!r} if m in sys.modules)))")
+    proc = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    return set(json.loads(proc.stdout.strip().splitlines()[-1]))
+
+
+@pytest.mark.parametrize("argv", [["--version"], ["--help"], ["fit", "--help"]])
+def test_help_and_version_load_no_heavy_library(argv: list[str]) -> None:
+    code = (f"from mavsid import cli\ntry:\n    with contextlib.redirect_stdout(io.StringIO()):"
+            f"\n        cli.main({argv!r})\nexcept SystemExit:\n    pass")
+    assert _loaded(code) == set()
+
+
+def test_a_plain_fit_loads_neither_the_viewer_nor_plots_nor_cvxpy() -> None:
+    code = ("from mavsid import cli\nwith contextlib.redirect_stdout(io.StringIO()):\n"
+            f"    assert cli.main(['fit', {str(FIXTURES / 'sysid_roll.bin')!r}]) == 0")
+    assert _loaded(code) == set()

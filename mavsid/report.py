@@ -19,7 +19,8 @@ import base64
 import html
 import io
 import os
-from collections.abc import Sequence
+import re
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -41,7 +42,10 @@ h1 { font-size: 1.6em; } h2 { border-bottom: 1px solid #ccc; padding-bottom: .2e
 table { border-collapse: collapse; margin: .5em 0 1em; }
 td, th { border: 1px solid #ccc; padding: .25em .6em; text-align: right; }
 th { background: #f3f3f3; } td.name, th.name { text-align: left; font-family: monospace; }
-img { max-width: 100%; display: block; margin: .5em 0; }
+img { max-width: 100%; height: auto; display: block; margin: .5em 0; }
+.row { display: flex; gap: 1em; align-items: flex-start; flex-wrap: wrap; }
+.verdict-good { color: #1a7f37; } .verdict-usable { color: #9a6700; }
+.verdict-not { color: #cf222e; }
 .meta { color: #666; font-size: .9em; }
 """
 
@@ -171,6 +175,88 @@ def _num(x: float) -> str:
     return "–" if x is None or not np.isfinite(x) else f"{x:.4g}"
 
 
+#: Parameters shown as "in force" in the report: the rate loop, its filters, the motors and
+#: the SYSTEMID settings (ArduPilot), the rate controller and gyro filters (PX4).
+_PARAMS_IN_FORCE = re.compile(
+    r"^(ATC_RAT_|ATC_ACCEL_|ATC_INPUT_TC|INS_GYRO_FILTER|INS_HNTCH_|INS_LOG_BAT|MOT_|SID_|"
+    r"FRAME|RATE_(RLL|PIT|YAW)_|LOG_BITMASK|SCHED_LOOP_RATE|MC_(ROLL|PITCH|YAW)RATE_|"
+    r"MC_.*RATE_(P|I|D|K|FF)|IMU_GYRO_CUTOFF|IMU_DGYRO_CUTOFF|IMU_GYRO_RATEMAX|SDLOG_PROFILE|"
+    r"SYS_AUTOSTART|CA_AIRFRAME)")
+
+
+def _verdict_html(fit: AxisFit) -> str:
+    v = fit.verdict
+    if v is None:
+        return ""
+    cls = {"good": "verdict-good", "usable": "verdict-usable"}.get(v.level, "verdict-not")
+    usable = f" (for {', '.join(v.usable_for)})" if v.usable_for else ""
+    return (f'<p><b class="{cls}">{html.escape(v.level)}{html.escape(usable)}</b>: '
+            f"{html.escape('; '.join(v.reasons))}</p>")
+
+
+def _physical(fit: AxisFit) -> str:
+    """What a tuner reads first: time constant, bandwidth, effectiveness, delay, lag,
+    filters, with σ where the model gives them."""
+    m = fit.model
+    y, u = fit.output, f"u_{fit.axis}"
+    params, stderr = m.params, getattr(m, "stderr", {}) or {}
+    prov = dict(getattr(m, "provenance", {}) or {})
+    rows = []
+    a, sa = params.get(f"A[{y},{y}]"), stderr.get(f"A[{y},{y}]", np.nan)
+    b, sb = params.get(f"B[{y},{u}]"), stderr.get(f"B[{y},{u}]", np.nan)
+    if a is not None and a < 0:
+        tau = -1.0 / a
+        rows.append(("time constant 1/damping", _num(tau), _num(tau * sa / abs(a)), "s"))
+        rows.append(("open-loop pole (bandwidth)", _num(-a / (2 * np.pi)),
+                     _num(sa / (2 * np.pi)), "Hz"))
+    if b is not None:
+        rows.append((f"control effectiveness B ({u} → {y}′)", _num(b), _num(sb),
+                     "rad/s² per unit"))
+    delay = float(getattr(m, "delay_s", 0.0) or 0.0)
+    rows.append(("input delay", _num(delay * 1e3), "", "ms"))
+    lag = prov.get("lag_s")
+    if isinstance(lag, (int, float)) and lag > 0:
+        rows.append(("input lag (motor/ESC)", _num(float(lag) * 1e3), "", "ms"))
+    for f in getattr(m, "filters", ()):
+        rows.append((f"known filter ({f.source})", _num(f.cutoff_hz), "", f"Hz, order {f.order}"))
+    body = "".join(f'<tr><td class="name">{html.escape(n)}</td><td>{v}</td><td>{s}</td>'
+                   f"<td>{html.escape(un)}</td></tr>" for n, v, s, un in rows)
+    return ('<table><tr><th class="name">physical parameter</th><th>value</th><th>σ</th>'
+            f"<th>unit</th></tr>{body}</table>")
+
+
+def _aircraft(result: FitResult) -> str:
+    """The aircraft and log: vehicle, firmware, frame, span, SYSTEMID runs, channels, and the
+    parameters in force."""
+    parts = ["<h2>Aircraft and log</h2>"]
+    for fd in result.flights:
+        meta = fd.meta
+        span = float(fd.time_s[-1] - fd.time_s[0]) if len(fd.time_s) else 0.0
+        frame = ", ".join(f"{k} {fd.params[k]:g}" for k in ("FRAME_CLASS", "FRAME_TYPE", "FRAME",
+                                                           "SYS_AUTOSTART", "CA_AIRFRAME")
+                          if k in fd.params) or "–"
+        sources: Mapping[str, Any] = meta.get("sources") or {}  # type: ignore[assignment]
+        rows = [("log", os.path.basename(fd.source.path)),
+                ("format", f"{fd.source.format}, {fd.source.size_bytes} bytes"),
+                ("vehicle", str(meta.get("vehicle") or "–")),
+                ("autopilot / firmware", f"{meta.get('autopilot') or '–'} / "
+                                         f"{meta.get('firmware') or '–'}"),
+                ("frame", frame), ("span used", f"{span:.1f} s at {1 / fd.dt:.0f} Hz"),
+                ("channel preset", fd.preset),
+                ("channels", ", ".join(f"{k} ← {v}" for k, v in sources.items()))]
+        runs = meta.get("sysid_runs") or []
+        for run in runs if isinstance(runs, list) else []:
+            rows.append(("SYSTEMID run", ", ".join(f"{k} {v}" for k, v in dict(run).items())))
+        parts.append("<table>" + "".join(
+            f'<tr><td class="name">{html.escape(k)}</td><td class="name">{html.escape(v)}</td>'
+            "</tr>" for k, v in rows) + "</table>")
+        shown = {k: v for k, v in sorted(fd.params.items()) if _PARAMS_IN_FORCE.match(k)}
+        if shown:
+            cells = " ".join(f"<code>{html.escape(k)}={v:g}</code>" for k, v in shown.items())
+            parts.append(f'<p class="meta">parameters in force: {cells}</p>')
+    return "\n".join(parts)
+
+
 def _axis_section(fit: AxisFit) -> str:
     m, v = fit.model, fit.validation
     stderr = getattr(m, "stderr", {}) or {}
@@ -193,16 +279,18 @@ def _axis_section(fit: AxisFit) -> str:
     train = ", ".join(f"{s.start_s:.2f}–{s.stop_s:.2f} s" for s in fit.train) or "–"
     parts = [
         f"<h2>{html.escape(fit.axis)}</h2>",
+        _verdict_html(fit),
+        _physical(fit),
         f'<p class="meta">estimator {html.escape(fit.estimator or "–")}; '
         f"dynamics {stable}{' (eigenvalues ' + html.escape(eig) + ')' if eig else ''}; "
         f"trained on {html.escape(train)}; validated on {html.escape(segs)}</p>",
-        '<table><tr><th class="name">parameter</th><th>value</th><th>σ</th><th>unit</th></tr>'
-        f"{rows}</table>",
+        '<table><tr><th class="name">fitted parameter</th><th>value</th><th>σ</th>'
+        f"<th>unit</th></tr>{rows}</table>",
         '<table><tr><th class="name">output</th><th>fit % one step</th><th>fit % 0.5 s</th>'
         "<th>fit % free run</th><th>RMSE one step</th><th>RMSE free run</th></tr>"
         f"{fit_rows}</table>",
         figure_png(_time_figure(fit)),
-        '<div style="display:flex;gap:1em">'
+        '<div class="row">'
         + figure_png(_horizon_figure(v))
         + figure_png(_residual_figure(v))
         + "</div>",
@@ -248,7 +336,14 @@ def render_html(result: FitResult) -> str:
         "<th>fit % one step</th><th>fit % 0.5 s</th><th>fit % free run</th></tr>"
         f"{summary_rows}</table>"
     )
-    sections = [header, summary, *(_axis_section(f) for f in result.axes.values())]
+    verdicts = "".join(
+        f'<tr><td class="name">{html.escape(a)}</td><td class="name">{html.escape(v.level)}'
+        f'</td><td class="name">{html.escape("; ".join(v.reasons))}</td></tr>'
+        for a, v in result.verdicts.items())
+    verdict_table = ('<table><tr><th class="name">axis</th><th class="name">verdict</th>'
+                     f'<th class="name">why</th></tr>{verdicts}</table>') if verdicts else ""
+    sections = [header, verdict_table, summary, _aircraft(result),
+                *(_axis_section(f) for f in result.axes.values())]
     return render_html_page(f"mavsid fit: {logs}", sections)
 
 

@@ -90,3 +90,37 @@ def test_parameter_table_shows_the_true_plant(page) -> None:  # type: ignore[no-
         cells = rows[axis]
         fits = [float(c) for c in cells[1:4]]
         assert all(80 < f <= 100 for f in fits)
+
+
+def test_report_leads_with_aircraft_verdicts_and_physics(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """What a tuner reads first: the aircraft and log (firmware, frame, SYSTEMID run,
+    the ATC_/INS_/MOT_/SID_ parameters in force), each axis's verdict, and the physical
+    parameters — time constant, bandwidth, B in rad/s² per unit, delay — near the truth."""
+    import html as html_mod
+    import json
+    import re
+    import warnings
+
+    from helpers import FIXTURES
+
+    from mavsid.pipeline import fit
+    from mavsid.report import render_html
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = fit([str(FIXTURES / "sysid_roll.bin")])
+    page = html_mod.unescape(re.sub(r"<[^>]+>", " ", render_html(result)))
+    text = " ".join(page.split())
+    assert "Aircraft and log" in text and "ArduCopter V4.5.7" in text
+    assert "FRAME_CLASS 1, FRAME_TYPE 1" in text and "SYSTEMID run" in text
+    for p in ("ATC_RAT_RLL_P=0.135", "INS_GYRO_FILTER=20", "MOT_SPIN_MIN=0.15", "SID_AXIS=10"):
+        assert p in text, p
+    assert "roll good" in text and "pitch not identified" in text
+    truth = json.loads((FIXTURES / "sysid_roll.truth.json").read_text())["axes"]["roll"]
+    tau = re.search(r"time constant 1/damping ([\d.]+)", text)
+    b = re.search(r"control effectiveness B \(u_roll → p′\) ([\d.]+)", text)
+    assert tau and b and "rad/s² per unit" in text
+    assert float(tau.group(1)) == pytest.approx(1 / truth["damping"], rel=0.1)
+    assert float(b.group(1)) == pytest.approx(truth["effectiveness"], rel=0.05)
+    assert text.index("Aircraft and log") < text.index("physical parameter") < text.index(
+        "fitted parameter")

@@ -8,8 +8,8 @@ global recording. Time series are sent whole with ``send_columns`` on the timeli
 ====================================  ==================================================
 entity                                content
 ====================================  ==================================================
-``flight/states/<name>``              every state of the flight (rad, rad/s)
-``flight/inputs/<name>``              every input of the flight (normalised)
+``flight/<kind>/<name>``              every state and input of the flight by kind (``KINDS``:
+                                      attitude, heading, rates, inputs, thrust; SI units)
 ``axes/<axis>/<state>/measured``      measured output on the validation segments
 ``axes/<axis>/<state>/one_step``      one-step-ahead prediction
 ``axes/<axis>/<state>/free_run``      free-run simulation (measured inputs only)
@@ -135,17 +135,38 @@ def _style(rec: rr.RecordingStream, path: str, colour: Sequence[int], name: str)
 # --------------------------------------------------------------------------- flight data
 
 
+#: The flight's series by kind, each on its own plot so that no scale flattens another
+#: (yaw wraps over 6 rad, thrust sits near 0.4 while the other inputs are near 0).
+KINDS: dict[str, tuple[str, ...]] = {
+    "attitude": ("roll", "pitch"),
+    "heading": ("yaw",),
+    "rates": ("p", "q", "r"),
+    "inputs": ("u_roll", "u_pitch", "u_yaw"),
+    "thrust": ("u_thrust",),
+}
+#: One colour per series: roll-like red, pitch-like green, yaw-like blue, thrust grey.
+SERIES_COLOURS: dict[str, tuple[int, int, int]] = {
+    "roll": AXIS_COLOURS["roll"], "p": AXIS_COLOURS["roll"], "u_roll": AXIS_COLOURS["roll"],
+    "pitch": AXIS_COLOURS["pitch"], "q": AXIS_COLOURS["pitch"], "u_pitch": AXIS_COLOURS["pitch"],
+    "yaw": AXIS_COLOURS["yaw"], "r": AXIS_COLOURS["yaw"], "u_yaw": AXIS_COLOURS["yaw"],
+    "u_thrust": MEASURED,
+}
+
+
+def _kind(name: str) -> str:
+    return next((k for k, names in KINDS.items() if name in names), "other")
+
+
 def log_flight(rec: rr.RecordingStream, flight: FlightData, prefix: str = "flight") -> None:
-    """Every state and input of ``flight`` as time series, and its attitude in 3-D."""
+    """Every state and input of ``flight`` as time series, grouped by kind (``KINDS``: one
+    plot each, one colour per series, names with units), and its attitude in 3-D."""
     t = flight.time_s
     blocks = flight.blocks if len(flight.blocks) else np.array([[0, len(t)]])
-    for group, names, data, units in (
-        ("states", flight.state_names, flight.states, flight.state_units),
-        ("inputs", flight.input_names, flight.inputs, flight.input_units),
-    ):
+    for names, data, units in ((flight.state_names, flight.states, flight.state_units),
+                               (flight.input_names, flight.inputs, flight.input_units)):
         for j, name in enumerate(names):
-            path = f"{prefix}/{group}/{name}"
-            _style(rec, path, INPUT if group == "inputs" else MEASURED, f"{name} [{units[j]}]")
+            path = f"{prefix}/{_kind(name)}/{name}"
+            _style(rec, path, SERIES_COLOURS.get(name, INPUT), f"{name} [{units[j]}]")
             tt, vv = _joined((t[a:b], data[a:b, j]) for a, b in blocks)
             _send_series(rec, path, tt, vv)
     if all(n in flight.state_names for n in ("roll", "pitch", "yaw")):
@@ -498,14 +519,28 @@ def _fmt(x: float) -> str:
 
 
 def log_summary(rec: rr.RecordingStream, fits: Sequence[AxisFit]) -> None:
-    """A markdown document: per axis the parameters ± σ and fit % on validation data."""
+    """A markdown document: per axis the verdict, the model structure (delay, lag, filters),
+    every parameter ± σ with its unit, and fit % on validation data."""
     lines = ["# mavsid fit", ""]
     for fit in fits:
         m, v = fit.model, fit.validation
-        lines += [f"## {fit.axis}", "", "| parameter | value | σ |", "|---|---|---|"]
+        lines += [f"## {fit.axis}", ""]
+        if fit.verdict is not None:
+            lines += [f"**{fit.verdict.level}**: " + "; ".join(fit.verdict.reasons), ""]
+        prov = dict(getattr(m, "provenance", {}) or {})
+        lag = prov.get("lag_s")
+        filters = ", ".join(f"{f.source} {f.cutoff_hz:g} Hz" for f in getattr(m, "filters", ()))
+        lines += [f"{fit.output}′ from u_{fit.axis}: {1 / v.dt:.0f} Hz, delay "
+                  f"{float(getattr(m, 'delay_s', 0.0) or 0.0) * 1e3:.1f} ms"
+                  + (f", input lag {float(lag) * 1e3:.0f} ms"
+                     if isinstance(lag, (int, float)) and lag > 0 else "")
+                  + (f", {filters}" if filters else "") + f"; estimator {fit.estimator}", ""]
+        lines += ["| parameter | value | σ | unit |", "|---|---|---|---|"]
         stderr = getattr(m, "stderr", {}) or {}
+        units = getattr(m, "units", {}) or {}
         for k, val in m.params.items():
-            lines.append(f"| {k} | {_fmt(val)} | {_fmt(stderr.get(k, np.nan))} |")
+            lines.append(f"| {k} | {_fmt(val)} | {_fmt(stderr.get(k, np.nan))} | "
+                         f"{units.get(k, '')} |")
         lines += ["", "| output | " + " | ".join(_fit_keys()) + " |", "|---" * 4 + "|"]
         for state in v.state_names:
             s = v.fit_summary(state)
@@ -538,8 +573,12 @@ def blueprint(axes: Sequence[str], *, with_flight: bool = True) -> rrb.Blueprint
             )
         )
     flight = rrb.Vertical(
-        rrb.TimeSeriesView(origin="flight/states", name="flight: states"),
-        rrb.TimeSeriesView(origin="flight/inputs", name="flight: inputs"),
+        rrb.TimeSeriesView(origin="flight/attitude", name="flight: roll, pitch [rad]"),
+        rrb.TimeSeriesView(origin="flight/heading", name="flight: yaw [rad]"),
+        rrb.TimeSeriesView(origin="flight/rates", name="flight: body rates p, q, r [rad/s]"),
+        rrb.TimeSeriesView(origin="flight/inputs", name="flight: controller outputs [1]"),
+        rrb.TimeSeriesView(origin="flight/thrust", name="flight: thrust [1]"),
+        row_shares=[2, 1, 2, 2, 1],
         name="flight",
     )
     if per_axis:

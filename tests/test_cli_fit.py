@@ -132,7 +132,8 @@ def test_view_saves_flight_and_windows(tmp_path: Path) -> None:
     proc = run("view", str(FIXTURES / "sysid_roll.bin"), "--save", str(out))
     assert proc.returncode == 0, proc.stderr
     entities = {c.entity_path for c in RrdReader(out).stream().to_chunks()}
-    want = {"/flight/states/p", "/flight/inputs/u_roll", "/world/data", "/segments/roll"}
+    want = {"/flight/rates/p", "/flight/inputs/u_roll", "/flight/attitude/roll",
+            "/world/data", "/segments/roll"}
     assert want <= entities
 
 

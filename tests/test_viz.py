@@ -85,9 +85,13 @@ def test_rrd_holds_exactly_the_computed_series(toy, rrd) -> None:  # type: ignor
         assert f"/fit/{axis}/p fit" in data or any(k.startswith(f"/fit/{axis}/") for k in data)
         assert any(k.startswith(f"/frequency/{axis}/") for k in data)
     for j, name in enumerate(flight.state_names):
-        t, got = _series(data, f"/flight/states/{name}")
+        t, got = _series(data, f"/flight/{viz._kind(name)}/{name}")
         np.testing.assert_allclose(t, flight.time_s, atol=1e-9)
         np.testing.assert_array_equal(got, flight.states[:, j])
+    # the summary: each axis's structure and every parameter with σ and unit
+    summary = " ".join(str(x) for x in data["/summary"]["TextDocument:text"])
+    assert "| parameter | value | σ | unit |" in summary and "delay" in summary
+    assert all(f"| {k} |" in summary for f in result.axes.values() for k in f.model.params)
     # attitude of the data as 3-D transforms, decimated to <= 50 Hz
     quats = data["/world/data"]["Transform3D:quaternion"]
     assert 0 < len(quats) <= flight.time_s.size // 4 + 1
@@ -135,7 +139,8 @@ def test_blueprint_has_one_view_set_per_axis() -> None:
 
     found = origins(viz.blueprint(["roll", "yaw"]).root_container)
     for origin in ("axes/roll", "axes/yaw", "axes/roll/inputs", "fit/roll", "frequency/yaw",
-                   "world", "segments", "summary", "flight/states"):
+                   "world", "segments", "summary", "flight/attitude", "flight/rates",
+                   "flight/inputs", "flight/heading", "flight/thrust"):
         assert origin in found
     assert not any("pitch" in o for o in found)
 

@@ -981,6 +981,10 @@ def _align(raw: RawLog, preset: Preset | str | None, rate_hz: float | None,
         "preset_description": preset.description,
         "native_rate_hz": {s.name: round(rates[s.name], 3) for s in series},
         "sources": {s.name: s.source for s in series},
+        # scales inferred for whole messages (ArduCopter 3.4-dev RATE): readers of the same
+        # message's other fields (the twin's RATE.RDes targets) apply them too
+        "scales": {"RATE": _CENTI} if any(s.source.endswith("(centideg/s, inferred)")
+                                            for s in series) else {},
         "sysid_runs": sysid_runs(raw),
         "excluded_samples": {name: sum(why.values()) for name, why in excluded.items()},
         "excluded_reasons": excluded,

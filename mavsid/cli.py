@@ -198,6 +198,11 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
                    help="gyro white noise, deg/s RMS per 400 Hz sample (fed back)")
     p.add_argument("--vibration", type=float, default=0.0, metavar="DEG_S",
                    help="frame vibration amplitude on the gyro, deg/s (0)")
+    p.add_argument("--layout", default="copter-4",
+                   choices=("copter-4", "copter-3.3", "copter-3.4-dev"),
+                   help="the .bin's ArduCopter log layout: 4.x (default); 3.3 (TimeMS, RCOU "
+                   "Ch1-8, no unit records, untimed PARM/MODE, ARM event first); 3.4-dev "
+                   "(RATE in centideg/s, outputs on +-4500)")
     p.add_argument("--faults", default="", metavar="SPEC",
                    help="damage: drop=FRACTION,reboot=SECONDS,truncate=BYTES")
     p.set_defaults(handler=_simulate)
@@ -225,7 +230,10 @@ def _simulate(args: argparse.Namespace) -> int:
         if value not in (None, ""):
             opts.append(f"--{name.replace('_', '-')} {value}")
     command = "mavsid simulate " + " ".join(opts)
-    result = simulate(scenario, args.output, faults, command=command)
+    if args.layout != "copter-4":
+        opts.append(f"--layout {args.layout}")
+        command = "mavsid simulate " + " ".join(opts)
+    result = simulate(scenario, args.output, faults, command=command, layout=args.layout)
     for path, size in zip(result.logs, result.sizes, strict=True):
         print(f"wrote {path} ({size} bytes)")
     for path in result.truths:

@@ -842,7 +842,8 @@ def twin_signals(flight: FlightData, raw: Any = None) -> TwinSignals:
             except MavsidError:
                 continue
             if t.size >= 2:
-                targets[axis] = _on_grid(t, v, grid, hold=True)
+                scale = dict(flight.meta.get("scales") or {}).get(ch.message, 1.0)  # type: ignore[call-overload]
+                targets[axis] = _on_grid(t, v * scale, grid, hold=True)
                 sources[f"target_{axis}"] = f"{ch.message}.{ch.field}"
                 break
     injection: dict[str, np.ndarray] = {}

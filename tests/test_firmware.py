@@ -215,3 +215,40 @@ def test_the_readme_preset_file_loads_and_fits(tmp_path) -> None:  # type: ignor
         warnings.simplefilter("ignore")
         fd = align(raw, presets["my-quad"])
     assert fd.preset == "my-quad" and fd.input_names == ("u_roll",)
+
+
+@pytest.mark.parametrize("layout", ["copter-4", "copter-3.3", "copter-3.4-dev"])
+def test_firmware_matrix_gives_the_truth_back(layout: str, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """The same simulated plant logged as each ArduCopter generation did (TimeMS, RCOU.Ch*,
+    no unit records, untimed PARM/MODE and an ARM event first for 3.3; centidegree RATE and
+    ±4500 outputs for 3.4-dev): info reads it, fit finds the roll chirp and gives the
+    plant's effectiveness and damping back in SI units."""
+    import contextlib
+    import io
+    import json
+
+    from mavsid import cli
+
+    path = tmp_path / f"{layout}.bin"
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert cli.main(["simulate", "-o", str(path), "--layout", layout, "--sid-axis", "10",
+                         "--t-rec", "15", "--rate-hz", "200", "--seed", "5"]) == 0
+    truth = json.loads(path.with_suffix(".truth.json").read_text())
+    assert truth["layout"] == layout
+    raw = _quiet_read(path)
+    assert ("TimeMS" in raw["ATT"].fields) == (layout == "copter-3.3")
+    assert ("FMTU" in raw.messages) == (layout == "copter-4")
+    assert summarize(raw)["firmware"].startswith(
+        {"copter-4": "ArduCopter V4", "copter-3.3": "ArduCopter V3.3",
+         "copter-3.4-dev": "ArduCopter V3.4-dev"}[layout])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = fit([str(path)])
+    f = result.axes["roll"]
+    assert f.verdict is not None and f.verdict.identified
+    b, damping = f.model.params["B[p,u_roll]"], -f.model.params["A[p,p]"]
+    want = truth["axes"]["roll"]
+    assert b == pytest.approx(want["effectiveness"], rel=0.12)
+    assert damping == pytest.approx(want["damping"], rel=0.35)
+    sources = result.flights[0].meta["sources"]
+    assert ("inferred" in sources["p"]) == (layout == "copter-3.4-dev")

@@ -34,7 +34,8 @@ from mavsid.errors import ConfigError
 from mavsid.synthetic.faults import Faults
 from mavsid.synthetic.flight import GRAVITY, MODE_SYSTEMID, Flight
 
-__all__ = ["FORMATS", "MULTS", "UNITS", "DataFlashBuilder", "MessageFormat", "write_dataflash"]
+__all__ = ["FORMATS", "LAYOUTS", "MULTS", "UNITS", "DataFlashBuilder", "MessageFormat",
+           "write_dataflash"]
 
 HEAD = b"\xa3\x95"
 
@@ -236,7 +237,8 @@ def _every(flight: Flight, name: str, lo: int, hi: int) -> np.ndarray:
     return np.arange(first, hi, step)
 
 
-def _build(flight: Flight, lo: int, hi: int, shift_s: float, faults: Faults) -> bytes:
+def _build(flight: Flight, lo: int, hi: int, shift_s: float, faults: Faults,
+           layout: str = "copter-4") -> bytes:
     """Records for loop samples [lo, hi) with TimeUS = (t - shift_s) * 1e6."""
     sc = flight.scenario
     loop_hz = sc.controller.loop_hz
@@ -306,11 +308,98 @@ def _build(flight: Flight, lo: int, hi: int, shift_s: float, faults: Faults) -> 
     i = _every(flight, "rcin", lo, hi)
     rc = flight.rc_in()[i]
     add("RCIN", i, **{f"C{c + 1}": rc[:, c] for c in range(rc.shape[1])})
+    if layout != "copter-4":
+        return _as_layout(data, b, layout)
     return b.to_bytes() + data.to_bytes()
 
 
+#: Older ArduCopter layouts the writer can produce (``mavsid simulate --layout``).
+LAYOUTS = ("copter-4", "copter-3.3", "copter-3.4-dev")
+
+#: ArduCopter 3.3: TimeMS (ms, uint32) instead of TimeUS; no FMTU/UNIT/MULT records; PARM,
+#: MODE and MSG without a time field; RCOU Ch1-Ch8; EV records; no SYSTEMID messages.
+_OLD_33: dict[str, MessageFormat] = {
+    f.name: f
+    for f in (
+        _fmt(128, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns"),
+        _fmt(129, "PARM", "Nf", "Name,Value"),
+        _fmt(130, "MSG", "Z", "Message"),
+        _fmt(131, "MODE", "Mh", "Mode,ThrCrs"),
+        _fmt(132, "EV", "B", "Id"),
+        _fmt(133, "ATT", "IccccCC", "TimeMS,DesRoll,Roll,DesPitch,Pitch,DesYaw,Yaw"),
+        _fmt(134, "RATE", "Ifffffffffff",
+             "TimeMS,RDes,R,ROut,PDes,P,POut,YDes,Y,YOut,ADes,A"),
+        _fmt(135, "IMU", "Iffffff", "TimeMS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ"),
+        _fmt(136, "RCOU", "IHHHHHHHH", "TimeMS," + ",".join(f"Ch{i}" for i in range(1, 9))),
+    )
+}
+_FIRMWARE = {"copter-3.3": "ArduCopter V3.3.3 (mavsid00)",
+             "copter-3.4-dev": "ArduCopter V3.4-dev (mavsid00)"}
+
+
+def _as_layout(data: DataFlashBuilder, header: DataFlashBuilder, layout: str) -> bytes:
+    """The records of a 4.x-layout flight rewritten as an older firmware logged them.
+
+    ``copter-3.3``: see ``_OLD_33`` (the ARM event is written before the first timed record,
+    as those logs do). ``copter-3.4-dev``: the 4.x types but no unit records, ``RATE`` rates
+    in centidegrees/s and ``ROut/POut/YOut`` on the ±4500 scale, as ArduCopter 3.4-dev wrote
+    them.
+    """
+    by_id = {f.type_id: f.name for f in FORMATS.values()}
+    out = DataFlashBuilder()
+    if layout == "copter-3.4-dev":
+        for name in ("FMT", *_DATA_TYPES):
+            out.define(FORMATS[name])
+    else:
+        out.formats = dict(_OLD_33)
+        for f in _OLD_33.values():
+            out.define(f)
+        out.add("EV", [-1], Id=10)  # armed, before any timed record
+    first_us = None
+    for chunk in (*header._chunks, *data._chunks):
+        t, rec = chunk
+        if not len(rec) or rec.dtype.names is None:
+            continue
+        found = by_id.get(int(rec["_head"][0][2]))
+        if found is None or found in _HEADER_TYPES:
+            continue
+        name = found
+        cols: dict[str, Any] = {c: rec[c] for c in rec.dtype.names
+                                if c not in ("_head", "TimeUS")}
+        if name == "MSG":
+            cols["Message"] = np.array([
+                _FIRMWARE[layout] if m.startswith(b"ArduCopter V") else m
+                for m in rec["Message"]])
+        if layout == "copter-3.4-dev":
+            if name == "RATE":
+                for k in ("RDes", "R", "PDes", "P", "YDes", "Y"):
+                    cols[k] = cols[k] * 100.0
+                for k in ("ROut", "POut", "YOut"):
+                    cols[k] = cols[k] * 4500.0
+            out.add(name, t, **cols)
+            continue
+        if name not in _OLD_33:
+            continue  # SIDS, SIDD, RCIN: not in this layout
+        f = _OLD_33[name]
+        timed = "TimeMS" in f.columns
+        keep: dict[str, Any] = {k: v for k, v in cols.items() if k in f.columns}
+        if name == "RCOU":
+            keep = {f"Ch{i}": cols[f"C{i}"] for i in range(1, 9)}
+        if name == "MODE":
+            keep = {"Mode": cols["Mode"], "ThrCrs": 0}
+        if timed:
+            keep["TimeMS"] = np.maximum(t, 0) // 1000
+            first_us = int(np.min(t)) if first_us is None else min(first_us, int(np.min(t)))
+        out.add(name, t if timed else np.maximum(t, 0), **keep)
+    if layout == "copter-3.3" and first_us is not None:
+        last = max(int(np.max(t)) for t, _ in data._chunks if len(t))
+        out.add("EV", [last + 1], Id=11)  # disarmed
+    return out.to_bytes()
+
+
 def write_dataflash(
-    flight: Flight, path: str | os.PathLike[str], faults: Faults | None = None
+    flight: Flight, path: str | os.PathLike[str], faults: Faults | None = None,
+    layout: str = "copter-4",
 ) -> int:
     """Write ``flight`` as a DataFlash ``.bin`` file; returns its size in bytes.
 
@@ -321,7 +410,11 @@ def write_dataflash(
     faults : Faults
         Optional damage: dropped data records, a reboot (the clock restarts and the headers
         are written again, as when logs are concatenated), a truncated tail.
+    layout : str
+        One of :data:`LAYOUTS`: the ArduCopter generation whose log layout to write.
     """
+    if layout not in LAYOUTS:
+        raise ConfigError(f"unknown layout {layout!r}; choose from {', '.join(LAYOUTS)}")
     faults = faults or Faults()
     n = len(flight)
     if faults.reboot_at_s is not None:
@@ -330,9 +423,10 @@ def write_dataflash(
             raise ConfigError(f"reboot at {faults.reboot_at_s} s is outside the flight")
         # after the reboot the clock reads 5 s at the first sample
         shift = float(flight.t_s[k]) - 5.0
-        data = _build(flight, 0, k, 0.0, faults) + _build(flight, k, n, shift, faults)
+        data = (_build(flight, 0, k, 0.0, faults, layout)
+                + _build(flight, k, n, shift, faults, layout))
     else:
-        data = _build(flight, 0, n, 0.0, faults)
+        data = _build(flight, 0, n, 0.0, faults, layout)
     if faults.truncate_bytes:
         data = data[: max(0, len(data) - faults.truncate_bytes)]
     with open(path, "wb") as f:

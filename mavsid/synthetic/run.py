@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np  # noqa: F401  (doctest namespace)
 
 from mavsid.errors import ConfigError
-from mavsid.synthetic.dfwriter import write_dataflash
+from mavsid.synthetic.dfwriter import LAYOUTS, write_dataflash
 from mavsid.synthetic.faults import Faults
 from mavsid.synthetic.flight import Flight, Scenario, fly
 from mavsid.synthetic.tlogwriter import write_tlog
@@ -66,8 +66,10 @@ def simulate(
     outputs: Sequence[str | os.PathLike[str]],
     faults: Faults | None = None,
     command: str | None = None,
+    layout: str = "copter-4",
 ) -> SimulationResult:
-    """Fly ``scenario`` once and write it to every path in ``outputs`` with its truth file.
+    """Fly ``scenario`` once and write it to every path in ``outputs`` with its truth file
+    (``.bin`` in the ArduCopter log ``layout``, see :data:`~mavsid.synthetic.dfwriter.LAYOUTS`).
 
     Raises
     ------
@@ -83,13 +85,17 @@ def simulate(
             raise ConfigError(f"{p}: output must end in .bin (DataFlash) or .tlog (MAVLink)")
         if not p.parent.exists():
             raise ConfigError(f"{p}: directory {p.parent} does not exist")
+    if layout not in LAYOUTS:
+        raise ConfigError(f"unknown layout {layout!r}; choose from {', '.join(LAYOUTS)}")
     flight = fly(scenario)
-    sizes = [WRITERS[p.suffix.lower()](flight, p, faults) for p in paths]
+    sizes = [write_dataflash(flight, p, faults, layout) if p.suffix.lower() == ".bin"
+             else WRITERS[p.suffix.lower()](flight, p, faults) for p in paths]
     truths: dict[Path, list[str]] = {}
     for p in paths:
         truths.setdefault(truth_path(p), []).append(p.name)
     for tp, names in truths.items():
-        doc: dict[str, Any] = {"logs": names, "command": command, **flight.truth()}
+        doc: dict[str, Any] = {"logs": names, "command": command, "layout": layout,
+                               **flight.truth()}
         doc["faults"] = {"drop_fraction": faults.drop_fraction,
                          "reboot_at_s": faults.reboot_at_s,
                          "truncate_bytes": faults.truncate_bytes}

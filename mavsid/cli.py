@@ -398,11 +398,14 @@ def _view(args: argparse.Namespace) -> int:
             sink["save"] = stack.enter_context(atomic_path(save))
         if args.model:
             result = validate_logs(load_models(args.model), [args.log], cfg)
-            served = viz.open_sink(rec, viz.blueprint(list(result.axes)), **sink)
+            focus = viz.focus_span({a: (f.train, f.held_out) for a, f in result.axes.items()})
+            served = viz.open_sink(rec, viz.blueprint(list(result.axes), focus=focus), **sink)
             viz.log_fit_result(rec, result)
         else:
             flight, windows = find_windows(args.log, cfg)
-            served = viz.open_sink(rec, viz.blueprint([], with_flight=True), **sink)
+            served = viz.open_sink(
+                rec, viz.blueprint([], with_flight=True, focus=viz.focus_span(windows=windows)),
+                **sink)
             viz.log_flight_windows(rec, flight, windows)
         rec.flush()
         if save:

@@ -20,7 +20,10 @@ entity                                content
                                       of the measured one, on validation segment i
                                       (roll 1.5 m right of the data, pitch 3 m, yaw 4.5 m)
 ``fit/<axis>``                        2-D plot: fit % against prediction horizon
-``frequency/<axis>``                  2-D plot: |H| (dB) measured vs model, coherence
+``frequency/<axis>``                  2-D Bode plot: |H| (dB) and phase (deg), measured vs
+                                      model, and coherence, with legends
+``bands/...``                         flight modes, airborne time, each axis's training,
+                                      validation and rejected windows as bands
 ``summary``                           markdown table of parameters and fit %
 ====================================  ==================================================
 
@@ -60,8 +63,10 @@ __all__ = [
     "TIMELINE",
     "Served",
     "blueprint",
+    "focus_span",
     "free_port",
     "log_attitude",
+    "log_bands",
     "log_fit_result",
     "log_flight",
     "log_flight_windows",
@@ -297,6 +302,123 @@ def log_segments(
     )
 
 
+# --------------------------------------------------------------------------- bands
+
+#: Band levels on the ``bands`` plot (top to bottom): one row per axis, then airborne, modes.
+BAND_LEVELS = {"roll": 4.0, "pitch": 3.0, "yaw": 2.0, "airborne": 1.0, "mode": 0.0}
+BAND_WIDTH = 6.0
+REJECTED = (110, 110, 110)
+
+
+def _merged(spans: Iterable[tuple[float, float]]) -> list[tuple[float, float]]:
+    """Sorted spans with the overlapping ones joined.
+
+    >>> _merged([(3.0, 4.0), (0.0, 1.0), (0.5, 2.0)])
+    [(0.0, 2.0), (3.0, 4.0)]
+    """
+    out: list[tuple[float, float]] = []
+    for a, b in sorted((float(a), float(b)) for a, b in spans):
+        if out and a <= out[-1][1]:
+            out[-1] = (out[-1][0], max(out[-1][1], b))
+        else:
+            out.append((a, b))
+    return out
+
+
+def _band(rec: rr.RecordingStream, path: str, spans: Iterable[tuple[float, float]],
+          level: float, colour: Sequence[int], name: str) -> None:
+    """Spans of time as one thick horizontal bar per span at ``level`` (a Gantt row)."""
+    parts = [(np.array([a, b]), np.array([level, level])) for a, b in _merged(spans) if b > a]
+    if not parts:
+        return
+    rec.log(path, rr.SeriesLines(colors=[colour], names=[name], widths=[BAND_WIDTH]),
+            static=True)
+    _send_series(rec, path, *_joined(parts))
+
+
+def _runs(time_s: np.ndarray, values: np.ndarray) -> dict[int, list[tuple[float, float]]]:
+    """Per value, the time spans over which an integer series holds it."""
+    out: dict[int, list[tuple[float, float]]] = {}
+    if len(values) == 0:
+        return out
+    edges = np.flatnonzero(np.diff(values)) + 1
+    starts = np.r_[0, edges]
+    stops = np.r_[edges, len(values)]
+    for a, b in zip(starts, stops, strict=True):
+        end = time_s[b] if b < len(time_s) else time_s[-1]
+        out.setdefault(int(values[a]), []).append((float(time_s[a]), float(end)))
+    return out
+
+
+def _mode_colour(mode: int) -> tuple[int, int, int]:
+    """A stable colour per flight-mode number, away from the series' red/green/blue."""
+    palette = [(240, 200, 60), (60, 200, 200), (220, 120, 200), (250, 140, 90),
+               (150, 150, 250), (170, 220, 120), (200, 170, 130), (120, 180, 240)]
+    return palette[mode % len(palette)]
+
+
+def log_bands(
+    rec: rr.RecordingStream,
+    flight: FlightData,
+    segments: Mapping[str, tuple[Sequence[Segment], Sequence[Segment]]] = {},
+    windows: Mapping[str, Sequence[WindowReport]] = {},
+) -> None:
+    """Flight modes, airborne time, and per axis the training, validation and rejected
+    windows as bands on one time plot (``bands/...``), its time axis linked to every other
+    time plot so that they line up when zoomed.
+
+    ``segments`` maps an axis to its ``(train, held_out)`` segments; ``windows`` adds the
+    windows the excitation search kept (when no segments are given) or rejected.
+    """
+    t = flight.time_s
+    if len(t) == 0:
+        return
+    names = dict(flight.meta.get("mode_names", {}) or {})  # type: ignore[call-overload]
+    mode = flight.flags.get("mode")
+    if mode is not None and len(mode) == len(t):
+        for m, spans in sorted(_runs(t, np.asarray(mode)).items()):
+            if m < 0:
+                continue
+            # a log's own text: the viewer's font has Latin glyphs only (others panic it)
+            label = str(names.get(m) or m).encode("ascii", "replace").decode()
+            _band(rec, f"bands/mode/{m}", spans, BAND_LEVELS["mode"], _mode_colour(m),
+                  f"mode {label}")
+    air = flight.flags.get("airborne")
+    if air is not None and len(air) == len(t):
+        spans = _runs(t, np.asarray(air, dtype=np.int64)).get(1, [])
+        _band(rec, "bands/airborne", spans, BAND_LEVELS["airborne"], MEASURED, "airborne")
+    for axis in dict.fromkeys([*segments, *windows]):
+        level = BAND_LEVELS.get(axis, -1.0)
+        colour = AXIS_COLOURS.get(axis, FREE_RUN)
+        train, held_out = segments.get(axis, ((), ()))
+        dim = tuple(int(c * 0.55) for c in colour)
+        _band(rec, f"bands/{axis}/train", [(s.start_s, s.stop_s) for s in train],
+              level, dim, f"{axis} training")
+        _band(rec, f"bands/{axis}/validation", [(s.start_s, s.stop_s) for s in held_out],
+              level, colour, f"{axis} validation")
+        reports = windows.get(axis, ())
+        if not train and not held_out:
+            _band(rec, f"bands/{axis}/kept", [(w.start_s, w.stop_s) for w in reports if w.kept],
+                  level, colour, f"{axis} kept window")
+        _band(rec, f"bands/{axis}/rejected",
+              [(w.start_s, w.stop_s) for w in reports if not w.kept],
+              level - 0.3, REJECTED, f"{axis} rejected window")
+
+
+def focus_span(
+    segments: Mapping[str, tuple[Sequence[Segment], Sequence[Segment]]] = {},
+    windows: Mapping[str, Sequence[WindowReport]] = {},
+) -> tuple[float, float] | None:
+    """Where the viewer should open: the first validation segment, else the first training
+    segment, else the first kept window (``None`` when there is none)."""
+    for pick in (1, 0):
+        spans = [(s.start_s, s.stop_s) for tr_ho in segments.values() for s in tr_ho[pick]]
+        if spans:
+            return min(spans)
+    kept = [(w.start_s, w.stop_s) for ws in windows.values() for w in ws if w.kept]
+    return min(kept) if kept else None
+
+
 # --------------------------------------------------------------------------- 2-D plots
 
 
@@ -313,10 +435,12 @@ def _plot2d(
     origin_y: float = 0.0,
     height: float = 100.0,
     y_range: tuple[float, float] | None = None,
+    legend: bool = False,
 ) -> None:
     """A static line plot drawn with 2-D primitives (rerun time-series views plot against
     time only). Plot space: x in [0, 200], y from ``origin_y`` down to ``origin_y - height``
-    (rerun's 2-D y axis points down, so values are flipped)."""
+    (rerun's 2-D y axis points down, so values are flipped). ``legend`` names each series
+    in its colour at the plot's top right."""
     xs_all = [np.asarray(x, dtype=float) for _, x, _, _ in series]
     ys_all = [np.asarray(y, dtype=float) for _, _, y, _ in series]
 
@@ -371,6 +495,14 @@ def _plot2d(
         if len(pts) < 30:  # few points (fit vs horizon): mark them
             rec.log(f"{entity}/points", rr.Points2D(pts, colors=[colour], radii=1.2),
                     static=True)
+    if legend:
+        at = [(208.0, origin_y + 4.0 + 7.0 * i) for i in range(len(series))]
+        rec.log(
+            f"{path}/legend",
+            rr.Points2D(at, labels=[name for name, *_ in series], radii=1.5,
+                        colors=[colour for *_, colour in series], show_labels=True),
+            static=True,
+        )
 
 
 def _log_fit_plot(rec: rr.RecordingStream, axis: str, v: Validation) -> None:
@@ -397,6 +529,7 @@ def _log_fit_plot(rec: rr.RecordingStream, axis: str, v: Validation) -> None:
         x_unit=" s",
         y_unit=" %",
         y_range=(lo, 100.0),
+        legend=True,
     )
     rec.log(
         f"fit/{axis}/free_run_label",
@@ -407,31 +540,63 @@ def _log_fit_plot(rec: rr.RecordingStream, axis: str, v: Validation) -> None:
 
 
 def _log_frequency_plot(rec: rr.RecordingStream, axis: str, v: Validation) -> None:
-    """Bode magnitude (dB) of measured and model response above, coherence below."""
+    """Bode plot of measured and model response: magnitude (dB) on top, phase (deg) below
+    it, coherence at the bottom, each with a legend."""
     for fr in v.frequency:
         band = fr.band_hz or (fr.freq_hz[1], fr.freq_hz[-1])
         sel = (fr.freq_hz >= band[0]) & (fr.freq_hz <= band[1])
         if sel.sum() < 2:
             continue
         f = fr.freq_hz[sel]
-        mag = np.clip(np.nan_to_num(20 * np.log10(np.abs(fr.measured[sel]) + 1e-12),
-                                    nan=-200.0, posinf=200.0, neginf=-200.0), -200.0, 200.0)
-        mod = np.clip(np.nan_to_num(20 * np.log10(np.abs(fr.model[sel]) + 1e-12),
-                                    nan=-200.0, posinf=200.0, neginf=-200.0), -200.0, 200.0)
+
+        def db(h: np.ndarray) -> np.ndarray:
+            return np.clip(np.nan_to_num(20 * np.log10(np.abs(h) + 1e-12), nan=-200.0,
+                                         posinf=200.0, neginf=-200.0), -200.0, 200.0)
+
+        def deg(h: np.ndarray) -> np.ndarray:
+            ok = np.isfinite(h)
+            out = np.full(len(h), np.nan)
+            if ok.any():
+                out[ok] = np.degrees(np.unwrap(np.angle(h[ok])))
+            return out
+
+        mag, mod = db(fr.measured[sel]), db(fr.model[sel])
+        ph, ph_mod = deg(fr.measured[sel]), deg(fr.model[sel])
         ticks = 10.0 ** np.arange(np.floor(np.log10(f[0])), np.ceil(np.log10(f[-1])) + 1)
         lo = float(np.floor(min(mag.min(), mod.min()) / 10) * 10)
         hi = float(np.ceil(max(mag.max(), mod.max()) / 10) * 10)
+        both = np.r_[ph, ph_mod]
+        both = both[np.isfinite(both)]
+        p_lo = float(np.floor(both.min() / 90) * 90) if len(both) else -180.0
+        p_hi = float(np.ceil(both.max() / 90) * 90) if len(both) else 0.0
+        p_lo, p_hi = max(p_lo, -1080.0), min(max(p_hi, p_lo + 90.0), 1080.0)
         name = f"frequency/{axis}/{fr.output_name}_{fr.input_name}"
         _plot2d(
             rec,
             f"{name}/magnitude",
-            [("measured", f, mag, MEASURED), ("model", f, mod, FREE_RUN)],
+            [("measured |H|", f, mag, MEASURED), ("model |H|", f, mod, FREE_RUN)],
             xlog=True,
             x_ticks=ticks,
             y_ticks=np.arange(lo, hi + 1, 10),
             x_unit=" Hz",
             y_unit=" dB",
             y_range=(lo, hi),
+            legend=True,
+        )
+        step = 90.0 if p_hi - p_lo <= 360 else 180.0
+        _plot2d(
+            rec,
+            f"{name}/phase",
+            [("measured phase", f, ph, MEASURED), ("model phase", f, ph_mod, FREE_RUN)],
+            xlog=True,
+            x_ticks=ticks,
+            y_ticks=np.arange(p_lo, p_hi + 1, step),
+            x_unit=" Hz",
+            y_unit=" deg",
+            origin_y=125.0,
+            height=60.0,
+            y_range=(p_lo, p_hi),
+            legend=True,
         )
         _plot2d(
             rec,
@@ -442,9 +607,10 @@ def _log_frequency_plot(rec: rr.RecordingStream, axis: str, v: Validation) -> No
             y_ticks=(0.0, 0.5, 1.0),
             x_unit=" Hz",
             y_unit="",
-            origin_y=125.0,
+            origin_y=210.0,
             height=40.0,
             y_range=(0.0, 1.0),
+            legend=True,
         )
 
 
@@ -556,40 +722,65 @@ def _fit_keys() -> tuple[str, ...]:
 # --------------------------------------------------------------------------- layout
 
 
-def blueprint(axes: Sequence[str], *, with_flight: bool = True) -> rrb.Blueprint:
-    """The layout: per axis predicted vs measured and inputs; attitude, fit, frequency."""
+def _time_view(origin: str, name: str, **kw: object) -> rrb.TimeSeriesView:
+    """A time plot whose time axis moves with every other one (zoom one, all follow)."""
+    return rrb.TimeSeriesView(origin=origin, name=name,
+                              axis_x=rrb.TimeAxis(link="LinkToGlobal"), **kw)  # type: ignore[arg-type]
+
+
+def _bands_view() -> rrb.TimeSeriesView:
+    top = max(BAND_LEVELS.values()) + 0.7
+    return _time_view("bands", "modes & segments (training dim, validation bright, "
+                      "rejected grey)",
+                      axis_y=rrb.ScalarAxis(range=(min(BAND_LEVELS.values()) - 0.7, top),
+                                            zoom_lock=True),
+                      plot_legend=rrb.PlotLegend(corner="RightTop"))
+
+
+def blueprint(
+    axes: Sequence[str],
+    *,
+    with_flight: bool = True,
+    focus: tuple[float, float] | None = None,
+) -> rrb.Blueprint:
+    """The layout: per axis predicted vs measured and inputs under the modes-and-segments
+    bands; the flight by kind; attitude, fit % vs horizon, Bode plots, summary.
+
+    ``focus`` (seconds on the log clock, e.g. from :func:`focus_span`) is selected on the
+    time panel, paused, so that the viewer opens on a segment rather than the end of the log.
+    """
     columns: list[rrb.Container | rrb.View] = []
-    per_axis: list[rrb.Container] = []
+    per_axis: list[rrb.Container | rrb.View] = [_bands_view()] if axes else []
     for axis in axes:
         per_axis.append(
             rrb.Vertical(
-                rrb.TimeSeriesView(
-                    origin=f"axes/{axis}",
-                    contents=["$origin/**", f"- axes/{axis}/inputs/**"],
-                    name=f"{axis}: measured / one-step / free-run",
-                ),
-                rrb.TimeSeriesView(origin=f"axes/{axis}/inputs", name=f"{axis}: inputs"),
+                _time_view(f"axes/{axis}", f"{axis}: measured / one-step / free-run",
+                           contents=["$origin/**", f"- axes/{axis}/inputs/**"]),
+                _time_view(f"axes/{axis}/inputs", f"{axis}: inputs [1]"),
                 row_shares=[2, 1],
             )
         )
     flight = rrb.Vertical(
-        rrb.TimeSeriesView(origin="flight/attitude", name="flight: roll, pitch [rad]"),
-        rrb.TimeSeriesView(origin="flight/heading", name="flight: yaw [rad]"),
-        rrb.TimeSeriesView(origin="flight/rates", name="flight: body rates p, q, r [rad/s]"),
-        rrb.TimeSeriesView(origin="flight/inputs", name="flight: controller outputs [1]"),
-        rrb.TimeSeriesView(origin="flight/thrust", name="flight: thrust [1]"),
-        row_shares=[2, 1, 2, 2, 1],
+        _bands_view(),
+        _time_view("flight/attitude", "flight: roll, pitch [rad]"),
+        _time_view("flight/heading", "flight: yaw [rad]"),
+        _time_view("flight/rates", "flight: body rates p, q, r [rad/s]"),
+        _time_view("flight/inputs", "flight: controller outputs [1]"),
+        _time_view("flight/thrust", "flight: thrust [1]"),
+        row_shares=[1, 2, 1, 2, 2, 1],
         name="flight",
     )
     if per_axis:
-        validation = rrb.Vertical(*per_axis, name="validation")
+        validation = rrb.Vertical(*per_axis, row_shares=[1] + [4] * len(axes),
+                                  name="validation")
         columns.append(rrb.Tabs(validation, flight) if with_flight else validation)
     else:
         columns.append(flight)
     plots: list[rrb.View] = []
     for axis in axes:
         plots.append(rrb.Spatial2DView(origin=f"fit/{axis}", name=f"{axis}: fit % vs horizon"))
-        plots.append(rrb.Spatial2DView(origin=f"frequency/{axis}", name=f"{axis}: |H| & coherence"))
+        plots.append(rrb.Spatial2DView(origin=f"frequency/{axis}",
+                                       name=f"{axis}: Bode |H|, phase, coherence"))
     texts = rrb.Tabs(
         rrb.TextDocumentView(origin="summary", name="summary"),
         rrb.TextLogView(origin="segments", name="segments"),
@@ -599,11 +790,18 @@ def blueprint(axes: Sequence[str], *, with_flight: bool = True) -> rrb.Blueprint
         origin="world", name="attitude: data (left) / model roll, pitch, yaw (right)"
     )
     if plots:
-        columns.append(rrb.Vertical(attitude, rrb.Tabs(*plots), texts, row_shares=[2, 2, 1]))
+        # the Bode plot of the first axis in front: what a tuner looks at first
+        columns.append(rrb.Vertical(texts, rrb.Tabs(*plots, active_tab=1), attitude,
+                                    row_shares=[3, 3, 1]))
     else:
         columns.append(rrb.Vertical(attitude, texts, row_shares=[1, 1]))
+    panel = rrb.TimePanel(timeline=TIMELINE, play_state="paused",
+                          time_selection=rrb.components.AbsoluteTimeRange(
+                              int(focus[0] * 1e9), int(focus[1] * 1e9))
+                          if focus is not None else None)
     return rrb.Blueprint(
         rrb.Horizontal(*columns, column_shares=[3, 2]),
+        panel,
         collapse_panels=True,
     )
 
@@ -616,6 +814,7 @@ def log_flight_windows(
     """A flight without a model: its data, attitude and every window kept or rejected."""
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_DOWN, static=True)
     log_flight(rec, flight)
+    log_bands(rec, flight, windows=windows)
     for axis, reports in windows.items():
         log_segments(rec, axis, (), (), reports)
 
@@ -623,10 +822,16 @@ def log_flight_windows(
 def log_fit_result(rec: rr.RecordingStream, result: FitResult, *, flight: bool = True) -> None:
     """Everything of a pipeline result into ``rec``."""
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_DOWN, static=True)
+    fits = list(result.axes.values())
     if flight:
         for fd in result.flights:
             log_flight(rec, fd)
-    fits = list(result.axes.values())
+            def ours(segs: Sequence[Segment], fd: FlightData = fd) -> list[Segment]:
+                one = len(result.flights) == 1
+                return [s for s in segs if one or s.log == fd.source.path]
+
+            mine = {f.axis: (ours(f.train), ours(f.held_out)) for f in fits}
+            log_bands(rec, fd, mine, {f.axis: f.windows for f in fits})
     for fit in fits:
         log_segments(rec, fit.axis, fit.train, fit.held_out, fit.windows)
         log_validation(rec, fit.axis, fit.validation, fit.held_out)
@@ -637,7 +842,8 @@ def save_rrd(
     result: FitResult, path: str | os.PathLike[str], *, flight: bool = True
 ) -> rrb.Blueprint:
     """Write ``result`` with its blueprint to an ``.rrd`` file; returns the blueprint."""
-    bp = blueprint(list(result.axes), with_flight=flight)
+    bp = blueprint(list(result.axes), with_flight=flight,
+                   focus=focus_span({a: (f.train, f.held_out) for a, f in result.axes.items()}))
     rec = new_recording()
     rec.save(os.fspath(path), default_blueprint=bp)
     log_fit_result(rec, result, flight=flight)

@@ -138,9 +138,9 @@ def test_blueprint_has_one_view_set_per_axis() -> None:
         return [o for child in getattr(node, "contents", []) for o in origins(child)]
 
     found = origins(viz.blueprint(["roll", "yaw"]).root_container)
-    for origin in ("axes/roll", "axes/yaw", "axes/roll/inputs", "fit/roll", "frequency/yaw",
-                   "world", "segments", "summary", "flight/attitude", "flight/rates",
-                   "flight/inputs", "flight/heading", "flight/thrust"):
+    for origin in ("bands", "axes/roll", "axes/yaw", "axes/roll/inputs", "fit/roll",
+                   "frequency/yaw", "world", "segments", "summary", "flight/attitude",
+                   "flight/rates", "flight/inputs", "flight/heading", "flight/thrust"):
         assert origin in found
     assert not any("pitch" in o for o in found)
 
@@ -203,3 +203,55 @@ def test_headless_viewer_renders_plots(rrd, tmp_path) -> None:  # type: ignore[n
 def test_recording_is_not_global() -> None:
     rec = viz.new_recording()
     assert rr.get_global_data_recording() is not rec
+
+
+def test_bands_phase_and_focus(toy, rrd) -> None:  # type: ignore[no-untyped-def]
+    """Segments and flight modes as bands on the time axis, Bode phase beside magnitude, and
+    the time panel opening on the first validation segment."""
+    flight, result, _ = toy
+    data, _ = _read(rrd)
+    for axis, fit in result.axes.items():
+        for role, segs in (("train", fit.train), ("validation", fit.held_out)):
+            t, level = _series(data, f"/bands/{axis}/{role}")
+            spans = viz._merged((s.start_s, s.stop_s) for s in segs)
+            # each span drawn as its two ends at the axis's level, NaN between spans
+            ends = t[np.isfinite(level)]
+            np.testing.assert_allclose(ends, np.ravel(spans), atol=1e-9)
+            assert set(level[np.isfinite(level)]) == {viz.BAND_LEVELS[axis]}
+        for fr in fit.validation.frequency:
+            base = f"/frequency/{axis}/{fr.output_name}_{fr.input_name}"
+            assert f"{base}/phase/measured_phase" in data
+            assert f"{base}/magnitude/legend" in data
+    # flight modes as bands, named after the modes (a log's text made safe for the font)
+    import dataclasses
+
+    modes = np.where(flight.time_s < flight.time_s[len(flight.time_s) // 3], 0, 25)
+    fd = dataclasses.replace(flight, flags={**flight.flags, "mode": modes},
+                             meta={**flight.meta, "mode_names": {0: "STABILIZE", 25: "SYS→ID"}})
+    path = rrd.parent / "bands.rrd"
+    rec = viz.new_recording()
+    rec.save(path)
+    viz.log_bands(rec, fd)
+    rec.flush()
+    rec.disconnect()
+    bands, _ = _read(path)
+    for m, name in ((0, "STABILIZE"), (25, "SYS?ID")):
+        t, level = _series(bands, f"/bands/mode/{m}")
+        inside = (flight.time_s >= t[0]) & (flight.time_s < t[-1])
+        assert np.all(modes[inside] == m) and set(level[np.isfinite(level)]) == {0.0}
+        assert bands[f"/bands/mode/{m}"]["SeriesLines:names"] == [[f"mode {name}"]]
+    data.update(bands)
+    # nothing the viewer's font cannot draw (an unknown glyph in a label panics it)
+    labels = [str(x) for cols in data.values() for name, xs in cols.items()
+              if name.endswith((":labels", ":names")) for x in xs if x is not None]
+    assert labels and all(s.isascii() for s in labels), [s for s in labels if not s.isascii()]
+    focus = viz.focus_span({a: (f.train, f.held_out) for a, f in result.axes.items()})
+    first = min((s.start_s, s.stop_s) for f in result.axes.values() for s in f.held_out)
+    assert focus == first
+
+
+def test_band_runs_and_merge() -> None:
+    t = np.arange(6.0)
+    assert viz._runs(t, np.array([0, 0, 5, 5, 0, 0])) == {0: [(0.0, 2.0), (4.0, 5.0)],
+                                                         5: [(2.0, 4.0)]}
+    assert viz._merged([(2.0, 3.0), (0.0, 2.5)]) == [(0.0, 3.0)]

@@ -19,7 +19,7 @@ import sys
 import time
 import traceback
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import TYPE_CHECKING, Any
 
 from mavsid import __version__
@@ -254,15 +254,46 @@ def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
                               allow_unstable=getattr(args, "allow_unstable", None) or None)
 
 
-def _write_outputs(args: argparse.Namespace, result: FitResult) -> None:
+@contextlib.contextmanager
+def _progress(args: argparse.Namespace, total: int) -> Iterator[Callable[[str], None]]:
+    """A progress bar on stderr over ``total`` stages, the current one named; nothing when
+    stderr is not a terminal or with ``--quiet``. Yields the callable the pipeline calls."""
+    if getattr(args, "quiet", False) or not sys.stderr.isatty():
+        yield lambda stage: None
+        return
+    from tqdm import tqdm
+
+    bar = tqdm(total=total, file=sys.stderr, unit="stage", dynamic_ncols=True, leave=False,
+               mininterval=0, miniters=1,  # a few stages: show each as it starts
+               bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} stages [{elapsed}<{remaining}]")
+    started = [False]
+
+    def step(stage: str) -> None:  # a stage starts: the one before it is done
+        bar.set_description_str(escape(stage)[-60:], refresh=False)
+        if started[0]:
+            bar.update(1)
+        else:
+            bar.refresh()
+        started[0] = True
+
+    try:
+        yield step
+    finally:
+        bar.close()
+
+
+def _write_outputs(args: argparse.Namespace, result: FitResult,
+                   step: Callable[[str], None] = lambda stage: None) -> None:
     if args.rrd:
         from mavsid.viz import save_rrd
 
+        step(f"writing {args.rrd}")
         with atomic_path(args.rrd) as tmp:
             save_rrd(result, tmp)
     if args.report:
         from mavsid.report import write_report
 
+        step(f"writing {args.report}")
         with atomic_path(args.report) as tmp:
             write_report(result, tmp)
 
@@ -289,6 +320,13 @@ def _add_output_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rrd", metavar="OUT.rrd", help="write a rerun recording")
     p.add_argument("--report", metavar="OUT.html", help="write a self-contained HTML report")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress bar (there is none when stderr is not a terminal)")
+
+
+def _stages(args: argparse.Namespace, axes: int, per_axis: int) -> int:
+    """How many stages a fit or validate run reports (reads, axes, outputs)."""
+    return len(args.logs) + per_axis * axes + bool(args.rrd) + bool(args.report)
 
 
 def _add_fit(sub: argparse._SubParsersAction) -> None:
@@ -312,14 +350,16 @@ def _add_fit(sub: argparse._SubParsersAction) -> None:
 def _fit(args: argparse.Namespace) -> int:
     import json
 
-    from mavsid.pipeline import fit
+    from mavsid.pipeline import FIT_STAGES, fit
 
     check_outputs([args.output, args.rrd, args.report], args.logs)
-    result = fit(args.logs, _pipeline_config(args))
-    if args.output:
-        with atomic_path(args.output) as tmp, open(tmp, "w", encoding="utf-8") as f:
-            json.dump(result.models_dict(), f, indent=1)
-    _write_outputs(args, result)
+    cfg = _pipeline_config(args)
+    with _progress(args, _stages(args, len(cfg.axes), len(FIT_STAGES))) as step:
+        result = fit(args.logs, cfg, progress=step)
+        if args.output:
+            with atomic_path(args.output) as tmp, open(tmp, "w", encoding="utf-8") as f:
+                json.dump(result.models_dict(), f, indent=1)
+        _write_outputs(args, result, step)
     _print_result(args, result)
     if args.output and not args.json:
         print(f"wrote {args.output}")
@@ -341,11 +381,15 @@ def _add_validate(sub: argparse._SubParsersAction) -> None:
 
 
 def _validate(args: argparse.Namespace) -> int:
-    from mavsid.pipeline import load_models, validate_logs
+    from mavsid.pipeline import VALIDATE_STAGES, load_models, validate_logs
 
     check_outputs([args.rrd, args.report], [args.model, *args.logs])
-    result = validate_logs(load_models(args.model), args.logs, _pipeline_config(args))
-    _write_outputs(args, result)
+    models = load_models(args.model)
+    cfg = _pipeline_config(args)
+    axes = len([a for a in models if a in cfg.axes])
+    with _progress(args, _stages(args, axes, len(VALIDATE_STAGES))) as step:
+        result = validate_logs(models, args.logs, cfg, progress=step)
+        _write_outputs(args, result, step)
     _print_result(args, result)
     return 0
 
@@ -493,6 +537,9 @@ def _add_batch(sub: argparse._SubParsersAction) -> None:
                    help="CSV log,vehicle[,date]: each log's aircraft (default: its folder)")
     p.add_argument("--report", metavar="OUT.html",
                    help="write the trends page (parameters against flight date, change points)")
+    p.add_argument("--rrd", metavar="OUT.rrd",
+                   help="write the trends as a rerun recording (timelines flight and "
+                   "flight_date; parameters with ±σ, change points)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(handler=_batch, axis=None)
 
@@ -503,7 +550,7 @@ def _batch(args: argparse.Namespace) -> int:
     if not args.output.endswith(".parquet"):
         raise ConfigError(f"{args.output}: the results table must be a .parquet file")
     outs = list(_paths(args.output).values())
-    check_outputs([*outs, args.report], args.inputs)
+    check_outputs([*outs, args.report, args.rrd], args.inputs)
     if args.workers is not None and args.workers < 1:
         raise ConfigError(f"--workers {args.workers}: must be at least 1")
     tables = run_batch(args.inputs, args.output, _pipeline_config(args), workers=args.workers,
@@ -521,6 +568,12 @@ def _batch(args: argparse.Namespace) -> int:
     if args.report:
         write_trends_html(tables, args.report)
         print(f"wrote {args.report}")
+    if args.rrd:
+        from mavsid.viz import save_trends_rrd
+
+        with atomic_path(args.rrd) as tmp:
+            save_trends_rrd(tables["axes"], tmp)
+        print(f"wrote {args.rrd} (open it with: rerun --bind 127.0.0.1 {args.rrd})")
     return 0
 
 

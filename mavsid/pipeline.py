@@ -50,7 +50,7 @@ import dataclasses
 import itertools
 import math
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -575,9 +575,18 @@ def _fit_model(train: Sequence[Segment], axis: str, cfg: PipelineConfig) -> Mode
     return model
 
 
+#: Stages :func:`fit` reports per axis (reading is one more per log).
+FIT_STAGES = ("segments", "fit", "validation", "closed-loop twin")
+
+
+def _noop(stage: str) -> None:
+    pass
+
+
 def fit(
     logs: Sequence[str | os.PathLike[str]],
     config: PipelineConfig | None = None,
+    progress: Callable[[str], None] | None = None,
 ) -> FitResult:
     """Fit and validate a model per axis from one or more logs.
 
@@ -587,6 +596,10 @@ def fit(
         Flight logs (any supported format); their segments are pooled per axis.
     config : PipelineConfig, optional
         Settings; defaults chosen from the log.
+    progress : callable, optional
+        Called with a stage's name as it starts: ``"reading LOG"`` per log, then per axis
+        ``"AXIS: STAGE"`` for each of :data:`FIT_STAGES` (a skipped stage is reported too,
+        so that the count is ``len(logs) + len(FIT_STAGES) * len(axes)``).
 
     Returns
     -------
@@ -600,29 +613,47 @@ def fit(
     cfg = config or PipelineConfig()
     if not logs:
         raise ConfigError("no log given")
+    step = progress or _noop
+    step(f"reading {os.fspath(logs[0])}")
     first = _read_flight(logs[0], cfg)
     # pooled segments need one step: later logs are aligned at the first one's rate
     same_rate = cfg if cfg.rate_hz is not None else cfg.with_overrides(rate_hz=1.0 / first.dt)
-    flights = (first, *(_read_flight(p, same_rate) for p in logs[1:]))
+    flights = [first]
+    for p in logs[1:]:
+        step(f"reading {os.fspath(p)}")
+        flights.append(_read_flight(p, same_rate))
     fits: dict[str, AxisFit] = {}
     verdicts: dict[str, Verdict] = {}
     signals: dict[int, TwinSignals] = {}
     for axis in cfg.axes:
+        stages = iter(FIT_STAGES)
+
+        def next_stage(axis: str = axis, stages: Any = stages) -> None:
+            step(f"{axis}: {next(stages)}")
+
+        next_stage()
         windows, segs = _axis_segments(flights, axis, cfg)
         missing = _missing_rate(axis, flights)
         if missing:
+            for name in stages:  # the skipped stages, so that the count stays whole
+                step(f"{axis}: {name}")
             verdicts[axis] = unfitted(axis, missing, windows, flights,
                                       [os.fspath(p) for p in logs])
             continue
         try:
             train, held_out = split_segments(segs, cfg.block_s)
+            next_stage()
             model = _fit_model(train, axis, cfg)
+            next_stage()
             val = _validate(model, held_out, cfg)
         except NoExcitationError as exc:
+            for name in stages:  # the skipped stages, so that the count stays whole
+                step(f"{axis}: {name}")
             verdicts[axis] = unfitted(axis, str(exc), windows, flights,
                                       [os.fspath(p) for p in logs])
             continue
         fitted = AxisFit(axis, model, val, train, held_out, cfg.estimator, windows)
+        next_stage()
         fitted = _closed_loop(fitted, flights, signals)
         verdict = _judge(fitted, flights)
         if val.stable is False and not cfg.allow_unstable:
@@ -644,7 +675,7 @@ def fit(
             fits[axis] = dataclasses.replace(fitted, verdict=verdict)
     if not fits:
         raise _nothing(logs, verdicts, "nothing identifiable")
-    return FitResult(fits, flights, tuple(os.fspath(p) for p in logs), cfg, verdicts)
+    return FitResult(fits, tuple(flights), tuple(os.fspath(p) for p in logs), cfg, verdicts)
 
 
 def _judge(fitted: AxisFit, flights: Sequence[FlightData]) -> Verdict:
@@ -716,12 +747,19 @@ def load_models(path: str | os.PathLike[str]) -> dict[str, Model]:
     return out
 
 
+#: Stages :func:`validate_logs` reports per model (reading is one more per log).
+VALIDATE_STAGES = ("segments", "validation", "closed-loop twin")
+
+
 def validate_logs(
     models: Mapping[str, Model],
     logs: Sequence[str | os.PathLike[str]],
     config: PipelineConfig | None = None,
+    progress: Callable[[str], None] | None = None,
 ) -> FitResult:
     """Validate saved models on other flights: every segment found is held out.
+
+    ``progress`` is called as in :func:`fit`, with :data:`VALIDATE_STAGES` per model.
 
     Unless the config fixes ``rate_hz``, the flights are aligned at the first log's own rate
     (later logs at the same rate) and a model fitted at another rate is re-discretised to it
@@ -733,9 +771,15 @@ def validate_logs(
     cfg = config or PipelineConfig()
     if not logs:
         raise ConfigError("no log given")
+    step = progress or _noop
+    step(f"reading {os.fspath(logs[0])}")
     first = _read_flight(logs[0], cfg)
     same_rate = cfg if cfg.rate_hz is not None else cfg.with_overrides(rate_hz=1.0 / first.dt)
-    native = (first, *(_read_flight(p, same_rate) for p in logs[1:]))
+    rest = []
+    for p in logs[1:]:
+        step(f"reading {os.fspath(p)}")
+        rest.append(_read_flight(p, same_rate))
+    native = (first, *rest)
     on_model_grid: dict[float, tuple[FlightData, ...]] = {}
     fits: dict[str, AxisFit] = {}
     verdicts: dict[str, Verdict] = {}
@@ -743,6 +787,7 @@ def validate_logs(
     for axis, model in models.items():
         if axis not in cfg.axes:
             continue
+        step(f"{axis}: {VALIDATE_STAGES[0]}")
         flights, note = native, ""
         if not np.isclose(model.dt, first.dt, rtol=1e-3):
             fitted_hz = 1.0 / model.dt
@@ -766,6 +811,7 @@ def validate_logs(
                 raise NoExcitationError(missing)
             if not segs:
                 raise NoExcitationError("no segments")
+            step(f"{axis}: {VALIDATE_STAGES[1]}")
             val = _validate(model, segs, cfg)
         except NoExcitationError as exc:
             verdicts[axis] = unfitted(axis, str(exc), windows, flights,
@@ -773,6 +819,7 @@ def validate_logs(
             continue
         estimator = str(dict(getattr(model, "provenance", {}) or {}).get("estimator", ""))
         fitted = AxisFit(axis, model, val, (), segs, estimator, windows)
+        step(f"{axis}: {VALIDATE_STAGES[2]}")
         fitted = _closed_loop(fitted, flights, signals)
         verdict = _judge(fitted, flights)
         if note:

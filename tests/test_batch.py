@@ -14,6 +14,7 @@ import shutil
 import warnings
 from pathlib import Path
 
+import numpy as np
 import pytest
 from helpers import FIXTURES, shared_path
 
@@ -87,10 +88,12 @@ def test_a_step_in_one_aircrafts_effectiveness_is_flagged(tmp_path: Path) -> Non
     mapping = tmp_path / "fleet.csv"
     mapping.write_text("\n".join(lines) + "\n")
     out, html = tmp_path / "fleet.parquet", tmp_path / "trends.html"
+    rrd = tmp_path / "trends.rrd"
     err = io.StringIO()
     with contextlib.redirect_stdout(io.StringIO()) as printed, contextlib.redirect_stderr(err):
         code = cli.main(["batch", str(logs), "-o", str(out), "--workers", "2",
-                         "--vehicles", str(mapping), "--report", str(html), "--quiet"])
+                         "--vehicles", str(mapping), "--report", str(html), "--rrd", str(rrd),
+                         "--quiet"])
     assert code == 0, err.getvalue()
     found = trends(read_tables(out)["axes"])
     flagged = found[found["changed"]]
@@ -100,6 +103,24 @@ def test_a_step_in_one_aircrafts_effectiveness_is_flagged(tmp_path: Path) -> Non
         130.0, rel=0.08)
     assert "change: A roll B[p,u_roll]" in printed.getvalue()
     assert "Change points" in html.read_text()
+    # the same trend in rerun: B per flight on the flight and flight_date timelines
+    from rerun.chunk import RrdReader
+
+    axes = read_tables(out)["axes"]
+    want = axes[(axes["vehicle"] == "A") & (axes["axis"] == "roll")].sort_values("flight_date")
+    got: dict[str, list] = {}
+    for chunk in RrdReader(rrd).stream().to_chunks():
+        batch = chunk.to_record_batch()
+        if (chunk.entity_path == "/trends/A/roll/B_p_u_roll/value"
+                and "Scalars:scalars" in batch.schema.names):
+            got["flight"] = batch.column("flight").to_pylist()
+            got["B"] = [x[0] for x in batch.column("Scalars:scalars").to_pylist()]
+            assert "flight_date" in batch.schema.names
+        if chunk.entity_path == "/changes":
+            got["changes"] = batch.column("TextLog:text").to_pylist()
+    assert got["flight"] == list(range(len(want)))
+    np.testing.assert_allclose(got["B"], want["p:B[p,u_roll]"].to_numpy(float))
+    assert any("A roll B[p,u_roll]" in str(t) for t in got["changes"])
 
 
 def test_batch_refuses_bad_outputs_and_workers(fleet: Path) -> None:

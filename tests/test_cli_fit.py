@@ -245,3 +245,43 @@ def test_validate_and_fit_help_describe_themselves(capsys) -> None:  # type: ign
     with pytest.raises(SystemExit):
         cli.main(["fit", "--help"])
     assert "stlsq" in capsys.readouterr().out
+
+
+class _Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+@pytest.mark.parametrize("quiet", [False, True])
+def test_progress_bar_on_a_terminal_only(quiet: bool, tmp_path: Path) -> None:
+    """On a terminal, fit shows a bar over its stages (each named as it starts), gone at the
+    end; --quiet or a non-terminal stderr shows none."""
+    from mavsid.pipeline import FIT_STAGES
+
+    err = _Terminal()
+    rrd = tmp_path / "f.rrd"
+    argv = ["fit", str(FIXTURES / "sysid_roll.bin"), "--rrd", str(rrd), *(["--quiet"] * quiet)]
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        assert cli.main(argv) == 0
+    text = err.getvalue()
+    if quiet:
+        assert text == ""
+        assert run(*argv[:-1]).stderr == ""  # not a terminal: no bar either
+        return
+    total = 1 + 3 * len(FIT_STAGES) + 1
+    frames = text.split("\r")
+    for stage in ("reading", "roll: segments", "roll: fit", "roll: validation",
+                  "roll: closed-loop twin", "pitch: segments", "yaw: closed-loop twin",
+                  "f.rrd"):
+        assert any(stage in f for f in frames), stage
+    assert f"{total - 1}/{total} stages" in text
+    assert frames[-1].strip() == ""  # the bar is cleared: the result stays readable
+
+
+def test_pipeline_reports_every_stage_even_skipped_ones() -> None:
+    from mavsid.pipeline import FIT_STAGES, PipelineConfig, fit
+
+    seen: list[str] = []
+    fit([str(FIXTURES / "sysid_roll.bin")], PipelineConfig(), progress=seen.append)
+    assert seen[0].startswith("reading ")
+    assert seen[1:] == [f"{a}: {s}" for a in ("roll", "pitch", "yaw") for s in FIT_STAGES]

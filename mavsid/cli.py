@@ -64,6 +64,7 @@ def _add_info(sub: argparse._SubParsersAction) -> None:
     p.add_argument("log", help="flight log (.bin, .log, .tlog, .ulg)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--dialect", help="MAVLink dialect of a .tlog (default ardupilotmega)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(handler=_info)
 
 
@@ -73,7 +74,11 @@ def _info(args: argparse.Namespace) -> int:
     from mavsid.info import format_summary, summarize
     from mavsid.readers import read_log
 
-    summary = summarize(read_log(args.log, **_dialect(args)))
+    with _progress(args, 2) as step:
+        step(f"reading {args.log}")
+        raw = read_log(args.log, **_dialect(args))
+        step("summarising")
+        summary = summarize(raw)
     print(json.dumps(summary, indent=1, ensure_ascii=True) if args.json
           else escape_lines(format_summary(summary)))
     return 0
@@ -134,6 +139,7 @@ def _add_segments(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     p.add_argument("--window", type=float, default=5.0, help="scan window length, s (5)")
     p.add_argument("--preset", help="channel preset name, or a TOML file of presets")
     p.add_argument("--rate", type=float, help="grid rate, Hz (default: the rate channel's)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(handler=_segments)
 
 
@@ -148,9 +154,12 @@ def _segments(args: argparse.Namespace) -> int:
     if preset and preset.lower().endswith(".toml"):
         presets, mixers = load_presets(preset)
         preset = None
-    flight = load_flight(args.log, preset, args.rate, presets=presets, mixers=mixers)
-    reports = find_segments(flight, args.axis, scan=True if args.scan else None,
-                            options=ScanOptions(window_s=args.window))
+    with _progress(args, 2) as step:
+        step(f"reading {args.log}")
+        flight = load_flight(args.log, preset, args.rate, presets=presets, mixers=mixers)
+        step("scoring windows")
+        reports = find_segments(flight, args.axis, scan=True if args.scan else None,
+                                options=ScanOptions(window_s=args.window))
     if args.json:
         print(json.dumps([r.to_dict() for r in reports], indent=1, ensure_ascii=True))
     else:

@@ -285,3 +285,16 @@ def test_pipeline_reports_every_stage_even_skipped_ones() -> None:
     fit([str(FIXTURES / "sysid_roll.bin")], PipelineConfig(), progress=seen.append)
     assert seen[0].startswith("reading ")
     assert seen[1:] == [f"{a}: {s}" for a in ("roll", "pitch", "yaw") for s in FIT_STAGES]
+
+
+@pytest.mark.parametrize("command, second", [("info", "summarising"),
+                                             ("segments", "scoring windows")])
+def test_info_and_segments_show_their_stages_on_a_terminal(command: str, second: str) -> None:
+    log = str(FIXTURES / "sysid_roll.bin")
+    for quiet in (False, True):
+        err = _Terminal()
+        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+            assert cli.main([command, log, *(["--quiet"] * quiet)]) == 0
+        text = err.getvalue()
+        assert (f"reading {log}" in text and second in text) is not quiet
+        assert (text == "") is quiet

@@ -76,6 +76,7 @@ from mavsid.channels import (
     mixer_for,
     motor_thrusts,
     preset_messages,
+    unit_origin,
 )
 from mavsid.channels import _rows as _rows
 from mavsid.data import FlightData, MessageTable, RawLog
@@ -117,6 +118,8 @@ class _Series:
     bad_t: np.ndarray = field(default_factory=lambda: np.empty(0))
     #: how many samples were excluded, and why
     excluded: tuple[tuple[str, int], ...] = ()
+    #: the unit the field was read in and where it came from (declared, preset, inferred)
+    unit_from: str = ""
 
     @property
     def median_dt(self) -> float:
@@ -217,7 +220,8 @@ def _collect(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer]
             t, u = t[~late], u[~late]
         for j, name in enumerate(INPUT_NAMES):
             inputs.append(_Series(name, f"{preset.motors.message} ({mixer.name} mixer)", t,
-                                  u[:, j], bad_t, excluded))
+                                  u[:, j], bad_t, excluded,
+                                  "PWM us through the thrust curve, unmixed"))
     else:
         inputs = _channel_series(raw, preset, INPUT_NAMES, preset.inputs, need_samples=False)
     states, inputs = _checked_scales(raw, states, inputs)
@@ -283,7 +287,8 @@ def _checked_scales(raw: RawLog, states: list[_Series], inputs: list[_Series]
     out_states = states
     if centi:
         notes.append(why)
-        out_states = [replace(s, v=s.v * _CENTI, source=f"{s.source} (centideg/s, inferred)")
+        out_states = [replace(s, v=s.v * _CENTI, source=f"{s.source} (centideg/s, inferred)",
+                              unit_from="centideg/s, inferred")
                       if any(s is r for r in rates) else s for s in states]
     outs = [s for s in inputs if s.source in ("RATE.ROut", "RATE.POut", "RATE.YOut")
             and s.v.size >= 10]
@@ -292,7 +297,8 @@ def _checked_scales(raw: RawLog, states: list[_Series], inputs: list[_Series]
     if top_out > 10.0 or (centi and outs and "firmware table" in why):
         notes.append(f"RATE.ROut/POut/YOut reach {top_out:.0f} (normally within ±1): on the "
                      "±4500 scale of ArduCopter 3.4-dev, divided by 4500")
-        out_inputs = [replace(s, v=s.v / _OUT_SCALE, source=f"{s.source} (/4500, inferred)")
+        out_inputs = [replace(s, v=s.v / _OUT_SCALE, source=f"{s.source} (/4500, inferred)",
+                              unit_from="/4500, inferred")
                       if any(s is o for o in outs) else s for s in inputs]
     if notes:
         warnings.warn(f"{raw.source.path}: " + "; ".join(notes), DataQualityWarning, stacklevel=5)
@@ -319,7 +325,8 @@ def _channel_series(raw: RawLog, preset: Preset, names: Sequence[str],
             raise
         t, v, bad_t, excluded = _screen(raw, ch, name, t, v)
         if t.size >= 2:
-            out.append(_Series(name, f"{ch.message}.{ch.field}", t, v, bad_t, excluded))
+            out.append(_Series(name, f"{ch.message}.{ch.field}", t, v, bad_t, excluded,
+                               unit_origin(raw, ch)))
         elif need_samples and not ch.optional:
             table = raw[ch.message]
             timed = int(np.count_nonzero(np.isfinite(np.asarray(table.time_s, dtype=float))))
@@ -479,7 +486,7 @@ def _one_boot(path: str, states: list[_Series], inputs: list[_Series]
         if s.name == "yaw":
             v = np.unwrap(v)
         bad_t = s.bad_t[(s.bad_t >= t[0]) & (s.bad_t <= t[-1])] if t.size else s.bad_t[:0]
-        return _Series(s.name, s.source, t, v, np.sort(bad_t), s.excluded)
+        return replace(s, t=t, v=v, bad_t=np.sort(bad_t))
 
     return [fix(s) for s in states], [fix(s) for s in inputs], boot
 
@@ -981,6 +988,7 @@ def _align(raw: RawLog, preset: Preset | str | None, rate_hz: float | None,
         "preset_description": preset.description,
         "native_rate_hz": {s.name: round(rates[s.name], 3) for s in series},
         "sources": {s.name: s.source for s in series},
+        "units_from": {s.name: s.unit_from for s in series if s.unit_from},
         # scales inferred for whole messages (ArduCopter 3.4-dev RATE): readers of the same
         # message's other fields (the twin's RATE.RDes targets) apply them too
         "scales": {"RATE": _CENTI} if any(s.source.endswith("(centideg/s, inferred)")

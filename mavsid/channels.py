@@ -677,6 +677,53 @@ def _rows(table: MessageTable, instance: int | None = None) -> np.ndarray | None
     return None if keep.all() else keep
 
 
+def source_text(source: object, unit_from: object) -> str:
+    """``RATE.R (deg/s, declared by the log)``: a channel's source and the unit it was read in
+    (not repeated when the source already says it was inferred).
+
+    >>> source_text("RATE.R", "deg/s, declared by the log")
+    'RATE.R (deg/s, declared by the log)'
+    >>> source_text("RATE.R (centideg/s, inferred)", "centideg/s, inferred")
+    'RATE.R (centideg/s, inferred)'
+    """
+    text, unit = str(source), str(unit_from or "")
+    return f"{text} ({unit})" if unit and unit not in text else text
+
+
+def _unit_of(table: MessageTable, first: str, channel: Channel) -> tuple[str, str]:
+    """``(unit, origin)`` of a channel's field: the log's declared unit when it has one
+    mavsid knows, else the preset's."""
+    declared = table.unit(first)
+    if declared is not None and declared.strip() in _UNIT_TO_SI:
+        return declared.strip(), "declared by the log"
+    return channel.unit, "the preset's unit: the log declares none"
+
+
+def unit_origin(raw: RawLog, channel: Channel) -> str:
+    """The unit a channel's field is read in and where that unit came from, for people.
+
+    Examples
+    --------
+    >>> from mavsid.data import MessageTable, RawLog, SourceInfo
+    >>> t = MessageTable("RATE", {"R": np.zeros(2)}, time_s=np.arange(2.0), units={"R": "deg/s"})
+    >>> raw = RawLog(SourceInfo("x.bin", "dataflash", 0), {"RATE": t})
+    >>> unit_origin(raw, Channel("RATE", "R", unit="deg/s"))
+    'deg/s, declared by the log'
+    >>> bare = MessageTable("RATE", {"R": np.zeros(2)}, time_s=np.arange(2.0))
+    >>> unit_origin(RawLog(SourceInfo("x.bin", "dataflash", 0), {"RATE": bare}),
+    ...             Channel("RATE", "R", unit="deg/s"))
+    "deg/s, the preset's unit: the log declares none"
+    """
+    if channel.transform.startswith("quat_"):
+        return "rad, from the attitude quaternion"
+    table = raw[channel.message]
+    for alternative in channel.field.split("|"):
+        parts = [p.strip() for p in alternative.split("+")]
+        if all(_column(table, p) is not None for p in parts):
+            return ", ".join(_unit_of(table, parts[0], channel))
+    return ", ".join(_unit_of(table, "", channel))
+
+
 def evaluate(raw: RawLog, channel: Channel, what: str = "") -> tuple[np.ndarray, np.ndarray]:
     """A channel's samples in SI units: ``(time_s, values)`` in record order, NaN-free.
 
@@ -704,9 +751,7 @@ def evaluate(raw: RawLog, channel: Channel, what: str = "") -> tuple[np.ndarray,
                 f"{channel.message}.{channel.field}", available=table.columns, what="field"
             )
         values, first = got
-        declared = table.unit(first)
-        unit = declared if declared is not None and declared.strip() in _UNIT_TO_SI else None
-        values = to_si(values, unit if unit is not None else channel.unit, what)
+        values = to_si(values, _unit_of(table, first, channel)[0], what)
     values = values * channel.scale
     t = np.asarray(table.time_s, dtype=np.float64)
     ok = np.isfinite(t) & np.isfinite(values)

@@ -56,6 +56,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mavsid.channels import source_text
 from mavsid.data import FlightData, Segment
 from mavsid.errors import ConfigError, MavsidError, NoExcitationError, escape
 from mavsid.validation import AXIS_RATE, DEFAULT_HORIZONS_S, Model, Validation, validate
@@ -933,9 +934,11 @@ def format_result(result: FitResult) -> str:
                          + ", ".join(f"{k} {v}" for k, v in excluded.items()))
         sources: Any = fd.meta.get("sources") or {}
         used = [n for ax in result.axes.values() for n in (ax.output, f"u_{ax.axis}")]
-        if sources:  # where each channel came from (and any scale inferred), in SI units
+        units_from: Any = fd.meta.get("units_from") or {}
+        if sources:  # where each channel came from, read in what unit (declared, preset's,
+            # inferred), in which SI unit
             lines.append(f"{fd.source.path}: preset {fd.preset}; " + ", ".join(
-                f"{n} [{_si_unit(fd, n)}] <- {escape(str(sources[n]))}"
+                f"{n} [{_si_unit(fd, n)}] <- {escape(source_text(sources[n], units_from.get(n)))}"
                 for n in dict.fromkeys(used) if n in sources))
     for axis, f in result.axes.items():
         d = f.to_dict()

@@ -27,6 +27,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from mavsid import __version__
+from mavsid.channels import source_text
 from mavsid.validation import Validation, horizon_label
 
 if TYPE_CHECKING:
@@ -236,6 +237,7 @@ def _aircraft(result: FitResult) -> str:
                                                            "SYS_AUTOSTART", "CA_AIRFRAME")
                           if k in fd.params) or "–"
         sources: Mapping[str, Any] = meta.get("sources") or {}  # type: ignore[assignment]
+        units_from: Mapping[str, Any] = meta.get("units_from") or {}  # type: ignore[assignment]
         rows = [("log", os.path.basename(fd.source.path)),
                 ("format", f"{fd.source.format}, {fd.source.size_bytes} bytes"),
                 ("vehicle", str(meta.get("vehicle") or "–")),
@@ -243,7 +245,8 @@ def _aircraft(result: FitResult) -> str:
                                          f"{meta.get('firmware') or '–'}"),
                 ("frame", frame), ("span used", f"{span:.1f} s at {1 / fd.dt:.0f} Hz"),
                 ("channel preset", fd.preset),
-                ("channels", ", ".join(f"{k} ← {v}" for k, v in sources.items()))]
+                ("channels", ", ".join(f"{k} ← {source_text(v, units_from.get(k))}"
+                                       for k, v in sources.items()))]
         runs = meta.get("sysid_runs") or []
         for run in runs if isinstance(runs, list) else []:
             rows.append(("SYSTEMID run", ", ".join(f"{k} {v}" for k, v in dict(run).items())))

@@ -182,7 +182,8 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
         "a MAVLink .tlog (format from the suffix), with OUT.truth.json beside it.",
     )
     p.add_argument("-o", "--output", action="append", required=True, metavar="OUT",
-                   help="OUT.bin or OUT.tlog (repeat to write both from one flight)")
+                   help="OUT.bin, OUT.tlog or OUT.ulg (repeat to write several from one "
+                   "flight)")
     p.add_argument("--manoeuvre", default="sysid",
                    choices=("sysid", "doublet", "3211", "random", "hover"),
                    help="excitation (default sysid: an ArduPilot SYSTEMID chirp)")
@@ -207,11 +208,14 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
                    help="gyro white noise, deg/s RMS per 400 Hz sample (fed back)")
     p.add_argument("--vibration", type=float, default=0.0, metavar="DEG_S",
                    help="frame vibration amplitude on the gyro, deg/s (0)")
-    p.add_argument("--layout", default="copter-4",
-                   choices=("copter-4", "copter-3.3", "copter-3.4-dev"),
-                   help="the .bin's ArduCopter log layout: 4.x (default); 3.3 (TimeMS, RCOU "
-                   "Ch1-8, no unit records, untimed PARM/MODE, ARM event first); 3.4-dev "
-                   "(RATE in centideg/s, outputs on +-4500)")
+    p.add_argument("--layout",
+                   choices=("copter-4", "copter-3.3", "copter-3.4-dev",
+                            "px4-1.14", "px4-1.11", "px4-1.8"),
+                   help="log layout. A .bin's ArduCopter generation: 4.x (default); 3.3 "
+                   "(TimeMS, RCOU Ch1-8, no unit records, untimed PARM/MODE, ARM event first); "
+                   "3.4-dev (RATE in centideg/s, outputs on +-4500). A .ulg's PX4 topic set: "
+                   "1.14 (default; vehicle_torque_setpoint), 1.11 (actuator_controls_0), 1.8 "
+                   "(rates in vehicle_attitude)")
     p.add_argument("--faults", default="", metavar="SPEC",
                    help="damage: drop=FRACTION,reboot=SECONDS,truncate=BYTES")
     p.set_defaults(handler=_simulate)
@@ -239,7 +243,7 @@ def _simulate(args: argparse.Namespace) -> int:
         if value not in (None, ""):
             opts.append(f"--{name.replace('_', '-')} {value}")
     command = "mavsid simulate " + " ".join(opts)
-    if args.layout != "copter-4":
+    if args.layout is not None:
         opts.append(f"--layout {args.layout}")
         command = "mavsid simulate " + " ".join(opts)
     result = simulate(scenario, args.output, faults, command=command, layout=args.layout)

@@ -2,7 +2,7 @@
 
 Ground truth for tests and the demo: :func:`~mavsid.synthetic.flight.fly` simulates a
 :class:`~mavsid.synthetic.flight.Scenario`; :func:`simulate` also writes the logs
-(DataFlash ``.bin``, MAVLink ``.tlog``) and the ``.truth.json`` sidecar.
+(DataFlash ``.bin``, MAVLink ``.tlog``, PX4 ULog ``.ulg``) and the ``.truth.json`` sidecar.
 """
 
 from mavsid.synthetic.controller import ControllerParams

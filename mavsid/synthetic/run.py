@@ -1,10 +1,10 @@
 """Fly a scenario and write its logs plus the ground-truth sidecar: what ``mavsid simulate`` does.
 
 The format of each output is chosen by its suffix (``.bin`` DataFlash, ``.tlog`` MAVLink
-telemetry) — the one place in mavsid where the suffix decides. Next to each log goes
-``<stem>.truth.json`` (:meth:`~mavsid.synthetic.flight.Flight.truth`, plus the file names
-and the command line that reproduces them); a ``.bin`` and a ``.tlog`` written by one call
-describe the same flight and share one truth file.
+telemetry, ``.ulg`` PX4 ULog) — the one place in mavsid where the suffix decides. Next to
+each log goes ``<stem>.truth.json`` (:meth:`~mavsid.synthetic.flight.Flight.truth`, plus
+the file names and the command line that reproduces them); logs written by one call describe
+the same flight and share one truth file.
 
 Examples
 --------
@@ -35,10 +35,19 @@ from mavsid.synthetic.dfwriter import LAYOUTS, write_dataflash
 from mavsid.synthetic.faults import Faults
 from mavsid.synthetic.flight import Flight, Scenario, fly
 from mavsid.synthetic.tlogwriter import write_tlog
+from mavsid.synthetic.ulogwriter import ULOG_LAYOUTS, write_ulog
 
 __all__ = ["SimulationResult", "scenario_from_options", "simulate", "truth_path"]
 
-WRITERS = {".bin": write_dataflash, ".tlog": write_tlog}
+WRITERS = {".bin": write_dataflash, ".tlog": write_tlog, ".ulg": write_ulog}  # by suffix
+#: the layout each format is written in unless one is asked for
+DEFAULT_LAYOUTS = {".bin": "copter-4", ".ulg": "px4-1.14"}
+#: for a truth file: each layout's rate and controller-output fields per axis
+_FIELDS = {
+    "px4-1.14": (("vehicle_angular_velocity.xyz[{i}]", "vehicle_torque_setpoint.xyz[{i}]")),
+    "px4-1.11": (("vehicle_angular_velocity.xyz[{i}]", "actuator_controls_0.control[{i}]")),
+    "px4-1.8": (("vehicle_attitude.{speed}", "actuator_controls_0.control[{i}]")),
+}
 
 
 @dataclass(frozen=True)
@@ -52,7 +61,7 @@ class SimulationResult:
 
 
 def truth_path(log: str | os.PathLike[str]) -> Path:
-    """``dir/stem.truth.json`` for ``dir/stem.bin`` or ``dir/stem.tlog``.
+    """``dir/stem.truth.json`` for ``dir/stem.bin``, ``dir/stem.tlog`` or ``dir/stem.ulg``.
 
     >>> truth_path("fixtures/sysid_roll.bin").as_posix()
     'fixtures/sysid_roll.truth.json'
@@ -66,10 +75,13 @@ def simulate(
     outputs: Sequence[str | os.PathLike[str]],
     faults: Faults | None = None,
     command: str | None = None,
-    layout: str = "copter-4",
+    layout: str | None = None,
 ) -> SimulationResult:
-    """Fly ``scenario`` once and write it to every path in ``outputs`` with its truth file
-    (``.bin`` in the ArduCopter log ``layout``, see :data:`~mavsid.synthetic.dfwriter.LAYOUTS`).
+    """Fly ``scenario`` once and write it to every path in ``outputs`` with its truth file.
+
+    ``layout`` is the log layout of the ``.bin`` (an ArduCopter generation, see
+    :data:`~mavsid.synthetic.dfwriter.LAYOUTS`; default ``copter-4``) or of the ``.ulg`` (a
+    PX4 topic set, :data:`~mavsid.synthetic.ulogwriter.ULOG_LAYOUTS`; default ``px4-1.14``).
 
     Raises
     ------
@@ -82,21 +94,41 @@ def simulate(
     paths = [Path(o) for o in outputs]
     for p in paths:
         if p.suffix.lower() not in WRITERS:
-            raise ConfigError(f"{p}: output must end in .bin (DataFlash) or .tlog (MAVLink)")
+            raise ConfigError(f"{p}: output must end in .bin (DataFlash), .tlog (MAVLink) or "
+                              ".ulg (PX4 ULog)")
         if not p.parent.exists():
             raise ConfigError(f"{p}: directory {p.parent} does not exist")
-    if layout not in LAYOUTS:
-        raise ConfigError(f"unknown layout {layout!r}; choose from {', '.join(LAYOUTS)}")
-    flight = fly(scenario)
-    sizes = [write_dataflash(flight, p, faults, layout) if p.suffix.lower() == ".bin"
-             else WRITERS[p.suffix.lower()](flight, p, faults) for p in paths]
-    truths: dict[Path, list[str]] = {}
+    layouts: dict[Path, str | None] = {}
     for p in paths:
-        truths.setdefault(truth_path(p), []).append(p.name)
-    for tp, names in truths.items():
-        doc: dict[str, Any] = {"logs": names, "command": command, **flight.truth()}
-        if layout != "copter-4":  # (the fixtures' truth files predate layouts: 4.x)
-            doc["layout"] = layout
+        suffix = p.suffix.lower()
+        fits = {".bin": LAYOUTS, ".ulg": ULOG_LAYOUTS}.get(suffix, ())
+        if layout is not None and layout not in (*LAYOUTS, *ULOG_LAYOUTS):
+            raise ConfigError(f"unknown layout {layout!r}; choose from "
+                              f"{', '.join((*LAYOUTS, *ULOG_LAYOUTS))}")
+        if layout is not None and fits and layout not in fits:
+            raise ConfigError(f"{p}: layout {layout} is not a {suffix} layout; choose from "
+                              f"{', '.join(fits)}")
+        layouts[p] = (layout if layout in fits else DEFAULT_LAYOUTS[suffix]) if fits else None
+    flight = fly(scenario)
+    sizes = [write_dataflash(flight, p, faults, str(layouts[p])) if p.suffix.lower() == ".bin"
+             else write_ulog(flight, p, faults, str(layouts[p])) if p.suffix.lower() == ".ulg"
+             else write_tlog(flight, p, faults) for p in paths]
+    truths: dict[Path, list[Path]] = {}
+    for p in paths:
+        truths.setdefault(truth_path(p), []).append(p)
+    for tp, logs in truths.items():
+        doc: dict[str, Any] = {"logs": [p.name for p in logs], "command": command,
+                               **flight.truth()}
+        written = {layouts[p] for p in logs} - {None, "copter-4"}
+        if written:  # (the fixtures' truth files predate layouts: 4.x)
+            doc["layout"] = ", ".join(sorted(str(w) for w in written))
+        for name in sorted(str(w) for w in written if w in _FIELDS):
+            rate, out = _FIELDS[name]
+            for i, (ax, speed) in enumerate(zip(("roll", "pitch", "yaw"),
+                                                ("rollspeed", "pitchspeed", "yawspeed"),
+                                                strict=True)):
+                doc["axes"][ax][f"output_field_{name}"] = rate.format(i=i, speed=speed)
+                doc["axes"][ax][f"input_field_{name}"] = out.format(i=i, speed=speed)
         doc["faults"] = {"drop_fraction": faults.drop_fraction,
                          "reboot_at_s": faults.reboot_at_s,
                          "truncate_bytes": faults.truncate_bytes}

@@ -137,6 +137,21 @@ def _pct(value: float | None) -> str:
     return text.replace(")", " %)") if text.startswith("diverges") else f"{text} %"
 
 
+def excitation_advice(axis: str, autopilot: str | None) -> str:
+    """What to fly next time to excite ``axis``, on this autopilot.
+
+    >>> excitation_advice("roll", "ardupilot")[:48]
+    'fly a SYSTEMID mixer chirp on roll (SID_AXIS 10)'
+    >>> excitation_advice("yaw", "px4")[:52]
+    'fly sharp stick doublets or a 3-2-1-1 on yaw in ACRO'
+    """
+    if autopilot and "px4" in autopilot.lower():
+        return (f"fly sharp stick doublets or a 3-2-1-1 on {axis} in ACRO (PX4 has no SYSTEMID "
+                "chirp mode), with SDLOG_PROFILE logging the rate controller at full rate")
+    return (f"fly a SYSTEMID mixer chirp on {axis} (SID_AXIS {_SID_AXIS.get(axis, '?')}) or "
+            f"sharp stick doublets on {axis} in a non-self-levelling mode (ACRO)")
+
+
 def logging_advice(autopilot: str | None) -> str:
     """Which logging setting to change to log body rates and controller outputs fast.
 
@@ -435,9 +450,7 @@ def unfitted(axis: str, why: str, windows: Sequence[Any] = (), flights: Sequence
         numbers["windows_rejected"] = float(len(mine))
         reasons.append(f"no window kept ({len(mine)} rejected: {top}; see `mavsid segments "
                        f"{where} --axis {axis} --all`)")
-        advice.append(f"fly a SYSTEMID mixer chirp on {axis} (SID_AXIS "
-                      f"{_SID_AXIS.get(axis, '?')}) or sharp stick doublets on {axis} in a "
-                      "non-self-levelling mode (ACRO)")
+        advice.append(excitation_advice(axis, _autopilot(flights)))
     elif not mine and not reasons:
         reasons.append(f"no window on {axis} ({why})")
     if not reasons:

@@ -1,6 +1,7 @@
 """The defaults (gates, thresholds, delay/lag search, block length, verdict) on the variety of
 simulated vehicles in ``fixtures/``: noisy gyros fed back through the rate controller, a
-heavier X quad, a hexacopter, manual stick flying, SYSTEMID, and a 10 Hz log.
+heavier X quad, a hexacopter (also as a PX4 ULog), manual stick flying, SYSTEMID, and a 10 Hz
+log.
 
 Truth comes from each fixture's ``*.truth.json`` (the simulator's plant), never from mavsid.
 The σ mavsid reports are statistical only (white-residual assumption, no model-structure
@@ -37,6 +38,7 @@ IDENTIFIABLE = [
     ("sysid_pitch.bin", "pitch"),
     ("sysid_yaw.bin", "yaw"),
     ("doublets.bin", "roll"),
+    ("px4_hexa_doublets.ulg", "pitch"),
 ]
 
 _RESULTS: dict[str, pipeline.FitResult] = {}
@@ -51,7 +53,7 @@ def _fit(name: str) -> pipeline.FitResult:
 
 
 def _truth(name: str) -> dict:
-    return json.loads((FIXTURES / name.replace(".bin", ".truth.json")).read_text())
+    return json.loads((FIXTURES / f"{name.rsplit('.', 1)[0]}.truth.json").read_text())
 
 
 @pytest.mark.parametrize(("name", "axis"), IDENTIFIABLE, ids=[f"{n}-{a}" for n, a in IDENTIFIABLE])
@@ -198,3 +200,13 @@ def test_plots_survive_a_diverging_model(tmp_path) -> None:  # type: ignore[no-u
     assert "<html" in html.lower()
     assert "diverges" in pipeline.format_result(diverging)
     assert "-2245833" not in pipeline.format_result(diverging)
+
+
+def test_advice_is_for_the_autopilot_that_flew() -> None:
+    """A PX4 log is not told to fly ArduPilot's SYSTEMID mode, nor an ArduPilot log PX4's."""
+    px4 = _fit("px4_hexa_doublets.ulg").verdicts["roll"]
+    assert px4.level == "not identified"
+    assert any("ACRO (PX4 has no SYSTEMID" in a for a in px4.advice)
+    assert not any("SID_AXIS" in a for a in px4.advice)
+    ap = _fit("doublets.bin").verdicts["pitch"]
+    assert any("SID_AXIS 11" in a for a in ap.advice)

@@ -1790,14 +1790,19 @@ def _advice(axis: str, fit: Any, ctrl: AxisController, bandwidth_hz: float,
     return out
 
 
-def tune(result: Any, target_pm_deg: float = 50.0, samples: int = 40) -> dict[str, Any]:
+def tune(result: Any, target_pm_deg: float = 50.0, samples: int = 40,
+         measured_out: dict[str, dict[str, Any]] | None = None) -> dict[str, Any]:
     """Per fitted axis of a :class:`mavsid.pipeline.FitResult`: the loop with the logged
     gains (margins, closed loop, uncertainties), the plant FRF and TF fit for SYSTEMID data,
     gains for ``target_pm_deg`` (only when the axis's verdict is ``good``) and next-flight
-    advice. The JSON form of ``mavsid tune --json``."""
+    advice. The JSON form of ``mavsid tune --json``.
+
+    ``measured_out``, when given, receives per axis the :func:`measured_responses` used (the
+    FRF objects), so that a caller plotting them does not measure them again."""
     from mavsid.frequency import fit_tf
 
     out: dict[str, Any] = {}
+    signals = [twin_signals(fd) for fd in result.flights]  # once for every axis
     for axis, fit in result.axes.items():
         entry: dict[str, Any] = {}
         fd = result.flights[0]
@@ -1812,7 +1817,9 @@ def tune(result: Any, target_pm_deg: float = 50.0, samples: int = 40) -> dict[st
             continue
         entry.update(an.to_dict())
         plant = None
-        measured = measured_responses(fit, result.flights, lag=lag)
+        measured = measured_responses(fit, result.flights, signals, lag=lag)
+        if measured_out is not None:
+            measured_out[axis] = measured
         if "plant" in measured:
             plant = measured["plant"]
             entry["plant_frf"] = plant.to_dict()

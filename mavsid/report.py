@@ -439,8 +439,9 @@ def loop_section(result: FitResult, target_pm_deg: float = 50.0) -> str:
     from mavsid import loop
     from mavsid.errors import MavsidError
 
+    responses: dict[str, dict[str, Any]] = {}
     try:
-        report = loop.tune(result, target_pm_deg, samples=20)
+        report = loop.tune(result, target_pm_deg, samples=20, measured_out=responses)
     except (MavsidError, ValueError, np.linalg.LinAlgError) as exc:
         return f"<h2>loop</h2><p>loop analysis failed: {html.escape(str(exc))}</p>"
     parts = ["<h2>loop</h2>",
@@ -468,7 +469,7 @@ def loop_section(result: FitResult, target_pm_deg: float = 50.0) -> str:
             continue
         text = loop.format_tune({axis: entry})
         parts.append(f"<pre>{html.escape(text)}</pre>")
-        measured = loop.measured_responses(fit, result.flights, lag=cl.lag_loops if cl else 0)
+        measured = responses.get(axis, {})
         if "plant" in measured:
             entry = {**entry, "_plant_frf": measured["plant"]}
             if "loop" in measured:

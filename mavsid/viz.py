@@ -66,6 +66,7 @@ __all__ = [
     "TIMELINE",
     "Served",
     "blueprint",
+    "decimate",
     "focus_span",
     "free_port",
     "log_attitude",
@@ -166,17 +167,69 @@ def _kind(name: str) -> str:
     return next((k for k, names in KINDS.items() if name in names), "other")
 
 
-def log_flight(rec: rr.RecordingStream, flight: FlightData, prefix: str = "flight") -> None:
+#: Most samples a flight's series keeps outside the segments (a plot a few thousand pixels
+#: wide cannot show more; the segments keep every sample)
+MAX_FLIGHT_POINTS = 20_000
+
+
+def decimate(v: np.ndarray, max_points: int, keep: np.ndarray | None = None) -> np.ndarray:
+    """Indices of ``v`` that draw the same picture with at most about ``max_points`` samples:
+    each bucket's minimum and maximum (the envelope, spikes included), every sample where
+    ``keep`` is set, the first sample and the last; all of them when ``v`` is short enough.
+
+    Examples
+    --------
+    >>> v = np.sin(np.arange(1000) / 5.0); v[500] = 9.0          # a spike
+    >>> i = decimate(v, 100)
+    >>> len(i) <= 102, 500 in i, bool(v[i].max() == v.max()), bool(v[i].min() == v.min())
+    (True, True, True, True)
+    >>> keep = np.zeros(1000, bool); keep[100:200] = True
+    >>> bool(np.isin(np.arange(100, 200), decimate(v, 100, keep)).all())
+    True
+    """
+    n = len(v)
+    if n <= max_points:
+        return np.arange(n)
+    m = int(np.ceil(2 * n / max(max_points, 2)))
+    nb = int(np.ceil(n / m))
+    padded = np.full(nb * m, np.nan)
+    padded[:n] = v
+    grid = padded.reshape(nb, m)
+    filled = np.isfinite(grid).any(axis=1)
+    lo = np.where(np.isfinite(grid), grid, np.inf).argmin(axis=1)
+    hi = np.where(np.isfinite(grid), grid, -np.inf).argmax(axis=1)
+    base = np.arange(nb) * m
+    picked = [base[filled] + lo[filled], base[filled] + hi[filled], base[~filled], [0, n - 1]]
+    if keep is not None:
+        picked.append(np.flatnonzero(keep))
+    idx = np.unique(np.concatenate([np.asarray(p, dtype=np.int64) for p in picked]))
+    return idx[idx < n]
+
+
+def log_flight(rec: rr.RecordingStream, flight: FlightData, prefix: str = "flight",
+               keep_spans: Iterable[tuple[float, float]] = ()) -> None:
     """Every state and input of ``flight`` as time series, grouped by kind (``KINDS``: one
-    plot each, one colour per series, names with units), and its attitude in 3-D."""
+    plot each, one colour per series, names with units), and its attitude in 3-D.
+
+    A long flight is decimated (:func:`decimate`) to about :data:`MAX_FLIGHT_POINTS` samples
+    per series, its envelope kept, except inside ``keep_spans`` (the segments, seconds),
+    which keep every sample."""
     t = flight.time_s
     blocks = flight.blocks if len(flight.blocks) else np.array([[0, len(t)]])
+    keep = np.zeros(len(t), bool)
+    for a, b in keep_spans:
+        keep |= (t >= a) & (t <= b)
+    budget = MAX_FLIGHT_POINTS / max(len(t), 1)
     for names, data, units in ((flight.state_names, flight.states, flight.state_units),
                                (flight.input_names, flight.inputs, flight.input_units)):
         for j, name in enumerate(names):
             path = f"{prefix}/{_kind(name)}/{name}"
             _style(rec, path, SERIES_COLOURS.get(name, INPUT), f"{name} [{units[j]}]")
-            tt, vv = _joined((t[a:b], data[a:b, j]) for a, b in blocks)
+            parts = []
+            for a, b in blocks:
+                i = a + decimate(data[a:b, j], max(100, int(budget * (b - a))), keep[a:b])
+                parts.append((t[i], data[i, j]))
+            tt, vv = _joined(parts)
             _send_series(rec, path, tt, vv)
     if all(n in flight.state_names for n in ("roll", "pitch", "yaw")):
         idx = [flight.state_names.index(n) for n in ("roll", "pitch", "yaw")]
@@ -775,7 +828,7 @@ def blueprint(
         name="flight",
     )
     if per_axis:
-        validation = rrb.Vertical(*per_axis, row_shares=[1] + [4] * len(axes),
+        validation = rrb.Vertical(*per_axis, row_shares=[1] + [3] * len(axes),
                                   name="validation")
         columns.append(rrb.Tabs(validation, flight) if with_flight else validation)
     else:
@@ -817,7 +870,8 @@ def log_flight_windows(
 ) -> None:
     """A flight without a model: its data, attitude and every window kept or rejected."""
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_DOWN, static=True)
-    log_flight(rec, flight)
+    log_flight(rec, flight, keep_spans=[(w.start_s, w.stop_s) for ws in windows.values()
+                                        for w in ws if w.kept])
     log_bands(rec, flight, windows=windows)
     for axis, reports in windows.items():
         log_segments(rec, axis, (), (), reports)
@@ -829,12 +883,13 @@ def log_fit_result(rec: rr.RecordingStream, result: FitResult, *, flight: bool =
     fits = list(result.axes.values())
     if flight:
         for fd in result.flights:
-            log_flight(rec, fd)
             def ours(segs: Sequence[Segment], fd: FlightData = fd) -> list[Segment]:
                 one = len(result.flights) == 1
                 return [s for s in segs if one or s.log == fd.source.path]
 
             mine = {f.axis: (ours(f.train), ours(f.held_out)) for f in fits}
+            log_flight(rec, fd, keep_spans=[(s.start_s, s.stop_s) for tr, ho in mine.values()
+                                            for s in (*tr, *ho)])
             log_bands(rec, fd, mine, {f.axis: f.windows for f in fits})
     for fit in fits:
         log_segments(rec, fit.axis, fit.train, fit.held_out, fit.windows)

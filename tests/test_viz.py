@@ -255,3 +255,35 @@ def test_band_runs_and_merge() -> None:
     assert viz._runs(t, np.array([0, 0, 5, 5, 0, 0])) == {0: [(0.0, 2.0), (4.0, 5.0)],
                                                          5: [(2.0, 4.0)]}
     assert viz._merged([(2.0, 3.0), (0.0, 2.5)]) == [(0.0, 3.0)]
+
+
+def test_a_long_flight_is_decimated_outside_the_segments(toy, tmp_path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """Outside the segments the flight's series keep their envelope (every bucket's min and
+    max) within the point budget; inside the segments every sample is kept."""
+    flight, _, _ = toy
+    monkeypatch.setattr(viz, "MAX_FLIGHT_POINTS", 300)
+    path = tmp_path / "small.rrd"
+    spans = [(110.0, 112.0)]
+    rec = viz.new_recording()
+    rec.save(path)
+    viz.log_flight(rec, flight, keep_spans=spans)
+    rec.flush()
+    rec.disconnect()
+    data, _ = _read(path)
+    inside = np.zeros(len(flight.time_s), bool)
+    for a, b in spans:
+        inside |= (flight.time_s >= a) & (flight.time_s <= b)
+    assert len(flight.time_s) > 300 + inside.sum()  # the toy flight is long enough to cut
+    for j, name in enumerate(flight.state_names):
+        t, got = _series(data, f"/flight/{viz._kind(name)}/{name}")
+        ok = np.isfinite(got)
+        t, got = t[ok], got[ok]
+        want = flight.states[:, j]
+        assert len(t) <= 300 + inside.sum() + 2 * len(flight.blocks) + 4
+        # every sample in a segment, with its value
+        k = np.searchsorted(t, flight.time_s[inside] - 1e-9)
+        np.testing.assert_allclose(t[k], flight.time_s[inside], atol=1e-9)
+        np.testing.assert_array_equal(got[k], want[inside])
+        # nothing invented, and the extremes survive
+        assert set(np.round(got, 12)) <= set(np.round(want, 12))
+        assert got.max() == np.nanmax(want) and got.min() == np.nanmin(want)

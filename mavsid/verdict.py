@@ -152,6 +152,17 @@ def excitation_advice(axis: str, autopilot: str | None) -> str:
             f"sharp stick doublets on {axis} in a non-self-levelling mode (ACRO)")
 
 
+def longer_advice(autopilot: str | None) -> str:
+    """What to fly when the excitation was too short, on this autopilot.
+
+    >>> longer_advice("px4")
+    'fly longer excitation (30 s of doublets or 3-2-1-1s in ACRO)'
+    """
+    if autopilot and "px4" in autopilot.lower():
+        return "fly longer excitation (30 s of doublets or 3-2-1-1s in ACRO)"
+    return "fly longer excitation (a 20-s SYSTEMID chirp or 30 s of doublets)"
+
+
 def logging_advice(autopilot: str | None) -> str:
     """Which logging setting to change to log body rates and controller outputs fast.
 
@@ -276,7 +287,7 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
             bad.append(f"identified dynamics are unstable: eigenvalue {abs(worst):.4g} "
                        f"(pole {_pole(worst, dt):+.3g} 1/s)")
             advice.append("refit with the physical bounds (damping >= 0; the default) or "
-                          "fly a SYSTEMID mixer chirp on this axis")
+                          + excitation_advice(axis, _autopilot(flights)))
 
     # log rate against the rate loop's bandwidth
     u_names = tuple(getattr(model, "input_names", ()) or ()) if model is not None else ()
@@ -309,11 +320,11 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
         numbers["params"] = float(n_par)
         if n_train < MIN_SAMPLES_PER_PARAM * n_par / 4:
             bad.append(f"only {n_train} training samples for {n_par} parameters")
-            advice.append("fly longer excitation (a 20-s SYSTEMID chirp or 30 s of doublets)")
+            advice.append(longer_advice(_autopilot(flights)))
         elif n_train < MIN_SAMPLES_PER_PARAM * n_par:
             caps.append(f"only {n_train} training samples for {n_par} parameters (want "
                         f"{MIN_SAMPLES_PER_PARAM} per parameter)")
-            advice.append("fly longer excitation (a 20-s SYSTEMID chirp or 30 s of doublets)")
+            advice.append(longer_advice(_autopilot(flights)))
 
     # residual whiteness
     res = getattr(validation, "residuals", None)

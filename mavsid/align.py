@@ -90,7 +90,8 @@ from mavsid.errors import (
 )
 from mavsid.readers import read_log, sniff_format
 
-__all__ = ["FLAG_MESSAGES", "align", "flight_table", "load_flight", "sysid_runs"]
+__all__ = ["FLAG_MESSAGES", "align", "channel_units", "flight_table", "load_flight",
+           "sysid_runs"]
 
 #: a channel pausing longer than this many of its own median sample intervals is a gap
 MAX_GAP_SAMPLES = 4.0
@@ -924,6 +925,41 @@ def align(
         if named is exc:
             raise
         raise named from exc
+
+
+def channel_units(
+    raw: RawLog,
+    preset: Preset | str | None = None,
+    presets: Mapping[str, Preset] | None = None,
+    mixers: Mapping[str, Mixer] | None = None,
+) -> tuple[str, dict[str, dict[str, str]]]:
+    """The preset :func:`align` would use and, per channel it reads, the SI unit it gives,
+    the source and the unit the field is read in with where that came from (declared by the
+    log, the preset's, inferred from evidence): what ``mavsid info`` shows. No time grid is
+    built; the warnings alignment gives are left to it.
+
+    Raises
+    ------
+    MavsidError
+        No preset fits the log, or its channels hold no usable sample.
+
+    Examples
+    --------
+    >>> from mavsid.data import MessageTable, SourceInfo
+    >>> t = np.arange(0, 1, 0.01)
+    >>> raw = RawLog(SourceInfo("x.bin", "dataflash", 0), {
+    ...     "ATT": MessageTable("ATT", {"Roll": t, "Pitch": t, "Yaw": t}, t, {"Roll": "deg"}),
+    ...     "RATE": MessageTable("RATE", {"R": t, "P": t, "Y": t, "ROut": t, "POut": t,
+    ...                                   "YOut": t, "AOut": t}, t, {"R": "deg/s"})})
+    >>> name, ch = channel_units(raw)
+    >>> name, ch["p"]["unit"], ch["p"]["source"], ch["p"]["read_in"]
+    ('ardupilot-rate', 'rad/s', 'RATE.R', 'deg/s, declared by the log')
+    """
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataQualityWarning)
+        chosen, (states, inputs, _) = _first_fitting(raw, preset, presets, mixers or {})
+    return chosen.name, {s.name: {"unit": STATE_UNITS.get(s.name, "1"), "source": s.source,
+                                  "read_in": s.unit_from} for s in (*states, *inputs)}
 
 
 def _align(raw: RawLog, preset: Preset | str | None, rate_hz: float | None,

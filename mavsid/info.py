@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from mavsid.channels import source_text
 from mavsid.data import MessageTable, RawLog
 from mavsid.errors import escape
 
@@ -141,10 +142,20 @@ def summarize(log: RawLog) -> dict[str, Any]:
 
     Keys: ``path, format, size_bytes, autopilot, firmware, vehicle, start_s, end_s,
     duration_s, messages`` (name -> ``count, rate_hz, fields`` (name -> unit or None)),
-    ``modes`` (``time_s, mode, name``), ``param_count, text_count, sysid_runs,
-    skipped_bytes, notes``.
+    ``modes`` (``time_s, mode, name``), ``param_count, text_count, sysid_runs, channels``
+    (the preset ``fit`` would use and per channel its SI ``unit``, ``source`` and the unit it
+    is ``read_in`` with where that came from; or the ``error`` why none fits),
+    ``skipped_bytes, notes``.
     """
+    from mavsid.align import channel_units
+    from mavsid.errors import MavsidError
+
     start, end = _span(log)
+    try:  # the channels fit would read, and the unit each is read in (and why)
+        preset, used = channel_units(log)
+        channels: dict[str, Any] = {"preset": preset, "channels": used}
+    except MavsidError as exc:
+        channels = {"preset": None, "channels": {}, "error": str(exc)}
     messages: dict[str, dict[str, Any]] = {}
     for name in sorted(log.messages):
         table = log.messages[name]
@@ -170,6 +181,7 @@ def summarize(log: RawLog) -> dict[str, Any]:
         "param_count": len(log.params),
         "text_count": len(log.texts),
         "sysid_runs": _sysid_runs(log),
+        "channels": channels,
         "skipped_bytes": log.source.skipped_bytes,
         "notes": list(log.source.notes),
     }
@@ -215,6 +227,14 @@ def format_summary(summary: Mapping[str, Any], max_fields: int | None = None) ->
         settings = " ".join(f"{e(k)}={v:.6g}" if isinstance(v, float) else f"{e(k)}={e(v)}"
                             for k, v in run.items() if k != "time_s")
         lines.append(f"    {_fmt_time(run['time_s']):>12}  {settings}")
+    ch = s.get("channels") or {}
+    if ch.get("preset"):
+        lines.append(f"  channels    preset {e(ch['preset'])} (what fit reads, in SI units)")
+        for name, c in ch["channels"].items():
+            lines.append(f"    {e(name):<8} [{e(c['unit'])}] <- "
+                         f"{e(source_text(c['source'], c.get('read_in')))}")
+    elif ch.get("error"):
+        lines.append(f"  channels    none: {e(ch['error'])}")
     for note in s["notes"]:
         lines.append(f"  note: {e(note)}")
     return "\n".join(lines)

@@ -16,7 +16,7 @@ from mavsid.align import _armed_events, align
 from mavsid.channels import pwm_to_thrust
 from mavsid.data import MessageTable, RawLog, SourceInfo
 from mavsid.errors import DataQualityWarning, MissingMessageError, NoExcitationError
-from mavsid.info import summarize
+from mavsid.info import format_summary, summarize
 from mavsid.pipeline import fit, format_result
 from mavsid.readers import read_log
 
@@ -252,7 +252,12 @@ def test_firmware_matrix_gives_the_truth_back(layout: str, tmp_path) -> None:  #
     assert damping == pytest.approx(want["damping"], rel=0.35)
     sources = result.flights[0].meta["sources"]
     assert ("inferred" in sources["p"]) == (layout == "copter-3.4-dev")
-    # the unit each channel was read in, and where it came from, is in the output
+    # the unit each channel was read in, and where it came from, is in info and in fit
+    info = format_summary(summarize(raw))
+    assert {"copter-4": "p        [rad/s] <- RATE.R (deg/s, declared by the log)",
+            "copter-3.3": "p        [rad/s] <- RATE.R (deg/s, the preset's unit: the log "
+                          "declares none)",
+            "copter-3.4-dev": "p        [rad/s] <- RATE.R (centideg/s, inferred)"}[layout] in info
     line = format_result(result).splitlines()[1]
     assert {"copter-4": "p [rad/s] <- RATE.R (deg/s, declared by the log)",
             "copter-3.3": "p [rad/s] <- RATE.R (deg/s, the preset's unit: the log declares none)",

@@ -465,6 +465,20 @@ def _read_flight(path: str | os.PathLike[str], cfg: PipelineConfig) -> FlightDat
     )
 
 
+def _read_flights(logs: Sequence[str | os.PathLike[str]], cfg: PipelineConfig,
+                  step: Callable[[str], None]) -> tuple[FlightData, ...]:
+    """Each log aligned; unless the config fixes the rate, later logs at the first one's
+    (pooled segments and one model need one step)."""
+    step(f"reading {os.fspath(logs[0])}")
+    first = _read_flight(logs[0], cfg)
+    same_rate = cfg if cfg.rate_hz is not None else cfg.with_overrides(rate_hz=1.0 / first.dt)
+    flights = [first]
+    for p in logs[1:]:
+        step(f"reading {os.fspath(p)}")
+        flights.append(_read_flight(p, same_rate))
+    return tuple(flights)
+
+
 def _windows(flight: FlightData, axis: str, cfg: PipelineConfig) -> list[WindowReport]:
     """Every window considered on ``axis``, kept or rejected, as the config asks."""
     from mavsid.excitation import ScanOptions, find_segments
@@ -615,14 +629,7 @@ def fit(
     if not logs:
         raise ConfigError("no log given")
     step = progress or _noop
-    step(f"reading {os.fspath(logs[0])}")
-    first = _read_flight(logs[0], cfg)
-    # pooled segments need one step: later logs are aligned at the first one's rate
-    same_rate = cfg if cfg.rate_hz is not None else cfg.with_overrides(rate_hz=1.0 / first.dt)
-    flights = [first]
-    for p in logs[1:]:
-        step(f"reading {os.fspath(p)}")
-        flights.append(_read_flight(p, same_rate))
+    flights = _read_flights(logs, cfg, step)
     fits: dict[str, AxisFit] = {}
     verdicts: dict[str, Verdict] = {}
     signals: dict[int, TwinSignals] = {}
@@ -676,7 +683,7 @@ def fit(
             fits[axis] = dataclasses.replace(fitted, verdict=verdict)
     if not fits:
         raise _nothing(logs, verdicts, "nothing identifiable")
-    return FitResult(fits, tuple(flights), tuple(os.fspath(p) for p in logs), cfg, verdicts)
+    return FitResult(fits, flights, tuple(os.fspath(p) for p in logs), cfg, verdicts)
 
 
 def _judge(fitted: AxisFit, flights: Sequence[FlightData]) -> Verdict:
@@ -773,14 +780,8 @@ def validate_logs(
     if not logs:
         raise ConfigError("no log given")
     step = progress or _noop
-    step(f"reading {os.fspath(logs[0])}")
-    first = _read_flight(logs[0], cfg)
-    same_rate = cfg if cfg.rate_hz is not None else cfg.with_overrides(rate_hz=1.0 / first.dt)
-    rest = []
-    for p in logs[1:]:
-        step(f"reading {os.fspath(p)}")
-        rest.append(_read_flight(p, same_rate))
-    native = (first, *rest)
+    native = _read_flights(logs, cfg, step)
+    first = native[0]
     on_model_grid: dict[float, tuple[FlightData, ...]] = {}
     fits: dict[str, AxisFit] = {}
     verdicts: dict[str, Verdict] = {}

@@ -146,6 +146,9 @@ class RawLog:
     autopilot: str = "unknown"
     vehicle: str | None = None
     firmware: str | None = None
+    #: the log's span (s) by its format's own clock where that differs from the records'
+    #: times (a ULog: its header's start time to its last data timestamp, as pyulog has it)
+    span_s: tuple[float, float] | None = None
 
     def __getitem__(self, name: str) -> MessageTable:
         try:
@@ -160,7 +163,10 @@ class RawLog:
 
     @property
     def duration_s(self) -> float:
-        """Span of the sample times over all messages (0 for an empty log)."""
+        """``span_s`` when the reader set it, else the span of the sample times over all
+        messages (0 for an empty log)."""
+        if self.span_s is not None:
+            return max(0.0, float(self.span_s[1] - self.span_s[0]))
         lo, hi = np.inf, -np.inf
         for table in self.messages.values():
             t = table.time_s[np.isfinite(table.time_s)] if len(table) else table.time_s

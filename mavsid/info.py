@@ -103,6 +103,8 @@ def median_rate_hz(table: MessageTable, span_s: float | None = None) -> float:
 
 
 def _span(log: RawLog) -> tuple[float | None, float | None]:
+    if log.span_s is not None:
+        return _num(log.span_s[0]), _num(log.span_s[1])
     lo, hi = math.inf, -math.inf
     for table in log.messages.values():
         t = table.time_s[np.isfinite(table.time_s)]

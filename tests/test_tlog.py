@@ -548,6 +548,26 @@ def test_info_json_agrees_with_pymavlink() -> None:
     assert summary["messages"]["ATTITUDE"]["fields"]["rollspeed"] == "rad/s"
 
 
+@pytest.mark.parametrize("path", TLOGS, ids=ids(TLOGS))
+def test_info_duration_is_pymavlinks_where_the_receive_clock_holds(path: Path) -> None:
+    """pymavlink's notion of a tlog's span: first to last receive time. Where the receive
+    clock was rewritten (the vehicles' own clocks span far more), the records' span stands."""
+    from mavsid.info import summarize
+
+    require_shared()
+    messages, _, _ = pymavlink_stream(str(path))
+    want = messages[-1]._timestamp - messages[0]._timestamp
+    log, _ = mavsid_read(str(path))
+    got = summarize(log)["duration_s"]
+    own = [t.time_s[np.isfinite(t.time_s)] for t in log.messages.values()]
+    own_span = max(float(t.max()) for t in own if t.size) - min(float(t.min()) for t in own
+                                                                 if t.size)
+    if log.span_s is not None:
+        assert got == pytest.approx(want, abs=1e-3)
+    else:  # the receive clock does not hold: the records' own span, far longer
+        assert got == pytest.approx(own_span) and own_span > 2 * want
+
+
 def test_block_boundaries_lose_nothing(monkeypatch: pytest.MonkeyPatch, vtol: Any) -> None:
     """The scan works in blocks (16 MiB); with tiny blocks every kind of record straddles
     one, and the result is still pymavlink's."""

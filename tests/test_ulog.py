@@ -227,6 +227,19 @@ def test_info_json_agrees_with_pyulog() -> None:
         f"{sum(d.duration for d in ref.dropouts)} ms in all"
 
 
+@pytest.mark.parametrize("path", ULOGS, ids=ids(ULOGS))
+def test_info_duration_is_pyulogs(path: Path) -> None:
+    """The log's span as pyulog has it (header start to the last data timestamp), not the
+    span of every topic's clock (a topic stamped 0 or in UNIX time made it 1.7e9 s)."""
+    from mavsid.info import summarize
+
+    ref, _ = pyulog(path)
+    log, _ = read(path)
+    want = (ref.last_timestamp - ref.start_timestamp) / 1e6
+    assert summarize(log)["duration_s"] == pytest.approx(want, abs=1e-6)
+    assert log.duration_s == pytest.approx(want, abs=1e-6)
+
+
 def test_self_containing_formats_are_one_typed_error(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """pyulog expands nested formats recursively: a format containing itself (directly or
     through another) was a RecursionError out of it; now one LogFormatError naming the

@@ -783,9 +783,13 @@ def read(
     firmware = next((m.text for m in texts if _FIRMWARE.match(m.text)), None)
     params = _params(pv, vehicle) if vehicle else {}
     modes = _modes(hb, vehicle) if vehicle else ()
+    span = _span(frames, offsets, vehicle[0] if vehicle else None,
+                 [t for i, t in own.items() if t is not None])
     if start is not None or stop is not None:
         lo = -np.inf if start is None else start
         hi = np.inf if stop is None else stop
+        if span is not None:
+            span = (max(span[0], lo), max(min(span[1], hi), max(span[0], lo)))
         tables = {n: _window(t, lo, hi) for n, t in tables.items()}
         texts = tuple(m for m in texts if lo <= m.time_s <= hi)
         modes = tuple(m for m in modes if lo <= m.time_s <= hi)
@@ -809,7 +813,30 @@ def read(
         autopilot=autopilot,
         vehicle=vehicle_name,
         firmware=firmware,
+        span_s=span,
     )
+
+
+def _span(frames: _Frames, offsets: NDArray[np.float64], main: int | None,
+          own: Sequence[NDArray[np.float64]] = ()) -> tuple[float, float] | None:
+    """The file's span as pymavlink has it (first to last receive time), on the main
+    vehicle's clock. None (the span of the records' times then stands) when the receive
+    clock runs backwards or jumps, when no frame carries a vehicle clock, or when more than
+    1 % of the vehicles' own time stamps lie outside it (a file whose receive times were
+    rewritten)."""
+    recv = frames.recv_s
+    step = np.diff(recv)
+    offset = float(offsets[main] if main is not None else offsets[0])
+    if not recv.size or not np.isfinite(offset) or np.any(step < 0) or np.any(
+            step > _TIME_JUMP_S):
+        return None
+    lo, hi = float(recv[0] + offset), float(recv[-1] + offset)
+    tol = max(2.0, 0.05 * (hi - lo))
+    times = np.concatenate([t[np.isfinite(t)] for t in own]) if own else np.zeros(0)
+    outside = np.count_nonzero((times < lo - tol) | (times > hi + tol))
+    if outside > 0.01 * times.size:  # (a stray zero time stamp here and there is no reason)
+        return None
+    return lo, hi
 
 
 @functools.lru_cache(maxsize=1024)

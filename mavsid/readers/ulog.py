@@ -341,9 +341,12 @@ def read(
     params, n_changes, bad_params = _params(ulog)
     texts = _texts(ulog)
     modes = _modes(tables.get(_MODE_TOPIC))
+    # the log's span as pyulog has it: the header's start time to the latest data timestamp
+    span = (ulog.start_timestamp / 1e6, max(ulog.last_timestamp, ulog.start_timestamp) / 1e6)
     if start is not None or stop is not None:
         lo = -np.inf if start is None else start
         hi = np.inf if stop is None else stop
+        span = (max(span[0], lo), max(min(span[1], hi), max(span[0], lo)))
         tables = {n: _window(t, lo, hi) for n, t in tables.items()}
         texts = [m for m in texts if lo <= m.time_s <= hi]
         modes = [m for m in modes if lo <= m.time_s <= hi]
@@ -371,6 +374,7 @@ def read(
         autopilot="px4",
         vehicle=vehicle_class(int(params["MAV_TYPE"])) if "MAV_TYPE" in params else None,
         firmware=_firmware(info),
+        span_s=span,
     )
 
 

@@ -71,12 +71,11 @@ def _add_info(sub: argparse._SubParsersAction) -> None:
 def _info(args: argparse.Namespace) -> int:
     import json
 
-    from mavsid.info import format_summary, summarize
-    from mavsid.readers import read_log
+    from mavsid.info import format_summary, read_for_summary, summarize
 
     with _progress(args, 2) as step:
         step(f"reading {args.log}")
-        raw = read_log(args.log, **_dialect(args))
+        raw = read_for_summary(args.log, **_dialect(args))
         step("summarising")
         summary = summarize(raw)
     print(json.dumps(summary, indent=1, ensure_ascii=True) if args.json

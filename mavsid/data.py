@@ -50,6 +50,9 @@ class MessageTable:
     multipliers : Mapping[str, float]
         Field name -> multiplier the log declares (DataFlash FMTU) but which is *not*
         applied to ``columns``; alignment applies it.
+    declared : tuple of str
+        Every field the log declares, for a table read for its times only (``times_only``
+        of the DataFlash reader: ``columns`` then holds the time and instance columns).
     """
 
     name: str
@@ -57,6 +60,7 @@ class MessageTable:
     time_s: np.ndarray
     units: Mapping[str, str] = field(default_factory=dict)
     multipliers: Mapping[str, float] = field(default_factory=dict)
+    declared: tuple[str, ...] = ()
 
     def __len__(self) -> int:
         return int(self.time_s.shape[0])
@@ -74,8 +78,8 @@ class MessageTable:
 
     @property
     def fields(self) -> tuple[str, ...]:
-        """Field names in log order."""
-        return tuple(self.columns)
+        """Field names in log order (``declared`` when the table was read for its times)."""
+        return self.declared or tuple(self.columns)
 
     def unit(self, name: str) -> str | None:
         """The declared unit of field ``name``, or None when the log declares none."""

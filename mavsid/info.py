@@ -26,6 +26,7 @@ x.bin
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Mapping
 from typing import Any
 
@@ -35,8 +36,9 @@ from mavsid.channels import source_text
 from mavsid.data import MessageTable, RawLog
 from mavsid.errors import escape
 
-__all__ = ["EVENT_TYPES", "format_summary", "median_rate_hz", "summarize"]
+__all__ = ["EVENT_TYPES", "format_summary", "median_rate_hz", "read_for_summary", "summarize"]
 
+#: the columns that tell instances apart, as the DataFlash reader's ``times_only`` keeps them
 _INSTANCE_FIELDS = ("I", "Instance", "C", "Id")
 
 
@@ -137,6 +139,28 @@ def _sysid_runs(log: RawLog) -> list[dict[str, Any]]:
                 run[name] = _value(table[name][k])
         runs.append(run)
     return runs
+
+
+def read_for_summary(path: str | os.PathLike[str], **options: Any) -> RawLog:
+    """Read ``path`` for :func:`summarize`: a DataFlash ``.bin`` with every message type but
+    the ones alignment reads decoded for its times only (``times_only``: the same summary,
+    a 1 GB log in a fraction of the time and memory); other formats whole.
+
+    Examples
+    --------
+    >>> s = summarize(read_for_summary("fixtures/sysid_roll.bin"))
+    >>> s["messages"]["RCIN"]["count"], len(s["messages"]["RCIN"]["fields"])
+    (330, 15)
+    """
+    from mavsid.align import FLAG_MESSAGES
+    from mavsid.channels import preset_messages
+    from mavsid.readers import read_log, sniff_format
+
+    fmt = sniff_format(path)
+    if fmt != "dataflash":
+        return read_log(path, **options)
+    return read_log(path, messages=[*preset_messages(fmt), *FLAG_MESSAGES[fmt]],
+                    times_only=True, **options)
 
 
 def summarize(log: RawLog) -> dict[str, Any]:

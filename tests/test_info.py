@@ -166,3 +166,29 @@ def test_info_counts_of_every_small_log_agree_with_pymavlink(small_ref):
     s = summarize(_read(path))
     assert Counter({k: v["count"] for k, v in s["messages"].items()}) == Counter(
         {k: len(v) for k, v in ref.items()})
+
+
+def _every_bin() -> list:  # type: ignore[type-arg]
+    from helpers import FIXTURES, shared_logs
+
+    # (the 104 MB SITL flight too would leave its arrays' pages in this test process, and
+    # the fuzz limits measure forked children's memory: bench_hostile.py covers big logs)
+    return [p for p in (*sorted(FIXTURES.glob("*.bin")), *shared_logs(".bin"))
+            if p.stat().st_size < 20_000_000]
+
+
+@pytest.mark.parametrize("path", _every_bin(), ids=lambda p: p.name)
+def test_info_reading_times_only_gives_the_same_summary(path) -> None:  # type: ignore[no-untyped-def]
+    """`mavsid info` decodes a .bin's other message types for their times only: its summary
+    (counts, rates per instance, fields and units, span, modes, channels) is the full read's."""
+    from mavsid.info import read_for_summary
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        full = summarize(read_log(path))
+        fast_log = read_for_summary(path)
+        fast = summarize(fast_log)
+    assert fast == full
+    skeletons = [t for t in fast_log.messages.values() if t.declared]
+    assert all(len(t.columns) <= len(t.declared) for t in skeletons)
+    assert not fast_log.messages or any(len(t.columns) < len(t.declared) for t in skeletons)

@@ -56,7 +56,7 @@ import os
 import re
 import struct
 import warnings
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from functools import cached_property, lru_cache
 
@@ -131,6 +131,9 @@ _PLAIN = frozenset(c for c, spec in FORMAT_CHARS.items()
 
 # always decoded: parameters, texts, modes, units, firmware
 _META_NAMES = frozenset({"FMTU", "UNIT", "MULT", "PARM", "MSG", "MODE", "VER"})
+#: columns that tell a message's instances apart (decoded with the times by ``times_only``,
+#: as are all one-byte integer columns)
+INSTANCE_COLUMNS = frozenset({"I", "Instance", "C", "Id"})
 _FORMAT_ONLY = frozenset({"FMT", "FMTU", "UNIT", "MULT"})
 
 
@@ -704,14 +707,17 @@ _BLOCK_BYTES = 1 << 26  # file bytes decoded (for every message) before their pa
 
 
 def _gather_by_block(
-    a: np.ndarray, jobs: Mapping[str, tuple[Definition, np.ndarray]]
+    a: np.ndarray, jobs: Mapping[str, tuple[Definition, np.ndarray]],
+    only: Mapping[str, Collection[str]] | None = None,
 ) -> dict[str, dict[str, np.ndarray]]:
     """:func:`_gather_into` for several messages (name -> definition and ascending record
     offsets), a block of the file at a time for all of them, each block's pages released
     once it is done (so the file is mapped into the process about once, a block at a time,
-    instead of once per message type)."""
+    instead of once per message type). ``only`` limits a message to some of its columns."""
+    only = only or {}
     outs = {name: {c: np.empty((pos.size, *shape), dt)
-                   for c, (_, _, dt, shape) in _layout(d).items()}
+                   for c, (_, _, dt, shape) in _layout(d).items()
+                   if name not in only or c in only[name]}
             for name, (d, pos) in jobs.items()}
     done = dict.fromkeys(jobs, 0)
     for lo in range(0, a.size, _BLOCK_BYTES):
@@ -1004,13 +1010,16 @@ def assemble(
     meta_columns: Mapping[str, Mapping[str, np.ndarray]] | None = None,
     meta_times: Mapping[str, np.ndarray] | None = None,
     banner: Sequence[str] = (),
+    declared: Mapping[str, tuple[str, ...]] | None = None,
 ) -> RawLog:
     """Build the :class:`RawLog` from decoded columns (shared by the binary and text readers).
 
     ``columns``/``times`` hold the messages to return; ``meta_*`` the full-log PARM, MSG,
     MODE, VER and FMTU/UNIT/MULT tables used for parameters, texts, modes and units;
-    ``banner`` extra lines (text logs' preamble) searched for the firmware after the texts.
+    ``banner`` extra lines (text logs' preamble) searched for the firmware after the texts;
+    ``declared`` the fields of tables read for their times only.
     """
+    declared = declared or {}
     meta_columns = meta_columns if meta_columns is not None else columns
     meta_times = meta_times if meta_times is not None else times
     times, meta_times, placed = _backfill(times, meta_times, defs_by_name)
@@ -1022,7 +1031,7 @@ def assemble(
     units, mults = _units(meta_columns, defs_by_name)
     messages = {
         name: MessageTable(name, dict(cols), times[name], units.get(name, {}),
-                           mults.get(name, {}))
+                           mults.get(name, {}), declared.get(name, ()))
         for name, cols in columns.items()
         if wanted is None or name in wanted
     }
@@ -1081,6 +1090,7 @@ def read(
     messages: Sequence[str] | None = None,
     start: float | None = None,
     stop: float | None = None,
+    times_only: bool = False,
     **options: object,
 ) -> RawLog:
     """Read a DataFlash ``.bin`` log.
@@ -1096,7 +1106,11 @@ def read(
     start, stop : float, optional
         Keep only records with ``start <= time_s <= stop`` (seconds of ``TimeUS``); records
         without a time are then dropped. Parameters, texts and modes come from the whole log.
-    **options
+    times_only : bool
+        Also return every other message type, with only its times and the columns that may
+        tell instances apart (:data:`INSTANCE_COLUMNS` and one-byte integers) decoded and its
+        fields listed in ``MessageTable.declared``:
+        enough to count, time and describe them (``mavsid info``) at a fraction of the cost.
         None applies to DataFlash logs (``read_log`` passes other formats' options on).
 
     Returns
@@ -1132,7 +1146,8 @@ def read(
     except OSError as exc:
         raise LogFormatError(f"cannot open: {exc.strerror or exc}", path=spath) from None
     try:
-        return _read_buffer(spath, np.frombuffer(buf, dtype=np.uint8), messages, start, stop)
+        return _read_buffer(spath, np.frombuffer(buf, dtype=np.uint8), messages, start, stop,
+                            times_only)
     finally:
         if isinstance(buf, mmap.mmap):
             try:
@@ -1147,6 +1162,7 @@ def _read_buffer(
     messages: Sequence[str] | None,
     start: float | None,
     stop: float | None,
+    times_only: bool = False,
 ) -> RawLog:
     n = a.size
     notes: list[str] = []
@@ -1182,8 +1198,12 @@ def _read_buffer(
     # grouped by definition: a stable radix sort of small integers keeps file order
     ndefs = len(table.defs)
     wanted = None if messages is None else set(messages)
-    decode = np.array([wanted is None or d.name in wanted or d.name in _META_NAMES
-                       for d in table.defs])
+    decode = np.array([wanted is None or times_only or d.name in wanted
+                       or d.name in _META_NAMES for d in table.defs])
+
+    def skeleton(name: str) -> bool:  # read for its times only
+        return times_only and wanted is not None and name not in wanted \
+            and name not in _META_NAMES
     timed = np.array([d.time_field is not None for d in table.defs])
     idx_dt = framing.pos.dtype
     sel: np.ndarray | None = None  # indices of the decoded records (None: all)
@@ -1258,7 +1278,14 @@ def _read_buffer(
     # messages of one layout: decoded a stretch of the file at a time (each file page is
     # mapped into the process once, then handed back); the others one by one
     single = {name: parts[0] for name, parts in all_parts.items() if len(parts) == 1}
-    prefilled = _gather_by_block(a, {name: (d, pos) for name, (d, _, pos, _) in single.items()})
+    # times only: the time field, and every column that may tell instances apart (by name,
+    # or a one-byte integer: what the log declares an instance, unit "#", always is)
+    only = {name: {c for c, (_, ch, _, _) in _layout(d).items()
+                   if c in INSTANCE_COLUMNS or ch in "BbM"
+                   or (d.time_field is not None and c == d.time_field[0])}
+            for name, (d, *_) in single.items() if skeleton(name)}
+    prefilled = _gather_by_block(a, {name: (d, pos) for name, (d, _, pos, _) in single.items()},
+                                 only)
     for name, parts in all_parts.items():
         if name in prefilled:
             d, _, _, t = parts[0]
@@ -1271,7 +1298,7 @@ def _read_buffer(
         del parts, keys
         if name in _META_NAMES:
             meta_columns[name], meta_times[name] = cols, t
-        if wanted is None or name in wanted:
+        if wanted is None or times_only or name in wanted:
             keep = window_mask(t, start, stop)
             if keep is not None and not keep.all():
                 cols, t = {k: v[keep] for k, v in cols.items()}, t[keep]
@@ -1291,7 +1318,11 @@ def _read_buffer(
     source = SourceInfo(path, "dataflash", n, skipped_bytes=skipped, notes=tuple(notes))
     if notes:
         warnings.warn(f"{path}: " + "; ".join(notes), DataQualityWarning, stacklevel=3)
-    return assemble(source, columns, time_s, defs_by_name, wanted, meta_columns, meta_times)
+    declared = {name: tuple(c for c, _ in defs_by_name[name].fields)
+                for name in columns if skeleton(name)}
+    return assemble(source, columns, time_s, defs_by_name,
+                    None if times_only else wanted, meta_columns, meta_times,
+                    declared=declared)
 
 
 def window_mask(t: np.ndarray, start: float | None, stop: float | None) -> np.ndarray | None:

@@ -19,7 +19,19 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 
 _CHILD = r"""
-import json, sys, warnings
+import atexit, json, sys, warnings
+
+
+def _hwm():  # this interpreter's own peak RSS (ru_maxrss would count a big parent's pages)
+    try:
+        with open("/proc/self/status") as f:
+            kb = next(ln.split()[1] for ln in f if ln.startswith("VmHWM:"))
+        print("HWM_KB", kb, flush=True)
+    except (OSError, StopIteration):
+        pass
+
+
+atexit.register(_hwm)
 warnings.simplefilter("error", RuntimeWarning)
 from mavsid.errors import MavsidError
 op, path = sys.argv[1], sys.argv[2]
@@ -27,10 +39,9 @@ try:
     if op == "read":
         from mavsid.readers import read_log
         read_log(path)
-    elif op == "info":
-        from mavsid.info import format_summary, summarize
-        from mavsid.readers import read_log
-        format_summary(summarize(read_log(path)))
+    elif op == "info":  # as `mavsid info` reads (a .bin's other types for their times only)
+        from mavsid.info import format_summary, read_for_summary, summarize
+        format_summary(summarize(read_for_summary(path)))
     elif op == "segments":
         from mavsid.align import load_flight
         from mavsid.excitation import find_segments
@@ -85,7 +96,10 @@ def run_case(op: str, path: Path, timeout_s: float) -> Outcome:
         out.seek(0)
         err.seek(0)
         stdout, stderr = out.read(), err.read()
-    rss_mb = usage.ru_maxrss / 1024  # kB on Linux
+    # the child's own high-water mark where /proc has it: a child forked from a big test
+    # process (before its exec) would otherwise report the parent's pages as its peak
+    hwm = [ln.split()[1] for ln in stdout.splitlines() if ln.startswith("HWM_KB ")]
+    rss_mb = (int(hwm[-1]) if hwm else usage.ru_maxrss) / 1024  # kB on Linux
     cpu = usage.ru_utime + usage.ru_stime
     code = proc.returncode
     if code == -9 and wall >= timeout_s:

@@ -24,9 +24,11 @@ from mavsid import pipeline
 from mavsid.errors import NoExcitationError
 from mavsid.pipeline import PipelineConfig, fit, validate_logs
 
-#: Stated tolerances on every vehicle (relative to the truth).
-B_TOLERANCE = 0.12
-DAMPING_TOLERANCE = 0.35
+#: Stated tolerances on every vehicle (relative to the truth). Measured: effectiveness
+#: within 3.7 % and damping within 11 % on all of them, noisy ones included (the lag chosen
+#: by output error there); before that choice, noisy vehicles came back 5-10 % low in B.
+B_TOLERANCE = 0.05
+DAMPING_TOLERANCE = 0.15
 
 #: (fixture, axis that must be identified)
 IDENTIFIABLE = [
@@ -210,3 +212,18 @@ def test_advice_is_for_the_autopilot_that_flew() -> None:
     assert not any("SID_AXIS" in a for a in px4.advice)
     ap = _fit("doublets.bin").verdicts["pitch"]
     assert any("SID_AXIS 11" in a for a in ap.advice)
+
+
+@pytest.mark.parametrize(("name", "axis"), [("noisy_sysid.bin", "roll"),
+                                            ("noisy_sysid.bin", "pitch"),
+                                            ("heavy_sysid.bin", "pitch")])
+def test_noisy_gyros_get_their_motor_lag_and_a_good_verdict(name: str, axis: str) -> None:
+    """With 2-3 deg/s of gyro noise fed back, the one-step score cannot see the motor lag;
+    the output-error choice finds one near the truth, and the model predicts held-out data."""
+    f = _fit(name).axes[axis]
+    prov = dict(f.model.provenance)
+    truth = _truth(name)["axes"][axis]
+    assert prov["lag_chosen_by"] == "output error"
+    assert abs(float(prov["lag_s"]) - truth["motor_tau_s"]) <= 0.0105
+    assert f.verdict is not None and f.verdict.level == "good"
+    assert f.validation.fit_summary(f.output)["free_run"] > 80.0

@@ -34,6 +34,7 @@ mavsid.errors.NoExcitationError: B_d[x,u] unidentifiable: u is zero in the selec
 from __future__ import annotations
 
 import itertools
+import math
 import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -56,8 +57,12 @@ from mavsid.estimators.select import (
     DEFAULT_MAX_DELAY_S,
     DEFAULT_STRUCTURE_TOL,
     ESTIMATORS,
+    LAG_OE_TOL,
+    LAG_PRUNE,
+    ONE_STEP_NOISE,
     make_estimator,
     search_structure,
+    with_lag,
 )
 
 __all__ = [
@@ -206,6 +211,7 @@ def identify_segments(
     if isinstance(delay, str) and delay != "search":
         raise ConfigError(f"delay must be a number of samples or 'search', got {delay!r}")
     lag, dly, scan = 0.0, 0.0, None
+    base = structure
     if search:
         choice = search_structure(
             segments, structure, delay=None if isinstance(delay, str) else float(delay),
@@ -217,34 +223,71 @@ def identify_segments(
         dly = float(delay)
         whole = int(np.floor(dly + 1e-9))
         structure = replace(structure, delay=whole, delay_frac=round(dly - whole, 9) % 1.0)
-    if isinstance(estimator, str):
-        est = make_estimator(estimator, structure, **dict(estimator_options or {}))
-    else:
-        if estimator_options:
-            raise ConfigError("estimator settings go into the Estimator instance, not identify")
-        est = estimator
-    est.fit(segments, structure)
-    model = est.model_
-    name = est.name
-    if var_units:
-        model = replace(model, var_units=dict(var_units))
-    constraints = est._constraints(structure) if hasattr(est, "_constraints") else None
-    if refine == "oe" or (refine == "auto" and model.is_affine):
+    if not isinstance(estimator, str) and estimator_options:
+        raise ConfigError("estimator settings go into the Estimator instance, not identify")
+
+    def fitted(st: Structure) -> tuple[Model, float, SolverError | None]:
+        """The estimator's model of ``st``, refined by output error when asked (with the
+        refinement's cost; inf and the error when it failed)."""
+        est = (make_estimator(estimator, st, **dict(estimator_options or {}))
+               if isinstance(estimator, str) else estimator)
+        est.fit(segments, st)
+        m = est.model_
+        if var_units:
+            m = replace(m, var_units=dict(var_units))
+        if not (refine == "oe" or (refine == "auto" and m.is_affine)):
+            return m, math.nan, None
+        constraints = est._constraints(st) if hasattr(est, "_constraints") else None
         try:
-            model = refine_output_error(model, segments, covariance=oe_covariance,
-                                        bounds=constraints)
+            m = refine_output_error(m, segments, covariance=oe_covariance, bounds=constraints)
         except SolverError as exc:
-            if refine == "oe":
-                raise
-            warnings.warn(f"{', '.join(outputs)}: {exc}; keeping the {name} estimate",
-                          DataQualityWarning, stacklevel=3)
+            return m, math.inf, exc
+        refined: Any = dict(m.provenance)["refine"]
+        return m, float(refined["cost"]), None
+
+    model, cost, failed = fitted(structure)
+    if search and math.isfinite(cost) and len(choice.by_lag) > 1 \
+            and _one_step_noise(segments, outputs, choice.by_lag) > ONE_STEP_NOISE:
+        # noisy: the lag by the free-run cost (see ONE_STEP_NOISE), the delay per lag by one
+        # step
+        floor = min(v[0] for v in choice.by_lag.values())
+        scored = {lag: (model, cost, failed)}
+        for lg, (mse, d) in choice.by_lag.items():
+            if lg != lag and mse <= floor * (1 + LAG_PRUNE):
+                scored[lg] = fitted(with_lag(base, lg, d))
+        lowest = min(c for _, c, _ in scored.values())
+        lag = min(lg for lg, (_, c, _) in scored.items() if c <= lowest * (1 + LAG_OE_TOL))
+        model, cost, failed = scored[lag]
+        dly = choice.by_lag[lag][1]
+        structure = with_lag(base, lag, dly)
+    if failed is not None:
+        if refine == "oe":
+            raise failed
+        name = estimator if isinstance(estimator, str) else estimator.name
+        warnings.warn(f"{', '.join(outputs)}: {failed}; keeping the {name} estimate",
+                      DataQualityWarning, stacklevel=3)
     prov = dict(model.provenance)
     if scan is not None:
         prov["structure_scan"] = scan
+        prov["lag_chosen_by"] = ("output error" if search and len(choice.by_lag) > 1
+                                 and _one_step_noise(segments, outputs, choice.by_lag)
+                                 > ONE_STEP_NOISE and math.isfinite(cost) else "one step")
     prov["filters"] = [f.to_dict() for f in structure.filters]
     prov["lag_s"] = lag
     prov["delay_s"] = dly * dt
     return replace(model, provenance=prov)
+
+
+def _one_step_noise(segments: Sequence[Segment], outputs: Sequence[str],
+                    by_lag: Mapping[float, tuple[float, float]]) -> float:
+    """The best one-step residual's RMS over the outputs' RMS about their mean (1 − the
+    one-step fit as a fraction)."""
+    ys = np.concatenate([np.column_stack([s.states[:, s.state_names.index(o)]
+                                          for o in outputs]) for s in segments
+                         if all(o in s.state_names for o in outputs)])
+    spread = float(np.nanmean(np.nanvar(ys, axis=0))) if ys.size else 0.0
+    best = min(v[0] for v in by_lag.values())
+    return math.sqrt(best / spread) if spread > 0 else 0.0
 
 
 def identify(

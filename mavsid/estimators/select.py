@@ -6,7 +6,10 @@ path's :func:`~mavsid.estimators.api.fit_axis` run before fitting:
 * a first-order input lag (motor and ESC response, in no log parameter) and the input delay
   ``d`` (whole samples, then fractions of a sample around the best) are chosen together;
 * each candidate is scored by the mean squared one-step residual of a least-squares fit;
-* parsimony: the simplest (lag, delay) within ``structure_tol`` of the best wins.
+* parsimony: the simplest (lag, delay) within ``structure_tol`` of the best wins;
+* on noisy data (see :data:`ONE_STEP_NOISE`) :func:`~mavsid.estimators.api.identify_segments`
+  then re-chooses the lag by the output-error cost of each lag's best delay
+  (:attr:`StructureChoice.by_lag`).
 
 Cost: the candidates share their rows. For a linear discrete-time structure the inputs are
 filtered once per lag (the Butterworth designs are cached), every delayed copy of them is
@@ -39,7 +42,7 @@ Examples
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -58,12 +61,16 @@ __all__ = [
     "DEFAULT_MAX_DELAY_S",
     "DEFAULT_STRUCTURE_TOL",
     "ESTIMATORS",
+    "LAG_OE_TOL",
+    "LAG_PRUNE",
+    "ONE_STEP_NOISE",
     "DelayScan",
     "StructureChoice",
     "lag_filter",
     "make_estimator",
     "search_structure",
     "select_delay",
+    "with_lag",
 ]
 
 #: Axis -> (modelled states, inputs).
@@ -76,6 +83,21 @@ AXES: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
 
 #: Default candidates for a first-order input (motor) lag, s.
 DEFAULT_LAGS_S: tuple[float, ...] = (0.0, 0.005, 0.01, 0.015, 0.02, 0.03, 0.04, 0.06)
+
+#: Noisy data (best one-step residual RMS over ``ONE_STEP_NOISE`` of the output's RMS about
+#: its mean, i.e. a one-step fit under 98 %; clean simulated and SITL chirps reach 0.2-0.8 %,
+#: simulated gyros with 2-3 deg/s of noise 4-9 %) with coefficients refined by output
+#: error: the lag is chosen by
+#: the free-run (output-error) cost instead, among the lags whose one-step score lies within
+#: ``LAG_PRUNE`` of the best, the shortest whose output-error cost lies within ``LAG_OE_TOL``
+#: of the lowest. Gyro noise fed back through the controller swamps the one-step score's
+#: sensitivity to the motor lag (a 15 ms lag then scores within 0.2 % of none); the free run
+#: still sees it, though its cost is flat near its minimum and drifts to longer lags under
+#: noise, hence the parsimony margin. On clean data the one-step score is the sharper one
+#: (a chirp's training block holds its low frequencies only), so it decides there.
+ONE_STEP_NOISE = 0.02
+LAG_PRUNE = 0.25
+LAG_OE_TOL = 0.03
 
 #: Longest input delay searched by default, s.
 DEFAULT_MAX_DELAY_S: float = 0.025
@@ -310,12 +332,16 @@ class StructureChoice:
         Chosen delay, samples (whole plus fraction).
     scan : dict of str to float
         ``"lag=…s,delay=…"`` -> mean squared one-step residual of every candidate.
+    by_lag : dict of float to (float, float)
+        Per candidate lag (s): the lowest mean squared one-step residual over its delays and
+        the delay chosen for it (the shortest within ``structure_tol`` of that lowest).
     """
 
     structure: Structure
     lag_s: float
     delay: float
     scan: dict[str, float]
+    by_lag: dict[float, tuple[float, float]] = field(default_factory=dict)
 
 
 def search_structure(
@@ -404,4 +430,18 @@ def search_structure(
     whole, frac = _split_delay(dly)
     chosen = replace(structure, filters=structure.filters + lag_filter(lag), delay=whole,
                      delay_frac=frac)
-    return StructureChoice(chosen, lag, float(dly), scan)
+    by_lag: dict[float, tuple[float, float]] = {}
+    for lg in lag_grid:
+        mine = [c for c in cands if c[1] == lg]
+        if mine:
+            low = min(c[0] for c in mine)
+            d = min(c[2] for c in mine if c[0] <= low * (1 + structure_tol))
+            by_lag[lg] = (low, float(d))
+    return StructureChoice(chosen, lag, float(dly), scan, by_lag)
+
+
+def with_lag(structure: Structure, lag_s: float, delay: float) -> Structure:
+    """``structure`` (its known filters) with a first-order input lag and a delay (samples)."""
+    whole, frac = _split_delay(delay)
+    return replace(structure, filters=structure.filters + lag_filter(lag_s), delay=whole,
+                   delay_frac=frac)

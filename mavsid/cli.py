@@ -208,9 +208,10 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--vibration", type=float, default=0.0, metavar="DEG_S",
                    help="frame vibration amplitude on the gyro, deg/s (0)")
     p.add_argument("--layout",
-                   choices=("copter-4", "copter-3.3", "copter-3.4-dev",
+                   choices=("copter-4", "copter-3.6", "copter-3.3", "copter-3.4-dev",
                             "px4-1.14", "px4-1.11", "px4-1.8"),
-                   help="log layout. A .bin's ArduCopter generation: 4.x (default); 3.3 "
+                   help="log layout. A .bin's ArduCopter generation: 4.x (default); 3.6 "
+                   "(no unit records, PARM without Default, no SYSTEMID messages); 3.3 "
                    "(TimeMS, RCOU Ch1-8, no unit records, untimed PARM/MODE, ARM event first); "
                    "3.4-dev (RATE in centideg/s, outputs on +-4500). A .ulg's PX4 topic set: "
                    "1.14 (default; vehicle_torque_setpoint), 1.11 (actuator_controls_0), 1.8 "

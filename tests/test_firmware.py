@@ -217,12 +217,14 @@ def test_the_readme_preset_file_loads_and_fits(tmp_path) -> None:  # type: ignor
     assert fd.preset == "my-quad" and fd.input_names == ("u_roll",)
 
 
-@pytest.mark.parametrize("layout", ["copter-4", "copter-3.3", "copter-3.4-dev"])
+@pytest.mark.parametrize("layout", ["copter-4", "copter-3.6", "copter-3.3", "copter-3.4-dev"])
 def test_firmware_matrix_gives_the_truth_back(layout: str, tmp_path) -> None:  # type: ignore[no-untyped-def]
     """The same simulated plant logged as each ArduCopter generation did (TimeMS, RCOU.Ch*,
     no unit records, untimed PARM/MODE and an ARM event first for 3.3; centidegree RATE and
-    ±4500 outputs for 3.4-dev): info reads it, fit finds the roll chirp and gives the
-    plant's effectiveness and damping back in SI units."""
+    ±4500 outputs for 3.4-dev; no unit records, no SYSTEMID messages and PARM without its
+    Default for 3.6): info reads it, fit finds the roll chirp (by its SYSTEMID run, or by
+    scanning where the log has none) and gives the plant's effectiveness and damping back in
+    SI units."""
     import contextlib
     import io
     import json
@@ -240,7 +242,9 @@ def test_firmware_matrix_gives_the_truth_back(layout: str, tmp_path) -> None:  #
     assert ("FMTU" in raw.messages) == (layout == "copter-4")
     assert summarize(raw)["firmware"].startswith(
         {"copter-4": "ArduCopter V4", "copter-3.3": "ArduCopter V3.3",
-         "copter-3.4-dev": "ArduCopter V3.4-dev"}[layout])
+         "copter-3.4-dev": "ArduCopter V3.4-dev", "copter-3.6": "ArduCopter V3.6"}[layout])
+    assert ("SIDD" in raw.messages) == (layout in ("copter-4", "copter-3.4-dev"))
+    assert ("Default" in raw["PARM"].fields) == (layout in ("copter-4", "copter-3.4-dev"))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         result = fit([str(path)])
@@ -257,10 +261,13 @@ def test_firmware_matrix_gives_the_truth_back(layout: str, tmp_path) -> None:  #
     assert {"copter-4": "p        [rad/s] <- RATE.R (deg/s, declared by the log)",
             "copter-3.3": "p        [rad/s] <- RATE.R (deg/s, the preset's unit: the log "
                           "declares none)",
+            "copter-3.6": "p        [rad/s] <- RATE.R (deg/s, the preset's unit: the log "
+                          "declares none)",
             "copter-3.4-dev": "p        [rad/s] <- RATE.R (centideg/s, inferred)"}[layout] in info
     line = format_result(result).splitlines()[1]
     assert {"copter-4": "p [rad/s] <- RATE.R (deg/s, declared by the log)",
             "copter-3.3": "p [rad/s] <- RATE.R (deg/s, the preset's unit: the log declares none)",
+            "copter-3.6": "p [rad/s] <- RATE.R (deg/s, the preset's unit: the log declares none)",
             "copter-3.4-dev": "p [rad/s] <- RATE.R (centideg/s, inferred)"}[layout] in line
     assert ("u_roll [1] <- RATE.ROut (/4500, inferred)" in line) == (layout == "copter-3.4-dev")
 

@@ -314,7 +314,11 @@ def _build(flight: Flight, lo: int, hi: int, shift_s: float, faults: Faults,
 
 
 #: Older ArduCopter layouts the writer can produce (``mavsid simulate --layout``).
-LAYOUTS = ("copter-4", "copter-3.3", "copter-3.4-dev")
+LAYOUTS = ("copter-4", "copter-3.6", "copter-3.3", "copter-3.4-dev")
+
+#: ArduCopter 3.5/3.6: the 4.x types and TimeUS, but no unit records (FMTU/UNIT/MULT), a
+#: PARM without the Default column and no SYSTEMID messages (SIDS/SIDD came with 4.1).
+_PARM_36 = _fmt(32, "PARM", "QNf", "TimeUS,Name,Value")
 
 #: ArduCopter 3.3: TimeMS (ms, uint32) instead of TimeUS; no FMTU/UNIT/MULT records; PARM,
 #: MODE and MSG without a time field; RCOU Ch1-Ch8; EV records; no SYSTEMID messages.
@@ -334,20 +338,26 @@ _OLD_33: dict[str, MessageFormat] = {
     )
 }
 _FIRMWARE = {"copter-3.3": "ArduCopter V3.3.3 (mavsid00)",
-             "copter-3.4-dev": "ArduCopter V3.4-dev (mavsid00)"}
+             "copter-3.4-dev": "ArduCopter V3.4-dev (mavsid00)",
+             "copter-3.6": "ArduCopter V3.6.12 (mavsid00)"}
 
 
 def _as_layout(data: DataFlashBuilder, header: DataFlashBuilder, layout: str) -> bytes:
     """The records of a 4.x-layout flight rewritten as an older firmware logged them.
 
     ``copter-3.3``: see ``_OLD_33`` (the ARM event is written before the first timed record,
-    as those logs do). ``copter-3.4-dev``: the 4.x types but no unit records, ``RATE`` rates
-    in centidegrees/s and ``ROut/POut/YOut`` on the ±4500 scale, as ArduCopter 3.4-dev wrote
-    them.
+    as those logs do). ``copter-3.6``: see ``_PARM_36``. ``copter-3.4-dev``: the 4.x types
+    but no unit records, ``RATE`` rates in centidegrees/s and ``ROut/POut/YOut`` on the ±4500
+    scale, as ArduCopter 3.4-dev wrote them.
     """
     by_id = {f.type_id: f.name for f in FORMATS.values()}
     out = DataFlashBuilder()
-    if layout == "copter-3.4-dev":
+    if layout == "copter-3.6":
+        out.formats = {**out.formats, "PARM": _PARM_36}
+        for name in ("FMT", *_DATA_TYPES):
+            if name not in ("SIDS", "SIDD"):
+                out.define(_PARM_36 if name == "PARM" else FORMATS[name])
+    elif layout == "copter-3.4-dev":
         for name in ("FMT", *_DATA_TYPES):
             out.define(FORMATS[name])
     else:
@@ -370,6 +380,15 @@ def _as_layout(data: DataFlashBuilder, header: DataFlashBuilder, layout: str) ->
             cols["Message"] = np.array([
                 _FIRMWARE[layout] if m.startswith(b"ArduCopter V") else m
                 for m in rec["Message"]])
+        if layout in ("copter-3.6", "copter-3.4-dev") and "TimeUS" in rec.dtype.names:
+            cols["TimeUS"] = rec["TimeUS"]  # (header records keep the time they were written)
+        if layout == "copter-3.6":
+            if name in ("SIDS", "SIDD"):
+                continue
+            if name == "PARM":
+                cols.pop("Default", None)
+            out.add(name, t, **cols)
+            continue
         if layout == "copter-3.4-dev":
             if name == "RATE":
                 for k in ("RDes", "R", "PDes", "P", "YDes", "Y"):

@@ -52,6 +52,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 from scipy.spatial.transform import Rotation
 
+from mavsid.channels import STATE_UNITS
 from mavsid.data import FlightData, Segment
 from mavsid.validation import AXIS_RATE, Validation, horizon_label
 
@@ -703,7 +704,9 @@ def log_validation(
             ("free_run", FREE_RUN, lambda s: s.free_run),
         ):
             path = f"axes/{axis}/{state}/{kind}"
-            _style(rec, path, colour, f"{state} {kind.replace('_', '-')}")
+            unit = STATE_UNITS.get(state)
+            _style(rec, path, colour, f"{state} {kind.replace('_', '-')}"
+                   + (f" [{unit}]" if unit else ""))
             t, y = _joined((s.time_s, pick(s)[:, j]) for s in v.segments)
             _send_series(rec, path, t, y)
     names = tuple(input_names) or v.input_names
@@ -811,7 +814,9 @@ def blueprint(
     for axis in axes:
         per_axis.append(
             rrb.Vertical(
-                _time_view(f"axes/{axis}", f"{axis}: measured / one-step / free-run",
+                _time_view(f"axes/{axis}", f"{axis}: {AXIS_RATE.get(axis, axis)} "
+                           f"[{STATE_UNITS.get(AXIS_RATE.get(axis, ''), '?')}] measured / "
+                           "one-step / free-run",
                            contents=["$origin/**", f"- axes/{axis}/inputs/**"]),
                 _time_view(f"axes/{axis}/inputs", f"{axis}: inputs [1]"),
                 row_shares=[2, 1],

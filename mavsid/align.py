@@ -71,8 +71,10 @@ from mavsid.channels import (
     Preset,
     choose_preset,
     evaluate,
+    frame_name,
     frame_of,
     get_preset,
+    has_mixer,
     mixer_for,
     motor_thrusts,
     preset_messages,
@@ -197,6 +199,16 @@ def _collect(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer]
         warnings.warn(
             f"{raw.source.path}: a {raw.vehicle}'s {preset.motors.message} outputs are not a "
             "multicopter's motors: no inputs (the mixer presets are for multicopters)",
+            DataQualityWarning,
+            stacklevel=4,
+        )
+    elif preset.motors is not None and preset.mixer == "auto" and not has_mixer(
+            raw.params, _motor_count(raw, preset)):
+        key, _ = frame_of(raw.params, _motor_count(raw, preset))
+        warnings.warn(
+            f"{raw.source.path}: FRAME_CLASS {key[0]} FRAME_TYPE {key[1]} "
+            f"({frame_name(key)}): no motor mixer for it here, {preset.motors.message} not "
+            "unmixed: no inputs (choose a preset with a mixer of your own for this frame)",
             DataQualityWarning,
             stacklevel=4,
         )

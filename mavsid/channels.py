@@ -108,8 +108,10 @@ __all__ = [
     "Preset",
     "choose_preset",
     "evaluate",
+    "frame_name",
     "frame_of",
     "get_preset",
+    "has_mixer",
     "load_presets",
     "mixer_for",
     "preset_messages",
@@ -548,6 +550,35 @@ def frame_of(params: Mapping[str, float], n_motors: int | None = None
     return (1, 1), "no frame parameters (FRAME_CLASS/FRAME_TYPE or FRAME): quad-X assumed"
 
 
+#: ArduPilot FRAME_CLASS names (for messages about frames without a mixer here)
+_FRAME_CLASSES = {1: "quad", 2: "hexa", 3: "octa", 4: "octaquad", 5: "Y6", 6: "heli",
+                  7: "tri", 8: "single copter", 9: "coax copter", 10: "bicopter",
+                  11: "dual heli", 12: "dodecahexa", 13: "heli quad", 14: "deca",
+                  15: "scripting matrix", 16: "6-DoF scripting", 17: "dynamic scripting"}
+
+
+def frame_name(key: tuple[int, int]) -> str:
+    """A frame class's name, e.g. ``heli`` for FRAME_CLASS 6.
+
+    >>> frame_name((6, 0)), frame_name((1, 3))
+    ('heli', 'quad, type 3')
+    """
+    cls = _FRAME_CLASSES.get(key[0], f"class {key[0]}")
+    return cls if key[0] not in _AP_FRAMES_CLASSES else f"{cls}, type {key[1]}"
+
+
+_AP_FRAMES_CLASSES = {c for c, _ in _AP_FRAMES}
+
+
+def has_mixer(params: Mapping[str, float], n_motors: int | None = None) -> bool:
+    """Whether the logged frame (:func:`frame_of`) has a motor mixer here.
+
+    >>> has_mixer({"FRAME_CLASS": 1, "FRAME_TYPE": 1}), has_mixer({"FRAME_CLASS": 6})
+    (True, False)
+    """
+    return frame_of(params, n_motors)[0] in _AP_FRAMES
+
+
 def mixer_for(preset: Preset, params: Mapping[str, float], mixers: Mapping[str, Mixer] = MIXERS,
               n_motors: int | None = None) -> Mixer:
     """The mixer a preset uses: its own, else from the frame parameters (:func:`frame_of`),
@@ -563,7 +594,11 @@ def mixer_for(preset: Preset, params: Mapping[str, float], mixers: Mapping[str, 
     name = preset.mixer
     if name == "auto":
         key, _ = frame_of(params, n_motors)
-        name = _AP_FRAMES.get(key, "quad-x")
+        if key not in _AP_FRAMES:
+            raise ConfigError(f"preset {preset.name!r}: no mixer for FRAME_CLASS {key[0]} "
+                              f"FRAME_TYPE {key[1]} ({frame_name(key)}); known frames: "
+                              + ", ".join(sorted(set(_AP_FRAMES.values()))))
+        name = _AP_FRAMES[key]
     try:
         return mixers[name]
     except KeyError:

@@ -112,6 +112,37 @@ def test_mixer_chosen_from_frame_params():
     assert mixer_for(p, {"FRAME_CLASS": 1, "FRAME_TYPE": 1}).name == "quad-x"
     assert mixer_for(p, {"FRAME_CLASS": 2, "FRAME_TYPE": 0}).name == "hexa-plus"
     assert mixer_for(p, {}).name == "quad-x"
+    # a frame without a mixer here (a heli's swash servos, a tricopter) is never unmixed as
+    # a quad: a typed error naming the frame
+    for params, name in (({"FRAME_CLASS": 6, "FRAME_TYPE": 0}, "heli"),
+                         ({"FRAME_CLASS": 7, "FRAME_TYPE": 0}, "tri"),
+                         ({"FRAME_CLASS": 1, "FRAME_TYPE": 3}, "quad, type 3")):
+        with pytest.raises(ConfigError, match=f"no mixer for FRAME_CLASS .*\\({name}\\)"):
+            mixer_for(p, params)
+
+
+def test_a_heli_log_without_rate_gets_no_quad_mixed_inputs(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """The motor-output preset on a frame with no mixer here: states, no inputs, a warning
+    naming the frame (it was unmixed as quad-X without a word)."""
+    import warnings
+
+    from mavsid.align import align
+    from mavsid.data import MessageTable, RawLog, SourceInfo
+    from mavsid.errors import DataQualityWarning
+
+    t = np.arange(0.0, 20.0, 0.01)
+    att = MessageTable("ATT", {"Roll": np.sin(t), "Pitch": np.cos(t), "Yaw": t * 0}, t)
+    imu = MessageTable("IMU", {"GyrX": np.cos(t), "GyrY": -np.sin(t), "GyrZ": t * 0}, t)
+    rcou = MessageTable("RCOU", {f"C{i}": 1500 + 100 * np.sin(t + i) for i in range(1, 9)}, t)
+    raw = RawLog(SourceInfo("heli.bin", "dataflash", 0), {"ATT": att, "IMU": imu, "RCOU": rcou},
+                 params={"FRAME_CLASS": 6.0, "FRAME_TYPE": 0.0}, autopilot="ardupilot",
+                 vehicle="copter")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        fd = align(raw, "ardupilot-rcou")
+    assert fd.input_names == ()
+    assert any(issubclass(w.category, DataQualityWarning) and "(heli)" in str(w.message)
+               and "not unmixed" in str(w.message) for w in caught)
 
 
 # --------------------------------------------------------------------------- choosing

@@ -105,6 +105,7 @@ class ControllerParams:
     spin_max: float = 0.95
     pwm_min: float = 1000.0
     pwm_max: float = 2000.0
+    thst_expo: float = 0.65
 
     def __post_init__(self) -> None:
         for name, value in asdict(self).items():
@@ -140,15 +141,26 @@ class ControllerParams:
         out["SCHED_LOOP_RATE"] = self.loop_hz
         out["MOT_SPIN_MIN"], out["MOT_SPIN_MAX"] = self.spin_min, self.spin_max
         out["MOT_PWM_MIN"], out["MOT_PWM_MAX"] = self.pwm_min, self.pwm_max
+        out["MOT_THST_EXPO"] = self.thst_expo
         return out
 
     def motor_pwm(self, motors: np.ndarray) -> np.ndarray:
-        """Motor demands (0-1) -> ESC pulse widths (µs, whole), via MOT_SPIN_* and MOT_PWM_*.
+        """Motor thrust demands (0-1) -> ESC pulse widths (µs, whole), as ArduPilot's motor
+        library outputs them: the thrust curve inverted (``MOT_THST_EXPO`` e: the actuator
+        ``a`` with ``(1 - e) a + e a² = thrust``), then ``MOT_SPIN_*`` and ``MOT_PWM_*``.
 
-        >>> ControllerParams().motor_pwm(np.array([0.0, 1.0])).tolist()
+        >>> c = ControllerParams()
+        >>> c.motor_pwm(np.array([0.0, 1.0])).tolist()
         [1150.0, 1950.0]
+        >>> a = (c.motor_pwm(np.array([0.5])) - 1150.0) / 800.0   # half the thrust
+        >>> bool(abs((1 - 0.65) * a[0] + 0.65 * a[0] ** 2 - 0.5) < 0.002)
+        True
         """
-        spin = self.spin_min + (self.spin_max - self.spin_min) * np.asarray(motors)
+        thrust = np.clip(np.asarray(motors, dtype=float), 0.0, 1.0)
+        e = self.thst_expo
+        actuator = thrust if e <= 0 else (
+            ((e - 1.0) + np.sqrt((1.0 - e) ** 2 + 4.0 * e * thrust)) / (2.0 * e))
+        spin = self.spin_min + (self.spin_max - self.spin_min) * actuator
         return np.round(self.pwm_min + (self.pwm_max - self.pwm_min) * spin)
 
 

@@ -97,11 +97,21 @@ def _add_extract(sub: argparse._SubParsersAction) -> None:
 
 
 def _extract(args: argparse.Namespace) -> int:
-    from mavsid.export import write
+    from pathlib import Path
+
+    from mavsid.export import SUFFIXES, write
     from mavsid.readers import read_log
 
     check_outputs([args.output], [args.log])
     names = [m.strip() for m in args.messages.split(",") if m.strip()] if args.messages else None
+    # what the output can hold, said before the log is read (and naming the output, not the
+    # temporary file it is written through)
+    suffix = Path(args.output).suffix.lower()
+    if suffix not in SUFFIXES:
+        raise ConfigError(f"{args.output}: output must end in {', '.join(SUFFIXES)}")
+    if suffix != ".npz" and not args.aligned and (names is None or len(names) != 1):
+        raise ConfigError(f"{args.output}: {suffix} holds exactly one message type; choose one "
+                          "with --messages, or write .npz")
     if args.aligned:
         from mavsid.align import flight_table, load_flight
         from mavsid.data import RawLog

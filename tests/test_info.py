@@ -11,6 +11,7 @@ import subprocess
 import sys
 import warnings
 from collections import Counter
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -149,6 +150,9 @@ def test_extract_errors_are_one_line_and_exit_1(small_ref, tmp_path, capsys):
         err = capsys.readouterr().err
         lines = [ln for ln in err.splitlines() if not ln.startswith("warning: ")]
         assert len(lines) == 1 and lines[0].startswith("mavsid: error: "), (argv, err)
+        # the file the user named, never the temporary one an output is written through
+        assert ".tmp." not in lines[0], lines[0]
+        assert any(Path(a).name in lines[0] for a in argv if "/" in a), lines[0]
 
 
 def test_bad_input_via_the_console(tmp_path):

@@ -229,7 +229,8 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
     - **residual whiteness**: Ljung–Box p-value of the one-step residual over 20 lags, and
       its lag-1 autocorrelation. Reported, not gated: the logged gyro is low-passed
       (``INS_GYRO_FILTER``), so even the true plant leaves a coloured one-step residual; a
-      small p-value says the σ are statistical only (optimistic);
+      small p-value says the σ cover the statistical error and the lag's grid resolution
+      but not other model-structure error;
     - **bounds**: a parameter held at a physical bound (``model.provenance["bounds_active"]``)
       caps the level at ``usable``;
     - **open-loop fit** on held-out data: free run ≥ 80 % ``good``; a free run that drifts
@@ -334,8 +335,9 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
         numbers["ljung_box_p"] = float(pval[j])
         numbers["residual_lag1_autocorr"] = r1
         if math.isfinite(float(pval[j])) and float(pval[j]) < 0.01:
-            good.append(f"residual not white (Ljung–Box p {float(pval[j]):.2g}): σ are "
-                        "statistical only, optimistic")
+            good.append(f"residual not white (Ljung–Box p {float(pval[j]):.2g}): σ hold "
+                        "the statistical error and the lag's grid resolution, not other "
+                        "model-structure error")
 
     # parameters held at bounds
     prov = dict(getattr(model, "provenance", {}) or {})

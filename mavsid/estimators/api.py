@@ -246,12 +246,13 @@ def identify_segments(
         return m, float(refined["cost"]), None
 
     model, cost, failed = fitted(structure)
-    if search and math.isfinite(cost) and len(choice.by_lag) > 1 \
-            and _one_step_noise(segments, outputs, choice.by_lag) > ONE_STEP_NOISE:
+    scored: dict[float, tuple[Model, float, SolverError | None]] = {lag: (model, cost, failed)}
+    by_oe = (search and math.isfinite(cost) and len(choice.by_lag) > 1
+             and _one_step_noise(segments, outputs, choice.by_lag) > ONE_STEP_NOISE)
+    if by_oe:
         # noisy: the lag by the free-run cost (see ONE_STEP_NOISE), the delay per lag by one
         # step
         floor = min(v[0] for v in choice.by_lag.values())
-        scored = {lag: (model, cost, failed)}
         for lg, (mse, d) in choice.by_lag.items():
             if lg != lag and mse <= floor * (1 + LAG_PRUNE):
                 scored[lg] = fitted(with_lag(base, lg, d))
@@ -266,16 +267,51 @@ def identify_segments(
         name = estimator if isinstance(estimator, str) else estimator.name
         warnings.warn(f"{', '.join(outputs)}: {failed}; keeping the {name} estimate",
                       DataQualityWarning, stacklevel=3)
+    neighbours: list[float] = []
+    if search and len(choice.by_lag) > 1 and failed is None:
+        # the lag is resolved only to its grid: the coefficients' spread between the
+        # neighbouring lags (each with its best delay) joins their covariance
+        lags = sorted(choice.by_lag)
+        i = lags.index(lag)
+        neighbours = [lags[j] for j in (i - 1, i + 1) if 0 <= j < len(lags)]
+        for lg in neighbours:
+            if lg not in scored:
+                scored[lg] = fitted(with_lag(base, lg, choice.by_lag[lg][1]))
+        model = _with_structure_spread(model, [scored[lg][0] for lg in neighbours
+                                               if scored[lg][2] is None])
     prov = dict(model.provenance)
     if scan is not None:
         prov["structure_scan"] = scan
-        prov["lag_chosen_by"] = ("output error" if search and len(choice.by_lag) > 1
-                                 and _one_step_noise(segments, outputs, choice.by_lag)
-                                 > ONE_STEP_NOISE and math.isfinite(cost) else "one step")
+        prov["lag_chosen_by"] = "output error" if by_oe else "one step"
+        prov["stderr_includes"] = ("statistical; the lag's grid resolution (the spread to "
+                                   f"lags {', '.join(f'{x:g}' for x in neighbours)} s)"
+                                   if neighbours else "statistical")
     prov["filters"] = [f.to_dict() for f in structure.filters]
     prov["lag_s"] = lag
     prov["delay_s"] = dly * dt
     return replace(model, provenance=prov)
+
+
+def _with_structure_spread(model: Model, others: Sequence[Model]) -> Model:
+    """``model`` with the spread of its coefficients to ``others`` (the neighbouring lags'
+    fits) added to its covariance: half the difference between two neighbours, or the
+    difference to one, per output as a rank-one term; standard errors follow."""
+    if model.covariance is None or not others:
+        return model
+    diffs = [np.asarray(o.coef, float) - np.asarray(model.coef, float) for o in others
+             if np.shape(o.coef) == np.shape(model.coef)]
+    if not diffs:
+        return model
+    d = (diffs[1] - diffs[0]) / 2.0 if len(diffs) == 2 else diffs[0]
+    d = np.where(model.coef != 0, np.nan_to_num(d), 0.0)
+    cov = np.array(model.covariance, dtype=float, copy=True)
+    for i in range(cov.shape[0]):
+        cov[i] = cov[i] + np.outer(d[:, i], d[:, i])
+    se = model.coef_stderr
+    if se is not None:
+        var = np.stack([np.diag(c) for c in cov], axis=1)
+        se = np.where(np.isfinite(se), np.sqrt(np.clip(var, 0.0, None)), se)
+    return replace(model, covariance=cov, coef_stderr=se)
 
 
 def _one_step_noise(segments: Sequence[Segment], outputs: Sequence[str],

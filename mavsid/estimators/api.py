@@ -33,6 +33,7 @@ mavsid.errors.NoExcitationError: B_d[x,u] unidentifiable: u is zero in the selec
 
 from __future__ import annotations
 
+import copy
 import itertools
 import math
 import warnings
@@ -229,8 +230,9 @@ def identify_segments(
     def fitted(st: Structure) -> tuple[Model, float, SolverError | None]:
         """The estimator's model of ``st``, refined by output error when asked (with the
         refinement's cost; inf and the error when it failed)."""
+        # (an Estimator instance is copied: the caller's holds the chosen structure's fit)
         est = (make_estimator(estimator, st, **dict(estimator_options or {}))
-               if isinstance(estimator, str) else estimator)
+               if isinstance(estimator, str) else copy.copy(estimator))
         est.fit(segments, st)
         m = est.model_
         if var_units:
@@ -279,6 +281,8 @@ def identify_segments(
                 scored[lg] = fitted(with_lag(base, lg, choice.by_lag[lg][1]))
         model = _with_structure_spread(model, [scored[lg][0] for lg in neighbours
                                                if scored[lg][2] is None])
+    if not isinstance(estimator, str):
+        estimator.fit(segments, structure)
     prov = dict(model.provenance)
     if scan is not None:
         prov["structure_scan"] = scan

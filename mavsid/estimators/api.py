@@ -227,12 +227,16 @@ def identify_segments(
     if not isinstance(estimator, str) and estimator_options:
         raise ConfigError("estimator settings go into the Estimator instance, not identify")
 
-    def fitted(st: Structure) -> tuple[Model, float, SolverError | None]:
+    def fitted(st: Structure, cheap: bool = False) -> tuple[Model, float, SolverError | None]:
         """The estimator's model of ``st``, refined by output error when asked (with the
-        refinement's cost; inf and the error when it failed)."""
+        refinement's cost; inf and the error when it failed). ``cheap``: without the
+        bootstrap and with the plain covariance (the same coefficients and cost, for
+        comparing candidates)."""
         # (an Estimator instance is copied: the caller's holds the chosen structure's fit)
         est = (make_estimator(estimator, st, **dict(estimator_options or {}))
                if isinstance(estimator, str) else copy.copy(estimator))
+        if cheap and hasattr(est, "n_bootstrap"):
+            est.n_bootstrap = 0
         est.fit(segments, st)
         m = est.model_
         if var_units:
@@ -240,12 +244,13 @@ def identify_segments(
         if not (refine == "oe" or (refine == "auto" and m.is_affine)):
             return m, math.nan, None
         constraints = est._constraints(st) if hasattr(est, "_constraints") else None
-        try:
-            m = refine_output_error(m, segments, covariance=oe_covariance, bounds=constraints)
+        try:  # (a cheap fit's covariance is not used: the plain one costs least)
+            m = refine_output_error(m, segments, covariance="plain" if cheap else oe_covariance,
+                                    bounds=constraints)
         except SolverError as exc:
             return m, math.inf, exc
-        refined: Any = dict(m.provenance)["refine"]
-        return m, float(refined["cost"]), None
+        refinement: Any = dict(m.provenance)["refine"]
+        return m, float(refinement["cost"]), None
 
     model, cost, failed = fitted(structure)
     scored: dict[float, tuple[Model, float, SolverError | None]] = {lag: (model, cost, failed)}
@@ -257,12 +262,13 @@ def identify_segments(
         floor = min(v[0] for v in choice.by_lag.values())
         for lg, (mse, d) in choice.by_lag.items():
             if lg != lag and mse <= floor * (1 + LAG_PRUNE):
-                scored[lg] = fitted(with_lag(base, lg, d))
+                scored[lg] = fitted(with_lag(base, lg, d), cheap=True)
         lowest = min(c for _, c, _ in scored.values())
-        lag = min(lg for lg, (_, c, _) in scored.items() if c <= lowest * (1 + LAG_OE_TOL))
-        model, cost, failed = scored[lag]
-        dly = choice.by_lag[lag][1]
-        structure = with_lag(base, lag, dly)
+        chosen = min(lg for lg, (_, c, _) in scored.items() if c <= lowest * (1 + LAG_OE_TOL))
+        if chosen != lag:  # the chosen candidate fitted again with its bootstrap
+            lag, dly = chosen, choice.by_lag[chosen][1]
+            structure = with_lag(base, lag, dly)
+            model, cost, failed = scored[lag] = fitted(structure)
     if failed is not None:
         if refine == "oe":
             raise failed
@@ -276,9 +282,9 @@ def identify_segments(
         lags = sorted(choice.by_lag)
         i = lags.index(lag)
         neighbours = [lags[j] for j in (i - 1, i + 1) if 0 <= j < len(lags)]
-        for lg in neighbours:
+        for lg in neighbours:  # (each refined as the chosen one is: the same kind of fit)
             if lg not in scored:
-                scored[lg] = fitted(with_lag(base, lg, choice.by_lag[lg][1]))
+                scored[lg] = fitted(with_lag(base, lg, choice.by_lag[lg][1]), cheap=True)
         model = _with_structure_spread(model, [scored[lg][0] for lg in neighbours
                                                if scored[lg][2] is None])
     if not isinstance(estimator, str):
@@ -302,8 +308,8 @@ def _with_structure_spread(model: Model, others: Sequence[Model]) -> Model:
     difference to one, per output as a rank-one term; standard errors follow."""
     if model.covariance is None or not others:
         return model
-    diffs = [np.asarray(o.coef, float) - np.asarray(model.coef, float) for o in others
-             if np.shape(o.coef) == np.shape(model.coef)]
+    ref = np.asarray(model.coef, float)
+    diffs = [np.asarray(o.coef, float) - ref for o in others if np.shape(o.coef) == ref.shape]
     if not diffs:
         return model
     d = (diffs[1] - diffs[0]) / 2.0 if len(diffs) == 2 else diffs[0]

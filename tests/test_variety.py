@@ -232,3 +232,21 @@ def test_noisy_gyros_get_their_motor_lag_and_a_good_verdict(name: str, axis: str
     assert abs(float(prov["lag_s"]) - truth["motor_tau_s"]) <= 0.0105
     assert f.verdict is not None and f.verdict.level == "good"
     assert f.validation.fit_summary(f.output)["free_run"] > 80.0
+
+
+def test_a_25_hz_log_gives_a_usable_model_and_says_what_it_misses(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """25 Hz (4+ samples per period of a 5 Hz loop): the slow dynamics are there to fit, so
+    a model with the cap said, not a refusal; 10 Hz stays refused (the test above)."""
+    from mavsid.synthetic.run import scenario_from_options, simulate
+
+    path = tmp_path / "r25.bin"
+    simulate(scenario_from_options(sid_axes=(10,), rate_hz=25.0, gyro_noise_dps=2.0, seed=24),
+             [path])
+    truth = json.loads(path.with_name("r25.truth.json").read_text())["axes"]["roll"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = fit([str(path)], PipelineConfig(axes=("roll",)))
+    f = result.axes["roll"]
+    assert f.verdict is not None and f.verdict.level == "usable"
+    assert any("logged at 25 Hz: only the slow part" in r for r in f.verdict.reasons)
+    assert f.model.params["B[p,u_roll]"] == pytest.approx(truth["effectiveness"], rel=0.10)

@@ -208,13 +208,14 @@ def decimate(v: np.ndarray, max_points: int, keep: np.ndarray | None = None) -> 
 
 
 def log_flight(rec: rr.RecordingStream, flight: FlightData, prefix: str = "flight",
-               keep_spans: Iterable[tuple[float, float]] = ()) -> None:
+               keep_spans: Iterable[tuple[float, float]] = (), tag: str = "") -> None:
     """Every state and input of ``flight`` as time series, grouped by kind (``KINDS``: one
     plot each, one colour per series, names with units), and its attitude in 3-D.
 
     A long flight is decimated (:func:`decimate`) to about :data:`MAX_FLIGHT_POINTS` samples
     per series, its envelope kept, except inside ``keep_spans`` (the segments, seconds),
-    which keep every sample."""
+    which keep every sample. ``tag`` (one flight of several) goes into every entity path
+    and series name, so that flights whose clocks overlap stay apart."""
     t = flight.time_s
     blocks = flight.blocks if len(flight.blocks) else np.array([[0, len(t)]])
     keep = np.zeros(len(t), bool)
@@ -224,8 +225,9 @@ def log_flight(rec: rr.RecordingStream, flight: FlightData, prefix: str = "fligh
     for names, data, units in ((flight.state_names, flight.states, flight.state_units),
                                (flight.input_names, flight.inputs, flight.input_units)):
         for j, name in enumerate(names):
-            path = f"{prefix}/{_kind(name)}/{name}"
-            _style(rec, path, SERIES_COLOURS.get(name, INPUT), f"{name} [{units[j]}]")
+            path = f"{prefix}/{_kind(name)}/{name}" + (f"/{tag}" if tag else "")
+            _style(rec, path, SERIES_COLOURS.get(name, INPUT),
+                   f"{name} [{units[j]}]" + (f" {tag}" if tag else ""))
             parts = []
             for a, b in blocks:
                 i = a + decimate(data[a:b, j], max(100, int(budget * (b - a))), keep[a:b])
@@ -234,7 +236,8 @@ def log_flight(rec: rr.RecordingStream, flight: FlightData, prefix: str = "fligh
             _send_series(rec, path, tt, vv)
     if all(n in flight.state_names for n in ("roll", "pitch", "yaw")):
         idx = [flight.state_names.index(n) for n in ("roll", "pitch", "yaw")]
-        log_attitude(rec, "world/data", t, flight.states[:, idx], colour=MEASURED)
+        log_attitude(rec, "world/data" + (f"/{tag}" if tag else ""), t, flight.states[:, idx],
+                     colour=MEASURED)
 
 
 def _quaternions(euler: np.ndarray) -> np.ndarray:
@@ -420,6 +423,7 @@ def log_bands(
     flight: FlightData,
     segments: Mapping[str, tuple[Sequence[Segment], Sequence[Segment]]] = {},
     windows: Mapping[str, Sequence[WindowReport]] = {},
+    tag: str = "",
 ) -> None:
     """Flight modes, airborne time, and per axis the training, validation and rejected
     windows as bands on one time plot (``bands/...``), its time axis linked to every other
@@ -431,6 +435,7 @@ def log_bands(
     t = flight.time_s
     if len(t) == 0:
         return
+    sub = f"/{tag}" if tag else ""  # one flight of several: its own entities
     names = dict(flight.meta.get("mode_names", {}) or {})  # type: ignore[call-overload]
     mode = flight.flags.get("mode")
     if mode is not None and len(mode) == len(t):
@@ -439,26 +444,27 @@ def log_bands(
                 continue
             # a log's own text: the viewer's font has Latin glyphs only (others panic it)
             label = str(names.get(m) or m).encode("ascii", "replace").decode()
-            _band(rec, f"bands/mode/{m}", spans, BAND_LEVELS["mode"], _mode_colour(m),
+            _band(rec, f"bands/mode/{m}{sub}", spans, BAND_LEVELS["mode"], _mode_colour(m),
                   f"mode {label}")
     air = flight.flags.get("airborne")
     if air is not None and len(air) == len(t):
         spans = _runs(t, np.asarray(air, dtype=np.int64)).get(1, [])
-        _band(rec, "bands/airborne", spans, BAND_LEVELS["airborne"], MEASURED, "airborne")
+        _band(rec, f"bands/airborne{sub}", spans, BAND_LEVELS["airborne"], MEASURED, "airborne")
     for axis in dict.fromkeys([*segments, *windows]):
         level = BAND_LEVELS.get(axis, -1.0)
         colour = AXIS_COLOURS.get(axis, FREE_RUN)
         train, held_out = segments.get(axis, ((), ()))
         dim = tuple(int(c * 0.55) for c in colour)
-        _band(rec, f"bands/{axis}/train", [(s.start_s, s.stop_s) for s in train],
+        _band(rec, f"bands/{axis}/train{sub}", [(s.start_s, s.stop_s) for s in train],
               level, dim, f"{axis} training")
-        _band(rec, f"bands/{axis}/validation", [(s.start_s, s.stop_s) for s in held_out],
+        _band(rec, f"bands/{axis}/validation{sub}", [(s.start_s, s.stop_s) for s in held_out],
               level, colour, f"{axis} validation")
         reports = windows.get(axis, ())
         if not train and not held_out:
-            _band(rec, f"bands/{axis}/kept", [(w.start_s, w.stop_s) for w in reports if w.kept],
+            _band(rec, f"bands/{axis}/kept{sub}",
+                  [(w.start_s, w.stop_s) for w in reports if w.kept],
                   level, colour, f"{axis} kept window")
-        _band(rec, f"bands/{axis}/rejected",
+        _band(rec, f"bands/{axis}/rejected{sub}",
               [(w.start_s, w.stop_s) for w in reports if not w.kept],
               level - 0.3, REJECTED, f"{axis} rejected window")
 
@@ -882,6 +888,18 @@ def log_flight_windows(
         log_segments(rec, axis, (), (), reports)
 
 
+def _flight_tag(fd: FlightData, flights: Sequence[FlightData]) -> str:
+    """"" for a single flight; else the log's file stem (ASCII, with its index when two share
+    one): the name its entities and series carry."""
+    if len(flights) < 2:
+        return ""
+    i = next(k for k, f in enumerate(flights) if f is fd)
+    stem = os.path.splitext(os.path.basename(fd.source.path))[0]
+    stem = "_".join(filter(None, re.split(r"[^A-Za-z0-9_.-]+", stem))) or "log"
+    stems = [os.path.splitext(os.path.basename(f.source.path))[0] for f in flights]
+    return stem if stems.count(stems[i]) == 1 else f"{stem}_{i}"
+
+
 def log_fit_result(rec: rr.RecordingStream, result: FitResult, *, flight: bool = True) -> None:
     """Everything of a pipeline result into ``rec``."""
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_DOWN, static=True)
@@ -893,9 +911,12 @@ def log_fit_result(rec: rr.RecordingStream, result: FitResult, *, flight: bool =
                 return [s for s in segs if one or s.log == fd.source.path]
 
             mine = {f.axis: (ours(f.train), ours(f.held_out)) for f in fits}
+            tag = _flight_tag(fd, result.flights)
             log_flight(rec, fd, keep_spans=[(s.start_s, s.stop_s) for tr, ho in mine.values()
-                                            for s in (*tr, *ho)])
-            log_bands(rec, fd, mine, {f.axis: f.windows for f in fits})
+                                            for s in (*tr, *ho)], tag=tag)
+            # (a window does not say which log it came from: several logs, no window bands)
+            log_bands(rec, fd, mine, {} if tag else {f.axis: f.windows for f in fits},
+                      tag=tag)
     for fit in fits:
         log_segments(rec, fit.axis, fit.train, fit.held_out, fit.windows)
         log_validation(rec, fit.axis, fit.validation, fit.held_out)

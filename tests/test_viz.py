@@ -287,3 +287,27 @@ def test_a_long_flight_is_decimated_outside_the_segments(toy, tmp_path, monkeypa
         # nothing invented, and the extremes survive
         assert set(np.round(got, 12)) <= set(np.round(want, 12))
         assert got.max() == np.nanmax(want) and got.min() == np.nanmin(want)
+
+
+def test_several_flights_keep_their_own_series(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """Two logs fitted together: each flight's series and bands are entities of their own
+    (named after the log), not one series interleaving two clocks."""
+    import warnings
+
+    from helpers import FIXTURES
+
+    from mavsid.pipeline import PipelineConfig, fit
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = fit([str(FIXTURES / "sysid_roll.bin"), str(FIXTURES / "doublets.bin")],
+                     PipelineConfig(axes=("roll",)))
+    path = tmp_path / "two.rrd"
+    viz.save_rrd(result, path)
+    data, _ = _read(path)
+    for fd, stem in zip(result.flights, ("sysid_roll", "doublets"), strict=True):
+        t, got = _series(data, f"/flight/rates/p/{stem}")
+        ok = np.isfinite(got)
+        assert set(np.round(t[ok], 6)) <= set(np.round(fd.time_s, 6))
+        assert f"/bands/roll/validation/{stem}" in data or f"/bands/roll/train/{stem}" in data
+    assert "/flight/rates/p" not in data

@@ -383,6 +383,21 @@ def test_garbage_between_records_loses_no_intact_record(small_log, data):
     assert log.source.skipped_bytes == full.source.skipped_bytes + sum(map(len, junk))
 
 
+def test_an_fmt_record_with_garbage_on_both_sides_is_kept(small_log):
+    """Found by the test above: a header pair just before an FMT record (its own first bytes
+    then look like a defined type's header) and one junk byte after it left the FMT record
+    no chain; an FMT whose content checks out is never swallowed."""
+    raw, full, offsets, tmp = small_log
+    assert 267 in offsets and 356 in offsets
+    path = tmp / "fmt_between_junk.bin"
+    path.write_bytes(raw[:267] + b"\xa3\x95" + raw[267:356] + b"\x00" + raw[356:])
+    log = _decode_quietly(path)
+    assert log is not None
+    assert {n: len(t) for n, t in log.messages.items()} == {
+        n: len(t) for n, t in full.messages.items()}
+    assert log.source.skipped_bytes == full.source.skipped_bytes + 3
+
+
 def test_a_partial_record_inserted_as_garbage_does_not_swallow_the_next(small_log):
     raw, full, offsets, tmp = small_log
     k = offsets[len(offsets) // 2]

@@ -660,10 +660,14 @@ def _frame(a: np.ndarray, cand: np.ndarray, types: np.ndarray, table: _Definitio
     weak = weak[~_near(weak, _NEAR, np.ones(m, bool),
                        lambda k, nb: cand[nb] < end[weak[k : k + nb.shape[0]], None])]
     node[weak] = True
-    node[np.searchsorted(cand, np.array(table.plausible, cand.dtype))] = True
-    # a record with backward evidence only must not swallow one with forward evidence
+    plausible = np.zeros(m, bool)
+    plausible[np.searchsorted(cand, np.array(table.plausible, cand.dtype))] = True
+    node |= plausible
+    # a record with backward evidence only must not swallow one with forward evidence, nor
+    # an FMT record whose content checks out (garbage on both sides of it leaves it no chain,
+    # and its own header bytes can look like a defined type's header just before it)
     back_only = np.flatnonzero(node & ~fwd)
-    swallows = _near(back_only, _NEAR, fwd,
+    swallows = _near(back_only, _NEAR, fwd | plausible,
                      lambda k, nb: cand[nb] < end[back_only[k : k + nb.shape[0]], None])
     node[back_only[swallows]] = False
     del fwd, complete, backed

@@ -387,18 +387,23 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
             caps.append(f"closed-loop twin {_pct(cl_fit)} does not beat the baseline "
                         f"{_pct(cl_base)}")
 
+    usable: list[str] = []
+    if math.isfinite(one) and one >= USABLE_SHORT_PCT:
+        usable.append("one-step prediction")
+    if not drift and free >= GOOD_FREE_RUN_PCT:
+        usable.append("open-loop simulation")
+    elif math.isfinite(short) and short >= USABLE_SHORT_PCT:
+        usable.append("short-horizon prediction")
+    if closed_ok:
+        usable.append("closed-loop simulation")
+    if caps and not usable and not bad:  # nothing it could be used for: no model
+        bad.append(f"on held-out data one step {_pct(one)}, 0.5 s ahead {_pct(short)}, free "
+                   f"run {_pct(free)}: too poor for any use")
     if bad:
         said = [c for c in caps if c.startswith(("bounded fit", "closed-loop twin"))]
         return Verdict(axis, "not identified", tuple(bad + said + notes), (), numbers,
                        tuple(dict.fromkeys(advice)))
     if caps:
-        usable = ["one-step prediction"]
-        if not drift and free >= GOOD_FREE_RUN_PCT:
-            usable.append("open-loop simulation")
-        elif math.isfinite(short) and short >= USABLE_SHORT_PCT:
-            usable.append("short-horizon prediction")
-        if closed_ok:
-            usable.append("closed-loop simulation")
         return Verdict(axis, "usable", tuple(caps + good + notes), tuple(usable), numbers,
                        tuple(dict.fromkeys(advice)))
     return Verdict(axis, "good", tuple(good + notes), (), numbers, tuple(dict.fromkeys(advice)))

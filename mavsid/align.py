@@ -195,6 +195,7 @@ def _collect(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer]
     inputs: list[_Series] = []
     mixer_name = None
     kind = (raw.vehicle or "").split()[0].lower() if (raw.vehicle or "").strip() else ""
+    n_motors = _motor_count(raw, preset)
     if preset.motors is not None and kind in _NOT_MULTICOPTER:
         warnings.warn(
             f"{raw.source.path}: a {raw.vehicle}'s {preset.motors.message} outputs are not a "
@@ -203,8 +204,8 @@ def _collect(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer]
             stacklevel=4,
         )
     elif preset.motors is not None and preset.mixer == "auto" and not has_mixer(
-            raw.params, _motor_count(raw, preset)):
-        key, _ = frame_of(raw.params, _motor_count(raw, preset))
+            raw.params, n_motors):
+        key, _ = frame_of(raw.params, n_motors)
         warnings.warn(
             f"{raw.source.path}: FRAME_CLASS {key[0]} FRAME_TYPE {key[1]} "
             f"({frame_name(key)}): no motor mixer for it here, {preset.motors.message} not "
@@ -213,7 +214,6 @@ def _collect(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer]
             stacklevel=4,
         )
     elif preset.motors is not None:
-        n_motors = _motor_count(raw, preset)
         mixer = mixer_for(preset, raw.params, {**MIXERS, **mixers}, n_motors)
         mixer_name = mixer.name
         _, frame_source = frame_of(raw.params, n_motors)

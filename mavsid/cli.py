@@ -465,8 +465,8 @@ def _view(args: argparse.Namespace) -> int:
             sink["save"] = stack.enter_context(atomic_path(save))
         if args.model:
             result = validate_logs(load_models(args.model), [args.log], cfg)
-            focus = viz.focus_span({a: (f.train, f.held_out) for a, f in result.axes.items()})
-            served = viz.open_sink(rec, viz.blueprint(list(result.axes), focus=focus), **sink)
+            served = viz.open_sink(
+                rec, viz.blueprint(list(result.axes), focus=viz.result_focus(result)), **sink)
             viz.log_fit_result(rec, result)
         else:
             flight, windows = find_windows(args.log, cfg)

@@ -35,11 +35,10 @@ import numpy as np
 from mavsid.channels import source_text
 from mavsid.data import MessageTable, RawLog
 from mavsid.errors import escape
+from mavsid.readers.dataflash import INSTANCE_COLUMNS
 
 __all__ = ["EVENT_TYPES", "format_summary", "median_rate_hz", "read_for_summary", "summarize"]
 
-#: the columns that tell instances apart, as the DataFlash reader's ``times_only`` keeps them
-_INSTANCE_FIELDS = ("I", "Instance", "C", "Id")
 
 
 def _num(x: float | None, digits: int | None = None) -> float | None:
@@ -54,7 +53,7 @@ def _instance_column(table: MessageTable) -> str | None:
     for name in table.fields:
         if table.unit(name) == "instance":
             return name
-    return next((n for n in _INSTANCE_FIELDS if n in table and table[n].ndim == 1
+    return next((n for n in INSTANCE_COLUMNS if n in table and table[n].ndim == 1
                  and table[n].dtype.kind in "iu"), None)
 
 

@@ -636,15 +636,19 @@ def fit(
     for axis in cfg.axes:
         stages = iter(FIT_STAGES)
 
-        def next_stage(axis: str = axis, stages: Any = stages) -> None:
-            step(f"{axis}: {next(stages)}")
+        def next_stage(axis: str = axis, stages: Any = stages, rest: bool = False) -> None:
+            """Report the next stage (``rest``: all those left, skipped: the count stays
+            whole)."""
+            for name in stages:
+                step(f"{axis}: {name}")
+                if not rest:
+                    return
 
         next_stage()
         windows, segs = _axis_segments(flights, axis, cfg)
         missing = _missing_rate(axis, flights)
         if missing:
-            for name in stages:  # the skipped stages, so that the count stays whole
-                step(f"{axis}: {name}")
+            next_stage(rest=True)
             verdicts[axis] = unfitted(axis, missing, windows, flights,
                                       [os.fspath(p) for p in logs])
             continue
@@ -655,8 +659,7 @@ def fit(
             next_stage()
             val = _validate(model, held_out, cfg)
         except NoExcitationError as exc:
-            for name in stages:  # the skipped stages, so that the count stays whole
-                step(f"{axis}: {name}")
+            next_stage(rest=True)
             verdicts[axis] = unfitted(axis, str(exc), windows, flights,
                                       [os.fspath(p) for p in logs])
             continue

@@ -80,6 +80,7 @@ __all__ = [
     "log_validation",
     "new_recording",
     "open_sink",
+    "result_focus",
     "save_rrd",
     "save_trends_rrd",
     "serve_command",
@@ -467,6 +468,11 @@ def log_bands(
         _band(rec, f"bands/{axis}/rejected{sub}",
               [(w.start_s, w.stop_s) for w in reports if not w.kept],
               level - 0.3, REJECTED, f"{axis} rejected window")
+
+
+def result_focus(result: FitResult) -> tuple[float, float] | None:
+    """:func:`focus_span` of a fit's segments."""
+    return focus_span({a: (f.train, f.held_out) for a, f in result.axes.items()})
 
 
 def focus_span(
@@ -997,8 +1003,7 @@ def save_rrd(
     result: FitResult, path: str | os.PathLike[str], *, flight: bool = True
 ) -> rrb.Blueprint:
     """Write ``result`` with its blueprint to an ``.rrd`` file; returns the blueprint."""
-    bp = blueprint(list(result.axes), with_flight=flight,
-                   focus=focus_span({a: (f.train, f.held_out) for a, f in result.axes.items()}))
+    bp = blueprint(list(result.axes), with_flight=flight, focus=result_focus(result))
     rec = new_recording()
     rec.save(os.fspath(path), default_blueprint=bp)
     log_fit_result(rec, result, flight=flight)

@@ -131,9 +131,9 @@ _PLAIN = frozenset(c for c, spec in FORMAT_CHARS.items()
 
 # always decoded: parameters, texts, modes, units, firmware
 _META_NAMES = frozenset({"FMTU", "UNIT", "MULT", "PARM", "MSG", "MODE", "VER"})
-#: columns that tell a message's instances apart (decoded with the times by ``times_only``,
-#: as are all one-byte integer columns)
-INSTANCE_COLUMNS = frozenset({"I", "Instance", "C", "Id"})
+#: columns that tell a message's instances apart, by name (decoded with the times by
+#: ``times_only``, as are all one-byte integer columns; ``mavsid info`` groups rates by them)
+INSTANCE_COLUMNS = ("I", "Instance", "C", "Id")
 _FORMAT_ONLY = frozenset({"FMT", "FMTU", "UNIT", "MULT"})
 
 

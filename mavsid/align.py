@@ -238,6 +238,7 @@ def _collect(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer]
     else:
         inputs = _channel_series(raw, preset, INPUT_NAMES, preset.inputs, need_samples=False)
     states, inputs = _checked_scales(raw, states, inputs)
+    states = [_possible(raw, s) for s in states]
     return states, inputs, mixer_name
 
 
@@ -410,9 +411,10 @@ def time_outliers(t: np.ndarray, half: int = _OUTLIER_HALF,
 
 def _screen(raw: RawLog, ch: Channel, name: str, t: np.ndarray, v: np.ndarray
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[tuple[str, int], ...]]:
-    """A channel's samples without the mistimed and the physically impossible ones; the times
-    where samples are missing (the non-finite ones :func:`evaluate` dropped, the impossible
-    ones, and, for mistimed ones, the neighbour's) and the counts of each kind."""
+    """A channel's samples without the mistimed ones; the times where samples are missing
+    (the non-finite ones :func:`evaluate` dropped and, for mistimed ones, the neighbour's) and
+    the counts of each kind. (Physically impossible values are screened once the units are
+    settled: :func:`_possible`.)"""
     table = raw[ch.message]
     t_all = np.asarray(table.time_s, dtype=np.float64)
     rows = _rows(table, ch.instance)
@@ -424,18 +426,35 @@ def _screen(raw: RawLog, ch: Channel, name: str, t: np.ndarray, v: np.ndarray
     if t_all.size > t.size:  # non-finite values evaluate() left out
         excluded.append(("non-finite", int(t_all.size - t.size)))
         bad.append(t_all[~np.isin(t_all, t)])
-    lo, hi = _STATE_LIMITS.get(name, (-np.inf, np.inf))
-    wrong = (v < lo) | (v > hi)
-    if wrong.any():
-        excluded.append((f"outside {lo:.4g}..{hi:.4g}", int(wrong.sum())))
-        bad.append(t[wrong])
-        t, v = t[~wrong], v[~wrong]
     late, late_t = _mistimed(t)
     if late.any():
         excluded.append(("mistimed", int(late.sum())))
         bad.append(late_t)
         t, v = t[~late], v[~late]
     return t, v, np.concatenate(bad), tuple(excluded)
+
+
+def _possible(raw: RawLog, s: _Series) -> _Series:
+    """``s`` without the samples outside its state's physical range (:data:`_STATE_LIMITS`,
+    SI units: judged after every unit decision, so a rate logged in centidegrees/s is
+    checked once scaled), their times marked missing and counted.
+
+    Raises
+    ------
+    NoExcitationError
+        Fewer than two samples are possible.
+    """
+    lo, hi = _STATE_LIMITS.get(s.name, (-np.inf, np.inf))
+    wrong = (s.v < lo) | (s.v > hi)
+    if not wrong.any():
+        return s
+    if s.v.size - int(wrong.sum()) < 2:
+        raise NoExcitationError(
+            f"{raw.source.path}: {s.source}: {int(wrong.sum())} of {s.v.size} samples outside "
+            f"the physically possible {lo:.4g}..{hi:.4g} ({s.name}, SI units): nothing to fit")
+    return replace(s, t=s.t[~wrong], v=s.v[~wrong],
+                   bad_t=np.sort(np.concatenate([s.bad_t, s.t[wrong]])),
+                   excluded=(*s.excluded, (f"outside {lo:.4g}..{hi:.4g}", int(wrong.sum()))))
 
 
 def _mistimed(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -991,8 +991,9 @@ def baseline_fit(
     from mavsid.validation import _fit_sums
 
     def shifted(x: np.ndarray, d: int) -> np.ndarray:
-        out = np.full(x.shape, np.nan)
-        out[d:] = x[: len(x) - d] if d else x
+        out = np.full(x.shape, np.nan)  # (a block shorter than the delay: all unknown)
+        if d < len(x):
+            out[d:] = x[: len(x) - d]
         return out
 
     longest = max((len(t) for t, _ in (*train, *held_out)), default=0)

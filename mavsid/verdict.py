@@ -43,8 +43,16 @@ USABLE_SHORT_PCT = 50.0
 #: it; slower than 4x the upper end only its low-frequency part (measured on simulated noisy
 #: SYSTEMID chirps and doublets at 25 Hz: effectiveness -3.6 / -5.8 %, free run 72 / 84 %).
 RATE_LOOP_BANDWIDTH_HZ = (5.0, 15.0)
-#: Training samples per fitted parameter below which the estimate is called thin.
+#: Training samples per fitted parameter below which the estimate is called thin (at best
+#: ``usable``), and below which it is not an estimate at all (``not identified``). Samples
+#: are not information: 5 s of a 25 Hz log hold as much of a 5-15 Hz loop as of a 400 Hz
+#: one, so whether the parameters are determined is judged by their σ
+#: (:data:`MAX_EFFECTIVENESS_REL_SE`), the count only where it is too small for any σ.
 MIN_SAMPLES_PER_PARAM = 200
+REFUSE_SAMPLES_PER_PARAM = 10
+#: A control effectiveness whose standard error exceeds this fraction of its value is not
+#: identified: the data do not say how strongly the axis responds.
+MAX_EFFECTIVENESS_REL_SE = 0.25
 
 
 @dataclass(frozen=True)
@@ -228,7 +236,9 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
       at best ``usable``;
       the advice names the logging parameter to change (:func:`logging_advice`);
     - **excitation**: band and coherence of the kept windows (the injection's for SYSTEMID);
-    - **training length** against the number of parameters;
+    - **training length** against the number of parameters (under 200 samples each: at best
+      ``usable``; under 10: ``not identified``), and whether the control effectiveness is
+      determined (its σ at most 25 % of it, else ``not identified``);
     - **residual whiteness**: Ljung–Box p-value of the one-step residual over 20 lags, and
       its lag-1 autocorrelation. Reported, not gated: the logged gyro is low-passed
       (``INS_GYRO_FILTER``), so even the true plant leaves a coloured one-step residual; a
@@ -322,13 +332,24 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
     if n_train and n_par:
         numbers["train_samples"] = float(n_train)
         numbers["params"] = float(n_par)
-        if n_train < MIN_SAMPLES_PER_PARAM * n_par / 4:
+        if n_train < REFUSE_SAMPLES_PER_PARAM * n_par:
             bad.append(f"only {n_train} training samples for {n_par} parameters")
             advice.append(longer_advice(_autopilot(flights)))
         elif n_train < MIN_SAMPLES_PER_PARAM * n_par:
             caps.append(f"only {n_train} training samples for {n_par} parameters (want "
                         f"{MIN_SAMPLES_PER_PARAM} per parameter)")
             advice.append(longer_advice(_autopilot(flights)))
+
+    # is the response's strength determined?
+    rel = _effectiveness_rel_se(model, output)
+    if rel is not None:
+        name, value, se = rel
+        numbers["effectiveness_rel_se"] = se / abs(value)
+        if se > MAX_EFFECTIVENESS_REL_SE * abs(value):
+            bad.append(f"control effectiveness not determined: {name} {value:.4g} ± {se:.2g} "
+                       f"(σ {100 * se / abs(value):.0f} % of it, at most "
+                       f"{100 * MAX_EFFECTIVENESS_REL_SE:.0f} %)")
+            advice.append(excitation_advice(axis, _autopilot(flights)))
 
     # residual whiteness
     res = getattr(validation, "residuals", None)
@@ -407,6 +428,32 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
         return Verdict(axis, "usable", tuple(caps + good + notes), tuple(usable), numbers,
                        tuple(dict.fromkeys(advice)))
     return Verdict(axis, "good", tuple(good + notes), (), numbers, tuple(dict.fromkeys(advice)))
+
+
+def _effectiveness_rel_se(model: Any, output: str) -> tuple[str, float, float] | None:
+    """The model's control effectiveness of ``output`` (continuous ``B[output,u_*]``, its
+    own axis's input first), its value and standard error; None when it has none.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace as NS
+    >>> m = NS(params={"B[p,u_roll]": 180.0}, stderr={"B[p,u_roll]": 3.0})
+    >>> _effectiveness_rel_se(m, "p")
+    ('B[p,u_roll]', 180.0, 3.0)
+    """
+    params = dict(getattr(model, "params", {}) or {}) if model is not None else {}
+    try:
+        stderr = dict(getattr(model, "stderr", {}) or {}) if model is not None else {}
+    except (TypeError, ValueError):
+        return None
+    names = [k for k in params if k.startswith(f"B[{output},u_")]
+    own = {"p": "u_roll", "q": "u_pitch", "r": "u_yaw"}.get(output)
+    names.sort(key=lambda k: k != f"B[{output},{own}]")
+    for k in names:
+        value, se = float(params[k]), float(stderr.get(k, math.nan))
+        if value != 0 and math.isfinite(value) and math.isfinite(se):
+            return k, value, se
+    return None
 
 
 def _too_slow(rate: float, flights: Sequence[Any]) -> tuple[str, str] | None:

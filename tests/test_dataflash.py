@@ -285,8 +285,9 @@ def test_messages_without_time_hold_the_previous_time(tmp_path):
     path.write_bytes(data)
     log = dataflash.read(path)
     t = log["P"].time_s
-    assert np.isnan(t[0]) and t[1] == 2.0
-    assert np.isnan(log["FMT"].time_s).all()
+    assert np.isnan(t[0]) and t[1] == 2.0  # data before any clock stay untimed
+    # header records before the first timed record take its time (as an ARM event would)
+    assert log["FMT"].time_s.tolist() == [2.0, 2.0]
 
 
 # --------------------------------------------------------------------------- properties

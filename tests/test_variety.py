@@ -250,3 +250,94 @@ def test_a_25_hz_log_gives_a_usable_model_and_says_what_it_misses(tmp_path) -> N
     assert f.verdict is not None and f.verdict.level == "usable"
     assert any("logged at 25 Hz: only the slow part" in r for r in f.verdict.reasons)
     assert f.model.params["B[p,u_roll]"] == pytest.approx(truth["effectiveness"], rel=0.10)
+
+
+def _simulated(tmp_path, name: str, layout: str | None = None, **options):  # type: ignore[no-untyped-def]
+    """A log simulated from ``options`` (:func:`scenario_from_options`), its truth and fit."""
+    from mavsid.synthetic.run import scenario_from_options, simulate
+
+    path = tmp_path / name
+    simulate(scenario_from_options(**options), [path], layout=layout)
+    axis = options.get("axis", "roll")
+    truth = json.loads(path.with_suffix(".truth.json").read_text())["axes"][axis]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = fit([str(path)], PipelineConfig(axes=(axis,)))
+    return path, truth, result
+
+
+def test_an_old_log_whose_metadata_has_no_time_is_armed_from_its_first_record(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """ArduCopter 3.3 writes EV, MODE and PARM without a time field, the ARM event first.
+    With no SYSTEMID run (a stick doublet) no metadata record has a time at all: the ARM
+    event belongs at the log's first timed record, not nowhere (which left the whole flight
+    "disarmed" and every window rejected)."""
+    from mavsid.readers import read_log
+
+    path, truth, result = _simulated(tmp_path, "d33.bin", "copter-3.3", manoeuvre="doublet",
+                                     axis="roll", rate_hz=50.0, seed=14)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        raw = read_log(path)
+    arm = raw["EV"].time_s[raw["EV"].columns["Id"] == 10]
+    assert arm.tolist() == [float(raw["ATT"].time_s[0])]
+    f = result.axes["roll"]
+    assert f.verdict is not None and f.verdict.level in ("good", "usable")
+    b, se = f.model.params["B[p,u_roll]"], f.model.stderr["B[p,u_roll]"]
+    assert abs(b - truth["effectiveness"]) < 2.5 * se  # (50 Hz: -6.8 %, 1.6 σ)
+
+
+def test_a_centidegree_rate_log_is_screened_in_si_units(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """ArduCopter 3.4-dev logs RATE in centidegrees/s: the physical range (4000 deg/s) is
+    judged once the scale is settled. Screened before, every sample above 40 deg/s was
+    "impossible" and excluded: 0.9 s left to train on, B -15 % and a raw numpy error from
+    the twin."""
+    _, truth, result = _simulated(tmp_path, "c34.bin", "copter-3.4-dev", manoeuvre="3211",
+                                     axis="pitch", rate_hz=200.0, gyro_noise_dps=6.0,
+                                     vibration_dps=2.0, seed=28)
+    f = result.axes["pitch"]
+    assert not result.flights[0].meta.get("excluded")
+    assert f.model.params["B[q,u_pitch]"] == pytest.approx(truth["effectiveness"],
+                                                          rel=B_TOLERANCE)
+    assert -f.model.params["A[q,q]"] == pytest.approx(truth["damping"], rel=DAMPING_TOLERANCE)
+    assert f.closed_loop is not None, f.closed_loop_note
+
+
+def test_a_short_low_rate_log_is_judged_by_its_sigma_not_its_sample_count(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """5 s of a 25 Hz log (133 training samples for 3 parameters) hold the slow dynamics as
+    well as 5 s at 400 Hz; whether the effectiveness is determined is its σ's to say. It
+    was refused for its sample count; now a capped model, the truth within 3 σ."""
+    _, truth, result = _simulated(tmp_path, "r25.bin", "copter-3.4-dev", manoeuvre="random",
+                                     axis="roll", vehicle="heavy-x", rate_hz=25.0,
+                                     vibration_dps=5.0, seed=227)
+    f = result.axes["roll"]
+    assert f.verdict is not None and f.verdict.level == "usable"
+    b, se = f.model.params["B[p,u_roll]"], f.model.stderr["B[p,u_roll]"]
+    assert abs(b - truth["effectiveness"]) < 3 * se
+    assert f.verdict.numbers["effectiveness_rel_se"] < 0.25
+
+
+def test_an_undetermined_effectiveness_is_not_identified() -> None:
+    from types import SimpleNamespace as NS
+
+    from mavsid.verdict import judge
+
+    val = NS(state_names=("p",), fit_free_run=np.array([85.0]), fit_vs_horizon=None,
+             fit_one_step=np.array([95.0]), fit_at=lambda s: np.array([90.0]), stable=True,
+             eigenvalues=np.array([0.99]), dt=0.0025, residuals=None)
+    for se, level in ((20.0, "good"), (60.0, "not identified")):
+        model = NS(params={"A[p,p]": -4.0, "B[p,u_roll]": 180.0, "c[p]": 0.0},
+                   stderr={"A[p,p]": 0.2, "B[p,u_roll]": se, "c[p]": 0.01}, provenance={})
+        v = judge("roll", val, "p", model=model)
+        assert v.level == level, v.reasons
+    assert "control effectiveness not determined: B[p,u_roll] 180 ± 60" in v.reasons[0]
+
+
+def test_the_baseline_survives_blocks_shorter_than_its_delay() -> None:
+    from mavsid.loop import baseline_fit
+
+    t = np.sin(np.arange(400) * 0.05)
+    short = np.sin(np.arange(5) * 0.05)
+    fit_pct, delay, preds = baseline_fit([(t, t), (short, short)], [(short, short), (t, t)],
+                                         dt=0.01)
+    assert delay == 0.0 and fit_pct == pytest.approx(100.0)
+    assert [p.shape for p in preds] == [(5,), (400,)]

@@ -976,9 +976,15 @@ def _backfill(
     >>> new, _, n = _backfill(t, t, d)
     >>> new["EV"].tolist(), n
     ([2.0, 5.0], 1)
+    >>> meta = {"EV": np.array([np.nan, 5.0]), "MODE": np.array([np.nan, 4.0])}
+    >>> new, m, n = _backfill(t, meta, d)    # the first timed record is ATT's, at 2 s
+    >>> m["EV"].tolist(), n
+    ([2.0, 5.0], 1)
     """
-    finite = [float(np.nanmin(v)) for v in meta_times.values()
-              if np.size(v) and np.isfinite(v).any()]
+    # each table's first time in file order (a later record's garbage time cannot pull
+    # it earlier); the earliest of those is the log's first timed record
+    finite = [float(v[np.argmax(ok)]) for table in (times, meta_times) for v in table.values()
+              if np.size(v) and (ok := np.isfinite(np.asarray(v, dtype=float))).any()]
     if not finite:
         return dict(times), dict(meta_times), 0
     first = min(finite)

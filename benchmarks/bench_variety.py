@@ -1,0 +1,126 @@
+"""Variety sweep: mavsid's defaults on simulated flights drawn at random, against the truth.
+
+    python benchmarks/bench_variety.py [--n 30] [--seed 0]
+
+Each flight is drawn from the simulator's whole range: manoeuvre (SYSTEMID mixer chirp, stick
+doublet, 3-2-1-1, random stick), axis, vehicle (small quad, heavier X quad, hexacopter), gyro
+white noise fed back through the rate controller (0-6 deg/s), frame vibration (0-5 deg/s),
+logging rate (25-400 Hz) and log layout (ArduCopter 3.3, 3.4-dev, 3.6, 4.x; PX4 1.11, 1.14).
+Each is fitted with the defaults (``pipeline.fit``, the axis flown) and compared with the
+simulated plant's truth:
+
+* ``ok``: a model whose control effectiveness is within 10 % of the truth, or within 2.5 of
+  the σ it reports;
+* ``WRONG``: a model off by more than both, yet called ``good`` (the one outcome that must
+  never happen);
+* ``poor``: off by more than both, called ``usable`` (its reasons say what it is fit for);
+* ``refused``: a typed error or ``not identified``, with its reason;
+* ``CRASH``: anything else (must never happen).
+
+It prints one line per flight and the counts. Not a test (a sweep takes minutes); run it
+after changing a default, on several ``--seed`` values.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import random
+import sys
+import tempfile
+import time
+import warnings
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from mavsid import pipeline  # noqa: E402
+from mavsid.errors import MavsidError  # noqa: E402
+from mavsid.synthetic.run import scenario_from_options, simulate  # noqa: E402
+
+RATE = {"roll": "p", "pitch": "q", "yaw": "r"}
+SID_AXIS = {"roll": 10, "pitch": 11, "yaw": 12}
+
+
+def draw(rng: random.Random) -> dict[str, Any]:
+    """One flight's settings."""
+    return {
+        "manoeuvre": rng.choice(["sysid", "sysid", "doublet", "3211", "random"]),
+        "axis": rng.choice(["roll", "pitch", "yaw"]),
+        "vehicle": rng.choice(["quad", "heavy-x", "hexa"]),
+        "gyro_noise_dps": rng.choice([0.0, 0.0, 1.0, 3.0, 6.0]),
+        "vibration_dps": rng.choice([0.0, 0.0, 2.0, 5.0]),
+        "rate_hz": float(rng.choice([25, 50, 100, 200, 400])),
+        "layout": rng.choice(["copter-4", "copter-4", "copter-3.6", "copter-3.3",
+                              "copter-3.4-dev", "px4-1.14", "px4-1.11"]),
+        "seed": rng.randrange(1000),
+    }
+
+
+def run_one(folder: Path, i: int, s: dict[str, Any]) -> tuple[str, str]:
+    """Simulate, fit and judge one flight: (outcome, line)."""
+    opts = {k: v for k, v in s.items() if k != "layout"}
+    if s["manoeuvre"] == "sysid":
+        opts["sid_axes"] = (SID_AXIS[s["axis"]],)
+    log = folder / f"f{i}{'.ulg' if s['layout'].startswith('px4') else '.bin'}"
+    desc = (f"{s['manoeuvre']:7s} {s['axis']:5s} {s['vehicle']:7s} "
+            f"gyro {s['gyro_noise_dps']:g} vib {s['vibration_dps']:g} {s['rate_hz']:g} Hz "
+            f"{s['layout']:14s} seed {s['seed']}")
+    axis, rate = s["axis"], RATE[s["axis"]]
+    try:
+        with contextlib.redirect_stdout(io.StringIO()):
+            simulate(scenario_from_options(**opts), [log], layout=s["layout"])
+        truth = json.loads(log.with_suffix(".truth.json").read_text())["axes"][axis]
+        try:
+            res = pipeline.fit([str(log)], pipeline.PipelineConfig(axes=(axis,)))
+        except MavsidError as exc:
+            return "refused", f"{desc} :: {str(exc).split(': ', 1)[-1][:110]}"
+        f = res.axes[axis]
+        level = f.verdict.level if f.verdict else "?"
+        if f.model is None or level == "not identified":
+            why = f.verdict.reasons[0] if f.verdict and f.verdict.reasons else ""
+            return "refused", f"{desc} :: {why[:110]}"
+        key = f"B[{rate},u_{axis}]"
+        b, se = float(f.model.params[key]), float(f.model.stderr.get(key, float("nan")))
+        damping = -float(f.model.params[f"A[{rate},{rate}]"])
+        err = b / truth["effectiveness"] - 1.0
+        z = abs(b - truth["effectiveness"]) / se if se > 0 else float("inf")
+        near = abs(err) <= 0.10 or z <= 2.5
+        outcome = "ok" if near else ("WRONG" if level == "good" else "poor")
+        v = f.validation
+        free = float(v.fit_free_run[v.state_names.index(f.output)])
+        cl = f.closed_loop
+        twin = (f"twin {cl.fit_percent:6.1f} / baseline {cl.baseline_percent:6.1f}"
+                if cl is not None else "twin not run")
+        return outcome, (f"{desc} :: {level:7s} B {100 * err:+6.1f} % ({z:4.1f} σ) damping "
+                         f"{100 * (damping / truth['damping'] - 1):+6.1f} % free run "
+                         f"{free:6.1f} % {twin}")
+    except Exception as exc:  # (the sweep reports every failure and goes on)
+        return "CRASH", f"{desc} :: {type(exc).__name__}: {exc}"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--n", type=int, default=30, help="flights (30)")
+    ap.add_argument("--seed", type=int, default=0, help="draws the flights (0)")
+    args = ap.parse_args(argv)
+    rng = random.Random(args.seed)
+    counts: dict[str, int] = {}
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for i in range(args.n):
+            outcome, line = run_one(Path(tmp), i, draw(rng))
+            counts[outcome] = counts.get(outcome, 0) + 1
+            print(f"{outcome:8s} {line}", flush=True)
+    print(f"\n{args.n} flights in {time.perf_counter() - t0:.0f} s: "
+          + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
+    return 1 if counts.get("WRONG") or counts.get("CRASH") else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -191,6 +191,9 @@ def read(
         held = hold_forward(timeline, timed_line)
     else:
         held, gps_note = _gps_clock(decoded, where)
+        if not gps_note:
+            gps_note = ("no boot-time field (TimeUS/TimeMS) and no GPS time in this log: its "
+                        "records have no time (counted, not given a rate or a span)")
 
     columns, times, defs_by_name = {}, {}, {}
     for name, (line_no, cols, d) in decoded.items():
@@ -228,9 +231,11 @@ def read(
 def _gps_clock(
     decoded: dict[str, tuple[np.ndarray, dict[str, np.ndarray], Definition]], where: np.ndarray
 ) -> tuple[np.ndarray, str]:
-    """Times for a log with no boot-time field at all (ArduCopter 3.0/3.1 text logs): the
-    GPS receiver's time of week at each 3D fix, every record interpolated by its place in
-    the file between fixes; records outside the fixes stay untimed (NaN).
+    """Times for a log with no boot-time field at all (ArduCopter 3.0/3.1 text logs): the GPS
+    message's own milliseconds since boot (``GPS.T``, 3.1; pymavlink's clock for such logs),
+    else the GPS receiver's time of week at each 3D fix; every record interpolated by its
+    place in the file between them; records outside them stay untimed (NaN). (The time of
+    week of a 3.1 log's first fix can be stale: seconds before the next.)
 
     Examples
     --------
@@ -241,18 +246,29 @@ def _gps_clock(
     [nan, nan, 1.0, 1.5, 2.0, nan]
     >>> note.startswith("no boot-time field")
     True
+    >>> gps["T"] = np.array([500, 700, 900])    # a 3.1 log: its boot clock, fix or not
+    >>> t, _ = _gps_clock({"GPS": (np.array([1, 4, 8]), gps, None)},  # type: ignore[dict-item]
+    ...                   np.array([1, 2, 4, 6, 8, 9]))
+    >>> np.round(t, 3).tolist()
+    [0.5, 0.567, 0.7, 0.8, 0.9, nan]
     """
     none = np.full(where.size, np.nan)
     gps = decoded.get("GPS")
     if gps is None:
         return none, ""
     line_no, cols, _ = gps
-    clock = next((c for c in ("TimeMS", "Time", "GMS") if c in cols), None)
-    if clock is None or "Status" not in cols:
-        return none, ""
-    ms = cols[clock].astype(np.float64)
-    fix = (cols["Status"].astype(np.float64) >= 3) & (ms > 0)
-    lines, secs = line_no[fix], ms[fix] * 1e-3
+    if "T" in cols:  # (3.1) the GPS message's own boot clock, ms: every record has it
+        boot = cols["T"].astype(np.float64)
+        lines, secs = line_no[boot > 0], boot[boot > 0] * 1e-3
+        source = "GPS.T (ms since boot) of {n} GPS records"
+    else:
+        clock = next((c for c in ("TimeMS", "Time", "GMS") if c in cols), None)
+        if clock is None or "Status" not in cols:
+            return none, ""
+        ms = cols[clock].astype(np.float64)
+        fix = (cols["Status"].astype(np.float64) >= 3) & (ms > 0)
+        lines, secs = line_no[fix], ms[fix] * 1e-3
+        source = "GPS time of week of {n} 3D fixes"
     if secs.size:  # keep a strictly increasing run of fixes (a week rollover ends it)
         keep = secs > np.maximum.accumulate(np.concatenate([[-np.inf], secs[:-1]]))
         lines, secs = lines[keep], secs[keep]
@@ -261,9 +277,9 @@ def _gps_clock(
     pos = where.astype(np.float64)
     out = np.interp(pos, lines.astype(np.float64), secs)
     out[(pos < lines[0]) | (pos > lines[-1])] = np.nan
-    note = (f"no boot-time field (TimeUS/TimeMS) in this log: records timed by the GPS time "
-            f"of week of {secs.size} 3D fixes, interpolated by their place in the file; "
-            "records outside the fixes are untimed")
+    note = (f"no boot-time field (TimeUS/TimeMS) in this log: records timed by the "
+            f"{source.format(n=secs.size)}, interpolated by their place in the file; "
+            "records before the first or after the last are untimed")
     return out, note
 
 

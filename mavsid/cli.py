@@ -188,7 +188,9 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
         help="fly a known plant like ArduCopter and write real-format logs + truth JSON",
         description="Simulate an ArduCopter-like quadrotor (known plant, ArduPilot-style "
         "controller, SYSTEMID chirps or pilot manoeuvres) and write a DataFlash .bin and/or "
-        "a MAVLink .tlog (format from the suffix), with OUT.truth.json beside it.",
+        "a MAVLink .tlog (format from the suffix), with OUT.truth.json beside it. "
+        "--layout writes other firmware: ArduCopter 3.2-4.x, a traditional heli, ArduPlane "
+        "4.x (.bin), PX4 1.8-1.14 (.ulg).",
     )
     p.add_argument("-o", "--output", action="append", required=True, metavar="OUT",
                    help="OUT.bin, OUT.tlog or OUT.ulg (repeat to write several from one "

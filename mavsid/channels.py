@@ -79,6 +79,13 @@ TOML presets
     angle_deg = [90, -90, -30, 150, 30, -150]
     yaw = [-1, 1, -1, 1, 1, -1]
 
+    [preset.my-plane]                # servo PWMs by SERVOn_FUNCTION, for ArduPlane logs only
+    vehicles = ["plane"]
+    servos = { message = "RCOU", field = "C{i}", unit = "pwm" }
+    [preset.my-plane.states]
+    roll = { message = "ATT", field = "Roll", unit = "deg" }
+    p = { message = "IMU", field = "GyrX", unit = "rad/s" }
+
 Examples
 --------
 >>> import numpy as np
@@ -1073,7 +1080,8 @@ def load_presets(path: str | os.PathLike[str]) -> tuple[dict[str, Preset], dict[
         if not isinstance(spec, Mapping):
             raise ConfigError(f"{where}: must be a table")
         unknown = set(spec) - {
-            "formats", "states", "inputs", "motors", "mixer", "requires", "description"
+            "formats", "states", "inputs", "motors", "mixer", "requires", "description",
+            "servos", "vehicles", "not_vehicles",
         }
         if unknown:
             raise ConfigError(f"{where}: unknown key(s) {', '.join(sorted(unknown))}")
@@ -1082,13 +1090,16 @@ def load_presets(path: str | os.PathLike[str]) -> tuple[dict[str, Preset], dict[
         inputs = {k: _channel_from(v, f"{where} input {k}") for k, v in
                   spec.get("inputs", {}).items()}
         motors = _channel_from(spec["motors"], f"{where} motors") if "motors" in spec else None
+        servos = _channel_from(spec["servos"], f"{where} servos") if "servos" in spec else None
         mixer = str(spec.get("mixer", "auto"))
         if mixer != "auto" and mixer not in mixers and mixer not in MIXERS:
             raise ConfigError(f"{where}: unknown mixer {mixer!r}")
         try:
             presets[name] = Preset(
                 name, tuple(spec.get("formats", ())), states, inputs, motors, mixer,
-                tuple(spec.get("requires", ())), str(spec.get("description", "")),
+                tuple(spec.get("requires", ())), str(spec.get("description", "")), servos,
+                tuple(str(v).lower() for v in spec.get("vehicles", ())),
+                tuple(str(v).lower() for v in spec.get("not_vehicles", ())),
             )
         except ConfigError as exc:
             raise ConfigError(f"{path}: {exc}") from None

@@ -420,8 +420,11 @@ def test_copter_32_layout_has_no_rate_and_fits_through_the_motor_mix(tmp_path) -
     assert _cli_verdicts(slow) == {"info": 0, "segments": 0, "fit": 1}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        with pytest.raises(NoExcitationError, match="logged at 10 Hz"):
+        with pytest.raises(NoExcitationError, match="logged at 10 Hz") as info:
             fit([str(slow)])
+    # the advice fits the firmware: no RATE before 3.3, no SYSTEMID chirp to fly
+    advice = " ".join(info.value.details)
+    assert "before 3.3 logs no RATE" in advice and "SID_AXIS" not in advice
     result, b, damping = _roll_fit(fast)
     assert result.flights[0].preset == "ardupilot-rcou"
     assert result.flights[0].meta["sources"]["u_roll"] == "RCOU (quad-x mixer)"
@@ -527,6 +530,9 @@ def test_plane_layout_fits_from_the_pid_sums_and_from_the_servos(tmp_path) -> No
         assert damping == pytest.approx(want["damping"], rel=0.35), preset
         assert "no closed-loop twin for ArduPlane" in (result.axes["roll"].closed_loop_note
                                                        or "")
+        pitch = result.verdicts["pitch"]
+        assert not pitch.identified  # only roll was flown
+        assert "ArduPlane has no SYSTEMID mode" in " ".join(pitch.advice)
 
 
 def test_servo_inputs_follow_the_servo_parameters() -> None:
@@ -553,3 +559,30 @@ def test_servo_inputs_follow_the_servo_parameters() -> None:
         servo_inputs(raw({"SERVO5_FUNCTION": 4}), preset)
     with pytest.raises(ConfigError, match="SERVO5_MIN/TRIM/MAX 1000/2000/1900"):
         servo_inputs(raw({**base, "SERVO5_TRIM": 2000}), preset)
+
+
+def test_a_toml_servo_preset_applies_to_its_vehicle_only(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """``servos`` and ``vehicles`` in a TOML preset: the plane preset reads the servos of a
+    plane log and is never chosen for a copter."""
+    from mavsid.channels import choose_preset, load_presets, servo_inputs
+
+    path = tmp_path / "p.toml"
+    path.write_text('''[preset.my-plane]
+vehicles = ["Plane"]
+servos = { message = "RCOU", field = "C{i}", unit = "pwm" }
+[preset.my-plane.states]
+roll = { message = "ATT", field = "Roll", unit = "deg" }
+''')
+    presets, _ = load_presets(path)
+    t = np.arange(3.0)
+    msgs = {"ATT": MessageTable("ATT", {"Roll": np.zeros(3)}, t),
+            "RCOU": MessageTable("RCOU", {f"C{i}": np.array([1500.0, 1900, 1100])
+                                          for i in range(1, 5)}, t)}
+    params = {"SERVO1_FUNCTION": 4, "SERVO2_FUNCTION": 19, "SERVO4_FUNCTION": 21}
+    src = SourceInfo("p.bin", "dataflash", 0)
+    plane = RawLog(src, msgs, params=params, vehicle="plane")
+    assert choose_preset(plane, presets).name == "my-plane"
+    roll = servo_inputs(plane, presets["my-plane"])[0]
+    assert roll[0] == "u_roll" and roll[3].tolist() == [0, 1, -1]
+    copter = RawLog(src, msgs, params=params, vehicle="copter QUAD/X")
+    assert choose_preset(copter, presets).name != "my-plane"

@@ -78,7 +78,9 @@ from mavsid.channels import (
     mixer_for,
     motor_thrusts,
     preset_messages,
+    servo_inputs,
     unit_origin,
+    vehicle_kind,
 )
 from mavsid.channels import _rows as _rows
 from mavsid.data import FlightData, MessageTable, RawLog
@@ -235,6 +237,15 @@ def _collect(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer]
             inputs.append(_Series(name, f"{preset.motors.message} ({mixer.name} mixer)", t,
                                   u[:, j], bad_t, excluded,
                                   "PWM us through the thrust curve, unmixed"))
+    elif preset.servos is not None:
+        for name, source, t, v in servo_inputs(raw, preset):
+            late, bad_t = _mistimed(t)
+            excluded = (("mistimed", int(late.sum())),) if late.any() else ()
+            if late.any():
+                t, v = t[~late], v[~late]
+            if t.size >= 2:
+                inputs.append(_Series(name, source, t, v, bad_t, excluded,
+                                      "PWM us through SERVOn_MIN/TRIM/MAX"))
     else:
         inputs = _channel_series(raw, preset, INPUT_NAMES, preset.inputs, need_samples=False)
     states, inputs = _checked_scales(raw, states, inputs)
@@ -1059,7 +1070,10 @@ def _align(raw: RawLog, preset: Preset | str | None, rate_hz: float | None,
         # scales inferred for whole messages (ArduCopter 3.4-dev RATE): readers of the same
         # message's other fields (the twin's RATE.RDes targets) apply them too
         "scales": {"RATE": _CENTI} if any(s.source.endswith("(centideg/s, inferred)")
-                                            for s in series) else {},
+                                            for s in series)
+        # ArduPlane's PIDR/PIDP/PIDY Tar and Act are deg/s (Copter's rad/s)
+        else dict.fromkeys(("PIDR", "PIDP", "PIDY"), np.pi / 180.0)
+        if vehicle_kind(raw) == "plane" else {},
         "sysid_runs": sysid_runs(raw),
         "excluded_samples": {name: sum(why.values()) for name, why in excluded.items()},
         "excluded_reasons": excluded,

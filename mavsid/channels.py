@@ -19,9 +19,14 @@ Built-in presets (in the order they are tried):
 ============================  ==========  =================================================
 preset                        format      states / inputs
 ============================  ==========  =================================================
+``ardupilot-plane-pid``       DataFlash   ArduPlane only: ATT; PIDR/PIDP/PIDY Act (deg/s),
+                                          P+I+D+FF / 45 (surface demand in degrees)
+``ardupilot-plane-servo``     DataFlash   ArduPlane only: ATT, IMU gyro; RCOU servos by
+                                          SERVOn_FUNCTION through SERVOn_MIN/TRIM/MAX
 ``ardupilot-rate``            DataFlash   ATT Roll/Pitch/Yaw (deg), RATE R/P/Y (deg/s);
                                           RATE ROut/POut/YOut/AOut
 ``ardupilot-pid``             DataFlash   ATT, IMU GyrX/Y/Z (rad/s); PIDR/PIDP/PIDY P+I+D+FF
+                                          (not for planes)
 ``ardupilot-rcou``            DataFlash   ATT (+ IMU gyro); RCOU motor PWM through the mixer
 ``ardupilot-mot``             DataFlash   ATT; MOT Mot1..n PWM (ArduCopter 3.1) via mixer
 ``ardupilot-att``             DataFlash   ATT only: no inputs (nothing to identify)
@@ -35,6 +40,12 @@ preset                        format      states / inputs
                                           actuator_controls_0.control[0..3]
 ``px4-att``                   ULog        vehicle_attitude.q only
 ============================  ==========  =================================================
+
+Presets with ``vehicles`` apply only to logs of those vehicle kinds (from the firmware
+banner, e.g. ``ArduPlane V4.3.8`` -> ``plane``). A traditional helicopter (``FRAME_CLASS`` 6)
+has no motor mixer to invert: its inputs are the rate controller's normalised outputs
+(``ardupilot-rate``'s RATE.ROut/POut/YOut, as ArduCopter logs them for every frame); its
+RCOU swashplate servos are not unmixed.
 
 Mixers
 ------
@@ -68,6 +79,13 @@ TOML presets
     angle_deg = [90, -90, -30, 150, 30, -150]
     yaw = [-1, 1, -1, 1, 1, -1]
 
+    [preset.my-plane]                # servo PWMs by SERVOn_FUNCTION, for ArduPlane logs only
+    vehicles = ["plane"]
+    servos = { message = "RCOU", field = "C{i}", unit = "pwm" }
+    [preset.my-plane.states]
+    roll = { message = "ATT", field = "Roll", unit = "deg" }
+    p = { message = "IMU", field = "GyrX", unit = "rad/s" }
+
 Examples
 --------
 >>> import numpy as np
@@ -100,7 +118,9 @@ __all__ = [
     "INJECTION_CHANNEL",
     "INPUT_NAMES",
     "MIXERS",
+    "PLANE_SURFACE_DEG",
     "PRESETS",
+    "SERVO_FUNCTIONS",
     "STATE_NAMES",
     "TARGET_CHANNELS",
     "Channel",
@@ -116,7 +136,9 @@ __all__ = [
     "mixer_for",
     "preset_messages",
     "pwm_to_thrust",
+    "servo_inputs",
     "to_si",
+    "vehicle_kind",
 ]
 
 #: canonical state names, in FlightData column order, and their SI units
@@ -276,6 +298,15 @@ class Preset:
         Messages the log must have (with samples) for the preset to be chosen; default
         every non-optional channel's message.
     description : str
+    servos : Channel, optional
+        Servo PWM outputs (``field`` a template with ``{i}`` for the output number): inputs
+        are the outputs whose ``SERVOn_FUNCTION`` carries each axis (:data:`SERVO_FUNCTIONS`)
+        normalised through ``SERVOn_MIN/TRIM/MAX`` (:func:`servo_inputs`).
+    vehicles : tuple of str
+        Vehicle kinds (``RawLog.vehicle``'s first word: ``plane``, ``copter`` ...) the preset
+        is for; empty: any.
+    not_vehicles : tuple of str
+        Vehicle kinds the preset is never chosen for.
     """
 
     name: str
@@ -286,6 +317,9 @@ class Preset:
     mixer: str = "auto"
     requires: tuple[str, ...] = ()
     description: str = ""
+    servos: Channel | None = None
+    vehicles: tuple[str, ...] = ()
+    not_vehicles: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         for name in self.states:
@@ -298,23 +332,36 @@ class Preset:
             raise ConfigError(f"preset {self.name!r} defines no states")
         if not self.requires:
             chans = [c for c in (*self.states.values(), *self.inputs.values()) if not c.optional]
-            if self.motors is not None:
-                chans.append(self.motors)
+            chans += [c for c in (self.motors, self.servos) if c is not None]
             object.__setattr__(self, "requires", tuple(dict.fromkeys(c.message for c in chans)))
 
     @property
     def messages(self) -> tuple[str, ...]:
         """Every message the preset may read."""
         chans = [*self.states.values(), *self.inputs.values()]
-        if self.motors is not None:
-            chans.append(self.motors)
+        chans += [c for c in (self.motors, self.servos) if c is not None]
         return tuple(dict.fromkeys([*self.requires, *(c.message for c in chans)]))
 
     def applies_to(self, raw: RawLog) -> bool:
-        """True when the log's format fits and it has samples of every required message."""
+        """True when the log's format and vehicle fit and it has samples of every required
+        message."""
         if self.formats and raw.source.format not in self.formats:
             return False
+        kind = vehicle_kind(raw)
+        if (self.vehicles and kind not in self.vehicles) or kind in self.not_vehicles:
+            return False
         return all(m in raw.messages and len(raw.messages[m]) > 0 for m in self.requires)
+
+
+def vehicle_kind(raw: RawLog) -> str:
+    """The log's vehicle kind: ``RawLog.vehicle``'s first word, lower case (``""`` unknown).
+
+    >>> from mavsid.data import RawLog, SourceInfo
+    >>> vehicle_kind(RawLog(SourceInfo("x.bin", "dataflash", 0), {}, vehicle="plane"))
+    'plane'
+    """
+    words = (raw.vehicle or "").split()
+    return words[0].lower() if words else ""
 
 
 def _ch(message: str, fld: str, unit: str = "1", **kw: Any) -> Channel:
@@ -353,10 +400,35 @@ _PX4_AC0 = {
     "u_thrust": _ch("actuator_controls_0", "control[3]", optional=True),
 }
 
+#: ArduPlane's surface demand (degrees) of a full deflection: its controllers' outputs are
+#: centidegrees limited to ±4500 (libraries/APM_Control/AP_RollController.cpp)
+PLANE_SURFACE_DEG = 45.0
+
 #: built-in presets, most informative first (the order :func:`choose_preset` tries them)
 PRESETS: dict[str, Preset] = {
     p.name: p
     for p in (
+        Preset(
+            "ardupilot-plane-pid", _DF,
+            states={**_ATT, "p": _ch("PIDR", "Act", "deg/s"), "q": _ch("PIDP", "Act", "deg/s"),
+                    "r": _ch("PIDY", "Act", "deg/s")},
+            inputs={
+                "u_roll": _ch("PIDR", "P+I+D+FF", scale=1.0 / PLANE_SURFACE_DEG),
+                "u_pitch": _ch("PIDP", "P+I+D+FF", scale=1.0 / PLANE_SURFACE_DEG),
+                "u_yaw": _ch("PIDY", "P+I+D+FF", scale=1.0 / PLANE_SURFACE_DEG),
+            },
+            vehicles=("plane",),
+            description="ArduPlane: ATT; PIDR/PIDP/PIDY Act (deg/s) and P+I+D+FF (surface "
+                        "demand, degrees) / 45: normalised aileron, elevator, rudder",
+        ),
+        Preset(
+            "ardupilot-plane-servo", _DF,
+            states={**_ATT, **{k: replace(c, optional=False) for k, c in _IMU_GYRO.items()}},
+            servos=_ch("RCOU", "C{i}|Chan{i}|Ch{i}", "pwm"),
+            vehicles=("plane",),
+            description="ArduPlane: ATT, IMU gyro; RCOU aileron/elevator/rudder/throttle "
+                        "servos (SERVOn_FUNCTION) through SERVOn_MIN/TRIM/MAX",
+        ),
         Preset(
             "ardupilot-rate", _DF,
             states={
@@ -381,6 +453,7 @@ PRESETS: dict[str, Preset] = {
                 "u_pitch": _ch("PIDP", "P+I+D+FF|P+I+D"),
                 "u_yaw": _ch("PIDY", "P+I+D+FF|P+I+D"),
             },
+            not_vehicles=("plane",),  # (a plane's sums are degrees of surface: its own preset)
             description="older ArduPilot: ATT, IMU gyro, PID term sums as controller outputs",
         ),
         Preset(
@@ -804,7 +877,10 @@ def pwm_to_thrust(pwm: np.ndarray, params: Mapping[str, float]) -> np.ndarray:
     ``thrust = (1 - MOT_THST_EXPO)·r + MOT_THST_EXPO·r²`` (battery scaling ignored). A PWM
     range of 0 (ArduPilot's "use RC3 range"), or none (ArduCopter < 3.5), takes
     ``RC3_MIN``/``RC3_MAX``, else 1000..2000 µs; ``MOT_SPIN_MIN`` absent (ArduCopter < 3.4)
-    takes ``THR_MIN``/1000.
+    takes ``THR_MIN``/1000. Such a log (``THR_MIN``, no ``MOT_SPIN_*``: ArduCopter 3.2's
+    parameter table has ``THR_MIN``/``THR_MAX`` and neither) takes ``THR_MAX``/1000 for the
+    top of the range and, without ``MOT_THST_EXPO``, outputs linear in thrust (exponent 0;
+    the old ``MOT_TCRV_*`` curve is not modelled).
 
     Examples
     --------
@@ -818,11 +894,99 @@ def pwm_to_thrust(pwm: np.ndarray, params: Mapping[str, float]) -> np.ndarray:
         lo, hi = 1000.0, 2000.0
     # ArduCopter < 3.4: THR_MIN (0-1000) is the lowest throttle in flight
     spin_min = params.get("MOT_SPIN_MIN", params.get("THR_MIN", 150.0) / 1000.0)
-    spin_max = params.get("MOT_SPIN_MAX", 0.95)
-    expo = params.get("MOT_THST_EXPO", 0.65)
+    # ArduCopter <= 3.3 (THR_MIN, no MOT_SPIN_*/MOT_THST_EXPO): THR_MAX (0-1000) the top,
+    # and no thrust-curve exponent (outputs taken as linear in thrust)
+    old = "THR_MIN" in params and "MOT_SPIN_MIN" not in params
+    spin_max = params.get("MOT_SPIN_MAX", params.get("THR_MAX", 950.0) / 1000.0 if old
+                          else 0.95)
+    expo = params.get("MOT_THST_EXPO", 0.0 if old else 0.65)
     actuator = (np.asarray(pwm, dtype=float) - lo) / (hi - lo)
     r = np.clip((actuator - spin_min) / max(spin_max - spin_min, 1e-6), 0.0, 1.0)
     return (1.0 - expo) * r + expo * r * r
+
+
+#: Canonical input -> ArduPilot servo function (``SERVOn_FUNCTION``,
+#: SRV_Channel::Aux_servo_function_t), its name, and whether it is an angle output
+#: (-1..1 about ``SERVOn_TRIM``) rather than a range (0..1 from ``SERVOn_MIN``).
+SERVO_FUNCTIONS: dict[str, tuple[int, str, bool]] = {
+    "u_roll": (4, "aileron", True),
+    "u_pitch": (19, "elevator", True),
+    "u_yaw": (21, "rudder", True),
+    "u_thrust": (70, "throttle", False),
+}
+
+
+def servo_inputs(raw: RawLog, preset: Preset) -> list[tuple[str, str, np.ndarray, np.ndarray]]:
+    """``(input, source, time_s, values)`` per canonical input from servo PWMs.
+
+    Each axis's output is the lowest-numbered servo whose ``SERVOn_FUNCTION`` is the axis's
+    function (:data:`SERVO_FUNCTIONS`). An angle output is normalised as ArduPilot's
+    SRV_Channel maps it (``pwm_from_angle``): ``(pwm - TRIM) / (MAX - TRIM)`` above trim,
+    ``(pwm - TRIM) / (TRIM - MIN)`` below, negated when ``SERVOn_REVERSED``; the throttle as a
+    range, ``(pwm - MIN) / (MAX - MIN)``. A PWM of 0 (output not yet set) is no sample.
+
+    Raises
+    ------
+    MissingMessageError
+        No servo carries roll, pitch or yaw (``SERVOn_FUNCTION``), or its PWM field is absent.
+    ConfigError
+        A servo's ``SERVOn_MIN/TRIM/MAX`` are not increasing.
+
+    Examples
+    --------
+    >>> from mavsid.data import MessageTable, RawLog, SourceInfo
+    >>> t = np.arange(3.0)
+    >>> pwm = {"C1": np.array([1500.0, 1900, 1300]), "C2": np.full(3, 1500.0),
+    ...        "C4": np.full(3, 1500.0)}
+    >>> params = {"SERVO1_FUNCTION": 4, "SERVO2_FUNCTION": 19, "SERVO4_FUNCTION": 21,
+    ...           "SERVO1_MIN": 1100, "SERVO1_TRIM": 1500, "SERVO1_MAX": 1900}
+    >>> raw = RawLog(SourceInfo("p.bin", "dataflash", 0), {"RCOU": MessageTable("RCOU", pwm, t)},
+    ...              params=params, vehicle="plane")
+    >>> got = servo_inputs(raw, PRESETS["ardupilot-plane-servo"])
+    >>> got[0][1], got[0][3].tolist()
+    ('RCOU.C1 (aileron, SERVO1)', [0.0, 1.0, -0.5])
+    """
+    assert preset.servos is not None
+    ch, params = preset.servos, raw.params
+    table = raw[ch.message]
+    by_function: dict[int, int] = {}
+    for key, value in sorted(params.items()):
+        m = re.fullmatch(r"SERVO(\d+)_FUNCTION", key)
+        if m and np.isfinite(value):
+            number = int(m.group(1))
+            by_function[int(value)] = min(number, by_function.get(int(value), number))
+    t_all = np.asarray(table.time_s, dtype=np.float64)
+    out = []
+    for name, (fn, label, angle) in SERVO_FUNCTIONS.items():
+        n = by_function.get(fn)
+        if n is None:
+            if name == "u_thrust":
+                continue
+            raise MissingMessageError(
+                f"SERVOn_FUNCTION {fn} ({label})", what="parameter", path=raw.source.path,
+                available=[k for k in params if re.fullmatch(r"SERVO\d+_FUNCTION", k)])
+        expr = ch.field.replace("{i}", str(n))
+        got = _resolve(table, expr)
+        if got is None:
+            raise MissingMessageError(f"{ch.message}.{expr} ({label}, SERVO{n})",
+                                      available=table.columns, what="field")
+        pwm, first = got
+        lo = float(params.get(f"SERVO{n}_MIN", 1100.0))
+        trim = float(params.get(f"SERVO{n}_TRIM", 1500.0))
+        hi = float(params.get(f"SERVO{n}_MAX", 1900.0))
+        if not hi > trim > lo:
+            raise ConfigError(f"{raw.source.path}: SERVO{n}_MIN/TRIM/MAX {lo:g}/{trim:g}/{hi:g} "
+                              f"are not increasing: the {label} output cannot be normalised")
+        rev = bool(params.get(f"SERVO{n}_REVERSED", 0.0))
+        if angle:
+            v = np.where(pwm >= trim, (pwm - trim) / (hi - trim), (pwm - trim) / (trim - lo))
+            v = -v if rev else v
+        else:
+            v = (pwm - lo) / (hi - lo)
+            v = 1.0 - v if rev else v
+        ok = np.isfinite(t_all) & np.isfinite(pwm) & (pwm > 0)
+        out.append((name, f"{ch.message}.{first} ({label}, SERVO{n})", t_all[ok], v[ok]))
+    return out
 
 
 def motor_thrusts(raw: RawLog, preset: Preset, mixer: Mixer) -> tuple[np.ndarray, np.ndarray]:
@@ -916,7 +1080,8 @@ def load_presets(path: str | os.PathLike[str]) -> tuple[dict[str, Preset], dict[
         if not isinstance(spec, Mapping):
             raise ConfigError(f"{where}: must be a table")
         unknown = set(spec) - {
-            "formats", "states", "inputs", "motors", "mixer", "requires", "description"
+            "formats", "states", "inputs", "motors", "mixer", "requires", "description",
+            "servos", "vehicles", "not_vehicles",
         }
         if unknown:
             raise ConfigError(f"{where}: unknown key(s) {', '.join(sorted(unknown))}")
@@ -925,13 +1090,16 @@ def load_presets(path: str | os.PathLike[str]) -> tuple[dict[str, Preset], dict[
         inputs = {k: _channel_from(v, f"{where} input {k}") for k, v in
                   spec.get("inputs", {}).items()}
         motors = _channel_from(spec["motors"], f"{where} motors") if "motors" in spec else None
+        servos = _channel_from(spec["servos"], f"{where} servos") if "servos" in spec else None
         mixer = str(spec.get("mixer", "auto"))
         if mixer != "auto" and mixer not in mixers and mixer not in MIXERS:
             raise ConfigError(f"{where}: unknown mixer {mixer!r}")
         try:
             presets[name] = Preset(
                 name, tuple(spec.get("formats", ())), states, inputs, motors, mixer,
-                tuple(spec.get("requires", ())), str(spec.get("description", "")),
+                tuple(spec.get("requires", ())), str(spec.get("description", "")), servos,
+                tuple(str(v).lower() for v in spec.get("vehicles", ())),
+                tuple(str(v).lower() for v in spec.get("not_vehicles", ())),
             )
         except ConfigError as exc:
             raise ConfigError(f"{path}: {exc}") from None

@@ -188,7 +188,9 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
         help="fly a known plant like ArduCopter and write real-format logs + truth JSON",
         description="Simulate an ArduCopter-like quadrotor (known plant, ArduPilot-style "
         "controller, SYSTEMID chirps or pilot manoeuvres) and write a DataFlash .bin and/or "
-        "a MAVLink .tlog (format from the suffix), with OUT.truth.json beside it.",
+        "a MAVLink .tlog (format from the suffix), with OUT.truth.json beside it. "
+        "--layout writes other firmware: ArduCopter 3.2-4.x, a traditional heli, ArduPlane "
+        "4.x (.bin), PX4 1.8-1.14 (.ulg).",
     )
     p.add_argument("-o", "--output", action="append", required=True, metavar="OUT",
                    help="OUT.bin, OUT.tlog or OUT.ulg (repeat to write several from one "
@@ -211,19 +213,27 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--rate-hz", type=float, default=400.0,
                    help="RATE/SIDD logging rate, must divide 400 Hz (400); below 25 Hz "
                    "every message is logged slowly")
-    p.add_argument("--vehicle", default="quad", choices=("quad", "heavy-x", "hexa"),
-                   help="plant: small quad (default), heavier X quad, hexacopter inertia")
+    p.add_argument("--vehicle", choices=("quad", "heavy-x", "hexa", "heli", "plane"),
+                   help="plant: small quad (default), heavier X quad, hexacopter inertia, "
+                   "traditional helicopter, fixed-wing plane (default for --layout heli / "
+                   "plane)")
     p.add_argument("--gyro-noise", type=float, metavar="DEG_S",
                    help="gyro white noise, deg/s RMS per 400 Hz sample (fed back)")
     p.add_argument("--vibration", type=float, default=0.0, metavar="DEG_S",
                    help="frame vibration amplitude on the gyro, deg/s (0)")
     p.add_argument("--layout",
                    choices=("copter-4", "copter-3.6", "copter-3.3", "copter-3.4-dev",
-                            "px4-1.14", "px4-1.11", "px4-1.8"),
+                            "copter-3.2", "heli", "plane", "px4-1.14", "px4-1.11", "px4-1.8"),
                    help="log layout. A .bin's ArduCopter generation: 4.x (default); 3.6 "
                    "(no unit records, PARM without Default, no SYSTEMID messages); 3.3 "
                    "(TimeMS, RCOU Ch1-8, no unit records, untimed PARM/MODE, ARM event first); "
-                   "3.4-dev (RATE in centideg/s, outputs on +-4500). A .ulg's PX4 topic set: "
+                   "3.4-dev (RATE in centideg/s, outputs on +-4500); 3.2 (as 3.3 but no RATE: "
+                   "inputs only from RCOU Chan1-8 motors, FRAME, RC3_MIN/MAX, THR_MIN/MAX); "
+                   "heli (ArduCopter 4.x traditional helicopter: FRAME_CLASS 6, H_SW_*, "
+                   "swashplate servos on RCOU, inputs from RATE); plane (ArduPlane 4.x: no "
+                   "RATE nor SYSTEMID, PIDR/PIDP/PIDY, aileron/elevator/throttle/rudder "
+                   "servos with SERVOn_FUNCTION; needs a pilot manoeuvre). A .ulg's PX4 "
+                   "topic set: "
                    "1.14 (default; vehicle_torque_setpoint), 1.11 (actuator_controls_0), 1.8 "
                    "(rates in vehicle_attitude)")
     p.add_argument("--faults", default="", metavar="SPEC",
@@ -235,17 +245,18 @@ def _simulate(args: argparse.Namespace) -> int:
     from mavsid.synthetic.faults import Faults
     from mavsid.synthetic.run import scenario_from_options, simulate
 
+    vehicle = args.vehicle or {"heli": "heli", "plane": "plane"}.get(args.layout, "quad")
     scenario = scenario_from_options(
         manoeuvre=args.manoeuvre, axis=args.axis, sid_axes=args.sid_axis or (),
         duration_s=args.duration, seed=args.seed, noise=args.noise, magnitude=args.magnitude,
         f_start_hz=args.f_start, f_stop_hz=args.f_stop, t_rec=args.t_rec, rate_hz=args.rate_hz,
-        vehicle=args.vehicle, gyro_noise_dps=args.gyro_noise, vibration_dps=args.vibration,
+        vehicle=vehicle, gyro_noise_dps=args.gyro_noise, vibration_dps=args.vibration,
     )
     faults = Faults.parse(args.faults, seed=args.seed)
     opts = [f"-o {o}" for o in args.output] + [f"--manoeuvre {args.manoeuvre}",
                                                  f"--axis {args.axis}"]
-    if args.vehicle != "quad":
-        opts.append(f"--vehicle {args.vehicle}")
+    if vehicle != "quad":
+        opts.append(f"--vehicle {vehicle}")
     opts += [f"--sid-axis {a}" for a in args.sid_axis or ()]
     for name in ("duration", "seed", "noise", "magnitude", "f_start", "f_stop", "t_rec",
                  "rate_hz", "gyro_noise", "vibration", "faults"):

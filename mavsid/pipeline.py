@@ -523,6 +523,13 @@ def _closed_loop(
     """``fitted`` with its closed-loop twin run on the held-out blocks (or the reason not)."""
     from mavsid.loop import closed_loop_fit, twin_signals
 
+    planes = [fd for fd in flights
+              if str(fd.meta.get("vehicle") or "").lower().split()[:1] == ["plane"]]
+    if planes:  # (the twin would run a multicopter's controller on a plane's targets)
+        return dataclasses.replace(
+            fitted, closed_loop_note="no closed-loop twin for ArduPlane: the twin rebuilds "
+            "ArduCopter's or PX4's multicopter rate controller, not Plane's roll/pitch/yaw "
+            "controllers")
     try:
         sigs = []
         for fd in flights:

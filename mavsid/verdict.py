@@ -20,6 +20,7 @@ Examples
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -158,6 +159,12 @@ def excitation_advice(axis: str, autopilot: str | None) -> str:
     if autopilot and "px4" in autopilot.lower():
         return (f"fly sharp stick doublets or a 3-2-1-1 on {axis} in ACRO (PX4 has no SYSTEMID "
                 "chirp mode), with SDLOG_PROFILE logging the rate controller at full rate")
+    if _is_plane(autopilot):
+        return (f"fly sharp stick doublets or a 3-2-1-1 on {axis} in ACRO or MANUAL (ArduPlane "
+                "has no SYSTEMID mode)")
+    if _before_rate(autopilot):
+        return (f"fly sharp stick doublets on {axis} in a non-self-levelling mode (ACRO; "
+                "SYSTEMID came with ArduCopter 4.1)")
     return (f"fly a SYSTEMID mixer chirp on {axis} (SID_AXIS {_SID_AXIS.get(axis, '?')}) or "
             f"sharp stick doublets on {axis} in a non-self-levelling mode (ACRO)")
 
@@ -170,7 +177,23 @@ def longer_advice(autopilot: str | None) -> str:
     """
     if autopilot and "px4" in autopilot.lower():
         return "fly longer excitation (30 s of doublets or 3-2-1-1s in ACRO)"
+    if _is_plane(autopilot) or _before_rate(autopilot):
+        return "fly longer excitation (30 s of doublets or 3-2-1-1s)"
     return "fly longer excitation (a 20-s SYSTEMID chirp or 30 s of doublets)"
+
+
+def _is_plane(autopilot: str | None) -> bool:
+    """Whether the platform text (:func:`_autopilot`) names an ArduPlane log."""
+    return bool(autopilot) and bool(re.search(r"\bplane\b|ArduPlane", str(autopilot), re.I))
+
+
+def _before_rate(autopilot: str | None) -> bool:
+    """Whether the platform text names an ArduCopter older than 3.3 (no RATE record).
+
+    >>> _before_rate("ardupilot copter ArduCopter V3.2.1 (abc)"), _before_rate("ArduCopter V3.3")
+    (True, False)
+    """
+    return bool(autopilot) and bool(re.search(r"ArduCopter V3\.[0-2]\b", str(autopilot)))
 
 
 def logging_advice(autopilot: str | None) -> str:
@@ -185,6 +208,13 @@ def logging_advice(autopilot: str | None) -> str:
         return ("PX4: set SDLOG_PROFILE to include 'high rate' (bit 1) or 'system identification'"
                 " (bit 4) so that vehicle_angular_velocity and the torque/actuator setpoints are "
                 "logged at 100 Hz or more")
+    if _is_plane(autopilot):
+        return ("ArduPlane: set LOG_BITMASK's fast attitude logging so that PIDR/PIDP/PIDY (the "
+                "body rates and the roll/pitch/yaw controllers' outputs) are logged at 100 Hz "
+                "or more")
+    if _before_rate(autopilot):
+        return ("ArduCopter before 3.3 logs no RATE record and RCOU at 10 Hz: fly 3.3 or later "
+                "with LOG_BITMASK bits ATTITUDE_FAST and ATTITUDE_MED (RATE at loop rate)")
     return ("ArduPilot: set LOG_BITMASK bits ATTITUDE_FAST and ATTITUDE_MED (RATE at loop rate) "
             "and INS_LOG_BAT_MASK=1 (gyro batches) so that RATE and its outputs are logged at "
             "100 Hz or more")
@@ -467,9 +497,14 @@ def _too_slow(rate: float, flights: Sequence[Any]) -> tuple[str, str] | None:
 
 
 def _autopilot(flights: Sequence[Any]) -> str | None:
-    """The autopilot the flights' metadata names (``meta["autopilot"]``), if any."""
-    return next((str(fd.meta.get("autopilot")) for fd in flights
-                 if getattr(fd, "meta", None) and fd.meta.get("autopilot")), None)
+    """The platform the flights' metadata names, if any: ``meta["autopilot"]``, then the
+    vehicle and the firmware banner when known (``ardupilot plane ArduPlane V4.3.8 (...)``)."""
+    for fd in flights:
+        meta = getattr(fd, "meta", None)
+        if meta and meta.get("autopilot"):
+            words = (meta.get("autopilot"), meta.get("vehicle"), meta.get("firmware"))
+            return " ".join(str(w) for w in words if w)
+    return None
 
 
 _SID_AXIS = {"roll": 10, "pitch": 11, "yaw": 12}

@@ -6,6 +6,7 @@ fact each where no shared log has it.
 
 from __future__ import annotations
 
+import json
 import warnings
 
 import numpy as np
@@ -325,3 +326,263 @@ def test_a_layout_for_another_format_is_refused(tmp_path) -> None:  # type: igno
             simulate(Scenario(manoeuvre="hover", duration_s=1.0), [tmp_path / name],
                      layout=layout)
     assert not list(tmp_path.iterdir())
+
+
+# --------------------------------------------------------------------------- the layouts
+# without RATE outputs or without a motor mixer: ArduCopter 3.2, a traditional heli, ArduPlane
+
+
+def _pymavlink(path, types):  # type: ignore[no-untyped-def]
+    """The records of ``types`` as pymavlink decodes them: type -> field -> array."""
+    from pymavlink import DFReader
+
+    log = DFReader.DFReader_binary(str(path), zero_time_base=False)
+    rows: dict[str, list[dict]] = {t: [] for t in types}
+    while (m := log.recv_match(type=list(types))) is not None:
+        d = m.to_dict()
+        rows[d.pop("mavpackettype")].append(d)
+    return {t: {k: np.array([r[k] for r in rs]) for k in rs[0]} for t, rs in rows.items() if rs}
+
+
+def _loop_index(fl, t_s):  # type: ignore[no-untyped-def]
+    """Loop sample of each logged time (s)."""
+    return np.round((np.asarray(t_s, float) - fl.t_s[0]) / fl.dt).astype(int)
+
+
+def _cli_verdicts(path) -> dict[str, int]:  # type: ignore[no-untyped-def]
+    """Exit codes of ``mavsid info``, ``segments`` and ``fit`` on ``path``."""
+    import contextlib
+    import io
+
+    from mavsid import cli
+
+    codes = {}
+    for cmd in ("info", "segments", "fit"):
+        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                codes[cmd] = cli.main([cmd, str(path)])
+    return codes
+
+
+def _fast(scenario):  # type: ignore[no-untyped-def]
+    """The scenario with IMU and RCOU logged at the RATE rate (200 Hz)."""
+    from dataclasses import replace
+
+    from mavsid.synthetic.flight import LogRates
+
+    return replace(scenario, rates=LogRates(rate=200, att=50, imu=200, rcou=200, rcin=10))
+
+
+def _roll_fit(path, **cfg):  # type: ignore[no-untyped-def]
+    from mavsid.pipeline import PipelineConfig
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = fit([str(path)], PipelineConfig(**cfg) if cfg else None)
+    f = result.axes["roll"]
+    assert f.verdict is not None and f.verdict.identified
+    return result, f.model.params["B[p,u_roll]"], -f.model.params["A[p,p]"]
+
+
+def test_copter_32_layout_has_no_rate_and_fits_through_the_motor_mix(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """ArduCopter 3.2 (ArduCopter/Log.pde and DataFlash/LogStructure.h of the 3.2 release):
+    TimeMS, ATT in centidegrees with ErrRP/ErrYaw, RCOU Chan1-Chan8, FRAME/RC3_*/THR_*/RATE_*
+    parameters and no RATE: the inputs come from the motors through the quad-X mix. With
+    RCOU at 3.2's 10 Hz, fit says why it cannot; with RCOU and IMU at 200 Hz it gives the
+    plant back."""
+    from mavsid.synthetic.run import scenario_from_options, simulate
+
+    sc = scenario_from_options(sid_axes=[10], t_rec=15, rate_hz=200, seed=5)
+    slow, fast = tmp_path / "c32.bin", tmp_path / "c32_fast.bin"
+    simulate(sc, [slow], layout="copter-3.2")
+    sim = simulate(_fast(sc), [fast], layout="copter-3.2")
+    truth = json.loads(fast.with_suffix(".truth.json").read_text())
+    assert truth["layout"] == "copter-3.2"
+    ref = _pymavlink(fast, ("ATT", "RCOU", "PARM", "MSG", "RATE", "IMU"))
+    assert "RATE" not in ref and "TimeMS" in ref["ATT"] and "ErrRP" in ref["ATT"]
+    params = dict(zip(ref["PARM"]["Name"], ref["PARM"]["Value"], strict=True))
+    assert params["FRAME"] == 1 and "FRAME_CLASS" not in params and "RATE_RLL_P" in params
+    assert "MOT_THST_EXPO" not in params and "ATC_RAT_RLL_P" not in params
+    assert any(m.startswith("ArduCopter V3.2") for m in ref["MSG"]["Message"])
+    raw = _quiet_read(fast)
+    for name in ("ATT", "RCOU", "IMU"):  # the reader against pymavlink, field by field
+        for fld, want in ref[name].items():
+            np.testing.assert_allclose(raw[name][fld], want, rtol=1e-6, err_msg=f"{name}.{fld}")
+    # the motors: linear in thrust over THR_MIN..THR_MAX of RC3_MIN..RC3_MAX (no expo)
+    fl = sim.flight
+    k = _loop_index(fl, ref["RCOU"]["TimeMS"] / 1e3)
+    lo, hi = params["RC3_MIN"], params["RC3_MAX"]
+    spin = (params["THR_MIN"] + (params["THR_MAX"] - params["THR_MIN"]) * fl.motors[k]) / 1e3
+    for c in range(4):
+        np.testing.assert_allclose(ref["RCOU"][f"Chan{c + 1}"], np.round(lo + (hi - lo)
+                                                                         * spin[:, c]))
+    assert _cli_verdicts(slow) == {"info": 0, "segments": 0, "fit": 1}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(NoExcitationError, match="logged at 10 Hz") as info:
+            fit([str(slow)])
+    # the advice fits the firmware: no RATE before 3.3, no SYSTEMID chirp to fly
+    advice = " ".join(info.value.details)
+    assert "before 3.3 logs no RATE" in advice and "SID_AXIS" not in advice
+    result, b, damping = _roll_fit(fast)
+    assert result.flights[0].preset == "ardupilot-rcou"
+    assert result.flights[0].meta["sources"]["u_roll"] == "RCOU (quad-x mixer)"
+    want = truth["axes"]["roll"]
+    assert b == pytest.approx(want["effectiveness"], rel=0.12)
+    assert damping == pytest.approx(want["damping"], rel=0.35)
+
+
+def test_heli_layout_takes_the_rate_outputs_not_the_swashplate(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """A traditional helicopter (ArduCopter 4.x, FRAME_CLASS 6): swashplate servos 1-3 (H3-120
+    mix of AP_MotorsHeli_Swash), tail on 4, rotor speed controller on 8; no mixer to invert,
+    so the RCOU preset gives no inputs and says why, and fit takes RATE.ROut/POut/YOut and
+    gives the heli plant back per normalised controller output."""
+    from mavsid.synthetic.run import scenario_from_options, simulate
+
+    path = tmp_path / "heli.bin"
+    sim = simulate(scenario_from_options(sid_axes=[10], t_rec=15, rate_hz=200, seed=5,
+                                         vehicle="heli"), [path], layout="heli")
+    truth = json.loads(path.with_suffix(".truth.json").read_text())
+    assert truth["layout"] == "heli" and "swashplate" in truth["axes"]["roll"][
+        "input_unit_heli"]
+    ref = _pymavlink(path, ("PARM", "MSG", "RCOU", "RATE"))
+    params = dict(zip(ref["PARM"]["Name"], ref["PARM"]["Value"], strict=True))
+    assert params["FRAME_CLASS"] == 6 and params["H_SW_TYPE"] == 3
+    assert [params[f"SERVO{n}_FUNCTION"] for n in (1, 2, 3, 4, 8)] == [33, 34, 35, 36, 31]
+    assert not any(k.startswith("MOT_") for k in params)
+    assert "Frame: HELI" in list(ref["MSG"]["Message"])
+    raw = _quiet_read(path)
+    for name in ("RCOU", "RATE"):
+        for fld, want in ref[name].items():
+            np.testing.assert_allclose(raw[name][fld], want, rtol=1e-6, err_msg=f"{name}.{fld}")
+    # H3-120 (AP_MotorsHeli_Swash): servo = (roll_f·roll + pitch_f·pitch)·0.45 + collective,
+    # rescaled to -1..1 and through SERVOn_MIN/TRIM/MAX; the tail servo carries the yaw output
+    fl = sim.flight
+    k = _loop_index(fl, ref["RCOU"]["TimeUS"] / 1e6)
+    u = fl.u_eff[k]
+    for c, (rf, pf) in enumerate(((0.866025, 0.5), (-0.866025, 0.5), (0.0, -1.0))):
+        x = 2.0 * ((rf * u[:, 0] + pf * u[:, 1]) * 0.45 + 0.5) - 1.0
+        np.testing.assert_allclose(ref["RCOU"][f"C{c + 1}"], np.round(1500 + 400 * x))
+    np.testing.assert_allclose(ref["RCOU"]["C4"], np.round(1500 + 400 * u[:, 2]))
+    assert summarize(raw)["vehicle"] == "copter HELI"
+    with pytest.warns(DataQualityWarning, match=r"FRAME_CLASS 6 .*\(heli\): no motor mixer"):
+        assert align(raw, "ardupilot-rcou").input_names == ()
+    assert _cli_verdicts(path) == {"info": 0, "segments": 0, "fit": 0}
+    result, b, damping = _roll_fit(path)
+    assert result.flights[0].preset == "ardupilot-rate"
+    want = truth["axes"]["roll"]
+    assert b == pytest.approx(want["effectiveness"], rel=0.12)
+    assert damping == pytest.approx(want["damping"], rel=0.35)
+
+
+def test_plane_layout_fits_from_the_pid_sums_and_from_the_servos(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """ArduPlane 4.x: no RATE nor SYSTEMID; PIDR/PIDP/PIDY (Tar/Act in deg/s, P+I+D+FF the
+    surface demand in degrees, ±45 full deflection) and the aileron/elevator/throttle/rudder
+    servos (SERVOn_FUNCTION 4/19/70/21). The plane preset is chosen by the vehicle kind and
+    gives the fixed-wing plant back from the PID sums; from the servo PWMs (normalised through
+    SERVOn_MIN/TRIM/MAX) as well when RCOU is logged fast enough."""
+    from mavsid.errors import ConfigError
+    from mavsid.synthetic.run import scenario_from_options, simulate
+
+    with pytest.raises(ConfigError, match="no SYSTEMID mode"):
+        simulate(scenario_from_options(sid_axes=[10], vehicle="plane"),
+                 [tmp_path / "sid.bin"], layout="plane")
+    assert not list(tmp_path.iterdir())
+    sc = scenario_from_options(manoeuvre="doublet", seed=4, rate_hz=200, vehicle="plane")
+    path, fast = tmp_path / "plane.bin", tmp_path / "plane_fast.bin"
+    simulate(sc, [path], layout="plane")
+    sim = simulate(_fast(sc), [fast], layout="plane")
+    truth = json.loads(fast.with_suffix(".truth.json").read_text())
+    assert truth["layout"] == "plane"
+    assert truth["axes"]["pitch"]["input_field_plane"].startswith("PIDP.P+I+D+FF / 45")
+    ref = _pymavlink(fast, ("PARM", "MSG", "RCOU", "PIDR", "PIDP", "MODE", "RATE", "SIDD"))
+    assert "RATE" not in ref and "SIDD" not in ref
+    params = dict(zip(ref["PARM"]["Name"], ref["PARM"]["Value"], strict=True))
+    assert [params[f"SERVO{n}_FUNCTION"] for n in (1, 2, 3, 4)] == [4, 19, 70, 21]
+    assert set(ref["MODE"]["Mode"]) == {5}  # FBWA
+    raw = _quiet_read(fast)
+    assert raw.vehicle == "plane" and raw.firmware.startswith("ArduPlane V4")
+    for name in ("RCOU", "PIDR", "PIDP"):
+        for fld, want in ref[name].items():
+            np.testing.assert_allclose(raw[name][fld], want, rtol=1e-6, err_msg=f"{name}.{fld}")
+    fl = sim.flight
+    k = _loop_index(fl, ref["PIDR"]["TimeUS"] / 1e6)
+    np.testing.assert_allclose(ref["PIDR"]["Act"], np.degrees(fl.gyro[k, 0]), rtol=1e-5,
+                               atol=1e-4)
+    np.testing.assert_allclose(ref["PIDR"]["Tar"], np.degrees(fl.rate_target[k, 0]),
+                               rtol=1e-5, atol=1e-4)
+    pid_sum = sum(ref["PIDR"][t] for t in ("P", "I", "D", "FF"))
+    np.testing.assert_allclose(pid_sum / 45.0, fl.u[k, 0], rtol=1e-5, atol=1e-6)
+    k = _loop_index(fl, ref["RCOU"]["TimeUS"] / 1e6)  # SRV_Channel::pwm_from_angle
+    for c, a in ((1, 0), (2, 1), (4, 2)):
+        np.testing.assert_allclose(ref["RCOU"][f"C{c}"], np.round(1500 + 400 * fl.u_eff[k, a]))
+    assert _cli_verdicts(path) == {"info": 0, "segments": 0, "fit": 0}
+    want = truth["axes"]["roll"]
+    for log, cfg, preset, source in (
+            (path, {}, "ardupilot-plane-pid", "PIDR.P+I+D+FF"),
+            (fast, {"preset": "ardupilot-plane-servo"}, "ardupilot-plane-servo",
+             "RCOU.C1 (aileron, SERVO1)")):
+        result, b, damping = _roll_fit(log, **cfg)
+        assert result.flights[0].preset == preset
+        assert result.flights[0].meta["sources"]["u_roll"] == source
+        assert b == pytest.approx(want["effectiveness"], rel=0.12), preset
+        assert damping == pytest.approx(want["damping"], rel=0.35), preset
+        assert "no closed-loop twin for ArduPlane" in (result.axes["roll"].closed_loop_note
+                                                       or "")
+        pitch = result.verdicts["pitch"]
+        assert not pitch.identified  # only roll was flown
+        assert "ArduPlane has no SYSTEMID mode" in " ".join(pitch.advice)
+
+
+def test_servo_inputs_follow_the_servo_parameters() -> None:
+    """A reversed servo flips its axis; an aileron on output 5 is found by its function; a
+    log without servo functions names what is missing; a TRIM outside MIN..MAX is refused."""
+    from mavsid.channels import PRESETS, servo_inputs
+    from mavsid.errors import ConfigError
+
+    t = np.arange(4.0)
+    pwm = {f"C{i}": np.full(4, 1500.0) for i in range(1, 9)}
+    pwm["C5"] = np.array([1500.0, 1700, 1300, 0])
+    base = {"SERVO5_FUNCTION": 4, "SERVO2_FUNCTION": 19, "SERVO4_FUNCTION": 21,
+            "SERVO5_MIN": 1000, "SERVO5_TRIM": 1500, "SERVO5_MAX": 1900, "SERVO5_REVERSED": 1}
+    preset = PRESETS["ardupilot-plane-servo"]
+
+    def raw(params):  # type: ignore[no-untyped-def]
+        return RawLog(SourceInfo("p.bin", "dataflash", 0),
+                      {"RCOU": MessageTable("RCOU", pwm, t)}, params=params, vehicle="plane")
+
+    name, source, tt, v = servo_inputs(raw(base), preset)[0]
+    assert (name, source) == ("u_roll", "RCOU.C5 (aileron, SERVO5)")
+    assert tt.tolist() == [0.0, 1.0, 2.0] and v.tolist() == [0.0, -0.5, 0.4]  # PWM 0 dropped
+    with pytest.raises(MissingMessageError, match="SERVOn_FUNCTION 19"):
+        servo_inputs(raw({"SERVO5_FUNCTION": 4}), preset)
+    with pytest.raises(ConfigError, match="SERVO5_MIN/TRIM/MAX 1000/2000/1900"):
+        servo_inputs(raw({**base, "SERVO5_TRIM": 2000}), preset)
+
+
+def test_a_toml_servo_preset_applies_to_its_vehicle_only(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """``servos`` and ``vehicles`` in a TOML preset: the plane preset reads the servos of a
+    plane log and is never chosen for a copter."""
+    from mavsid.channels import choose_preset, load_presets, servo_inputs
+
+    path = tmp_path / "p.toml"
+    path.write_text('''[preset.my-plane]
+vehicles = ["Plane"]
+servos = { message = "RCOU", field = "C{i}", unit = "pwm" }
+[preset.my-plane.states]
+roll = { message = "ATT", field = "Roll", unit = "deg" }
+''')
+    presets, _ = load_presets(path)
+    t = np.arange(3.0)
+    msgs = {"ATT": MessageTable("ATT", {"Roll": np.zeros(3)}, t),
+            "RCOU": MessageTable("RCOU", {f"C{i}": np.array([1500.0, 1900, 1100])
+                                          for i in range(1, 5)}, t)}
+    params = {"SERVO1_FUNCTION": 4, "SERVO2_FUNCTION": 19, "SERVO4_FUNCTION": 21}
+    src = SourceInfo("p.bin", "dataflash", 0)
+    plane = RawLog(src, msgs, params=params, vehicle="plane")
+    assert choose_preset(plane, presets).name == "my-plane"
+    roll = servo_inputs(plane, presets["my-plane"])[0]
+    assert roll[0] == "u_roll" and roll[3].tolist() == [0, 1, -1]
+    copter = RawLog(src, msgs, params=params, vehicle="copter QUAD/X")
+    assert choose_preset(copter, presets).name != "my-plane"

@@ -7,6 +7,12 @@ Message layouts (type ids, format characters, field names, units and multipliers
 of ArduCopter 4.7 as found in a real SITL log, so that readers see what they will meet in
 the field: ATT, RATE, IMU, RCOU, RCIN, MODE, SIDS, SIDD, PARM, MSG.
 
+Other layouts (``layout=``, :data:`LAYOUTS`): older ArduCopter generations (3.2 without
+RATE, 3.3 with TimeMS, 3.4-dev in centidegrees, 3.6 without unit records), a traditional
+helicopter (``heli``: the 4.x records, FRAME_CLASS 6, swashplate servo PWMs on RCOU) and
+ArduPlane 4.x (``plane``: no RATE nor SYSTEMID records; PIDR/PIDP/PIDY and the aileron,
+elevator, throttle and rudder servos on RCOU).
+
 Records are built column-wise in numpy structured arrays and merged into one buffer by a
 stable sort on time; nothing is packed one record at a time.
 
@@ -24,6 +30,7 @@ True
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
 from typing import Any
@@ -215,17 +222,18 @@ class DataFlashBuilder:
         return out.tobytes()
 
 
-def _header(b: DataFlashBuilder, time_us: int) -> None:
+def _header(b: DataFlashBuilder, time_us: int,
+            data_types: tuple[str, ...] = _DATA_TYPES) -> None:
     """FMT, UNIT, MULT and FMTU records for every type this writer uses."""
-    for name in _HEADER_TYPES + _DATA_TYPES:
-        b.define(FORMATS[name])
+    for name in _HEADER_TYPES + data_types:
+        b.define(b.formats[name])
         if name == "MULT":
             b.add("UNIT", np.full(len(UNITS), -1), Id=[ord(k) for k in UNITS],
                   Label=list(UNITS.values()), TimeUS=time_us)
             b.add("MULT", np.full(len(MULTS), -1), Id=[ord(k) for k in MULTS],
                   Mult=list(MULTS.values()), TimeUS=time_us)
-    for name in _DATA_TYPES:
-        f = FORMATS[name]
+    for name in data_types:
+        f = b.formats[name]
         b.add("FMTU", [-1], TimeUS=time_us, FmtType=f.type_id, UnitIds=f.units,
               MultIds=f.mults)
 
@@ -244,18 +252,21 @@ def _build(flight: Flight, lo: int, hi: int, shift_s: float, faults: Faults,
     loop_hz = sc.controller.loop_hz
     tus = np.round((flight.t_s - shift_s) * 1e6).astype(np.int64)
     t0 = int(tus[lo])
+    plane = layout == "plane"
     b = DataFlashBuilder()
-    _header(b, t0)
-    params = flight.params()
+    b.formats.update(_PLANE_PID)
+    _header(b, t0, _PLANE_TYPES if plane else _DATA_TYPES)
+    params = layout_params(flight, layout)
     b.add("PARM", np.full(len(params), -1), TimeUS=t0, Name=list(params),
           Value=list(params.values()), Default=list(params.values()))
     texts = [
-        "ArduCopter V4.5.7 (mavsid00)",
-        "Frame: QUAD/X",
+        _BANNER.get(layout, "ArduCopter V4.5.7 (mavsid00)"),
+        *_FRAME_TEXT.get(layout, ("Frame: QUAD/X",)),
         f"mavsid synthetic flight: manoeuvre={sc.manoeuvre} axis={sc.axis} seed={sc.seed}",
     ]
     b.add("MSG", np.full(len(texts), -1), TimeUS=t0, Message=texts)
     data = DataFlashBuilder()
+    data.formats.update(_PLANE_PID)
 
     def add(name: str, idx: np.ndarray, **cols: Any) -> None:
         keep = faults.keep_mask(len(idx), salt=name) if faults.drop_fraction else slice(None)
@@ -263,7 +274,7 @@ def _build(flight: Flight, lo: int, hi: int, shift_s: float, faults: Faults,
         data.add(name, tus[idx][keep], **cols)
 
     # mode changes (the first sample states the current mode)
-    m = flight.mode
+    m = np.full(len(flight), _PLANE_FBWA) if plane else flight.mode
     change = np.flatnonzero(np.r_[True, m[1:] != m[:-1]])
     change = change[(change >= lo) & (change < hi)]
     if not len(change) or change[0] != lo:
@@ -273,7 +284,7 @@ def _build(flight: Flight, lo: int, hi: int, shift_s: float, faults: Faults,
     run = flight.run_index
     starts = np.flatnonzero((run >= 0) & np.r_[True, run[1:] != run[:-1]])
     starts = starts[(starts >= lo) & (starts < hi)]
-    for k in starts:
+    for k in ([] if plane else starts):
         s = sc.runs[run[k]]
         data.add("SIDS", tus[[k]], Ax=s.axis, Mag=s.magnitude, FSt=s.f_start_hz,
                  FSp=s.f_stop_hz, TFin=s.t_fade_in, TC=s.t_const_freq, TR=s.t_rec,
@@ -281,20 +292,29 @@ def _build(flight: Flight, lo: int, hi: int, shift_s: float, faults: Faults,
         data.add("MSG", tus[[k]], Message=[f"SystemID Starting: axis={s.axis}"])
     ends = np.flatnonzero((run >= 0) & np.r_[run[1:] != run[:-1], True])
     ends = ends[(ends >= lo) & (ends < hi)]
-    data.add("MSG", tus[ends], Message=["SystemID Finished"] * len(ends))
+    if not plane:
+        data.add("MSG", tus[ends], Message=["SystemID Finished"] * len(ends))
 
     deg = np.degrees
     i = _every(flight, "rate", lo, hi)
     g, rt, u = deg(flight.gyro[i]), deg(flight.rate_target[i]), flight.u[i]
-    acc_up = -(flight.accel[i, 2] + GRAVITY) * 100.0  # cm/s/s (multiplier 0.01)
-    add("RATE", i, RDes=rt[:, 0], R=g[:, 0], ROut=u[:, 0], PDes=rt[:, 1], P=g[:, 1],
-        POut=u[:, 1], YDes=rt[:, 2], Y=g[:, 2], YOut=u[:, 2], ADes=0.0, A=acc_up,
-        AOut=flight.throttle[i], AOutSlew=0.0)
-    j = i[flight.mode[i] == MODE_SYSTEMID]
-    graw = deg(flight.gyro_raw[j])
-    add("SIDD", j, Time=flight.sid_time[j], Targ=flight.sid_targ[j], F=flight.sid_freq[j],
-        Gx=graw[:, 0], Gy=graw[:, 1], Gz=graw[:, 2], Ax=flight.accel[j, 0],
-        Ay=flight.accel[j, 1], Az=flight.accel[j, 2])
+    if plane:  # ArduPlane: no RATE; the roll/pitch/yaw controllers' PID records instead
+        for a, pid in enumerate(("PIDR", "PIDP", "PIDY")):
+            # the simulator's controller gives its output sum only: logged as P; the sum
+            # is the surface demand in degrees, +-45 full deflection (AP_RollController)
+            add(pid, i, Tar=rt[:, a], Act=g[:, a], Err=rt[:, a] - g[:, a],
+                P=u[:, a] * _PLANE_SURFACE_DEG, I=0.0, D=0.0, FF=0.0, Dmod=1.0, SRate=0.0,
+                Limit=0)
+    else:
+        acc_up = -(flight.accel[i, 2] + GRAVITY) * 100.0  # cm/s/s (multiplier 0.01)
+        add("RATE", i, RDes=rt[:, 0], R=g[:, 0], ROut=u[:, 0], PDes=rt[:, 1], P=g[:, 1],
+            POut=u[:, 1], YDes=rt[:, 2], Y=g[:, 2], YOut=u[:, 2], ADes=0.0, A=acc_up,
+            AOut=flight.throttle[i], AOutSlew=0.0)
+        j = i[flight.mode[i] == MODE_SYSTEMID]
+        graw = deg(flight.gyro_raw[j])
+        add("SIDD", j, Time=flight.sid_time[j], Targ=flight.sid_targ[j], F=flight.sid_freq[j],
+            Gx=graw[:, 0], Gy=graw[:, 1], Gz=graw[:, 2], Ax=flight.accel[j, 0],
+            Ay=flight.accel[j, 1], Az=flight.accel[j, 2])
     i = _every(flight, "att", lo, hi)
     a, at = deg(flight.attitude[i]), deg(flight.attitude_target[i])
     add("ATT", i, DesRoll=at[:, 0], Roll=a[:, 0], DesPitch=at[:, 1], Pitch=a[:, 1],
@@ -304,17 +324,156 @@ def _build(flight: Flight, lo: int, hi: int, shift_s: float, faults: Faults,
         AccX=flight.accel[i, 0], AccY=flight.accel[i, 1], AccZ=flight.accel[i, 2], EG=0, EA=0,
         T=45.0, GH=1, AH=1, GHz=int(loop_hz), AHz=int(loop_hz))
     i = _every(flight, "rcou", lo, hi)
-    add("RCOU", i, **{f"C{c + 1}": flight.pwm[i, c] for c in range(4)})
+    out = servo_outputs(flight, layout)[i]
+    add("RCOU", i, **{f"C{c + 1}": out[:, c] for c in range(out.shape[1])})
     i = _every(flight, "rcin", lo, hi)
     rc = flight.rc_in()[i]
     add("RCIN", i, **{f"C{c + 1}": rc[:, c] for c in range(rc.shape[1])})
-    if layout != "copter-4":
+    if layout not in ("copter-4", "heli", "plane"):
         return _as_layout(data, b, layout)
     return b.to_bytes() + data.to_bytes()
 
 
-#: Older ArduCopter layouts the writer can produce (``mavsid simulate --layout``).
-LAYOUTS = ("copter-4", "copter-3.6", "copter-3.3", "copter-3.4-dev")
+#: Layouts the writer can produce (``mavsid simulate --layout``): ArduCopter generations,
+#: a traditional helicopter (ArduCopter 4.x heli) and ArduPlane 4.x.
+LAYOUTS = ("copter-4", "copter-3.6", "copter-3.3", "copter-3.4-dev", "copter-3.2", "heli",
+           "plane")
+
+#: ArduPlane's roll/pitch/yaw controllers log PIDR/PIDP/PIDY (``log_PID`` of
+#: libraries/AP_Logger/LogStructure.h: TimeUS,Tar,Act,Err,P,I,D,FF,Dmod,SRate,Limit, no
+#: declared units). Plane's Tar/Act are deg/s and P+I+D+FF is the surface demand in degrees
+#: (x100 centidegrees, limited to +-4500: libraries/APM_Control/AP_RollController.cpp).
+_PLANE_PID: dict[str, MessageFormat] = {
+    f.name: f
+    for f in (
+        _fmt(n, name, "QfffffffffB", "TimeUS,Tar,Act,Err,P,I,D,FF,Dmod,SRate,Limit",
+             "s----------", "F----------")
+        for n, name in ((48, "PIDR"), (49, "PIDP"), (50, "PIDY"))
+    )
+}
+_PLANE_TYPES = ("PARM", "MSG", "MODE", "ATT", "PIDR", "PIDP", "PIDY", "IMU", "RCOU", "RCIN")
+#: the surface demand (degrees) of a full deflection: ArduPlane's +-4500 centidegrees
+_PLANE_SURFACE_DEG = 45.0
+#: ArduPlane mode number of FBWA (fly-by-wire: sticks set bank and pitch angles)
+_PLANE_FBWA = 5
+_BANNER = {"copter-3.2": "ArduCopter V3.2.1 (mavsid00)",
+           "plane": "ArduPlane V4.3.8 (mavsid00)"}
+#: the frame texts each firmware writes after its banner (ArduPlane writes none)
+_FRAME_TEXT: dict[str, tuple[str, ...]] = {"copter-3.2": ("Frame: QUAD",),
+                                           "heli": ("Frame: HELI",), "plane": ()}
+#: servo functions (SERVOn_FUNCTION, SRV_Channel::Aux_servo_function_t) of the outputs
+_PLANE_SERVOS = {1: 4, 2: 19, 3: 70, 4: 21}  # aileron, elevator, throttle, rudder
+_HELI_SERVOS = {1: 33, 2: 34, 3: 35, 4: 36, 8: 31}  # swash 1-3 (motor1-3), tail, RSC
+_SERVO_MIN, _SERVO_TRIM, _SERVO_MAX = 1100.0, 1500.0, 1900.0
+#: AP_MotorsHeli_Swash H3_120 (H_SW_TYPE 3): roll and pitch factor of swash servos 1-3
+_H3_120 = ((0.866025, 0.5), (-0.866025, 0.5), (0.0, -1.0))
+
+
+def layout_params(flight: Flight, layout: str = "copter-4") -> dict[str, float]:
+    """The parameters (PARM) a log of ``layout`` holds for ``flight``, by that firmware's names.
+
+    ``copter-3.2``: the rate PIDs as ``RATE_{RLL,PIT,YAW}_{P,I,D,IMAX}`` (per centidegree/s
+    to the +-4500 output: the ``ATC_RAT`` gains / (18000/pi/4500), IMAX x4500), the angle
+    gains as ``STB_*_P``, ``FRAME`` (1: X) instead of ``FRAME_CLASS/FRAME_TYPE``, the motor
+    range as ``RC3_MIN/RC3_MAX`` and ``THR_MIN/THR_MAX`` (0-1000) instead of ``MOT_PWM_*`` and
+    ``MOT_SPIN_*``, ``TRIM_THROTTLE``; no ``MOT_THST_EXPO`` (outputs linear in thrust), no
+    ``ATC_*``, ``INS_*``, ``SID_*``. ``heli``: ``FRAME_CLASS`` 6, the swashplate (``H_SW_*``,
+    H3-120), ``SERVOn_FUNCTION`` 33-35 (swash servos), 36 (tail), 31 (rotor speed controller)
+    with their ranges; no ``MOT_*``. ``plane``: ``SERVOn_FUNCTION`` 4 aileron, 19 elevator, 70
+    throttle, 21 rudder with ``SERVOn_MIN/TRIM/MAX/REVERSED``, the gyro filter, the loop rate,
+    FBWA for the mode switch; no copter controller gains.
+
+    >>> from mavsid.synthetic.flight import Scenario, fly
+    >>> fl = fly(Scenario(manoeuvre="hover", duration_s=0.1))
+    >>> p = layout_params(fl, "copter-3.2")
+    >>> p["FRAME"], p["RC3_MIN"], p["THR_MIN"], "MOT_THST_EXPO" in p
+    (1.0, 1000.0, 150.0, False)
+    >>> layout_params(fl, "plane")["SERVO2_FUNCTION"], layout_params(fl, "heli")["FRAME_CLASS"]
+    (19.0, 6.0)
+    """
+    p = flight.params()
+    if layout == "copter-3.2":
+        scale = (18000.0 / math.pi) / 4500.0
+        old: dict[str, float] = {}
+        for ax in ("RLL", "PIT", "YAW"):
+            for k in ("P", "I", "D"):
+                old[f"RATE_{ax}_{k}"] = round(p[f"ATC_RAT_{ax}_{k}"] / scale, 6)
+            old[f"RATE_{ax}_IMAX"] = p[f"ATC_RAT_{ax}_IMAX"] * 4500.0
+            old[f"STB_{ax}_P"] = p[f"ATC_ANG_{ax}_P"]
+        old.update(FRAME=1.0, RC3_MIN=p["MOT_PWM_MIN"], RC3_MAX=p["MOT_PWM_MAX"],
+                   THR_MIN=float(round(p["MOT_SPIN_MIN"] * 1000.0)),
+                   THR_MAX=float(round(p["MOT_SPIN_MAX"] * 1000.0)),
+                   TRIM_THROTTLE=float(round(p["MOT_THST_HOVER"] * 1000.0)),
+                   ANGLE_MAX=p["ANGLE_MAX"],
+                   LOG_BITMASK=p["LOG_BITMASK"], FLTMODE1=p["FLTMODE1"], FLTMODE6=p["FLTMODE6"])
+        return dict(sorted(old.items()))
+    if layout == "heli":
+        q = {k: v for k, v in p.items() if not k.startswith(("MOT_", "FRAME_"))}
+        q.update(FRAME_CLASS=6.0, H_SW_TYPE=3.0, H_SW_COL_DIR=0.0, H_SW_LIN_SVO=0.0,
+                 H_RSC_MODE=1.0)
+        q.update(_servo_params(_HELI_SERVOS))
+        return dict(sorted(q.items()))
+    if layout == "plane":
+        q = {k: p[k] for k in ("INS_GYRO_FILTER", "INS_ACCEL_FILTER", "SCHED_LOOP_RATE",
+                               "LOG_BITMASK")}
+        q.update(FLTMODE1=float(_PLANE_FBWA), FLTMODE6=float(_PLANE_FBWA))
+        q.update(_servo_params(_PLANE_SERVOS))
+        return dict(sorted(q.items()))
+    return p
+
+
+def _servo_params(functions: dict[int, int]) -> dict[str, float]:
+    out: dict[str, float] = {}
+    for n, fn in functions.items():
+        out.update({f"SERVO{n}_FUNCTION": float(fn), f"SERVO{n}_MIN": _SERVO_MIN,
+                    f"SERVO{n}_TRIM": _SERVO_TRIM, f"SERVO{n}_MAX": _SERVO_MAX,
+                    f"SERVO{n}_REVERSED": 0.0})
+    return out
+
+
+def _angle_pwm(x: np.ndarray) -> np.ndarray:
+    """A -1..1 angle output to PWM through SERVOn_MIN/TRIM/MAX, as SRV_Channel's
+    ``pwm_from_angle`` maps it (not reversed), to whole microseconds."""
+    x = np.clip(np.asarray(x, dtype=float), -1.0, 1.0)
+    return np.round(_SERVO_TRIM + np.where(x > 0, x * (_SERVO_MAX - _SERVO_TRIM),
+                                           x * (_SERVO_TRIM - _SERVO_MIN)))
+
+
+def servo_outputs(flight: Flight, layout: str = "copter-4") -> np.ndarray:
+    """The RCOU pulse widths (µs) of every loop sample, shape ``(n, channels)``.
+
+    Multicopter layouts: the four motors (``copter-3.2``: linear in thrust, no
+    ``MOT_THST_EXPO`` curve). ``heli``: swash servos 1-3 mixing roll and pitch (the rate
+    controller's outputs) with a fixed mid collective as AP_MotorsHeli_Swash does for
+    H3-120, the tail servo (yaw output) on 4, the rotor speed controller on 8. ``plane``:
+    aileron, elevator (roll and pitch outputs), throttle, rudder (yaw output) on 1-4, each
+    a -1..1 deflection through ``SERVOn_MIN/TRIM/MAX``.
+
+    >>> from mavsid.synthetic.flight import Scenario, fly
+    >>> fl = fly(Scenario(manoeuvre="hover", duration_s=0.1, seed=1))
+    >>> servo_outputs(fl, "plane").shape, servo_outputs(fl, "heli").shape
+    ((40, 4), (40, 8))
+    """
+    if layout == "copter-3.2":
+        from dataclasses import replace
+
+        return replace(flight.scenario.controller, thst_expo=0.0).motor_pwm(flight.motors)
+    u = flight.u_eff
+    if layout == "plane":
+        thr = np.clip(flight.throttle, 0.0, 1.0)
+        return np.column_stack([_angle_pwm(u[:, 0]), _angle_pwm(u[:, 1]),
+                                np.round(_SERVO_MIN + thr * (_SERVO_MAX - _SERVO_MIN)),
+                                _angle_pwm(u[:, 2])])
+    if layout == "heli":
+        out = np.zeros((len(flight), 8))
+        collective = 0.5
+        for k, (roll_f, pitch_f) in enumerate(_H3_120):
+            servo = (roll_f * u[:, 0] + pitch_f * u[:, 1]) * 0.45 + collective
+            out[:, k] = _angle_pwm(2.0 * servo - 1.0)
+        out[:, 3] = _angle_pwm(u[:, 2])
+        out[:, 7] = _SERVO_MAX  # rotor speed controller: governor at its set speed
+        return out
+    return flight.pwm
 
 #: ArduCopter 3.5/3.6: the 4.x types and TimeUS, but no unit records (FMTU/UNIT/MULT), a
 #: PARM without the Default column and no SYSTEMID messages (SIDS/SIDD came with 4.1).
@@ -337,7 +496,27 @@ _OLD_33: dict[str, MessageFormat] = {
         _fmt(136, "RCOU", "IHHHHHHHH", "TimeMS," + ",".join(f"Ch{i}" for i in range(1, 9))),
     )
 }
-_FIRMWARE = {"copter-3.3": "ArduCopter V3.3.3 (mavsid00)",
+#: ArduCopter 3.2 (ArduCopter/Log.pde, libraries/DataFlash/LogStructure.h of that
+#: release): TimeMS; the common types numbered 128-134 (FMT, PARM, -, IMU, MSG, RCIN, RCOU)
+#: and the copter's own from 1 (ATT 1, MODE 3, EV 13); ATT in centidegrees with ErrRP/ErrYaw;
+#: RCIN/RCOU Chan1-Chan8 as int16; no RATE, no PID records (the rate controller's outputs
+#: are not logged), no units.
+_OLD_32: dict[str, MessageFormat] = {
+    f.name: f
+    for f in (
+        _fmt(128, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns"),
+        _fmt(129, "PARM", "Nf", "Name,Value"),
+        _fmt(132, "MSG", "Z", "Message"),
+        _fmt(3, "MODE", "Mh", "Mode,ThrCrs"),
+        _fmt(13, "EV", "B", "Id"),
+        _fmt(1, "ATT", "IccccCCCC", "TimeMS,DesRoll,Roll,DesPitch,Pitch,DesYaw,Yaw,ErrRP,ErrYaw"),
+        _fmt(131, "IMU", "Iffffff", "TimeMS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ"),
+        _fmt(133, "RCIN", "Ihhhhhhhh", "TimeMS," + ",".join(f"Chan{i}" for i in range(1, 9))),
+        _fmt(134, "RCOU", "Ihhhhhhhh", "TimeMS," + ",".join(f"Chan{i}" for i in range(1, 9))),
+    )
+}
+_FIRMWARE = {"copter-3.2": "ArduCopter V3.2.1 (mavsid00)",
+             "copter-3.3": "ArduCopter V3.3.3 (mavsid00)",
              "copter-3.4-dev": "ArduCopter V3.4-dev (mavsid00)",
              "copter-3.6": "ArduCopter V3.6.12 (mavsid00)"}
 
@@ -346,9 +525,11 @@ def _as_layout(data: DataFlashBuilder, header: DataFlashBuilder, layout: str) ->
     """The records of a 4.x-layout flight rewritten as an older firmware logged them.
 
     ``copter-3.3``: see ``_OLD_33`` (the ARM event is written before the first timed record,
-    as those logs do). ``copter-3.6``: see ``_PARM_36``. ``copter-3.4-dev``: the 4.x types
-    but no unit records, ``RATE`` rates in centidegrees/s and ``ROut/POut/YOut`` on the ±4500
-    scale, as ArduCopter 3.4-dev wrote them.
+    as those logs do). ``copter-3.2``: the same with ``_OLD_32`` (no RATE: the rate
+    controller's outputs are in no record, only the motors' RCOU). ``copter-3.6``: see
+    ``_PARM_36``. ``copter-3.4-dev``: the 4.x types but no unit records, ``RATE`` rates in
+    centidegrees/s and ``ROut/POut/YOut`` on the ±4500 scale, as ArduCopter 3.4-dev wrote
+    them.
     """
     by_id = {f.type_id: f.name for f in FORMATS.values()}
     out = DataFlashBuilder()
@@ -361,8 +542,9 @@ def _as_layout(data: DataFlashBuilder, header: DataFlashBuilder, layout: str) ->
         for name in ("FMT", *_DATA_TYPES):
             out.define(FORMATS[name])
     else:
-        out.formats = dict(_OLD_33)
-        for f in _OLD_33.values():
+        old_fmt = _OLD_32 if layout == "copter-3.2" else _OLD_33
+        out.formats = dict(old_fmt)
+        for f in old_fmt.values():
             out.define(f)
         out.add("EV", [-1], Id=10)  # armed, before any timed record
     first_us = None
@@ -397,20 +579,21 @@ def _as_layout(data: DataFlashBuilder, header: DataFlashBuilder, layout: str) ->
                     cols[k] = cols[k] * 4500.0
             out.add(name, t, **cols)
             continue
-        if name not in _OLD_33:
-            continue  # SIDS, SIDD, RCIN: not in this layout
-        f = _OLD_33[name]
+        if name not in old_fmt:
+            continue  # SIDS, SIDD (and RCIN for 3.3, RATE for 3.2): not in this layout
+        f = old_fmt[name]
         timed = "TimeMS" in f.columns
         keep: dict[str, Any] = {k: v for k, v in cols.items() if k in f.columns}
-        if name == "RCOU":
-            keep = {f"Ch{i}": cols[f"C{i}"] for i in range(1, 9)}
+        if name in ("RCOU", "RCIN"):
+            chan = "Chan" if layout == "copter-3.2" else "Ch"
+            keep = {f"{chan}{i}": cols[f"C{i}"] for i in range(1, 9)}
         if name == "MODE":
             keep = {"Mode": cols["Mode"], "ThrCrs": 0}
         if timed:
             keep["TimeMS"] = np.maximum(t, 0) // 1000
             first_us = int(np.min(t)) if first_us is None else min(first_us, int(np.min(t)))
         out.add(name, t if timed else np.maximum(t, 0), **keep)
-    if layout == "copter-3.3" and first_us is not None:
+    if layout in ("copter-3.3", "copter-3.2") and first_us is not None:
         last = max(int(np.max(t)) for t, _ in data._chunks if len(t))
         out.add("EV", [last + 1], Id=11)  # disarmed
     return out.to_bytes()

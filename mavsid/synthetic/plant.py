@@ -171,8 +171,19 @@ class PlantParams:
 
 
 #: Named vehicles for ``mavsid simulate --vehicle``: the default small quad, a heavier X quad
-#: (more inertia: lower control effectiveness and damping, slower motors, a lower gyro filter)
-#: and a hexacopter (six motors: more authority than the heavy quad, yaw weaker).
+#: (more inertia: lower control effectiveness and damping, slower motors, a lower gyro filter),
+#: a hexacopter (six motors: more authority than the heavy quad, yaw weaker), a traditional
+#: helicopter and a fixed-wing plane. For the last two the input is not a motor mix:
+#:
+#: - ``heli``: effectiveness per unit of the rate controller's normalised output (cyclic
+#:   roll/pitch through the swashplate, tail-rotor pitch for yaw); rotor-head damping
+#:   stronger than a small quad's in yaw, the tail rotor much stronger in yaw; the lag is the
+#:   swashplate servos' (25 ms) rather than motors spinning up.
+#: - ``plane``: a small fixed wing at cruise, per unit of normalised surface deflection
+#:   (aileron, elevator, rudder: -1..1 over the servo's travel); roll damping strong (8 1/s,
+#:   the wing's roll damping), pitch and yaw weaker (short-period and dutch-roll reduced to
+#:   first order), authority lower than a multicopter's; the lag is the surface servos'
+#:   (30 ms). ``hover_throttle`` stands for the cruise throttle.
 VEHICLES: dict[str, PlantParams] = {
     "quad": PlantParams(),
     "heavy-x": PlantParams(damping=(2.5, 2.8, 0.8), effectiveness=(95.0, 80.0, 9.0),
@@ -181,6 +192,12 @@ VEHICLES: dict[str, PlantParams] = {
     "hexa": PlantParams(damping=(3.2, 3.0, 1.1), effectiveness=(130.0, 120.0, 14.0),
                         motor_tau_s=0.022, delay_s=0.005, gyro_filter_hz=20.0,
                         hover_throttle=0.45),
+    "heli": PlantParams(damping=(3.5, 3.0, 2.0), effectiveness=(120.0, 100.0, 60.0),
+                        motor_tau_s=0.025, delay_s=0.005, gyro_filter_hz=20.0,
+                        hover_throttle=0.5),
+    "plane": PlantParams(damping=(8.0, 3.0, 1.2), effectiveness=(90.0, 45.0, 15.0),
+                         motor_tau_s=0.03, delay_s=0.005, gyro_filter_hz=20.0,
+                         hover_throttle=0.55),
 }
 
 

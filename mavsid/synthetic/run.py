@@ -47,7 +47,19 @@ _FIELDS = {
     "px4-1.14": (("vehicle_angular_velocity.xyz[{i}]", "vehicle_torque_setpoint.xyz[{i}]")),
     "px4-1.11": (("vehicle_angular_velocity.xyz[{i}]", "actuator_controls_0.control[{i}]")),
     "px4-1.8": (("vehicle_attitude.{speed}", "actuator_controls_0.control[{i}]")),
+    "copter-3.2": (("IMU.Gyr{xyz}", "RCOU.Chan1-Chan4 (quad-X motor mix of u)")),
+    "plane": (("IMU.Gyr{xyz}", "PID{rpy}.P+I+D+FF / 45 = RCOU servo {servo} through "
+               "SERVO{servo}_MIN/TRIM/MAX")),
 }
+#: what the effectiveness is per unit of, for layouts whose input is not RATE.ROut/POut/YOut
+_INPUT_UNIT = {
+    "heli": "the rate controller's normalised output (RATE.ROut/POut/YOut) driving the "
+            "swashplate cyclic (roll, pitch) and the tail rotor (yaw)",
+    "plane": "normalised surface deflection: aileron (roll), elevator (pitch), rudder (yaw), "
+             "-1..1 over the servo's SERVOn_MIN/TRIM/MAX travel",
+}
+#: layouts whose firmware has no SYSTEMID mode (ArduPlane 4.x)
+_NO_SYSTEMID = ("plane",)
 
 
 @dataclass(frozen=True)
@@ -79,14 +91,17 @@ def simulate(
 ) -> SimulationResult:
     """Fly ``scenario`` once and write it to every path in ``outputs`` with its truth file.
 
-    ``layout`` is the log layout of the ``.bin`` (an ArduCopter generation, see
-    :data:`~mavsid.synthetic.dfwriter.LAYOUTS`; default ``copter-4``) or of the ``.ulg`` (a
-    PX4 topic set, :data:`~mavsid.synthetic.ulogwriter.ULOG_LAYOUTS`; default ``px4-1.14``).
+    ``layout`` is the log layout of the ``.bin`` (an ArduCopter generation, a heli or
+    ArduPlane, see :data:`~mavsid.synthetic.dfwriter.LAYOUTS`; default ``copter-4``) or of
+    the ``.ulg`` (a PX4 topic set, :data:`~mavsid.synthetic.ulogwriter.ULOG_LAYOUTS`; default
+    ``px4-1.14``). The layout sets the records, not the plant: fly
+    ``VEHICLES["heli"]``/``["plane"]`` for those (``mavsid simulate`` does by default).
 
     Raises
     ------
     ConfigError
-        No output, or an output whose suffix is neither ``.bin`` nor ``.tlog``.
+        No output, or an output whose suffix is neither ``.bin`` nor ``.tlog``; SYSTEMID runs
+        written as ArduPlane (which has no SYSTEMID mode).
     """
     faults = faults or Faults()
     if not outputs:
@@ -109,6 +124,10 @@ def simulate(
             raise ConfigError(f"{p}: layout {layout} is not a {suffix} layout; choose from "
                               f"{', '.join(fits)}")
         layouts[p] = (layout if layout in fits else DEFAULT_LAYOUTS[suffix]) if fits else None
+    for p in paths:
+        if layouts[p] in _NO_SYSTEMID and scenario.runs:
+            raise ConfigError(f"{p}: layout {layouts[p]}: ArduPlane has no SYSTEMID mode; fly "
+                              "a pilot manoeuvre (--manoeuvre doublet, 3211 or random)")
     flight = fly(scenario)
     sizes = [write_dataflash(flight, p, faults, str(layouts[p])) if p.suffix.lower() == ".bin"
              else write_ulog(flight, p, faults, str(layouts[p])) if p.suffix.lower() == ".ulg"
@@ -127,8 +146,13 @@ def simulate(
             for i, (ax, speed) in enumerate(zip(("roll", "pitch", "yaw"),
                                                 ("rollspeed", "pitchspeed", "yawspeed"),
                                                 strict=True)):
-                doc["axes"][ax][f"output_field_{name}"] = rate.format(i=i, speed=speed)
-                doc["axes"][ax][f"input_field_{name}"] = out.format(i=i, speed=speed)
+                keys = {"i": i, "speed": speed, "xyz": "XYZ"[i], "rpy": "RPY"[i],
+                        "servo": (1, 2, 4)[i]}
+                doc["axes"][ax][f"output_field_{name}"] = rate.format(**keys)
+                doc["axes"][ax][f"input_field_{name}"] = out.format(**keys)
+        for name in sorted(str(w) for w in written if w in _INPUT_UNIT):
+            for ax in ("roll", "pitch", "yaw"):
+                doc["axes"][ax][f"input_unit_{name}"] = _INPUT_UNIT[name]
         doc["faults"] = {"drop_fraction": faults.drop_fraction,
                          "reboot_at_s": faults.reboot_at_s,
                          "truncate_bytes": faults.truncate_bytes}

@@ -31,9 +31,10 @@ def _quiet_read(path, **kw):  # type: ignore[no-untyped-def]
 
 
 def test_copter_31_text_log_is_timed_by_gps_like_pymavlink() -> None:
-    """ArduCopter 3.1: no boot-time field on ATT; GPS.TimeMS is the only clock. pymavlink
-    holds the last GPS time (two ATT per 5 Hz fix share one stamp); mavsid interpolates by
-    the record's place in the file: the two agree to within one GPS interval."""
+    """ArduCopter 3.1: no boot-time field on ATT; the GPS message's T (ms since boot) is the
+    clock, pymavlink's and mavsid's. pymavlink holds the last GPS time (two ATT per 5 Hz fix
+    share one stamp); mavsid interpolates by the record's place in the file: the two agree to
+    within one GPS interval."""
     from pymavlink import DFReader
 
     path = shared_path("public", "ArduPilot__ardupilot", "mechanical_fail.log")
@@ -44,13 +45,12 @@ def test_copter_31_text_log_is_timed_by_gps_like_pymavlink() -> None:
     raw = _quiet_read(path, messages=["ATT", "GPS"])
     ours = raw["ATT"].time_s
     assert np.isfinite(ours).all() and len(ours) == len(att)
-    # the clocks differ by a constant (pymavlink's epoch; it also skips the 7.4 s jump of
-    # GPS.TimeMS at the second fix, mavsid keeps it): compare after the median offset
+    # the clocks differ by a constant (pymavlink's epoch): compare after the median offset
     d = ours - np.asarray(att)
     d = np.abs(d - np.median(d))[10:]
     assert np.median(d) < 0.15 and np.percentile(d, 95) <= 0.25
     assert np.all(np.diff(ours) >= 0)
-    assert any("GPS time of week" in n for n in raw.source.notes)
+    assert any("GPS.T (ms since boot)" in n for n in raw.source.notes)
 
 
 @pytest.mark.parametrize("name", _OLD_COPTER)

@@ -5,7 +5,8 @@
 Each flight is drawn from the simulator's whole range: manoeuvre (SYSTEMID mixer chirp, stick
 doublet, 3-2-1-1, random stick), axis, vehicle (small quad, heavier X quad, hexacopter), gyro
 white noise fed back through the rate controller (0-6 deg/s), frame vibration (0-5 deg/s),
-logging rate (25-400 Hz) and log layout (ArduCopter 3.3, 3.4-dev, 3.6, 4.x; PX4 1.11, 1.14).
+logging rate (25-400 Hz) and log layout (ArduCopter 3.2, 3.3, 3.4-dev, 3.6, 4.x, a 4.x
+traditional heli, ArduPlane 4.x; PX4 1.11, 1.14; heli and plane fly their own plants).
 Each is fitted with the defaults (``pipeline.fit``, the axis flown) and compared with the
 simulated plant's truth:
 
@@ -48,7 +49,7 @@ SID_AXIS = {"roll": 10, "pitch": 11, "yaw": 12}
 
 def draw(rng: random.Random) -> dict[str, Any]:
     """One flight's settings."""
-    return {
+    s = {
         "manoeuvre": rng.choice(["sysid", "sysid", "doublet", "3211", "random"]),
         "axis": rng.choice(["roll", "pitch", "yaw"]),
         "vehicle": rng.choice(["quad", "heavy-x", "hexa"]),
@@ -56,9 +57,13 @@ def draw(rng: random.Random) -> dict[str, Any]:
         "vibration_dps": rng.choice([0.0, 0.0, 2.0, 5.0]),
         "rate_hz": float(rng.choice([25, 50, 100, 200, 400])),
         "layout": rng.choice(["copter-4", "copter-4", "copter-3.6", "copter-3.3",
-                              "copter-3.4-dev", "px4-1.14", "px4-1.11"]),
+                              "copter-3.4-dev", "copter-3.2", "heli", "plane", "px4-1.14",
+                              "px4-1.11"]),
         "seed": rng.randrange(1000),
     }
+    if s["layout"] == "plane" and s["manoeuvre"] == "sysid":  # (ArduPlane has no SYSTEMID)
+        s["manoeuvre"] = rng.choice(["doublet", "3211", "random"])
+    return s
 
 
 def run_one(folder: Path, i: int, s: dict[str, Any]) -> tuple[str, str]:

@@ -930,7 +930,8 @@ def servo_inputs(raw: RawLog, preset: Preset) -> list[tuple[str, str, np.ndarray
     MissingMessageError
         No servo carries roll, pitch or yaw (``SERVOn_FUNCTION``), or its PWM field is absent.
     ConfigError
-        A servo's ``SERVOn_MIN/TRIM/MAX`` are not increasing.
+        An angle servo's ``SERVOn_MIN/TRIM/MAX`` are not increasing (a throttle's need only
+        ``MIN < MAX``; one without is left out).
 
     Examples
     --------
@@ -974,7 +975,10 @@ def servo_inputs(raw: RawLog, preset: Preset) -> list[tuple[str, str, np.ndarray
         lo = float(params.get(f"SERVO{n}_MIN", 1100.0))
         trim = float(params.get(f"SERVO{n}_TRIM", 1500.0))
         hi = float(params.get(f"SERVO{n}_MAX", 1900.0))
-        if not hi > trim > lo:
+        # (a range output's trim is usually its minimum: a throttle idles there)
+        if not (hi > trim > lo if angle else hi > lo):
+            if name == "u_thrust":  # (optional: the attitude axes do not need it)
+                continue
             raise ConfigError(f"{raw.source.path}: SERVO{n}_MIN/TRIM/MAX {lo:g}/{trim:g}/{hi:g} "
                               f"are not increasing: the {label} output cannot be normalised")
         rev = bool(params.get(f"SERVO{n}_REVERSED", 0.0))

@@ -559,6 +559,26 @@ def test_servo_inputs_follow_the_servo_parameters() -> None:
         servo_inputs(raw({"SERVO5_FUNCTION": 4}), preset)
     with pytest.raises(ConfigError, match="SERVO5_MIN/TRIM/MAX 1000/2000/1900"):
         servo_inputs(raw({**base, "SERVO5_TRIM": 2000}), preset)
+    # a throttle idles at its trim = MIN (ArduPlane's default): a range, normalised from MIN
+    pwm["C3"] = np.array([1100.0, 1500, 1900, 1100])
+    thr = {**base, "SERVO3_FUNCTION": 70, "SERVO3_MIN": 1100, "SERVO3_TRIM": 1100,
+           "SERVO3_MAX": 1900}
+    got = {n: v for n, _, _, v in servo_inputs(raw(thr), preset)}
+    assert got["u_thrust"].tolist() == [0.0, 0.5, 1.0, 0.0]
+    # one whose range is broken is left out: the attitude axes do not need it
+    got = {n for n, _, _, _ in servo_inputs(raw({**thr, "SERVO3_MAX": 1100}), preset)}
+    assert got == {"u_roll", "u_pitch", "u_yaw"}
+
+
+def test_a_real_plane_log_reaches_a_verdict() -> None:
+    """ArduPlane 3.8 (pymavlink's test.BIN, throttle trim at its minimum as on every plane):
+    a verdict per axis, not a servo-normalisation error."""
+    path = shared_path("public", "ArduPilot__pymavlink", "test.BIN")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(NoExcitationError, match="nothing identifiable") as info:
+            fit([str(path)])
+    assert set(info.value.verdicts) == {"roll", "pitch", "yaw"}  # type: ignore[attr-defined]
 
 
 def test_a_toml_servo_preset_applies_to_its_vehicle_only(tmp_path) -> None:  # type: ignore[no-untyped-def]

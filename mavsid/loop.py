@@ -631,6 +631,7 @@ def simulate_closed_loop(
     warmup: int = 0,
     limit: float = 1.0,
     lag: int = 0,
+    meas_delay: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Close the loop: the controller follows ``target`` through ``plant``.
 
@@ -661,6 +662,9 @@ def simulate_closed_loop(
     lag : int
         Controller steps between a target (and injection) sample and the step that first
         uses it (ArduCopter: 1, see :func:`replay_controller`).
+    meas_delay : float
+        Controller steps (0-1) by which the rate the controller reads lags the plant's output
+        (linear interpolation with the step before; see :func:`replay_controller`).
 
     Returns
     -------
@@ -692,11 +696,15 @@ def simulate_closed_loop(
     if u is not None and n:
         pid.preset(float(tg[0]), float(ym[0]), float(um[0] - ij[0]))
     j = 0
+    tau = min(max(float(meas_delay), 0.0), 1.0)
+    y_prev = float(ym[0]) if n else 0.0
     if warmup:
         outs = np.empty(warmup)
         for k in range(warmup):
             for s in range(substeps):
-                out = pid.update(float(tg[j]), float(ym[k]))
+                y_now = float(ym[k])
+                out = pid.update(float(tg[j]), (1.0 - tau) * y_now + tau * y_prev)
+                y_prev = y_now
                 if s == 0:
                     outs[k] = out
                 x = a @ x + b * (float(um[k]) + off) + ew[j]
@@ -711,7 +719,9 @@ def simulate_closed_loop(
     for k in range(warmup, n):
         for s in range(substeps):
             y = float(c @ x)
-            uk = min(max(pid.update(float(tg[j]), y) + float(ij[j]), -limit), limit)
+            seen = (1.0 - tau) * y + tau * y_prev
+            y_prev = y
+            uk = min(max(pid.update(float(tg[j]), seen) + float(ij[j]), -limit), limit)
             if s == 0:
                 y_out[k - warmup], u_out[k - warmup] = y, uk
             x = a @ x + b * (uk + off) + ew[j]
@@ -729,6 +739,7 @@ def _lagged(x: np.ndarray, lag: int) -> np.ndarray:
 def replay_controller(
     ctrl: AxisController, dt: float, target: np.ndarray, rate: np.ndarray, output: np.ndarray,
     injection: np.ndarray | None = None, lag: int = 0, substeps: int = 1,
+    meas_delay: float = 0.0,
 ) -> np.ndarray:
     """The rebuilt controller fed the *measured* rate: its output (mixer input minus the
     injection) sample by sample, to compare with the logged one.
@@ -737,6 +748,10 @@ def replay_controller(
     controller at the start of each loop on the target and injection its attitude controller
     and SYSTEMID set in the loop before, and logs them when they are set: 1 loop).
     ``substeps`` controller steps per sample (``lag`` counts them) hold the measured rate.
+    ``meas_delay`` (controller steps, 0-1): the rate the controller reads lags the logged one
+    by that fraction of a step (linear interpolation with the step before): a log may stamp
+    the gyro sample a little apart from the one the controller used (the SITL flight's
+    replay: 96.2 % at 0, 97.7 % at 0.2 of its 400 Hz loop).
 
     Examples
     --------
@@ -751,6 +766,9 @@ def replay_controller(
     tg = _lagged(np.repeat(np.asarray(target, dtype=float), substeps), lag)
     ij = _lagged(np.repeat(inj, substeps), lag)[::substeps]
     ym = np.repeat(np.asarray(rate, dtype=float), substeps)
+    tau = min(max(float(meas_delay), 0.0), 1.0)
+    if tau > 0 and ym.size:
+        ym = (1.0 - tau) * ym + tau * np.concatenate([ym[:1], ym[:-1]])
     pid = ctrl.new_pid(dt / substeps)
     pid.preset(float(tg[0]), float(rate[0]), float(output[0] - ij[0]))
     out = np.array([pid.update(float(a), float(b)) for a, b in zip(tg, ym, strict=True)])
@@ -914,6 +932,9 @@ class ClosedLoopFit:
         Controller steps per data sample (the plant re-discretised when > 1).
     lag_loops : int
         Controller loops between a logged target (and injection) and its use.
+    measurement_delay_loops : float
+        Part of a loop by which the rate the controller reads lags the logged rate (chosen,
+        as ``lag_loops``, by the controller replay on the training blocks).
     target_source, injection_source : str
     blocks : tuple of TwinBlock
     """
@@ -927,6 +948,7 @@ class ClosedLoopFit:
     controller: Mapping[str, Any] = field(default_factory=dict)
     substeps: int = 1
     lag_loops: int = 0
+    measurement_delay_loops: float = 0.0
     target_source: str = ""
     injection_source: str = ""
     blocks: tuple[TwinBlock, ...] = field(default=(), repr=False)
@@ -943,6 +965,7 @@ class ClosedLoopFit:
             "controller": dict(self.controller),
             "substeps": self.substeps,
             "lag_loops": self.lag_loops,
+            "measurement_delay_loops": self.measurement_delay_loops,
             "target_source": self.target_source,
             "injection_source": self.injection_source,
             "blocks": [[float(b.time_s[0]), float(b.time_s[-1])] for b in self.blocks],
@@ -1047,6 +1070,11 @@ WARMUP_S = 0.5
 
 #: target/injection lags (controller loops) tried
 LAGS = (0, 1, 2)
+#: measurement delays (controller loops) tried when the log is at the loop rate: the rate
+#: the controller read may lag the logged one by part of a loop (the gyro sample stamped
+#: apart from the one used); the shortest within MEAS_DELAY_TOL (fit %) of the best replay
+MEAS_DELAYS = (0.0, 0.1, 0.2, 0.3, 0.4, 0.5)
+MEAS_DELAY_TOL = 0.1
 #: ArduCopter uses a target one loop after logging it (see :func:`replay_controller`)
 _DEFAULT_LAG = {"ardupilot": 1, "px4": 0}
 
@@ -1067,7 +1095,8 @@ def closed_loop_fit(
     model at the controller's loop rate, from the measured rate and controller output at
     the block's start. The lag between a logged target and its use (0-2 loops) is the one
     whose controller replay (:func:`replay_controller`) matches the training blocks best
-    (without training blocks: ArduPilot's 1 loop, PX4's 0).
+    (without training blocks: ArduPilot's 1 loop, PX4's 0); then, for a log at the loop
+    rate, the measurement delay (:data:`MEAS_DELAYS`) the same way.
 
     Raises
     ------
@@ -1087,17 +1116,27 @@ def closed_loop_fit(
     dt = val[0].seg.dt
     substeps = max(1, round(ctrl.loop_hz * dt))
     lag = _DEFAULT_LAG[ctrl.autopilot]
+    meas_delay = 0.0
+
+    def replayed(cand: int, tau: float) -> float:
+        """The controller replay's fit % on the training blocks."""
+        out = [(b.u - _lagged(np.repeat(b.injection, substeps), cand)[::substeps],
+                replay_controller(b.ctrl, dt, b.target, b.rate, b.u, b.injection, cand,
+                                  substeps, tau))
+               for b in tr]
+        out = [(m[b.warm:], r[b.warm:]) for b, (m, r) in zip(tr, out, strict=True)]
+        return _pooled_fit([o[0] for o in out], [o[1] for o in out])
+
     if tr:
-        scores = []
-        for cand in LAGS:
-            out = [(b.u - _lagged(np.repeat(b.injection, substeps), cand)[::substeps],
-                    replay_controller(b.ctrl, dt, b.target, b.rate, b.u, b.injection, cand,
-                                      substeps))
-                   for b in tr]
-            out = [(m[b.warm:], r[b.warm:]) for b, (m, r) in zip(tr, out, strict=True)]
-            scores.append(_pooled_fit([o[0] for o in out], [o[1] for o in out]))
+        scores = [replayed(cand, 0.0) for cand in LAGS]
         if np.any(np.isfinite(scores)):
             lag = LAGS[int(np.nanargmax(scores))]
+            if substeps == 1:  # (a sample held over several steps has no sub-step timing)
+                by_tau = [(scores[LAGS.index(lag)], 0.0)]
+                by_tau += [(replayed(lag, tau), tau) for tau in MEAS_DELAYS[1:]]
+                best = max(sc for sc, _ in by_tau if np.isfinite(sc))
+                meas_delay = min(tau for sc, tau in by_tau
+                                 if np.isfinite(sc) and sc >= best - MEAS_DELAY_TOL)
     try:
         plant = plant_from_model(model, axis, dt / substeps)
     except ConfigError:
@@ -1110,7 +1149,7 @@ def closed_loop_fit(
         y_sim, u_sim = simulate_closed_loop(
             plant, b.ctrl.new_pid(dt / substeps), b.target, injection=b.injection,
             others=_others(b, plant), substeps=substeps, rate=b.rate, u=b.u, warmup=b.warm,
-            lag=lag,
+            lag=lag, meas_delay=meas_delay,
         )
         w = b.warm
         inj = _lagged(np.repeat(b.injection, substeps), lag)[::substeps][w:]
@@ -1137,6 +1176,7 @@ def closed_loop_fit(
         controller=ctrl.to_dict(),
         substeps=substeps,
         lag_loops=lag,
+        measurement_delay_loops=meas_delay,
         target_source=sigs[k].sources.get(f"target_{axis}", ""),
         injection_source=sigs[k].sources.get(f"injection_{axis}", ""),
         blocks=twin_blocks,
@@ -1413,11 +1453,13 @@ def _db(gain_margin: float) -> float:
 
 
 def analyse_loop(plant_ss: Any, ctrl: AxisController, lag: int = 0,
-                 freq_hz: np.ndarray | None = None) -> LoopAnalysis:
+                 freq_hz: np.ndarray | None = None, meas_delay: float = 0.0) -> LoopAnalysis:
     """Margins, bandwidths and step metrics of ``ctrl`` around ``plant_ss`` (a discrete
     python-control system at the controller's loop step, rate per controller output).
 
-    ``lag`` loops of delay on the target path (see :func:`replay_controller`).
+    ``lag`` loops of delay on the target path (see :func:`replay_controller`);
+    ``meas_delay`` (0-1 loop) on the measured rate the controller reads (``(1 − τ) + τz⁻¹``,
+    :attr:`ClosedLoopFit.measurement_delay_loops`).
     """
     import control
 
@@ -1425,6 +1467,9 @@ def analyse_loop(plant_ss: Any, ctrl: AxisController, lag: int = 0,
     cfb, ct = controller_tf(ctrl, dt)
     if lag:
         ct = ct * control.tf([1.0], [1.0] + [0.0] * lag, dt)
+    tau = min(max(float(meas_delay), 0.0), 1.0)
+    if tau:
+        cfb = cfb * control.tf([1.0 - tau, tau], [1.0, 0.0], dt)
     p = control.ss(plant_ss)
     cfb_ss, ct_ss = control.ss(cfb), control.ss(ct)
     loop_tf = cfb_ss * p
@@ -1497,11 +1542,11 @@ def plant_statespace(model: Any, axis: str, dt: float) -> Any:
 
 
 def analyse_model(model: Any, axis: str, ctrl: AxisController, lag: int = 0,
-                  samples: int = 40, seed: int = 0) -> LoopAnalysis:
+                  samples: int = 40, seed: int = 0, meas_delay: float = 0.0) -> LoopAnalysis:
     """:func:`analyse_loop` of the identified plant, with one-σ uncertainties from
     ``samples`` draws of the model's coefficients from their covariance."""
     dt = 1.0 / ctrl.loop_hz
-    base = analyse_loop(plant_statespace(model, axis, dt), ctrl, lag)
+    base = analyse_loop(plant_statespace(model, axis, dt), ctrl, lag, meas_delay=meas_delay)
     cov = getattr(model, "covariance", None)
     rate = AXIS_RATE[axis]
     if cov is None or samples < 2 or rate not in model.state_names:
@@ -1516,7 +1561,7 @@ def analyse_model(model: Any, axis: str, ctrl: AxisController, lag: int = 0,
         try:
             m = replace(model, coef=coef)
             draws.append(analyse_loop(plant_statespace(m, axis, dt), ctrl, lag,
-                                      base.freq_hz).figures())
+                                      base.freq_hz, meas_delay).figures())
         except (MavsidError, ValueError, np.linalg.LinAlgError):
             continue
     if len(draws) < 2:
@@ -1534,20 +1579,24 @@ def _scaled(ctrl: AxisController, k: float) -> AxisController:
 
 
 def suggest_gains(plant_ss: Any, ctrl: AxisController, target_pm_deg: float = 50.0,
-                  lag: int = 0) -> tuple[dict[str, float], LoopAnalysis] | None:
+                  lag: int = 0, meas_delay: float = 0.0
+                  ) -> tuple[dict[str, float], LoopAnalysis] | None:
     """P, I and D scaled together (ratios and filters kept) so that the loop's phase margin
     is ``target_pm_deg``; the vehicle's parameter names and units, and the predicted loop.
-    None when no scale in [0.05, 20] reaches it with a stable loop."""
+    None when no scale in [0.05, 20] reaches it with a stable loop. (``lag``, ``meas_delay``:
+    :func:`analyse_loop`.)"""
     import warnings
 
     import control
 
     p = control.ss(plant_ss)
     dt = float(plant_ss.dt)
+    tau = min(max(float(meas_delay), 0.0), 1.0)
+    reads = control.tf([1.0 - tau, tau], [1.0, 0.0], dt)
 
     def pm(k: float) -> float:
         cfb, _ = controller_tf(_scaled(ctrl, k), dt)
-        loop_tf = control.ss(cfb) * p
+        loop_tf = control.ss(cfb * reads if tau else cfb) * p
         if np.any(np.abs(control.feedback(loop_tf, 1).poles()) >= 1.0):
             return -1e9  # unstable closed loop
         with np.errstate(all="ignore"), warnings.catch_warnings():
@@ -1565,7 +1614,7 @@ def suggest_gains(plant_ss: Any, ctrl: AxisController, target_pm_deg: float = 50
         mid = np.sqrt(lo * hi)
         lo, hi = (mid, hi) if pm(mid) >= target_pm_deg else (lo, mid)
     new = _scaled(ctrl, lo)
-    result = analyse_loop(plant_ss, new, lag)
+    result = analyse_loop(plant_ss, new, lag, meas_delay=tau)
     if not (np.isfinite(result.phase_margin_deg) and result.gain_margin_db > 0):
         return None
     return gain_params(new), result
@@ -1809,9 +1858,10 @@ def tune(result: Any, target_pm_deg: float = 50.0, samples: int = 40,
         fd = result.flights[0]
         ctrl = controller_from_params(fd.params, axis, _autopilot(fd))
         lag = fit.closed_loop.lag_loops if fit.closed_loop is not None else 0
+        tau = fit.closed_loop.measurement_delay_loops if fit.closed_loop is not None else 0.0
         entry["controller"] = ctrl.to_dict()
         try:
-            an = analyse_model(fit.model, axis, ctrl, lag, samples=samples)
+            an = analyse_model(fit.model, axis, ctrl, lag, samples=samples, meas_delay=tau)
         except (MavsidError, ValueError, np.linalg.LinAlgError) as exc:
             entry["error"] = str(exc)
             out[axis] = entry
@@ -1846,7 +1896,7 @@ def tune(result: Any, target_pm_deg: float = 50.0, samples: int = 40,
             entry["suggested_note"] = f"no gains suggested: the plant model is {level}"
         else:
             got = suggest_gains(plant_statespace(fit.model, axis, 1.0 / ctrl.loop_hz), ctrl,
-                                target_pm_deg, lag)
+                                target_pm_deg, lag, tau)
             if got is None:
                 entry["suggested"] = {}
                 entry["suggested_note"] = (f"no P/I/D scale gives {target_pm_deg:g} deg phase "

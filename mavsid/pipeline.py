@@ -907,6 +907,9 @@ def _closed_loop_line(f: AxisFit) -> str:
 
     text = (f"closed loop %  rate {pct(cl.fit_percent)}  output {pct(cl.output_fit_percent)}  "
             f"(baseline {pct(cl.baseline_percent)} at {cl.baseline_delay_s * 1e3:.0f} ms)")
+    if cl.measurement_delay_loops:
+        text += (f"; the controller read the rate {cl.measurement_delay_loops:g} loop after "
+                 "the logged sample (replay on the training blocks)")
     if cl.defaults_used:
         text += f"; defaults used: {', '.join(cl.defaults_used)}"
     return text

@@ -119,6 +119,8 @@ _BASIC: dict[str, tuple[type[np.generic], int, str]] = {
     "bool": (np.int8, 1, "?"), "char": (np.int8, 1, "c"),
 }  # fmt: skip
 #: message types read in the definitions section / in the data section
+#: little-endian numpy dtypes of the basic types
+_DTYPE = {kind: np.dtype(t).newbyteorder("<") for kind, (t, _, _) in _BASIC.items()}
 _DEF_TYPES = frozenset(b"FIMPQBALC")
 _DATA_TYPES = frozenset(b"IMPQALCDOS")
 _HEAD = struct.Struct("<HB").unpack_from
@@ -132,6 +134,8 @@ _MAX_UNKNOWN_SIZE = 10000
 #: a format flattening to more fields than a data message can hold bytes is never decoded
 _MAX_FIELDS = 0xFFFF
 _NO_LIMIT = 1 << 62
+#: bytes of the file scanned at a time for message candidates
+_BLOCK = 1 << 22
 
 
 def table_name(topic: str, multi_id: int) -> str:
@@ -209,10 +213,10 @@ def _format(data: bytes) -> tuple[str, list[Field]]:
     for item in parts[1].split(";"):
         if not item:
             continue
-        words = item.split(" ")
-        if len(words) < 2:
+        kind, space, rest = item.partition(" ")
+        if not space:
             raise _Bad
-        kind, name = words[0], words[1]
+        name = rest.partition(" ")[0]  # the second word, as pyulog takes it
         a = kind.find("[")
         if a < 0:
             fields.append((kind, 0, name))
@@ -381,6 +385,15 @@ class _Reader:
         (type 0, size 0 or > 10000; in the data section also: whose message fits below
         ``limit``), which pyulog would step over one byte at a time."""
         u8, n, width = self.u8, self.n, 256
+        top = n if limit is None else min(n, limit)
+        for _ in range(8):  # most runs are short: a few steps in Python first
+            if q + 3 > n:
+                return q
+            size, kind = _HEAD(self.buf, q)
+            if kind in known or (kind and size and size <= _MAX_UNKNOWN_SIZE) or (
+                    limit is not None and q + 3 + size > top):
+                return q
+            q += 1
         table = np.zeros(256, bool)
         table[list(known)] = True
         while q + 3 <= n:
@@ -465,16 +478,36 @@ class _Reader:
     # ------------------------------------------------------------------ candidates
     def candidates(self, start: int) -> None:
         """Data-message candidates from ``start`` (see *Framing*), their successors, ids
-        and sizes, and the indices where a run of consecutive candidates breaks."""
+        and sizes, and the indices where a run of consecutive candidates breaks.
+
+        One pass over the file in blocks (small temporaries, reused): positions of type
+        byte ``D`` whose size is some format's, and of type byte ``A`` (subscriptions to
+        be); then the ``D`` ones are kept where their size is one their id's subscription
+        allows (:meth:`allowed_sizes`)."""
         u8, n = self.u8, self.n
-        allowed = self.subscription_sizes(start)
-        p = np.flatnonzero(u8[start + 2 :] == 0x44)
-        p += start
-        p = p[p + 5 <= n]
+        sizes = _sizes(self.out.formats)
+        any_size = np.zeros(1 << 16, bool)
+        any_size[[s for got in sizes.values() for s in got]] = True
         u16 = np.ndarray((max(n - 1, 0),), "<u2", buffer=self.buf, strides=(1,))
-        size, ids = u16[p], u16[p + 3]
+        found: list[tuple[NDArray[np.int64], NDArray[np.uint16], NDArray[np.uint16]]] = []
+        subs = []
+        for lo in range(start, max(n - 4, start), _BLOCK):
+            hi = min(lo + _BLOCK, n - 4)  # a data message needs 5 bytes
+            kinds = u8[lo + 2 : hi + 2]
+            p = np.flatnonzero(kinds == 0x44)
+            p += lo
+            size = u16[p]
+            p = p[any_size[size]]
+            found.append((p, u16[p], u16[p + 3]))
+            q = np.flatnonzero(kinds == 0x41)
+            q += lo
+            subs.append(q)
+        if found:
+            p, size, ids = (np.concatenate(a) for a in zip(*found, strict=True))
+        else:
+            p, size, ids = np.zeros(0, np.int64), np.zeros(0, np.uint16), np.zeros(0, np.uint16)
         keep = np.zeros(p.size, bool)
-        for table in allowed:
+        for table in self.allowed_sizes(np.concatenate(subs) if subs else p, sizes):
             keep |= table[ids] == size
         keep &= p + 3 + size <= n
         self.cand, self.csize, self.cmsg = p[keep], size[keep], ids[keep]
@@ -483,15 +516,14 @@ class _Reader:
         follows[:-1] = self.cnext[:-1] == self.cand[1:]
         self.breaks = np.flatnonzero(~follows)
 
-    def subscription_sizes(self, start: int) -> list[NDArray[np.uint16]]:
+    def allowed_sizes(self, p: NDArray[np.int64],
+                      sizes: dict[str, tuple[int, ...]]) -> list[NDArray[np.uint16]]:
         """The data message sizes the file's subscriptions allow, as tables by message id
-        (0: none; one table per size a message id may have): from every ``A`` message-to-be
-        (type byte ``A``, a defined format's name as its payload, followed by a message of
-        a known type), the format's size + 2, with and without its trailing padding. A
-        filter only: a data message it misses is read by a Python step."""
+        (0: none; one table per size a message id may have), from the positions ``p`` of
+        type byte ``A``: those with a defined format's name as payload and followed by a
+        message of a known type give the format's size + 2, with and without its trailing
+        padding. A filter only: a data message it misses is read by a Python step."""
         u8, n = self.u8, self.n
-        sizes = _sizes(self.out.formats)
-        p = np.flatnonzero(u8[start + 2 :] == 0x41) + start
         size = u8[p].astype(np.int64) | u8[p + 1].astype(np.int64) << 8
         ok = (size > 3) & (size < 260) & (p + 3 + size <= n)
         p, size = p[ok], size[ok]
@@ -517,6 +549,9 @@ class _Reader:
             return self.flat[name]
         out: list[tuple[str, str]] = []
         for kind, count, fname in self.out.formats[name]:  # KeyError: an unknown type
+            if kind in _BASIC and not count:
+                out.append((fname, kind))
+                continue
             names = [f"{fname}[{i}]" for i in range(count)] if count else [fname]
             if kind in _BASIC:
                 inner = [("", kind)]
@@ -525,7 +560,7 @@ class _Reader:
                 names = [f + "." for f in names]
             if len(out) + len(names) * len(inner) > _MAX_FIELDS:
                 raise _Bad
-            out.extend((prefix + sub, t) for prefix in names for sub, t in inner)
+            out.extend([(prefix + sub, t) for prefix in names for sub, t in inner])
         self.flat[name] = out
         return out
 
@@ -540,7 +575,11 @@ class _Reader:
                 if fname == "timestamp":
                     break
                 offset += _BASIC[kind][1]
-            dtype = np.dtype([(f, _BASIC[k][0]) for f, k in fields]).newbyteorder("<")
+            names = [f for f, _ in fields]
+            formats = [_DTYPE[k] for _, k in fields]
+            # (the list form names an empty field f<index>, as pyulog's dtype has it)
+            dtype = np.dtype({"names": names, "formats": formats}) if all(names) else \
+                np.dtype(list(zip(names, formats, strict=True)))
             self.dtypes[name] = (dtype, offset)
         return self.dtypes[name]
 
@@ -716,9 +755,10 @@ class _Reader:
         if not valid.all():
             wrong = ~valid & (sub >= 0)
             lost = sub == -1
-            out.corrupt = True
-            out.skipped += int((size[wrong | lost].astype(np.int64) + 3).sum())
-            for m in np.unique(ids[lost]).tolist():
+            if wrong.any() or lost.any():
+                out.corrupt = True
+                out.skipped += int((size[wrong | lost].astype(np.int64) + 3).sum())
+            for m in sorted(set(ids[lost].tolist())):
                 self.problem(f"no subscription found for message id {m}")
             pos, sub = pos[valid], sub[valid]
             counts = np.cumsum(valid)  # data messages before -> decodable ones before
@@ -733,7 +773,7 @@ class _Reader:
             stamped = (offset + 8 <= item)[sub]
             stamps = np.zeros(pos.size, np.uint64)
             stamps[stamped] = self.u64[pos[stamped] + 5 + offset[sub[stamped]]]
-        bounds = np.unique(np.array([0, *events, pos.size], np.int64))
+        bounds = np.array(sorted({0, *events, pos.size}), np.int64)
         upto = dict.fromkeys(bounds.tolist(), out.start_us)
         if pos.size:
             maxima = np.maximum.accumulate(np.maximum.reduceat(stamps, bounds[:-1]))
@@ -741,7 +781,8 @@ class _Reader:
             upto.update(zip(ends, (max(out.start_us, m) for m in maxima.tolist()), strict=True))
         out.last_us = upto[pos.size]
         k = len(out.dropouts)
-        dropouts, changed = zip(events[:k], out.dropouts), zip(events[k:], out.changed_params)
+        dropouts = zip(events[:k], out.dropouts, strict=True)
+        changed = zip(events[k:], out.changed_params, strict=True)
         out.dropouts = [(upto[c], d) for c, (_, d) in dropouts]
         out.changed_params = [(upto[c], key, v) for c, (_, key, v) in changed]
         return pos, sub
@@ -759,7 +800,7 @@ class _Reader:
             if not counts[k] or not width:
                 continue
             raw = np.ndarray((self.n - width + 1,), f"V{width}", buffer=self.buf, strides=(1,))
-            records = raw[pos[order[first[k] : first[k + 1]]] + 5].view(s.dtype)
+            records = np.frombuffer(raw[pos[order[first[k] : first[k + 1]]] + 5], s.dtype)
             items.append((s.name, s.multi_id, {f: records[f] for f in s.dtype.names or ()}))
         items.sort(key=lambda d: (d[0], d[1]))
         self.out.data = items

@@ -340,12 +340,14 @@ class _Reader:
         self.topics = topics
         self.out = _Parsed()
         self.has_sync = True
+        self.offsets: list[int] = []  # appended data (flag bits)
         # subscriptions: all seen; the active one per message id (-1 none); filtered ids
         self.subs: list[_Sub] = []
         self.active: dict[int, int] = {}  # message id -> subscription, in first order
         # message id -> active subscription, -2 filtered out (topics not asked for), -1 none
         self.lookup = np.full(1 << 16, -1, np.int32)
         self.filtered: set[int] = set()
+        self.untimed: dict[int, int] = {}  # subscription -> record size, without timestamp
         self.final: list[int] = []  # subscriptions whose data is kept, pyulog's order
         self.flat: dict[str, list[tuple[str, str]]] = {}
         self.dtypes: dict[str, tuple[np.dtype[Any], int]] = {}
@@ -598,6 +600,8 @@ class _Reader:
                 self.lookup[msg_id] = -2
             return
         self.active[msg_id] = self.lookup[msg_id] = len(self.subs)
+        if offset + 8 > dtype.itemsize:  # no room for the timestamp pyulog reads
+            self.untimed[len(self.subs)] = dtype.itemsize
         self.subs.append(_Sub(msg_id, multi_id, name, dtype, offset))
 
     def end_segment(self) -> None:
@@ -622,7 +626,10 @@ class _Reader:
                 j = b if cnext[b] <= until else \
                     i - 1 + int(np.searchsorted(cnext[i : b + 1], until, "right"))
                 if j >= i:
-                    self.chunk(cand[i : j + 1], self.csize[i : j + 1], self.cmsg[i : j + 1])
+                    stop_at = self.chunk(cand[i : j + 1], self.csize[i : j + 1],
+                                         self.cmsg[i : j + 1])
+                    if stop_at:
+                        return stop_at
                     pos = int(cnext[j])
                     continue
             if pos + 3 > n:
@@ -653,11 +660,23 @@ class _Reader:
                 self.problem("file corruption detected while reading file data")
             pos = end
 
-    def chunk(self, pos: NDArray[np.int64], size: NDArray[np.int64],
-              ids: NDArray[np.int64]) -> None:
-        """Consecutive data messages, resolved against the subscriptions later."""
-        self.chunks.append((pos, size, ids, self.lookup[ids]))
+    def chunk(self, pos: NDArray[np.int64], size: NDArray[Any], ids: NDArray[Any]) -> int:
+        """Consecutive data messages with their subscriptions, checked later. Returns 0, or
+        where the section ends (after a decodable record of a topic without room for a
+        timestamp: pyulog's struct.error stops reading there); the rest is not taken."""
+        sub = self.lookup[ids]
+        stop_at = 0
+        if self.untimed:
+            stop = np.zeros(pos.size, bool)
+            for k, width in self.untimed.items():
+                stop |= (sub == k) & (size == width + 2)
+            if stop.any():
+                end = int(np.argmax(stop)) + 1
+                pos, size, ids, sub = pos[:end], size[:end], ids[:end], sub[:end]
+                stop_at = int(pos[-1]) + 3 + int(size[-1])
+        self.chunks.append((pos, size, ids, sub))
         self.count += pos.size
+        return stop_at
 
     def resync(self, pos: int, until: int) -> int:
         """After an implausible header at ``pos``: the next sync magic's end, or (none in the
@@ -681,8 +700,9 @@ class _Reader:
         if kind == 0x44:  # D that is no candidate
             if size < 2:
                 raise _Stop
-            self.chunk(np.array([pos]), np.array([size], np.uint16),
-                       np.array([data[0] | data[1] << 8], np.uint16))
+            if self.chunk(np.array([pos]), np.array([size], np.uint16),
+                          np.array([data[0] | data[1] << 8], np.uint16)):
+                raise _Stop
         elif kind == 0x41:  # A
             self.subscribe(data)
         elif kind == 0x4C:  # L
@@ -714,7 +734,6 @@ class _Reader:
     # ------------------------------------------------------------------ all
     def run(self) -> _Parsed:
         self.header()
-        self.offsets: list[int] = []
         start = self.definitions()
         cycle = _cycle(self.out.formats)
         if cycle:
@@ -970,7 +989,8 @@ def read(
     tables: dict[str, MessageTable] = {}
     for topic, multi_id, data in parsed.data:
         name = table_name(topic, multi_id)
-        units = {k: "us" for k in ("timestamp", "timestamp_sample") if k in data}
+        units: dict[str, str] = {k: "us" for k in ("timestamp", "timestamp_sample")
+                                 if k in data}
         tables[name] = MessageTable(name, data, _time_s(data), units)
     params, n_changes, bad_params = _params(parsed)
     texts = _texts(parsed)

@@ -261,13 +261,14 @@ def _cycle(formats: dict[str, list[Field]]) -> list[str] | None:
     return None
 
 
-def _sizes(formats: dict[str, list[Field]]) -> dict[str, tuple[int, ...]]:
-    """Per format, the payload sizes its data messages can have: 2 (message id) + the
-    format's size, with and without its trailing ``_padding`` fields (formats acyclic).
+def _sizes(formats: dict[str, list[Field]], names: set[str]) -> dict[str, tuple[int, ...]]:
+    """Per format of ``names``, the payload sizes its data messages can have: 2 (message
+    id) + the format's size, with and without its trailing ``_padding`` fields (formats
+    acyclic).
 
     Examples
     --------
-    >>> _sizes({"a": [("uint64_t", 0, "timestamp"), ("uint8_t", 3, "_padding0")]})
+    >>> _sizes({"a": [("uint64_t", 0, "timestamp"), ("uint8_t", 3, "_padding0")]}, {"a"})
     {'a': (13, 10)}
     """
     memo: dict[str, int] = {}
@@ -279,7 +280,8 @@ def _sizes(formats: dict[str, list[Field]]) -> dict[str, tuple[int, ...]]:
         return memo[name]
 
     out = {}
-    for name, fields in formats.items():
+    for name in names & formats.keys():
+        fields = formats[name]
         full = trimmed = size(name)
         for kind, n, fname in reversed(fields):
             part = max(n, 1) * (_BASIC[kind][1] if kind in _BASIC else size(kind))
@@ -483,13 +485,10 @@ class _Reader:
         and sizes, and the indices where a run of consecutive candidates breaks.
 
         One pass over the file in blocks (small temporaries, reused): positions of type
-        byte ``D`` whose size is some format's, and of type byte ``A`` (subscriptions to
-        be); then the ``D`` ones are kept where their size is one their id's subscription
-        allows (:meth:`allowed_sizes`)."""
+        byte ``D`` and of type byte ``A`` (subscriptions to be); then the ``D`` ones are
+        kept where their size is one their id's subscription allows
+        (:meth:`allowed_sizes`)."""
         u8, n = self.u8, self.n
-        sizes = _sizes(self.out.formats)
-        any_size = np.zeros(1 << 16, bool)
-        any_size[[s for got in sizes.values() for s in got]] = True
         u16 = np.ndarray((max(n - 1, 0),), "<u2", buffer=self.buf, strides=(1,))
         found: list[tuple[NDArray[np.int64], NDArray[np.uint16], NDArray[np.uint16]]] = []
         subs = []
@@ -498,8 +497,6 @@ class _Reader:
             kinds = u8[lo + 2 : hi + 2]
             p = np.flatnonzero(kinds == 0x44)
             p += lo
-            size = u16[p]
-            p = p[any_size[size]]
             found.append((p, u16[p], u16[p + 3]))
             q = np.flatnonzero(kinds == 0x41)
             q += lo
@@ -509,17 +506,16 @@ class _Reader:
         else:
             p, size, ids = np.zeros(0, np.int64), np.zeros(0, np.uint16), np.zeros(0, np.uint16)
         keep = np.zeros(p.size, bool)
-        for table in self.allowed_sizes(np.concatenate(subs) if subs else p, sizes):
+        for table in self.allowed_sizes(np.concatenate(subs) if subs else p):
             keep |= table[ids] == size
-        keep &= p + 3 + size <= n
+        keep &= (size != 0) & (p + 3 + size <= n)  # a size 0 in a table: none allowed
         self.cand, self.csize, self.cmsg = p[keep], size[keep], ids[keep]
         self.cnext = self.cand + 3 + self.csize
         follows = np.zeros(self.cand.size, bool)
         follows[:-1] = self.cnext[:-1] == self.cand[1:]
         self.breaks = np.flatnonzero(~follows)
 
-    def allowed_sizes(self, p: NDArray[np.int64],
-                      sizes: dict[str, tuple[int, ...]]) -> list[NDArray[np.uint16]]:
+    def allowed_sizes(self, p: NDArray[np.int64]) -> list[NDArray[np.uint16]]:
         """The data message sizes the file's subscriptions allow, as tables by message id
         (0: none; one table per size a message id may have), from the positions ``p`` of
         type byte ``A``: those with a defined format's name as payload and followed by a
@@ -531,12 +527,16 @@ class _Reader:
         p, size = p[ok], size[ok]
         follower = np.minimum(p + 5 + size, n - 1)  # the type byte of the next message
         p = p[_KNOWN_TYPE[u8[follower]] | (follower == n - 1)]
-        allowed: dict[int, set[int]] = {}
+        named = []
         for q in p.tolist():
             length = self.buf[q] | self.buf[q + 1] << 8
-            got = sizes.get(_text(self.buf[q + 6 : q + 3 + length]))
-            if got:
-                allowed.setdefault(self.buf[q + 4] | self.buf[q + 5] << 8, set()).update(got)
+            named.append((self.buf[q + 4] | self.buf[q + 5] << 8,
+                          _text(self.buf[q + 6 : q + 3 + length])))
+        sizes = _sizes(self.out.formats, {name for _, name in named})
+        allowed: dict[int, set[int]] = {}
+        for msg_id, name in named:
+            if name in sizes:
+                allowed.setdefault(msg_id, set()).update(sizes[name])
         tables = [np.zeros(1 << 16, np.uint16)
                   for _ in range(max(map(len, allowed.values()), default=0))]  # fmt: skip
         for msg_id, options in allowed.items():

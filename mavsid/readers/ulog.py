@@ -1,9 +1,10 @@
 """Read PX4 ULog files (``.ulg``) into a :class:`~mavsid.data.RawLog`, vectorised with numpy.
 
 The reader gives the values pyulog gives (the reference the tests compare against field by
-field), about ten times faster: definitions and every message that is not topic data are
-parsed once in Python; the data messages (``D``, nearly all of a log) are framed, checked
-and decoded with numpy over a memory map of the file.
+field), several times faster (ten and more on large logs, where data messages dominate):
+definitions and every message that is not topic data are parsed once in Python; the data
+messages (``D``, nearly all of a log) are framed, checked and decoded with numpy over a
+memory map of the file. pyulog is not used at run time.
 
 What the returned log holds:
 
@@ -28,11 +29,13 @@ ULog has no sync bytes in its data stream: a message is ``uint16 size, uint8 typ
 pyulog reads it, one message after the other from the end of the definitions, but the
 runs of consecutive data messages are taken in one step:
 
-1. *Candidates*: every position ``p`` whose type byte ``p+2`` is ``'D'``, whose ``size``
-   is that of some defined format (+2 for the message id, with or without its trailing
-   padding) and whose message ends inside the file. Its successor is ``next = p + 3 +
-   size``. A real data message is always a candidate; a candidate may be false (the
-   byte pattern inside some payload).
+1. *Candidates*: every position ``p`` whose type byte ``p+2`` is ``'D'``, whose message
+   id and ``size`` agree with some subscription in the file (the ``A`` messages are found
+   the same way: type byte ``A``, a defined format's name as payload, a known type byte
+   after it; the size is the format's + 2, with or without its trailing padding) and
+   whose message ends inside the file. Its successor is ``next = p + 3 + size``. A
+   candidate may be false (the byte pattern inside some payload) and a real message may
+   be no candidate (a damaged one): both only cost Python steps, never correctness.
 2. *Runs*: ``follows[i]`` is true when candidate ``i``'s successor is candidate ``i+1``.
    If candidate ``i`` is a true message start and ``follows[i]``, so is candidate ``i+1``
    (it is where the next message starts); by induction every candidate from ``i`` up to
@@ -47,7 +50,7 @@ runs of consecutive data messages are taken in one step:
 
 Every position the walk visits is one pyulog visits, so the framing is pyulog's exactly.
 The Python steps are as many as the messages that are not data plus the false candidates
-inside the walked range (a few per thousand messages in real logs); in the worst case
+inside the walked range (none in the shared real logs); in the worst case
 (a hostile file made of false candidates or tiny unknown messages) the walk is one Python
 step per message, like pyulog: linear, never endless (every step moves forward). Runs of
 implausible headers (garbage) are skipped in vectorised windows.
@@ -56,7 +59,13 @@ Data messages are then grouped by subscription and gathered with one fancy index
 structured view of the map (``np.ndarray(..., strides=(1,))``: a record of the topic's
 dtype at every byte), so each topic is one copy of its records. A data message counts if
 its id is subscribed at that point and its size is exactly the format's; the others are
-skipped and flagged as corruption, as pyulog does. pyulog is not used at run time.
+skipped and flagged as corruption, as pyulog does. pyulog's quirks on damaged files are
+kept so that its values stay the reference there too: the data of each section read
+(several with appended data) are taken at its end, a re-subscribed id keeps only its last
+subscription's data, and a record of a topic without room for an 8-byte timestamp (a
+damaged ``timestamp`` name) ends the section. The one departure: a message that claims to
+reach back before itself (a corrupt header near the end of the definitions) moves the
+read one byte forward, where pyulog may read the same bytes again.
 
 Bad input is one :class:`~mavsid.errors.LogFormatError` naming the file: a bad header,
 incompatible flags, formats that contain themselves (pyulog would recurse without end)
@@ -180,7 +189,7 @@ def _info(data: bytes, multiple: bool = False) -> tuple[str, str, Any]:
     --------
     >>> _info(bytes([13]) + b"float MC_RATE" + struct.pack("<f", 0.5))
     ('float', 'MC_RATE', 0.5)
-    >>> _info(bytes([13]) + b"char[3] ver_hw" + b"abc")[2]
+    >>> _info(bytes([14]) + b"char[3] ver_hw" + b"abc")[2]
     'abc'
     """
     if multiple:

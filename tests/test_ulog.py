@@ -416,3 +416,21 @@ def test_huge_claimed_sizes_and_garbage_are_bounded(tmp_path: Path) -> None:
         path.write_bytes(head + tail)
         log, _ = read(path)
         assert len(log["att"]) >= 10
+
+
+def test_many_short_runs_match_pyulog(tmp_path: Path) -> None:
+    """Data messages each followed by a sync message: thousands of one-message runs (their
+    bookkeeping joined as it grows) give pyulog's values."""
+    from fuzz.hostile import ATT_FORMAT, _ulog_msg, ulog_file
+
+    out = bytearray(ulog_file([ATT_FORMAT], samples=0))
+    sync = _ulog_msg(b"S", b"\x2f\x73\x13\x20\x25\x0c\xbb\x12")
+    for k in range(10_000):
+        out += _ulog_msg(b"D", struct.pack("<HQf", 0, 1000 * k, k / 7)) + sync
+    path = tmp_path / "short_runs.ulg"
+    path.write_bytes(bytes(out))
+    ref, _ = pyulog(path)
+    log, quality = read(path)
+    assert quality == []
+    assert_tables_match(log, ref)
+    assert len(log["att"]) == 10_000

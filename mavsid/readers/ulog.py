@@ -145,6 +145,8 @@ _MAX_FIELDS = 0xFFFF
 _NO_LIMIT = 1 << 62
 #: bytes of the file scanned at a time for message candidates
 _BLOCK = 1 << 22
+#: runs of data messages kept apart before they are joined (bounds the memory per run)
+_MAX_CHUNKS = 4096
 
 
 def table_name(topic: str, multi_id: int) -> str:
@@ -644,7 +646,7 @@ class _Reader:
             if pos + 3 > n:
                 if final and pos < n:
                     out.truncated = n - pos
-                return pos
+                return max(pos, n)
             size, kind = self.header_fields(pos)
             end = pos + 3 + size
             if end > n:
@@ -685,7 +687,17 @@ class _Reader:
                 stop_at = int(pos[-1]) + 3 + int(size[-1])
         self.chunks.append((pos, size, ids, sub))
         self.count += pos.size
+        if len(self.chunks) >= _MAX_CHUNKS:  # many short runs (a hostile file): bounded
+            self.chunks = [self.joined()]
         return stop_at
+
+    def joined(self) -> tuple[NDArray[np.int64], NDArray[Any], NDArray[Any], NDArray[Any]]:
+        """The chunks so far as one (positions, sizes, ids, subscriptions)."""
+        if not self.chunks:
+            return (np.zeros(0, np.int64), np.zeros(0, np.uint16), np.zeros(0, np.uint16),
+                    np.zeros(0, np.int32))
+        pos, size, ids, sub = (np.concatenate(a) for a in zip(*self.chunks, strict=True))
+        return pos, size, ids, sub
 
     def resync(self, pos: int, until: int) -> int:
         """After an implausible header at ``pos``: the next sync magic's end, or (none in the
@@ -768,10 +780,8 @@ class _Reader:
         and subscriptions of the decodable ones (in file order); the last timestamp, and
         with it the time of each dropout and parameter change; corruption found."""
         out = self.out
-        parts = list(zip(*self.chunks, strict=True)) or [
-            [np.zeros(0, np.int64)], [np.zeros(0, np.uint16)], [np.zeros(0, np.uint16)],
-            [np.zeros(0, np.int32)]]
-        pos, size, ids, sub = (np.concatenate(p) for p in parts)
+        pos, size, ids, sub = self.joined()
+        self.chunks = []
         if len(self.subs) < (1 << 15):
             sub = sub.astype(np.int16)
         # per subscription (and two zeros for -1, -2): record size, timestamp offset
@@ -838,9 +848,11 @@ def _parse(path: str | os.PathLike[str], topics: set[str] | None) -> _Parsed:
     :class:`~mavsid.errors.LogFormatError` naming the file."""
     try:
         with open(path, "rb") as f:
-            # read ahead in one go where the system can (faulting page by page is slower)
-            flags = mmap.MAP_SHARED | getattr(mmap, "MAP_POPULATE", 0)
-            buf = mmap.mmap(f.fileno(), 0, flags=flags, prot=mmap.PROT_READ)
+            if hasattr(mmap, "MAP_POPULATE"):  # read ahead at once (faults page by page are slow)
+                buf = mmap.mmap(f.fileno(), 0, flags=mmap.MAP_SHARED | mmap.MAP_POPULATE,
+                                prot=mmap.PROT_READ)
+            else:
+                buf = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
     except (OSError, ValueError) as exc:
         raise LogFormatError(f"cannot read: {getattr(exc, 'strerror', None) or exc}",
                              path=path) from None

@@ -306,7 +306,7 @@ def bench_ulog(min_mb: float = 100.0, repeat: int = 5) -> None:
         ref, ours = warm_pair(plain(path), quiet(lambda: ulog.read(path)), n)
         _, sel = warm_pair(lambda: None, quiet(lambda: ulog.read(path, messages=ULOG_TOPICS)),
                            n)
-        (cold_ref, _), (cold_ours, _) = cold(path, "pyulog"), cold(path, "mavsid")
+        (_, cold_ref), (_, cold_ours) = cold(path, "pyulog"), cold(path, "mavsid")
         log = quiet(lambda: ulog.read(path))()
         arrays = decoded_bytes(log)
         del log
@@ -317,7 +317,7 @@ def bench_ulog(min_mb: float = 100.0, repeat: int = 5) -> None:
                                 f"{peak / max(arrays, 1):5.2f}x")  # fmt: skip
 
     header = ("file", "     MB  pyulog  mavsid  ratio   (warm, best CPU s)  pyulog  mavsid  "
-                      "ratio (cold, wall s)  selective  peak/arrays")  # fmt: skip
+                      "ratio  (cold, CPU s)  selective  peak/arrays")  # fmt: skip
     rows = [header] + [measure(path, repeat) for path in paths]
     with tempfile.TemporaryDirectory() as tmp:
         big = build_big_ulog(Path(tmp), min_mb)

@@ -521,9 +521,11 @@ class _Reader:
             keep |= table[ids] == size
         keep &= (size != 0) & (p + 3 + size <= n)  # a size 0 in a table: none allowed
         self.cand, self.csize, self.cmsg = p[keep], size[keep], ids[keep]
-        self.cnext = self.cand + 3 + self.csize
         follows = np.zeros(self.cand.size, bool)
-        follows[:-1] = self.cnext[:-1] == self.cand[1:]
+        nxt = self.cand[:-1] + 3
+        nxt += self.csize[:-1]
+        follows[:-1] = nxt == self.cand[1:]
+        del nxt
         self.breaks = np.flatnonzero(~follows)
 
     def allowed_sizes(self, p: NDArray[np.int64]) -> list[NDArray[np.uint16]]:
@@ -628,20 +630,20 @@ class _Reader:
         """Walk the data section from ``pos`` to ``until`` (exclusive of a message that
         passes it); the position where the walk stopped."""
         n, out = self.n, self.out
-        cand, breaks, cnext = self.cand, self.breaks, self.cnext
+        cand, breaks, csize = self.cand, self.breaks, self.csize
         buf = self.buf
         while True:
             i = int(np.searchsorted(cand, pos)) if pos + 2 < n and buf[pos + 2] == 0x44 else 0
             if i < cand.size and cand[i] == pos:  # a run of data messages
                 b = int(breaks[np.searchsorted(breaks, i)])
-                j = b if cnext[b] <= until else \
-                    i - 1 + int(np.searchsorted(cnext[i : b + 1], until, "right"))
+                j = b if cand[b] + 3 + csize[b] <= until else i - 1 + int(
+                    np.searchsorted(cand[i : b + 1] + 3 + csize[i : b + 1], until, "right"))
                 if j >= i:
                     stop_at = self.chunk(cand[i : j + 1], self.csize[i : j + 1],
                                          self.cmsg[i : j + 1])
                     if stop_at:
                         return stop_at
-                    pos = int(cnext[j])
+                    pos = int(cand[j]) + 3 + int(csize[j])
                     continue
             if pos + 3 > n:
                 if final and pos < n:
@@ -696,6 +698,8 @@ class _Reader:
         if not self.chunks:
             return (np.zeros(0, np.int64), np.zeros(0, np.uint16), np.zeros(0, np.uint16),
                     np.zeros(0, np.int32))
+        if len(self.chunks) == 1:
+            return self.chunks[0]
         pos, size, ids, sub = (np.concatenate(a) for a in zip(*self.chunks, strict=True))
         return pos, size, ids, sub
 
@@ -806,7 +810,11 @@ class _Reader:
             events = [c for c, *_ in out.dropouts] + [c for c, *_ in out.changed_params]
         # pyulog's last timestamp: 8 bytes at the timestamp's offset, the maximum so far
         if (offset + 8 <= item)[:-2].all():
-            stamps = self.u64[pos + 5 + offset[sub]]
+            at = offset[sub].astype(np.int64)
+            at += pos
+            at += 5
+            stamps = self.u64[at]
+            del at
         else:
             stamped = (offset + 8 <= item)[sub]
             stamps = np.zeros(pos.size, np.uint64)
@@ -838,7 +846,9 @@ class _Reader:
             if not counts[k] or not width:
                 continue
             raw = np.ndarray((self.n - width + 1,), f"V{width}", buffer=self.buf, strides=(1,))
-            records = np.frombuffer(raw[pos[order[first[k] : first[k + 1]]] + 5], s.dtype)
+            at = pos[order[first[k] : first[k + 1]]]
+            at += 5
+            records = np.frombuffer(raw[at], s.dtype)
             items.append((s.name, s.multi_id, {f: records[f] for f in s.dtype.names or ()}))
         items.sort(key=lambda d: (d[0], d[1]))
         self.out.data = items

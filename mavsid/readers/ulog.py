@@ -136,7 +136,6 @@ _HEAD = struct.Struct("<HB").unpack_from
 #: parameter types with 4-byte values, read without the general parser
 _FAST_VALUE = {"float": struct.Struct("<f").unpack_from,
                "int32_t": struct.Struct("<i").unpack_from}
-_DATA_HEAD = np.dtype([("size", "<u2"), ("type", "u1"), ("id", "<u2")])
 _KNOWN_TYPE = np.zeros(256, bool)
 _KNOWN_TYPE[list(b"FDIMPQARLCOSB")] = True
 #: an unknown message type with a size above this is taken as corruption (pyulog's rule)
@@ -501,38 +500,27 @@ class _Reader:
         kept where their size is one their id's subscription allows
         (:meth:`allowed_sizes`)."""
         u8, n = self.u8, self.n
-        # the 5 bytes of a data message header (size, type, id) at every byte
-        heads = np.ndarray((max(n - 4, 0),), "V5", buffer=self.buf, strides=(1,))
-        found: list[tuple[NDArray[np.int64], NDArray[np.void]]] = []
+        u16 = np.ndarray((max(n - 1, 0),), "<u2", buffer=self.buf, strides=(1,))
+        found: list[tuple[NDArray[np.int64], NDArray[np.uint16], NDArray[np.uint16]]] = []
         subs = []
         for lo in range(start, max(n - 4, start), _BLOCK):
-            hi = min(lo + _BLOCK, n - 4)
+            hi = min(lo + _BLOCK, n - 4)  # a data message needs 5 bytes
             kinds = u8[lo + 2 : hi + 2]
             p = np.flatnonzero(kinds == 0x44)
             p += lo
-            found.append((p, heads[p]))
-            maybe = kinds == 0x41
-            maybe &= u8[lo + 1 : hi + 1] <= 1  # a subscription is < 512 bytes long
-            q = np.flatnonzero(maybe)
+            found.append((p, u16[p], u16[p + 3]))
+            q = np.flatnonzero(kinds == 0x41)
             q += lo
             subs.append(q)
         if found:
-            p = np.concatenate([f[0] for f in found])
-            head = np.concatenate([f[1] for f in found]).view(_DATA_HEAD)
+            p, size, ids = (np.concatenate(a) for a in zip(*found, strict=True))
         else:
-            p, head = np.zeros(0, np.int64), np.zeros(0, _DATA_HEAD)
-        del found
-        size, ids = head["size"], head["id"]
+            p, size, ids = np.zeros(0, np.int64), np.zeros(0, np.uint16), np.zeros(0, np.uint16)
         keep = np.zeros(p.size, bool)
         for table in self.allowed_sizes(np.concatenate(subs) if subs else p):
             keep |= table[ids] == size
-        keep &= size != 0  # a size 0 in a table: none allowed
-        near_end = np.flatnonzero(p > n - (1 << 16) - 3)  # only these can end past the file
-        keep[near_end] &= p[near_end] + 3 + size[near_end] <= n
-        self.cand = p[keep]
-        kept = head[keep]
-        self.csize, self.cmsg = kept["size"].copy(), kept["id"].copy()
-        del p, head, size, ids, keep, kept
+        keep &= (size != 0) & (p + 3 + size <= n)  # a size 0 in a table: none allowed
+        self.cand, self.csize, self.cmsg = p[keep], size[keep], ids[keep]
         follows = np.zeros(self.cand.size, bool)
         nxt = self.cand[:-1] + 3
         nxt += self.csize[:-1]

@@ -144,7 +144,7 @@ _MAX_UNKNOWN_SIZE = 10000
 _MAX_FIELDS = 0xFFFF
 _NO_LIMIT = 1 << 62
 #: bytes of the file scanned at a time for message candidates
-_BLOCK = 1 << 22
+_BLOCK = 1 << 20
 #: runs of data messages kept apart before they are joined (bounds the memory per run)
 _MAX_CHUNKS = 4096
 
@@ -367,7 +367,8 @@ class _Reader:
         # data messages met: (positions, sizes, ids, their subscriptions), and how many
         self.chunks: list[tuple[NDArray[Any], NDArray[Any], NDArray[Any], NDArray[np.int32]]]
         self.chunks = []
-        self.count = 0
+        self.pending: list[tuple[int, int, int, int]] = []
+        self.count = self.taken = 0
         self.u64 = (np.ndarray((self.n - 7,), "<u8", buffer=buf, strides=(1,))
                     if self.n >= 8 else np.zeros(0, np.uint64))  # fmt: skip
 
@@ -492,32 +493,35 @@ class _Reader:
 
     # ------------------------------------------------------------------ candidates
     def candidates(self, start: int) -> None:
-        """Data-message candidates from ``start`` (see *Framing*), their successors, ids
-        and sizes, and the indices where a run of consecutive candidates breaks.
+        """Prepare the data-message candidates (see *Framing*): the sizes the file's
+        subscriptions allow; each block's candidates are found when the walk gets there
+        (:meth:`load`), so that memory stays bounded whatever the file holds."""
+        self.start = start
+        self.tables = self.allowed_sizes(start)
+        self.lo = self.hi = -1  # the block whose candidates are loaded
+        self.cand = np.zeros(0, np.int64)
+        self.csize = self.cmsg = np.zeros(0, np.uint16)
+        self.breaks = np.zeros(0, np.int64)
+        self.u16 = np.ndarray((max(self.n - 1, 0),), "<u2", buffer=self.buf, strides=(1,))
 
-        One pass over the file in blocks (small temporaries, reused): positions of type
-        byte ``D`` and of type byte ``A`` (subscriptions to be); then the ``D`` ones are
-        kept where their size is one their id's subscription allows
-        (:meth:`allowed_sizes`)."""
+    def load(self, pos: int) -> None:
+        """The candidates of the block of the file holding ``pos``: positions of type byte
+        ``D`` whose size is one their id's subscription allows and whose message ends in
+        the file; their sizes and ids; the indices where a run of consecutive candidates
+        breaks (the block's last one always)."""
         u8, n = self.u8, self.n
-        u16 = np.ndarray((max(n - 1, 0),), "<u2", buffer=self.buf, strides=(1,))
-        found: list[tuple[NDArray[np.int64], NDArray[np.uint16], NDArray[np.uint16]]] = []
-        subs = []
-        for lo in range(start, max(n - 4, start), _BLOCK):
-            hi = min(lo + _BLOCK, n - 4)  # a data message needs 5 bytes
-            kinds = u8[lo + 2 : hi + 2]
-            p = np.flatnonzero(kinds == 0x44)
-            p += lo
-            found.append((p, u16[p], u16[p + 3]))
-            q = np.flatnonzero(kinds == 0x41)
-            q += lo
-            subs.append(q)
-        if found:
-            p, size, ids = (np.concatenate(a) for a in zip(*found, strict=True))
-        else:
-            p, size, ids = np.zeros(0, np.int64), np.zeros(0, np.uint16), np.zeros(0, np.uint16)
+        self.flush()
+        if self.chunks and self.cand.size > 4 * self.taken + _BLOCK // 64:
+            # runs taken are views of the candidates: keep copies of them, not all these
+            pos_, size_, ids_, sub_ = (np.concatenate(a) for a in zip(*self.chunks, strict=True))
+            self.chunks = [(pos_, size_, ids_, sub_)]
+        lo = self.start + (pos - self.start) // _BLOCK * _BLOCK
+        hi = min(lo + _BLOCK, n - 4)  # a data message needs 5 bytes
+        p = np.flatnonzero(u8[lo + 2 : hi + 2] == 0x44)
+        p += lo
+        size, ids = self.u16[p], self.u16[p + 3]
         keep = np.zeros(p.size, bool)
-        for table in self.allowed_sizes(np.concatenate(subs) if subs else p):
+        for table in self.tables:
             keep |= table[ids] == size
         keep &= (size != 0) & (p + 3 + size <= n)  # a size 0 in a table: none allowed
         self.cand, self.csize, self.cmsg = p[keep], size[keep], ids[keep]
@@ -525,26 +529,29 @@ class _Reader:
         nxt = self.cand[:-1] + 3
         nxt += self.csize[:-1]
         follows[:-1] = nxt == self.cand[1:]
-        del nxt
         self.breaks = np.flatnonzero(~follows)
+        self.lo, self.hi, self.taken = lo, hi, 0
 
-    def allowed_sizes(self, p: NDArray[np.int64]) -> list[NDArray[np.uint16]]:
+    def allowed_sizes(self, start: int) -> list[NDArray[np.uint16]]:
         """The data message sizes the file's subscriptions allow, as tables by message id
-        (0: none; one table per size a message id may have), from the positions ``p`` of
-        type byte ``A``: those with a defined format's name as payload and followed by a
-        message of a known type give the format's size + 2, with and without its trailing
-        padding. A filter only: a data message it misses is read by a Python step."""
+        (0: none; one table per size a message id may have), from the positions of type
+        byte ``A`` (in blocks of the file): those with a defined format's name as payload
+        and followed by a message of a known type give the format's size + 2, with and
+        without its trailing padding. A filter only: a data message it misses is read by a
+        Python step."""
         u8, n = self.u8, self.n
-        size = u8[p].astype(np.int64) | u8[p + 1].astype(np.int64) << 8
-        ok = (size > 3) & (size < 260) & (p + 3 + size <= n)
-        p, size = p[ok], size[ok]
-        follower = np.minimum(p + 5 + size, n - 1)  # the type byte of the next message
-        p = p[_KNOWN_TYPE[u8[follower]] | (follower == n - 1)]
-        named = []
-        for q in p.tolist():
-            length = self.buf[q] | self.buf[q + 1] << 8
-            named.append((self.buf[q + 4] | self.buf[q + 5] << 8,
-                          _text(self.buf[q + 6 : q + 3 + length])))
+        named: dict[tuple[int, str], None] = {}
+        for lo in range(start, max(n - 2, start), _BLOCK):
+            p = np.flatnonzero(u8[lo + 2 : min(lo + _BLOCK, n - 2) + 2] == 0x41)
+            p += lo
+            size = u8[p].astype(np.int64) | u8[p + 1].astype(np.int64) << 8
+            ok = (size > 3) & (size < 260) & (p + 3 + size <= n)
+            p, size = p[ok], size[ok]
+            follower = np.minimum(p + 5 + size, n - 1)  # the type byte of the next message
+            for q in p[_KNOWN_TYPE[u8[follower]] | (follower == n - 1)].tolist():
+                length = self.buf[q] | self.buf[q + 1] << 8
+                named[self.buf[q + 4] | self.buf[q + 5] << 8,
+                      _text(self.buf[q + 6 : q + 3 + length])] = None
         sizes = _sizes(self.out.formats, {name for _, name in named})
         allowed: dict[int, set[int]] = {}
         for msg_id, name in named:
@@ -629,35 +636,43 @@ class _Reader:
     def data(self, pos: int, until: int, final: bool) -> int:
         """Walk the data section from ``pos`` to ``until`` (exclusive of a message that
         passes it); the position where the walk stopped."""
-        n, out = self.n, self.out
-        cand, breaks, csize = self.cand, self.breaks, self.csize
-        buf = self.buf
+        n, out, buf = self.n, self.out, self.buf
         while True:
-            i = int(np.searchsorted(cand, pos)) if pos + 2 < n and buf[pos + 2] == 0x44 else 0
-            if i < cand.size and cand[i] == pos:  # a run of data messages
-                b = int(breaks[np.searchsorted(breaks, i)])
-                j = b if cand[b] + 3 + csize[b] <= until else i - 1 + int(
-                    np.searchsorted(cand[i : b + 1] + 3 + csize[i : b + 1], until, "right"))
-                if j >= i:
-                    stop_at = self.chunk(cand[i : j + 1], self.csize[i : j + 1],
-                                         self.cmsg[i : j + 1])
-                    if stop_at:
-                        return stop_at
-                    pos = int(cand[j]) + 3 + int(csize[j])
-                    continue
             if pos + 3 > n:
                 if final and pos < n:
                     out.truncated = n - pos
                 return max(pos, n)
-            size, kind = self.header_fields(pos)
+            size, kind = _HEAD(buf, pos)
             end = pos + 3 + size
+            if kind == 0x44 and size >= 2 and end <= n and end <= until:
+                if not self.untimed and (end + 3 > n or buf[end + 2] != 0x44):
+                    self.single(pos, size, buf[pos + 3] | buf[pos + 4] << 8)  # no run
+                    pos = end
+                    continue
+                if not self.lo <= pos < self.hi and self.start <= pos < n - 4:
+                    self.load(pos)
+                cand = self.cand
+                i = int(cand.searchsorted(pos))
+                if i < cand.size and cand[i] == pos:  # a run of data messages
+                    breaks, csize = self.breaks, self.csize
+                    b = int(breaks[breaks.searchsorted(i)])
+                    j = b if int(cand[b]) + 3 + int(csize[b]) <= until else i - 1 + int(
+                        np.searchsorted(cand[i : b + 1] + 3 + csize[i : b + 1], until, "right"))
+                    stop_at = self.chunk(cand[i : j + 1], csize[i : j + 1], self.cmsg[i : j + 1])
+                    if stop_at:
+                        return stop_at
+                    pos = int(cand[j]) + 3 + int(csize[j])
+                    continue
             if end > n:
                 if final:
                     out.truncated = n - pos
                 return n
             if end > until:
                 return end
-            data = self.buf[pos + 3 : end]
+            if kind == 0x53:  # sync: nothing to keep
+                pos = end
+                continue
+            data = buf[pos + 3 : end]
             try:
                 if kind in _DATA_TYPES:
                     self.message(kind, pos, size, data)
@@ -673,10 +688,30 @@ class _Reader:
                 self.problem("file corruption detected while reading file data")
             pos = end
 
+    def single(self, pos: int, size: int, msg_id: int) -> None:
+        """One data message between others (kept in a list, made a run by :meth:`flush`)."""
+        sub = self.active.get(msg_id)
+        if sub is None:
+            sub = -2 if msg_id in self.filtered else -1
+        self.pending.append((pos, size, msg_id, sub))
+        self.count += 1
+        self.taken += 1
+        if len(self.pending) >= _MAX_CHUNKS:
+            self.flush()
+
+    def flush(self) -> None:
+        """The single data messages met since the last run, as one run."""
+        if self.pending:
+            table = np.array(self.pending, np.int64).reshape(-1, 4)
+            self.pending = []
+            self.chunks.append((table[:, 0].copy(), table[:, 1].astype(np.uint16),
+                                table[:, 2].astype(np.uint16), table[:, 3].astype(np.int32)))
+
     def chunk(self, pos: NDArray[np.int64], size: NDArray[Any], ids: NDArray[Any]) -> int:
         """Consecutive data messages with their subscriptions, checked later. Returns 0, or
         where the section ends (after a decodable record of a topic without room for a
         timestamp: pyulog's struct.error stops reading there); the rest is not taken."""
+        self.flush()
         sub = self.lookup[ids]
         stop_at = 0
         if self.untimed:
@@ -689,12 +724,14 @@ class _Reader:
                 stop_at = int(pos[-1]) + 3 + int(size[-1])
         self.chunks.append((pos, size, ids, sub))
         self.count += pos.size
+        self.taken += pos.size
         if len(self.chunks) >= _MAX_CHUNKS:  # many short runs (a hostile file): bounded
             self.chunks = [self.joined()]
         return stop_at
 
     def joined(self) -> tuple[NDArray[np.int64], NDArray[Any], NDArray[Any], NDArray[Any]]:
         """The chunks so far as one (positions, sizes, ids, subscriptions)."""
+        self.flush()
         if not self.chunks:
             return (np.zeros(0, np.int64), np.zeros(0, np.uint16), np.zeros(0, np.uint16),
                     np.zeros(0, np.int32))

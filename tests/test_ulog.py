@@ -434,3 +434,22 @@ def test_many_short_runs_match_pyulog(tmp_path: Path) -> None:
     assert quality == []
     assert_tables_match(log, ref)
     assert len(log["att"]) == 10_000
+
+
+def test_a_file_of_data_header_look_alikes_matches_pyulog(tmp_path: Path) -> None:
+    """Every byte after the subscription is ``D``: every position is a framing candidate
+    (size 0x4444 = the subscribed format's + 2, id 0x4444 subscribed); the candidates are
+    found a block at a time, and the records are pyulog's."""
+    from fuzz.hostile import ATT_FORMAT, _ulog_msg, ulog_file
+
+    fmt = f"big:uint64_t timestamp;uint8_t[{0x4444 - 2 - 8}] x;"
+    out = bytearray(ulog_file([ATT_FORMAT, fmt], topic=None))
+    out += _ulog_msg(b"A", struct.pack("<BH", 0, 0x4444) + b"big")
+    out += b"D" * (3 << 20)
+    path = tmp_path / "look_alikes.ulg"
+    path.write_bytes(bytes(out))
+    ref, _ = pyulog(path)
+    log, _ = read(path)
+    assert_tables_match(log, ref)
+    assert len(log["big"]) == (3 << 20) // 0x4447
+    assert f"last message truncated: {(3 << 20) % 0x4447} bytes ignored" in log.source.notes

@@ -36,6 +36,8 @@ runs of consecutive data messages are taken in one step:
    whose message ends inside the file. Its successor is ``next = p + 3 + size``. A
    candidate may be false (the byte pattern inside some payload) and a real message may
    be no candidate (a damaged one): both only cost Python steps, never correctness.
+   Candidates are found one 1 MB block of the file at a time, when the walk reaches it,
+   so that their arrays stay small whatever the file holds.
 2. *Runs*: ``follows[i]`` is true when candidate ``i``'s successor is candidate ``i+1``.
    If candidate ``i`` is a true message start and ``follows[i]``, so is candidate ``i+1``
    (it is where the next message starts); by induction every candidate from ``i`` up to
@@ -43,10 +45,11 @@ runs of consecutive data messages are taken in one step:
    order. One ``searchsorted`` finds ``b``; the run ``i..b`` is decoded at once.
 3. *Steps*: at the end of a run (or at a position that is no candidate) one message is
    read in Python, with pyulog's rules: subscriptions, texts, parameters, dropouts, sync
-   messages; an unknown type with an implausible header (type 0, size 0 or > 10000)
-   resynchronises at the next sync message's magic, else (no sync in the rest of the
-   file) one byte further; a message cut by the end of the file ends the read. The walk
-   then goes on at the next position, which may start a run again.
+   messages, a data message with no other right after it (no run to look for: kept in a
+   list, checked with the others at the end); an unknown type with an implausible header
+   (type 0, size 0 or > 10000) resynchronises at the next sync message's magic, else (no
+   sync in the rest of the file) one byte further; a message cut by the end of the file
+   ends the read. The walk then goes on at the next position, which may start a run.
 
 Every position the walk visits is one pyulog visits, so the framing is pyulog's exactly.
 The Python steps are as many as the messages that are not data plus the false candidates
@@ -56,16 +59,17 @@ step per message, like pyulog: linear, never endless (every step moves forward).
 implausible headers (garbage) are skipped in vectorised windows.
 
 Data messages are then grouped by subscription and gathered with one fancy index into a
-structured view of the map (``np.ndarray(..., strides=(1,))``: a record of the topic's
-dtype at every byte), so each topic is one copy of its records. A data message counts if
-its id is subscribed at that point and its size is exactly the format's; the others are
-skipped and flagged as corruption, as pyulog does. pyulog's quirks on damaged files are
-kept so that its values stay the reference there too: the data of each section read
-(several with appended data) are taken at its end, a re-subscribed id keeps only its last
-subscription's data, and a record of a topic without room for an 8-byte timestamp (a
-damaged ``timestamp`` name) ends the section. The one departure: a message that claims to
-reach back before itself (a corrupt header near the end of the definitions) moves the
-read one byte forward, where pyulog may read the same bytes again.
+view of the map as raw records of the topic's size at every byte (``np.ndarray(...,
+strides=(1,))``), then seen as the topic's dtype, so each topic is one copy of its
+records. A data message counts if its id is subscribed at that point and its size is
+exactly the format's; the others are skipped and flagged as corruption, as pyulog does.
+pyulog's quirks on damaged files are kept so that its values stay the reference there
+too: the data of each section read (several with appended data) are taken at its end, a
+re-subscribed id keeps only its last subscription's data, and a record of a topic
+without room for an 8-byte timestamp (a damaged ``timestamp`` name) ends the section.
+The one departure: a message that claims to reach back before itself (a corrupt header
+near the end of the definitions) moves the read one byte forward, where pyulog may read
+the same bytes again.
 
 Bad input is one :class:`~mavsid.errors.LogFormatError` naming the file: a bad header,
 incompatible flags, formats that contain themselves (pyulog would recurse without end)
@@ -377,11 +381,6 @@ class _Reader:
         self.out.corrupt = True
         if text not in self.out.problems:
             self.out.problems.append(text)
-
-    def header_fields(self, pos: int) -> tuple[int, int]:
-        """(size, type) of the message header at ``pos``."""
-        size, kind = _HEAD(self.buf, pos)
-        return int(size), int(kind)
 
     # ------------------------------------------------------------------ header
     def header(self) -> None:

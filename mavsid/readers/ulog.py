@@ -67,9 +67,11 @@ pyulog's quirks on damaged files are kept so that its values stay the reference 
 too: the data of each section read (several with appended data) are taken at its end, a
 re-subscribed id keeps only its last subscription's data, and a record of a topic
 without room for an 8-byte timestamp (a damaged ``timestamp`` name) ends the section.
-The one departure: a message that claims to reach back before itself (a corrupt header
-near the end of the definitions) moves the read one byte forward, where pyulog may read
-the same bytes again.
+Departures, on hostile files only: a message that claims to reach back before itself (a
+corrupt header near the end of the definitions) moves the read one byte forward, where
+pyulog may read the same bytes again; a format that flattens to more fields than a data
+message can hold bytes (nested arrays) is an unreadable subscription instead of minutes
+of expansion.
 
 Bad input is one :class:`~mavsid.errors.LogFormatError` naming the file: a bad header,
 incompatible flags, formats that contain themselves (pyulog would recurse without end)
@@ -969,6 +971,9 @@ def _params(parsed: _Parsed) -> tuple[dict[str, float], int, int]:
     entries = list(parsed.initial_params.items())
     entries += [(name, value) for _, name, value in parsed.changed_params]
     for name, value in entries:
+        if type(value) is float or type(value) is int:  # the common case, directly
+            params[name] = float(value)
+            continue
         number = _number(value)
         if number is None:
             bad += 1
@@ -1111,7 +1116,8 @@ def _notes(parsed: _Parsed, tables: dict[str, MessageTable], n_changes: int) -> 
         notes.append("has appended data (crash dump)")
     if n_changes:
         notes.append(f"{n_changes} parameter changes during the log")
-    backwards = [n for n, t in tables.items() if len(t) > 1 and np.any(np.diff(t.time_s) < 0)]
+    backwards = [n for n, t in tables.items()
+                 if len(t) > 1 and (t.time_s[1:] < t.time_s[:-1]).any()]
     if backwards:
         shown = ", ".join(backwards[:5]) + (" ..." if len(backwards) > 5 else "")
         notes.append(f"time runs backwards in {len(backwards)} topics ({shown})")

@@ -1,7 +1,7 @@
 """Reader benchmark: mavsid against pymavlink on the same data, in the same run.
 
     python benchmarks/bench_readers.py [--prefix-mb 30] [--copies 2] [--tlog-mb 100]
-                                       [--only dataflash|tlog|ulog]
+                                       [--ulog-mb 100] [--only dataflash|tlog|ulog]
 
 DataFlash: builds a >= 200 MB ``.bin`` by concatenating the shared ``.bin`` logs (the SITL
 flight ``--copies`` times) in a temporary folder, then times
@@ -17,8 +17,10 @@ arrays it returns.
 
 MAVLink .tlog (``--tlog-mb``, default 100): every shared ``.tlog`` concatenated until the file
 is that large; mavsid's reader against pymavlink's ``recv_match`` loop over all messages of
-the whole file. ULog: per shared ``.ulg``, mavsid against a plain ``pyulog.ULog`` (mavsid's
-overhead), and mavsid reading the attitude topics only against the full pyulog parse.
+the whole file. ULog: per shared ``.ulg`` and on a simulated long flight of ``--ulog-mb`` MB
+(built in a temporary folder), mavsid's ``ulog.read`` against ``pyulog.ULog`` in the same
+run, warm (best CPU time, the two in turn) and cold (first read in a fresh process), mavsid
+reading the attitude topics only, and mavsid's peak memory against its returned arrays.
 
 Each format has its own ``bench_<format>()``; ``main()`` calls them, so a section for another
 format is one more function.
@@ -222,11 +224,67 @@ def bench_tlog(min_mb: float) -> None:
 # --------------------------------------------------------------------------- ULog
 ULOG_TOPICS = ["vehicle_attitude", "vehicle_angular_velocity", "vehicle_torque_setpoint",
                "actuator_controls_0", "vehicle_rates_setpoint"]  # fmt: skip
+#: bytes of ULog the simulator writes per second of a px4-1.14 flight (about)
+ULOG_BYTES_PER_S = 68_000
+
+_COLD = """
+import contextlib, io, sys, time, warnings
+path, which = sys.argv[1], sys.argv[2]
+if which == "pyulog":
+    from pyulog import ULog
+    def run():
+        with contextlib.redirect_stdout(io.StringIO()):
+            return ULog(path)
+else:
+    from mavsid.readers import ulog
+    def run():
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return ulog.read(path)
+t0, c0 = time.perf_counter(), time.process_time()
+run()
+print(time.perf_counter() - t0, time.process_time() - c0)
+"""
 
 
-def bench_ulog(repeat: int = 5) -> None:
-    """Per shared .ulg: mavsid's ``ulog.read`` against a plain ``pyulog.ULog`` (mavsid's
-    overhead), and mavsid reading the attitude topics only against a full pyulog parse."""
+def cold(path: Path, which: str) -> tuple[float, float]:
+    """Wall and CPU time of the first read in a fresh process (imports not timed)."""
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", _COLD, str(path), which], check=True,
+                         capture_output=True, text=True, cwd=ROOT).stdout.split()
+    return float(out[0]), float(out[1])
+
+
+def warm_pair(a: Callable[[], Any], b: Callable[[], Any], repeat: int) -> tuple[float, float]:
+    """Best CPU time of ``a`` and of ``b``, called in turn (a b a b ...) so that a drift of
+    the machine's speed touches both."""
+    best = [float("inf"), float("inf")]
+    for _ in range(repeat):
+        for k, fn in enumerate((a, b)):
+            c0 = time.process_time()
+            fn()
+            best[k] = min(best[k], time.process_time() - c0)
+    return best[0], best[1]
+
+
+def build_big_ulog(folder: Path, min_mb: float) -> Path:
+    """A >= ``min_mb`` MB ULog: a long simulated flight in PX4 1.14's topic set."""
+    from mavsid.synthetic.run import scenario_from_options, simulate
+
+    path = folder / "long_flight.ulg"
+    duration = max(60.0, min_mb * MB / ULOG_BYTES_PER_S * 1.05)
+    simulate(scenario_from_options(duration_s=duration), [path],
+             layout="px4-1.14")
+    return path
+
+
+def bench_ulog(min_mb: float = 100.0, repeat: int = 5) -> None:
+    """Per shared .ulg and on a >= ``min_mb`` MB simulated flight: mavsid's ``ulog.read``
+    against ``pyulog.ULog`` measured in the same run, warm (best CPU of ``repeat``, in
+    turn) and cold (first read in a fresh process); mavsid reading the attitude topics
+    only; mavsid's peak memory against the arrays it returns."""
     import contextlib
     import io
 
@@ -236,34 +294,37 @@ def bench_ulog(repeat: int = 5) -> None:
 
     paths = sorted(LOGS.rglob("*.ulg"))
     if not paths:
-        print(f"skipping ULog: {LOGS} not present")
-        return
+        print(f"skipping shared ULogs: {LOGS} not present")
 
-    def runs(path: Path) -> list[Callable[[], Any]]:
-        def plain() -> Any:
+    def plain(path: Path) -> Callable[[], Any]:
+        def run() -> Any:
             with contextlib.redirect_stdout(io.StringIO()):
                 return ULog(str(path))
+        return run
 
-        def full() -> Any:
-            return ulog.read(path)
+    def measure(path: Path, n: int) -> tuple[str, str]:
+        ref, ours = warm_pair(plain(path), quiet(lambda: ulog.read(path)), n)
+        _, sel = warm_pair(lambda: None, quiet(lambda: ulog.read(path, messages=ULOG_TOPICS)),
+                           n)
+        (_, cold_ref), (_, cold_ours) = cold(path, "pyulog"), cold(path, "mavsid")
+        log = quiet(lambda: ulog.read(path))()
+        arrays = decoded_bytes(log)
+        del log
+        peak, _ = peak_memory(quiet(lambda: ulog.read(path)))
+        return (path.name[:44], f"{path.stat().st_size / MB:7.1f} {ref:7.3f} {ours:7.3f} "
+                                f"{ref / ours:6.1f}x  {cold_ref:7.3f} {cold_ours:7.3f} "
+                                f"{cold_ref / cold_ours:6.1f}x  {ref / sel:6.1f}x  "
+                                f"{peak / max(arrays, 1):5.2f}x")  # fmt: skip
 
-        def selective() -> Any:
-            return ulog.read(path, messages=ULOG_TOPICS)
-
-        return [plain, quiet(full), quiet(selective)]
-
-    rows, totals = [], [0.0, 0.0, 0.0]
-    for path in paths:
-        cpu = [timed(fn, repeat)[1] for fn in runs(path)]
-        totals = [a + b for a, b in zip(totals, cpu, strict=True)]
-        rows.append((path.name, f"{cpu[0]:6.3f} {cpu[1]:6.3f} {cpu[1] / cpu[0] - 1:+7.1%}  "
-                                f"{cpu[2]:6.3f} {cpu[0] / cpu[2]:5.2f}x"))  # fmt: skip
-    ref, ours, sel = totals
-    rows.append(("all", f"{ref:6.3f} {ours:6.3f} {ours / ref - 1:+7.1%}  {sel:6.3f} "
-                        f"{ref / sel:5.2f}x"))  # fmt: skip
-    report(f"ULog: {len(paths)} shared .ulg, best CPU s of {repeat}: pyulog, mavsid, "
-           "mavsid's overhead (goal <= +20 %), mavsid selective "
-           f"({', '.join(ULOG_TOPICS)}), full pyulog / selective", rows)
+    header = ("file", "     MB  pyulog  mavsid  ratio   (warm, best CPU s)  pyulog  mavsid  "
+                      "ratio  (cold, CPU s)  selective  peak/arrays")  # fmt: skip
+    rows = [header] + [measure(path, repeat) for path in paths]
+    with tempfile.TemporaryDirectory() as tmp:
+        big = build_big_ulog(Path(tmp), min_mb)
+        rows.append(measure(big, 3))
+    report(f"ULog: pyulog.ULog against mavsid ulog.read, same run; selective = full pyulog "
+           f"/ mavsid on {', '.join(ULOG_TOPICS)}; peak = tracemalloc peak of mavsid's read "
+           "/ bytes of its returned arrays (the memory map is not counted)", rows)
 
 
 # --------------------------------------------------------------------------- main
@@ -274,13 +335,15 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--copies", type=int, default=2, help="SITL log copies (default 2)")
     parser.add_argument("--tlog-mb", type=float, default=100.0,
                         help="size of the concatenated .tlog, MB (default 100)")
+    parser.add_argument("--ulog-mb", type=float, default=100.0,
+                        help="size of the simulated long ULog flight, MB (default 100)")
     parser.add_argument("--only", choices=["dataflash", "tlog", "ulog"],
                         help="run one format only")
     args = parser.parse_args(argv)
     if args.only in (None, "dataflash"):
         bench_dataflash(args.prefix_mb, args.copies)
     if args.only in (None, "ulog"):
-        bench_ulog()
+        bench_ulog(args.ulog_mb)
     if args.only in (None, "tlog"):
         bench_tlog(args.tlog_mb)
 

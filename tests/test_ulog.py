@@ -5,13 +5,21 @@ from __future__ import annotations
 
 import contextlib
 import io
+import struct
 import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-from helpers import assert_info_matches_golden, ids, require_shared, shared_logs, shared_path
+from helpers import (
+    FIXTURES,
+    assert_info_matches_golden,
+    ids,
+    require_shared,
+    shared_logs,
+    shared_path,
+)
 from pyulog import ULog
 
 from mavsid.data import RawLog
@@ -19,6 +27,7 @@ from mavsid.errors import DataQualityWarning, LogFormatError
 from mavsid.readers import read_log, ulog
 
 ULOGS = shared_logs(".ulg")
+FIXTURE_ULOGS = sorted(FIXTURES.glob("*.ulg"))
 PX4_ULOG_RS = ("public", "Auterion__px4-ulog-rs")
 
 
@@ -59,6 +68,17 @@ def assert_tables_match(log: RawLog, ref: ULog) -> None:
 @pytest.mark.parametrize("path", ULOGS, ids=ids(ULOGS))
 def test_shared_ulog_matches_pyulog(path: Path) -> None:
     require_shared()
+    assert_matches_pyulog(path)
+
+
+@pytest.mark.parametrize("path", FIXTURE_ULOGS, ids=[p.name for p in FIXTURE_ULOGS])
+def test_fixture_ulog_matches_pyulog(path: Path) -> None:
+    assert_matches_pyulog(path)
+
+
+def assert_matches_pyulog(path: Path) -> None:
+    """Tables, parameters, texts, modes, span, dropouts and the corruption warning as
+    pyulog has them."""
     ref, printed = pyulog(path)
     log, quality = read(path)
     assert_tables_match(log, ref)
@@ -90,6 +110,11 @@ def test_shared_ulog_matches_pyulog(path: Path) -> None:
         assert "has appended data (crash dump)" in log.source.notes
     # corruption pyulog finds (flag or printed diagnostics) -> one warning; else none
     assert len(quality) == int(bool(ref.file_corruption or printed.strip())), quality
+    assert log.span_s == (ref.start_timestamp / 1e6,
+                          max(ref.last_timestamp, ref.start_timestamp) / 1e6)  # fmt: skip
+    if ref.dropouts:
+        total = sum(d.duration for d in ref.dropouts)
+        assert f"{len(ref.dropouts)} dropouts, {total} ms in all" in log.source.notes
 
 
 def test_corrupt_px4_ulog_rs_logs_warn_and_keep_pyulog_values() -> None:
@@ -97,7 +122,7 @@ def test_corrupt_px4_ulog_rs_logs_warn_and_keep_pyulog_values() -> None:
                  "corrupt_unregistered_msg_id.ulg"):  # fmt: skip
         path = shared_path(*PX4_ULOG_RS, name)
         log, quality = read(path)
-        assert len(quality) == 1 and "pyulog found corruption" in quality[0]
+        assert len(quality) == 1 and "file corruption found" in quality[0]
         assert len(log["vehicle_attitude"]) > 250
 
 
@@ -266,3 +291,165 @@ def test_a_damaged_parameter_type_is_skipped_and_counted(tmp_path) -> None:  # t
         raw = read_log(path)
     assert raw.params == {"MC_ROLL_P": 6.5}
     assert len(raw["att"]) == 50
+
+
+# ------------------------------------------------------------------ framing, truncation
+
+def message_ends(raw: bytes) -> list[int]:
+    """Where each message of a clean ULog ends: an independent walk over the headers
+    (16-byte file header, then ``uint16 size, uint8 type`` and the payload)."""
+    ends, pos = [], 16
+    while pos + 3 <= len(raw):
+        pos += 3 + int.from_bytes(raw[pos : pos + 2], "little")
+        ends.append(pos)
+    return ends
+
+
+@pytest.mark.parametrize("source", ["px4_hexa_doublets.ulg", "sample_log_small.ulg"])
+@pytest.mark.parametrize("cut", [0.2, 0.55, 0.9, 1.0])
+def test_truncated_last_message_is_counted(tmp_path: Path, source: str, cut: float) -> None:
+    """A file cut inside its last message: the complete messages give pyulog's values and
+    the partial one is counted (skipped bytes) and noted, not dropped silently."""
+    src = FIXTURES / source if (FIXTURES / source).exists() else \
+        shared_path("public", "PX4__pyulog", source)
+    raw = src.read_bytes()
+    ends = message_ends(raw)
+    k = max(int(len(ends) * cut) - 1, 1)  # cut the k-th message (or the last) in its middle
+    start, stop = ends[k - 1], ends[k]
+    assert stop - start > 3
+    at = start + (stop - start) // 2
+    path = tmp_path / "cut.ulg"
+    path.write_bytes(raw[:at])
+    ref, _ = pyulog(path)
+    log, _ = read(path)
+    assert_tables_match(log, ref)
+    assert f"last message truncated: {at - start} bytes ignored" in log.source.notes
+    assert log.source.skipped_bytes == at - start
+    whole, _ = read(src)
+    assert not any("truncated" in n for n in whole.source.notes)
+    assert whole.source.skipped_bytes == 0
+
+
+def test_selected_topics_match_pyulog_and_do_not_warn() -> None:
+    """Topics not asked for are framed but neither decoded nor taken for corruption."""
+    path = shared_path("public", "PX4__pyulog", "sample.ulg")
+    ref, printed = pyulog(path, ["vehicle_attitude", "vehicle_status"])
+    assert not ref.file_corruption and not printed.strip()
+    log, quality = read(path, messages=["vehicle_attitude"])
+    assert quality == []
+    assert set(log.messages) == {"vehicle_attitude"}
+    d = ref.get_dataset("vehicle_attitude")
+    for field, want in d.data.items():
+        assert np.array_equal(log["vehicle_attitude"][field], want)
+
+
+def fake_header_ulog(samples: int = 400) -> bytes:
+    """A valid ULog whose ``att`` records carry, in their float bytes, what looks like
+    data-message headers of the right size and id (false framing candidates), and whose
+    stream holds texts, parameter changes, dropouts and a second topic in between."""
+    from fuzz.hostile import ATT_FORMAT, _ulog_msg, ulog_file
+
+    out = bytearray(ulog_file([ATT_FORMAT, "rate:uint64_t timestamp;float[3] xyz;"],
+                              [("float MC_ROLL_P", struct.pack("<f", 6.5))], topic=None))
+    out += _ulog_msg(b"A", struct.pack("<BH", 0, 0) + b"att")
+    out += _ulog_msg(b"A", struct.pack("<BH", 2, 7) + b"rate")
+    fake = struct.pack("<HBH", 14, ord("D"), 0)  # a header of an att record, 5 bytes
+    for k in range(samples):
+        payload = fake[:4] if k % 3 == 0 else struct.pack("<f", 0.01 * k)
+        out += _ulog_msg(b"D", struct.pack("<HQ", 0, 10_000 * k) + payload)
+        if k % 7 == 0:
+            out += _ulog_msg(b"D", struct.pack("<HQ", 7, 10_000 * k + 5) + fake + bytes(7))
+        if k % 50 == 25:
+            out += _ulog_msg(b"L", struct.pack("<BQ", ord("6"), 10_000 * k) + b"hello")
+            out += _ulog_msg(b"O", struct.pack("<H", 20))
+            out += _ulog_msg(b"P", bytes([15]) + b"float MC_ROLL_P" + struct.pack("<f", k))
+    return bytes(out)
+
+
+def test_false_candidates_inside_records_keep_pyulogs_framing(tmp_path: Path) -> None:
+    path = tmp_path / "fake.ulg"
+    path.write_bytes(fake_header_ulog())
+    ref, printed = pyulog(path)
+    log, quality = read(path)
+    assert quality == [] and not printed.strip()
+    assert_tables_match(log, ref)
+    assert len(log["att"]) == 400 and len(log["rate[2]"]) == 58
+    assert log.params["MC_ROLL_P"] == ref.changed_parameters[-1][2]
+    assert f"{len(ref.dropouts)} dropouts, {20 * len(ref.dropouts)} ms in all" \
+        in log.source.notes
+    assert [t.text for t in log.texts] == [m.message for m in ref.logged_messages]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_garbage_between_messages_resynchronises_as_pyulog(tmp_path: Path, seed: int) -> None:
+    """Random bytes inserted between two messages (no sync message after them): pyulog
+    steps over them; so does the reader, counting the bytes, with the same values."""
+    raw = shared_path("public", "PX4__pyulog", "sample_log_small.ulg").read_bytes()
+    ends = message_ends(raw)
+    rng = np.random.default_rng(seed)
+    at = ends[int(rng.integers(len(ends) // 4, len(ends) - 10))]
+    junk = rng.integers(0, 256, int(rng.integers(1, 400))).astype(np.uint8).tobytes()
+    path = tmp_path / "junk.ulg"
+    path.write_bytes(raw[:at] + junk + raw[at:])
+    try:
+        ref, _ = pyulog(path)
+    except Exception:
+        with pytest.raises(LogFormatError):
+            read(path)
+        return
+    log, _ = read(path)
+    assert_tables_match(log, ref)
+    assert log.source.skipped_bytes >= (0 if not ref.file_corruption else 1)
+
+
+def test_huge_claimed_sizes_and_garbage_are_bounded(tmp_path: Path) -> None:
+    """A megabyte of garbage and of maximal sizes after valid definitions: a result or one
+    typed error, in linear time (no hang: each step moves forward)."""
+    from fuzz.hostile import ATT_FORMAT, ulog_file
+
+    head = ulog_file([ATT_FORMAT], samples=10)
+    rng = np.random.default_rng(1)
+    for tail in (rng.integers(0, 256, 1 << 20).astype(np.uint8).tobytes(),
+                 b"\xff\xff\x00" * (1 << 18), b"\x01\x00X" * (1 << 18),
+                 b"\xff\xffD" * (1 << 18)):  # fmt: skip
+        path = tmp_path / "tail.ulg"
+        path.write_bytes(head + tail)
+        log, _ = read(path)
+        assert len(log["att"]) >= 10
+
+
+def test_many_short_runs_match_pyulog(tmp_path: Path) -> None:
+    """Data messages each followed by a sync message: thousands of one-message runs (their
+    bookkeeping joined as it grows) give pyulog's values."""
+    from fuzz.hostile import ATT_FORMAT, _ulog_msg, ulog_file
+
+    out = bytearray(ulog_file([ATT_FORMAT], samples=0))
+    sync = _ulog_msg(b"S", b"\x2f\x73\x13\x20\x25\x0c\xbb\x12")
+    for k in range(10_000):
+        out += _ulog_msg(b"D", struct.pack("<HQf", 0, 1000 * k, k / 7)) + sync
+    path = tmp_path / "short_runs.ulg"
+    path.write_bytes(bytes(out))
+    ref, _ = pyulog(path)
+    log, quality = read(path)
+    assert quality == []
+    assert_tables_match(log, ref)
+    assert len(log["att"]) == 10_000
+
+
+def test_a_file_of_data_header_look_alikes_matches_pyulog(tmp_path: Path) -> None:
+    """Every byte after the subscription is ``D``: every position is a framing candidate
+    (size 0x4444 = the subscribed format's + 2, id 0x4444 subscribed); the candidates are
+    found a block at a time, and the records are pyulog's."""
+    from fuzz.hostile import ATT_FORMAT, _ulog_msg, ulog_file
+
+    fmt = f"big:uint64_t timestamp;uint8_t[{0x4444 - 2 - 8}] x;"
+    out = bytearray(ulog_file([ATT_FORMAT, fmt], topic=None))
+    out += _ulog_msg(b"A", struct.pack("<BH", 0, 0x4444) + b"big")
+    out += b"D" * (3 << 20)
+    path = tmp_path / "look_alikes.ulg"
+    path.write_bytes(bytes(out))
+    ref, _ = pyulog(path)
+    log, _ = read(path)
+    assert_tables_match(log, ref)
+    assert len(log["big"]) == (3 << 20) // 0x4447
+    assert f"last message truncated: {(3 << 20) % 0x4447} bytes ignored" in log.source.notes

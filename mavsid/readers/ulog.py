@@ -1,22 +1,82 @@
-"""Read PX4 ULog files (``.ulg``) into a :class:`~mavsid.data.RawLog`, through pyulog.
+"""Read PX4 ULog files (``.ulg``) into a :class:`~mavsid.data.RawLog`, vectorised with numpy.
 
-pyulog already decodes each topic with one ``np.frombuffer`` over its raw bytes; this reader
-keeps those arrays as they are (no copy) and adds what the rest of mavsid needs:
+The reader gives the values pyulog gives (the reference the tests compare against field by
+field), several times faster (ten and more on large logs, where data messages dominate):
+definitions and every message that is not topic data are parsed once in Python; the data
+messages (``D``, nearly all of a log) are framed, checked and decoded with numpy over a
+memory map of the file. pyulog is not used at run time.
+
+What the returned log holds:
 
 - one table per topic instance: ``topic`` for ``multi_id`` 0, ``topic[N]`` otherwise, with
-  pyulog's field names (``timestamp``, ``xyz[0]``, ``q[3]``, nested ``a.b``);
+  pyulog's field names (``timestamp``, ``xyz[0]``, ``q[3]``, nested ``a.b``; padding fields
+  kept, except those at the end of a format, which pyulog drops);
 - ``time_s``: ``timestamp_sample`` where the topic has it (when the sensor sampled), else
   ``timestamp`` (when it was published), µs → s on the vehicle's boot clock;
 - ``params``: the initial parameters, updated by every parameter change in the log;
 - ``texts``: logged (and tagged logged) messages, ``severity`` the syslog level 0–7;
 - ``modes``: each change of ``vehicle_status.nav_state``, named by PX4's ``NAVIGATION_STATE``;
 - ``SourceInfo.notes``: dropouts (count and total length), appended (crash-dump) data,
-  parameter changes, topics whose time runs backwards, and pyulog's corruption findings.
+  parameter changes, topics whose time runs backwards, corruption found, and a last
+  message cut off by the end of the file; ``SourceInfo.skipped_bytes`` counts the bytes
+  stepped over to resynchronise, those of data messages that could not be decoded (wrong
+  size, no subscription) and a truncated last message.
 
-A file pyulog flags as corrupt is still returned with pyulog's values and one
-:class:`~mavsid.errors.DataQualityWarning`; one it cannot parse at all raises
-:class:`~mavsid.errors.LogFormatError`. pyulog's own diagnostics, which it prints, are
-captured into the notes instead.
+Framing
+-------
+ULog has no sync bytes in its data stream: a message is ``uint16 size, uint8 type`` and
+``size`` bytes of payload, and the next one starts right after it. The file is read as
+pyulog reads it, one message after the other from the end of the definitions, but the
+runs of consecutive data messages are taken in one step:
+
+1. *Candidates*: every position ``p`` whose type byte ``p+2`` is ``'D'``, whose message
+   id and ``size`` agree with some subscription in the file (the ``A`` messages are found
+   the same way: type byte ``A``, a defined format's name as payload, a known type byte
+   after it; the size is the format's + 2, with or without its trailing padding) and
+   whose message ends inside the file. Its successor is ``next = p + 3 + size``. A
+   candidate may be false (the byte pattern inside some payload) and a real message may
+   be no candidate (a damaged one): both only cost Python steps, never correctness.
+   Candidates are found one 1 MB block of the file at a time, when the walk reaches it,
+   so that their arrays stay small whatever the file holds.
+2. *Runs*: ``follows[i]`` is true when candidate ``i``'s successor is candidate ``i+1``.
+   If candidate ``i`` is a true message start and ``follows[i]``, so is candidate ``i+1``
+   (it is where the next message starts); by induction every candidate from ``i`` up to
+   the first index ``b >= i`` with ``follows[b]`` false is a true message, in file
+   order. One ``searchsorted`` finds ``b``; the run ``i..b`` is decoded at once.
+3. *Steps*: at the end of a run (or at a position that is no candidate) one message is
+   read in Python, with pyulog's rules: subscriptions, texts, parameters, dropouts, sync
+   messages, a data message with no other right after it (no run to look for: kept in a
+   list, checked with the others at the end); an unknown type with an implausible header
+   (type 0, size 0 or > 10000) resynchronises at the next sync message's magic, else (no
+   sync in the rest of the file) one byte further; a message cut by the end of the file
+   ends the read. The walk then goes on at the next position, which may start a run.
+
+Every position the walk visits is one pyulog visits, so the framing is pyulog's exactly.
+The Python steps are as many as the messages that are not data plus the false candidates
+inside the walked range (none in the shared real logs); in the worst case
+(a hostile file made of false candidates or tiny unknown messages) the walk is one Python
+step per message, like pyulog: linear, never endless (every step moves forward). Runs of
+implausible headers (garbage) are skipped in vectorised windows.
+
+Data messages are then grouped by subscription and gathered with one fancy index into a
+view of the map as raw records of the topic's size at every byte (``np.ndarray(...,
+strides=(1,))``), then seen as the topic's dtype, so each topic is one copy of its
+records. A data message counts if its id is subscribed at that point and its size is
+exactly the format's; the others are skipped and flagged as corruption, as pyulog does.
+pyulog's quirks on damaged files are kept so that its values stay the reference there
+too: the data of each section read (several with appended data) are taken at its end, a
+re-subscribed id keeps only its last subscription's data, and a record of a topic
+without room for an 8-byte timestamp (a damaged ``timestamp`` name) ends the section.
+Departures, on hostile files only: a message that claims to reach back before itself (a
+corrupt header near the end of the definitions) moves the read one byte forward, where
+pyulog may read the same bytes again; a format that flattens to more fields than a data
+message can hold bytes (nested arrays) is an unreadable subscription instead of minutes
+of expansion.
+
+Bad input is one :class:`~mavsid.errors.LogFormatError` naming the file: a bad header,
+incompatible flags, formats that contain themselves (pyulog would recurse without end)
+or nest too deeply, an empty log. A file with corruption is returned with what could be
+decoded and one :class:`~mavsid.errors.DataQualityWarning`.
 
 Examples
 --------
@@ -32,15 +92,13 @@ mavsid.errors.LogFormatError: ...: not a readable ULog (Invalid file format (Hea
 
 from __future__ import annotations
 
-import contextlib
-import io
+import mmap
 import os
 import re
-import signal
 import struct
-import threading
 import warnings
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -64,6 +122,38 @@ NAV_STATES: dict[int, str] = {
 _MODE_TOPIC = "vehicle_status"
 _INSTANCE = re.compile(r"^(.*)\[(\d+)\]$")
 
+_MAGIC = b"ULog\x01\x12\x35"
+_SYNC = b"\x2f\x73\x13\x20\x25\x0c\xbb\x12"
+#: basic field types: numpy type, size in bytes, struct code (pyulog's table)
+_BASIC: dict[str, tuple[type[np.generic], int, str]] = {
+    "int8_t": (np.int8, 1, "b"), "uint8_t": (np.uint8, 1, "B"),
+    "int16_t": (np.int16, 2, "h"), "uint16_t": (np.uint16, 2, "H"),
+    "int32_t": (np.int32, 4, "i"), "uint32_t": (np.uint32, 4, "I"),
+    "int64_t": (np.int64, 8, "q"), "uint64_t": (np.uint64, 8, "Q"),
+    "float": (np.float32, 4, "f"), "double": (np.float64, 8, "d"),
+    "bool": (np.int8, 1, "?"), "char": (np.int8, 1, "c"),
+}  # fmt: skip
+#: message types read in the definitions section / in the data section
+#: little-endian numpy dtypes of the basic types
+_DTYPE = {kind: np.dtype(t).newbyteorder("<") for kind, (t, _, _) in _BASIC.items()}
+_DEF_TYPES = frozenset(b"FIMPQBALC")
+_DATA_TYPES = frozenset(b"IMPQALCDOS")
+_HEAD = struct.Struct("<HB").unpack_from
+#: parameter types with 4-byte values, read without the general parser
+_FAST_VALUE = {"float": struct.Struct("<f").unpack_from,
+               "int32_t": struct.Struct("<i").unpack_from}
+_KNOWN_TYPE = np.zeros(256, bool)
+_KNOWN_TYPE[list(b"FDIMPQARLCOSB")] = True
+#: an unknown message type with a size above this is taken as corruption (pyulog's rule)
+_MAX_UNKNOWN_SIZE = 10000
+#: a format flattening to more fields than a data message can hold bytes is never decoded
+_MAX_FIELDS = 0xFFFF
+_NO_LIMIT = 1 << 62
+#: bytes of the file scanned at a time for message candidates
+_BLOCK = 1 << 20
+#: runs of data messages kept apart before they are joined (bounds the memory per run)
+_MAX_CHUNKS = 4096
+
 
 def table_name(topic: str, multi_id: int) -> str:
     """The table name of one topic instance.
@@ -76,126 +166,756 @@ def table_name(topic: str, multi_id: int) -> str:
     return topic if multi_id == 0 else f"{topic}[{multi_id}]"
 
 
-#: Time pyulog may take: a fixed part plus this much per MB of file (far above its ~1 µs per
-#: message) before the read is abandoned as hostile.
-_PARSE_S, _PARSE_S_PER_MB = 20.0, 5.0
-#: Definitions are read from the head of the file only (real ones take a few hundred kB).
-_DEFINITIONS_MAX_BYTES = 64 << 20
+# ------------------------------------------------------------------ message payloads
+class _Stop(Exception):
+    """A payload too short for its fixed fields: pyulog's ``struct.error``, which ends the
+    section being read (in the definitions: counted as corruption)."""
 
 
-def _format_cycle(path: str | os.PathLike[str]) -> list[str] | None:
-    """A chain of message formats that contain themselves (``a`` → ``b`` → ``a``), found in
-    the definitions at the head of the file; None when there is none.
+class _Bad(Exception):
+    """A payload that does not parse (pyulog's IndexError, KeyError, ValueError): the
+    message is skipped and the file marked corrupt."""
 
-    pyulog expands nested formats recursively: a format that contains itself, directly or
-    through others, is a RecursionError (or an endless loop) there, so it is refused first.
+
+Field = tuple[str, int, str]  # type, array size (0: scalar), name
+
+
+def _text(raw: bytes) -> str:
+    return raw.decode("utf-8", "ignore")
+
+
+def _unpack(code: str, raw: bytes) -> Any:
+    if len(raw) != struct.calcsize("<" + code):
+        raise _Stop
+    return struct.unpack("<" + code, raw)[0]
+
+
+def _info(data: bytes, multiple: bool = False) -> tuple[str, str, Any]:
+    """An info, info-multiple or parameter payload: (type, key, value).
 
     Examples
     --------
-    >>> import tempfile
-    >>> def msg(kind, text):
-    ...     return struct.pack("<HB", len(text), ord(kind)) + text.encode()
-    >>> body = msg("F", "a:uint64_t timestamp;b x;") + msg("F", "b:a y[2];")
-    >>> with tempfile.NamedTemporaryFile(suffix=".ulg", delete=False) as f:
-    ...     _ = f.write(b"ULog" + bytes(12) + body)
-    >>> _format_cycle(f.name)
-    ['a', 'b', 'a']
+    >>> _info(bytes([13]) + b"float MC_RATE" + struct.pack("<f", 0.5))
+    ('float', 'MC_RATE', 0.5)
+    >>> _info(bytes([14]) + b"char[3] ver_hw" + b"abc")[2]
+    'abc'
     """
-    with open(path, "rb") as f:
-        head = f.read(_DEFINITIONS_MAX_BYTES)
-    graph: dict[str, set[str]] = {}
-    pos = 16
-    while pos + 3 <= len(head):
-        size, kind = struct.unpack_from("<HB", head, pos)
-        payload = head[pos + 3 : pos + 3 + size]
-        pos += 3 + size
-        if kind in (ord("A"), ord("D"), ord("L")):  # the data section has begun
-            break
-        if kind != ord("F"):
+    if multiple:
+        data = data[1:]
+    if not data:
+        raise _Stop
+    words = _text(data[1 : 1 + data[0]]).split(" ")
+    if len(words) < 2:
+        raise _Bad
+    kind, key, raw = words[0], words[1], data[1 + data[0] :]
+    if kind.startswith("char["):
+        return kind, key, _text(raw)
+    if kind in _BASIC:
+        return kind, key, _unpack(_BASIC[kind][2], raw)
+    return kind, key, raw  # an array or a damaged type: raw bytes, as pyulog keeps them
+
+
+def _format(data: bytes) -> tuple[str, list[Field]]:
+    """A format definition ``name:type field;type[n] field;...``.
+
+    Examples
+    --------
+    >>> _format(b"att:uint64_t timestamp;float[4] q;")
+    ('att', [('uint64_t', 0, 'timestamp'), ('float', 4, 'q')])
+    """
+    parts = _text(data).split(":")
+    if len(parts) < 2:
+        raise _Bad
+    fields = []
+    for item in parts[1].split(";"):
+        if not item:
             continue
-        name, _, fields = payload.decode("ascii", "replace").partition(":")
-        types = {f.strip().split(" ")[0].split("[")[0] for f in fields.split(";") if f.strip()}
-        graph.setdefault(name, set()).update(types)
+        kind, space, rest = item.partition(" ")
+        if not space:
+            raise _Bad
+        name = rest.partition(" ")[0]  # the second word, as pyulog takes it
+        a = kind.find("[")
+        if a < 0:
+            fields.append((kind, 0, name))
+            continue
+        try:
+            count = int(kind[a + 1 : kind.find("]")])
+        except ValueError:
+            raise _Bad from None
+        if not 0 <= count <= 0xFFFF:
+            raise _Bad
+        fields.append((kind[:a], count, name))
+    return parts[0], fields
+
+
+def _cycle(formats: dict[str, list[Field]]) -> list[str] | None:
+    """A chain of formats that contain themselves (``a`` → ``b`` → ``a``); None if none.
+
+    Examples
+    --------
+    >>> _cycle({"a": [("b", 0, "x")], "b": [("a", 2, "y")]})
+    ['a', 'b', 'a']
+    >>> _cycle({"a": [("float", 0, "x")]}) is None
+    True
+    """
+    graph = {name: {kind for kind, _, _ in fields if kind not in _BASIC}
+             for name, fields in formats.items()}  # fmt: skip
     state: dict[str, int] = {}  # 1: on the current path, 2: done
 
     def visit(node: str, chain: list[str]) -> list[str] | None:
         state[node] = 1
         for nxt in sorted(graph.get(node, ())):
             if state.get(nxt) == 1:
-                return [*chain, node, nxt][[*chain, node].index(nxt):]
+                return [*chain, node, nxt][[*chain, node].index(nxt) :]
             if nxt in graph and state.get(nxt) is None and (got := visit(nxt, [*chain, node])):
                 return got
         state[node] = 2
         return None
 
     for start in sorted(graph):
-        if state.get(start) is None and (cycle := visit(start, [])):
-            return cycle
+        if state.get(start) is None and (found := visit(start, [])):
+            return found
     return None
 
 
-@contextlib.contextmanager
-def _time_limit(seconds: float) -> Iterator[None]:
-    """Raise TimeoutError in the block after ``seconds`` (main thread on POSIX; elsewhere no
-    limit can be set on a running parser, and the block runs unbounded)."""
-    if (not hasattr(signal, "setitimer")
-            or threading.current_thread() is not threading.main_thread()):
-        yield
-        return
+def _sizes(formats: dict[str, list[Field]], names: set[str]) -> dict[str, tuple[int, ...]]:
+    """Per format of ``names``, the payload sizes its data messages can have: 2 (message
+    id) + the format's size, with and without its trailing ``_padding`` fields (formats
+    acyclic).
 
-    def expire(signum: int, frame: object) -> None:
-        raise TimeoutError
-
-    previous = signal.signal(signal.SIGALRM, expire)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, previous)
-
-
-def _parse(path: str | os.PathLike[str], topics: list[str] | None) -> tuple[Any, list[str]]:
-    """Run pyulog, bounded: returns the ULog and the lines pyulog printed (its diagnostics).
-
-    Third-party parsing of an untrusted file: self-containing formats are refused before it
-    runs, it gets a time limit proportional to the file, and whatever it raises becomes one
-    :class:`~mavsid.errors.LogFormatError` naming the file.
+    Examples
+    --------
+    >>> _sizes({"a": [("uint64_t", 0, "timestamp"), ("uint8_t", 3, "_padding0")]}, {"a"})
+    {'a': (13, 10)}
     """
-    from pyulog import ULog
-    from pyulog.core import ULogException
+    memo: dict[str, int] = {}
 
+    def size(name: str) -> int:
+        if name not in memo:
+            memo[name] = sum(max(n, 1) * (_BASIC[k][1] if k in _BASIC else size(k))
+                             for k, n, _ in formats.get(name, ()))  # fmt: skip
+        return memo[name]
+
+    out = {}
+    for name in names & formats.keys():
+        fields = formats[name]
+        full = trimmed = size(name)
+        for kind, n, fname in reversed(fields):
+            part = max(n, 1) * (_BASIC[kind][1] if kind in _BASIC else size(kind))
+            if part and not fname.startswith("_padding"):
+                break
+            trimmed -= part
+        out[name] = tuple(dict.fromkeys(s + 2 for s in (full, trimmed) if 0 < s <= 0xFFFF - 2))
+    return out
+
+
+@dataclass
+class _Sub:
+    """One subscription (``A`` message): a topic instance's message id and record dtype."""
+
+    msg_id: int
+    multi_id: int
+    name: str
+    dtype: np.dtype[Any]
+    ts_offset: int  # bytes before ``timestamp`` (the record size if there is none)
+
+
+@dataclass
+class _Text:
+    time_us: int
+    message: str
+    level: int
+
+
+@dataclass
+class _Parsed:
+    """What a ULog holds, as pyulog has it."""
+
+    start_us: int = 0
+    last_us: int = 0
+    info: dict[str, Any] = field(default_factory=dict)
+    formats: dict[str, list[Field]] = field(default_factory=dict)
+    initial_params: dict[str, Any] = field(default_factory=dict)
+    changed_params: list[tuple[int, str, Any]] = field(default_factory=list)
+    logged: list[_Text] = field(default_factory=list)
+    tagged: dict[int, list[_Text]] = field(default_factory=dict)
+    dropouts: list[tuple[int, int]] = field(default_factory=list)  # (time µs, duration ms)
+    appended: bool = False
+    corrupt: bool = False
+    problems: list[str] = field(default_factory=list)
+    skipped: int = 0
+    truncated: int = 0
+    data: list[tuple[str, int, dict[str, NDArray[Any]]]] = field(default_factory=list)
+
+
+class _Reader:
+    """One pass over a mapped ULog (see the module's *Framing*)."""
+
+    def __init__(self, buf: Any, path: str | os.PathLike[str], topics: set[str] | None) -> None:
+        self.buf = buf  # the mmap (bytes-like, with .find)
+        self.u8 = np.frombuffer(buf, np.uint8)
+        self.n = self.u8.size
+        self.path = path
+        self.topics = topics
+        self.out = _Parsed()
+        self.has_sync = True
+        self.offsets: list[int] = []  # appended data (flag bits)
+        # subscriptions: all seen; the active one per message id (-1 none); filtered ids
+        self.subs: list[_Sub] = []
+        self.active: dict[int, int] = {}  # message id -> subscription, in first order
+        # message id -> active subscription, -2 filtered out (topics not asked for), -1 none
+        self.lookup = np.full(1 << 16, -1, np.int32)
+        self.filtered: set[int] = set()
+        self.untimed: dict[int, int] = {}  # subscription -> record size, without timestamp
+        self.final: list[int] = []  # subscriptions whose data is kept, pyulog's order
+        self.flat: dict[str, list[tuple[str, str]]] = {}
+        self.dtypes: dict[str, tuple[np.dtype[Any], int]] = {}
+        # data messages met: (positions, sizes, ids, their subscriptions), and how many
+        self.chunks: list[tuple[NDArray[Any], NDArray[Any], NDArray[Any], NDArray[np.int32]]]
+        self.chunks = []
+        self.pending: list[tuple[int, int, int, int]] = []
+        self.count = self.taken = 0
+        self.u64 = (np.ndarray((self.n - 7,), "<u8", buffer=buf, strides=(1,))
+                    if self.n >= 8 else np.zeros(0, np.uint64))  # fmt: skip
+
+    # ------------------------------------------------------------------ diagnostics
+    def problem(self, text: str) -> None:
+        self.out.corrupt = True
+        if text not in self.out.problems:
+            self.out.problems.append(text)
+
+    # ------------------------------------------------------------------ header
+    def header(self) -> None:
+        if self.n < 16:
+            raise LogFormatError("not a readable ULog (Invalid file format (Header too short))",
+                                 path=self.path)
+        if bytes(self.buf[:7]) != _MAGIC:
+            raise LogFormatError("not a readable ULog (Invalid file format (Failed to parse "
+                                 "header))", path=self.path)
+        if self.buf[7] > 1:
+            self.out.problems.append("unknown file version")
+        self.out.start_us = self.out.last_us = struct.unpack_from("<Q", self.buf, 8)[0]
+
+    # ------------------------------------------------------------------ garbage
+    def garbage_end(self, q: int, known: frozenset[int], limit: int | None) -> int:
+        """First position from ``q`` that is not an implausible header of an unknown type
+        (type 0, size 0 or > 10000; in the data section also: whose message fits below
+        ``limit``), which pyulog would step over one byte at a time."""
+        u8, n, width = self.u8, self.n, 256
+        top = n if limit is None else min(n, limit)
+        for _ in range(8):  # most runs are short: a few steps in Python first
+            if q + 3 > n:
+                return q
+            size, kind = _HEAD(self.buf, q)
+            if kind in known or (kind and size and size <= _MAX_UNKNOWN_SIZE) or (
+                    limit is not None and q + 3 + size > top):
+                return q
+            q += 1
+        table = np.zeros(256, bool)
+        table[list(known)] = True
+        while q + 3 <= n:
+            hi = min(n - 2, q + width)
+            t = u8[q + 2 : hi + 2]
+            s = u8[q:hi].astype(np.int64) | u8[q + 1 : hi + 1].astype(np.int64) << 8
+            plain = ~table[t] & ((t == 0) | (s == 0) | (s > _MAX_UNKNOWN_SIZE))
+            if limit is not None:
+                plain &= np.arange(q, hi) + 3 + s <= min(n, limit)
+            stop = np.flatnonzero(~plain)
+            if stop.size:
+                return q + int(stop[0])
+            q, width = hi, min(width * 4, 1 << 20)
+        return q
+
+    # ------------------------------------------------------------------ definitions
+    def definitions(self) -> int:
+        """Read formats, info, parameters and flag bits; the data section's start."""
+        out, n, buf, pos = self.out, self.n, self.buf, 16
+        params = out.initial_params
+        while pos < n:
+            if n - pos < 3:
+                self.problem("file corruption detected while reading file definitions")
+                return n
+            size, kind = _HEAD(buf, pos)
+            end = pos + 3 + size
+            if kind == 0x50 and end <= n and size == buf[pos + 3] + 5:  # the common parameter
+                words = _text(buf[pos + 4 : end - 4]).split(" ")
+                if len(words) > 1 and words[0] in _FAST_VALUE:
+                    params[words[1]] = _FAST_VALUE[words[0]](buf, end - 4)[0]
+                    pos = end
+                    continue
+            if kind in (0x41, 0x4C, 0x43):  # A, L, C: the data section begins
+                return pos
+            data = self.buf[pos + 3 : min(end, n)]
+            try:
+                if kind == 0x49:  # I
+                    _, key, value = _info(data)
+                    out.info[key] = value
+                elif kind == 0x4D:  # M
+                    _info(data, multiple=True)
+                elif kind == 0x46:  # F
+                    name, fields = _format(data)
+                    out.formats[name] = fields
+                elif kind == 0x50:  # P
+                    _, key, value = _info(data)
+                    out.initial_params[key] = value
+                elif kind == 0x51:  # Q
+                    if not data:
+                        raise _Stop
+                    _info(data[1:])
+                elif kind == 0x42:  # B
+                    self.flag_bits(pos, size, data)
+                elif kind == 0 or size == 0 or size > _MAX_UNKNOWN_SIZE:
+                    self.problem("file corruption detected while reading file definitions")
+                    nxt = self.garbage_end(pos + 1, _DEF_TYPES, None)
+                    out.skipped += nxt - pos
+                    pos = nxt
+                    continue
+            except (_Stop, _Bad):
+                self.problem("file corruption detected while reading file definitions")
+            pos = end
+        return min(pos, n)
+
+    def flag_bits(self, pos: int, size: int, data: bytes) -> None:
+        if pos != 16:
+            self.out.problems.append("FLAGS_BITS message must be the first message")
+        if size > 40:
+            self.out.problems.append("flag bits message is longer than expected")
+        if len(data) < 40:
+            raise _Stop
+        incompat = data[8:16]
+        offsets = list(struct.unpack_from("<3Q", data, 16))
+        while offsets and offsets[-1] == 0:
+            offsets.pop()
+        if incompat[0] & ~1 or any(incompat[1:]):
+            raise LogFormatError("not a readable ULog (Unknown incompatible flag set: cannot "
+                                 "parse the log)", path=self.path)
+        self.out.appended = bool(incompat[0] & 1)
+        self.offsets = offsets
+
+    # ------------------------------------------------------------------ candidates
+    def candidates(self, start: int) -> None:
+        """Prepare the data-message candidates (see *Framing*): the sizes the file's
+        subscriptions allow; each block's candidates are found when the walk gets there
+        (:meth:`load`), so that memory stays bounded whatever the file holds."""
+        self.start = start
+        self.tables = self.allowed_sizes(start)
+        self.lo = self.hi = -1  # the block whose candidates are loaded
+        self.cand = np.zeros(0, np.int64)
+        self.csize = self.cmsg = np.zeros(0, np.uint16)
+        self.breaks = np.zeros(0, np.int64)
+        self.u16 = np.ndarray((max(self.n - 1, 0),), "<u2", buffer=self.buf, strides=(1,))
+
+    def load(self, pos: int) -> None:
+        """The candidates of the block of the file holding ``pos``: positions of type byte
+        ``D`` whose size is one their id's subscription allows and whose message ends in
+        the file; their sizes and ids; the indices where a run of consecutive candidates
+        breaks (the block's last one always)."""
+        u8, n = self.u8, self.n
+        self.flush()
+        if self.chunks and self.cand.size > 4 * self.taken + _BLOCK // 64:
+            # runs taken are views of the candidates: keep copies of them, not all these
+            pos_, size_, ids_, sub_ = (np.concatenate(a) for a in zip(*self.chunks, strict=True))
+            self.chunks = [(pos_, size_, ids_, sub_)]
+        lo = self.start + (pos - self.start) // _BLOCK * _BLOCK
+        hi = min(lo + _BLOCK, n - 4)  # a data message needs 5 bytes
+        p = np.flatnonzero(u8[lo + 2 : hi + 2] == 0x44)
+        p += lo
+        size, ids = self.u16[p], self.u16[p + 3]
+        keep = np.zeros(p.size, bool)
+        for table in self.tables:
+            keep |= table[ids] == size
+        keep &= (size != 0) & (p + 3 + size <= n)  # a size 0 in a table: none allowed
+        self.cand, self.csize, self.cmsg = p[keep], size[keep], ids[keep]
+        follows = np.zeros(self.cand.size, bool)
+        nxt = self.cand[:-1] + 3
+        nxt += self.csize[:-1]
+        follows[:-1] = nxt == self.cand[1:]
+        self.breaks = np.flatnonzero(~follows)
+        self.lo, self.hi, self.taken = lo, hi, 0
+
+    def allowed_sizes(self, start: int) -> list[NDArray[np.uint16]]:
+        """The data message sizes the file's subscriptions allow, as tables by message id
+        (0: none; one table per size a message id may have), from the positions of type
+        byte ``A`` (in blocks of the file): those with a defined format's name as payload
+        and followed by a message of a known type give the format's size + 2, with and
+        without its trailing padding. A filter only: a data message it misses is read by a
+        Python step."""
+        u8, n = self.u8, self.n
+        named: dict[tuple[int, str], None] = {}
+        for lo in range(start, max(n - 2, start), _BLOCK):
+            p = np.flatnonzero(u8[lo + 2 : min(lo + _BLOCK, n - 2) + 2] == 0x41)
+            p += lo
+            size = u8[p].astype(np.int64) | u8[p + 1].astype(np.int64) << 8
+            ok = (size > 3) & (size < 260) & (p + 3 + size <= n)
+            p, size = p[ok], size[ok]
+            follower = np.minimum(p + 5 + size, n - 1)  # the type byte of the next message
+            for q in p[_KNOWN_TYPE[u8[follower]] | (follower == n - 1)].tolist():
+                length = self.buf[q] | self.buf[q + 1] << 8
+                named[self.buf[q + 4] | self.buf[q + 5] << 8,
+                      _text(self.buf[q + 6 : q + 3 + length])] = None
+        sizes = _sizes(self.out.formats, {name for _, name in named})
+        allowed: dict[int, set[int]] = {}
+        for msg_id, name in named:
+            if name in sizes:
+                allowed.setdefault(msg_id, set()).update(sizes[name])
+        tables = [np.zeros(1 << 16, np.uint16)
+                  for _ in range(max(map(len, allowed.values()), default=0))]  # fmt: skip
+        for msg_id, options in allowed.items():
+            for table, value in zip(tables, sorted(options), strict=False):
+                table[msg_id] = value
+        return tables
+
+    # ------------------------------------------------------------------ subscriptions
+    def flatten(self, name: str) -> list[tuple[str, str]]:
+        """(field name, basic type) of a format, nested types and arrays expanded."""
+        if name in self.flat:
+            return self.flat[name]
+        out: list[tuple[str, str]] = []
+        for kind, count, fname in self.out.formats[name]:  # KeyError: an unknown type
+            if kind in _BASIC and not count:
+                out.append((fname, kind))
+                continue
+            names = [f"{fname}[{i}]" for i in range(count)] if count else [fname]
+            if kind in _BASIC:
+                inner = [("", kind)]
+            else:
+                inner = self.flatten(kind)
+                names = [f + "." for f in names]
+            if len(out) + len(names) * len(inner) > _MAX_FIELDS:
+                raise _Bad
+            out.extend([(prefix + sub, t) for prefix in names for sub, t in inner])
+        self.flat[name] = out
+        return out
+
+    def record(self, name: str) -> tuple[np.dtype[Any], int]:
+        """The record dtype of a topic (trailing padding dropped) and its timestamp offset."""
+        if name not in self.dtypes:
+            fields = list(self.flatten(name))
+            while fields and fields[-1][0].startswith("_padding"):
+                fields.pop()
+            offset = 0
+            for fname, kind in fields:
+                if fname == "timestamp":
+                    break
+                offset += _BASIC[kind][1]
+            names = [f for f, _ in fields]
+            formats = [_DTYPE[k] for _, k in fields]
+            # (the list form names an empty field f<index>, as pyulog's dtype has it)
+            dtype = np.dtype({"names": names, "formats": formats}) if all(names) else \
+                np.dtype(list(zip(names, formats, strict=True)))
+            self.dtypes[name] = (dtype, offset)
+        return self.dtypes[name]
+
+    def subscribe(self, data: bytes) -> None:
+        if len(data) < 3:
+            raise _Stop
+        multi_id, msg_id = data[0], data[1] | data[2] << 8
+        name = _text(data[3:])
+        try:
+            dtype, offset = self.record(name)
+        except (KeyError, ValueError, TypeError):
+            raise _Bad from None
+        if self.topics is not None and name not in self.topics:
+            self.filtered.add(msg_id)
+            if self.lookup[msg_id] == -1:
+                self.lookup[msg_id] = -2
+            return
+        self.active[msg_id] = self.lookup[msg_id] = len(self.subs)
+        if offset + 8 > dtype.itemsize:  # no room for the timestamp pyulog reads
+            self.untimed[len(self.subs)] = dtype.itemsize
+        self.subs.append(_Sub(msg_id, multi_id, name, dtype, offset))
+
+    def end_segment(self) -> None:
+        """pyulog turns the subscriptions into data at the end of each section read
+        (several with appended data), in reverse order of their first subscription."""
+        for msg_id in reversed(list(self.active)):
+            self.final.append(self.active[msg_id])
+            self.lookup[msg_id] = -2 if msg_id in self.filtered else -1
+        self.active.clear()
+
+    # ------------------------------------------------------------------ the walk
+    def data(self, pos: int, until: int, final: bool) -> int:
+        """Walk the data section from ``pos`` to ``until`` (exclusive of a message that
+        passes it); the position where the walk stopped."""
+        n, out, buf = self.n, self.out, self.buf
+        while True:
+            if pos + 3 > n:
+                if final and pos < n:
+                    out.truncated = n - pos
+                return max(pos, n)
+            size, kind = _HEAD(buf, pos)
+            end = pos + 3 + size
+            if kind == 0x44 and size >= 2 and end <= n and end <= until:
+                if not self.untimed and (end + 3 > n or buf[end + 2] != 0x44):
+                    self.single(pos, size, buf[pos + 3] | buf[pos + 4] << 8)  # no run
+                    pos = end
+                    continue
+                if not self.lo <= pos < self.hi and self.start <= pos < n - 4:
+                    self.load(pos)
+                cand = self.cand
+                i = int(cand.searchsorted(pos))
+                if i < cand.size and cand[i] == pos:  # a run of data messages
+                    breaks, csize = self.breaks, self.csize
+                    b = int(breaks[breaks.searchsorted(i)])
+                    j = b if int(cand[b]) + 3 + int(csize[b]) <= until else i - 1 + int(
+                        np.searchsorted(cand[i : b + 1] + 3 + csize[i : b + 1], until, "right"))
+                    stop_at = self.chunk(cand[i : j + 1], csize[i : j + 1], self.cmsg[i : j + 1])
+                    if stop_at:
+                        return stop_at
+                    pos = int(cand[j]) + 3 + int(csize[j])
+                    continue
+            if end > n:
+                if final:
+                    out.truncated = n - pos
+                return n
+            if end > until:
+                return end
+            if kind == 0x53:  # sync: nothing to keep
+                pos = end
+                continue
+            data = buf[pos + 3 : end]
+            try:
+                if kind in _DATA_TYPES:
+                    self.message(kind, pos, size, data)
+                elif kind == 0 or size == 0 or size > _MAX_UNKNOWN_SIZE:
+                    end = self.resync(pos, until)
+                elif self.has_sync and size >= 8 and (k := data.find(_SYNC)) >= 0:
+                    out.corrupt = True  # sync magic inside a message of an unknown type
+                    out.skipped += k + 8
+                    end = pos + 3 + k + 8
+            except _Stop:
+                return end
+            except _Bad:
+                self.problem("file corruption detected while reading file data")
+            pos = end
+
+    def single(self, pos: int, size: int, msg_id: int) -> None:
+        """One data message between others (kept in a list, made a run by :meth:`flush`)."""
+        sub = self.active.get(msg_id)
+        if sub is None:
+            sub = -2 if msg_id in self.filtered else -1
+        self.pending.append((pos, size, msg_id, sub))
+        self.count += 1
+        self.taken += 1
+        if len(self.pending) >= _MAX_CHUNKS:
+            self.flush()
+
+    def flush(self) -> None:
+        """The single data messages met since the last run, as one run."""
+        if self.pending:
+            table = np.array(self.pending, np.int64).reshape(-1, 4)
+            self.pending = []
+            self.chunks.append((table[:, 0].copy(), table[:, 1].astype(np.uint16),
+                                table[:, 2].astype(np.uint16), table[:, 3].astype(np.int32)))
+
+    def chunk(self, pos: NDArray[np.int64], size: NDArray[Any], ids: NDArray[Any]) -> int:
+        """Consecutive data messages with their subscriptions, checked later. Returns 0, or
+        where the section ends (after a decodable record of a topic without room for a
+        timestamp: pyulog's struct.error stops reading there); the rest is not taken."""
+        self.flush()
+        sub = self.lookup[ids]
+        stop_at = 0
+        if self.untimed:
+            stop = np.zeros(pos.size, bool)
+            for k, width in self.untimed.items():
+                stop |= (sub == k) & (size == width + 2)
+            if stop.any():
+                end = int(np.argmax(stop)) + 1
+                pos, size, ids, sub = pos[:end], size[:end], ids[:end], sub[:end]
+                stop_at = int(pos[-1]) + 3 + int(size[-1])
+        self.chunks.append((pos, size, ids, sub))
+        self.count += pos.size
+        self.taken += pos.size
+        if len(self.chunks) >= _MAX_CHUNKS:  # many short runs (a hostile file): bounded
+            self.chunks = [self.joined()]
+        return stop_at
+
+    def joined(self) -> tuple[NDArray[np.int64], NDArray[Any], NDArray[Any], NDArray[Any]]:
+        """The chunks so far as one (positions, sizes, ids, subscriptions)."""
+        self.flush()
+        if not self.chunks:
+            return (np.zeros(0, np.int64), np.zeros(0, np.uint16), np.zeros(0, np.uint16),
+                    np.zeros(0, np.int32))
+        if len(self.chunks) == 1:
+            return self.chunks[0]
+        pos, size, ids, sub = (np.concatenate(a) for a in zip(*self.chunks, strict=True))
+        return pos, size, ids, sub
+
+    def resync(self, pos: int, until: int) -> int:
+        """After an implausible header at ``pos``: the next sync magic's end, or (none in the
+        rest of the file) the next plausible header one byte at a time."""
+        self.out.corrupt = True
+        nxt = pos + 1
+        if self.has_sync:
+            k = self.buf.find(_SYNC, pos + 1)
+            if k >= 0:
+                nxt = k + len(_SYNC)
+            else:
+                self.has_sync = False
+        if not self.has_sync:
+            nxt = self.garbage_end(pos + 1, _DATA_TYPES, until)
+        self.out.skipped += nxt - pos
+        return nxt
+
+    def message(self, kind: int, pos: int, size: int, data: bytes) -> None:
+        """One message of the data section other than a run of data messages."""
+        out = self.out
+        if kind == 0x44:  # D that is no candidate
+            if size < 2:
+                raise _Stop
+            if self.chunk(np.array([pos]), np.array([size], np.uint16),
+                          np.array([data[0] | data[1] << 8], np.uint16)):
+                raise _Stop
+        elif kind == 0x41:  # A
+            self.subscribe(data)
+        elif kind == 0x4C:  # L
+            if len(data) < 9:
+                raise _Stop
+            level, stamp = struct.unpack_from("<BQ", data)
+            out.logged.append(_Text(stamp, _text(data[9:]), level))
+        elif kind == 0x43:  # C
+            if len(data) < 11:
+                raise _Stop
+            level, tag, stamp = struct.unpack_from("<BHQ", data)
+            out.tagged.setdefault(tag, []).append(_Text(stamp, _text(data[11:]), level))
+        elif kind == 0x4F:  # O: its time (the last timestamp so far) is set in resolve()
+            out.dropouts.append((self.count, _unpack("H", data)))
+        elif kind == 0x49:  # I
+            _, key, value = _info(data)
+            out.info[key] = value
+        elif kind == 0x4D:  # M
+            _info(data, multiple=True)
+        elif kind == 0x50:  # P: as O
+            _, key, value = _info(data)
+            out.changed_params.append((self.count, key, value))
+        elif kind == 0x51:  # Q
+            if not data:
+                raise _Stop
+            _info(data[1:])
+        # S (sync): nothing to keep
+
+    # ------------------------------------------------------------------ all
+    def run(self) -> _Parsed:
+        self.header()
+        start = self.definitions()
+        cycle = _cycle(self.out.formats)
+        if cycle:
+            raise LogFormatError("message format " + " -> ".join(cycle) + " contains itself "
+                                 "(a damaged or hostile definition)", path=self.path)
+        self.candidates(start)
+        pos = start
+        if self.out.appended and self.offsets:
+            for offset in self.offsets:
+                pos = self.data(pos, offset, final=False)
+                self.end_segment()
+                if offset >= 1 << 63:
+                    self.out.corrupt = True
+                    break
+                pos = offset
+        self.data(pos, _NO_LIMIT, final=True)
+        self.end_segment()
+        self.decode(*self.resolve())
+        return self.out
+
+    def resolve(self) -> tuple[NDArray[np.int64], NDArray[Any]]:
+        """Every data message of the walk against the subscription it met: the positions
+        and subscriptions of the decodable ones (in file order); the last timestamp, and
+        with it the time of each dropout and parameter change; corruption found."""
+        out = self.out
+        pos, size, ids, sub = self.joined()
+        self.chunks = []
+        if len(self.subs) < (1 << 15):
+            sub = sub.astype(np.int16)
+        # per subscription (and two zeros for -1, -2): record size, timestamp offset
+        item = np.array([s.dtype.itemsize for s in self.subs] + [0, 0], np.int32)
+        offset = np.array([s.ts_offset for s in self.subs] + [0, 0], np.int32)
+        valid = item[sub] == size.astype(np.int32) - 2
+        if sub.size and sub.min() < 0:
+            valid &= sub >= 0
+        if not valid.all():
+            wrong = ~valid & (sub >= 0)
+            lost = sub == -1
+            if wrong.any() or lost.any():
+                out.corrupt = True
+                out.skipped += int((size[wrong | lost].astype(np.int64) + 3).sum())
+            for m in sorted(set(ids[lost].tolist())):
+                self.problem(f"no subscription found for message id {m}")
+            pos, sub = pos[valid], sub[valid]
+            counts = np.cumsum(valid)  # data messages before -> decodable ones before
+            events = [int(counts[c - 1]) if c else 0 for c, *_ in out.dropouts] + \
+                     [int(counts[c - 1]) if c else 0 for c, *_ in out.changed_params]
+        else:
+            events = [c for c, *_ in out.dropouts] + [c for c, *_ in out.changed_params]
+        # pyulog's last timestamp: 8 bytes at the timestamp's offset, the maximum so far
+        if (offset + 8 <= item)[:-2].all():
+            at = offset[sub].astype(np.int64)
+            at += pos
+            at += 5
+            stamps = self.u64[at]
+            del at
+        else:
+            stamped = (offset + 8 <= item)[sub]
+            stamps = np.zeros(pos.size, np.uint64)
+            stamps[stamped] = self.u64[pos[stamped] + 5 + offset[sub[stamped]]]
+        bounds = np.array(sorted({0, *events, pos.size}), np.int64)
+        upto = dict.fromkeys(bounds.tolist(), out.start_us)
+        if pos.size:
+            maxima = np.maximum.accumulate(np.maximum.reduceat(stamps, bounds[:-1]))
+            ends = bounds[1:].tolist()
+            upto.update(zip(ends, (max(out.start_us, m) for m in maxima.tolist()), strict=True))
+        out.last_us = upto[pos.size]
+        k = len(out.dropouts)
+        dropouts = zip(events[:k], out.dropouts, strict=True)
+        changed = zip(events[k:], out.changed_params, strict=True)
+        out.dropouts = [(upto[c], d) for c, (_, d) in dropouts]
+        out.changed_params = [(upto[c], key, v) for c, (_, key, v) in changed]
+        return pos, sub
+
+    def decode(self, pos: NDArray[np.int64], sub: NDArray[np.int64]) -> None:
+        """Gather each kept subscription's records: one fancy index per topic into a view
+        of the file as raw records of its size at every byte, then seen as its dtype."""
+        order = np.argsort(sub, kind="stable")
+        counts = np.bincount(sub, minlength=len(self.subs))
+        first = np.concatenate([[0], np.cumsum(counts)])
+        items = []
+        for k in self.final:
+            s = self.subs[k]
+            width = s.dtype.itemsize
+            if not counts[k] or not width:
+                continue
+            raw = np.ndarray((self.n - width + 1,), f"V{width}", buffer=self.buf, strides=(1,))
+            at = pos[order[first[k] : first[k + 1]]]
+            at += 5
+            records = np.frombuffer(raw[at], s.dtype)
+            items.append((s.name, s.multi_id, {f: records[f] for f in s.dtype.names or ()}))
+        items.sort(key=lambda d: (d[0], d[1]))
+        self.out.data = items
+
+def _parse(path: str | os.PathLike[str], topics: set[str] | None) -> _Parsed:
+    """Map the file and read it (see the module's *Framing*); any failure is one
+    :class:`~mavsid.errors.LogFormatError` naming the file."""
     try:
-        cycle = _format_cycle(path)
-        size_mb = os.path.getsize(path) / 1e6
-    except OSError as exc:
-        raise LogFormatError(f"cannot read: {exc.strerror or exc}", path=path) from None
-    if cycle:
-        raise LogFormatError("message format " + " -> ".join(cycle) + " contains itself "
-                             "(a damaged or hostile definition)", path=path)
-    limit = _PARSE_S + _PARSE_S_PER_MB * size_mb
-    printed = io.StringIO()
+        with open(path, "rb") as f:
+            if hasattr(mmap, "MAP_POPULATE"):  # read ahead at once (faults page by page are slow)
+                buf = mmap.mmap(f.fileno(), 0, flags=mmap.MAP_SHARED | mmap.MAP_POPULATE,
+                                prot=mmap.PROT_READ)
+            else:
+                buf = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
+    except (OSError, ValueError) as exc:
+        raise LogFormatError(f"cannot read: {getattr(exc, 'strerror', None) or exc}",
+                             path=path) from None
     try:
-        with contextlib.redirect_stdout(printed), _time_limit(limit):
-            ulog = ULog(os.fspath(path), topics, disable_str_exceptions=True)
-    except OSError as exc:
-        raise LogFormatError(f"cannot read: {exc.strerror or exc}", path=path) from None
-    except TimeoutError:
-        raise LogFormatError(f"pyulog did not finish within {limit:.0f} s (a damaged or "
-                             "hostile file)", path=path) from None
-    except (ULogException, ValueError, IndexError, KeyError, struct.error, EOFError) as exc:
-        raise LogFormatError(f"not a readable ULog ({exc})", path=path) from None
+        return _Reader(buf, path, topics).run()
     except RecursionError:
         raise LogFormatError("not a readable ULog (definitions nested without end)",
                              path=path) from None
     except MemoryError:
-        raise LogFormatError("not a readable ULog (pyulog ran out of memory)",
-                             path=path) from None
-    except Exception as exc:  # any failure of the third-party parser
-        raise LogFormatError(f"not a readable ULog ({type(exc).__name__}: {exc})",
-                             path=path) from None
-    lines = [line.strip() for line in printed.getvalue().splitlines() if line.strip()]
-    return ulog, lines
+        raise LogFormatError("not a readable ULog (out of memory)", path=path) from None
+    finally:
+        try:
+            buf.close()
+        except BufferError:  # a view still refers to it: closed when collected
+            pass
 
 
 def _time_s(data: dict[str, NDArray[Any]]) -> NDArray[np.float64]:
@@ -207,16 +927,16 @@ def _time_s(data: dict[str, NDArray[Any]]) -> NDArray[np.float64]:
     return np.full(n, np.nan)
 
 
-def _texts(ulog: Any) -> list[TextMessage]:
+def _texts(parsed: _Parsed) -> list[TextMessage]:
     """Logged and tagged logged messages in time order; severity from the ASCII level."""
-    entries = list(ulog.logged_messages)
-    for tagged in ulog.logged_messages_tagged.values():
+    entries = list(parsed.logged)
+    for tagged in parsed.tagged.values():
         entries.extend(tagged)
     texts = []
     for m in entries:
-        level = int(m.log_level)
+        level = m.level
         severity = level - ord("0") if ord("0") <= level <= ord("7") else level
-        texts.append(TextMessage(m.timestamp / 1e6, m.message, severity))
+        texts.append(TextMessage(m.time_us / 1e6, m.message, severity))
     return sorted(texts, key=lambda t: t.time_s)
 
 
@@ -234,7 +954,7 @@ def _modes(table: MessageTable | None) -> list[ModeChange]:
 
 def _number(value: Any) -> float | None:
     """A parameter's value as float; None for what is not a number (a damaged type string
-    leaves pyulog with raw bytes)."""
+    leaves raw bytes)."""
     if isinstance(value, (bytes, bytearray, str)) or isinstance(value, bool):
         return None
     try:
@@ -243,20 +963,23 @@ def _number(value: Any) -> float | None:
         return None
 
 
-def _params(ulog: Any) -> tuple[dict[str, float], int, int]:
+def _params(parsed: _Parsed) -> tuple[dict[str, float], int, int]:
     """Initial parameters with later changes applied; the number of changes; and how many
     values were not numbers (skipped)."""
     params: dict[str, float] = {}
     bad = 0
-    entries = [(k, v) for k, v in ulog.initial_parameters.items()]
-    entries += [(name, value) for _, name, value in ulog.changed_parameters]
+    entries = list(parsed.initial_params.items())
+    entries += [(name, value) for _, name, value in parsed.changed_params]
     for name, value in entries:
+        if type(value) is float or type(value) is int:  # the common case, directly
+            params[name] = float(value)
+            continue
         number = _number(value)
         if number is None:
             bad += 1
         else:
             params[str(name)] = number
-    return params, len(ulog.changed_parameters), bad
+    return params, len(parsed.changed_params), bad
 
 
 def _firmware(info: dict[str, Any]) -> str | None:
@@ -284,12 +1007,12 @@ def _base(name: str) -> str:
     return match.group(1) if match else name
 
 
-def _wanted_topics(messages: Sequence[str] | None) -> tuple[list[str] | None, set[str] | None]:
-    """pyulog's topic filter (base names, plus vehicle_status for the modes) and the wanted
+def _wanted_topics(messages: Sequence[str] | None) -> tuple[set[str] | None, set[str] | None]:
+    """The topics to decode (base names, plus vehicle_status for the modes) and the wanted
     table names (``topic`` wants every instance, ``topic[N]`` only that one)."""
     if messages is None:
         return None, None
-    return sorted({_base(n) for n in messages} | {_MODE_TOPIC}), set(messages)
+    return {_base(n) for n in messages} | {_MODE_TOPIC}, set(messages)
 
 
 def read(
@@ -306,7 +1029,7 @@ def read(
         The ``.ulg`` file.
     messages : sequence of str, optional
         Topics to load (``topic`` for all its instances or ``topic[N]``); default all.
-        pyulog then skips the others' data, which is faster.
+        The others' records are framed but not decoded, which is faster.
     start, stop : float, optional
         Keep only samples (and texts, mode changes) with ``start <= time_s <= stop``
         (seconds since boot).
@@ -314,13 +1037,15 @@ def read(
     Raises
     ------
     LogFormatError
-        Empty or unreadable file, one pyulog cannot parse, or one without any topic sample
-        or parameter (when all topics were asked for).
+        Empty or unreadable file, a bad header or incompatible flags, formats that
+        contain themselves, or one without any topic sample or parameter (when all
+        topics were asked for).
 
     Warns
     -----
     DataQualityWarning
-        pyulog found corruption (skipped bytes, data of unknown message ids, wrong sizes).
+        Corruption found (bytes skipped to resynchronise, data of unknown message ids,
+        wrong sizes, unreadable definitions), or parameter values of an unreadable type.
     """
     try:
         size = os.path.getsize(path)
@@ -329,20 +1054,21 @@ def read(
     if size == 0:
         raise LogFormatError("empty file", path=path)
     topics, wanted = _wanted_topics(messages)
-    ulog, printed = _parse(path, topics)
-    if messages is None and not ulog.data_list and not ulog.initial_parameters:
+    parsed = _parse(path, topics)
+    if messages is None and not parsed.data and not parsed.initial_params:
         raise LogFormatError("no ULog data (no topic samples, no parameters)", path=path)
 
     tables: dict[str, MessageTable] = {}
-    for d in ulog.data_list:
-        name = table_name(d.name, d.multi_id)
-        units = {k: "us" for k in ("timestamp", "timestamp_sample") if k in d.data}
-        tables[name] = MessageTable(name, d.data, _time_s(d.data), units)
-    params, n_changes, bad_params = _params(ulog)
-    texts = _texts(ulog)
+    for topic, multi_id, data in parsed.data:
+        name = table_name(topic, multi_id)
+        units: dict[str, str] = {k: "us" for k in ("timestamp", "timestamp_sample")
+                                 if k in data}
+        tables[name] = MessageTable(name, data, _time_s(data), units)
+    params, n_changes, bad_params = _params(parsed)
+    texts = _texts(parsed)
     modes = _modes(tables.get(_MODE_TOPIC))
-    # the log's span as pyulog has it: the header's start time to the latest data timestamp
-    span = (ulog.start_timestamp / 1e6, max(ulog.last_timestamp, ulog.start_timestamp) / 1e6)
+    # the log's span: the header's start time to the latest data timestamp
+    span = (parsed.start_us / 1e6, max(parsed.last_us, parsed.start_us) / 1e6)
     if start is not None or stop is not None:
         lo = -np.inf if start is None else start
         hi = np.inf if stop is None else stop
@@ -353,42 +1079,45 @@ def read(
     if wanted is not None:
         tables = {n: t for n, t in tables.items() if n in wanted or _base(n) in wanted}
 
-    notes = _notes(ulog, tables, n_changes)
+    notes = _notes(parsed, tables, n_changes)
     if bad_params:
         notes.append(f"{bad_params} parameter value(s) of an unreadable type skipped")
         warnings.warn(f"{path}: {notes[-1]}", DataQualityWarning, stacklevel=2)
-    problems = list(dict.fromkeys(printed))
-    if ulog.file_corruption or problems:
+    problems = parsed.problems
+    if parsed.corrupt or problems:
         detail = "; ".join(problems[:3])
         if len(problems) > 3:
             detail += f" (+{len(problems) - 3} more)"
-        notes.append("pyulog found corruption" + (f": {detail}" if detail else ""))
+        notes.append("file corruption found" + (f": {detail}" if detail else ""))
         warnings.warn(f"{path}: {notes[-1]}", DataQualityWarning, stacklevel=2)
-    info = ulog.msg_info_dict
+    if parsed.truncated:
+        notes.append(f"last message truncated: {parsed.truncated} bytes ignored")
     return RawLog(
-        source=SourceInfo(str(path), "ulog", size, 0, tuple(notes)),
+        source=SourceInfo(str(path), "ulog", size, parsed.skipped + parsed.truncated,
+                          tuple(notes)),
         messages=tables,
         params=params,
         texts=tuple(texts),
         modes=tuple(modes),
         autopilot="px4",
         vehicle=vehicle_class(int(params["MAV_TYPE"])) if "MAV_TYPE" in params else None,
-        firmware=_firmware(info),
+        firmware=_firmware(parsed.info),
         span_s=span,
     )
 
 
-def _notes(ulog: Any, tables: dict[str, MessageTable], n_changes: int) -> list[str]:
+def _notes(parsed: _Parsed, tables: dict[str, MessageTable], n_changes: int) -> list[str]:
     """Data-quality notes: dropouts, appended data, parameter changes, time running back."""
     notes = []
-    if ulog.dropouts:
-        total = sum(int(d.duration) for d in ulog.dropouts)
-        notes.append(f"{len(ulog.dropouts)} dropouts, {total} ms in all")
-    if ulog.has_data_appended:
+    if parsed.dropouts:
+        total = sum(duration for _, duration in parsed.dropouts)
+        notes.append(f"{len(parsed.dropouts)} dropouts, {total} ms in all")
+    if parsed.appended:
         notes.append("has appended data (crash dump)")
     if n_changes:
         notes.append(f"{n_changes} parameter changes during the log")
-    backwards = [n for n, t in tables.items() if len(t) > 1 and np.any(np.diff(t.time_s) < 0)]
+    backwards = [n for n, t in tables.items()
+                 if len(t) > 1 and (t.time_s[1:] < t.time_s[:-1]).any()]
     if backwards:
         shown = ", ".join(backwards[:5]) + (" ..." if len(backwards) > 5 else "")
         notes.append(f"time runs backwards in {len(backwards)} topics ({shown})")

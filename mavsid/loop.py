@@ -90,6 +90,7 @@ __all__ = [
     "suggest_gains",
     "sysid_spans",
     "tune",
+    "twin_messages",
     "twin_signals",
 ]
 
@@ -808,6 +809,15 @@ def _on_grid(t: np.ndarray, v: np.ndarray, grid: np.ndarray, hold: bool) -> np.n
     return out
 
 
+def twin_messages() -> set[str]:
+    """The messages :func:`twin_signals` reads (rate targets, SYSTEMID injection), of every
+    format: a caller reading the log anyway reads them in the same pass."""
+    from mavsid.channels import INJECTION_CHANNEL, TARGET_CHANNELS
+
+    return {ch.message for chans in TARGET_CHANNELS.values() for ch in chans} | {
+        INJECTION_CHANNEL.message}
+
+
 def twin_signals(flight: FlightData, raw: Any = None) -> TwinSignals:
     """Rate targets and SYSTEMID mixer injections of ``flight``, from its log (re-read for
     the few messages needed unless ``raw`` is given).
@@ -823,8 +833,7 @@ def twin_signals(flight: FlightData, raw: Any = None) -> TwinSignals:
         path = flight.source.path
         if not path or not os.path.exists(path):
             return TwinSignals({}, {})
-        wanted = {ch.message for chans in TARGET_CHANNELS.values() for ch in chans}
-        wanted.add(INJECTION_CHANNEL.message)
+        wanted = twin_messages()
         import warnings
 
         with warnings.catch_warnings():

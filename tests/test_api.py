@@ -446,3 +446,25 @@ def test_every_parameter_is_documented(func):
             entries.update(n.strip().lstrip("*") for n in m.group(2).split(","))
     for name in inspect.signature(f).parameters:
         assert name in entries, f"{func}: parameter {name} not documented"
+
+
+def test_predictions_from_one_run_equal_stepping_every_start():
+    """A stable one-state affine model predicts every horizon from one run of its recursion;
+    the same numbers as stepping each start forward (what other models do)."""
+    x, u = _plant(600, 9, a=((0.97,),), b=((0.3,),), noise=0.02)
+    seg = Segment(np.arange(len(x)) * 0.01, x, u, ("p",), ("u_roll",), 0.01, "roll", "sysid")
+    m = mavsid.Model(("p",), ("u_roll",), ("p", "u_roll", "1"),
+                     np.array([[0.97], [0.3], [0.01]]), 0.01, delay=2, delay_frac=0.5,
+                     filters=(InputFilter(8.0, 1, "lag"),))
+    _, var = m._measured(seg)
+    phi, f = m._affine(var)
+    for h, got in zip((1, 7, 50, 599, 600), m.predict_horizons(seg, [1, 7, 50, 599, 600]),
+                      strict=True):
+        want = np.full_like(x, np.nan)
+        if h < len(x):
+            step = x[: len(x) - h].copy()
+            for j in range(h):
+                step = step @ phi.T + f[j : j + len(x) - h]
+            want[h:] = step
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
+        np.testing.assert_array_equal(np.isnan(got), np.isnan(m.predict(seg, h)))

@@ -54,7 +54,7 @@ from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
-from scipy import linalg
+from scipy import linalg, signal
 
 from mavsid.errors import ConfigError, MavsidError
 
@@ -186,6 +186,35 @@ class RatePID:
             mod = max(_SLEW_MIN_MOD, min(1.0, g.smax / self.slew)) if self.slew > 0 else 1.0
             return mod * pd + self.integ + g.ff * self.target
         return g.p * self.error + self.integ + g.d * self.deriv + g.ff * self.target
+
+    def run(self, target: np.ndarray, measured: np.ndarray) -> np.ndarray | None:
+        """The outputs of :meth:`update` over whole sequences from a fresh controller (after
+        :meth:`preset`), without feedback: its filters are first-order recursions
+        (``scipy.signal.lfilter``) and the integrator a running sum. None when the slew
+        limiter is on or the integrator would reach ``±IMAX`` (callers then step)."""
+        g = self.g
+        tg, ym = np.asarray(target, dtype=float), np.asarray(measured, dtype=float)
+        n = tg.size
+        if not self.reset or g.smax > 0 or n == 0 or ym.size != n:
+            return None
+
+        def low(x: np.ndarray, a: float, x0: float) -> np.ndarray:
+            """``y[0] = x0``, then ``y[k] = y[k-1] + a (x[k] - y[k-1])``."""
+            y = np.empty(n)
+            y[0] = x0
+            if n > 1:
+                y[1:] = signal.lfilter([a], [1.0, a - 1.0], x[1:], zi=[(1.0 - a) * x0])[0]
+            return y
+
+        tf = low(tg, self.a_t, float(tg[0]))
+        err = low(tf - ym, self.a_e, float(tg[0] - ym[0]))
+        rate = np.zeros(n)
+        rate[1:] = np.diff(err) / self.dt
+        deriv = low(rate, self.a_d, 0.0)
+        integ = np.cumsum(np.concatenate([[self.integ], g.i * err * self.dt]))[1:]
+        if np.any(np.abs(integ) > g.imax):
+            return None
+        return np.asarray(g.p * err + integ + g.d * deriv + g.ff * tf)
 
     def preset(self, target: float, measured: float, output: float) -> None:
         """Before the first :meth:`update`: set the integrator so that the first output of
@@ -754,7 +783,9 @@ def replay_controller(
     ym = np.repeat(np.asarray(rate, dtype=float), substeps)
     pid = ctrl.new_pid(dt / substeps)
     pid.preset(float(tg[0]), float(rate[0]), float(output[0] - ij[0]))
-    out = np.array([pid.update(float(a), float(b)) for a, b in zip(tg, ym, strict=True)])
+    whole = pid.run(tg, ym) if isinstance(pid, RatePID) else None  # (no feedback here)
+    out = whole if whole is not None else np.array(
+        [pid.update(float(a), float(b)) for a, b in zip(tg, ym, strict=True)])
     out = out[::substeps]
     # the first output has no derivative term and an unfiltered error: the integrator takes
     # the offset that leaves, measured once the controller's filters have settled

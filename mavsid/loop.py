@@ -1842,7 +1842,9 @@ def tune(result: Any, target_pm_deg: float = 50.0, samples: int = 40,
     from mavsid.frequency import fit_tf
 
     out: dict[str, Any] = {}
-    signals = [twin_signals(fd) for fd in result.flights]  # once for every axis
+    known = getattr(result, "twins", None)  # (those the fit read, else once for every axis)
+    signals = (list(known) if known is not None and len(known) == len(result.flights)
+               else [twin_signals(fd) for fd in result.flights])
     for axis, fit in result.axes.items():
         entry: dict[str, Any] = {}
         fd = result.flights[0]

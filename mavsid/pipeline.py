@@ -410,6 +410,9 @@ class FitResult:
     config: PipelineConfig = field(default_factory=PipelineConfig)
     #: A verdict for every axis asked for, fitted or not (fitted ones: ``axes[a].verdict``).
     verdicts: Mapping[str, Verdict] = field(default_factory=dict)
+    #: The twin's signals of each flight (in ``flights`` order) when the fit had them, for
+    #: later analyses (:func:`mavsid.loop.tune`) not to read the logs again.
+    twins: tuple[TwinSignals, ...] | None = field(default=None, repr=False, compare=False)
 
     def to_dict(self) -> dict[str, Any]:
         """``{"axes": {axis: {...}}, "verdicts": {axis: {...}}, "logs": [...], ...}``."""
@@ -710,7 +713,12 @@ def fit(
             fits[axis] = dataclasses.replace(fitted, verdict=verdict)
     if not fits:
         raise _nothing(logs, verdicts, "nothing identifiable")
-    return FitResult(fits, flights, tuple(os.fspath(p) for p in logs), cfg, verdicts)
+    from mavsid.loop import TwinSignals
+
+    twins = [signals.get(id(fd)) for fd in flights]
+    return FitResult(fits, flights, tuple(os.fspath(p) for p in logs), cfg, verdicts,
+                     tuple(t for t in twins if isinstance(t, TwinSignals))
+                     if all(isinstance(t, TwinSignals) for t in twins) else None)
 
 
 def _judge(fitted: AxisFit, flights: Sequence[FlightData]) -> Verdict:

@@ -579,8 +579,20 @@ def _continuous_blocks(model: Model) -> tuple[np.ndarray, np.ndarray, list[int],
     if np.any(np.abs(ev.imag) > 1e-12) or np.any(ev.real <= 0):
         raise ConfigError("the model's discrete poles have no continuous-time equivalent "
                           "(negative or complex); the twin runs at the model's own step")
+    if n == 1:  # the logarithm of [[a, b], [0, I]] in closed form: [[ln a, b ln a/(a-1)], 0]
+        pole = float(a[0, 0])
+        gain = _log_ratio(pole)
+        return (np.array([[math.log(pole)]]) / model.dt, b * gain / model.dt, states, exo)
     log = np.real(linalg.logm(big)) / model.dt
     return log[:n, :n], log[:n, n:], states, exo
+
+
+def _log_ratio(a: float) -> float:
+    """``ln(a) / (a - 1)`` (1 at ``a = 1``), accurate near 1."""
+    x = a - 1.0
+    if abs(x) < 1e-5:
+        return 1.0 - x / 2.0 + x * x / 3.0
+    return math.log(a) / x
 
 
 def _at_step(model: Model, dt: float) -> Model:
@@ -591,7 +603,13 @@ def _at_step(model: Model, dt: float) -> Model:
     n, m = a.shape[0], b.shape[1]
     big = np.zeros((n + m, n + m))
     big[:n, :n], big[:n, n:] = a, b
-    e = linalg.expm(big * dt)
+    if n == 1:  # the exponential of [[A, B], [0, 0]] dt in closed form
+        x = float(a[0, 0]) * dt
+        e = np.eye(n + m)
+        e[0, 0] = math.exp(x)
+        e[0, 1:] = b[0] * dt * (math.expm1(x) / x if x != 0.0 else 1.0)
+    else:
+        e = linalg.expm(big * dt)
     coef = np.zeros_like(model.coef)
     for j in states:
         coef[j] = e[:n, :n][:, model.state_names.index(model.features[j])]

@@ -54,7 +54,7 @@ import itertools
 import os
 import re
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -94,7 +94,7 @@ from mavsid.errors import (
 )
 from mavsid.readers import read_log, sniff_format
 
-__all__ = ["FLAG_MESSAGES", "align", "channel_units", "flight_table", "load_flight",
+__all__ = ["FLAG_MESSAGES", "align", "channel_units", "flight_table", "load_flight", "read_flight",
            "sysid_runs"]
 
 #: a channel pausing longer than this many of its own median sample intervals is a gap
@@ -1124,14 +1124,29 @@ def load_flight(
     ...
     mavsid.errors.LogFormatError: /nonexistent.bin: cannot open: ...
     """
+    return read_flight(path, preset, rate_hz, presets=presets, mixers=mixers)[0]
+
+
+def read_flight(
+    path: str | os.PathLike[str],
+    preset: Preset | str | None = None,
+    rate_hz: float | None = None,
+    *,
+    presets: Mapping[str, Preset] | None = None,
+    mixers: Mapping[str, Mixer] | None = None,
+    also: Iterable[str] = (),
+) -> tuple[FlightData, RawLog]:
+    """:func:`load_flight`, and the log as read: the messages alignment needs and ``also``
+    (read in the same pass, for a caller that needs a few more, e.g. the twin's targets)."""
     fmt = sniff_format(path)
     chosen = [preset] if isinstance(preset, Preset) else []
     if isinstance(preset, str):
         chosen = [get_preset(preset, presets)]
     extra = [*chosen, *(presets or {}).values()]
     wanted = preset_messages(fmt, extra) if not chosen else chosen[0].messages
-    raw = read_log(path, messages=[*wanted, *FLAG_MESSAGES.get(fmt, ())])
-    return align(raw, preset, rate_hz, presets=presets, mixers=mixers)
+    more = [m for m in also if m not in wanted]
+    raw = read_log(path, messages=[*wanted, *FLAG_MESSAGES.get(fmt, ()), *more])
+    return align(raw, preset, rate_hz, presets=presets, mixers=mixers), raw
 
 
 def flight_table(flight: FlightData, start: float | None = None, stop: float | None = None

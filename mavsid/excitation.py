@@ -301,20 +301,33 @@ def _metrics(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions,
              band: tuple[float, float] | None = None) -> dict[str, float]:
     """Excitation metrics of samples ``[i0, i1)`` for one axis (``band``: a SYSTEMID run's)."""
     with np.errstate(divide="ignore", invalid="ignore"):  # constant signals give NaN, handled
-        out = _metrics_raw(ax, fd, i0, i1, opts)
+        spectra: dict[str, np.ndarray] = {}  # the output's, measured once for both coherences
+        out = _metrics_raw(ax, fd, i0, i1, opts, spectra)
         if ax.y_hp is not None and i1 - i0 >= 8:
             out["response_rms"] = float(np.sqrt(np.mean(ax.y_hp[i0:i1] ** 2)))
             out["response_floor"] = ax.y_floor
             out["response_ratio"] = out["response_rms"] / ax.y_floor
         if ax.injection is not None and ax.y is not None and i1 - i0 >= 8:
-            out.update(_injection_metrics(ax, fd, i0, i1, opts, band))
+            out.update(_injection_metrics(ax, fd, i0, i1, opts, band, spectra))
         return out
 
 
+def _coherence(x: np.ndarray, pxx: np.ndarray, y: np.ndarray, fs: float, nper: int,
+               spectra: dict[str, np.ndarray]) -> np.ndarray:
+    """``scipy.signal.coherence(x, y)`` (linear detrend) from ``x``'s spectrum ``pxx`` already
+    measured and ``y``'s kept in ``spectra``: the same numbers without measuring them again."""
+    if "pyy" not in spectra:
+        spectra["pyy"] = signal.welch(y, fs=fs, nperseg=nper, detrend="linear")[1]
+    _, pxy = signal.csd(x, y, fs=fs, nperseg=nper, detrend="linear")
+    return np.asarray(np.abs(pxy) ** 2 / pxx / spectra["pyy"])
+
+
 def _injection_metrics(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions,
-                       band: tuple[float, float] | None) -> dict[str, float]:
+                       band: tuple[float, float] | None,
+                       spectra: dict[str, np.ndarray] | None = None) -> dict[str, float]:
     """Level, band and output coherence of SYSTEMID's logged injection in ``[i0, i1)``."""
     assert ax.injection is not None and ax.y is not None
+    spectra = {} if spectra is None else spectra
     v, y = ax.injection[i0:i1], ax.y[i0:i1]
     rms = float(np.sqrt(np.mean(v**2)))
     if not rms > 0:
@@ -325,7 +338,7 @@ def _injection_metrics(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOp
     out = {"injection_rms": rms, "injection_lo_hz": f_lo, "injection_hi_hz": f_hi}
     nper = int(min(v.size, max(16, round(2.0 * fs))))
     f, pvv = signal.welch(v, fs=fs, nperseg=nper, detrend="linear")
-    _, coh = signal.coherence(v, y, fs=fs, nperseg=nper, detrend="linear")
+    coh = _coherence(v, pvv, y, fs, nper, spectra)
     sel = (f >= f_lo) & (f <= f_hi)
     if sel.sum() < 2 or not pvv[sel].sum() > 0:
         out["injection_coherence"] = 0.0
@@ -338,8 +351,8 @@ def _injection_metrics(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOp
     return out
 
 
-def _metrics_raw(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions
-                 ) -> dict[str, float]:
+def _metrics_raw(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions,
+                 spectra: dict[str, np.ndarray] | None = None) -> dict[str, float]:
     fs = 1.0 / fd.dt
     out: dict[str, float] = {"noise_floor": ax.floor}
     if ax.u is None or ax.u_hp is None or ax.y is None or i1 - i0 < 8:
@@ -359,7 +372,7 @@ def _metrics_raw(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions
             w[band] = 1.0 / f[band]  # log-frequency weighting
             white = ax.floor**2 / (fs / 2)
             out["coverage"] = float(np.sum(w * (puu > 10 * white)) / np.sum(w))
-            _, coh = signal.coherence(u, y, fs=fs, nperseg=nper, detrend="linear")
+            coh = _coherence(u, puu, y, fs, nper, {} if spectra is None else spectra)
             wp = puu * band
             out["coherence"] = float(np.sum(wp * np.nan_to_num(coh)) / np.sum(wp)) if wp.sum(
             ) > 0 else 0.0

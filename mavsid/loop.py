@@ -54,7 +54,7 @@ from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
-from scipy import linalg
+from scipy import linalg, signal
 
 from mavsid.errors import ConfigError, MavsidError
 
@@ -90,6 +90,7 @@ __all__ = [
     "suggest_gains",
     "sysid_spans",
     "tune",
+    "twin_messages",
     "twin_signals",
 ]
 
@@ -185,6 +186,35 @@ class RatePID:
             mod = max(_SLEW_MIN_MOD, min(1.0, g.smax / self.slew)) if self.slew > 0 else 1.0
             return mod * pd + self.integ + g.ff * self.target
         return g.p * self.error + self.integ + g.d * self.deriv + g.ff * self.target
+
+    def run(self, target: np.ndarray, measured: np.ndarray) -> np.ndarray | None:
+        """The outputs of :meth:`update` over whole sequences from a fresh controller (after
+        :meth:`preset`), without feedback: its filters are first-order recursions
+        (``scipy.signal.lfilter``) and the integrator a running sum. None when the slew
+        limiter is on or the integrator would reach ``±IMAX`` (callers then step)."""
+        g = self.g
+        tg, ym = np.asarray(target, dtype=float), np.asarray(measured, dtype=float)
+        n = tg.size
+        if not self.reset or g.smax > 0 or n == 0 or ym.size != n:
+            return None
+
+        def low(x: np.ndarray, a: float, x0: float) -> np.ndarray:
+            """``y[0] = x0``, then ``y[k] = y[k-1] + a (x[k] - y[k-1])``."""
+            y = np.empty(n)
+            y[0] = x0
+            if n > 1:
+                y[1:] = signal.lfilter([a], [1.0, a - 1.0], x[1:], zi=[(1.0 - a) * x0])[0]
+            return y
+
+        tf = low(tg, self.a_t, float(tg[0]))
+        err = low(tf - ym, self.a_e, float(tg[0] - ym[0]))
+        rate = np.zeros(n)
+        rate[1:] = np.diff(err) / self.dt
+        deriv = low(rate, self.a_d, 0.0)
+        integ = np.cumsum(np.concatenate([[self.integ], g.i * err * self.dt]))[1:]
+        if np.any(np.abs(integ) > g.imax):
+            return None
+        return np.asarray(g.p * err + integ + g.d * deriv + g.ff * tf)
 
     def preset(self, target: float, measured: float, output: float) -> None:
         """Before the first :meth:`update`: set the integrator so that the first output of
@@ -549,8 +579,20 @@ def _continuous_blocks(model: Model) -> tuple[np.ndarray, np.ndarray, list[int],
     if np.any(np.abs(ev.imag) > 1e-12) or np.any(ev.real <= 0):
         raise ConfigError("the model's discrete poles have no continuous-time equivalent "
                           "(negative or complex); the twin runs at the model's own step")
+    if n == 1:  # the logarithm of [[a, b], [0, I]] in closed form: [[ln a, b ln a/(a-1)], 0]
+        pole = float(a[0, 0])
+        gain = _log_ratio(pole)
+        return (np.array([[math.log(pole)]]) / model.dt, b * gain / model.dt, states, exo)
     log = np.real(linalg.logm(big)) / model.dt
     return log[:n, :n], log[:n, n:], states, exo
+
+
+def _log_ratio(a: float) -> float:
+    """``ln(a) / (a - 1)`` (1 at ``a = 1``), accurate near 1."""
+    x = a - 1.0
+    if abs(x) < 1e-5:
+        return 1.0 - x / 2.0 + x * x / 3.0
+    return math.log(a) / x
 
 
 def _at_step(model: Model, dt: float) -> Model:
@@ -561,7 +603,13 @@ def _at_step(model: Model, dt: float) -> Model:
     n, m = a.shape[0], b.shape[1]
     big = np.zeros((n + m, n + m))
     big[:n, :n], big[:n, n:] = a, b
-    e = linalg.expm(big * dt)
+    if n == 1:  # the exponential of [[A, B], [0, 0]] dt in closed form
+        x = float(a[0, 0]) * dt
+        e = np.eye(n + m)
+        e[0, 0] = math.exp(x)
+        e[0, 1:] = b[0] * dt * (math.expm1(x) / x if x != 0.0 else 1.0)
+    else:
+        e = linalg.expm(big * dt)
     coef = np.zeros_like(model.coef)
     for j in states:
         coef[j] = e[:n, :n][:, model.state_names.index(model.features[j])]
@@ -771,7 +819,9 @@ def replay_controller(
         ym = (1.0 - tau) * ym + tau * np.concatenate([ym[:1], ym[:-1]])
     pid = ctrl.new_pid(dt / substeps)
     pid.preset(float(tg[0]), float(rate[0]), float(output[0] - ij[0]))
-    out = np.array([pid.update(float(a), float(b)) for a, b in zip(tg, ym, strict=True)])
+    whole = pid.run(tg, ym) if isinstance(pid, RatePID) else None  # (no feedback here)
+    out = whole if whole is not None else np.array(
+        [pid.update(float(a), float(b)) for a, b in zip(tg, ym, strict=True)])
     out = out[::substeps]
     # the first output has no derivative term and an unfiltered error: the integrator takes
     # the offset that leaves, measured once the controller's filters have settled
@@ -826,6 +876,15 @@ def _on_grid(t: np.ndarray, v: np.ndarray, grid: np.ndarray, hold: bool) -> np.n
     return out
 
 
+def twin_messages() -> set[str]:
+    """The messages :func:`twin_signals` reads (rate targets, SYSTEMID injection), of every
+    format: a caller reading the log anyway reads them in the same pass."""
+    from mavsid.channels import INJECTION_CHANNEL, TARGET_CHANNELS
+
+    return {ch.message for chans in TARGET_CHANNELS.values() for ch in chans} | {
+        INJECTION_CHANNEL.message}
+
+
 def twin_signals(flight: FlightData, raw: Any = None) -> TwinSignals:
     """Rate targets and SYSTEMID mixer injections of ``flight``, from its log (re-read for
     the few messages needed unless ``raw`` is given).
@@ -841,8 +900,7 @@ def twin_signals(flight: FlightData, raw: Any = None) -> TwinSignals:
         path = flight.source.path
         if not path or not os.path.exists(path):
             return TwinSignals({}, {})
-        wanted = {ch.message for chans in TARGET_CHANNELS.values() for ch in chans}
-        wanted.add(INJECTION_CHANNEL.message)
+        wanted = twin_messages()
         import warnings
 
         with warnings.catch_warnings():
@@ -1852,7 +1910,9 @@ def tune(result: Any, target_pm_deg: float = 50.0, samples: int = 40,
     from mavsid.frequency import fit_tf
 
     out: dict[str, Any] = {}
-    signals = [twin_signals(fd) for fd in result.flights]  # once for every axis
+    known = getattr(result, "twins", None)  # (those the fit read, else once for every axis)
+    signals = (list(known) if known is not None and len(known) == len(result.flights)
+               else [twin_signals(fd) for fd in result.flights])
     for axis, fit in result.axes.items():
         entry: dict[str, Any] = {}
         fd = result.flights[0]

@@ -410,6 +410,9 @@ class FitResult:
     config: PipelineConfig = field(default_factory=PipelineConfig)
     #: A verdict for every axis asked for, fitted or not (fitted ones: ``axes[a].verdict``).
     verdicts: Mapping[str, Verdict] = field(default_factory=dict)
+    #: The twin's signals of each flight (in ``flights`` order) when the fit had them, for
+    #: later analyses (:func:`mavsid.loop.tune`) not to read the logs again.
+    twins: tuple[TwinSignals, ...] | None = field(default=None, repr=False, compare=False)
 
     def to_dict(self) -> dict[str, Any]:
         """``{"axes": {axis: {...}}, "verdicts": {axis: {...}}, "logs": [...], ...}``."""
@@ -452,30 +455,51 @@ def _json_safe(x: Any) -> Any:
 # --------------------------------------------------------------------------- running
 
 
-def _read_flight(path: str | os.PathLike[str], cfg: PipelineConfig) -> FlightData:
-    """Read only the messages alignment needs, then align."""
-    from mavsid.align import load_flight
+#: Per flight (by ``id``): its twin's signals, or why they could not be had.
+_Twins = dict[int, "TwinSignals | MavsidError | ValueError | np.linalg.LinAlgError"]
 
-    return load_flight(
+
+def _read_flight(path: str | os.PathLike[str], cfg: PipelineConfig,
+                 twins: _Twins | None = None) -> FlightData:
+    """Read only the messages alignment needs, then align. With ``twins``: the twin's few
+    messages are read in the same pass and its signals put there (no second read)."""
+    from mavsid.align import read_flight
+
+    also: Sequence[str] = ()
+    if twins is not None:
+        from mavsid.loop import twin_messages
+
+        also = sorted(twin_messages())
+    flight, raw = read_flight(
         path,
         cfg.preset,
         cfg.rate_hz,
         presets=cfg.presets or None,
         mixers=cfg.mixers or None,
+        also=also,
     )
+    if twins is not None:
+        from mavsid.loop import twin_signals
+
+        try:
+            twins[id(flight)] = twin_signals(flight, raw)
+        except (MavsidError, ValueError, np.linalg.LinAlgError) as exc:
+            twins[id(flight)] = exc  # (raised where the twin runs, as a second read would)
+    return flight
 
 
 def _read_flights(logs: Sequence[str | os.PathLike[str]], cfg: PipelineConfig,
-                  step: Callable[[str], None]) -> tuple[FlightData, ...]:
+                  step: Callable[[str], None], twins: _Twins | None = None
+                  ) -> tuple[FlightData, ...]:
     """Each log aligned; unless the config fixes the rate, later logs at the first one's
     (pooled segments and one model need one step)."""
     step(f"reading {os.fspath(logs[0])}")
-    first = _read_flight(logs[0], cfg)
+    first = _read_flight(logs[0], cfg, twins)
     same_rate = cfg if cfg.rate_hz is not None else cfg.with_overrides(rate_hz=1.0 / first.dt)
     flights = [first]
     for p in logs[1:]:
         step(f"reading {os.fspath(p)}")
-        flights.append(_read_flight(p, same_rate))
+        flights.append(_read_flight(p, same_rate, twins))
     return tuple(flights)
 
 
@@ -518,7 +542,7 @@ def _validate(model: Model, segments: Sequence[Segment], cfg: PipelineConfig) ->
 
 
 def _closed_loop(
-    fitted: AxisFit, flights: Sequence[FlightData], signals: dict[int, TwinSignals]
+    fitted: AxisFit, flights: Sequence[FlightData], signals: _Twins
 ) -> AxisFit:
     """``fitted`` with its closed-loop twin run on the held-out blocks (or the reason not)."""
     from mavsid.loop import closed_loop_fit, twin_signals
@@ -535,7 +559,10 @@ def _closed_loop(
         for fd in flights:
             if id(fd) not in signals:
                 signals[id(fd)] = twin_signals(fd)
-            sigs.append(signals[id(fd)])
+            sig = signals[id(fd)]
+            if isinstance(sig, Exception):
+                raise sig
+            sigs.append(sig)
         j = fitted.validation.state_names.index(fitted.output)
         cl = closed_loop_fit(fitted.model, fitted.axis, fitted.train, fitted.held_out, flights,
                              sigs, open_loop_percent=float(fitted.validation.fit_free_run[j]))
@@ -636,10 +663,10 @@ def fit(
     if not logs:
         raise ConfigError("no log given")
     step = progress or _noop
-    flights = _read_flights(logs, cfg, step)
+    signals: _Twins = {}
+    flights = _read_flights(logs, cfg, step, signals)
     fits: dict[str, AxisFit] = {}
     verdicts: dict[str, Verdict] = {}
-    signals: dict[int, TwinSignals] = {}
     for axis in cfg.axes:
         stages = iter(FIT_STAGES)
 
@@ -693,7 +720,12 @@ def fit(
             fits[axis] = dataclasses.replace(fitted, verdict=verdict)
     if not fits:
         raise _nothing(logs, verdicts, "nothing identifiable")
-    return FitResult(fits, flights, tuple(os.fspath(p) for p in logs), cfg, verdicts)
+    from mavsid.loop import TwinSignals
+
+    twins = [signals.get(id(fd)) for fd in flights]
+    return FitResult(fits, flights, tuple(os.fspath(p) for p in logs), cfg, verdicts,
+                     tuple(t for t in twins if isinstance(t, TwinSignals))
+                     if all(isinstance(t, TwinSignals) for t in twins) else None)
 
 
 def _judge(fitted: AxisFit, flights: Sequence[FlightData]) -> Verdict:
@@ -795,7 +827,7 @@ def validate_logs(
     on_model_grid: dict[float, tuple[FlightData, ...]] = {}
     fits: dict[str, AxisFit] = {}
     verdicts: dict[str, Verdict] = {}
-    signals: dict[int, TwinSignals] = {}
+    signals: _Twins = {}
     for axis, model in models.items():
         if axis not in cfg.axes:
             continue

@@ -461,8 +461,11 @@ def validate(
         _columns(seg, model.input_names, "input")
         n = len(seg)
         one = np.full((n, ny), np.nan)
-        for i, k in enumerate(horizons):
-            pred = _as_2d(model.predict(seg, horizon=int(k)), n, ny, "predict")
+        many = getattr(model, "predict_horizons", None)  # (every horizon, inputs filtered once)
+        preds = (many(seg, [int(k) for k in horizons]) if many is not None
+                 else [model.predict(seg, horizon=int(k)) for k in horizons])
+        for i, (k, raw) in enumerate(zip(horizons, preds, strict=True)):
+            pred = _as_2d(raw, n, ny, "predict")
             if k == 1:
                 one = pred
             e, m = _fit_sums(y, pred)

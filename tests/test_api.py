@@ -3,8 +3,10 @@ statsmodels on the same arrays) and against simulated truth (interval coverage).
 
 from __future__ import annotations
 
+import functools
 import json
 import warnings
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -15,8 +17,10 @@ from mavsid import NoExcitationError, identify, regress
 from mavsid.data import Segment
 from mavsid.errors import ConfigError
 from mavsid.estimators import Structure, fit_axis, load_model, select_delay
+from mavsid.estimators import output_error as oe
+from mavsid.estimators.least_squares import LeastSquares
 from mavsid.estimators.regressors import InputFilter
-from mavsid.estimators.select import DelayScan, _slow_mse
+from mavsid.estimators.select import DelayScan, _slow_mse, with_lag
 
 # ----------------------------------------------------------------------- lecture examples
 
@@ -352,6 +356,36 @@ def test_fast_delay_scan_equals_refitting_every_candidate():
         assert scan.mse(dly) == pytest.approx(slow, rel=1e-9)
     best, _ = select_delay(segs, st, [0.0, 1.0, 2.5])
     assert best in (0.0, 1.0, 2.5)
+    dlys = [0.0, 1.0, 2.5, 7.125, 13.875]  # scored together: the numbers of one by one
+    assert scan.mse_many(dlys) == pytest.approx([scan.mse(d) for d in dlys], rel=1e-12)
+
+
+def test_output_error_coef_reaches_the_trust_region_optimum():
+    """The search's neighbouring-lag refinement (variable projection on the pole) lands on
+    the minimum refine_output_error finds with tight tolerances, at its cost."""
+    x, u = _plant(3000, 8, a=((0.985,),), b=((0.4,),), noise=0.01)
+    segs = [Segment(np.arange(len(x)) * 0.0025, x, u, ("p",), ("u_roll",), 0.0025, "roll",
+                    "sysid")]
+    base = Structure(("p",), ("p", "u_roll", "1"), ("u_roll",))
+    start = LeastSquares(with_lag(base, 0.01, 2.0), n_bootstrap=0).fit(segs).model_
+    got = oe.output_error_coef(start, segs)
+    assert got is not None
+    tight = functools.partial(oe.optimize.least_squares, ftol=1e-15, xtol=1e-15, gtol=1e-15)
+    saved = oe.optimize.least_squares
+    try:
+        oe.optimize.least_squares = tight
+        ref = oe.refine_output_error(start, segs, covariance="plain")
+    finally:
+        oe.optimize.least_squares = saved
+    np.testing.assert_allclose(got[0], ref.coef, rtol=1e-6)
+    assert got[1] <= ref.provenance["refine"]["cost"] * (1 + 1e-12)
+    # not its kind: two states, or a continuous-time model -> None (callers refine)
+    seg2 = [Segment(np.arange(len(x)) * 0.0025, np.hstack([x, 0.5 * x]), u, ("p", "q"),
+                    ("u_roll",), 0.0025, "all", "sysid")]
+    m2 = mavsid.Model(("p", "q"), ("u_roll",), ("p", "q", "u_roll"),
+                      np.array([[0.9, 0.1], [0.0, 0.8], [0.4, 0.2]]), 0.0025)
+    assert oe.output_error_coef(m2, seg2) is None
+    assert oe.output_error_coef(replace(start, continuous=True), segs) is None
 
 
 def test_fit_axis_bounds_hold_through_output_error():
@@ -412,3 +446,25 @@ def test_every_parameter_is_documented(func):
             entries.update(n.strip().lstrip("*") for n in m.group(2).split(","))
     for name in inspect.signature(f).parameters:
         assert name in entries, f"{func}: parameter {name} not documented"
+
+
+def test_predictions_from_one_run_equal_stepping_every_start():
+    """A stable one-state affine model predicts every horizon from one run of its recursion;
+    the same numbers as stepping each start forward (what other models do)."""
+    x, u = _plant(600, 9, a=((0.97,),), b=((0.3,),), noise=0.02)
+    seg = Segment(np.arange(len(x)) * 0.01, x, u, ("p",), ("u_roll",), 0.01, "roll", "sysid")
+    m = mavsid.Model(("p",), ("u_roll",), ("p", "u_roll", "1"),
+                     np.array([[0.97], [0.3], [0.01]]), 0.01, delay=2, delay_frac=0.5,
+                     filters=(InputFilter(8.0, 1, "lag"),))
+    _, var = m._measured(seg)
+    phi, f = m._affine(var)
+    for h, got in zip((1, 7, 50, 599, 600), m.predict_horizons(seg, [1, 7, 50, 599, 600]),
+                      strict=True):
+        want = np.full_like(x, np.nan)
+        if h < len(x):
+            step = x[: len(x) - h].copy()
+            for j in range(h):
+                step = step @ phi.T + f[j : j + len(x) - h]
+            want[h:] = step
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
+        np.testing.assert_array_equal(np.isnan(got), np.isnan(m.predict(seg, h)))

@@ -106,6 +106,29 @@ def test_controller_from_params_lists_the_defaults_it_used() -> None:
         loop.controller_from_params({"ATC_RAT_RLL_P": -1.0}, "roll")
 
 
+def test_rate_pid_run_equals_stepping_and_steps_when_imax_binds() -> None:
+    """The replay's vectorised controller (filters as recursions, the integrator a running
+    sum): update() step by step to rounding; None (step instead) when IMAX would bind or the
+    slew limiter is on."""
+    rng = np.random.default_rng(4)
+    n = 3000
+    tg = np.cumsum(rng.standard_normal(n)) * 0.01
+    ym = 0.9 * tg + 0.01 * rng.standard_normal(n)
+    gains = loop.RateGains(0.135, 0.135, 0.0036, 0.05, 0.5, 20.0, 20.0, 2.5)
+    for g, whole in ((gains, True), (replace(gains, imax=0.01), False),
+                     (replace(gains, smax=50.0), False)):
+        run, step = loop.RatePID(g, 0.0025), loop.RatePID(g, 0.0025)
+        run.preset(tg[0], ym[0], 0.02)
+        step.preset(tg[0], ym[0], 0.02)
+        got = run.run(tg, ym)
+        want = np.array([step.update(a, b) for a, b in zip(tg, ym, strict=True)])
+        if whole:
+            assert got is not None
+            np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-14)
+        else:
+            assert got is None
+
+
 def test_px4_pid_terms() -> None:
     # K multiplies P, I and D; the derivative acts on the measurement, not the target; the
     # integration shrinks as (1 - (err / 400 deg/s)^2) and stops at MC_*R_INT_LIM

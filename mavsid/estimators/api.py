@@ -49,7 +49,7 @@ from mavsid.estimators import library
 from mavsid.estimators._base import Estimator, Gram, bartlett_meat, solve
 from mavsid.estimators.least_squares import thresholded
 from mavsid.estimators.model import Model
-from mavsid.estimators.output_error import refine_output_error
+from mavsid.estimators.output_error import output_error_coef, refine_output_error
 from mavsid.estimators.regressors import InputFilter, Structure, filters_from_params
 from mavsid.estimators.select import (
     AXES,
@@ -79,6 +79,10 @@ __all__ = [
 
 #: Longest delay (samples) :func:`identify` searches with ``delay="search"``.
 DEFAULT_MAX_DELAY_SAMPLES: int = 10
+
+#: Settings of the ``ls`` estimator that leave its coefficients alone (a neighbouring lag's
+#: fit then starts from the search's Gram).
+_LS_SETTINGS_KEEPING_COEF = frozenset({"n_bootstrap", "hac", "random_state", "min_blocks"})
 
 
 # --------------------------------------------------------------------------- arrays in
@@ -252,6 +256,27 @@ def identify_segments(
         refinement: Any = dict(m.provenance)["refine"]
         return m, float(refinement["cost"]), None
 
+    def neighbour(lg: float) -> tuple[Model, float, SolverError | None]:
+        """A candidate lag (at its best delay) fitted as ``fitted(..., cheap=True)`` does,
+        for its coefficients and cost: least squares from the search's Gram and, for a
+        one-state affine model, the output-error optimum by exact-Jacobian Gauss–Newton;
+        anything else through :func:`fitted`."""
+        st = with_lag(base, lg, choice.by_lag[lg][1])
+        coef0 = choice.ls_coef.get(lg)
+        if (coef0 is None or estimator != "ls" or continuous
+                or set(estimator_options or {}) - _LS_SETTINGS_KEEPING_COEF):
+            return fitted(st, cheap=True)
+        m0 = Model(st.outputs, st.inputs, st.features, coef0, dt, delay=st.delay,
+                   filters=st.filters, delay_frac=st.delay_frac)
+        if not (refine == "oe" or (refine == "auto" and m0.is_affine)):
+            return m0, math.nan, None
+        # started from the chosen lag's refined pole (nearer than its own least squares)
+        start = model.coef if np.array_equal(model.coef != 0, coef0 != 0) else coef0
+        got = output_error_coef(replace(m0, coef=start), segments)
+        if got is None:
+            return fitted(st, cheap=True)
+        return replace(m0, coef=got[0]), got[1], None
+
     model, cost, failed = fitted(structure)
     scored: dict[float, tuple[Model, float, SolverError | None]] = {lag: (model, cost, failed)}
     by_oe = (search and math.isfinite(cost) and len(choice.by_lag) > 1
@@ -260,9 +285,9 @@ def identify_segments(
         # noisy: the lag by the free-run cost (see ONE_STEP_NOISE), the delay per lag by one
         # step
         floor = min(v[0] for v in choice.by_lag.values())
-        for lg, (mse, d) in choice.by_lag.items():
+        for lg, (mse, _) in choice.by_lag.items():
             if lg != lag and mse <= floor * (1 + LAG_PRUNE):
-                scored[lg] = fitted(with_lag(base, lg, d), cheap=True)
+                scored[lg] = neighbour(lg)
         lowest = min(c for _, c, _ in scored.values())
         chosen = min(lg for lg, (_, c, _) in scored.items() if c <= lowest * (1 + LAG_OE_TOL))
         if chosen != lag:  # the chosen candidate fitted again with its bootstrap
@@ -284,7 +309,7 @@ def identify_segments(
         neighbours = [lags[j] for j in (i - 1, i + 1) if 0 <= j < len(lags)]
         for lg in neighbours:  # (each refined as the chosen one is: the same kind of fit)
             if lg not in scored:
-                scored[lg] = fitted(with_lag(base, lg, choice.by_lag[lg][1]), cheap=True)
+                scored[lg] = neighbour(lg)
         model = _with_structure_spread(model, [scored[lg][0] for lg in neighbours
                                                if scored[lg][2] is None])
     if not isinstance(estimator, str):

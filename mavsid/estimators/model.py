@@ -609,26 +609,50 @@ class Model:
         from the measured state at ``i - horizon`` and the measured inputs; NaN for the first
         ``horizon`` rows.
         """
-        if horizon < 1:
-            raise ConfigError(f"horizon must be >= 1 sample, got {horizon}")
+        return self.predict_horizons(segment, (horizon,))[0]
+
+    def predict_horizons(self, segment: Segment, horizons: Sequence[int]) -> list[np.ndarray]:
+        """:meth:`predict` at each of ``horizons`` (samples), the inputs filtered once.
+
+        A stable one-state affine model predicts every horizon from one run ``z`` of its
+        recursion from zero: ``x̂[i + h] = z[i + h] + aʰ (x[i] − z[i])`` (the forcing's sum
+        over the horizon is ``z[i + h] − aʰ z[i]``), one pass per horizon instead of ``h``;
+        other models step every start forward ``h`` times.
+        """
+        hs = [int(h) for h in horizons]
+        if hs and min(hs) < 1:
+            raise ConfigError(f"horizon must be >= 1 sample, got {min(hs)}")
         xm, var = self._measured(segment)
         n, m = xm.shape
-        out = np.full((n, m), np.nan)
-        if horizon >= n:
-            return out
-        starts = np.arange(n - horizon)
-        x = xm[starts].copy()
-        with np.errstate(over="ignore", invalid="ignore"):
-            if self.is_affine:
-                phi, f = self._affine(var)
-                for j in range(horizon):
-                    x = x @ phi.T + f[starts + j]
-            else:
-                step = self._stepper(var)
-                for j in range(horizon):
-                    x = step(x, starts + j)
-        out[horizon:] = x
-        return out
+        outs = [np.full((n, m), np.nan) for _ in hs]
+        if not any(h < n for h in hs):
+            return outs
+        phi = f = z = None
+        if self.is_affine:
+            phi, f = self._affine(var)
+            a = float(phi[0, 0]) if m == 1 else np.inf
+            if abs(a) < 1.0 and np.isfinite(f).all():
+                z = np.zeros(n)
+                z[1:] = signal.lfilter([1.0], [1.0, -a], f[:-1, 0])
+        for h, out in zip(hs, outs, strict=True):
+            if h >= n:
+                continue
+            with np.errstate(over="ignore", invalid="ignore"):
+                if z is not None and phi is not None:
+                    a = float(phi[0, 0])
+                    out[h:, 0] = z[h:] + a**h * (xm[: n - h, 0] - z[: n - h])
+                    continue
+                starts = np.arange(n - h)
+                x = xm[starts].copy()
+                if phi is not None and f is not None:
+                    for j in range(h):
+                        x = x @ phi.T + f[starts + j]
+                else:
+                    step = self._stepper(var)
+                    for j in range(h):
+                        x = step(x, starts + j)
+            out[h:] = x
+        return outs
 
     # ----------------------------------------------------------------- export
 

@@ -35,15 +35,16 @@ from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
-from scipy import optimize
+from scipy import optimize, signal
 
 from mavsid.data import Segment
 from mavsid.errors import ConfigError, SolverError
+from mavsid.estimators import library
 from mavsid.estimators._base import hac_covariance
 from mavsid.estimators.model import Model
 from mavsid.estimators.regressors import Regression
 
-__all__ = ["refine_output_error"]
+__all__ = ["output_error_coef", "refine_output_error"]
 
 
 def _measured(model: Model, seg: Segment) -> np.ndarray:
@@ -173,3 +174,149 @@ def refine_output_error(model: Model, segments: Sequence[Segment], max_nfev: int
                       "covariance": covariance,
                       "cost_start": start_cost, "cost": float(sol.cost)}
     return replace(refined, covariance=cov, coef_stderr=se, sigma=sigma, provenance=prov)
+
+
+def output_error_coef(model: Model, segments: Sequence[Segment], max_nfev: int = 100,
+                      tol: float = 1e-10) -> tuple[np.ndarray, float] | None:
+    """The output-error optimum of a one-state affine discrete model, coefficients only.
+
+    The free run ``x[k+1] = a x[k] + Σⱼ θⱼ φⱼ[k]`` (``φ`` the terms free of the state, ``x[0]``
+    the first measured sample) is linear in ``θ`` for a given ``a``: ``x = Σⱼ θⱼ Sⱼ(a) + aᵏ x[0]``
+    with ``Sⱼ`` the response of the pole ``a`` to ``φⱼ`` (one ``scipy.signal.lfilter`` per
+    term). So ``θ`` is solved exactly for each ``a`` (a small Gram), and ``a`` by Newton
+    steps on the cost with ``θ`` eliminated (variable projection: its gradient is the plain
+    partial derivative, ``Σ e ∂x/∂a`` with ``∂x/∂a`` the pole's response to ``x`` itself; its
+    curvature the Gauss–Newton one of ``∂x/∂a`` projected off the ``Sⱼ``). It minimises the
+    cost of :func:`refine_output_error` (the same scaled residuals) to the cost's resolution
+    (``tol``, relative), in a few passes over the data, where the trust-region solver there
+    stops at its default tolerances (about 1e-6 relative) after finite-difference Jacobians
+    and an SVD per step. What the structure search needs of the neighbouring lags'
+    refinements (their coefficients and cost); covariances stay with
+    :func:`refine_output_error`.
+
+    Returns
+    -------
+    (coef, cost) or None
+        The coefficients (shaped like ``model.coef``, zeros kept) and ``½‖e/scale‖²``; None
+        when the model is not of that kind, the terms are collinear or the run is not finite
+        (callers then use :func:`refine_output_error`).
+    """
+    if model.continuous or len(model.state_names) != 1 or not model.is_affine:
+        return None
+    states, exo, _ = model._split
+    coef = np.asarray(model.coef, float)
+    act = coef[:, 0] != 0
+    ia = [j for j in states if act[j]]
+    je = [j for j in exo if act[j]]
+    if len(ia) > 1 or not je:
+        return None
+    feats = [model.features[j] for j in je]
+    every, ys, fts = [], [], []
+    for s in segments:
+        x, var = model._measured(s)
+        every.append(x[:, 0])
+        if len(x) >= 2:  # (a one-sample run is its start: no residual)
+            ys.append(x[:, 0])
+            # the terms, and an impulse of x[0] (whose response is the start's free decay)
+            ft = np.zeros((len(je) + 1, len(x) - 1))
+            ft[:-1] = library.evaluate(feats, var)[:-1].T
+            ft[-1, 0] = x[0, 0]
+            fts.append(ft)
+    if not ys:
+        return None
+    scale = float(np.concatenate(every).std())
+    scale = scale if scale > 0 else 1.0
+    k = len(je)
+
+    def at(a: float) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray], float,
+                              np.ndarray] | None:
+        """θ solved for the pole ``a``: (θ, responses per segment, runs, cost, their Gram)."""
+        gram = np.zeros((k + 1, k + 1))
+        resp = []
+        with np.errstate(all="ignore"):
+            for y, ft in zip(ys, fts, strict=True):
+                r = signal.lfilter([1.0], [1.0, -a], ft, axis=-1)
+                r[k] = y[1:] - a * r[k]  # the target less the start's free decay a^i x[0]
+                gram += r @ r.T
+                resp.append(r)
+            if not np.isfinite(gram).all():
+                return None
+            try:
+                th = np.linalg.solve(gram[:k, :k], gram[:k, k])
+            except np.linalg.LinAlgError:
+                return None
+            xs, cost = [], 0.0
+            for y, r in zip(ys, resp, strict=True):
+                x = np.empty(len(y))
+                x[0] = y[0]
+                x[1:] = th @ r[:k] + (y[1:] - r[k])
+                e = (x - y) / scale
+                # (an elementwise sum: a long BLAS dot is threaded, slow on a busy machine)
+                cost += 0.5 * float(np.sum(e * e))
+                xs.append(x)
+        if not (np.isfinite(th).all() and np.isfinite(cost)):
+            return None
+        return th, resp, xs, cost, gram
+
+    if not ia:  # no pole: θ is linear least squares
+        got = at(0.0)
+        if got is None:
+            return None
+        out = np.zeros_like(coef)
+        out[je, 0] = got[0]
+        return out, got[3]
+    a = float(coef[ia[0], 0])
+    got = at(a)
+    nfev = 1
+    if got is None:
+        return None
+    th, resp, xs, cost, gram = got
+    converged = False
+    last: tuple[float, float] | None = None  # (a, gradient) of the previous step
+    while nfev < max_nfev and not converged:
+        # gradient and projected Gauss-Newton curvature of the cost in a (θ optimal)
+        grad, sa_sa = 0.0, 0.0
+        sa_s = np.zeros(k)
+        with np.errstate(all="ignore"):
+            for y, r, x in zip(ys, resp, xs, strict=True):
+                sa = signal.lfilter([1.0], [1.0, -a], x[:-1])
+                grad += float(np.sum(sa * (x[1:] - y[1:])))
+                sa_sa += float(np.sum(sa * sa))
+                sa_s += r[:k] @ sa
+        try:
+            curv = sa_sa - float(sa_s @ np.linalg.solve(gram[:k, :k], sa_s))
+        except np.linalg.LinAlgError:
+            return None
+        grad /= scale**2
+        curv /= scale**2
+        if not (np.isfinite(grad) and np.isfinite(curv)) or curv <= 0:
+            return None
+        if last is not None and a != last[0]:
+            # the secant through the last two gradients holds the residual's own curvature,
+            # which Gauss-Newton leaves out (linear convergence): superlinear with it
+            secant = (grad - last[1]) / (a - last[0])
+            if 0.1 * curv < secant < 10.0 * curv:
+                curv = secant
+        last = (a, grad)
+        step = -grad / curv
+        # converged when the step's predicted decrease is below what the cost resolves
+        # (its last digits); the step is still taken when it does not raise the cost
+        converged = 0.5 * grad * grad / curv <= tol * cost
+        while True:
+            got = at(a + step)
+            nfev += 1
+            if got is not None and got[3] <= cost:
+                a += step
+                th, resp, xs, cost, gram = got
+                break
+            if converged:
+                break
+            step *= 0.5
+            if nfev >= max_nfev:
+                return None
+    if not converged:
+        return None
+    out = np.zeros_like(coef)
+    out[ia[0], 0] = a
+    out[je, 0] = th
+    return out, cost

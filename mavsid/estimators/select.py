@@ -17,8 +17,11 @@ one column of a single Gram matrix, and a candidate's Gram (including a fraction
 ``(1 − f) u[k−d] + f u[k−d−1]``, which is linear in two delayed copies) is a small projection
 of it plus the few rows at the record's start that only shorter delays use. Scores are
 therefore exact (the same rows and sums as refitting each candidate), and the search costs
-one pass over the data per lag. Other structures (continuous time, nonlinear libraries) are
-scored candidate by candidate.
+one pass over the data per lag; a lag's candidate delays are projected and solved together
+(:meth:`DelayScan.mse_many`). Other structures (continuous time, nonlinear libraries) are
+scored candidate by candidate. The least-squares coefficients of each lag's best delay come
+from the same Gram (:attr:`StructureChoice.ls_coef`): what the neighbouring lags' output-error
+refinements start from (:func:`~mavsid.estimators.output_error.output_error_coef`).
 
 The default search ranges are the module constants below (``DEFAULT_*``).
 
@@ -35,7 +38,7 @@ Examples
 >>> seg = Segment(np.arange(2000) * 0.0025, p[:, None], u[:, None], ("p",), ("u_roll",),
 ...               0.0025, "roll", "sysid")
 >>> best, scan = select_delay([seg], Structure(("p",), ("p", "u_roll", "1")), range(6))
->>> best, bool(scan[3.0] < 1e-20 < scan[2.0])
+>>> best, bool(scan[3.0] < 1e-12 * scan[2.0])  # exact at 3 (to rounding)
 (3.0, True)
 """
 
@@ -190,6 +193,9 @@ class DelayScan:
         has_bias = library.BIAS in st.features
         q = len(others) + len(ins) * (k_max + 1) + int(has_bias) + len(st.outputs)
         suffix = np.zeros((k_max + 2, q, q))
+        n_oth, k1 = len(others), k_max + 1
+        # the regressors that are not delayed inputs: others, bias, outputs
+        stat = np.r_[np.arange(n_oth), np.arange(n_oth + len(ins) * k1, q)].astype(int)
         self._lengths = []
         for si, seg in enumerate(segments):
             n = len(seg)
@@ -203,78 +209,154 @@ class DelayScan:
                                   .astype(float), seg.dt, st.filters)
             else:
                 u = np.empty((n, 0))
-            w = np.empty((n - 1, q))
+            # the rows as columns (one contiguous row per regressor): built by slicing,
+            # summed by one symmetric product
+            wt = np.empty((q, n - 1))
             c = 0
             for v in others:
-                w[:, c] = np.asarray(_column(seg, v)[0], float)[:-1]
+                wt[c] = np.asarray(_column(seg, v)[0], float)[:-1]
                 c += 1
             for i in range(len(ins)):
                 ui = np.asarray(u[:, i], float)
                 for j in range(k_max + 1):  # u[k - j], held at u[0] before it starts
                     h = min(j, n - 1)
-                    w[:h, c] = ui[0]
-                    w[h:, c] = ui[: n - 1 - h]
+                    wt[c, :h] = ui[0]
+                    wt[c, h:] = ui[: n - 1 - h]
                     c += 1
             if has_bias:
-                w[:, c] = 1.0
+                wt[c] = 1.0
                 c += 1
             for v in st.outputs:
-                w[:, c] = np.asarray(_column(seg, v)[0], float)[1:]
+                wt[c] = np.asarray(_column(seg, v)[0], float)[1:]
                 c += 1
-            if not np.isfinite(w).all():
+            if not np.isfinite(wt).all():
                 raise ValueError("non-finite rows")
             head = min(k_max + 1, n - 1)
-            suffix[head] += w[head:].T @ w[head:]
-            for r in range(head - 1, -1, -1):
-                suffix[r] += np.outer(w[r], w[r])
+            tail = wt[:, head:]
+            if head == k_max + 1 and ins:
+                suffix[head] += self._tail_gram(wt, head, u, stat)
+            else:
+                suffix[head] += tail @ tail.T
+            suffix[:head] += np.einsum("ir,jr->rij", wt[:, :head], wt[:, :head])
         # suffix[r]: row r alone (r < head) or every row from head on; summed from the end,
         # _cum[l] is the Gram of the rows k >= l of every segment
         self._cum = np.cumsum(suffix[::-1], axis=0)[::-1]
         self._has_bias = has_bias
 
-    def gram(self, dly: float) -> Gram:
-        """The Gram ``[Z Y]ᵀ[Z Y]`` of the rows a fit at delay ``dly`` (samples) uses."""
+    def _tail_gram(self, wt: np.ndarray, head: int, u: np.ndarray, stat: np.ndarray
+                   ) -> np.ndarray:
+        """The entries of the Gram of the rows ``head …`` (columns of ``wt``) that candidates
+        use: every regressor against the undelayed ones (one product), and the delayed
+        inputs against each other only at shifts at most one apart (a delay ``d + f`` uses
+        ``u[k-d]`` and ``u[k-d-1]``), as sums of lagged products over shifted windows: the
+        whole sum less the few terms each window leaves out at either end. Other entries
+        stay zero (no candidate reads them)."""
+        q, n = wt.shape[0], wt.shape[1] + 1
+        k1 = self.max_shift + 1
+        n_oth = len(self._others)
+        g = np.zeros((q, q))
+        part = wt[stat, head:] @ wt[:, head:].T
+        g[stat, :] = part
+        g[:, stat] = part.T
+        js = np.arange(k1)
+        for i in range(len(self._ins)):
+            for i2 in range(len(self._ins)):
+                for lag in (0, 1):
+                    if lag == 0 and i2 < i:
+                        continue
+                    # sum over rows k of u_i[k - j] u_i2[k - j - lag], j = 0 … k_max - lag:
+                    # m = k - j runs over [head - j, n - 2 - j]
+                    prod = np.zeros(n - 1)
+                    prod[lag:] = u[lag : n - 1, i] * u[: n - 1 - lag, i2]
+                    pre = np.concatenate([[0.0], np.cumsum(prod[: k1 + 1])])
+                    post = np.concatenate([[0.0], np.cumsum(prod[::-1][: k1 + 1])])
+                    j = js[: k1 - lag]
+                    vals = float(prod.sum()) - pre[head - j] - post[j]
+                    r = n_oth + i * k1 + j
+                    c = n_oth + i2 * k1 + j + lag
+                    g[r, c] = vals
+                    g[c, r] = vals
+        return g
+
+    def _grams(self, dlys: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+        """The Grams ``[Z Y]ᵀ[Z Y]`` of the rows fits at the delays ``dlys`` (samples) use,
+        stacked (k, p + m, p + m), and their row counts (k,)."""
         st = self.structure
-        d, f = _split_delay(dly)
-        lead = _shift_needed(dly)
-        if lead > self.max_shift:
-            raise ConfigError(f"delay {dly:g} beyond the scan's {self.max_shift} samples")
+        split = [_split_delay(v) for v in dlys]
+        leads = np.array([_shift_needed(v) for v in dlys], dtype=int)
+        if len(leads) and leads.max() > self.max_shift:
+            bad = float(np.asarray(dlys)[int(np.argmax(leads))])
+            raise ConfigError(f"delay {bad:g} beyond the scan's {self.max_shift} samples")
+        k = len(split)
         q = self._cum.shape[1]
         p, m = len(st.features), len(st.outputs)
-        t = np.zeros((q, p + m))
+        whole = np.array([d for d, _ in split], dtype=int)
+        frac = np.array([f for _, f in split], dtype=float)
+        t = np.zeros((k, q, p + m))
         n_oth, k1 = len(self._others), self.max_shift + 1
+        cand = np.arange(k)
         for j, feat in enumerate(st.features):
             if feat == library.BIAS:
-                t[n_oth + len(self._ins) * k1, j] = 1.0
+                t[:, n_oth + len(self._ins) * k1, j] = 1.0
             elif feat in st.inputs:
                 base = n_oth + self._ins.index(feat) * k1
-                t[base + d, j] = 1.0 - f
-                if f > 0:
-                    t[base + d + 1, j] = f
+                t[cand, base + whole, j] = 1.0 - frac
+                on = frac > 0
+                t[cand[on], base + whole[on] + 1, j] = frac[on]
             else:
-                t[self._others.index(feat), j] = 1.0
+                t[:, self._others.index(feat), j] = 1.0
         for i in range(m):
-            t[q - m + i, p + i] = 1.0
-        full = t.T @ self._cum[lead] @ t
-        rows = sum(max(n - 1 - lead, 0) for n in self._lengths)
-        return Gram(full[:p, :p], full[:p, p:], full[p:, p:], int(rows))
+            t[:, q - m + i, p + i] = 1.0
+        full = np.transpose(t, (0, 2, 1)) @ self._cum[leads] @ t
+        lengths = np.asarray(self._lengths, dtype=int)
+        rows = np.array([np.maximum(lengths - 1 - lead, 0).sum() for lead in leads], dtype=int)
+        return full, rows
+
+    def gram(self, dly: float) -> Gram:
+        """The Gram ``[Z Y]ᵀ[Z Y]`` of the rows a fit at delay ``dly`` (samples) uses."""
+        full, rows = self._grams([dly])
+        p = len(self.structure.features)
+        return Gram(full[0, :p, :p], full[0, :p, p:], full[0, p:, p:], int(rows[0]))
 
     def mse(self, dly: float) -> float | None:
         """Mean squared one-step residual (over rows and outputs) of the least-squares fit at
         ``dly``; None when no segment is long enough."""
-        g = self.gram(dly)
-        if g.n < 1:
-            return None
+        return self.mse_many([dly])[0]
+
+    def mse_many(self, dlys: Sequence[float]) -> list[float | None]:
+        """:meth:`mse` of every delay in ``dlys``, the candidates' Grams projected and solved
+        together (the same numbers as one by one)."""
+        if not len(dlys):
+            return []
+        full, rows = self._grams(dlys)
+        p = len(self.structure.features)
+        zz, zy, yy = full[:, :p, :p], full[:, :p, p:], full[:, p:, p:]
+        n = np.maximum(rows, 1).astype(float)
         # the least-squares solution of the (tiny) unit-RMS-scaled Gram; solve()'s Cholesky
         # path would give the same numbers at ten times the call overhead
-        s = np.sqrt(np.clip(np.diag(g.zz), 0, None) / g.n)
+        s = np.sqrt(np.clip(np.diagonal(zz, axis1=1, axis2=2), 0, None) / n[:, None])
         s = np.where(s > 0, s, 1.0)
         try:
-            coef = np.linalg.solve(g.zz / np.outer(s, s), g.zy / s[:, None]) / s[:, None]
+            coef = (np.linalg.solve(zz / (s[:, :, None] * s[:, None, :]), zy / s[:, :, None])
+                    / s[:, :, None])
+        except np.linalg.LinAlgError:  # one singular candidate: each on its own
+            coef = np.stack([self._coef(Gram(a, b, c, int(r)))
+                             for a, b, c, r in zip(zz, zy, yy, rows, strict=True)])
+        sse = (np.diagonal(yy, axis1=1, axis2=2) - 2 * np.sum(coef * zy, axis=1)
+               + np.sum(coef * (zz @ coef), axis=1)).sum(axis=1)
+        m = zy.shape[2]
+        return [max(float(v), 0.0) / (int(r) * m) if r >= 1 else None
+                for v, r in zip(sse, rows, strict=True)]
+
+    @staticmethod
+    def _coef(g: Gram) -> np.ndarray:
+        s = np.sqrt(np.clip(np.diag(g.zz), 0, None) / max(g.n, 1))
+        s = np.where(s > 0, s, 1.0)
+        try:
+            return np.asarray(np.linalg.solve(g.zz / np.outer(s, s), g.zy / s[:, None])
+                              / s[:, None])
         except np.linalg.LinAlgError:
-            coef = solve(g)
-        sse = float(np.sum(g.sse(coef)))
-        return max(sse, 0.0) / (g.n * g.zy.shape[1])
+            return solve(g) if g.n >= 1 else np.zeros_like(g.zy)
 
 
 def _slow_mse(segments: Sequence[Segment], structure: Structure, dly: float) -> float | None:
@@ -292,11 +374,15 @@ def _slow_mse(segments: Sequence[Segment], structure: Structure, dly: float) -> 
 
 
 def _scorer(segments: Sequence[Segment], structure: Structure, max_shift: int,
-            inputs: Sequence[np.ndarray] | None = None) -> Callable[[float], float | None]:
+            inputs: Sequence[np.ndarray] | None = None
+            ) -> tuple[Callable[[Sequence[float]], list[float | None]], DelayScan | None]:
+    """Candidate delays -> their one-step mean squared residuals (None: no rows), and the
+    scan behind it (None when candidates are refitted one by one)."""
     try:
-        return DelayScan(segments, structure, max_shift, inputs).mse
+        scan = DelayScan(segments, structure, max_shift, inputs)
     except ValueError:
-        return lambda dly: _slow_mse(segments, structure, dly)
+        return (lambda dlys: [_slow_mse(segments, structure, d) for d in dlys]), None
+    return scan.mse_many, scan
 
 
 def select_delay(segments: Sequence[Segment], structure: Structure, delays: Iterable[float]
@@ -311,8 +397,8 @@ def select_delay(segments: Sequence[Segment], structure: Structure, delays: Iter
         raise ConfigError("no candidate delay given")
     if min(delays) < 0:
         raise ConfigError(f"delays must be >= 0 samples, got {min(delays):g}")
-    score = _scorer(segments, structure, max(_shift_needed(v) for v in delays))
-    scan = {dly: v for dly in delays if (v := score(dly)) is not None}
+    score, _ = _scorer(segments, structure, max(_shift_needed(v) for v in delays))
+    scan = {dly: v for dly, v in zip(delays, score(delays), strict=True) if v is not None}
     if not scan:
         raise NoExcitationError("segments too short for every candidate delay")
     return min(scan, key=scan.__getitem__), scan
@@ -335,6 +421,10 @@ class StructureChoice:
     by_lag : dict of float to (float, float)
         Per candidate lag (s): the lowest mean squared one-step residual over its delays and
         the delay chosen for it (the shortest within ``structure_tol`` of that lowest).
+    ls_coef : dict of float to numpy.ndarray
+        Per candidate lag: the least-squares coefficients (p, m) at its chosen delay, solved
+        from the search's Gram (the rows' sums a fit at that structure forms again); empty
+        when the candidates were refitted one by one.
     """
 
     structure: Structure
@@ -342,6 +432,7 @@ class StructureChoice:
     delay: float
     scan: dict[str, float]
     by_lag: dict[float, tuple[float, float]] = field(default_factory=dict)
+    ls_coef: dict[float, np.ndarray] = field(default_factory=dict, repr=False)
 
 
 def search_structure(
@@ -405,21 +496,26 @@ def search_structure(
         base = [filter_inputs(np.column_stack([_column(s, v)[0] for v in ins]).astype(float),
                               s.dt, structure.filters) for s in segments]
     cands: list[tuple[float, float, float]] = []  # (mse, lag, delay)
+    scans: dict[float, DelayScan | None] = {}
     scan: dict[str, float] = {}
     for lag in lag_grid:
         extra = lag_filter(lag)
         st = replace(structure, filters=structure.filters + extra)
         pre = None if base is None else [filter_inputs(u, s.dt, extra)
                                          for u, s in zip(base, segments, strict=True)]
-        score = _scorer(segments, st, max_shift, pre)
+        score, scans[lag] = _scorer(segments, st, max_shift, pre)
         if fixed is not None:
-            d_scan = {dly: v for dly in fixed if (v := score(dly)) is not None}
+            d_scan = {dly: v for dly, v in zip(fixed, score(fixed), strict=True)
+                      if v is not None}
         else:  # whole samples first, then fractions around the best
-            d_scan = {float(k): v for k in range(top + 1) if (v := score(float(k))) is not None}
+            ints = [float(k) for k in range(top + 1)]
+            d_scan = {k: v for k, v in zip(ints, score(ints), strict=True) if v is not None}
             if d_scan and delay_step < 1:
                 d0 = int(min(d_scan, key=d_scan.__getitem__))
-                fine = np.arange(max(d0 - 1, 0), min(d0 + 1, top) + 1e-9, delay_step)
-                d_scan.update({float(k): v for k in fine if (v := score(float(k))) is not None})
+                fine = [float(k) for k in
+                        np.arange(max(d0 - 1, 0), min(d0 + 1, top) + 1e-9, delay_step)]
+                d_scan.update({k: v for k, v in zip(fine, score(fine), strict=True)
+                               if v is not None})
         scan.update({f"lag={lag:g}s,delay={k:g}": v for k, v in d_scan.items()})
         cands.extend((v, lag, k) for k, v in d_scan.items())
     if not cands:
@@ -437,7 +533,14 @@ def search_structure(
             low = min(c[0] for c in mine)
             d = min(c[2] for c in mine if c[0] <= low * (1 + structure_tol))
             by_lag[lg] = (low, float(d))
-    return StructureChoice(chosen, lag, float(dly), scan, by_lag)
+    ls_coef: dict[float, np.ndarray] = {}
+    for lg, (_, d) in by_lag.items():
+        lag_scan = scans.get(lg)
+        if lag_scan is not None:
+            g = lag_scan.gram(d)
+            if g.n >= len(structure.features):
+                ls_coef[lg] = solve(g)
+    return StructureChoice(chosen, lag, float(dly), scan, by_lag, ls_coef)
 
 
 def with_lag(structure: Structure, lag_s: float, delay: float) -> Structure:

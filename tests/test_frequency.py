@@ -92,8 +92,30 @@ def test_margins_and_bandwidth_flown(roll_fit) -> None:
     assert flown["crossover_hz"] == pytest.approx(truth.crossover_hz, rel=0.05)
 
 
-@pytest.mark.xfail(strict=True, reason="the estimator's delay/lag split: phase margin 75.1 "
-                   "against 72.0 deg (sysid_roll.bin), bandwidth 13.8 against 12.4 Hz (seed 7)")
+@pytest.mark.parametrize("rate_hz", ["200", "400"])
+def test_identified_margins_within_the_issue_tolerance_without_noise(tmp_path,
+                                                                     rate_hz: str) -> None:
+    """Sensor noise, gyro bias and disturbance off: the identified plant's margin and
+    bandwidth are the true plant's to within the issue's ±2° / ±5 % (measured: 71.9-72.0
+    against 72.0°, 12.34-12.35 against 12.37 Hz). With the simulator's default noise they
+    are not: see the xfail below."""
+    log = tmp_path / "clean.bin"
+    assert main(["simulate", "-o", str(log), "--sid-axis", "10", "--seed", "7", "--noise", "0",
+                 "--rate-hz", rate_hz]) == 0
+    res = pipeline.fit([str(log)], pipeline.PipelineConfig(axes=("roll",)))
+    ctrl = loop.controller_from_params(res.flights[0].params, "roll")
+    tp = true_plant(PlantParams(), 0, 1.0 / ctrl.loop_hz)
+    ss = control.ss(tp.a, tp.b.reshape(-1, 1), tp.c.reshape(1, -1), 0.0, tp.dt)
+    truth = loop.analyse_loop(ss, ctrl)
+    got = loop.analyse_model(res.axes["roll"].model, "roll", ctrl, samples=0)
+    assert got.phase_margin_deg == pytest.approx(truth.phase_margin_deg, abs=2.0)
+    assert got.bandwidth_hz == pytest.approx(truth.bandwidth_hz, rel=0.05)
+
+
+@pytest.mark.xfail(strict=True, reason="with the default sensor noise the delay/lag split "
+                   "wanders: phase margin 75.1 against 72.0 deg (sysid_roll.bin), bandwidth "
+                   "13.8 against 12.4 Hz (seed 7); the lag search's neighbours do not explain "
+                   "it (75.5 / 75.4 deg)")
 def test_identified_margins_within_the_issue_tolerance(roll_fit, roll_fit_400) -> None:
     ctrl = loop.controller_from_params(roll_fit.flights[0].params, "roll")
     tp = true_plant(PlantParams(), 0, 1.0 / ctrl.loop_hz)

@@ -841,21 +841,28 @@ def _gather_by_block(
             stop = int(np.searchsorted(pos, lo + _BLOCK_BYTES))
             if stop > k:
                 _gather_into(a, d, pos[k:stop], {c: v[k:stop] for c, v in out.items()},
-                             release=False)
+                             release=False, quiet=False)
                 done[j] = stop
         _release(a, lo, lo + _BLOCK_BYTES)
+    for d, _, out in jobs:  # once per column, not per slice
+        layout = _layout(d)
+        for c, v in out.items():
+            if v.dtype.kind == "f" and layout[c][1] in _PLAIN:
+                _quiet_nans(v)
 
 
 def _gather_into(
     a: np.ndarray, d: Definition, pos: np.ndarray, out: dict[str, np.ndarray] | None = None,
-    release: bool = True,
+    release: bool = True, quiet: bool = True,
 ) -> dict[str, np.ndarray]:
     """Decode the records of definition ``d`` at offsets ``pos`` into ``out`` (arrays of
     ``pos.size`` rows, allocated when not given).
 
     Records are copied out of the file in slices that fit a CPU cache, then each field
     is written straight into its column. With ``release``, the file's pages are handed back
-    as the records are passed (see :func:`_release`).
+    as the records are passed (see :func:`_release`); without ``quiet``, float columns
+    copied as stored may keep signalling NaNs (the caller quiets them,
+    :func:`_quiet_nans`).
     """
     layout = _layout(d)
     if out is None:
@@ -875,7 +882,7 @@ def _gather_into(
         for f, ch, col in fields:
             if ch is None:
                 col[k:stop] = recs[f]
-                if col.dtype.kind == "f":
+                if quiet and col.dtype.kind == "f":
                     _quiet_nans(col[k:stop])
             else:
                 _column_into(recs[f], ch, d.name, col[k:stop])
@@ -1347,7 +1354,7 @@ def _read_buffer(
     untimed = [i for i in groups if not timed[i]]
     src: tuple[np.ndarray, np.ndarray] = (np.zeros(0, idx_dt), np.zeros(0))
     if untimed:
-        k = np.sort(np.concatenate([groups[i][0] for i in untimed]))
+        k = _sorted_concat([groups[i][0] for i in untimed])
         held, src = _held_times(a, framing, table, timed, k if sel is None else sel[k])
         for i in untimed:
             k_i, pos_i, _ = groups[i]
@@ -1421,7 +1428,7 @@ def _read_buffer(
             t = times_of()
         else:
             cols, t = _decode_message(a, parts)
-        keys = parts[0][1] if len(parts) == 1 else np.sort(np.concatenate([p[1] for p in parts]))
+        keys = parts[0][1] if len(parts) == 1 else _sorted_concat([p[1] for p in parts])
         timeline[keys.astype(np.intp)] = t
         del parts, keys
         if name in _META_NAMES:
@@ -1451,6 +1458,22 @@ def _read_buffer(
     return assemble(source, columns, time_s, defs_by_name,
                     None if times_only else wanted, meta_columns, meta_times,
                     declared=declared)
+
+
+def _sorted_concat(parts: Sequence[np.ndarray]) -> np.ndarray:
+    """Ascending arrays joined in ascending order (sorted only when they interleave: parts
+    that follow one another in the file need no sort).
+
+    Examples
+    --------
+    >>> _sorted_concat([np.array([5, 6]), np.array([1, 2])]).tolist()
+    [1, 2, 5, 6]
+    """
+    parts = sorted(parts, key=lambda p: p[0] if p.size else -1)
+    out = np.concatenate(parts)
+    if out.size > 1 and bool(np.any(out[1:] < out[:-1])):
+        out.sort(kind="stable")
+    return out
 
 
 def window_mask(t: np.ndarray, start: float | None, stop: float | None) -> np.ndarray | None:

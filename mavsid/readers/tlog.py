@@ -255,6 +255,7 @@ def _windows(buf: NDArray[np.uint8], at: NDArray[np.int64], width: int) -> NDArr
 
 
 _BLOCK = 1 << 24  # candidates are checked block by block: bounded memory, warm caches
+_NONE = np.zeros(0, dtype=np.int64)
 _MAX_RECORD = _PREFIX + 10 + 255 + 2 + _SIGNATURE_LEN
 
 
@@ -263,13 +264,22 @@ def _scan(buf: NDArray[np.uint8], size: int, defs: dict[int, MessageDef]) -> _Fr
     ids = np.array(sorted(defs), dtype=np.int64)
     extras = np.array([defs[i].crc_extra for i in ids.tolist()], dtype=np.uint8)
     longest = np.array([defs[i].dtype.itemsize for i in ids.tolist()], dtype=np.int64)
-    blocks = [_scan_block(buf, size, lo, min(lo + _BLOCK, size), ids, extras, longest)
+    blocks = [list(_scan_block(buf, size, lo, min(lo + _BLOCK, size), ids, extras, longest))
               for lo in range(0, size, _BLOCK)]  # fmt: skip
-    start, end, hdr, mlen, msgid, sysid, compid, odd_start, odd_end = (
-        np.concatenate(parts) for parts in zip(*blocks, strict=True)
-    )
+    fields = []
+    for k in range(len(blocks[0]) if blocks else 0):  # joined a field at a time, freed as
+        fields.append(np.concatenate([b[k] for b in blocks]))  # it goes (bounded peak)
+        for b in blocks:
+            b[k] = _NONE
+    if not fields:
+        fields = [_NONE] * 9
+    del blocks
+    start, end, hdr, mlen, msgid, sysid, compid, odd_start, odd_end = fields
+    del fields
     valid = _resolve_overlaps(start, end, size)
     first, last = start[valid], end[valid]
+    del start, end
+    hdr, mlen, msgid, sysid, compid = (x[valid] for x in (hdr, mlen, msgid, sysid, compid))
     odd = _unknown_frames(odd_start, odd_end, first, last, size)
     # gaps: bytes in neither a valid frame nor a frame of unknown id
     starts = np.concatenate([first, odd_start[odd]])
@@ -279,13 +289,15 @@ def _scan(buf: NDArray[np.uint8], size: int, defs: dict[int, MessageDef]) -> _Fr
     if starts.size:
         gaps += int(starts[0] != 0) + int(ends[-1] != size)
     recv_us = _windows(buf, first, _PREFIX).copy().view(">u8")[:, 0]
+    hdr += first
+    hdr += _PREFIX
     return _Frames(
         start=first,
-        payload=first + _PREFIX + hdr[valid],
-        length=mlen[valid],
-        msgid=msgid[valid],
-        sysid=sysid[valid],
-        compid=compid[valid],
+        payload=hdr,
+        length=mlen,
+        msgid=msgid,
+        sysid=sysid,
+        compid=compid,
         recv_s=recv_us.astype(np.float64) * 1e-6,
         skipped_bytes=int(size - (last - first).sum()),
         garbage_bytes=int(size - (ends - starts).sum()),
@@ -319,7 +331,7 @@ def _scan_block(
     return tuple(np.concatenate(parts) for parts in zip(*slices, strict=True))
 
 
-_SLICE = 1 << 20  # candidates checked at once (bounds memory on pathological input)
+_SLICE = 1 << 16  # candidates checked at once: bounded temporaries (~40 bytes each)
 
 
 def _check(

@@ -250,8 +250,23 @@ class _Frames:
 
 
 def _windows(buf: NDArray[np.uint8], at: NDArray[np.int64], width: int) -> NDArray[np.uint8]:
-    """Copy of ``buf[a:a+width]`` for every ``a`` in ``at``, one row each."""
-    return sliding_window_view(buf, width)[at]
+    """Copy of ``buf[a:a+width]`` for every ``a`` in ``at``, one row each.
+
+    Gathered as items of ``width`` opaque bytes (one block copy per row) from an
+    overlapping view, about twice as fast as indexing the rows of a sliding-window view
+    (a byte-by-byte copy).
+
+    Examples
+    --------
+    >>> _windows(np.arange(10, dtype=np.uint8), np.array([0, 7]), 3).tolist()
+    [[0, 1, 2], [7, 8, 9]]
+    """
+    if width <= 0 or buf.size < width:
+        return sliding_window_view(buf, width)[at] if width > 0 else np.zeros((at.size, 0),
+                                                                              np.uint8)
+    rows = np.ndarray((buf.size - width + 1,), dtype=np.dtype((np.void, width)), buffer=buf,
+                      strides=(1,))
+    return rows[at].view(np.uint8).reshape(-1, width)
 
 
 _BLOCK = 1 << 24  # candidates are checked block by block: bounded memory, warm caches

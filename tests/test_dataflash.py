@@ -520,6 +520,23 @@ def test_framing_on_suspects_equals_the_full_length_rules(mutator):
             assert framing.defid.tolist() == defid.tolist()
 
 
+@pytest.mark.parametrize("parts", [SMALL, ("public", "ArduPilot__MethodicConfigurator",
+                                            "backend_log_80k.bin")], ids=["pymavlink", "mc80k"])
+def test_times_only_columns_equal_the_full_decode(parts):
+    """The columns a times-only read decodes (gathered field by field from the file when
+    they are a small part of the record) hold the full decode's values, NaN for NaN."""
+    path = shared_path(*parts)
+    full = _decode_quietly(path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        light = read_log(path, messages=["ATT"], times_only=True)
+    assert full is not None and set(light.messages) == set(full.messages)
+    for name, table in light.messages.items():
+        assert _same_column(table.time_s, full[name].time_s)
+        for column in table.columns:
+            assert _same_column(table[column], full[name][column]), (name, column)
+
+
 def test_header_search_grows_past_its_estimate():
     """A file denser in header patterns than a log (its result grows by doubling)."""
     data = bytes(3000) + b"\xa3\x95\x81" * 50_000 + b"\xa3\x95"

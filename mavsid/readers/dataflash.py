@@ -871,6 +871,11 @@ def _gather_into(
     fields = [(f, None if ch in _PLAIN and col.dtype != object else ch, col)
               for c, (f, ch, _, _) in layout.items() if (col := out.get(c)) is not None]
     step = max(1, _GATHER_BYTES // max(d.payload_dtype.itemsize, 1))
+    # a few narrow fields of a wide record (times only): each gathered on its own from
+    # the file, not the whole records
+    pdt = d.payload_dtype
+    spans: Mapping[str, tuple[np.dtype, int]] = pdt.fields or {}  # type: ignore[assignment]
+    direct = _DIRECT * sum(int(spans[f][0].itemsize) for f, _, _ in fields) <= pdt.itemsize
     done = 0  # file bytes before this are not needed again for this definition
     k = 0
     while k < pos.size:
@@ -878,7 +883,13 @@ def _gather_into(
         # (each record touched maps file pages into the process until released)
         stop = min(k + step, int(np.searchsorted(pos, pos[k] + _SPAN_BYTES)))
         stop = max(stop, k + 1)
-        recs = _records(a, d.payload_dtype, pos[k:stop] + 3)
+        recs: Mapping[str, np.ndarray] | np.ndarray
+        if direct:
+            at = pos[k:stop].astype(np.intp)
+            at += 3
+            recs = {f: _field_view(a, pdt, f)[at] for f, _, _ in fields}
+        else:
+            recs = _records(a, pdt, pos[k:stop] + 3)
         for f, ch, col in fields:
             if ch is None:
                 col[k:stop] = recs[f]
@@ -893,6 +904,26 @@ def _gather_into(
     if release:
         _release(a, done, a.size)
     return out
+
+
+_DIRECT = 4  # fields gathered one by one when they hold at most 1/4 of a record's bytes
+
+
+def _field_view(a: np.ndarray, payload: np.ndarray | np.dtype, name: str) -> np.ndarray:
+    """Overlapping view: element ``k`` is field ``name`` of a ``payload`` read at byte
+    ``k`` of the file.
+
+    Examples
+    --------
+    >>> dt = np.dtype({"names": ["f0", "f1"], "formats": ["<u1", "<u2"], "offsets": [0, 1]})
+    >>> _field_view(np.arange(6, dtype=np.uint8), dt, "f1")[[0, 2]].tolist()
+    [513, 1027]
+    """
+    fdt, ofs = np.dtype(payload).fields[name][:2]  # type: ignore[index]
+    count = a.size - ofs - fdt.itemsize + 1
+    if count <= 0:
+        return np.zeros(0, fdt)
+    return np.ndarray((count,), dtype=fdt, buffer=a, offset=ofs, strides=(1,))
 
 
 def _quiet_nans(v: np.ndarray) -> None:

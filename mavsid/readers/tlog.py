@@ -238,10 +238,10 @@ class _Frames:
 
     start: NDArray[np.int64]  # record start (receive time)
     payload: NDArray[np.int64]  # payload start
-    length: NDArray[np.int64]  # payload bytes on the wire
-    msgid: NDArray[np.int64]
-    sysid: NDArray[np.int64]
-    compid: NDArray[np.int64]
+    length: NDArray[np.uint8]  # payload bytes on the wire
+    msgid: NDArray[np.int32]
+    sysid: NDArray[np.uint8]
+    compid: NDArray[np.uint8]
     recv_s: NDArray[np.float64]
     skipped_bytes: int  # not decoded
     garbage_bytes: int  # not decoded and not a frame of unknown id either
@@ -294,7 +294,10 @@ def _scan(buf: NDArray[np.uint8], size: int, defs: dict[int, MessageDef]) -> _Fr
     valid = _resolve_overlaps(start, end, size)
     first, last = start[valid], end[valid]
     del start, end
-    hdr, mlen, msgid, sysid, compid = (x[valid] for x in (hdr, mlen, msgid, sysid, compid))
+    hdr = hdr[valid]
+    # compact types for what is kept per frame (payload length, ids: bytes; message id: 24 bits)
+    mlen, sysid, compid = (x[valid].astype(np.uint8) for x in (mlen, sysid, compid))
+    msgid = msgid[valid].astype(np.int32)
     odd = _unknown_frames(odd_start, odd_end, first, last, size)
     # gaps: bytes in neither a valid frame nor a frame of unknown id
     starts = np.concatenate([first, odd_start[odd]])
@@ -510,7 +513,7 @@ def _payloads(
 ) -> NDArray[np.uint8]:
     """``width`` payload bytes from offset ``at`` of the given frames, zeros past their end."""
     raw = _windows(buf, frames.payload[rows] + at, width)
-    length = frames.length[rows] - at
+    length = frames.length[rows].astype(np.int64) - at
     short = np.flatnonzero(length < width)
     if short.size:
         cut = np.arange(width)[None, :] >= length[short, None]
@@ -700,7 +703,7 @@ _FIRMWARE = re.compile(r"^(Ardu\w+|APM:\w+|PX4\w*|Rover|AntennaTracker|Blimp)\s+
 _FRAME = "Frame:"
 
 
-def _groups(keys: NDArray[np.int64]) -> dict[int, NDArray[np.int64]]:
+def _groups(keys: NDArray[np.integer]) -> dict[int, NDArray[np.int64]]:
     """key -> indices of ``keys`` equal to it, in their original order."""
     if not keys.size:
         return {}
@@ -713,7 +716,7 @@ def _groups(keys: NDArray[np.int64]) -> dict[int, NDArray[np.int64]]:
 
 
 def _clock_offsets(
-    pieces: list[tuple[NDArray[np.int64], NDArray[np.float64]]],
+    pieces: list[tuple[NDArray[np.integer], NDArray[np.float64]]],
     vehicles: set[int],
     main: int | None,
 ) -> NDArray[np.float64]:

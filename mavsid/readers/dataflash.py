@@ -15,10 +15,16 @@ A DataFlash log is a sequence of records ``0xA3 0x95 <type> <payload>``. FMT rec
    garbage; not a header-like pattern inside a cut last record, nor one of a flood of header
    patterns). From the first record, each record is
    followed by the next one at or after its end, so garbage is skipped and reading resumes on
-   the next valid record;
+   the next valid record. The rules are evaluated on the few candidates not followed at once
+   by the next one; every other candidate is a record of the chain;
 4. decodes only the records asked for: each type's records are copied out of the file
-   through an overlapping view in cache-sized slices (one fancy-indexing call per slice) and
-   every field is written straight into its preallocated column.
+   through an overlapping view in cache-sized slices (one fancy-indexing call per slice; a
+   few narrow columns of wide records, field by field) and every field is written straight
+   into its preallocated column (a message's columns are carved out of one allocation), a
+   64 MB block of the file at a time for every message.
+
+A cold read (the first in a process) pays for every fresh page it writes: the reader keeps
+its temporaries few and small and writes results in place.
 
 Values are those pymavlink presents: format characters ``c C e E`` are divided by 100 and ``L``
 by 1e7 (as pymavlink does it: ``value / (1 / multiplier)``), ``a`` is an ``int16[32]`` row,
@@ -80,7 +86,6 @@ __all__ = [
 ]
 
 _HEAD1, _HEAD2 = 0xA3, 0x95
-_HEAD_U16 = _HEAD1 | (_HEAD2 << 8)
 _FMT_TYPE = 0x80
 _FMT_LEN = 89
 _CHUNK = 1 << 20  # bytes scanned per step when looking for headers

@@ -431,6 +431,136 @@ def test_chain_follows_the_greedy_rule(nodes):
     assert dataflash._chain(pos, end).tolist() == expected
 
 
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.integers(1, 12), st.booleans()), min_size=1, max_size=60),
+       st.integers(0, 2**32 - 1))
+def test_chain_over_nodes_in_place_equals_chaining_the_nodes_copied_out(spans, seed):
+    """``_chain_nodes`` (with and without the suspects it may be given) visits what the
+    greedy chain of the nodes alone visits, and its runs cover exactly those candidates."""
+    rng = random.Random(seed)
+    pos = np.cumsum([0] + [rng.choice([1, 2, 3, 4]) for _ in spans[1:]]).astype(np.int32)
+    end = pos + np.array([n for n, _ in spans], np.int32)
+    node = np.array([b for _, b in spans], bool)
+    expected = np.zeros(pos.size, bool)
+    expected[np.flatnonzero(node)[dataflash._chain(pos[node], end[node])]] = True
+    fwd = np.zeros(pos.size, bool)
+    fwd[:-1] = end[:-1] == pos[1:]
+    skip = np.flatnonzero(~node).astype(np.int32)
+    for args in ((), ((np.flatnonzero(~fwd), skip - 1), skip)):
+        keep, starts, stops = dataflash._chain_nodes(pos, end, node, *args)
+        assert keep.tolist() == expected.tolist()
+        runs = np.zeros(pos.size, bool)
+        for a, b in zip(starts.tolist(), stops.tolist(), strict=True):
+            runs[a:b] = True
+            assert (end[a : b - 1] == pos[a + 1 : b]).all()  # a run leaves no gap
+        assert runs.tolist() == expected.tolist()
+
+
+def _frame_reference(a, cand, types, table):
+    """The framing rules evaluated on every candidate with full-length flags (the
+    implementation before the suspects-only one), as the reference it must equal."""
+    n, m = a.size, cand.size
+    defid = dataflash._assign_definitions(cand, types, table)
+    lengths = np.array([d.length for d in table.defs] + [0], cand.dtype)
+    end = lengths[defid] + cand
+    known = end > cand
+    complete = known & (end <= n)
+    fwd = np.zeros(m, bool)
+    fwd[:-1] = end[:-1] == cand[1:]
+    has_in = np.zeros(m + 1, bool)
+    has_in[1:] = fwd
+    rest = np.flatnonzero(complete & ~fwd)
+    j = np.searchsorted(cand, end[rest], side="left")
+    found = j < m
+    found[found] = cand[j[found]] == end[rest[found]]
+    fwd[rest[found]] = True
+    has_in[j[found]] = True
+    backed = (fwd | has_in[:m]) & known
+    node = complete & backed
+    weak = np.flatnonzero(complete & ~backed & (types != 0x80))
+    near = dataflash._near
+    weak = weak[~near(weak, -16, backed,
+                      lambda k, nb: end[nb] > cand[weak[k:k + nb.shape[0]], None])]
+    weak = weak[~near(weak, 16, np.ones(m, bool),
+                      lambda k, nb: cand[nb] < end[weak[k:k + nb.shape[0]], None])]
+    node[weak] = True
+    plausible = np.zeros(m, bool)
+    plausible[np.searchsorted(cand, np.array(table.plausible, cand.dtype))] = True
+    node |= plausible
+    back = np.flatnonzero(node & ~fwd)
+    node[back[near(back, 16, fwd | plausible,
+                   lambda k, nb: cand[nb] < end[back[k:k + nb.shape[0]], None])]] = False
+    keep = node.copy()
+    keep[node] = False
+    keep[np.flatnonzero(node)[dataflash._chain(cand[node], end[node])]] = True
+    return cand[keep], defid[keep]
+
+
+@pytest.mark.parametrize("mutator", ["bit_flips", "garbage", "splice", "corrupt_definitions",
+                                     "repeat_definition", "header_flood", "truncate"])
+def test_framing_on_suspects_equals_the_full_length_rules(mutator):
+    """Mutated logs (the fuzz corpus's mutations of the shared and bundled .bin seeds):
+    the records the reader accepts are those of the rules evaluated on every candidate,
+    and the headers it finds are every ``A3 95`` pair of the file."""
+    from fuzz import mutate
+
+    seeds = [s for s in mutate.available_seeds() if s.endswith(".bin")]
+    for seed in seeds:
+        for k in range(4):
+            data = mutate.mutate(seed, mutator, k)
+            a = np.frombuffer(data, np.uint8)
+            cand, types = dataflash._find_headers(a)
+            pairs = [i for i in range(len(data) - 2) if data[i:i + 2] == b"\xa3\x95"]
+            assert cand.tolist() == pairs
+            assert types.tolist() == [data[i + 2] for i in pairs]
+            fmt = cand[types == 0x80]
+            table = dataflash._read_definitions(a, fmt[fmt <= a.size - 89])
+            framing = dataflash._frame(a, cand, types, table)
+            pos, defid = _frame_reference(a, cand, types, table)
+            assert framing.pos.tolist() == pos.tolist(), (seed, mutator, k)
+            assert framing.defid.tolist() == defid.tolist()
+
+
+@pytest.mark.parametrize("parts", [SMALL, ("public", "ArduPilot__MethodicConfigurator",
+                                            "backend_log_80k.bin")], ids=["pymavlink", "mc80k"])
+def test_times_only_columns_equal_the_full_decode(parts):
+    """The columns a times-only read decodes (gathered field by field from the file when
+    they are a small part of the record) hold the full decode's values, NaN for NaN."""
+    path = shared_path(*parts)
+    full = _decode_quietly(path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        light = read_log(path, messages=["ATT"], times_only=True)
+    assert full is not None and set(light.messages) == set(full.messages)
+    for name, table in light.messages.items():
+        assert _same_column(table.time_s, full[name].time_s)
+        for column in table.columns:
+            assert _same_column(table[column], full[name][column]), (name, column)
+
+
+def test_header_search_grows_past_its_estimate():
+    """A file denser in header patterns than a log (its result grows by doubling)."""
+    data = bytes(3000) + b"\xa3\x95\x81" * 50_000 + b"\xa3\x95"
+    cand, types = dataflash._find_headers(np.frombuffer(data, np.uint8))
+    assert cand.tolist() == list(range(3000, 3000 + 150_000, 3))
+    assert set(types.tolist()) == {0x81}
+
+
+def test_columns_from_one_block_are_independent():
+    cols = dataflash._alloc_columns(5, {"a": (np.dtype(np.uint8), ()),
+                                        "b": (np.dtype(np.float64), ()),
+                                        "s": (np.dtype(object), ()),
+                                        "r": (np.dtype(np.int16), (32,))})
+    cols["a"][:] = 255
+    cols["b"][:] = -1.5
+    cols["r"][:] = 7
+    cols["s"][:] = "x"
+    assert cols["a"].tolist() == [255] * 5 and cols["b"].tolist() == [-1.5] * 5
+    assert cols["r"].shape == (5, 32) and (cols["r"] == 7).all()
+    assert all(v.flags.c_contiguous and v.flags.aligned for v in cols.values())
+    assert not np.shares_memory(cols["a"], cols["b"])
+
+
 @pytest.mark.parametrize("body", [b"\xa3\x95\x81" * 100_000,
                                   (b"\xa3\x95\x81\xa3\x95" + bytes(range(3))) * 40_000,
                                   b"\xa3\x95" * 150_000], ids=["triples", "mixed", "pairs"])

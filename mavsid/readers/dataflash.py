@@ -15,10 +15,16 @@ A DataFlash log is a sequence of records ``0xA3 0x95 <type> <payload>``. FMT rec
    garbage; not a header-like pattern inside a cut last record, nor one of a flood of header
    patterns). From the first record, each record is
    followed by the next one at or after its end, so garbage is skipped and reading resumes on
-   the next valid record;
+   the next valid record. The rules are evaluated on the few candidates not followed at once
+   by the next one; every other candidate is a record of the chain;
 4. decodes only the records asked for: each type's records are copied out of the file
-   through an overlapping view in cache-sized slices (one fancy-indexing call per slice) and
-   every field is written straight into its preallocated column.
+   through an overlapping view in cache-sized slices (one fancy-indexing call per slice; a
+   few narrow columns of wide records, field by field) and every field is written straight
+   into its preallocated column (a message's columns are carved out of one allocation), a
+   64 MB block of the file at a time for every message.
+
+A cold read (the first in a process) pays for every fresh page it writes: the reader keeps
+its temporaries few and small and writes results in place.
 
 Values are those pymavlink presents: format characters ``c C e E`` are divided by 100 and ``L``
 by 1e7 (as pymavlink does it: ``value / (1 / multiplier)``), ``a`` is an ``int16[32]`` row,
@@ -50,13 +56,14 @@ Examples
 from __future__ import annotations
 
 import array
+import functools
 import itertools
 import mmap
 import os
 import re
 import struct
 import warnings
-from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from functools import cached_property, lru_cache
 
@@ -79,7 +86,6 @@ __all__ = [
 ]
 
 _HEAD1, _HEAD2 = 0xA3, 0x95
-_HEAD_U16 = _HEAD1 | (_HEAD2 << 8)
 _FMT_TYPE = 0x80
 _FMT_LEN = 89
 _CHUNK = 1 << 20  # bytes scanned per step when looking for headers
@@ -290,29 +296,36 @@ def _find_headers(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Offsets of every ``0xA3 0x95`` byte pair followed by a type byte, ascending, and
     those type bytes.
 
-    The file is compared as 16-bit words at both byte parities, in cache-sized chunks; the
-    two ascending hit lists are merged by a stable sort (a single merge of two runs).
+    One pass over the file in cache-sized chunks: both header bytes are compared into two
+    reused boolean buffers and the hits written straight into the result (grown by doubling
+    when a file holds more headers than a log usually does), so that a cold read touches
+    little fresh memory beyond the result itself.
     """
     n = a.size
     dt = _index_dtype(n)
-    found, types = [np.zeros(0, dt)], [np.zeros(0, np.uint8)]
+    chunk = min(_CHUNK, max(n - 2, 1))
+    first, second = np.empty(chunk, bool), np.empty(chunk, bool)
+    size = max(n // 40, 1024)  # a log has a record per ~50 bytes
+    found, types = np.empty(size, dt), np.empty(size, np.uint8)
+    count = 0
     for start in range(0, max(n - 2, 0), _CHUNK):
-        seg = a[start : min(n, start + _CHUNK + 2)]
-        limit = min(_CHUNK, seg.size - 2)  # a header needs its type byte
-        parts = []
-        for parity in (0, 1):
-            sub = seg[parity : parity + 2 * ((limit - parity + 1) // 2)]
-            hits = np.flatnonzero(sub.view("<u2") == _HEAD_U16).astype(dt)
-            hits *= 2
-            hits += parity
-            parts.append(hits)
-        hits = np.concatenate(parts)
-        hits.sort(kind="stable")
-        found.append(hits + dt(start))  # chunks come in order
-        types.append(seg[hits + 2])
+        limit = min(_CHUNK, n - 2 - start)  # a header needs its type byte
+        hit = np.equal(a[start : start + limit], _HEAD1, out=first[:limit])
+        hit &= np.equal(a[start + 1 : start + limit + 1], _HEAD2, out=second[:limit])
+        at = np.flatnonzero(hit)
+        k = at.size
+        if count + k > found.size:
+            grow = max(found.size, k)
+            found = np.concatenate([found[:count], np.empty(grow, dt)])
+            types = np.concatenate([types[:count], np.empty(grow, np.uint8)])
+        at += start
+        np.copyto(found[count : count + k], at, casting="unsafe")
+        at += 2
+        types[count : count + k] = a[at]
+        count += k
         if (start // _CHUNK) % 16 == 15:
             _release(a, start - 15 * _CHUNK, start)
-    return np.concatenate(found), np.concatenate(types)
+    return found[:count], types[:count]
 
 
 def _decode_text(raw: bytes) -> str:
@@ -593,7 +606,8 @@ def _chain_mask(pos: np.ndarray, end: np.ndarray) -> np.ndarray:
 
 
 def _near(
-    idx: np.ndarray, span: int, flag: np.ndarray, hit: Callable[[int, np.ndarray], np.ndarray]
+    idx: np.ndarray, span: int, flag: np.ndarray | None,
+    hit: Callable[[int, np.ndarray], np.ndarray], size: int | None = None,
 ) -> np.ndarray:
     """For each candidate index in ``idx``: is one of the ``|span|`` candidates before
     (``span < 0``) or after it ``flag``-ged and satisfying ``hit``?
@@ -601,16 +615,21 @@ def _near(
     ``hit(k, nb)`` receives the first position ``k`` in ``idx`` of a block and the
     neighbours' indices (shape ``(block, |span|)``) and returns a boolean array of that
     shape. Headers inside one record are few, so a short look-around replaces a search over
-    all candidates.
+    all candidates. ``flag`` None stands for every one of ``size`` candidates (default: as
+    many as ``flag`` has).
     """
+    size = flag.size if flag is not None else size
+    assert size is not None
     out = np.zeros(idx.size, bool)
     steps = np.arange(1, abs(span) + 1) * (1 if span > 0 else -1)
     block = 1 << 12  # bounded temporaries, whatever the number of such candidates
     for k in range(0, idx.size, block):
         nb = idx[k : k + block, None] + steps
-        valid = (nb >= 0) & (nb < flag.size)
-        nb = np.clip(nb, 0, flag.size - 1)
-        out[k : k + block] = np.any(valid & flag[nb] & hit(k, nb), axis=1)
+        valid = (nb >= 0) & (nb < size)
+        nb = np.clip(nb, 0, size - 1)
+        if flag is not None:
+            valid &= flag[nb]
+        out[k : k + block] = np.any(valid & hit(k, nb), axis=1)
     return out
 
 
@@ -623,66 +642,169 @@ class _Framing:
 
 
 def _frame(a: np.ndarray, cand: np.ndarray, types: np.ndarray, table: _Definitions) -> _Framing:
-    """The accepted records among the header candidates ``cand`` (see the module doc)."""
+    """The accepted records among the header candidates ``cand`` (see the module doc).
+
+    Nearly every candidate of a log is followed by the next one exactly where it ends; only
+    the others (*suspects*: header-like bytes inside a record, garbage, the last record,
+    undefined types) need the evidence rules, so these are evaluated on the suspects alone
+    and the full-length flags are set from them: few passes over the candidates and little
+    fresh memory, which is what a cold read pays for.
+    """
     n = a.size
     m = cand.size
     defid = _assign_definitions(cand, types, table)
     lengths = np.array([d.length for d in table.defs] + [0], cand.dtype)
     end = _lookup(lengths, defid)  # undefined (-1) -> the sentinel 0
     end += cand
-    known = end > cand
-    complete = known & (end <= n)
     # forward evidence: the next header starts where this record ends. The common case, the
     # very next candidate, is checked first; only the rest needs a binary search.
     fwd = np.zeros(m, bool)
     np.equal(end[:-1], cand[1:], out=fwd[:-1])
-    # backward evidence: the record before ends here
-    has_in = np.zeros(m + 1, bool)
-    has_in[1:] = fwd
-    rest = np.flatnonzero(complete & ~fwd)
+    sus = np.flatnonzero(~fwd).astype(cand.dtype)  # not followed at once (few, in a log)
+    # outside ``sus`` a candidate is known (defined types have a length), complete (it ends
+    # at the next candidate), has forward and backward evidence: a node
+    known = end[sus] > cand[sus]
+    complete = known & (end[sus] <= n)
+    # backward evidence of the suspects: the candidate before ends here, or a suspect's
+    # end is found further on
+    has_in = np.zeros(sus.size, bool)
+    has_in[sus > 0] = fwd[sus[sus > 0] - 1]
+    rest = sus[complete]
     j = np.searchsorted(cand, end[rest], side="left")
     found = j < m
     found[found] = cand[j[found]] == end[rest[found]]
     fwd[rest[found]] = True
-    has_in[j[found]] = True
-    del rest, j, found
-    backed = fwd | has_in[:m]
-    backed &= known
-    del has_in, known
-    node = complete & backed
+    at = np.searchsorted(sus, j[found])  # found candidates that are suspects themselves
+    inside = at < sus.size
+    inside[inside] = sus[at[inside]] == j[found][inside]
+    has_in[at[inside]] = True
+    del rest, j, found, at, inside
+    fwd_sus = fwd[sus]
+    backed_sus = (fwd_sus | has_in) & known
+    backed = np.ones(m, bool)
+    backed[sus] = backed_sus
+    node_sus = complete & backed_sus
     # a lone record between two stretches of garbage has neither kind of evidence: take it
     # unless it lies inside the declared span of a backed header (e.g. a cut last record)
     # (FMT records need plausible content instead, below)
-    weak = np.flatnonzero(complete & ~backed & (types != _FMT_TYPE))
+    weak = sus[complete & ~backed_sus & (types[sus] != _FMT_TYPE)]
     weak = weak[~_near(weak, -_NEAR, backed,
                        lambda k, nb: end[nb] > cand[weak[k : k + nb.shape[0]], None])]
     # ... and that has no other header inside it (not one of a flood of header patterns)
-    weak = weak[~_near(weak, _NEAR, np.ones(m, bool),
-                       lambda k, nb: cand[nb] < end[weak[k : k + nb.shape[0]], None])]
+    weak = weak[~_near(weak, _NEAR, None,
+                       lambda k, nb: cand[nb] < end[weak[k : k + nb.shape[0]], None], m)]
+    node = backed  # reused: every candidate outside ``sus`` is a node
+    node[sus] = node_sus
     node[weak] = True
-    plausible = np.zeros(m, bool)
-    plausible[np.searchsorted(cand, np.array(table.plausible, cand.dtype))] = True
-    node |= plausible
+    plausible = np.searchsorted(cand, np.array(table.plausible, cand.dtype))
+    node[plausible] = True
+    del backed, backed_sus, node_sus, known, complete, has_in
     # a record with backward evidence only must not swallow one with forward evidence, nor
     # an FMT record whose content checks out (garbage on both sides of it leaves it no chain,
     # and its own header bytes can look like a defined type's header just before it)
-    back_only = np.flatnonzero(node & ~fwd)
-    swallows = _near(back_only, _NEAR, fwd | plausible,
+    back_only = sus[node[sus] & ~fwd_sus]
+    fwd[plausible] = True  # now: forward evidence or plausible content
+    swallows = _near(back_only, _NEAR, fwd,
                      lambda k, nb: cand[nb] < end[back_only[k : k + nb.shape[0]], None])
     node[back_only[swallows]] = False
-    del fwd, complete, backed
-    if node.all():  # the usual case: no header-like pattern inside any record
-        keep = _chain_mask(cand, end)
-    else:  # chain the nodes only
-        keep = node
-        keep[node] = _chain_mask(cand[node], end[node])
+    del fwd, fwd_sus, swallows, plausible
+    # a node may break the chain only where it is a suspect or the next one is not a node
+    skip = np.flatnonzero(~node).astype(cand.dtype)
+    keep, starts, stops = _chain_nodes(cand, end, node, (sus, skip - 1), skip)
     del node
-    pos = cand[keep]
-    end = end[keep]
-    defid = defid[keep]
-    del keep
-    skipped = _skipped_regions(n, pos, end) if pos.size else (pos[:0], pos[:0])
-    return _Framing(pos, defid, *skipped)
+    skipped = _run_gaps(n, cand, end, starts, stops)
+    return _Framing(cand[keep], defid[keep], *skipped)
+
+
+def _chain_nodes(
+    pos: np.ndarray, end: np.ndarray, node: np.ndarray,
+    suspects: Sequence[np.ndarray] | None = None, skip: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_chain_mask` over the ``node`` candidates only, without copying them out:
+    which candidates the chain visits, and the runs it takes whole (``starts``, ``stops``:
+    candidate index ranges, each record of a run ending where the next one starts).
+
+    A node is *regular* when the next candidate is a node starting where it ends; the chain
+    takes runs of regular nodes whole and looks up, for each other node, the first node at
+    or after its end (skipping the few candidates that are not nodes).
+
+    Examples
+    --------
+    >>> pos, end = np.array([0, 3, 5, 6, 9]), np.array([3, 6, 6, 9, 12])
+    >>> keep, starts, stops = _chain_nodes(pos, end, np.array([1, 1, 0, 1, 1], bool))
+    >>> keep.tolist(), starts.tolist(), stops.tolist()
+    ([True, True, False, True, True], [0, 3], [2, 5])
+
+    ``suspects`` (arrays of candidate indices) and ``skip`` (the non-nodes, ascending), when
+    given, spare the passes over all candidates: only suspects may be irregular.
+    """
+    m = pos.size
+    none = np.zeros(0, np.int64)
+    if m == 0:
+        return np.zeros(0, bool), none, none
+    if suspects is None:
+        regular = np.zeros(m, bool)
+        np.equal(end[:-1], pos[1:], out=regular[:-1])
+        regular[:-1] &= node[1:]
+        irr = np.flatnonzero(node & ~regular)  # never empty when a node exists: the last one
+        del regular
+    else:  # only these may be irregular
+        irr = np.zeros(0, np.int64)
+        for some in suspects:
+            some = some[(some >= 0) & (some < m)]
+            irr = np.union1d(irr, some[node[some]])
+        nxt = np.minimum(irr + 1, m - 1)
+        irr = irr[(irr == m - 1) | (end[irr] != pos[nxt]) | ~node[nxt]]
+    if irr.size == 0:
+        return np.zeros(m, bool), none, none
+    if skip is None:
+        skip = np.flatnonzero(~node)  # candidates that are not nodes (few)
+    # per non-node: the first index after its run of consecutive non-nodes
+    brk = np.flatnonzero(np.diff(skip) != 1)
+    run_end = np.repeat(np.append(skip[brk], skip[-1:]) + 1 if skip.size else skip,
+                        np.diff(np.concatenate([[0], brk + 1, [skip.size]])))
+
+    def next_node(j: np.ndarray) -> np.ndarray:  # first node at index >= j
+        k = np.searchsorted(skip, j)
+        inside = k < skip.size
+        inside[inside] = skip[k[inside]] == j[inside]
+        out = j.copy()
+        out[inside] = run_end[k[inside]]
+        return out
+
+    after = next_node(np.searchsorted(pos, end[irr], side="left"))  # where the chain goes on
+    next_irr = array.array("q", np.searchsorted(irr, after, side="left").astype(np.int64)
+                           .tobytes())
+    after_a = array.array("q", after.astype(np.int64).tobytes())
+    irr_a = array.array("q", irr.astype(np.int64).tobytes())
+    starts, stops = array.array("q"), array.array("q")
+    c = int(next_node(np.zeros(1, np.int64))[0])
+    k = int(np.searchsorted(irr, c))
+    while c < m:  # c strictly increases: always progresses
+        starts.append(c)
+        stops.append(irr_a[k] + 1)
+        c = after_a[k]
+        if c >= m:
+            break
+        k = next_irr[k]
+    first, last = np.frombuffer(starts, np.int64), np.frombuffer(stops, np.int64)
+    edges = np.empty(2 * first.size + 2, np.int64)
+    edges[0], edges[-1] = 0, m
+    edges[1:-1:2] = first
+    edges[2:-1:2] = last
+    on = np.zeros(edges.size - 1, bool)
+    on[1::2] = True
+    return np.repeat(on, np.diff(edges)), first, last
+
+
+def _run_gaps(
+    n: int, pos: np.ndarray, end: np.ndarray, starts: np.ndarray, stops: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_skipped_regions` of the records in runs ``starts..stops`` of candidates
+    (records within a run leave no gap: only the runs' edges are looked at)."""
+    if starts.size == 0:
+        return pos[:0], pos[:0]
+    return _skipped_regions(n, pos[starts], end[stops - 1])
 
 
 # --------------------------------------------------------------------------- decoding
@@ -711,49 +833,54 @@ _BLOCK_BYTES = 1 << 26  # file bytes decoded (for every message) before their pa
 
 
 def _gather_by_block(
-    a: np.ndarray, jobs: Mapping[str, tuple[Definition, np.ndarray]],
-    only: Mapping[str, Collection[str]] | None = None,
-) -> dict[str, dict[str, np.ndarray]]:
-    """:func:`_gather_into` for several messages (name -> definition and ascending record
-    offsets), a block of the file at a time for all of them, each block's pages released
-    once it is done (so the file is mapped into the process about once, a block at a time,
-    instead of once per message type). ``only`` limits a message to some of its columns."""
-    only = only or {}
-    outs = {name: {c: np.empty((pos.size, *shape), dt)
-                   for c, (_, _, dt, shape) in _layout(d).items()
-                   if name not in only or c in only[name]}
-            for name, (d, pos) in jobs.items()}
-    done = dict.fromkeys(jobs, 0)
+    a: np.ndarray, jobs: Sequence[tuple[Definition, np.ndarray, dict[str, np.ndarray]]],
+) -> None:
+    """:func:`_gather_into` for several jobs (definition, ascending record offsets, the
+    columns to fill), a block of the file at a time for all of them, each block's pages
+    released once it is done (so the file is mapped into the process about once, a block
+    at a time, instead of once per message type)."""
+    done = [0] * len(jobs)
     for lo in range(0, a.size, _BLOCK_BYTES):
-        for name, (d, pos) in jobs.items():
-            k = done[name]
+        for j, (d, pos, out) in enumerate(jobs):
+            k = done[j]
             stop = int(np.searchsorted(pos, lo + _BLOCK_BYTES))
             if stop > k:
-                _gather_into(a, d, pos[k:stop], {c: v[k:stop] for c, v in outs[name].items()},
-                             release=False)
-                done[name] = stop
+                _gather_into(a, d, pos[k:stop], {c: v[k:stop] for c, v in out.items()},
+                             release=False, quiet=False)
+                done[j] = stop
         _release(a, lo, lo + _BLOCK_BYTES)
-    return outs
+    for d, _, out in jobs:  # once per column, not per slice
+        layout = _layout(d)
+        for c, v in out.items():
+            if v.dtype.kind == "f" and layout[c][1] in _PLAIN:
+                _quiet_nans(v)
 
 
 def _gather_into(
     a: np.ndarray, d: Definition, pos: np.ndarray, out: dict[str, np.ndarray] | None = None,
-    release: bool = True,
+    release: bool = True, quiet: bool = True,
 ) -> dict[str, np.ndarray]:
     """Decode the records of definition ``d`` at offsets ``pos`` into ``out`` (arrays of
     ``pos.size`` rows, allocated when not given).
 
     Records are copied out of the file in slices that fit a CPU cache, then each field
     is written straight into its column. With ``release``, the file's pages are handed back
-    as the records are passed (see :func:`_release`).
+    as the records are passed (see :func:`_release`); without ``quiet``, float columns
+    copied as stored may keep signalling NaNs (the caller quiets them,
+    :func:`_quiet_nans`).
     """
     layout = _layout(d)
     if out is None:
-        out = {c: np.empty((pos.size, *shape), dt) for c, (_, _, dt, shape) in layout.items()}
+        out = _alloc_columns(pos.size, {c: (dt, shape) for c, (_, _, dt, shape) in layout.items()})
     # (payload field, format character or None when a plain copy does, column)
     fields = [(f, None if ch in _PLAIN and col.dtype != object else ch, col)
               for c, (f, ch, _, _) in layout.items() if (col := out.get(c)) is not None]
     step = max(1, _GATHER_BYTES // max(d.payload_dtype.itemsize, 1))
+    # a few narrow fields of a wide record (times only): each gathered on its own from
+    # the file, not the whole records
+    pdt = d.payload_dtype
+    spans: Mapping[str, tuple[np.dtype, int]] = pdt.fields or {}  # type: ignore[assignment]
+    direct = _DIRECT * sum(int(spans[f][0].itemsize) for f, _, _ in fields) <= pdt.itemsize
     done = 0  # file bytes before this are not needed again for this definition
     k = 0
     while k < pos.size:
@@ -761,11 +888,17 @@ def _gather_into(
         # (each record touched maps file pages into the process until released)
         stop = min(k + step, int(np.searchsorted(pos, pos[k] + _SPAN_BYTES)))
         stop = max(stop, k + 1)
-        recs = _records(a, d.payload_dtype, pos[k:stop] + 3)
+        recs: Mapping[str, np.ndarray] | np.ndarray
+        if direct:
+            at = pos[k:stop].astype(np.intp)
+            at += 3
+            recs = {f: _field_view(a, pdt, f)[at] for f, _, _ in fields}
+        else:
+            recs = _records(a, pdt, pos[k:stop] + 3)
         for f, ch, col in fields:
             if ch is None:
                 col[k:stop] = recs[f]
-                if col.dtype.kind == "f":
+                if quiet and col.dtype.kind == "f":
                     _quiet_nans(col[k:stop])
             else:
                 _column_into(recs[f], ch, d.name, col[k:stop])
@@ -776,6 +909,26 @@ def _gather_into(
     if release:
         _release(a, done, a.size)
     return out
+
+
+_DIRECT = 4  # fields gathered one by one when they hold at most 1/4 of a record's bytes
+
+
+def _field_view(a: np.ndarray, payload: np.ndarray | np.dtype, name: str) -> np.ndarray:
+    """Overlapping view: element ``k`` is field ``name`` of a ``payload`` read at byte
+    ``k`` of the file.
+
+    Examples
+    --------
+    >>> dt = np.dtype({"names": ["f0", "f1"], "formats": ["<u1", "<u2"], "offsets": [0, 1]})
+    >>> _field_view(np.arange(6, dtype=np.uint8), dt, "f1")[[0, 2]].tolist()
+    [513, 1027]
+    """
+    fdt, ofs = np.dtype(payload).fields[name][:2]  # type: ignore[index]
+    count = a.size - ofs - fdt.itemsize + 1
+    if count <= 0:
+        return np.zeros(0, fdt)
+    return np.ndarray((count,), dtype=fdt, buffer=a, offset=ofs, strides=(1,))
 
 
 def _quiet_nans(v: np.ndarray) -> None:
@@ -1243,7 +1396,7 @@ def _read_buffer(
     untimed = [i for i in groups if not timed[i]]
     src: tuple[np.ndarray, np.ndarray] = (np.zeros(0, idx_dt), np.zeros(0))
     if untimed:
-        k = np.sort(np.concatenate([groups[i][0] for i in untimed]))
+        k = _sorted_concat([groups[i][0] for i in untimed])
         held, src = _held_times(a, framing, table, timed, k if sel is None else sel[k])
         for i in untimed:
             k_i, pos_i, _ = groups[i]
@@ -1294,16 +1447,30 @@ def _read_buffer(
                    if c in INSTANCE_COLUMNS or ch in "BbM"
                    or (d.time_field is not None and c == d.time_field[0])}
             for name, (d, *_) in single.items() if skeleton(name)}
-    prefilled = _gather_by_block(a, {name: (d, pos) for name, (d, _, pos, _) in single.items()},
-                                 only)
+    jobs: list[tuple[Definition, np.ndarray, dict[str, np.ndarray]]] = []
+    prefilled: dict[str, tuple[dict[str, np.ndarray], Callable[[], np.ndarray]]] = {}
+    for name, parts in all_parts.items():
+        if name in single:
+            d, _, pos, t = single[name]
+            keep_cols = only.get(name)
+            cols = _alloc_columns(pos.size, {c: (dt, shape)
+                                             for c, (_, _, dt, shape) in _layout(d).items()
+                                             if keep_cols is None or c in keep_cols})
+            jobs.append((d, pos, cols))
+            prefilled[name] = (cols, functools.partial(_times_of, d, cols) if t is None
+                               else functools.partial(np.asarray, t))
+        elif (plan := _plan_message(a, parts)) is not None:
+            jobs.extend(plan[1])
+            prefilled[name] = (plan[0], plan[2])
+    _gather_by_block(a, jobs)
+    del jobs
     for name, parts in all_parts.items():
         if name in prefilled:
-            d, _, _, t = parts[0]
-            cols = prefilled.pop(name)
-            t = _times_of(d, cols) if t is None else t
+            cols, times_of = prefilled.pop(name)
+            t = times_of()
         else:
             cols, t = _decode_message(a, parts)
-        keys = parts[0][1] if len(parts) == 1 else np.sort(np.concatenate([p[1] for p in parts]))
+        keys = parts[0][1] if len(parts) == 1 else _sorted_concat([p[1] for p in parts])
         timeline[keys.astype(np.intp)] = t
         del parts, keys
         if name in _META_NAMES:
@@ -1333,6 +1500,22 @@ def _read_buffer(
     return assemble(source, columns, time_s, defs_by_name,
                     None if times_only else wanted, meta_columns, meta_times,
                     declared=declared)
+
+
+def _sorted_concat(parts: Sequence[np.ndarray]) -> np.ndarray:
+    """Ascending arrays joined in ascending order (sorted only when they interleave: parts
+    that follow one another in the file need no sort).
+
+    Examples
+    --------
+    >>> _sorted_concat([np.array([5, 6]), np.array([1, 2])]).tolist()
+    [1, 2, 5, 6]
+    """
+    parts = sorted(parts, key=lambda p: p[0] if p.size else -1)
+    out = np.concatenate(parts)
+    if out.size > 1 and bool(np.any(out[1:] < out[:-1])):
+        out.sort(kind="stable")
+    return out
 
 
 def window_mask(t: np.ndarray, start: float | None, stop: float | None) -> np.ndarray | None:
@@ -1476,19 +1659,40 @@ def _decode_message(
         d, _, pos, t = parts[0]
         cols = _gather_into(a, d, pos)
         return cols, _times_of(d, cols) if t is None else t
+    plan = _plan_message(a, parts)
+    if plan is None:
+        parts = sorted(parts, key=lambda part: int(part[1][0]) if part[1].size else -1)
+        decoded = [(d, k, _gather_into(a, d, p)) for d, k, p, _ in parts]
+        return _merge([(d, k, cols, _times_of(d, cols) if t is None else t)
+                       for (d, k, cols), (_, _, _, t) in zip(decoded, parts, strict=True)])
+    out, jobs, finish = plan
+    for d, pos, own in jobs:
+        _gather_into(a, d, pos, own)
+    return out, finish()
+
+
+_Plan = tuple[dict[str, np.ndarray], list[tuple[Definition, np.ndarray, dict[str, np.ndarray]]],
+              Callable[[], np.ndarray]]
+
+
+def _plan_message(
+    a: np.ndarray, parts: list[tuple[Definition, np.ndarray, np.ndarray, np.ndarray | None]]
+) -> _Plan | None:
+    """The columns of a message defined with several layouts whose parts follow one another
+    in the file (None when they interleave): the union of the columns, allocated, the
+    columns a layout lacks filled; the gather jobs ``(definition, offsets, its slice of the
+    columns)`` that fill the rest; and the function that gives the times once they ran."""
     parts = sorted(parts, key=lambda part: int(part[1][0]) if part[1].size else -1)
     keys = [k for _, k, _, _ in parts]
     ends = [(int(k[0]), int(k[-1])) for k in keys if k.size]
     if any(x[1] > y[0] for x, y in itertools.pairwise(ends)):
-        decoded = [(d, k, _gather_into(a, d, p)) for d, k, p, _ in parts]
-        return _merge([(d, k, cols, _times_of(d, cols) if t is None else t)
-                       for (d, k, cols), (_, _, _, t) in zip(decoded, parts, strict=True)])
+        return None
     names: list[str] = []
     for d, _, _, _ in parts:
         names.extend(c for c, _ in d.fields if c not in names)
     sizes = [k.size for k in keys]
     total = sum(sizes)
-    out: dict[str, np.ndarray] = {}
+    specs: dict[str, tuple[np.dtype, tuple[int, ...]]] = {}
     fill: dict[str, object] = {}
     for c in names:
         kinds = [_layout(d).get(c) for d, _, _, _ in parts]
@@ -1496,26 +1700,35 @@ def _decode_message(
         dtypes = [k[2] if k is not None and k[3] == like[1] else _filler(like)[0]
                   for k in kinds]
         obj = any(k is not None and k[2].kind == "O" for k in kinds)
-        dtype = np.dtype(object) if obj else np.result_type(*dtypes)
-        out[c] = np.empty((total, *like[1]), dtype)
+        specs[c] = (np.dtype(object) if obj else np.result_type(*dtypes), like[1])
         fill[c] = _filler(like)[1]
-    t_out = np.empty(total)
+    out = _alloc_columns(total, specs)
+    jobs = []
     at = 0
-    for (d, _, pos, t), size in zip(parts, sizes, strict=True):
+    for (d, _, pos, _), size in zip(parts, sizes, strict=True):
         layout = _layout(d)
         region = {c: v[at : at + size] for c, v in out.items()}
         own = {c: v for c, v in region.items() if c in layout and layout[c][3] == v.shape[1:]}
-        _gather_into(a, d, pos, own)
+        jobs.append((d, pos, own))
         for c, v in region.items():
             if c not in own:  # a column this layout lacks (or has in another shape)
                 v[...] = fill[c]
-        if t is None:
-            tf = d.time_field
-            t = _times_of(d, own) if tf is not None and tf[0] in own else _gather_times(a, d, pos)
-            assert t is not None
-        t_out[at : at + size] = t
         at += size
-    return out, t_out
+
+    def finish() -> np.ndarray:
+        t_out = np.empty(total)
+        at = 0
+        for (d, _, pos, t), (_, _, own) in zip(parts, jobs, strict=True):
+            if t is None:
+                tf = d.time_field
+                t = (_times_of(d, own) if tf is not None and tf[0] in own
+                     else _gather_times(a, d, pos))
+                assert t is not None
+            t_out[at : at + pos.size] = t
+            at += pos.size
+        return t_out
+
+    return out, jobs, finish
 
 
 def _times_of(d: Definition, cols: Mapping[str, np.ndarray]) -> np.ndarray:
@@ -1546,6 +1759,40 @@ def _layout(d: Definition) -> dict[str, tuple[str, str, np.dtype, tuple[int, ...
         else:
             dt = dt.newbyteorder("=")
         out[column] = (f"f{i}", ch, dt, shape)
+    return out
+
+
+def _alloc_columns(
+    rows: int, specs: Mapping[str, tuple[np.dtype, tuple[int, ...]]]
+) -> dict[str, np.ndarray]:
+    """Uninitialised columns of ``rows`` rows (name -> dtype and per-row shape), the numeric
+    ones carved out of one allocation.
+
+    A fresh array costs a page fault per 4 KiB page on first write, unless the kernel backs
+    it with huge pages, which it does only for the 2 MiB-aligned stretches of a large
+    allocation: one block per message instead of one array per column (most of them a few
+    MB) makes a cold read fault its output in far fewer steps. The block is freed when
+    every column is.
+
+    Examples
+    --------
+    >>> cols = _alloc_columns(3, {"a": (np.dtype("<u8"), ()), "b": (np.dtype("<i2"), (2,))})
+    >>> cols["a"].shape, cols["b"].shape, cols["b"].dtype.str
+    ((3,), (3, 2), '<i2')
+    """
+    sizes = {c: rows * dt.itemsize * int(np.prod(shape)) for c, (dt, shape) in specs.items()
+             if dt.kind != "O"}
+    offsets, total = {}, 0
+    for c, size in sizes.items():
+        offsets[c] = total
+        total += -(-size // 64) * 64  # every column 64-byte aligned
+    block = np.empty(total, np.uint8)
+    out = {}
+    for c, (dt, shape) in specs.items():
+        if c in sizes:
+            out[c] = block[offsets[c] : offsets[c] + sizes[c]].view(dt).reshape(rows, *shape)
+        else:
+            out[c] = np.empty((rows, *shape), dt)
     return out
 
 

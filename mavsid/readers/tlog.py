@@ -238,10 +238,10 @@ class _Frames:
 
     start: NDArray[np.int64]  # record start (receive time)
     payload: NDArray[np.int64]  # payload start
-    length: NDArray[np.int64]  # payload bytes on the wire
-    msgid: NDArray[np.int64]
-    sysid: NDArray[np.int64]
-    compid: NDArray[np.int64]
+    length: NDArray[np.uint8]  # payload bytes on the wire
+    msgid: NDArray[np.int32]
+    sysid: NDArray[np.uint8]
+    compid: NDArray[np.uint8]
     recv_s: NDArray[np.float64]
     skipped_bytes: int  # not decoded
     garbage_bytes: int  # not decoded and not a frame of unknown id either
@@ -250,11 +250,27 @@ class _Frames:
 
 
 def _windows(buf: NDArray[np.uint8], at: NDArray[np.int64], width: int) -> NDArray[np.uint8]:
-    """Copy of ``buf[a:a+width]`` for every ``a`` in ``at``, one row each."""
-    return sliding_window_view(buf, width)[at]
+    """Copy of ``buf[a:a+width]`` for every ``a`` in ``at``, one row each.
+
+    Gathered as items of ``width`` opaque bytes (one block copy per row) from an
+    overlapping view, about twice as fast as indexing the rows of a sliding-window view
+    (a byte-by-byte copy).
+
+    Examples
+    --------
+    >>> _windows(np.arange(10, dtype=np.uint8), np.array([0, 7]), 3).tolist()
+    [[0, 1, 2], [7, 8, 9]]
+    """
+    if width <= 0 or buf.size < width:
+        return sliding_window_view(buf, width)[at] if width > 0 else np.zeros((at.size, 0),
+                                                                              np.uint8)
+    rows = np.ndarray((buf.size - width + 1,), dtype=np.dtype((np.void, width)), buffer=buf,
+                      strides=(1,))
+    return rows[at].view(np.uint8).reshape(-1, width)
 
 
 _BLOCK = 1 << 24  # candidates are checked block by block: bounded memory, warm caches
+_NONE = np.zeros(0, dtype=np.int64)
 _MAX_RECORD = _PREFIX + 10 + 255 + 2 + _SIGNATURE_LEN
 
 
@@ -263,13 +279,25 @@ def _scan(buf: NDArray[np.uint8], size: int, defs: dict[int, MessageDef]) -> _Fr
     ids = np.array(sorted(defs), dtype=np.int64)
     extras = np.array([defs[i].crc_extra for i in ids.tolist()], dtype=np.uint8)
     longest = np.array([defs[i].dtype.itemsize for i in ids.tolist()], dtype=np.int64)
-    blocks = [_scan_block(buf, size, lo, min(lo + _BLOCK, size), ids, extras, longest)
+    blocks = [list(_scan_block(buf, size, lo, min(lo + _BLOCK, size), ids, extras, longest))
               for lo in range(0, size, _BLOCK)]  # fmt: skip
-    start, end, hdr, mlen, msgid, sysid, compid, odd_start, odd_end = (
-        np.concatenate(parts) for parts in zip(*blocks, strict=True)
-    )
+    fields = []
+    for k in range(len(blocks[0]) if blocks else 0):  # joined a field at a time, freed as
+        fields.append(np.concatenate([b[k] for b in blocks]))  # it goes (bounded peak)
+        for b in blocks:
+            b[k] = _NONE
+    if not fields:
+        fields = [_NONE] * 9
+    del blocks
+    start, end, hdr, mlen, msgid, sysid, compid, odd_start, odd_end = fields
+    del fields
     valid = _resolve_overlaps(start, end, size)
     first, last = start[valid], end[valid]
+    del start, end
+    hdr = hdr[valid]
+    # compact types for what is kept per frame (payload length, ids: bytes; message id: 24 bits)
+    mlen, sysid, compid = (x[valid].astype(np.uint8) for x in (mlen, sysid, compid))
+    msgid = msgid[valid].astype(np.int32)
     odd = _unknown_frames(odd_start, odd_end, first, last, size)
     # gaps: bytes in neither a valid frame nor a frame of unknown id
     starts = np.concatenate([first, odd_start[odd]])
@@ -279,13 +307,15 @@ def _scan(buf: NDArray[np.uint8], size: int, defs: dict[int, MessageDef]) -> _Fr
     if starts.size:
         gaps += int(starts[0] != 0) + int(ends[-1] != size)
     recv_us = _windows(buf, first, _PREFIX).copy().view(">u8")[:, 0]
+    hdr += first
+    hdr += _PREFIX
     return _Frames(
         start=first,
-        payload=first + _PREFIX + hdr[valid],
-        length=mlen[valid],
-        msgid=msgid[valid],
-        sysid=sysid[valid],
-        compid=compid[valid],
+        payload=hdr,
+        length=mlen,
+        msgid=msgid,
+        sysid=sysid,
+        compid=compid,
         recv_s=recv_us.astype(np.float64) * 1e-6,
         skipped_bytes=int(size - (last - first).sum()),
         garbage_bytes=int(size - (ends - starts).sum()),
@@ -319,7 +349,7 @@ def _scan_block(
     return tuple(np.concatenate(parts) for parts in zip(*slices, strict=True))
 
 
-_SLICE = 1 << 20  # candidates checked at once (bounds memory on pathological input)
+_SLICE = 1 << 16  # candidates checked at once: bounded temporaries (~40 bytes each)
 
 
 def _check(
@@ -483,7 +513,7 @@ def _payloads(
 ) -> NDArray[np.uint8]:
     """``width`` payload bytes from offset ``at`` of the given frames, zeros past their end."""
     raw = _windows(buf, frames.payload[rows] + at, width)
-    length = frames.length[rows] - at
+    length = frames.length[rows].astype(np.int64) - at
     short = np.flatnonzero(length < width)
     if short.size:
         cut = np.arange(width)[None, :] >= length[short, None]
@@ -673,7 +703,7 @@ _FIRMWARE = re.compile(r"^(Ardu\w+|APM:\w+|PX4\w*|Rover|AntennaTracker|Blimp)\s+
 _FRAME = "Frame:"
 
 
-def _groups(keys: NDArray[np.int64]) -> dict[int, NDArray[np.int64]]:
+def _groups(keys: NDArray[np.integer]) -> dict[int, NDArray[np.int64]]:
     """key -> indices of ``keys`` equal to it, in their original order."""
     if not keys.size:
         return {}
@@ -686,7 +716,7 @@ def _groups(keys: NDArray[np.int64]) -> dict[int, NDArray[np.int64]]:
 
 
 def _clock_offsets(
-    pieces: list[tuple[NDArray[np.int64], NDArray[np.float64]]],
+    pieces: list[tuple[NDArray[np.integer], NDArray[np.float64]]],
     vehicles: set[int],
     main: int | None,
 ) -> NDArray[np.float64]:

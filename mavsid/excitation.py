@@ -20,7 +20,10 @@ that output's "noise floor" can be as large as a SYSTEMID injection.
 - **response**: RMS of the *output* (body rate) in the band (its moving average over one
   period of the band's lower edge removed) against the output's own *noise floor*, its 1-s
   RMS where the input has no power (the median over the airborne samples whose input 1-s
-  RMS lies in its lowest 20 %: hover, sticks centred). Gate: ``power_ratio``× the floor.
+  RMS lies in its lowest 20 %: hover, sticks centred). Gate: ``power_ratio``× the floor,
+  for windows without a logged injection (a SYSTEMID run with ``SIDD.Targ`` is judged by
+  the injection, below: with 6 deg/s of gyro noise fed back a well-identifiable chirp's
+  response can sit under 5× that floor while 92 % coherent with the injection).
 - **injection** (SYSTEMID runs whose log has ``SIDD.Targ``): the injected waveform's RMS, its
   band (``SID_F_START_HZ``–``SID_F_STOP_HZ``, upper edge at most 0.4× the sample rate) and
   the output's coherence with it (weighted by the injection's PSD). Gate: ``min_coherence``.
@@ -470,7 +473,9 @@ def _gates(ax: _Axis, fd: FlightData, i0: int, i1: int, m: Mapping[str, float],
         out.append(f"rejected: window too short ({i1 - i0} samples)")
         return out
     ratio = m.get("response_ratio", math.nan)
-    if not math.isfinite(ratio):  # no output to judge by: the input's own level
+    if "injection_rms" in m:  # SYSTEMID: judged by the output's coherence with the injection
+        pass
+    elif not math.isfinite(ratio):  # no output to judge by: the input's own level
         if m["power_ratio"] < opts.power_ratio:
             out.append(
                 f"rejected: input RMS {_fmt(m['input_rms'])} below {opts.power_ratio:g}× noise "

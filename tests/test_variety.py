@@ -354,3 +354,28 @@ def test_a_systemid_chirp_is_judged_by_its_injection_not_the_noise_floor(tmp_pat
     assert f.model is not None and [w.kept for w in f.windows] == [True]
     assert f.model.params["B[q,u_pitch]"] == pytest.approx(truth["effectiveness"],
                                                           rel=B_TOLERANCE)
+
+
+def test_random_flights_give_no_wrong_model_and_no_crash(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """A dozen flights drawn by ``benchmarks/bench_variety.py`` (manoeuvre, vehicle, noise,
+    vibration, 25-400 Hz, ten layouts; fixed seed): no model off the truth by more than 10 %
+    and 2.5 σ is called ``good``, nothing crashes, and most are identified near the truth.
+    (The sweep itself runs 40+ flights per seed; see the README.)"""
+    import importlib.util
+    import random
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_variety.py"
+    spec = importlib.util.spec_from_file_location("bench_variety", path)
+    assert spec is not None and spec.loader is not None
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    rng = random.Random(11)
+    outcomes = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for i in range(12):
+            outcome, line = bench.run_one(tmp_path, i, bench.draw(rng))
+            outcomes.append((outcome, line))
+    assert not [o for o in outcomes if o[0] in ("WRONG", "CRASH")], outcomes
+    assert sum(o[0] == "ok" for o in outcomes) >= 8, outcomes

@@ -29,13 +29,14 @@ ULog has no sync bytes in its data stream: a message is ``uint16 size, uint8 typ
 pyulog reads it, one message after the other from the end of the definitions, but the
 runs of consecutive data messages are taken in one step:
 
-1. *Candidates*: every position ``p`` whose type byte ``p+2`` is ``'D'``, whose message
-   id and ``size`` agree with some subscription in the file (the ``A`` messages are found
-   the same way: type byte ``A``, a defined format's name as payload, a known type byte
-   after it; the size is the format's + 2, with or without its trailing padding) and
-   whose message ends inside the file. Its successor is ``next = p + 3 + size``. A
-   candidate may be false (the byte pattern inside some payload) and a real message may
-   be no candidate (a damaged one): both only cost Python steps, never correctness.
+1. *Candidates*: every position ``p`` whose type byte ``p+2`` is ``'D'``, whose ``size``
+   is one a data message of some format defined in the file can have (the format's size
+   + 2, with or without its trailing padding; the message id is not looked at: the
+   subscriptions are only known as the walk meets them), whose message ends inside
+   the file and is followed by the header of a known message type (or the file's end).
+   Its successor is ``next = p + 3 + size``. A candidate may be false (the byte pattern
+   inside some payload) and a real message may be no candidate (a damaged one): both
+   only cost Python steps, never correctness.
    Candidates are found one 1 MB block of the file at a time, when the walk reaches it,
    so that their arrays stay small whatever the file holds.
 2. *Runs*: ``follows[i]`` is true when candidate ``i``'s successor is candidate ``i+1``.
@@ -97,7 +98,7 @@ import os
 import re
 import struct
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -139,9 +140,6 @@ _DTYPE = {kind: np.dtype(t).newbyteorder("<") for kind, (t, _, _) in _BASIC.item
 _DEF_TYPES = frozenset(b"FIMPQBALC")
 _DATA_TYPES = frozenset(b"IMPQALCDOS")
 _HEAD = struct.Struct("<HB").unpack_from
-#: parameter types with 4-byte values, read without the general parser
-_FAST_VALUE = {"float": struct.Struct("<f").unpack_from,
-               "int32_t": struct.Struct("<i").unpack_from}
 _KNOWN_TYPE = np.zeros(256, bool)
 _KNOWN_TYPE[list(b"FDIMPQARLCOSB")] = True
 #: an unknown message type with a size above this is taken as corruption (pyulog's rule)
@@ -248,6 +246,20 @@ def _format(data: bytes) -> tuple[str, list[Field]]:
     return parts[0], fields
 
 
+def _u16(u8: NDArray[np.uint8], at: NDArray[np.int64]) -> NDArray[np.uint16]:
+    """The little-endian ``uint16`` at each byte position ``at`` (``at`` is reused).
+
+    Examples
+    --------
+    >>> _u16(np.array([1, 2, 3], np.uint8), np.array([0, 1]))
+    array([513, 770], dtype=uint16)
+    """
+    low = u8.take(at).astype(np.uint16)
+    at += 1
+    low |= u8.take(at).astype(np.uint16) << 8
+    return low
+
+
 def _cycle(formats: dict[str, list[Field]]) -> list[str] | None:
     """A chain of formats that contain themselves (``a`` → ``b`` → ``a``); None if none.
 
@@ -345,7 +357,49 @@ class _Parsed:
     problems: list[str] = field(default_factory=list)
     skipped: int = 0
     truncated: int = 0
-    data: list[tuple[str, int, dict[str, NDArray[Any]]]] = field(default_factory=list)
+    data: list[tuple[str, int, _Columns]] = field(default_factory=list)
+
+
+class _Columns(Mapping[str, NDArray[Any]]):
+    """A topic's columns: field name -> the records' field (a view), made when first asked
+    for (most of a log's hundred topics and thousands of fields are never looked at).
+
+    Examples
+    --------
+    >>> cols = _Columns(np.zeros(2, [("timestamp", "<u8"), ("x", "<f4")]))
+    >>> list(cols), cols["x"].dtype, len(cols)
+    (['timestamp', 'x'], dtype('float32'), 2)
+    """
+
+    __slots__ = ("_views", "records")
+
+    def __init__(self, records: NDArray[Any]) -> None:
+        self.records = records
+        self._views: dict[str, NDArray[Any]] = {}
+
+    def __getitem__(self, name: str) -> NDArray[Any]:
+        try:
+            return self._views[name]
+        except KeyError:
+            if not isinstance(name, str) or name not in self.records.dtype.fields:
+                raise KeyError(name) from None
+            view = self._views[name] = self.records[name]
+            return view
+
+    def __contains__(self, name: object) -> bool:
+        return isinstance(name, str) and name in self.records.dtype.fields
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.records.dtype.names or ())
+
+    def __len__(self) -> int:
+        return len(self.records.dtype.names or ())
+
+    def __repr__(self) -> str:
+        return f"_Columns({list(self)!r})"
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (_Columns, (self.records,))
 
 
 class _Reader:
@@ -429,21 +483,30 @@ class _Reader:
     # ------------------------------------------------------------------ definitions
     def definitions(self) -> int:
         """Read formats, info, parameters and flag bits; the data section's start."""
+        plain: list[int] = []  # parameters with a 4-byte value, read in batches
+        try:
+            return self.definitions_walk(plain)
+        finally:
+            self.parameters(plain)
+
+    def definitions_walk(self, plain: list[int]) -> int:
+        """:meth:`definitions`' walk; the positions of parameters whose payload has room
+        for a 4-byte value only are put in ``plain``, read by :meth:`parameters` before
+        any other parameter (the order of the values is the file's)."""
         out, n, buf, pos = self.out, self.n, self.buf, 16
-        params = out.initial_params
         while pos < n:
             if n - pos < 3:
                 self.problem("file corruption detected while reading file definitions")
                 return n
             size, kind = _HEAD(buf, pos)
             end = pos + 3 + size
-            if kind == 0x50 and end <= n and size == buf[pos + 3] + 5:  # the common parameter
-                words = _text(buf[pos + 4 : end - 4]).split(" ")
-                if len(words) > 1 and words[0] in _FAST_VALUE:
-                    params[words[1]] = _FAST_VALUE[words[0]](buf, end - 4)[0]
+            if kind == 0x50:
+                if end <= n and size == buf[pos + 3] + 5:  # the common parameter
+                    plain.append(pos)
                     pos = end
                     continue
-            if kind in (0x41, 0x4C, 0x43):  # A, L, C: the data section begins
+                self.parameters(plain)
+            elif kind in (0x41, 0x4C, 0x43):  # A, L, C: the data section begins
                 return pos
             data = self.buf[pos + 3 : min(end, n)]
             try:
@@ -475,6 +538,48 @@ class _Reader:
             pos = end
         return min(pos, n)
 
+    def parameters(self, plain: list[int]) -> None:
+        """The parameters at ``plain`` (whose payload is the key and a 4-byte value), in
+        order, then ``plain`` emptied: keys gathered and decoded at once, values read as
+        arrays; one not of type ``float`` or ``int32_t`` takes the general path."""
+        if not plain:
+            return
+        at = np.array(plain, np.int64)
+        length = self.u8[at + 3].astype(np.int64)
+        value = at + 4 + length
+        texts: list[str] | None = None
+        if length.sum() < (1 << 24):
+            # each key followed by a newline; the whole decoded at once (no key may hold a
+            # newline): the same text per key as decoding each, invalid bytes dropped
+            owner = np.repeat(np.arange(at.size), length)
+            ends = np.cumsum(length + 1)
+            inner = np.arange(owner.size) + owner  # index in the joined text
+            src = inner - (ends - length - 1)[owner] + at[owner] + 4
+            keys = self.u8[src]
+            if not (keys == 10).any():
+                joined = np.full(int(ends[-1]), 10, np.uint8)
+                joined[inner] = keys
+                texts = joined.tobytes().decode("utf-8", "ignore").split("\n")
+        if texts is None:
+            texts = [_text(self.buf[p + 4 : p + 4 + k]) for p, k in
+                     zip(plain, length.tolist(), strict=True)]  # fmt: skip
+        floats = np.ndarray((self.n - 3,), "<f4", buffer=self.buf, strides=(1,))[value]
+        ints = np.ndarray((self.n - 3,), "<i4", buffer=self.buf, strides=(1,))[value]
+        params = self.out.initial_params
+        for text, f, i, p in zip(texts, floats.tolist(), ints.tolist(), plain, strict=False):
+            kind, space, rest = text.partition(" ")
+            if space and kind == "float":
+                params[rest.partition(" ")[0]] = f
+            elif space and kind == "int32_t":
+                params[rest.partition(" ")[0]] = i
+            else:
+                try:
+                    _, key, v = _info(self.buf[p + 3 : p + 3 + _HEAD(self.buf, p)[0]])
+                    params[key] = v
+                except (_Stop, _Bad):
+                    self.problem("file corruption detected while reading file definitions")
+        plain.clear()
+
     def flag_bits(self, pos: int, size: int, data: bytes) -> None:
         if pos != 16:
             self.out.problems.append("FLAGS_BITS message must be the first message")
@@ -498,18 +603,21 @@ class _Reader:
         subscriptions allow; each block's candidates are found when the walk gets there
         (:meth:`load`), so that memory stays bounded whatever the file holds."""
         self.start = start
-        self.tables = self.allowed_sizes(start)
+        # the data message sizes the file's formats allow: any message id (a filter only)
+        self.allowed = np.zeros(1 << 16, bool)
+        self.allowed[[s for v in _sizes(self.out.formats, set(self.out.formats)).values()
+                      for s in v]] = True  # fmt: skip
         self.lo = self.hi = -1  # the block whose candidates are loaded
         self.cand = np.zeros(0, np.int64)
         self.csize = self.cmsg = np.zeros(0, np.uint16)
         self.breaks = np.zeros(0, np.int64)
-        self.u16 = np.ndarray((max(self.n - 1, 0),), "<u2", buffer=self.buf, strides=(1,))
 
     def load(self, pos: int) -> None:
         """The candidates of the block of the file holding ``pos``: positions of type byte
-        ``D`` whose size is one their id's subscription allows and whose message ends in
-        the file; their sizes and ids; the indices where a run of consecutive candidates
-        breaks (the block's last one always)."""
+        ``D`` whose size is one a format allows, whose message ends in the file and is
+        followed by one of a known type or the file's end; their sizes and ids; the
+        indices where a run of consecutive candidates breaks (the block's last one
+        always)."""
         u8, n = self.u8, self.n
         self.flush()
         if self.chunks and self.cand.size > 4 * self.taken + _BLOCK // 64:
@@ -520,50 +628,25 @@ class _Reader:
         hi = min(lo + _BLOCK, n - 4)  # a data message needs 5 bytes
         p = np.flatnonzero(u8[lo + 2 : hi + 2] == 0x44)
         p += lo
-        size, ids = self.u16[p], self.u16[p + 3]
-        keep = np.zeros(p.size, bool)
-        for table in self.tables:
-            keep |= table[ids] == size
-        keep &= (size != 0) & (p + 3 + size <= n)  # a size 0 in a table: none allowed
-        self.cand, self.csize, self.cmsg = p[keep], size[keep], ids[keep]
+        # (``take`` on the contiguous bytes: much faster than indexing unaligned views)
+        size = _u16(u8, p + 0)
+        keep = self.allowed.take(size)  # (never 0)
+        after = p + 5
+        after += size  # the next message's type byte
+        keep &= after <= n + 2  # the message ends in the file
+        end = after >= n  # no room for another header
+        np.minimum(after, n - 1, out=after)
+        # and the message after it is of a known type, or the file ends: fewer false ones
+        end |= _KNOWN_TYPE.take(u8.take(after))
+        keep &= end
+        p, size = p[keep], size[keep]
+        self.cand, self.csize, self.cmsg = p, size, _u16(u8, p + 3)
         follows = np.zeros(self.cand.size, bool)
         nxt = self.cand[:-1] + 3
         nxt += self.csize[:-1]
         follows[:-1] = nxt == self.cand[1:]
         self.breaks = np.flatnonzero(~follows)
         self.lo, self.hi, self.taken = lo, hi, 0
-
-    def allowed_sizes(self, start: int) -> list[NDArray[np.uint16]]:
-        """The data message sizes the file's subscriptions allow, as tables by message id
-        (0: none; one table per size a message id may have), from the positions of type
-        byte ``A`` (in blocks of the file): those with a defined format's name as payload
-        and followed by a message of a known type give the format's size + 2, with and
-        without its trailing padding. A filter only: a data message it misses is read by a
-        Python step."""
-        u8, n = self.u8, self.n
-        named: dict[tuple[int, str], None] = {}
-        for lo in range(start, max(n - 2, start), _BLOCK):
-            p = np.flatnonzero(u8[lo + 2 : min(lo + _BLOCK, n - 2) + 2] == 0x41)
-            p += lo
-            size = u8[p].astype(np.int64) | u8[p + 1].astype(np.int64) << 8
-            ok = (size > 3) & (size < 260) & (p + 3 + size <= n)
-            p, size = p[ok], size[ok]
-            follower = np.minimum(p + 5 + size, n - 1)  # the type byte of the next message
-            for q in p[_KNOWN_TYPE[u8[follower]] | (follower == n - 1)].tolist():
-                length = self.buf[q] | self.buf[q + 1] << 8
-                named[self.buf[q + 4] | self.buf[q + 5] << 8,
-                      _text(self.buf[q + 6 : q + 3 + length])] = None
-        sizes = _sizes(self.out.formats, {name for _, name in named})
-        allowed: dict[int, set[int]] = {}
-        for msg_id, name in named:
-            if name in sizes:
-                allowed.setdefault(msg_id, set()).update(sizes[name])
-        tables = [np.zeros(1 << 16, np.uint16)
-                  for _ in range(max(map(len, allowed.values()), default=0))]  # fmt: skip
-        for msg_id, options in allowed.items():
-            for table, value in zip(tables, sorted(options), strict=False):
-                table[msg_id] = value
-        return tables
 
     # ------------------------------------------------------------------ subscriptions
     def flatten(self, name: str) -> list[tuple[str, str]]:
@@ -886,8 +969,7 @@ class _Reader:
             raw = np.ndarray((self.n - width + 1,), f"V{width}", buffer=self.buf, strides=(1,))
             at = pos[order[first[k] : first[k + 1]]]
             at += 5
-            records = np.frombuffer(raw[at], s.dtype)
-            items.append((s.name, s.multi_id, {f: records[f] for f in s.dtype.names or ()}))
+            items.append((s.name, s.multi_id, _Columns(np.frombuffer(raw[at], s.dtype))))
         items.sort(key=lambda d: (d[0], d[1]))
         self.out.data = items
 
@@ -918,13 +1000,12 @@ def _parse(path: str | os.PathLike[str], topics: set[str] | None) -> _Parsed:
             pass
 
 
-def _time_s(data: dict[str, NDArray[Any]]) -> NDArray[np.float64]:
+def _time_s(data: _Columns) -> NDArray[np.float64]:
     """``timestamp_sample`` if present, else ``timestamp``, in seconds (NaN if neither)."""
     for key in ("timestamp_sample", "timestamp"):
         if key in data:
             return data[key].astype(np.float64) / 1e6
-    n = len(next(iter(data.values()))) if data else 0
-    return np.full(n, np.nan)
+    return np.full(len(data.records), np.nan)
 
 
 def _texts(parsed: _Parsed) -> list[TextMessage]:
@@ -997,7 +1078,11 @@ def _firmware(info: dict[str, Any]) -> str | None:
 def _window(table: MessageTable, lo: float, hi: float) -> MessageTable:
     """Rows of ``table`` with ``lo <= time_s <= hi``."""
     keep = (table.time_s >= lo) & (table.time_s <= hi)
-    columns = {n: c[keep] for n, c in table.columns.items()}
+    columns: Mapping[str, NDArray[Any]]
+    if isinstance(table.columns, _Columns):
+        columns = _Columns(table.columns.records[keep])
+    else:
+        columns = {n: c[keep] for n, c in table.columns.items()}
     return MessageTable(table.name, columns, table.time_s[keep], table.units)
 
 

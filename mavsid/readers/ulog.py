@@ -371,23 +371,24 @@ class _Columns(Mapping[str, NDArray[Any]]):
     (['timestamp', 'x'], dtype('float32'), 2)
     """
 
-    __slots__ = ("_views", "records")
+    __slots__ = ("_fields", "_views", "records")
 
     def __init__(self, records: NDArray[Any]) -> None:
         self.records = records
+        self._fields: Mapping[str, Any] = records.dtype.fields or {}
         self._views: dict[str, NDArray[Any]] = {}
 
     def __getitem__(self, name: str) -> NDArray[Any]:
         try:
             return self._views[name]
         except KeyError:
-            if not isinstance(name, str) or name not in self.records.dtype.fields:
+            if not isinstance(name, str) or name not in self._fields:
                 raise KeyError(name) from None
             view = self._views[name] = self.records[name]
             return view
 
     def __contains__(self, name: object) -> bool:
-        return isinstance(name, str) and name in self.records.dtype.fields
+        return isinstance(name, str) and name in self._fields
 
     def __iter__(self) -> Iterator[str]:
         return iter(self.records.dtype.names or ())

@@ -134,6 +134,8 @@ _BASIC: dict[str, tuple[type[np.generic], int, str]] = {
     "float": (np.float32, 4, "f"), "double": (np.float64, 8, "d"),
     "bool": (np.int8, 1, "?"), "char": (np.int8, 1, "c"),
 }  # fmt: skip
+#: bytes of each basic type
+_SIZE = {kind: size for kind, (_, size, _) in _BASIC.items()}
 #: message types read in the definitions section / in the data section
 #: little-endian numpy dtypes of the basic types
 _DTYPE = {kind: np.dtype(t).newbyteorder("<") for kind, (t, _, _) in _BASIC.items()}
@@ -290,34 +292,37 @@ def _cycle(formats: dict[str, list[Field]]) -> list[str] | None:
     return None
 
 
-def _sizes(formats: dict[str, list[Field]], names: set[str]) -> dict[str, tuple[int, ...]]:
-    """Per format of ``names``, the payload sizes its data messages can have: 2 (message
-    id) + the format's size, with and without its trailing ``_padding`` fields (formats
-    acyclic).
+def _sizes(formats: dict[str, list[Field]]) -> set[int]:
+    """The payload sizes data messages of the formats can have: 2 (message id) + a
+    format's size, with and without its trailing ``_padding`` fields (formats acyclic;
+    a nested type not defined counts 0).
 
     Examples
     --------
-    >>> _sizes({"a": [("uint64_t", 0, "timestamp"), ("uint8_t", 3, "_padding0")]}, {"a"})
-    {'a': (13, 10)}
+    >>> sorted(_sizes({"a": [("uint64_t", 0, "timestamp"), ("uint8_t", 3, "_padding0")]}))
+    [10, 13]
     """
     memo: dict[str, int] = {}
 
-    def size(name: str) -> int:
-        if name not in memo:
-            memo[name] = sum(max(n, 1) * (_BASIC[k][1] if k in _BASIC else size(k))
-                             for k, n, _ in formats.get(name, ()))  # fmt: skip
-        return memo[name]
+    def part(kind: str, count: int) -> int:
+        width = _SIZE.get(kind)
+        return (size(kind) if width is None else width) * (count or 1)
 
-    out = {}
-    for name in names & formats.keys():
-        fields = formats[name]
+    def size(name: str) -> int:
+        got = memo.get(name)
+        if got is None:
+            got = memo[name] = sum([part(k, n) for k, n, _ in formats.get(name, ())])
+        return got
+
+    out: set[int] = set()
+    for name, fields in formats.items():
         full = trimmed = size(name)
         for kind, n, fname in reversed(fields):
-            part = max(n, 1) * (_BASIC[kind][1] if kind in _BASIC else size(kind))
-            if part and not fname.startswith("_padding"):
+            width = part(kind, n)
+            if width and not fname.startswith("_padding"):
                 break
-            trimmed -= part
-        out[name] = tuple(dict.fromkeys(s + 2 for s in (full, trimmed) if 0 < s <= 0xFFFF - 2))
+            trimmed -= width
+        out.update(s + 2 for s in (full, trimmed) if 0 < s <= 0xFFFF - 2)
     return out
 
 
@@ -606,8 +611,7 @@ class _Reader:
         self.start = start
         # the data message sizes the file's formats allow: any message id (a filter only)
         self.allowed = np.zeros(1 << 16, bool)
-        self.allowed[[s for v in _sizes(self.out.formats, set(self.out.formats)).values()
-                      for s in v]] = True  # fmt: skip
+        self.allowed[list(_sizes(self.out.formats))] = True
         self.lo = self.hi = -1  # the block whose candidates are loaded
         self.cand = np.zeros(0, np.int64)
         self.csize = self.cmsg = np.zeros(0, np.uint16)
@@ -958,19 +962,20 @@ class _Reader:
     def decode(self, pos: NDArray[np.int64], sub: NDArray[np.int64]) -> None:
         """Gather each kept subscription's records: one fancy index per topic into a view
         of the file as raw records of its size at every byte, then seen as its dtype."""
-        order = np.argsort(sub, kind="stable")
-        counts = np.bincount(sub, minlength=len(self.subs))
-        first = np.concatenate([[0], np.cumsum(counts)])
+        at = pos[np.argsort(sub, kind="stable")]  # grouped by subscription, in file order
+        at += 5
+        counts = np.bincount(sub, minlength=len(self.subs)).tolist()
+        first = [0, *np.cumsum(counts).tolist()]
         items = []
         for k in self.final:
             s = self.subs[k]
             width = s.dtype.itemsize
             if not counts[k] or not width:
                 continue
+            # (raw records gathered as void: much faster than as the structured dtype)
             raw = np.ndarray((self.n - width + 1,), f"V{width}", buffer=self.buf, strides=(1,))
-            at = pos[order[first[k] : first[k + 1]]]
-            at += 5
-            items.append((s.name, s.multi_id, _Columns(np.frombuffer(raw[at], s.dtype))))
+            records = np.frombuffer(raw[at[first[k] : first[k + 1]]], s.dtype)
+            items.append((s.name, s.multi_id, _Columns(records)))
         items.sort(key=lambda d: (d[0], d[1]))
         self.out.data = items
 
@@ -1001,12 +1006,37 @@ def _parse(path: str | os.PathLike[str], topics: set[str] | None) -> _Parsed:
             pass
 
 
-def _time_s(data: _Columns) -> NDArray[np.float64]:
-    """``timestamp_sample`` if present, else ``timestamp``, in seconds (NaN if neither)."""
-    for key in ("timestamp_sample", "timestamp"):
-        if key in data:
-            return data[key].astype(np.float64) / 1e6
-    return np.full(len(data.records), np.nan)
+def _times(tables: list[_Columns]) -> list[NDArray[np.float64]]:
+    """Per table, ``timestamp_sample`` if present, else ``timestamp``, in seconds (NaN if
+    neither): the ``uint64`` ones (all in a real log) converted in one go, each table's
+    a slice of the whole.
+
+    Examples
+    --------
+    >>> a = _Columns(np.array([(1_000_000,), (2_500_000,)], [("timestamp", "<u8")]))
+    >>> b = _Columns(np.array([(7,)], [("x", "<f4")]))
+    >>> [t.tolist() for t in _times([a, b, a])]
+    [[1.0, 2.5], [nan], [1.0, 2.5]]
+    """
+    out: list[NDArray[np.float64] | None] = []
+    batch: list[NDArray[Any]] = []
+    for data in tables:
+        key = "timestamp_sample" if "timestamp_sample" in data else "timestamp"
+        column = data.get(key)
+        if column is None:
+            out.append(np.full(len(data.records), np.nan))
+        elif column.dtype == np.uint64:
+            out.append(None)
+            batch.append(column)
+        else:
+            out.append(column.astype(np.float64) / 1e6)
+    if batch:
+        whole = np.concatenate(batch, dtype=np.float64)
+        whole /= 1e6
+        ends = np.cumsum([len(c) for c in batch]).tolist()
+        parts = iter([whole[e - len(c) : e] for c, e in zip(batch, ends, strict=True)])
+        return [next(parts) if t is None else t for t in out]
+    return [t for t in out if t is not None]
 
 
 def _texts(parsed: _Parsed) -> list[TextMessage]:
@@ -1145,11 +1175,12 @@ def read(
         raise LogFormatError("no ULog data (no topic samples, no parameters)", path=path)
 
     tables: dict[str, MessageTable] = {}
-    for topic, multi_id, data in parsed.data:
+    times = _times([data for _, _, data in parsed.data])
+    for (topic, multi_id, data), time_s in zip(parsed.data, times, strict=True):
         name = table_name(topic, multi_id)
         units: dict[str, str] = {k: "us" for k in ("timestamp", "timestamp_sample")
                                  if k in data}
-        tables[name] = MessageTable(name, data, _time_s(data), units)
+        tables[name] = MessageTable(name, data, time_s, units)
     params, n_changes, bad_params = _params(parsed)
     texts = _texts(parsed)
     modes = _modes(tables.get(_MODE_TOPIC))
@@ -1202,9 +1233,30 @@ def _notes(parsed: _Parsed, tables: dict[str, MessageTable], n_changes: int) -> 
         notes.append("has appended data (crash dump)")
     if n_changes:
         notes.append(f"{n_changes} parameter changes during the log")
-    backwards = [n for n, t in tables.items()
-                 if len(t) > 1 and (t.time_s[1:] < t.time_s[:-1]).any()]
+    backwards = _backwards(tables)
     if backwards:
         shown = ", ".join(backwards[:5]) + (" ..." if len(backwards) > 5 else "")
         notes.append(f"time runs backwards in {len(backwards)} topics ({shown})")
     return notes
+
+
+def _backwards(tables: dict[str, MessageTable]) -> list[str]:
+    """The tables whose time runs backwards somewhere, in order: all checked at once.
+
+    Examples
+    --------
+    >>> def table(t):
+    ...     return MessageTable("x", {}, np.array(t, float))
+    >>> _backwards({"a": table([1, 2]), "b": table([0, 1, 0.5]), "c": table([1])})
+    ['b']
+    """
+    timed = [(name, t.time_s) for name, t in tables.items() if len(t) > 1]
+    if not timed:
+        return []
+    lengths = np.array([len(t) for _, t in timed])
+    starts = np.cumsum(lengths) - lengths
+    whole = np.concatenate([t for _, t in timed])
+    back = np.flatnonzero(whole[1:] < whole[:-1])  # whole[i + 1] < whole[i]
+    owner = np.searchsorted(starts, back, "right") - 1
+    inside = back + 1 < starts[owner] + lengths[owner]  # i and i + 1 in one table
+    return [timed[k][0] for k in np.unique(owner[inside]).tolist()]

@@ -134,6 +134,9 @@ _BASIC: dict[str, tuple[type[np.generic], int, str]] = {
     "float": (np.float32, 4, "f"), "double": (np.float64, 8, "d"),
     "bool": (np.int8, 1, "?"), "char": (np.int8, 1, "c"),
 }  # fmt: skip
+#: a parameter key's type as the payload has it (after size, type and key length)
+_FLOAT, _INT32 = np.frombuffer(b"float ", np.uint8), np.frombuffer(b"int32_t ", np.uint8)
+_FLOAT_AT, _INT32_AT = np.arange(4, 10), np.arange(4, 12)
 #: bytes of each basic type
 _SIZE = {kind: size for kind, (_, size, _) in _BASIC.items()}
 #: message types read in the definitions section / in the data section
@@ -260,6 +263,32 @@ def _u16(u8: NDArray[np.uint8], at: NDArray[np.int64]) -> NDArray[np.uint16]:
     at += 1
     low |= u8.take(at).astype(np.uint16) << 8
     return low
+
+
+def _joined(u8: NDArray[np.uint8], start: NDArray[np.int64],
+            length: NDArray[np.int64]) -> list[str] | None:
+    """The texts ``u8[start:start + length]`` (UTF-8, invalid bytes dropped) decoded at
+    once: None if one holds a space or a newline (the separator), or they are too long.
+
+    Examples
+    --------
+    >>> u8 = np.frombuffer(b"abc de\\xff", np.uint8)
+    >>> _joined(u8, np.array([0, 4]), np.array([2, 3])), _joined(u8, np.array([0]), np.array([5]))
+    (['ab', 'de'], None)
+    """
+    total = int(length.sum())
+    if total >= 1 << 24:
+        return None
+    owner = np.repeat(np.arange(start.size), length)
+    ends = np.cumsum(length + 1)
+    inner = np.arange(total) + owner  # where each byte goes, each text followed by "\n"
+    text = u8[inner - (ends - length - 1)[owner] + start[owner]]
+    if ((text == 10) | (text == 32)).any():
+        return None
+    joined = np.full(int(ends[-1]) if ends.size else 0, 10, np.uint8)
+    joined[inner] = text
+    # decoding the whole drops the same bytes as decoding each (the newline is ASCII)
+    return joined.tobytes().decode("utf-8", "ignore").split("\n")[:-1]
 
 
 def _cycle(formats: dict[str, list[Field]]) -> list[str] | None:
@@ -546,45 +575,37 @@ class _Reader:
 
     def parameters(self, plain: list[int]) -> None:
         """The parameters at ``plain`` (whose payload is the key and a 4-byte value), in
-        order, then ``plain`` emptied: keys gathered and decoded at once, values read as
-        arrays; one not of type ``float`` or ``int32_t`` takes the general path."""
+        order, then ``plain`` emptied. When every key is ``float name`` or ``int32_t name``
+        (one space), the names are gathered and decoded at once and the values read as
+        arrays; otherwise each is read on its own (:meth:`parameter`)."""
         if not plain:
             return
-        at = np.array(plain, np.int64)
-        length = self.u8[at + 3].astype(np.int64)
+        u8, at = self.u8, np.array(plain, np.int64)
+        plain.clear()
+        length = u8[at + 3].astype(np.int64)
         value = at + 4 + length
-        texts: list[str] | None = None
-        if length.sum() < (1 << 24):
-            # each key followed by a newline; the whole decoded at once (no key may hold a
-            # newline): the same text per key as decoding each, invalid bytes dropped
-            owner = np.repeat(np.arange(at.size), length)
-            ends = np.cumsum(length + 1)
-            inner = np.arange(owner.size) + owner  # index in the joined text
-            src = inner - (ends - length - 1)[owner] + at[owner] + 4
-            keys = self.u8[src]
-            if not (keys == 10).any():
-                joined = np.full(int(ends[-1]), 10, np.uint8)
-                joined[inner] = keys
-                texts = joined.tobytes().decode("utf-8", "ignore").split("\n")
-        if texts is None:
-            texts = [_text(self.buf[p + 4 : p + 4 + k]) for p, k in
-                     zip(plain, length.tolist(), strict=True)]  # fmt: skip
+        is_float = u8[at + 4] == ord("f")  # (a byte of the key or the value: in the file)
+        skip = np.where(is_float, 6, 8)  # "float " or "int32_t "
+        names = None
+        if (length >= skip).all() and (u8[at[is_float, None] + _FLOAT_AT] == _FLOAT).all() \
+                and (u8[at[~is_float, None] + _INT32_AT] == _INT32).all():
+            names = _joined(u8, at + 4 + skip, length - skip)
+        if names is None:
+            for p in at.tolist():
+                self.parameter(p)
+            return
         floats = np.ndarray((self.n - 3,), "<f4", buffer=self.buf, strides=(1,))[value]
         ints = np.ndarray((self.n - 3,), "<i4", buffer=self.buf, strides=(1,))[value]
-        params = self.out.initial_params
-        for text, f, i, p in zip(texts, floats.tolist(), ints.tolist(), plain, strict=False):
-            kind, space, rest = text.partition(" ")
-            if space and kind == "float":
-                params[rest.partition(" ")[0]] = f
-            elif space and kind == "int32_t":
-                params[rest.partition(" ")[0]] = i
-            else:
-                try:
-                    _, key, v = _info(self.buf[p + 3 : p + 3 + _HEAD(self.buf, p)[0]])
-                    params[key] = v
-                except (_Stop, _Bad):
-                    self.problem("file corruption detected while reading file definitions")
-        plain.clear()
+        self.out.initial_params.update(zip(names, np.where(
+            is_float, floats.astype(object), ints.astype(object)).tolist(), strict=True))
+
+    def parameter(self, pos: int) -> None:
+        """One parameter message of the definitions (pyulog's rules)."""
+        try:
+            _, key, value = _info(self.buf[pos + 3 : pos + 3 + _HEAD(self.buf, pos)[0]])
+            self.out.initial_params[key] = value
+        except (_Stop, _Bad):
+            self.problem("file corruption detected while reading file definitions")
 
     def flag_bits(self, pos: int, size: int, data: bytes) -> None:
         if pos != 16:

@@ -342,6 +342,24 @@ def test_parameters_read_at_once_are_pyulogs(tmp_path: Path, odd: bytes | None) 
     assert log.params == numbers
 
 
+def test_a_read_imports_nothing_more() -> None:
+    """A cold read (a fresh process, as the command line does it) imports no module the
+    reader does not need: numpy.ma, pulled in by np.unique's first call, was 15 ms of a
+    5 ms read of a small log."""
+    import subprocess
+    import sys
+
+    code = ("import sys, warnings; warnings.simplefilter('ignore')\n"
+            "from mavsid.readers import ulog\n"
+            "before = set(sys.modules)\n"
+            "ulog.read(sys.argv[1])\n"
+            "print(sorted(set(sys.modules) - before))")
+    for path in FIXTURE_ULOGS[:1]:
+        out = subprocess.run([sys.executable, "-c", code, str(path)], check=True,
+                             capture_output=True, text=True).stdout
+        assert out.strip() == "[]", out
+
+
 # ------------------------------------------------------------------ framing, truncation
 
 def message_ends(raw: bytes) -> list[int]:

@@ -218,6 +218,34 @@ def _info(data: bytes, multiple: bool = False) -> tuple[str, str, Any]:
     return kind, key, raw  # an array or a damaged type: raw bytes, as pyulog keeps them
 
 
+def _checked(buf: Any, pos: int, end: int) -> bool:
+    """Whether the ``M`` or ``Q`` message at ``pos`` (a byte, then an info: key length,
+    key ``type name``, value) is one pyulog reads without error, seen without decoding it:
+    a text (type ``char[N]``) or a 4-byte parameter value. False: not known to be.
+
+    Examples
+    --------
+    >>> _checked(b"\\0\\0M" + bytes([0, 9]) + b"char[1] ab", 0, 15)
+    True
+    >>> _checked(b"\\0\\0Q" + bytes([0, 7]) + b"float x" + bytes(4), 0, 16)
+    True
+    >>> _checked(b"\\0\\0Q" + bytes([0, 7]) + b"float x" + bytes(3), 0, 15)
+    False
+    """
+    if end - pos < 5:
+        return False
+    key = pos + 5
+    stop = key + buf[pos + 4]
+    if stop > end:
+        return False
+    if buf[key : key + 5] == b"char[":
+        return bool(buf.find(b" ", key + 5, stop) >= 0)
+    if end - stop != 4:
+        return False
+    return (stop - key >= 6 and buf[key : key + 6] == b"float ") or (
+        stop - key >= 8 and buf[key : key + 8] == b"int32_t ")
+
+
 def _format(data: bytes) -> tuple[str, list[Field]]:
     """A format definition ``name:type field;type[n] field;...``.
 
@@ -543,6 +571,9 @@ class _Reader:
                 self.parameters(plain)
             elif kind in (0x41, 0x4C, 0x43):  # A, L, C: the data section begins
                 return pos
+            elif (kind == 0x4D or kind == 0x51) and end <= n and _checked(buf, pos, end):
+                pos = end  # M, Q: only checked
+                continue
             data = self.buf[pos + 3 : min(end, n)]
             try:
                 if kind == 0x49:  # I
@@ -779,8 +810,8 @@ class _Reader:
                 return n
             if end > until:
                 return end
-            if kind == 0x53:  # sync: nothing to keep
-                pos = end
+            if kind == 0x53 or ((kind == 0x4D or kind == 0x51) and _checked(buf, pos, end)):
+                pos = end  # sync: nothing to keep; M, Q: only checked
                 continue
             data = buf[pos + 3 : end]
             try:

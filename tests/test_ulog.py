@@ -360,6 +360,35 @@ def test_a_read_imports_nothing_more() -> None:
         assert out.strip() == "[]", out
 
 
+INFO_PAYLOADS = [bytes([9]) + b"char[3] ab" + b"xyz", bytes([7]) + b"char[3]" + b"xyz",
+                 bytes([2]) + b"ch", bytes([7]) + b"float x" + bytes(4),
+                 bytes([7]) + b"float x" + bytes(3), bytes([9]) + b"int32_t y" + bytes(4),
+                 bytes([9]) + b"int32_t y" + bytes(8), bytes([40]) + b"char[1] z",
+                 bytes([8]) + b"double d" + bytes(8), bytes([7]) + b"float\xff" + bytes(4),
+                 b"", bytes([5]) + b"char[" + b" "]  # fmt: skip
+
+
+@pytest.mark.parametrize("kind", [b"M", b"Q"])
+@pytest.mark.parametrize("where", ["definitions", "data"])
+@pytest.mark.parametrize("payload", INFO_PAYLOADS, ids=range(len(INFO_PAYLOADS)))
+def test_checked_info_messages_flag_what_pyulog_flags(
+        tmp_path: Path, kind: bytes, where: str, payload: bytes) -> None:
+    """``M`` and ``Q`` messages are only checked (plainly valid ones without decoding):
+    one that pyulog cannot parse is corruption, as there; the tables are unchanged."""
+    from fuzz import hostile
+
+    raw = hostile.ulog_file([hostile.ATT_FORMAT], samples=5)
+    message = hostile._ulog_msg(kind, b"\x00" + payload)
+    at = raw.index(b"att:") + len(hostile.ATT_FORMAT) if where == "definitions" else \
+        len(raw) - 17  # before the last data message (3 + 14 bytes)
+    path = tmp_path / "info.ulg"
+    path.write_bytes(raw[:at] + message + raw[at:])
+    ref, printed = pyulog(path)
+    log, quality = read(path)
+    assert_tables_match(log, ref)
+    assert len(quality) == int(bool(ref.file_corruption or printed.strip())), quality
+
+
 # ------------------------------------------------------------------ framing, truncation
 
 def message_ends(raw: bytes) -> list[int]:

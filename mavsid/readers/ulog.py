@@ -368,7 +368,11 @@ def _sizes(formats: dict[str, list[Field]]) -> set[int]:
     def size(name: str) -> int:
         got = memo.get(name)
         if got is None:
-            got = memo[name] = sum([part(k, n) for k, n, _ in formats.get(name, ())])
+            got = 0
+            for kind, count, _ in formats.get(name, ()):
+                width = _SIZE.get(kind)
+                got += (size(kind) if width is None else width) * (count or 1)
+            memo[name] = got
         return got
 
     out: set[int] = set()

@@ -6,6 +6,13 @@ definitions and every message that is not topic data are parsed once in Python; 
 messages (``D``, nearly all of a log) are framed, checked and decoded with numpy over a
 memory map of the file. pyulog is not used at run time.
 
+On a small log (a few MB) the fixed costs weigh most: a thousand or two definition
+messages and a hundred topics. They are kept down so: the plain parameters (``float`` or
+``int32_t`` key, 4-byte value: nearly all) are decoded in one batch, names at once and
+values as arrays; ``M`` and ``Q`` messages, which are only checked, are seen without
+decoding when plainly valid; a table's columns are views made when first asked for; the
+times of all tables are converted, and checked for running backwards, in one go.
+
 What the returned log holds:
 
 - one table per topic instance: ``topic`` for ``multi_id`` 0, ``topic[N]`` otherwise, with
@@ -61,18 +68,18 @@ implausible headers (garbage) are skipped in vectorised windows.
 
 Data messages are then grouped by subscription and gathered with one fancy index into a
 view of the map as raw records of the topic's size at every byte (``np.ndarray(...,
-strides=(1,))``), then seen as the topic's dtype, so each topic is one copy of its
-records. A data message counts if its id is subscribed at that point and its size is
-exactly the format's; the others are skipped and flagged as corruption, as pyulog does.
-pyulog's quirks on damaged files are kept so that its values stay the reference there
-too: the data of each section read (several with appended data) are taken at its end, a
-re-subscribed id keeps only its last subscription's data, and a record of a topic
-without room for an 8-byte timestamp (a damaged ``timestamp`` name) ends the section.
-Departures, on hostile files only: a message that claims to reach back before itself (a
-corrupt header near the end of the definitions) moves the read one byte forward, where
-pyulog may read the same bytes again; a format that flattens to more fields than a data
-message can hold bytes (nested arrays) is an unreadable subscription instead of minutes
-of expansion.
+strides=(1,))``), then seen as the topic's dtype, so each topic is one copy of its records
+(gathered as ``void`` records: much faster than as the structured dtype). A data message
+counts if its id is subscribed at that point and its size is exactly the format's; the
+others are skipped and flagged as corruption, as pyulog does. pyulog's quirks on damaged
+files are kept so that its values stay the reference there too: the data of each section
+read (several with appended data) are taken at its end, a re-subscribed id keeps only its
+last subscription's data, and a record of a topic without room for an 8-byte timestamp (a
+damaged ``timestamp`` name) ends the section. Departures, on hostile files only: a message
+that claims to reach back before itself (a corrupt header near the end of the definitions)
+moves the read one byte forward, where pyulog may read the same bytes again; a format that
+flattens to more fields than a data message can hold bytes (nested arrays) is an unreadable
+subscription instead of minutes of expansion.
 
 Bad input is one :class:`~mavsid.errors.LogFormatError` naming the file: a bad header,
 incompatible flags, formats that contain themselves (pyulog would recurse without end)

@@ -1141,10 +1141,15 @@ def _number(value: Any) -> float | None:
 def _params(parsed: _Parsed) -> tuple[dict[str, float], int, int]:
     """Initial parameters with later changes applied; the number of changes; and how many
     values were not numbers (skipped)."""
-    params: dict[str, float] = {}
+    initial = parsed.initial_params
+    if {type(v) for v in initial.values()} <= {float, int}:  # the common case: at once
+        params = dict(zip(initial, map(float, initial.values()), strict=True))
+        entries = [(name, value) for _, name, value in parsed.changed_params]
+    else:
+        params = {}
+        entries = list(initial.items())
+        entries += [(name, value) for _, name, value in parsed.changed_params]
     bad = 0
-    entries = list(parsed.initial_params.items())
-    entries += [(name, value) for _, name, value in parsed.changed_params]
     for name, value in entries:
         if type(value) is float or type(value) is int:  # the common case, directly
             params[name] = float(value)

@@ -293,6 +293,102 @@ def test_a_damaged_parameter_type_is_skipped_and_counted(tmp_path) -> None:  # t
     assert len(raw["att"]) == 50
 
 
+def _parameter_ulog(keys: list[bytes]) -> bytes:
+    """A small ULog whose definitions hold one parameter per key (4-byte values: the
+    key's index as float32 for keys starting ``float``, else as int32)."""
+    from fuzz import hostile
+
+    out = bytearray(hostile.ulog_file([hostile.ATT_FORMAT], samples=3))
+    params = b"".join(
+        hostile._ulog_msg(b"P", bytes([len(key)]) + key
+                          + struct.pack("<f" if key.startswith(b"f") else "<i", k))
+        for k, key in enumerate(keys))  # fmt: skip
+    at = out.index(b"att:") + len(hostile.ATT_FORMAT)  # after the format message
+    return bytes(out[:at] + params + out[at:])
+
+
+PLAIN_KEYS = [b"float MC_ROLL_P", b"int32_t MAV_TYPE", b"float MC_ROLL_P", b"int32_t ",
+              b"float \xc3\xa9t\xc3", b"int32_t SYS_" + b"X" * 200]  # fmt: skip
+
+
+@pytest.mark.parametrize("odd", [None, b"float A B", b"int32_t  TWO", b"flo", b"double D",
+                                 b"float N\nL", b"int32_t", b"int32_tX Y", b""])
+def test_parameters_read_at_once_are_pyulogs(tmp_path: Path, odd: bytes | None) -> None:
+    """Plain parameters (``float name`` / ``int32_t name``, a 4-byte value) are decoded
+    in one batch; a key that is not plain (a second word, a damaged or other type, a
+    newline, no space) sends the batch through pyulog's general rules: same values,
+    types and order as pyulog's (a repeated key: the last value, at the first place)."""
+    keys = PLAIN_KEYS + ([] if odd is None else [odd, b"float AFTER"])
+    path = tmp_path / "params.ulg"
+    path.write_bytes(_parameter_ulog(keys))
+    ref, _ = pyulog(path)
+    log, _ = read(path)
+    want = [(k, repr(v), type(v)) for k, v in ref.initial_parameters.items()]
+    singly: list[int] = []
+
+    class Reader(ulog._Reader):
+        def parameter(self, pos: int) -> None:
+            singly.append(pos)
+            super().parameter(pos)
+
+    reader = Reader(path.read_bytes(), path, None)
+    reader.header()
+    reader.definitions()
+    assert bool(singly) == (odd is not None)  # the batch, or each on its own
+    got = [(k, repr(v), type(v)) for k, v in reader.out.initial_params.items()]
+    assert got == want
+    numbers = {k: float(v) for k, v in ref.initial_parameters.items()
+               if isinstance(v, (int, float))}  # fmt: skip
+    assert log.params == numbers
+
+
+def test_a_read_imports_nothing_more() -> None:
+    """A cold read (a fresh process, as the command line does it) imports no module the
+    reader does not need: numpy.ma, pulled in by np.unique's first call, was 15 ms of a
+    5 ms read of a small log."""
+    import subprocess
+    import sys
+
+    code = ("import sys, warnings; warnings.simplefilter('ignore')\n"
+            "from mavsid.readers import ulog\n"
+            "before = set(sys.modules)\n"
+            "ulog.read(sys.argv[1])\n"
+            "print(sorted(set(sys.modules) - before))")
+    for path in FIXTURE_ULOGS[:1]:
+        out = subprocess.run([sys.executable, "-c", code, str(path)], check=True,
+                             capture_output=True, text=True).stdout
+        assert out.strip() == "[]", out
+
+
+INFO_PAYLOADS = [bytes([9]) + b"char[3] ab" + b"xyz", bytes([7]) + b"char[3]" + b"xyz",
+                 bytes([2]) + b"ch", bytes([7]) + b"float x" + bytes(4),
+                 bytes([7]) + b"float x" + bytes(3), bytes([9]) + b"int32_t y" + bytes(4),
+                 bytes([9]) + b"int32_t y" + bytes(8), bytes([40]) + b"char[1] z",
+                 bytes([8]) + b"double d" + bytes(8), bytes([7]) + b"float\xff" + bytes(4),
+                 b"", bytes([5]) + b"char[" + b" "]  # fmt: skip
+
+
+@pytest.mark.parametrize("kind", [b"M", b"Q"])
+@pytest.mark.parametrize("where", ["definitions", "data"])
+@pytest.mark.parametrize("payload", INFO_PAYLOADS, ids=range(len(INFO_PAYLOADS)))
+def test_checked_info_messages_flag_what_pyulog_flags(
+        tmp_path: Path, kind: bytes, where: str, payload: bytes) -> None:
+    """``M`` and ``Q`` messages are only checked (plainly valid ones without decoding):
+    one that pyulog cannot parse is corruption, as there; the tables are unchanged."""
+    from fuzz import hostile
+
+    raw = hostile.ulog_file([hostile.ATT_FORMAT], samples=5)
+    message = hostile._ulog_msg(kind, b"\x00" + payload)
+    at = raw.index(b"att:") + len(hostile.ATT_FORMAT) if where == "definitions" else \
+        len(raw) - 17  # before the last data message (3 + 14 bytes)
+    path = tmp_path / "info.ulg"
+    path.write_bytes(raw[:at] + message + raw[at:])
+    ref, printed = pyulog(path)
+    log, quality = read(path)
+    assert_tables_match(log, ref)
+    assert len(quality) == int(bool(ref.file_corruption or printed.strip())), quality
+
+
 # ------------------------------------------------------------------ framing, truncation
 
 def message_ends(raw: bytes) -> list[int]:

@@ -6,6 +6,13 @@ definitions and every message that is not topic data are parsed once in Python; 
 messages (``D``, nearly all of a log) are framed, checked and decoded with numpy over a
 memory map of the file. pyulog is not used at run time.
 
+On a small log (a few MB) the fixed costs weigh most: a thousand or two definition
+messages and a hundred topics. They are kept down so: the plain parameters (``float`` or
+``int32_t`` key, 4-byte value: nearly all) are decoded in one batch, names at once and
+values as arrays; ``M`` and ``Q`` messages, which are only checked, are seen without
+decoding when plainly valid; a table's columns are views made when first asked for; the
+times of all tables are converted, and checked for running backwards, in one go.
+
 What the returned log holds:
 
 - one table per topic instance: ``topic`` for ``multi_id`` 0, ``topic[N]`` otherwise, with
@@ -29,13 +36,14 @@ ULog has no sync bytes in its data stream: a message is ``uint16 size, uint8 typ
 pyulog reads it, one message after the other from the end of the definitions, but the
 runs of consecutive data messages are taken in one step:
 
-1. *Candidates*: every position ``p`` whose type byte ``p+2`` is ``'D'``, whose message
-   id and ``size`` agree with some subscription in the file (the ``A`` messages are found
-   the same way: type byte ``A``, a defined format's name as payload, a known type byte
-   after it; the size is the format's + 2, with or without its trailing padding) and
-   whose message ends inside the file. Its successor is ``next = p + 3 + size``. A
-   candidate may be false (the byte pattern inside some payload) and a real message may
-   be no candidate (a damaged one): both only cost Python steps, never correctness.
+1. *Candidates*: every position ``p`` whose type byte ``p+2`` is ``'D'``, whose ``size``
+   is one a data message of some format defined in the file can have (the format's size
+   + 2, with or without its trailing padding; the message id is not looked at: the
+   subscriptions are only known as the walk meets them), whose message ends inside
+   the file and is followed by the header of a known message type (or the file's end).
+   Its successor is ``next = p + 3 + size``. A candidate may be false (the byte pattern
+   inside some payload) and a real message may be no candidate (a damaged one): both
+   only cost Python steps, never correctness.
    Candidates are found one 1 MB block of the file at a time, when the walk reaches it,
    so that their arrays stay small whatever the file holds.
 2. *Runs*: ``follows[i]`` is true when candidate ``i``'s successor is candidate ``i+1``.
@@ -60,18 +68,18 @@ implausible headers (garbage) are skipped in vectorised windows.
 
 Data messages are then grouped by subscription and gathered with one fancy index into a
 view of the map as raw records of the topic's size at every byte (``np.ndarray(...,
-strides=(1,))``), then seen as the topic's dtype, so each topic is one copy of its
-records. A data message counts if its id is subscribed at that point and its size is
-exactly the format's; the others are skipped and flagged as corruption, as pyulog does.
-pyulog's quirks on damaged files are kept so that its values stay the reference there
-too: the data of each section read (several with appended data) are taken at its end, a
-re-subscribed id keeps only its last subscription's data, and a record of a topic
-without room for an 8-byte timestamp (a damaged ``timestamp`` name) ends the section.
-Departures, on hostile files only: a message that claims to reach back before itself (a
-corrupt header near the end of the definitions) moves the read one byte forward, where
-pyulog may read the same bytes again; a format that flattens to more fields than a data
-message can hold bytes (nested arrays) is an unreadable subscription instead of minutes
-of expansion.
+strides=(1,))``), then seen as the topic's dtype, so each topic is one copy of its records
+(gathered as ``void`` records: much faster than as the structured dtype). A data message
+counts if its id is subscribed at that point and its size is exactly the format's; the
+others are skipped and flagged as corruption, as pyulog does. pyulog's quirks on damaged
+files are kept so that its values stay the reference there too: the data of each section
+read (several with appended data) are taken at its end, a re-subscribed id keeps only its
+last subscription's data, and a record of a topic without room for an 8-byte timestamp (a
+damaged ``timestamp`` name) ends the section. Departures, on hostile files only: a message
+that claims to reach back before itself (a corrupt header near the end of the definitions)
+moves the read one byte forward, where pyulog may read the same bytes again; a format that
+flattens to more fields than a data message can hold bytes (nested arrays) is an unreadable
+subscription instead of minutes of expansion.
 
 Bad input is one :class:`~mavsid.errors.LogFormatError` naming the file: a bad header,
 incompatible flags, formats that contain themselves (pyulog would recurse without end)
@@ -97,7 +105,7 @@ import os
 import re
 import struct
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -133,15 +141,17 @@ _BASIC: dict[str, tuple[type[np.generic], int, str]] = {
     "float": (np.float32, 4, "f"), "double": (np.float64, 8, "d"),
     "bool": (np.int8, 1, "?"), "char": (np.int8, 1, "c"),
 }  # fmt: skip
+#: a parameter key's type as the payload has it (after size, type and key length)
+_FLOAT, _INT32 = np.frombuffer(b"float ", np.uint8), np.frombuffer(b"int32_t ", np.uint8)
+_FLOAT_AT, _INT32_AT = np.arange(4, 10), np.arange(4, 12)
+#: bytes of each basic type
+_SIZE = {kind: size for kind, (_, size, _) in _BASIC.items()}
 #: message types read in the definitions section / in the data section
 #: little-endian numpy dtypes of the basic types
 _DTYPE = {kind: np.dtype(t).newbyteorder("<") for kind, (t, _, _) in _BASIC.items()}
 _DEF_TYPES = frozenset(b"FIMPQBALC")
 _DATA_TYPES = frozenset(b"IMPQALCDOS")
 _HEAD = struct.Struct("<HB").unpack_from
-#: parameter types with 4-byte values, read without the general parser
-_FAST_VALUE = {"float": struct.Struct("<f").unpack_from,
-               "int32_t": struct.Struct("<i").unpack_from}
 _KNOWN_TYPE = np.zeros(256, bool)
 _KNOWN_TYPE[list(b"FDIMPQARLCOSB")] = True
 #: an unknown message type with a size above this is taken as corruption (pyulog's rule)
@@ -215,6 +225,34 @@ def _info(data: bytes, multiple: bool = False) -> tuple[str, str, Any]:
     return kind, key, raw  # an array or a damaged type: raw bytes, as pyulog keeps them
 
 
+def _checked(buf: Any, pos: int, end: int) -> bool:
+    """Whether the ``M`` or ``Q`` message at ``pos`` (a byte, then an info: key length,
+    key ``type name``, value) is one pyulog reads without error, seen without decoding it:
+    a text (type ``char[N]``) or a 4-byte parameter value. False: not known to be.
+
+    Examples
+    --------
+    >>> _checked(b"\\0\\0M" + bytes([0, 9]) + b"char[1] ab", 0, 15)
+    True
+    >>> _checked(b"\\0\\0Q" + bytes([0, 7]) + b"float x" + bytes(4), 0, 16)
+    True
+    >>> _checked(b"\\0\\0Q" + bytes([0, 7]) + b"float x" + bytes(3), 0, 15)
+    False
+    """
+    if end - pos < 5:
+        return False
+    key = pos + 5
+    stop = key + buf[pos + 4]
+    if stop > end:
+        return False
+    if buf[key : key + 5] == b"char[":
+        return bool(buf.find(b" ", key + 5, stop) >= 0)
+    if end - stop != 4:
+        return False
+    return (stop - key >= 6 and buf[key : key + 6] == b"float ") or (
+        stop - key >= 8 and buf[key : key + 8] == b"int32_t ")
+
+
 def _format(data: bytes) -> tuple[str, list[Field]]:
     """A format definition ``name:type field;type[n] field;...``.
 
@@ -248,6 +286,46 @@ def _format(data: bytes) -> tuple[str, list[Field]]:
     return parts[0], fields
 
 
+def _u16(u8: NDArray[np.uint8], at: NDArray[np.int64]) -> NDArray[np.uint16]:
+    """The little-endian ``uint16`` at each byte position ``at`` (``at`` is reused).
+
+    Examples
+    --------
+    >>> _u16(np.array([1, 2, 3], np.uint8), np.array([0, 1]))
+    array([513, 770], dtype=uint16)
+    """
+    low = u8.take(at).astype(np.uint16)
+    at += 1
+    low |= u8.take(at).astype(np.uint16) << 8
+    return low
+
+
+def _joined(u8: NDArray[np.uint8], start: NDArray[np.int64],
+            length: NDArray[np.int64]) -> list[str] | None:
+    """The texts ``u8[start:start + length]`` (UTF-8, invalid bytes dropped) decoded at
+    once: None if one holds a space or a newline (the separator), or they are too long.
+
+    Examples
+    --------
+    >>> u8 = np.frombuffer(b"abc de\\xff", np.uint8)
+    >>> _joined(u8, np.array([0, 4]), np.array([2, 3])), _joined(u8, np.array([0]), np.array([5]))
+    (['ab', 'de'], None)
+    """
+    total = int(length.sum())
+    if total >= 1 << 24:
+        return None
+    owner = np.repeat(np.arange(start.size), length)
+    ends = np.cumsum(length + 1)
+    inner = np.arange(total) + owner  # where each byte goes, each text followed by "\n"
+    text = u8[inner - (ends - length - 1)[owner] + start[owner]]
+    if ((text == 10) | (text == 32)).any():
+        return None
+    joined = np.full(int(ends[-1]) if ends.size else 0, 10, np.uint8)
+    joined[inner] = text
+    # decoding the whole drops the same bytes as decoding each (the newline is ASCII)
+    return joined.tobytes().decode("utf-8", "ignore").split("\n")[:-1]
+
+
 def _cycle(formats: dict[str, list[Field]]) -> list[str] | None:
     """A chain of formats that contain themselves (``a`` → ``b`` → ``a``); None if none.
 
@@ -278,34 +356,41 @@ def _cycle(formats: dict[str, list[Field]]) -> list[str] | None:
     return None
 
 
-def _sizes(formats: dict[str, list[Field]], names: set[str]) -> dict[str, tuple[int, ...]]:
-    """Per format of ``names``, the payload sizes its data messages can have: 2 (message
-    id) + the format's size, with and without its trailing ``_padding`` fields (formats
-    acyclic).
+def _sizes(formats: dict[str, list[Field]]) -> set[int]:
+    """The payload sizes data messages of the formats can have: 2 (message id) + a
+    format's size, with and without its trailing ``_padding`` fields (formats acyclic;
+    a nested type not defined counts 0).
 
     Examples
     --------
-    >>> _sizes({"a": [("uint64_t", 0, "timestamp"), ("uint8_t", 3, "_padding0")]}, {"a"})
-    {'a': (13, 10)}
+    >>> sorted(_sizes({"a": [("uint64_t", 0, "timestamp"), ("uint8_t", 3, "_padding0")]}))
+    [10, 13]
     """
     memo: dict[str, int] = {}
 
-    def size(name: str) -> int:
-        if name not in memo:
-            memo[name] = sum(max(n, 1) * (_BASIC[k][1] if k in _BASIC else size(k))
-                             for k, n, _ in formats.get(name, ()))  # fmt: skip
-        return memo[name]
+    def part(kind: str, count: int) -> int:
+        width = _SIZE.get(kind)
+        return (size(kind) if width is None else width) * (count or 1)
 
-    out = {}
-    for name in names & formats.keys():
-        fields = formats[name]
+    def size(name: str) -> int:
+        got = memo.get(name)
+        if got is None:
+            got = 0
+            for kind, count, _ in formats.get(name, ()):
+                width = _SIZE.get(kind)
+                got += (size(kind) if width is None else width) * (count or 1)
+            memo[name] = got
+        return got
+
+    out: set[int] = set()
+    for name, fields in formats.items():
         full = trimmed = size(name)
         for kind, n, fname in reversed(fields):
-            part = max(n, 1) * (_BASIC[kind][1] if kind in _BASIC else size(kind))
-            if part and not fname.startswith("_padding"):
+            width = part(kind, n)
+            if width and not fname.startswith("_padding"):
                 break
-            trimmed -= part
-        out[name] = tuple(dict.fromkeys(s + 2 for s in (full, trimmed) if 0 < s <= 0xFFFF - 2))
+            trimmed -= width
+        out.update(s + 2 for s in (full, trimmed) if 0 < s <= 0xFFFF - 2)
     return out
 
 
@@ -345,7 +430,50 @@ class _Parsed:
     problems: list[str] = field(default_factory=list)
     skipped: int = 0
     truncated: int = 0
-    data: list[tuple[str, int, dict[str, NDArray[Any]]]] = field(default_factory=list)
+    data: list[tuple[str, int, _Columns]] = field(default_factory=list)
+
+
+class _Columns(Mapping[str, NDArray[Any]]):
+    """A topic's columns: field name -> the records' field (a view), made when first asked
+    for (most of a log's hundred topics and thousands of fields are never looked at).
+
+    Examples
+    --------
+    >>> cols = _Columns(np.zeros(2, [("timestamp", "<u8"), ("x", "<f4")]))
+    >>> list(cols), cols["x"].dtype, len(cols)
+    (['timestamp', 'x'], dtype('float32'), 2)
+    """
+
+    __slots__ = ("_fields", "_views", "records")
+
+    def __init__(self, records: NDArray[Any]) -> None:
+        self.records = records
+        self._fields: Mapping[str, Any] = records.dtype.fields or {}
+        self._views: dict[str, NDArray[Any]] = {}
+
+    def __getitem__(self, name: str) -> NDArray[Any]:
+        try:
+            return self._views[name]
+        except KeyError:
+            if not isinstance(name, str) or name not in self._fields:
+                raise KeyError(name) from None
+            view = self._views[name] = self.records[name]
+            return view
+
+    def __contains__(self, name: object) -> bool:
+        return isinstance(name, str) and name in self._fields
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.records.dtype.names or ())
+
+    def __len__(self) -> int:
+        return len(self.records.dtype.names or ())
+
+    def __repr__(self) -> str:
+        return f"_Columns({list(self)!r})"
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (_Columns, (self.records,))
 
 
 class _Reader:
@@ -429,22 +557,34 @@ class _Reader:
     # ------------------------------------------------------------------ definitions
     def definitions(self) -> int:
         """Read formats, info, parameters and flag bits; the data section's start."""
+        plain: list[int] = []  # parameters with a 4-byte value, read in batches
+        try:
+            return self.definitions_walk(plain)
+        finally:
+            self.parameters(plain)
+
+    def definitions_walk(self, plain: list[int]) -> int:
+        """:meth:`definitions`' walk; the positions of parameters whose payload has room
+        for a 4-byte value only are put in ``plain``, read by :meth:`parameters` before
+        any other parameter (the order of the values is the file's)."""
         out, n, buf, pos = self.out, self.n, self.buf, 16
-        params = out.initial_params
         while pos < n:
             if n - pos < 3:
                 self.problem("file corruption detected while reading file definitions")
                 return n
             size, kind = _HEAD(buf, pos)
             end = pos + 3 + size
-            if kind == 0x50 and end <= n and size == buf[pos + 3] + 5:  # the common parameter
-                words = _text(buf[pos + 4 : end - 4]).split(" ")
-                if len(words) > 1 and words[0] in _FAST_VALUE:
-                    params[words[1]] = _FAST_VALUE[words[0]](buf, end - 4)[0]
+            if kind == 0x50:
+                if end <= n and size == buf[pos + 3] + 5:  # the common parameter
+                    plain.append(pos)
                     pos = end
                     continue
-            if kind in (0x41, 0x4C, 0x43):  # A, L, C: the data section begins
+                self.parameters(plain)
+            elif kind in (0x41, 0x4C, 0x43):  # A, L, C: the data section begins
                 return pos
+            elif (kind == 0x4D or kind == 0x51) and end <= n and _checked(buf, pos, end):
+                pos = end  # M, Q: only checked
+                continue
             data = self.buf[pos + 3 : min(end, n)]
             try:
                 if kind == 0x49:  # I
@@ -475,6 +615,40 @@ class _Reader:
             pos = end
         return min(pos, n)
 
+    def parameters(self, plain: list[int]) -> None:
+        """The parameters at ``plain`` (whose payload is the key and a 4-byte value), in
+        order, then ``plain`` emptied. When every key is ``float name`` or ``int32_t name``
+        (one space), the names are gathered and decoded at once and the values read as
+        arrays; otherwise each is read on its own (:meth:`parameter`)."""
+        if not plain:
+            return
+        u8, at = self.u8, np.array(plain, np.int64)
+        plain.clear()
+        length = u8[at + 3].astype(np.int64)
+        value = at + 4 + length
+        is_float = u8[at + 4] == ord("f")  # (a byte of the key or the value: in the file)
+        skip = np.where(is_float, 6, 8)  # "float " or "int32_t "
+        names = None
+        if (length >= skip).all() and (u8[at[is_float, None] + _FLOAT_AT] == _FLOAT).all() \
+                and (u8[at[~is_float, None] + _INT32_AT] == _INT32).all():
+            names = _joined(u8, at + 4 + skip, length - skip)
+        if names is None:
+            for p in at.tolist():
+                self.parameter(p)
+            return
+        floats = np.ndarray((self.n - 3,), "<f4", buffer=self.buf, strides=(1,))[value]
+        ints = np.ndarray((self.n - 3,), "<i4", buffer=self.buf, strides=(1,))[value]
+        self.out.initial_params.update(zip(names, np.where(
+            is_float, floats.astype(object), ints.astype(object)).tolist(), strict=True))
+
+    def parameter(self, pos: int) -> None:
+        """One parameter message of the definitions (pyulog's rules)."""
+        try:
+            _, key, value = _info(self.buf[pos + 3 : pos + 3 + _HEAD(self.buf, pos)[0]])
+            self.out.initial_params[key] = value
+        except (_Stop, _Bad):
+            self.problem("file corruption detected while reading file definitions")
+
     def flag_bits(self, pos: int, size: int, data: bytes) -> None:
         if pos != 16:
             self.out.problems.append("FLAGS_BITS message must be the first message")
@@ -498,18 +672,20 @@ class _Reader:
         subscriptions allow; each block's candidates are found when the walk gets there
         (:meth:`load`), so that memory stays bounded whatever the file holds."""
         self.start = start
-        self.tables = self.allowed_sizes(start)
+        # the data message sizes the file's formats allow: any message id (a filter only)
+        self.allowed = np.zeros(1 << 16, bool)
+        self.allowed[list(_sizes(self.out.formats))] = True
         self.lo = self.hi = -1  # the block whose candidates are loaded
         self.cand = np.zeros(0, np.int64)
         self.csize = self.cmsg = np.zeros(0, np.uint16)
         self.breaks = np.zeros(0, np.int64)
-        self.u16 = np.ndarray((max(self.n - 1, 0),), "<u2", buffer=self.buf, strides=(1,))
 
     def load(self, pos: int) -> None:
         """The candidates of the block of the file holding ``pos``: positions of type byte
-        ``D`` whose size is one their id's subscription allows and whose message ends in
-        the file; their sizes and ids; the indices where a run of consecutive candidates
-        breaks (the block's last one always)."""
+        ``D`` whose size is one a format allows, whose message ends in the file and is
+        followed by one of a known type or the file's end; their sizes and ids; the
+        indices where a run of consecutive candidates breaks (the block's last one
+        always)."""
         u8, n = self.u8, self.n
         self.flush()
         if self.chunks and self.cand.size > 4 * self.taken + _BLOCK // 64:
@@ -520,50 +696,25 @@ class _Reader:
         hi = min(lo + _BLOCK, n - 4)  # a data message needs 5 bytes
         p = np.flatnonzero(u8[lo + 2 : hi + 2] == 0x44)
         p += lo
-        size, ids = self.u16[p], self.u16[p + 3]
-        keep = np.zeros(p.size, bool)
-        for table in self.tables:
-            keep |= table[ids] == size
-        keep &= (size != 0) & (p + 3 + size <= n)  # a size 0 in a table: none allowed
-        self.cand, self.csize, self.cmsg = p[keep], size[keep], ids[keep]
+        # (``take`` on the contiguous bytes: much faster than indexing unaligned views)
+        size = _u16(u8, p + 0)
+        keep = self.allowed.take(size)  # (never 0)
+        after = p + 5
+        after += size  # the next message's type byte
+        keep &= after <= n + 2  # the message ends in the file
+        end = after >= n  # no room for another header
+        np.minimum(after, n - 1, out=after)
+        # and the message after it is of a known type, or the file ends: fewer false ones
+        end |= _KNOWN_TYPE.take(u8.take(after))
+        keep &= end
+        p, size = p[keep], size[keep]
+        self.cand, self.csize, self.cmsg = p, size, _u16(u8, p + 3)
         follows = np.zeros(self.cand.size, bool)
         nxt = self.cand[:-1] + 3
         nxt += self.csize[:-1]
         follows[:-1] = nxt == self.cand[1:]
         self.breaks = np.flatnonzero(~follows)
         self.lo, self.hi, self.taken = lo, hi, 0
-
-    def allowed_sizes(self, start: int) -> list[NDArray[np.uint16]]:
-        """The data message sizes the file's subscriptions allow, as tables by message id
-        (0: none; one table per size a message id may have), from the positions of type
-        byte ``A`` (in blocks of the file): those with a defined format's name as payload
-        and followed by a message of a known type give the format's size + 2, with and
-        without its trailing padding. A filter only: a data message it misses is read by a
-        Python step."""
-        u8, n = self.u8, self.n
-        named: dict[tuple[int, str], None] = {}
-        for lo in range(start, max(n - 2, start), _BLOCK):
-            p = np.flatnonzero(u8[lo + 2 : min(lo + _BLOCK, n - 2) + 2] == 0x41)
-            p += lo
-            size = u8[p].astype(np.int64) | u8[p + 1].astype(np.int64) << 8
-            ok = (size > 3) & (size < 260) & (p + 3 + size <= n)
-            p, size = p[ok], size[ok]
-            follower = np.minimum(p + 5 + size, n - 1)  # the type byte of the next message
-            for q in p[_KNOWN_TYPE[u8[follower]] | (follower == n - 1)].tolist():
-                length = self.buf[q] | self.buf[q + 1] << 8
-                named[self.buf[q + 4] | self.buf[q + 5] << 8,
-                      _text(self.buf[q + 6 : q + 3 + length])] = None
-        sizes = _sizes(self.out.formats, {name for _, name in named})
-        allowed: dict[int, set[int]] = {}
-        for msg_id, name in named:
-            if name in sizes:
-                allowed.setdefault(msg_id, set()).update(sizes[name])
-        tables = [np.zeros(1 << 16, np.uint16)
-                  for _ in range(max(map(len, allowed.values()), default=0))]  # fmt: skip
-        for msg_id, options in allowed.items():
-            for table, value in zip(tables, sorted(options), strict=False):
-                table[msg_id] = value
-        return tables
 
     # ------------------------------------------------------------------ subscriptions
     def flatten(self, name: str) -> list[tuple[str, str]]:
@@ -670,8 +821,8 @@ class _Reader:
                 return n
             if end > until:
                 return end
-            if kind == 0x53:  # sync: nothing to keep
-                pos = end
+            if kind == 0x53 or ((kind == 0x4D or kind == 0x51) and _checked(buf, pos, end)):
+                pos = end  # sync: nothing to keep; M, Q: only checked
                 continue
             data = buf[pos + 3 : end]
             try:
@@ -874,20 +1025,20 @@ class _Reader:
     def decode(self, pos: NDArray[np.int64], sub: NDArray[np.int64]) -> None:
         """Gather each kept subscription's records: one fancy index per topic into a view
         of the file as raw records of its size at every byte, then seen as its dtype."""
-        order = np.argsort(sub, kind="stable")
-        counts = np.bincount(sub, minlength=len(self.subs))
-        first = np.concatenate([[0], np.cumsum(counts)])
+        at = pos[np.argsort(sub, kind="stable")]  # grouped by subscription, in file order
+        at += 5
+        counts = np.bincount(sub, minlength=len(self.subs)).tolist()
+        first = [0, *np.cumsum(counts).tolist()]
         items = []
         for k in self.final:
             s = self.subs[k]
             width = s.dtype.itemsize
             if not counts[k] or not width:
                 continue
+            # (raw records gathered as void: much faster than as the structured dtype)
             raw = np.ndarray((self.n - width + 1,), f"V{width}", buffer=self.buf, strides=(1,))
-            at = pos[order[first[k] : first[k + 1]]]
-            at += 5
-            records = np.frombuffer(raw[at], s.dtype)
-            items.append((s.name, s.multi_id, {f: records[f] for f in s.dtype.names or ()}))
+            records = np.frombuffer(raw[at[first[k] : first[k + 1]]], s.dtype)
+            items.append((s.name, s.multi_id, _Columns(records)))
         items.sort(key=lambda d: (d[0], d[1]))
         self.out.data = items
 
@@ -918,13 +1069,37 @@ def _parse(path: str | os.PathLike[str], topics: set[str] | None) -> _Parsed:
             pass
 
 
-def _time_s(data: dict[str, NDArray[Any]]) -> NDArray[np.float64]:
-    """``timestamp_sample`` if present, else ``timestamp``, in seconds (NaN if neither)."""
-    for key in ("timestamp_sample", "timestamp"):
-        if key in data:
-            return data[key].astype(np.float64) / 1e6
-    n = len(next(iter(data.values()))) if data else 0
-    return np.full(n, np.nan)
+def _times(tables: list[_Columns]) -> list[NDArray[np.float64]]:
+    """Per table, ``timestamp_sample`` if present, else ``timestamp``, in seconds (NaN if
+    neither): the ``uint64`` ones (all in a real log) converted in one go, each table's
+    a slice of the whole.
+
+    Examples
+    --------
+    >>> a = _Columns(np.array([(1_000_000,), (2_500_000,)], [("timestamp", "<u8")]))
+    >>> b = _Columns(np.array([(7,)], [("x", "<f4")]))
+    >>> [t.tolist() for t in _times([a, b, a])]
+    [[1.0, 2.5], [nan], [1.0, 2.5]]
+    """
+    out: list[NDArray[np.float64] | None] = []
+    batch: list[NDArray[Any]] = []
+    for data in tables:
+        key = "timestamp_sample" if "timestamp_sample" in data else "timestamp"
+        column = data.get(key)
+        if column is None:
+            out.append(np.full(len(data.records), np.nan))
+        elif column.dtype == np.uint64:
+            out.append(None)
+            batch.append(column)
+        else:
+            out.append(column.astype(np.float64) / 1e6)
+    if batch:
+        whole = np.concatenate(batch, dtype=np.float64)
+        whole /= 1e6
+        ends = np.cumsum([len(c) for c in batch]).tolist()
+        parts = iter([whole[e - len(c) : e] for c, e in zip(batch, ends, strict=True)])
+        return [next(parts) if t is None else t for t in out]
+    return [t for t in out if t is not None]
 
 
 def _texts(parsed: _Parsed) -> list[TextMessage]:
@@ -966,10 +1141,15 @@ def _number(value: Any) -> float | None:
 def _params(parsed: _Parsed) -> tuple[dict[str, float], int, int]:
     """Initial parameters with later changes applied; the number of changes; and how many
     values were not numbers (skipped)."""
-    params: dict[str, float] = {}
+    initial = parsed.initial_params
+    if {type(v) for v in initial.values()} <= {float, int}:  # the common case: at once
+        params = dict(zip(initial, map(float, initial.values()), strict=True))
+        entries = [(name, value) for _, name, value in parsed.changed_params]
+    else:
+        params = {}
+        entries = list(initial.items())
+        entries += [(name, value) for _, name, value in parsed.changed_params]
     bad = 0
-    entries = list(parsed.initial_params.items())
-    entries += [(name, value) for _, name, value in parsed.changed_params]
     for name, value in entries:
         if type(value) is float or type(value) is int:  # the common case, directly
             params[name] = float(value)
@@ -997,7 +1177,11 @@ def _firmware(info: dict[str, Any]) -> str | None:
 def _window(table: MessageTable, lo: float, hi: float) -> MessageTable:
     """Rows of ``table`` with ``lo <= time_s <= hi``."""
     keep = (table.time_s >= lo) & (table.time_s <= hi)
-    columns = {n: c[keep] for n, c in table.columns.items()}
+    columns: Mapping[str, NDArray[Any]]
+    if isinstance(table.columns, _Columns):
+        columns = _Columns(table.columns.records[keep])
+    else:
+        columns = {n: c[keep] for n, c in table.columns.items()}
     return MessageTable(table.name, columns, table.time_s[keep], table.units)
 
 
@@ -1059,11 +1243,12 @@ def read(
         raise LogFormatError("no ULog data (no topic samples, no parameters)", path=path)
 
     tables: dict[str, MessageTable] = {}
-    for topic, multi_id, data in parsed.data:
+    times = _times([data for _, _, data in parsed.data])
+    for (topic, multi_id, data), time_s in zip(parsed.data, times, strict=True):
         name = table_name(topic, multi_id)
         units: dict[str, str] = {k: "us" for k in ("timestamp", "timestamp_sample")
                                  if k in data}
-        tables[name] = MessageTable(name, data, _time_s(data), units)
+        tables[name] = MessageTable(name, data, time_s, units)
     params, n_changes, bad_params = _params(parsed)
     texts = _texts(parsed)
     modes = _modes(tables.get(_MODE_TOPIC))
@@ -1116,9 +1301,32 @@ def _notes(parsed: _Parsed, tables: dict[str, MessageTable], n_changes: int) -> 
         notes.append("has appended data (crash dump)")
     if n_changes:
         notes.append(f"{n_changes} parameter changes during the log")
-    backwards = [n for n, t in tables.items()
-                 if len(t) > 1 and (t.time_s[1:] < t.time_s[:-1]).any()]
+    backwards = _backwards(tables)
     if backwards:
         shown = ", ".join(backwards[:5]) + (" ..." if len(backwards) > 5 else "")
         notes.append(f"time runs backwards in {len(backwards)} topics ({shown})")
     return notes
+
+
+def _backwards(tables: dict[str, MessageTable]) -> list[str]:
+    """The tables whose time runs backwards somewhere, in order: all checked at once.
+
+    Examples
+    --------
+    >>> def table(t):
+    ...     return MessageTable("x", {}, np.array(t, float))
+    >>> _backwards({"a": table([1, 2]), "b": table([0, 1, 0.5]), "c": table([1])})
+    ['b']
+    """
+    timed = [(name, t.time_s) for name, t in tables.items() if len(t) > 1]
+    if not timed:
+        return []
+    lengths = np.array([len(t) for _, t in timed])
+    starts = np.cumsum(lengths) - lengths
+    whole = np.concatenate([t for _, t in timed])
+    back = np.flatnonzero(whole[1:] < whole[:-1])  # whole[i + 1] < whole[i]
+    owner = np.searchsorted(starts, back, "right") - 1
+    inside = back + 1 < starts[owner] + lengths[owner]  # i and i + 1 in one table
+    # (not np.unique: its first call imports numpy.ma, 15 ms of a cold read)
+    hit = np.bincount(owner[inside], minlength=len(timed))
+    return [timed[k][0] for k in np.flatnonzero(hit).tolist()]

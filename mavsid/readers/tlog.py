@@ -83,6 +83,7 @@ from numpy.typing import NDArray
 
 from mavsid.data import MessageTable, ModeChange, RawLog, SourceInfo, TextMessage
 from mavsid.errors import ConfigError, DataQualityWarning, LogFormatError
+from mavsid.readers.modes import ardupilot_modes, px4_mode_name
 
 __all__ = ["MessageDef", "load_dialect", "read", "vehicle_class"]
 
@@ -670,12 +671,11 @@ def _modes(hb: MessageTable | None, vehicle: tuple[int, int, int, int]) -> tuple
 
 
 def _mode_names(autopilot: int, mav_type: int) -> Any:
-    """mode number -> name (or None), from pymavlink's ArduPilot and PX4 mode tables."""
-    from pymavlink import mavutil
-
+    """mode number -> name (or None), from the ArduPilot and PX4 mode tables
+    (:mod:`mavsid.readers.modes`)."""
     if autopilot == 12:
-        return lambda mode: mavutil.interpret_px4_mode(0, mode)
-    table = mavutil.mode_mapping_bynumber(mav_type) if autopilot == 3 else None
+        return px4_mode_name
+    table = ardupilot_modes(mav_type) if autopilot == 3 else None
     return lambda mode: table.get(mode) if table else None
 
 

@@ -71,6 +71,7 @@ import numpy as np
 
 from mavsid.data import MessageTable, ModeChange, RawLog, SourceInfo, TextMessage
 from mavsid.errors import ConfigError, DataQualityWarning, LogFormatError
+from mavsid.readers.modes import ardupilot_modes
 
 __all__ = [
     "FORMAT_CHARS",
@@ -1067,19 +1068,8 @@ def vehicle_and_firmware(
 
 
 def _mode_names(vehicle: str | None) -> dict[int, str]:
-    """Mode number -> name for the vehicle type (pymavlink's tables)."""
-    if not vehicle:
-        return {}
-    from pymavlink import mavutil  # lazy: slow to import
-
-    mav = mavutil.mavlink
-    kind = vehicle.split()[0]
-    mav_type = {"copter": mav.MAV_TYPE_QUADROTOR, "heli": mav.MAV_TYPE_HELICOPTER,
-                "plane": mav.MAV_TYPE_FIXED_WING, "rover": mav.MAV_TYPE_GROUND_ROVER,
-                "sub": mav.MAV_TYPE_SUBMARINE, "tracker": mav.MAV_TYPE_ANTENNA_TRACKER,
-                "blimp": mav.MAV_TYPE_AIRSHIP}.get(kind)
-    mapping = mavutil.mode_mapping_bynumber(mav_type) if mav_type is not None else None
-    return dict(mapping or {})
+    """Mode number -> name for the vehicle type (:mod:`mavsid.readers.modes`)."""
+    return dict(ardupilot_modes(vehicle) or {})
 
 
 def _modes(table: Mapping[str, np.ndarray] | None, time_s: np.ndarray | None,

@@ -15,7 +15,10 @@ on); candidates are checked by length, flags, a known message id and the X.25 CR
 with the message's CRC_EXTRA, all as numpy operations grouped by frame length; overlapping
 survivors are resolved in file order, preferring frames that chain into the next record.
 Each message id's frames are then viewed through a structured dtype in wire order (short v2
-payloads zero-padded, as MAVLink specifies) and split into columns by field name.
+payloads zero-padded, as MAVLink specifies) and split into columns by field name. The file is
+memory-mapped, not copied, and its pages are handed back as the scan and each table are done;
+what is kept per frame is compact (about 20 bytes): the read's peak stays under twice the
+tables it returns.
 
 Every table has the fields of the message (2-D arrays for array fields, ``str`` for char
 arrays, decoded as pymavlink does) plus ``_sysid``, ``_compid`` and ``_recv_time_s`` (the
@@ -32,10 +35,10 @@ has unit ``"instance"``. ``MessageTable.time_s`` is the vehicle's clock:
   clock.
 
 ``PARAM_VALUE`` gives ``params``, ``STATUSTEXT`` the text messages (chunks joined), the
-``HEARTBEAT``'s ``custom_mode`` the mode changes (names from pymavlink's ArduPilot and PX4
-mode tables) and ``autopilot`` — all of the main vehicle: the first system whose heartbeat is
-neither a ground station, gimbal, ADS-B receiver, onboard computer nor
-``MAV_AUTOPILOT_INVALID``, as pymavlink picks it.
+``HEARTBEAT``'s ``custom_mode`` the mode changes (names from the ArduPilot and PX4 mode
+tables of :mod:`mavsid.readers.modes`, pymavlink's names) and ``autopilot`` — all of the
+main vehicle: the first system whose heartbeat is neither a ground station, gimbal, ADS-B
+receiver, onboard computer nor ``MAV_AUTOPILOT_INVALID``, as pymavlink picks it.
 
 Bytes that form no valid frame (garbage, bad CRC, truncated records), frames of message ids
 the dialect does not define and receive times that run backwards or jump by more than an hour
@@ -70,6 +73,7 @@ from __future__ import annotations
 
 import functools
 import importlib
+import mmap
 import os
 import re
 import warnings
@@ -78,16 +82,15 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import NDArray
 
 from mavsid.data import MessageTable, ModeChange, RawLog, SourceInfo, TextMessage
 from mavsid.errors import ConfigError, DataQualityWarning, LogFormatError
+from mavsid.readers.modes import ardupilot_modes, px4_mode_name
 
 __all__ = ["MessageDef", "load_dialect", "read", "vehicle_class"]
 
 _PREFIX = 8  # receive-time bytes before every frame
-_PAD = 512  # zero bytes after the file's end, so that fixed-width windows never overrun
 _MAGIC_V1, _MAGIC_V2 = 0xFE, 0xFD
 _IFLAG_SIGNED = 0x01
 _SIGNATURE_LEN = 13
@@ -236,8 +239,7 @@ def _x25(rows: NDArray[np.uint8], extra: NDArray[np.uint8]) -> NDArray[np.uint16
 class _Frames:
     """Valid frames in file order and what had to be skipped around them."""
 
-    start: NDArray[np.int64]  # record start (receive time)
-    payload: NDArray[np.int64]  # payload start
+    payload: NDArray[np.signedinteger]  # payload start (int32 in files under 2 GiB)
     length: NDArray[np.uint8]  # payload bytes on the wire
     msgid: NDArray[np.int32]
     sysid: NDArray[np.uint8]
@@ -249,24 +251,59 @@ class _Frames:
     unknown: int  # well-formed frames of ids the dialect does not define
 
 
-def _windows(buf: NDArray[np.uint8], at: NDArray[np.int64], width: int) -> NDArray[np.uint8]:
-    """Copy of ``buf[a:a+width]`` for every ``a`` in ``at``, one row each.
+def _windows(buf: NDArray[np.uint8], at: NDArray[np.integer], width: int) -> NDArray[np.uint8]:
+    """Copy of ``buf[a:a+width]`` for every ``a`` in ``at``, one row each, zeros past the
+    end of ``buf``.
 
     Gathered as items of ``width`` opaque bytes (one block copy per row) from an
     overlapping view, about twice as fast as indexing the rows of a sliding-window view
-    (a byte-by-byte copy).
+    (a byte-by-byte copy). ``buf`` is the file itself (memory-mapped): the few windows
+    that run past its end are read from a zero-padded copy of its last bytes.
 
     Examples
     --------
-    >>> _windows(np.arange(10, dtype=np.uint8), np.array([0, 7]), 3).tolist()
-    [[0, 1, 2], [7, 8, 9]]
+    >>> _windows(np.arange(10, dtype=np.uint8), np.array([0, 7, 9]), 3).tolist()
+    [[0, 1, 2], [7, 8, 9], [9, 0, 0]]
     """
-    if width <= 0 or buf.size < width:
-        return sliding_window_view(buf, width)[at] if width > 0 else np.zeros((at.size, 0),
-                                                                              np.uint8)
-    rows = np.ndarray((buf.size - width + 1,), dtype=np.dtype((np.void, width)), buffer=buf,
+    n = buf.size
+    if width <= 0:
+        return np.zeros((at.size, 0), np.uint8)
+    if at.size and int(at.max()) > n - width:
+        over = at > n - width
+        out = np.empty((at.size, width), np.uint8)
+        if not over.all():
+            out[~over] = _windows(buf, at[~over], width)
+        lo = max(n - width, 0)
+        tail = np.zeros(n - lo + width, np.uint8)
+        tail[: n - lo] = buf[lo:]
+        out[over] = _windows(tail, at[over] - lo, width)
+        return out
+    rows = np.ndarray((n - width + 1,), dtype=np.dtype((np.void, width)), buffer=buf,
                       strides=(1,))
     return rows[at].view(np.uint8).reshape(-1, width)
+
+
+def _release(buf: NDArray[np.uint8], lo: int, hi: int) -> None:
+    """Hand bytes ``lo..hi`` of the memory-mapped file ``buf`` back to the kernel: their
+    pages leave the process's resident set (they stay in the page cache and come back on
+    the next touch), so that reading the file does not map all of it into the process on
+    top of the tables decoded from it."""
+    base = buf.base.obj if isinstance(buf.base, memoryview) else buf.base
+    if not isinstance(base, mmap.mmap) or not hasattr(mmap, "MADV_DONTNEED"):
+        return
+    lo = max(lo, 0) // mmap.PAGESIZE * mmap.PAGESIZE
+    hi = min(hi, len(base))
+    if hi - lo < 1 << 20:
+        return
+    try:
+        base.madvise(mmap.MADV_DONTNEED, lo, hi - lo)
+    except (OSError, ValueError):  # not supported here: only memory use differs
+        pass
+
+
+def _offset_dtype(size: int) -> type[np.signedinteger]:
+    """Integer type for byte offsets into a ``size``-byte file (room for a record's end)."""
+    return np.int32 if size < 2**31 - 1024 else np.int64
 
 
 _BLOCK = 1 << 24  # candidates are checked block by block: bounded memory, warm caches
@@ -275,12 +312,19 @@ _MAX_RECORD = _PREFIX + 10 + 255 + 2 + _SIGNATURE_LEN
 
 
 def _scan(buf: NDArray[np.uint8], size: int, defs: dict[int, MessageDef]) -> _Frames:
-    """Find every valid record in ``buf[:size]`` (``buf`` is zero-padded beyond ``size``)."""
+    """Find every valid record in ``buf`` (``size`` bytes).
+
+    What is kept per frame is compact (offsets as ``int32`` in files under 2 GiB, ids and
+    lengths as bytes): the frames' arrays stay well under the decoded tables' size."""
     ids = np.array(sorted(defs), dtype=np.int64)
     extras = np.array([defs[i].crc_extra for i in ids.tolist()], dtype=np.uint8)
     longest = np.array([defs[i].dtype.itemsize for i in ids.tolist()], dtype=np.int64)
-    blocks = [list(_scan_block(buf, size, lo, min(lo + _BLOCK, size), ids, extras, longest))
-              for lo in range(0, size, _BLOCK)]  # fmt: skip
+    blocks = []
+    for lo in range(0, size, _BLOCK):
+        blocks.append(list(_scan_block(buf, size, lo, min(lo + _BLOCK, size), ids, extras,
+                                       longest)))
+        _release(buf, lo - _BLOCK, lo)  # the file pages scanned leave the resident set
+    _release(buf, 0, size)
     fields = []
     for k in range(len(blocks[0]) if blocks else 0):  # joined a field at a time, freed as
         fields.append(np.concatenate([b[k] for b in blocks]))  # it goes (bounded peak)
@@ -288,6 +332,7 @@ def _scan(buf: NDArray[np.uint8], size: int, defs: dict[int, MessageDef]) -> _Fr
             b[k] = _NONE
     if not fields:
         fields = [_NONE] * 9
+    pos_dt = _offset_dtype(size)
     del blocks
     start, end, hdr, mlen, msgid, sysid, compid, odd_start, odd_end = fields
     del fields
@@ -295,9 +340,7 @@ def _scan(buf: NDArray[np.uint8], size: int, defs: dict[int, MessageDef]) -> _Fr
     first, last = start[valid], end[valid]
     del start, end
     hdr = hdr[valid]
-    # compact types for what is kept per frame (payload length, ids: bytes; message id: 24 bits)
-    mlen, sysid, compid = (x[valid].astype(np.uint8) for x in (mlen, sysid, compid))
-    msgid = msgid[valid].astype(np.int32)
+    mlen, sysid, compid, msgid = mlen[valid], sysid[valid], compid[valid], msgid[valid]
     odd = _unknown_frames(odd_start, odd_end, first, last, size)
     # gaps: bytes in neither a valid frame nor a frame of unknown id
     starts = np.concatenate([first, odd_start[odd]])
@@ -306,19 +349,21 @@ def _scan(buf: NDArray[np.uint8], size: int, defs: dict[int, MessageDef]) -> _Fr
     gaps = int(np.count_nonzero(starts[1:] != ends[:-1])) if starts.size else 0
     if starts.size:
         gaps += int(starts[0] != 0) + int(ends[-1] != size)
-    recv_us = _windows(buf, first, _PREFIX).copy().view(">u8")[:, 0]
-    hdr += first
-    hdr += _PREFIX
+    recv_s = _windows(buf, first, _PREFIX).view(">u8")[:, 0].astype(np.float64)
+    recv_s *= 1e-6
+    payload = first + np.asarray(_PREFIX, pos_dt)
+    payload += hdr
+    skipped = int(size - (last - first).sum(dtype=np.int64))
+    del first, last, hdr
     return _Frames(
-        start=first,
-        payload=hdr,
+        payload=payload,
         length=mlen,
         msgid=msgid,
         sysid=sysid,
         compid=compid,
-        recv_s=recv_us.astype(np.float64) * 1e-6,
-        skipped_bytes=int(size - (last - first).sum()),
-        garbage_bytes=int(size - (ends - starts).sum()),
+        recv_s=recv_s,
+        skipped_bytes=skipped,
+        garbage_bytes=int(size - (ends - starts).sum(dtype=np.int64)),
         gaps=gaps,
         unknown=int(np.count_nonzero(odd)),
     )
@@ -344,8 +389,9 @@ def _scan_block(
     slices = [_check(buf, size, every[a : min(a + _SLICE, own)], every, ids, extras, longest)
               for a in range(0, own, _SLICE)]  # fmt: skip
     if not slices:
-        empty = np.zeros(0, dtype=np.int64)
-        return (empty,) * 9
+        pos_dt = _offset_dtype(size)
+        return tuple(np.zeros(0, dt) for dt in (pos_dt, pos_dt, np.uint8, np.uint8, np.int32,
+                                                 np.uint8, np.uint8, pos_dt, pos_dt))
     return tuple(np.concatenate(parts) for parts in zip(*slices, strict=True))
 
 
@@ -395,8 +441,12 @@ def _check(
     odd = ~listed & chained  # well-formed frames of ids the dialect does not have
     sysid = np.where(v2, head[:, 5], head[:, 3]).astype(np.int64)
     compid = np.where(v2, head[:, 6], head[:, 4]).astype(np.int64)
-    return (s[ok], end[ok], hdr[ok], mlen[ok], msgid[ok], sysid[ok], compid[ok],
-            s[odd], end[odd])  # fmt: skip
+    # compact types for what is kept per frame (offsets: int32 in files under 2 GiB; payload
+    # length, header length and ids: bytes; message id: 24 bits)
+    pos_dt = _offset_dtype(size)
+    return (s[ok].astype(pos_dt), end[ok].astype(pos_dt), hdr[ok].astype(np.uint8),
+            mlen[ok].astype(np.uint8), msgid[ok].astype(np.int32), sysid[ok].astype(np.uint8),
+            compid[ok].astype(np.uint8), s[odd].astype(pos_dt), end[odd].astype(pos_dt))
 
 
 def _crc_ok(
@@ -569,18 +619,21 @@ def _table(
 # ----------------------------------------------------------------------------- reading
 
 
-def _load(path: str | os.PathLike[str]) -> tuple[NDArray[np.uint8], int]:
-    """The file's bytes followed by ``_PAD`` zeros, and its size."""
+def _load(path: str | os.PathLike[str]) -> tuple[NDArray[np.uint8], int, mmap.mmap | None]:
+    """The file's bytes (memory-mapped, not copied; a small file read whole), its size and
+    the map to close once read."""
     try:
-        size = os.path.getsize(path)
-        buf = np.zeros(size + _PAD, dtype=np.uint8)
         with open(path, "rb") as f:
-            got = f.readinto(buf[:size].data)
+            size = os.fstat(f.fileno()).st_size
+            if size < 1 << 16:
+                return np.frombuffer(f.read(), np.uint8), size, None
+            mm = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
     except OSError as exc:
         raise LogFormatError(f"cannot read: {exc.strerror or exc}", path=path) from None
-    if got != size:
+    if len(mm) != size:
+        mm.close()
         raise LogFormatError("file changed while reading", path=path)
-    return buf, size
+    return np.frombuffer(mm, np.uint8), size, mm
 
 
 def _vehicles(hb: MessageTable | None) -> tuple[tuple[int, int, int, int] | None, set[int]]:
@@ -670,12 +723,11 @@ def _modes(hb: MessageTable | None, vehicle: tuple[int, int, int, int]) -> tuple
 
 
 def _mode_names(autopilot: int, mav_type: int) -> Any:
-    """mode number -> name (or None), from pymavlink's ArduPilot and PX4 mode tables."""
-    from pymavlink import mavutil
-
+    """mode number -> name (or None), from the ArduPilot and PX4 mode tables
+    (:mod:`mavsid.readers.modes`)."""
     if autopilot == 12:
-        return lambda mode: mavutil.interpret_px4_mode(0, mode)
-    table = mavutil.mode_mapping_bynumber(mav_type) if autopilot == 3 else None
+        return px4_mode_name
+    table = ardupilot_modes(mav_type) if autopilot == 3 else None
     return lambda mode: table.get(mode) if table else None
 
 
@@ -776,15 +828,38 @@ def read(
         not define, receive times running backwards or jumping.
     """
     defs = load_dialect(dialect)
-    buf, size = _load(path)
+    buf, size, mm = _load(path)
+    try:
+        return _read(path, buf, size, defs, messages, start, stop, dialect)
+    finally:
+        del buf
+        if mm is not None:
+            try:
+                mm.close()
+            except BufferError:  # a view is still referenced somewhere: leave it to the GC
+                pass
+
+
+def _read(
+    path: str | os.PathLike[str],
+    buf: NDArray[np.uint8],
+    size: int,
+    defs: dict[int, MessageDef],
+    messages: Sequence[str] | None,
+    start: float | None,
+    stop: float | None,
+    dialect: str,
+) -> RawLog:
+    """:func:`read` of the file's bytes ``buf``."""
     if size == 0:
         raise LogFormatError("empty file", path=path)
     frames = _scan(buf, size, defs)
-    if not frames.start.size:
+    if not frames.payload.size:
         raise LogFormatError("no valid MAVLink frame found (not a .tlog?)", path=path)
 
     groups = _groups(frames.msgid)
     own = {i: _own_time(buf, frames, rows, defs[i]) for i, rows in groups.items()}
+    _release(buf, 0, size)
     hb_id = next((i for i in groups if defs[i].name == "HEARTBEAT"), None)
     vehicle, vehicle_ids = _vehicles(
         None if hb_id is None else
@@ -807,6 +882,7 @@ def read(
         t = own[i]
         time_s = t if t is not None else frames.recv_s[rows] + offsets[frames.sysid[rows]]
         tables[mdef.name] = _table(buf, frames, rows, mdef, time_s, _units(dialect, i))
+        _release(buf, 0, size)  # the pages this table touched
 
     hb, pv, st = (tables.get(n) for n in ("HEARTBEAT", "PARAM_VALUE", "STATUSTEXT"))
     texts = _texts(st, vehicle[0] if vehicle else None)

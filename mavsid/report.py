@@ -59,6 +59,23 @@ def figure_png(fig: Figure) -> str:
     return f'<img alt="figure" src="data:image/png;base64,{data}">'
 
 
+def _layout(fig: Figure, left: float = 0.85, right: float = 0.15, top: float = 0.35,
+            bottom: float = 0.55, hspace: float = 0.3, wspace: float = 0.85) -> None:
+    """Fixed margins in inches (``hspace``, ``wspace`` between panels, also inches) in place
+    of ``tight_layout``, which draws every axis's ticks once more to measure them (about a
+    quarter of the report's time). The margins fit the labels these figures carry: tick
+    labels of a few digits, one y label, an x label and a title."""
+    w, h = fig.get_size_inches()
+    spec = fig.axes[0].get_subplotspec() if fig.axes else None
+    rows, cols = spec.get_gridspec().get_geometry() if spec is not None else (1, 1)
+    inner_w = w - left - right
+    inner_h = h - top - bottom
+    fig.subplots_adjust(left=left / w, right=1 - right / w, top=1 - top / h,
+                        bottom=bottom / h,
+                        wspace=wspace * cols / max(inner_w - wspace * (cols - 1), 1e-3),
+                        hspace=hspace * rows / max(inner_h - hspace * (rows - 1), 1e-3))
+
+
 def _gapped(parts: Sequence[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
     ts: list[np.ndarray] = []
     vs: list[np.ndarray] = []
@@ -93,7 +110,7 @@ def _time_figure(fit: AxisFit) -> Figure:
     ax_u.set_ylabel("input")
     ax_u.set_xlabel("log time [s]")
     ax_u.legend(loc="upper right", fontsize=8)
-    fig.tight_layout()
+    _layout(fig, hspace=0.2)
     return fig
 
 
@@ -112,7 +129,7 @@ def _horizon_figure(v: Validation) -> Figure:
     ax.set_ylim(max(lo, -100.0) - 5, 102)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
-    fig.tight_layout()
+    _layout(fig)
     return fig
 
 
@@ -131,7 +148,7 @@ def _residual_figure(v: Validation) -> Figure:
     ax.set_title("one-step residuals: autocorrelation", fontsize=10)
     ax_u.set_title("input–residual cross-correlation", fontsize=10)
     ax_u.set_xlabel("lag [ms]")
-    fig.tight_layout()
+    _layout(fig, hspace=0.6)
     return fig
 
 
@@ -168,7 +185,7 @@ def _bode_figure(v: Validation) -> Figure | None:
         mag.legend(fontsize=8)
         for a in (mag, ph, coh):
             a.grid(True, which="both", alpha=0.3)
-    fig.tight_layout()
+    _layout(fig, hspace=0.2)
     return fig
 
 
@@ -378,7 +395,7 @@ def _twin_figure(fit: AxisFit) -> Figure | None:
     ax.set_ylabel(f"{fit.output} [rad/s]")
     ax.legend(fontsize=8, loc="upper right")
     ax.grid(True, alpha=0.3)
-    fig.tight_layout()
+    _layout(fig, top=0.1)
     return fig
 
 
@@ -427,7 +444,7 @@ def _loop_bode(fit: AxisFit, entry: dict[str, Any]) -> Figure | None:
         axes[0, c].legend(fontsize=8)
         for a in axes[:, c]:
             a.grid(True, which="both", alpha=0.3)
-    fig.tight_layout()
+    _layout(fig, hspace=0.2)
     return fig
 
 

@@ -765,15 +765,19 @@ def simulate_closed_loop(
         x = x + (np.linalg.pinv(cc) @ np.array([ym[warmup] - float((cc @ x)[0])])).ravel()
     y_out = np.empty(n - warmup)
     u_out = np.empty(n - warmup)
+    tgl, ijl = tg.tolist(), ij.tolist()  # Python floats: no numpy scalar per step
+    rows = list(ew) if w.shape[1] else None  # no other inputs: nothing to add
     for k in range(warmup, n):
         for s in range(substeps):
             y = float(c @ x)
             seen = (1.0 - tau) * y + tau * y_prev
             y_prev = y
-            uk = min(max(pid.update(float(tg[j]), seen) + float(ij[j]), -limit), limit)
+            uk = min(max(pid.update(tgl[j], seen) + ijl[j], -limit), limit)
             if s == 0:
                 y_out[k - warmup], u_out[k - warmup] = y, uk
-            x = a @ x + b * (uk + off) + ew[j]
+            x = a @ x + b * (uk + off)
+            if rows is not None:
+                x = x + rows[j]
             j += 1
     return y_out, u_out
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import gc
 import signal
 import sys
 import time
@@ -628,8 +629,20 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: The cyclic collector's thresholds for one command run from the command line: Python's
+#: (700, 10, 10) collected 800 times during ``fit --rrd --report`` on the SITL flight (0.6 s,
+#: a tenth of the run, mostly walking matplotlib's and the fit's long-lived objects); these
+#: 60 times (0.17 s) for 12 MB more peak memory. Results do not depend on it.
+_GC_THRESHOLDS = (20_000, 20, 20)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the command line; returns the exit code."""
+    """Run the command line; returns the exit code.
+
+    Without ``argv`` (the process's own command line: the ``mavsid`` script, ``python -m
+    mavsid``) the process runs one command and exits, so the cyclic garbage collector runs
+    less often (:data:`_GC_THRESHOLDS`) and the objects still alive at the end are frozen
+    (the exit's collection skips them)."""
     for stream in (sys.stdout, sys.stderr):  # a non-UTF-8 terminal gets escapes, not a crash
         reconfigure = getattr(stream, "reconfigure", None)
         if reconfigure is not None:
@@ -647,6 +660,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     warnings.showwarning = _show_warning
     previous = signal.getsignal(signal.SIGTERM)
     signal.signal(signal.SIGTERM, _terminate)  # like Ctrl-C: outputs and children cleaned up
+    once = argv is None  # the process's own command line (not a caller's main([...]))
+    if once:
+        gc.set_threshold(*_GC_THRESHOLDS)
     try:
         return handler(args)
     except MavsidError as exc:
@@ -664,6 +680,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         warnings.showwarning = _default_showwarning
         signal.signal(signal.SIGTERM, previous)
+        if once:  # the interpreter's last collection at exit would walk every live object
+            gc.freeze()
 
 
 def _terminate(signum: int, frame: object) -> None:

@@ -14,6 +14,7 @@ Examples
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -275,3 +276,51 @@ class Segment:
 
     def __len__(self) -> int:
         return int(self.time_s.shape[0])
+
+
+def demean(x: np.ndarray) -> np.ndarray:
+    """``x`` less its mean along the last axis: ``scipy.signal.detrend(x, type="constant")``
+    to the bit, without its per-call checks (Welch estimates call it once per window,
+    thousands of times; pass it as ``detrend=demean``).
+
+    Examples
+    --------
+    >>> from scipy.signal import detrend
+    >>> x = np.random.default_rng(0).standard_normal(64)
+    >>> bool(np.array_equal(demean(x), detrend(x, type="constant")))
+    True
+    """
+    return x - np.mean(x, -1, keepdims=True)
+
+
+@functools.lru_cache(maxsize=16)
+def _line_design(n: int) -> np.ndarray:
+    a = np.ones((n, 2))
+    a[:, 0] = np.arange(1, n + 1, dtype=float) / n
+    a.flags.writeable = False
+    return a
+
+
+def detrend_linear(x: np.ndarray) -> np.ndarray:
+    """``x`` less its least-squares line along the last axis:
+    ``scipy.signal.detrend(x, type="linear")`` to the bit (the same design matrix and
+    ``scipy.linalg.lstsq``), with the design kept between calls of one length and without
+    the per-call checks (``detrend=detrend_linear`` in a Welch estimate).
+
+    Examples
+    --------
+    >>> from scipy.signal import detrend
+    >>> x = np.random.default_rng(0).standard_normal((3, 64))
+    >>> bool(np.array_equal(detrend_linear(x), detrend(x, type="linear")))
+    True
+    """
+    from scipy import linalg
+
+    x = np.asarray(x, dtype=float)
+    n = x.shape[-1]
+    d = np.moveaxis(x, -1, 0)
+    shape = d.shape
+    d = d.reshape(n, -1).copy()
+    a = _line_design(n)
+    coef = linalg.lstsq(a, d)[0]
+    return np.moveaxis((d - a @ coef).reshape(shape), 0, -1)

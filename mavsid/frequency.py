@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 from scipy import optimize, signal
 
+from mavsid.data import demean
 from mavsid.errors import NoExcitationError
 
 __all__ = ["FRF", "MIN_COHERENCE", "TFFit", "fit_tf", "frf"]
@@ -123,19 +124,19 @@ def _welch(us: Sequence[np.ndarray], ys: Sequence[np.ndarray], rs: Sequence[np.n
         u, y, r = u[ok], y[ok], r[ok]
         if len(u) < nper:
             continue
-        kw = {"fs": fs, "nperseg": nper, "noverlap": nper // 2, "detrend": "constant"}
+        kw = {"fs": fs, "nperseg": nper, "noverlap": nper // 2, "detrend": demean}
         k = 1 + (len(u) - nper) // (nper // 2)
+        freq, puu = signal.welch(u, **kw)
         spectra = {
-            "rr": signal.welch(r, **kw)[1], "uu": signal.welch(u, **kw)[1],
+            "rr": puu if rs is None else signal.welch(r, **kw)[1], "uu": puu,
             "yy": signal.welch(y, **kw)[1], "ru": signal.csd(r, u, **kw)[1],
             "ry": signal.csd(r, y, **kw)[1],
         }
-        freq = signal.welch(u, **kw)[0]
         for key, val in spectra.items():
             acc[key] = acc.get(key, 0.0) + k * val
         # per-window input power: a chirp excites a frequency in few windows only
         per = signal.spectrogram(r, fs=fs, nperseg=nper, noverlap=nper // 2,
-                                 detrend="constant")[2]
+                                 detrend=demean)[2]
         acc["p1"] = acc.get("p1", 0.0) + per.sum(axis=1)
         acc["p2"] = acc.get("p2", 0.0) + (per**2).sum(axis=1)
         n_avg += k

@@ -47,6 +47,7 @@ Examples
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from collections.abc import Mapping, Sequence
@@ -764,15 +765,19 @@ def simulate_closed_loop(
         x = x + (np.linalg.pinv(cc) @ np.array([ym[warmup] - float((cc @ x)[0])])).ravel()
     y_out = np.empty(n - warmup)
     u_out = np.empty(n - warmup)
+    tgl, ijl = tg.tolist(), ij.tolist()  # Python floats: no numpy scalar per step
+    rows = list(ew) if w.shape[1] else None  # no other inputs: nothing to add
     for k in range(warmup, n):
         for s in range(substeps):
             y = float(c @ x)
             seen = (1.0 - tau) * y + tau * y_prev
             y_prev = y
-            uk = min(max(pid.update(float(tg[j]), seen) + float(ij[j]), -limit), limit)
+            uk = min(max(pid.update(tgl[j], seen) + ijl[j], -limit), limit)
             if s == 0:
                 y_out[k - warmup], u_out[k - warmup] = y, uk
-            x = a @ x + b * (uk + off) + ew[j]
+            x = a @ x + b * (uk + off)
+            if rows is not None:
+                x = x + rows[j]
             j += 1
     return y_out, u_out
 
@@ -1316,13 +1321,20 @@ def controller_tf(ctrl: AxisController, dt: float | None = None) -> tuple[Any, A
     >>> round(float(abs(cfb(np.exp(1j * 2 * np.pi * 1.0 * 0.0025)))), 3)   # |C| at 1 Hz
     0.136
     """
+    step = 1.0 / ctrl.loop_hz if dt is None else dt
+    return _controller_tf(ctrl.gains, float(step))
+
+
+@functools.lru_cache(maxsize=64)
+def _controller_tf(g: RateGains | PX4RateGains, step: float) -> tuple[Any, Any]:
+    """:func:`controller_tf` by gains and step, cached: the report's σ draws and the loop
+    section ask for the same controller dozens of times (python-control's polynomial
+    arithmetic, ~5 ms a call). The systems are never modified in place."""
     import control
 
-    step = 1.0 / ctrl.loop_hz if dt is None else dt
     one = control.tf([1.0], [1.0], step)
     integ = control.tf([step, 0.0], [1.0, -1.0], step)  # dt / (1 - z^-1)
     deriv = control.tf([1.0, -1.0], [step, 0.0], step)  # (1 - z^-1) / dt
-    g = ctrl.gains
     if isinstance(g, PX4RateGains):
         from mavsid.synthetic.plant import lowpass2p_coefficients
 
@@ -1481,8 +1493,17 @@ def loop_margins(loop: Any, dt: float, n: int = 4000) -> tuple[float, float, flo
     ...      and abs(gm - ref[0]) / ref[0] < 1e-3)
     True
     """
-    f = np.geomspace(1e-3 / dt, 0.4999 / dt, n)
-    resp = frequency_response(loop, np.exp(2j * np.pi * f * dt))
+    f = _margin_grid(dt, n)
+    return _margins_of(f, frequency_response(loop, np.exp(2j * np.pi * f * dt)))
+
+
+def _margin_grid(dt: float, n: int = 4000) -> np.ndarray:
+    """The frequencies (Hz) :func:`loop_margins` reads a loop on."""
+    return np.geomspace(1e-3 / dt, 0.4999 / dt, n)
+
+
+def _margins_of(f: np.ndarray, resp: np.ndarray) -> tuple[float, float, float]:
+    """:func:`loop_margins` from the loop's response ``resp`` at ``f`` (Hz)."""
     mag = np.abs(resp)
     logf = np.log(f)
     pm, wc = float("inf"), float("nan")
@@ -1549,18 +1570,7 @@ def analyse_loop(plant_ss: Any, ctrl: AxisController, lag: int = 0,
         l_resp = frequency_response(loop_tf, zs)
         m_resp = frequency_response(mixer_loop, zs)
         mgm, mpm, mwc = loop_margins(mixer_loop, dt)
-    mag = 20 * np.log10(np.abs(t_resp))
-    ph = np.degrees(np.unwrap(np.angle(t_resp)))
-    bw = _crossing(f, mag - mag[0], -3.0, rising=False)
-    dbw = _crossing(f, 20 * np.log10(np.abs(s_resp)), -3.0, rising=True)
-    i180 = np.flatnonzero(ph <= -180.0)
-    if i180.size:
-        f2 = 2 * f[i180[0]] if 2 * f[i180[0]] <= f[-1] else f[i180[0]]
-        phase_delay = float(-np.interp(f2, f, ph) / (360 * f2))
-    elif np.isfinite(bw):
-        phase_delay = float(-np.interp(bw, f, ph) / (360 * bw))
-    else:
-        phase_delay = float("nan")
+    mag, ph, bw, dbw, phase_delay = _closed_figures(f, t_resp, s_resp)
     rise, over = _step_metrics(closed, dt)
     return LoopAnalysis(
         gain_margin_db=_db(gm),
@@ -1575,12 +1585,125 @@ def analyse_loop(plant_ss: Any, ctrl: AxisController, lag: int = 0,
     )
 
 
+def _closed_figures(f: np.ndarray, t_resp: np.ndarray, s_resp: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, float, float, float]:
+    """``(magnitude dB, phase deg, bandwidth, disturbance bandwidth, phase delay)`` of a
+    closed loop from its responses ``T`` and ``S`` at ``f`` (see :class:`LoopAnalysis`)."""
+    mag = 20 * np.log10(np.abs(t_resp))
+    ph = np.degrees(np.unwrap(np.angle(t_resp)))
+    bw = _crossing(f, mag - mag[0], -3.0, rising=False)
+    dbw = _crossing(f, 20 * np.log10(np.abs(s_resp)), -3.0, rising=True)
+    i180 = np.flatnonzero(ph <= -180.0)
+    if i180.size:
+        f2 = 2 * f[i180[0]] if 2 * f[i180[0]] <= f[-1] else f[i180[0]]
+        phase_delay = float(-np.interp(f2, f, ph) / (360 * f2))
+    elif np.isfinite(bw):
+        phase_delay = float(-np.interp(bw, f, ph) / (360 * bw))
+    else:
+        phase_delay = float("nan")
+    return mag, ph, bw, dbw, phase_delay
+
+
+def _tf_poly(system: Any) -> tuple[np.ndarray, np.ndarray]:
+    """``(num, den)`` in descending powers of z of a SISO python-control transfer function."""
+    return (np.asarray(system.num[0][0], dtype=float), np.asarray(system.den[0][0], dtype=float))
+
+
+def loop_figures(plant: LinearPlant, ctrl: AxisController, lag: int = 0,
+                 freq_hz: np.ndarray | None = None, meas_delay: float = 0.0
+                 ) -> dict[str, float]:
+    """:meth:`LoopAnalysis.figures` of :func:`analyse_loop` for a :class:`LinearPlant` at
+    the controller's step, with numpy polynomials instead of python-control systems (no
+    state-space products, feedback or simulation objects): the same figures to rounding
+    (``tests/test_loop.py`` checks 1e-6), about 10× faster, for :func:`analyse_model`'s
+    draws of the coefficients."""
+    from scipy.signal import ss2tf
+
+    dt = 1.0 / ctrl.loop_hz
+    cfb, ct = controller_tf(ctrl, dt)
+    (bf, af), (bt, at) = _tf_poly(cfb), _tf_poly(ct)
+    if lag:
+        at = np.polymul(at, [1.0] + [0.0] * lag)
+    tau = min(max(float(meas_delay), 0.0), 1.0)
+    if tau:
+        bf, af = np.polymul(bf, [1.0 - tau, tau]), np.polymul(af, [1.0, 0.0])
+    num, den = ss2tf(plant.a, plant.b.reshape(-1, 1), plant.c.reshape(1, -1), np.zeros((1, 1)))
+    bp, ap = np.atleast_2d(num)[0], np.asarray(den, dtype=float)
+    f = np.geomspace(0.1, 0.45 / dt, 400) if freq_hz is None else np.asarray(freq_hz)
+    fm = _margin_grid(dt)
+
+    def loop_at(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        p = np.polyval(bp, z) / np.polyval(ap, z)
+        return p, p * np.polyval(bf, z) / np.polyval(af, z)
+
+    with np.errstate(all="ignore"):
+        gm, pm, wcp = _margins_of(fm, loop_at(np.exp(2j * np.pi * fm * dt))[1])
+        zs = np.exp(2j * np.pi * f * dt)
+        p, lz = loop_at(zs)
+        t_resp = p * np.polyval(bt, zs) / np.polyval(at, zs) / (1.0 + lz)
+        mag, _ph, bw, dbw, phase_delay = _closed_figures(f, t_resp, 1.0 / (1.0 + lz))
+        t = np.arange(0.0, 2.0, dt)
+        y = _closed_step(plant, (bf, af), (bt, at), t.size)
+    rise, over = _step_figures(t, y)
+    return {"gain_margin_db": _db(gm), "phase_margin_deg": float(pm),
+            "crossover_hz": float(wcp / (2 * np.pi)), "bandwidth_hz": bw,
+            "peak_db": float(np.max(mag)), "disturbance_bandwidth_hz": dbw,
+            "phase_delay_s": phase_delay, "rise_time_s": rise, "overshoot_percent": over}
+
+
+def _closed_step(plant: LinearPlant, fb: tuple[np.ndarray, np.ndarray],
+                 tg: tuple[np.ndarray, np.ndarray], n: int) -> np.ndarray:
+    """``n`` samples of the unit-step response of ``P·C_t / (1 + C_fb·P)`` (``fb``, ``tg``:
+    ``C_fb``, ``C_t`` as ``(num, den)`` in z), simulated in state space: plant, feedback and
+    target filter states side by side (a single polynomial of the closed loop would carry
+    the integrators' cancelling pole-zero pair at z = 1 and drift)."""
+    from scipy.signal import tf2ss
+
+    ap, bp, cp = plant.a, plant.b.reshape(-1, 1), plant.c.reshape(1, -1)
+    af, bf, cf, df = tf2ss(*fb)
+    at, bt, ct, dt_ = tf2ss(*tg)
+    npl, nf, nt = ap.shape[0], af.shape[0], at.shape[0]
+    a = np.zeros((npl + nf + nt,) * 2)
+    a[:npl, :npl] = ap - bp @ (df @ cp)
+    a[:npl, npl:npl + nf] = -bp @ cf
+    a[:npl, npl + nf:] = bp @ ct
+    a[npl:npl + nf, :npl] = bf @ cp
+    a[npl:npl + nf, npl:npl + nf] = af
+    a[npl + nf:, npl + nf:] = at
+    b = np.concatenate([bp @ dt_, np.zeros((nf, 1)), bt]).ravel()
+    c = np.concatenate([cp.ravel(), np.zeros(nf + nt)])
+    # blocks of m steps: y[jm + i] = c·Aⁱ·x[jm] + c·(I + … + Aⁱ⁻¹)·b, x[(j+1)m] = Aᵐ·x[jm] + sₘ
+    m = 32
+    rows = np.empty((m, a.shape[0]))
+    sums = np.empty(m)
+    row, acc = c.copy(), 0.0
+    for i in range(m):
+        rows[i], sums[i] = row, acc
+        acc += float(row @ b)
+        row = row @ a
+    power, s = np.eye(a.shape[0]), np.zeros(a.shape[0])
+    for _ in range(m):
+        s = a @ s + b
+        power = a @ power
+    x = np.zeros(a.shape[0])
+    y = np.empty(-(-n // m) * m)
+    for j in range(0, y.size, m):
+        y[j:j + m] = rows @ x + sums
+        x = power @ x + s
+    return y[:n]
+
+
 def _step_metrics(closed: Any, dt: float, horizon_s: float = 2.0) -> tuple[float, float]:
     """10-90 % rise time (s) and overshoot (%) of the closed loop's unit step."""
     import control
 
     t = np.arange(0.0, horizon_s, dt)
     y = np.asarray(control.step_response(closed, T=t).outputs, dtype=float).ravel()
+    return _step_figures(t, y)
+
+
+def _step_figures(t: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """:func:`_step_metrics` of a step response ``y`` at times ``t``."""
     final = float(np.mean(y[-max(1, len(y) // 10):]))
     if not np.all(np.isfinite(y)) or abs(final) < 1e-9:
         return float("nan"), float("nan")
@@ -1618,8 +1741,8 @@ def analyse_model(model: Any, axis: str, ctrl: AxisController, lag: int = 0,
         coef[:, j] = rng.multivariate_normal(model.coef[:, j], c, check_valid="ignore")
         try:
             m = replace(model, coef=coef)
-            draws.append(analyse_loop(plant_statespace(m, axis, dt), ctrl, lag,
-                                      base.freq_hz, meas_delay).figures())
+            draws.append(loop_figures(plant_from_model(m, axis, dt), ctrl, lag, base.freq_hz,
+                                      meas_delay))
         except (MavsidError, ValueError, np.linalg.LinAlgError):
             continue
     if len(draws) < 2:
@@ -1651,15 +1774,23 @@ def suggest_gains(plant_ss: Any, ctrl: AxisController, target_pm_deg: float = 50
     dt = float(plant_ss.dt)
     tau = min(max(float(meas_delay), 0.0), 1.0)
     reads = control.tf([1.0 - tau, tau], [1.0, 0.0], dt)
+    # P, I and D scaled by k scale C_fb, so the loop, by k: one state space and one
+    # response on the margins' grid serve every k (the closed loop's state matrix is
+    # A − k·B·C / (1 + k·D)); the same margins as building each scaled loop, to rounding
+    cfb, _ = controller_tf(ctrl, dt)
+    unit = control.ss(cfb * reads if tau else cfb) * p
+    a, b, c, d = (np.asarray(x, dtype=float) for x in (unit.A, unit.B, unit.C, unit.D))
+    fm = _margin_grid(dt)
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        unit_resp = frequency_response(unit, np.exp(2j * np.pi * fm * dt))
 
     def pm(k: float) -> float:
-        cfb, _ = controller_tf(_scaled(ctrl, k), dt)
-        loop_tf = control.ss(cfb * reads if tau else cfb) * p
-        if np.any(np.abs(control.feedback(loop_tf, 1).poles()) >= 1.0):
+        closed = a - (k / (1.0 + k * float(d[0, 0]))) * (b @ c)
+        if np.any(np.abs(np.linalg.eigvals(closed)) >= 1.0):
             return -1e9  # unstable closed loop
-        with np.errstate(all="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            margin = loop_margins(loop_tf, dt)[1]
+        with np.errstate(all="ignore"):
+            margin = _margins_of(fm, k * unit_resp)[1]
         return float(margin) if np.isfinite(margin) else 1e9
 
     ks = np.geomspace(0.05, 20.0, 25)

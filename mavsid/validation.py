@@ -38,7 +38,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 from scipy import signal, stats
 
-from mavsid.data import Segment
+from mavsid.data import Segment, demean
 from mavsid.errors import ConfigError, NoExcitationError
 
 __all__ = [
@@ -661,7 +661,7 @@ def frequency_response(
         if len(ui) < nperseg:
             continue
         w = float(len(ui))
-        kw = {"fs": fs, "nperseg": nperseg, "detrend": "constant"}
+        kw = {"fs": fs, "nperseg": nperseg, "detrend": demean}
         freq, puu = signal.welch(ui, **kw)
         _, pyy = signal.welch(yi, **kw)
         _, puy = signal.csd(ui, yi, **kw)

@@ -57,6 +57,45 @@ def true_plant(p: PlantParams, axis: int, dt: float) -> loop.LinearPlant:
     return loop.LinearPlant(a, b, c, dt)
 
 
+@pytest.mark.parametrize(("params", "lag", "tau"), [
+    ({}, 0, 0.0), ({}, 2, 0.3),
+    ({"MC_ROLLRATE_P": 0.15, "MC_ROLLRATE_D": 0.003, "IMU_GYRO_RATEMAX": 400.0}, 1, 0.5)])
+def test_loop_figures_are_analyse_loops(params: dict[str, float], lag: int, tau: float
+                                        ) -> None:
+    """The σ draws' numpy figures equal python-control's to rounding: margins, crossover,
+    disturbance bandwidth and phase delay to 1e-7, the step's rise and overshoot to 1e-6.
+    Bandwidth and peak equal python-control's point-by-point evaluation of the closed loop
+    to 1e-8, :func:`loop.analyse_loop`'s to 1e-3 only: that evaluates the 11th-order closed
+    loop through one polynomial ratio (:func:`loop.frequency_response`), off by 1e-4 here and
+    0.5 % on the SITL flight's yaw (the numpy figures multiply the parts' responses)."""
+    import control
+
+    ctrl = loop.controller_from_params(params, "roll")
+    tp = true_plant(PlantParams(), 0, 1.0 / ctrl.loop_hz)
+    ss = control.ss(tp.a, tp.b.reshape(-1, 1), tp.c.reshape(1, -1), 0.0, tp.dt)
+    want = loop.analyse_loop(ss, ctrl, lag, meas_delay=tau).figures()
+    got = loop.loop_figures(tp, ctrl, lag, meas_delay=tau)
+    assert set(got) == set(want)
+    for k in ("gain_margin_db", "phase_margin_deg", "crossover_hz",
+              "disturbance_bandwidth_hz", "phase_delay_s"):
+        assert got[k] == pytest.approx(want[k], rel=1e-7), k
+    # the closed loop evaluated point by point by python-control (a solve per frequency)
+    dt = tp.dt
+    cfb, ct = loop.controller_tf(ctrl, dt)
+    ct = ct * control.tf([1.0], [1.0] + [0.0] * lag, dt)
+    cfb = cfb * control.tf([1.0 - tau, tau], [1.0, 0.0], dt)
+    closed = control.feedback(ss, control.ss(cfb)) * control.ss(ct)
+    f = np.geomspace(0.1, 0.45 / dt, 400)
+    t_resp = np.ravel(closed(np.exp(2j * np.pi * f * dt)))
+    mag, _, bw, _, _ = loop._closed_figures(f, t_resp, np.ones(f.size))
+    assert got["bandwidth_hz"] == pytest.approx(bw, rel=1e-8)
+    assert got["peak_db"] == pytest.approx(float(np.max(mag)), rel=1e-8, abs=1e-9)
+    for k in ("bandwidth_hz", "peak_db"):
+        assert got[k] == pytest.approx(want[k], rel=1e-3, abs=1e-4), k
+    assert got["rise_time_s"] == pytest.approx(want["rise_time_s"], abs=1e-9)
+    assert got["overshoot_percent"] == pytest.approx(want["overshoot_percent"], abs=1e-6)
+
+
 @pytest.mark.parametrize("manoeuvre", ["sysid", "doublet"])
 def test_twin_with_the_true_plant_reproduces_a_simulated_flight(manoeuvre: str) -> None:
     # noise-free vehicle: the twin, given the true plant, the logged rate target and the

@@ -124,3 +124,30 @@ def test_report_leads_with_aircraft_verdicts_and_physics(tmp_path) -> None:  # t
     assert float(b.group(1)) == pytest.approx(truth["effectiveness"], rel=0.05)
     assert text.index("Aircraft and log") < text.index("physical parameter") < text.index(
         "fitted parameter")
+
+
+def test_log_axes_keep_their_minor_grid_and_ticks_without_tick_objects() -> None:
+    """The report draws a log axis's minor grid and tick marks as two artists (2-9 of each
+    decade inside the limits), not as matplotlib's per-tick objects; fixed margins keep
+    every label inside the figure."""
+    from matplotlib.collections import LineCollection
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(5.2, 3.4))
+    ax = fig.subplots()
+    ax.semilogx([0.5, 20.0], [0.0, 1.0])
+    ax.set_xlabel("frequency [Hz]")
+    ax.set_ylabel("|H| [dB]")
+    ax.set_title("t", y=1.0)
+    report._layout(fig)
+    lines = [c for c in ax.collections if isinstance(c, LineCollection)]
+    assert len(lines) == 1
+    xs = sorted(seg[0][0] for seg in lines[0].get_segments())
+    lo, hi = ax.get_xlim()
+    want = [m * 10.0**d for d in (-1, 0, 1) for m in range(2, 10) if lo <= m * 10.0**d <= hi]
+    assert xs == pytest.approx(want)
+    assert ax.xaxis.get_minor_locator()() == []  # no per-tick minor objects
+    fig.draw_without_rendering()
+    inside, box = fig.get_tightbbox(), fig.bbox_inches  # every drawn label, in inches
+    assert box.x0 <= inside.x0 and inside.x1 <= box.x1
+    assert box.y0 <= inside.y0 and inside.y1 <= box.y1

@@ -312,6 +312,23 @@ def identify_segments(
                 scored[lg] = neighbour(lg)
         model = _with_structure_spread(model, [scored[lg][0] for lg in neighbours
                                                if scored[lg][2] is None])
+        # lags the one-step score cannot tell from the best (within structure_tol of it)
+        # are as plausible as the chosen one: the farthest of their fits joins too
+        low = min(v[0] for v in choice.by_lag.values())
+        alike = [lg for lg, (mse, _) in choice.by_lag.items()
+                 if lg != lag and lg not in neighbours and mse <= low * (1 + structure_tol)]
+        for lg in alike:
+            if lg not in scored:
+                scored[lg] = neighbour(lg)
+        far = _farthest(model, [scored[lg][0] for lg in alike if scored[lg][2] is None])
+        if far is not None:
+            model = _with_structure_spread(model, [far])
+            alike_note = ("; the lags the data cannot tell apart "
+                          f"({', '.join(f'{x:g}' for x in sorted(alike))} s)")
+        else:
+            alike_note = ""
+    else:
+        alike_note = ""
     if not isinstance(estimator, str):
         estimator.fit(segments, structure)
     prov = dict(model.provenance)
@@ -320,11 +337,26 @@ def identify_segments(
         prov["lag_chosen_by"] = "output error" if by_oe else "one step"
         prov["stderr_includes"] = ("statistical; the lag's grid resolution (the spread to "
                                    f"lags {', '.join(f'{x:g}' for x in neighbours)} s)"
-                                   if neighbours else "statistical")
+                                   if neighbours else "statistical") + alike_note
     prov["filters"] = [f.to_dict() for f in structure.filters]
     prov["lag_s"] = lag
     prov["delay_s"] = dly * dt
     return replace(model, provenance=prov)
+
+
+def _farthest(model: Model, others: Sequence[Model]) -> Model | None:
+    """The model among ``others`` whose coefficients differ most from ``model``'s (the
+    largest relative difference of any coefficient); None when there are none."""
+    ref = np.asarray(model.coef, float)
+    scale = np.where(ref != 0, np.abs(ref), np.inf)
+    best, far = 0.0, None
+    for o in others:
+        if np.shape(o.coef) != ref.shape:
+            continue
+        d = float(np.nanmax(np.abs(np.asarray(o.coef, float) - ref) / scale))
+        if d > best:
+            best, far = d, o
+    return far
 
 
 def _with_structure_spread(model: Model, others: Sequence[Model]) -> Model:

@@ -474,15 +474,16 @@ def _gates(ax: _Axis, fd: FlightData, i0: int, i1: int, m: Mapping[str, float],
         out.append(f"rejected: window too short ({i1 - i0} samples)")
         return out
     ratio = m.get("response_ratio", math.nan)
-    if "injection_rms" in m:  # SYSTEMID: judged by the output's coherence with the injection
-        pass
-    elif not math.isfinite(ratio):  # no output to judge by: the input's own level
+    # (a SYSTEMID run with its injection logged is judged by the output's coherence with
+    # the injection, below, not by these levels)
+    by_level = "injection_rms" not in m
+    if by_level and not math.isfinite(ratio):  # no output to judge by: the input's own level
         if m["power_ratio"] < opts.power_ratio:
             out.append(
                 f"rejected: input RMS {_fmt(m['input_rms'])} below {opts.power_ratio:g}× noise "
                 f"floor {_fmt(ax.floor)} ({ax.u_name})"
             )
-    elif ratio < opts.power_ratio:
+    elif by_level and ratio < opts.power_ratio:
         out.append(
             f"rejected: response RMS {_fmt(m['response_rms'])} below {opts.power_ratio:g}× its "
             f"noise floor {_fmt(m['response_floor'])} ({ax.y_name} where {ax.u_name} is quiet;"

@@ -745,7 +745,7 @@ def simulate_closed_loop(
     if u is not None and n:
         pid.preset(float(tg[0]), float(ym[0]), float(um[0] - ij[0]))
     j = 0
-    tau = min(max(float(meas_delay), 0.0), 1.0)
+    tau = _reads(meas_delay)[0]
     y_prev = float(ym[0]) if n else 0.0
     if warmup:
         outs = np.empty(warmup)
@@ -780,6 +780,20 @@ def simulate_closed_loop(
                 x = x + rows[j]
             j += 1
     return y_out, u_out
+
+
+def _reads(meas_delay: float) -> tuple[float, list[float], list[float]]:
+    """A measurement delay of ``meas_delay`` loops, held to 0-1: ``τ`` and the rate the
+    controller reads as a filter of the plant's output, ``(1 − τ) + τz⁻¹`` (numerator and
+    denominator in descending powers of z).
+
+    Examples
+    --------
+    >>> _reads(0.2)
+    (0.2, [0.8, 0.2], [1.0, 0.0])
+    """
+    tau = min(max(float(meas_delay), 0.0), 1.0)
+    return tau, [1.0 - tau, tau], [1.0, 0.0]
 
 
 def _lagged(x: np.ndarray, lag: int) -> np.ndarray:
@@ -819,7 +833,7 @@ def replay_controller(
     tg = _lagged(np.repeat(np.asarray(target, dtype=float), substeps), lag)
     ij = _lagged(np.repeat(inj, substeps), lag)[::substeps]
     ym = np.repeat(np.asarray(rate, dtype=float), substeps)
-    tau = min(max(float(meas_delay), 0.0), 1.0)
+    tau = _reads(meas_delay)[0]
     if tau > 0 and ym.size:
         ym = (1.0 - tau) * ym + tau * np.concatenate([ym[:1], ym[:-1]])
     pid = ctrl.new_pid(dt / substeps)
@@ -1546,9 +1560,9 @@ def analyse_loop(plant_ss: Any, ctrl: AxisController, lag: int = 0,
     cfb, ct = controller_tf(ctrl, dt)
     if lag:
         ct = ct * control.tf([1.0], [1.0] + [0.0] * lag, dt)
-    tau = min(max(float(meas_delay), 0.0), 1.0)
+    tau, num, den = _reads(meas_delay)
     if tau:
-        cfb = cfb * control.tf([1.0 - tau, tau], [1.0, 0.0], dt)
+        cfb = cfb * control.tf(num, den, dt)
     p = control.ss(plant_ss)
     cfb_ss, ct_ss = control.ss(cfb), control.ss(ct)
     loop_tf = cfb_ss * p
@@ -1624,9 +1638,9 @@ def loop_figures(plant: LinearPlant, ctrl: AxisController, lag: int = 0,
     (bf, af), (bt, at) = _tf_poly(cfb), _tf_poly(ct)
     if lag:
         at = np.polymul(at, [1.0] + [0.0] * lag)
-    tau = min(max(float(meas_delay), 0.0), 1.0)
+    tau, num, den = _reads(meas_delay)
     if tau:
-        bf, af = np.polymul(bf, [1.0 - tau, tau]), np.polymul(af, [1.0, 0.0])
+        bf, af = np.polymul(bf, num), np.polymul(af, den)
     num, den = ss2tf(plant.a, plant.b.reshape(-1, 1), plant.c.reshape(1, -1), np.zeros((1, 1)))
     bp, ap = np.atleast_2d(num)[0], np.asarray(den, dtype=float)
     f = np.geomspace(0.1, 0.45 / dt, 400) if freq_hz is None else np.asarray(freq_hz)
@@ -1772,8 +1786,8 @@ def suggest_gains(plant_ss: Any, ctrl: AxisController, target_pm_deg: float = 50
 
     p = control.ss(plant_ss)
     dt = float(plant_ss.dt)
-    tau = min(max(float(meas_delay), 0.0), 1.0)
-    reads = control.tf([1.0 - tau, tau], [1.0, 0.0], dt)
+    tau, num, den = _reads(meas_delay)
+    reads = control.tf(num, den, dt)
     # P, I and D scaled by k scale C_fb, so the loop, by k: one state space and one
     # response on the margins' grid serve every k (the closed loop's state matrix is
     # A − k·B·C / (1 + k·D)); the same margins as building each scaled loop, to rounding

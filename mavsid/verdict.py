@@ -371,7 +371,7 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
             advice.append(longer_advice(_autopilot(flights)))
 
     # is the response's strength determined?
-    rel = _effectiveness_rel_se(model, output)
+    rel = _effectiveness(model, output, axis)
     if rel is not None:
         name, value, se = rel
         numbers["effectiveness_rel_se"] = se / abs(value)
@@ -460,30 +460,23 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
     return Verdict(axis, "good", tuple(good + notes), (), numbers, tuple(dict.fromkeys(advice)))
 
 
-def _effectiveness_rel_se(model: Any, output: str) -> tuple[str, float, float] | None:
-    """The model's control effectiveness of ``output`` (continuous ``B[output,u_*]``, its
-    own axis's input first), its value and standard error; None when it has none.
+def _effectiveness(model: Any, output: str, axis: str) -> tuple[str, float, float] | None:
+    """The model's control effectiveness of ``output`` by the axis's own input (continuous
+    ``B[output,u_axis]``): its name, value and standard error; None when it has none.
 
     Examples
     --------
     >>> from types import SimpleNamespace as NS
     >>> m = NS(params={"B[p,u_roll]": 180.0}, stderr={"B[p,u_roll]": 3.0})
-    >>> _effectiveness_rel_se(m, "p")
+    >>> _effectiveness(m, "p", "roll")
     ('B[p,u_roll]', 180.0, 3.0)
     """
-    params = dict(getattr(model, "params", {}) or {}) if model is not None else {}
-    try:
-        stderr = dict(getattr(model, "stderr", {}) or {}) if model is not None else {}
-    except (TypeError, ValueError):
+    name = f"B[{output},u_{axis}]"
+    value = float((getattr(model, "params", None) or {}).get(name, math.nan))
+    se = float((getattr(model, "stderr", None) or {}).get(name, math.nan))
+    if value == 0 or not (math.isfinite(value) and math.isfinite(se)):
         return None
-    names = [k for k in params if k.startswith(f"B[{output},u_")]
-    own = {"p": "u_roll", "q": "u_pitch", "r": "u_yaw"}.get(output)
-    names.sort(key=lambda k: k != f"B[{output},{own}]")
-    for k in names:
-        value, se = float(params[k]), float(stderr.get(k, math.nan))
-        if value != 0 and math.isfinite(value) and math.isfinite(se):
-            return k, value, se
-    return None
+    return name, value, se
 
 
 def _too_slow(rate: float, flights: Sequence[Any]) -> tuple[str, str] | None:

@@ -279,12 +279,12 @@ def identify_segments(
 
     model, cost, failed = fitted(structure)
     scored: dict[float, tuple[Model, float, SolverError | None]] = {lag: (model, cost, failed)}
+    floor = min(v[0] for v in choice.by_lag.values()) if search else math.nan  # best one step
     by_oe = (search and math.isfinite(cost) and len(choice.by_lag) > 1
-             and _one_step_noise(segments, outputs, choice.by_lag) > ONE_STEP_NOISE)
+             and _one_step_noise(segments, outputs, floor) > ONE_STEP_NOISE)
     if by_oe:
         # noisy: the lag by the free-run cost (see ONE_STEP_NOISE), the delay per lag by one
         # step
-        floor = min(v[0] for v in choice.by_lag.values())
         for lg, (mse, _) in choice.by_lag.items():
             if lg != lag and mse <= floor * (1 + LAG_PRUNE):
                 scored[lg] = neighbour(lg)
@@ -301,6 +301,7 @@ def identify_segments(
         warnings.warn(f"{', '.join(outputs)}: {failed}; keeping the {name} estimate",
                       DataQualityWarning, stacklevel=3)
     neighbours: list[float] = []
+    alike: list[float] = []
     if search and len(choice.by_lag) > 1 and failed is None:
         # the lag is resolved only to its grid: the coefficients' spread between the
         # neighbouring lags (each with its best delay) joins their covariance
@@ -314,21 +315,16 @@ def identify_segments(
                                                if scored[lg][2] is None])
         # lags the one-step score cannot tell from the best (within structure_tol of it)
         # are as plausible as the chosen one: the farthest of their fits joins too
-        low = min(v[0] for v in choice.by_lag.values())
         alike = [lg for lg, (mse, _) in choice.by_lag.items()
-                 if lg != lag and lg not in neighbours and mse <= low * (1 + structure_tol)]
+                 if lg != lag and lg not in neighbours and mse <= floor * (1 + structure_tol)]
         for lg in alike:
             if lg not in scored:
                 scored[lg] = neighbour(lg)
         far = _farthest(model, [scored[lg][0] for lg in alike if scored[lg][2] is None])
-        if far is not None:
-            model = _with_structure_spread(model, [far])
-            alike_note = ("; the lags the data cannot tell apart "
-                          f"({', '.join(f'{x:g}' for x in sorted(alike))} s)")
+        if far is None:
+            alike = []
         else:
-            alike_note = ""
-    else:
-        alike_note = ""
+            model = _with_structure_spread(model, [far])
     if not isinstance(estimator, str):
         estimator.fit(segments, structure)
     prov = dict(model.provenance)
@@ -337,7 +333,9 @@ def identify_segments(
         prov["lag_chosen_by"] = "output error" if by_oe else "one step"
         prov["stderr_includes"] = ("statistical; the lag's grid resolution (the spread to "
                                    f"lags {', '.join(f'{x:g}' for x in neighbours)} s)"
-                                   if neighbours else "statistical") + alike_note
+                                   if neighbours else "statistical") + (
+            f"; the lags the data cannot tell apart ({', '.join(f'{x:g}' for x in sorted(alike))}"
+            " s)" if alike else "")
     prov["filters"] = [f.to_dict() for f in structure.filters]
     prov["lag_s"] = lag
     prov["delay_s"] = dly * dt
@@ -381,15 +379,14 @@ def _with_structure_spread(model: Model, others: Sequence[Model]) -> Model:
     return replace(model, covariance=cov, coef_stderr=se)
 
 
-def _one_step_noise(segments: Sequence[Segment], outputs: Sequence[str],
-                    by_lag: Mapping[float, tuple[float, float]]) -> float:
-    """The best one-step residual's RMS over the outputs' RMS about their mean (1 − the
-    one-step fit as a fraction)."""
+def _one_step_noise(segments: Sequence[Segment], outputs: Sequence[str], best: float
+                    ) -> float:
+    """The best one-step residual's RMS (``best``: its mean square) over the outputs' RMS
+    about their mean (1 − the one-step fit as a fraction)."""
     ys = np.concatenate([np.column_stack([s.states[:, s.state_names.index(o)]
                                           for o in outputs]) for s in segments
                          if all(o in s.state_names for o in outputs)])
     spread = float(np.nanmean(np.nanvar(ys, axis=0))) if ys.size else 0.0
-    best = min(v[0] for v in by_lag.values())
     return math.sqrt(best / spread) if spread > 0 else 0.0
 
 

@@ -1,4 +1,5 @@
-"""Flight-mode names of ArduPilot and PX4, without importing pymavlink.
+"""Flight-mode names of ArduPilot and PX4 (MAVLink modes, PX4's nav_state), without
+importing pymavlink.
 
 The readers name the modes a log records (DataFlash ``MODE`` records, a ``.tlog``'s
 ``HEARTBEAT.custom_mode``). The numbers are the autopilots' own mode enumerations, as
@@ -19,7 +20,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from types import MappingProxyType
 
-__all__ = ["ARDUPILOT_MODES", "MAV_TYPE_MODES", "ardupilot_modes", "px4_mode_name"]
+__all__ = ["ARDUPILOT_MODES", "MAV_TYPE_MODES", "NAV_STATES", "ardupilot_modes", "px4_mode_name"]
 
 
 def _table(spec: str) -> Mapping[int, str]:
@@ -87,6 +88,15 @@ def ardupilot_modes(vehicle: str | int | None) -> Mapping[int, str] | None:
     words = vehicle.split()
     return ARDUPILOT_MODES.get(words[0]) if words else None
 
+
+#: PX4 ``vehicle_status.nav_state`` values whose meaning has not changed across releases
+#: (the others were renamed or freed over time and are left unnamed): a ULog's modes.
+NAV_STATES: Mapping[int, str] = MappingProxyType({
+    0: "MANUAL", 1: "ALTCTL", 2: "POSCTL", 3: "AUTO_MISSION", 4: "AUTO_LOITER",
+    5: "AUTO_RTL", 10: "ACRO", 12: "DESCEND", 13: "TERMINATION", 14: "OFFBOARD",
+    15: "STAB", 17: "AUTO_TAKEOFF", 18: "AUTO_LAND", 19: "AUTO_FOLLOW_TARGET",
+    20: "AUTO_PRECLAND", 21: "ORBIT", 22: "AUTO_VTOL_TAKEOFF",
+})  # fmt: skip
 
 # PX4 custom_mode: main mode in bits 16..23, sub mode (AUTO's) in bits 24..31
 _PX4_MAIN = {1: "MANUAL", 5: "ACRO", 8: "RATTITUDE", 7: "STABILIZED", 2: "ALTCTL",

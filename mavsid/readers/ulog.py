@@ -114,18 +114,10 @@ from numpy.typing import NDArray
 
 from mavsid.data import MessageTable, ModeChange, RawLog, SourceInfo, TextMessage
 from mavsid.errors import DataQualityWarning, LogFormatError
+from mavsid.readers.modes import NAV_STATES
 from mavsid.readers.tlog import vehicle_class
 
 __all__ = ["NAV_STATES", "read", "table_name"]
-
-#: PX4 ``vehicle_status.nav_state`` values whose meaning has not changed across releases
-#: (the others were renamed or freed over time and are left unnamed).
-NAV_STATES: dict[int, str] = {
-    0: "MANUAL", 1: "ALTCTL", 2: "POSCTL", 3: "AUTO_MISSION", 4: "AUTO_LOITER",
-    5: "AUTO_RTL", 10: "ACRO", 12: "DESCEND", 13: "TERMINATION", 14: "OFFBOARD",
-    15: "STAB", 17: "AUTO_TAKEOFF", 18: "AUTO_LAND", 19: "AUTO_FOLLOW_TARGET",
-    20: "AUTO_PRECLAND", 21: "ORBIT", 22: "AUTO_VTOL_TAKEOFF",
-}  # fmt: skip
 
 _MODE_TOPIC = "vehicle_status"
 _INSTANCE = re.compile(r"^(.*)\[(\d+)\]$")

@@ -227,8 +227,9 @@ def write_ulog(
             pay[key] = v[idx] if v.ndim and len(v) == len(flight) else v
         parts.append((tus[idx], rec.view(np.uint8).reshape(len(idx), rec.dtype.itemsize)))
 
-    rate_hz = sc.controller.loop_hz / sc.rates.step("rate", sc.controller.loop_hz)
-    fast = _every(flight, rate_hz)  # the rate controller's topics (SDLOG_PROFILE high rate)
+    step = sc.rates.step("rate", sc.controller.loop_hz)
+    rate_hz = sc.controller.loop_hz / step
+    fast = np.arange(0, len(flight), step)  # the rate controller's (SDLOG_PROFILE high rate)
     slow = _every(flight, min(rate_hz, 50.0))
     q = _quaternion(flight.attitude)
     att: dict[str, Any] = {"q": q}

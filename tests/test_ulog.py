@@ -410,12 +410,14 @@ def test_truncated_last_message_is_counted(tmp_path: Path, source: str, cut: flo
     path = tmp_path / "cut.ulg"
     path.write_bytes(raw[:at])
     ref, _ = pyulog(path)
-    log, _ = read(path)
+    log, said = read(path)
     assert_tables_match(log, ref)
     assert f"last message truncated: {at - start} bytes ignored" in log.source.notes
+    assert any(f"last message truncated: {at - start} bytes ignored" in w for w in said)
     assert log.source.skipped_bytes == at - start
-    whole, _ = read(src)
+    whole, said = read(src)
     assert not any("truncated" in n for n in whole.source.notes)
+    assert not any("truncated" in w for w in said)
     assert whole.source.skipped_bytes == 0
 
 

@@ -1257,18 +1257,20 @@ def read(
         tables = {n: t for n, t in tables.items() if n in wanted or _base(n) in wanted}
 
     notes = _notes(parsed, tables, n_changes)
+    damage = []  # (said in one warning, as a damaged DataFlash file is: nothing silently lost)
     if bad_params:
-        notes.append(f"{bad_params} parameter value(s) of an unreadable type skipped")
-        warnings.warn(f"{path}: {notes[-1]}", DataQualityWarning, stacklevel=2)
+        damage.append(f"{bad_params} parameter value(s) of an unreadable type skipped")
     problems = parsed.problems
     if parsed.corrupt or problems:
         detail = "; ".join(problems[:3])
         if len(problems) > 3:
             detail += f" (+{len(problems) - 3} more)"
-        notes.append("file corruption found" + (f": {detail}" if detail else ""))
-        warnings.warn(f"{path}: {notes[-1]}", DataQualityWarning, stacklevel=2)
+        damage.append("file corruption found" + (f": {detail}" if detail else ""))
     if parsed.truncated:
-        notes.append(f"last message truncated: {parsed.truncated} bytes ignored")
+        damage.append(f"last message truncated: {parsed.truncated} bytes ignored")
+    notes += damage
+    if damage:
+        warnings.warn(f"{path}: {'; '.join(damage)}", DataQualityWarning, stacklevel=2)
     return RawLog(
         source=SourceInfo(str(path), "ulog", size, parsed.skipped + parsed.truncated,
                           tuple(notes)),

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import optimize, signal
+from scipy import optimize
 
 from mavsid.data import demean
 from mavsid.errors import NoExcitationError
@@ -105,47 +105,66 @@ class FRF:
         }
 
 
+def _starts(n: int, nper: int) -> np.ndarray:
+    """Start indices of Welch windows of ``nper`` samples spanning all ``n``: evenly spaced,
+    at least half-overlapped, the last ending on the last sample. (scipy's fixed half-step
+    drops the tail that does not fill a whole step: up to half a window, on a chirp the
+    end of its sweep, whose frequencies were then seen only under the taper's edge.)
+
+    Examples
+    --------
+    >>> _starts(7999, 3200).tolist()
+    [0, 1600, 3199, 4799]
+    >>> _starts(8000, 3200).tolist()
+    [0, 1600, 3200, 4800]
+    """
+    k = 1 + -(-(n - nper) // (nper // 2))
+    return np.rint(np.linspace(0, n - nper, k)).astype(int)
+
+
+def _spectra(x: np.ndarray, starts: np.ndarray, taper: np.ndarray) -> np.ndarray:
+    """One-sided spectra of the demeaned, tapered windows of ``x`` (rows: windows)."""
+    seg = x[starts[:, None] + np.arange(taper.size)]
+    return np.fft.rfft(demean(seg) * taper, axis=1)
+
+
 def _welch(us: Sequence[np.ndarray], ys: Sequence[np.ndarray], rs: Sequence[np.ndarray] | None,
            nper: int, fs: float
            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """Pooled Welch estimate of one window length: frequencies, ``H``, ``γ²`` and the
     effective number of averages per frequency (windows weighted by their input power).
 
-    Without a reference ``H = S_uy / S_uu`` (H1), ``γ² = |S_uy|² / (S_uu S_yy)``. With a
-    reference ``r`` (an injected signal, uncorrelated with the noise the feedback puts in
-    ``u``) ``H = S_ry / S_ru`` and ``γ² = γ²_ru · γ²_ry``: closed-loop data give the plant, not
-    the inverse of the controller."""
+    Hann windows of ``nper`` samples, demeaned, at least half-overlapped and spanning each
+    segment to its last sample (:func:`_starts`). Without a reference ``H = S_uy / S_uu``
+    (H1), ``γ² = |S_uy|² / (S_uu S_yy)``. With a reference ``r`` (an injected signal,
+    uncorrelated with the noise the feedback puts in ``u``) ``H = S_ry / S_ru`` and
+    ``γ² = γ²_ru · γ²_ry``: closed-loop data give the plant, not the inverse of the
+    controller."""
+    taper = np.hanning(nper + 1)[:-1]  # periodic Hann, as Welch's default
     acc: dict[str, Any] = {}
-    n_avg = 0.0
-    freq = None
+    n_avg = 0
     refs = rs if rs is not None else us
     for u, y, r in zip(us, ys, refs, strict=True):
         ok = np.isfinite(u) & np.isfinite(y) & np.isfinite(r)
         u, y, r = u[ok], y[ok], r[ok]
         if len(u) < nper:
             continue
-        kw = {"fs": fs, "nperseg": nper, "noverlap": nper // 2, "detrend": demean}
-        k = 1 + (len(u) - nper) // (nper // 2)
-        freq, puu = signal.welch(u, **kw)
-        spectra = {
-            "rr": puu if rs is None else signal.welch(r, **kw)[1], "uu": puu,
-            "yy": signal.welch(y, **kw)[1], "ru": signal.csd(r, u, **kw)[1],
-            "ry": signal.csd(r, y, **kw)[1],
-        }
-        for key, val in spectra.items():
-            acc[key] = acc.get(key, 0.0) + k * val
+        starts = _starts(len(u), nper)
+        fu, fy = _spectra(u, starts, taper), _spectra(y, starts, taper)
+        fr = fu if rs is None else _spectra(r, starts, taper)
+        pr = np.abs(fr) ** 2
         # per-window input power: a chirp excites a frequency in few windows only
-        per = signal.spectrogram(r, fs=fs, nperseg=nper, noverlap=nper // 2,
-                                 detrend=demean)[2]
-        acc["p1"] = acc.get("p1", 0.0) + per.sum(axis=1)
-        acc["p2"] = acc.get("p2", 0.0) + (per**2).sum(axis=1)
-        n_avg += k
-    if freq is None or n_avg == 0:
+        sums = {"rr": pr, "uu": np.abs(fu) ** 2, "yy": np.abs(fy) ** 2,
+                "ru": np.conj(fr) * fu, "ry": np.conj(fr) * fy, "p2": pr**2}
+        for key, val in sums.items():
+            acc[key] = acc.get(key, 0.0) + val.sum(axis=0)
+        n_avg += len(starts)
+    if n_avg == 0:
         return None
+    freq = np.fft.rfftfreq(nper, 1.0 / fs)
     with np.errstate(divide="ignore", invalid="ignore"):
         # effective number of averages at each frequency (participation ratio of the windows)
-        n_eff = np.where(acc["p2"] > 0, acc["p1"] ** 2 / acc["p2"], 1.0)
-    with np.errstate(divide="ignore", invalid="ignore"):
+        n_eff = np.where(acc["p2"] > 0, acc["rr"] ** 2 / acc["p2"], 1.0)
         h = acc["ry"] / acc["ru"]
         coh_ry = np.abs(acc["ry"]) ** 2 / (acc["rr"] * acc["yy"])
         coh_ru = np.abs(acc["ru"]) ** 2 / (acc["rr"] * acc["uu"])

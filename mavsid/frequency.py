@@ -60,6 +60,8 @@ class FRF:
     error : (m,) normalised random error of ``|H|`` (fraction).
     windows_s : window lengths combined.
     input, output : names of the signals.
+    referenced : estimated against an injected reference (``S_ry / S_ru``: unbiased by
+        the feedback on closed-loop data), not as H1.
     """
 
     freq_hz: np.ndarray
@@ -69,6 +71,7 @@ class FRF:
     windows_s: tuple[float, ...]
     input: str = "u"
     output: str = "y"
+    referenced: bool = False
 
     @property
     def coherent(self) -> np.ndarray:
@@ -246,7 +249,7 @@ def frf(
         # composite is credited with the best single window's error, not their combination
         error = 1.0 / np.sqrt(wmax)
     return FRF(grid, response, np.nan_to_num(coherence), error,
-               tuple(w for w, *_ in estimates), *names)
+               tuple(w for w, *_ in estimates), *names, referenced=reference is not None)
 
 
 @dataclass(frozen=True)

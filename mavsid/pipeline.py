@@ -615,13 +615,38 @@ def _missing_rate(axis: str, flights: Sequence[FlightData]) -> str:
             "PX4 vehicle_angular_velocity)")
 
 
-def _fit_model(train: Sequence[Segment], axis: str, cfg: PipelineConfig) -> Model:
+def _fit_model(train: Sequence[Segment], axis: str, cfg: PipelineConfig,
+               choose: Any = None) -> Model:
     from mavsid import estimators
 
-    model: Model = estimators.fit_axis(
-        list(train), axis=axis, estimator=cfg.estimator, **dict(cfg.model_options)
-    )
+    options = dict(cfg.model_options)
+    if choose is not None:
+        options["choose_structure"] = choose
+    model: Model = estimators.fit_axis(list(train), axis=axis, estimator=cfg.estimator,
+                                       **options)
     return model
+
+
+def _frf_chooser(axis: str, flights: Sequence[FlightData], signals: _Twins,
+                 cfg: PipelineConfig) -> Any:
+    """The structure chooser from the axis's SYSTEMID injection (its FRF against the
+    injection, :func:`mavsid.loop.structure_by_frf`), None where there is none or the
+    configuration fixes the delay or lags."""
+    if {"delay", "delays", "lags_s"} & set(cfg.model_options):
+        return None
+    from mavsid.loop import TwinSignals, measured_responses, structure_by_frf
+
+    sigs = [sg for fd in flights if isinstance(sg := signals.get(id(fd)), TwinSignals)]
+    if len(sigs) < len(flights):
+        return None
+    try:
+        plant = measured_responses(axis, flights, sigs).get("plant")
+    except (MavsidError, ValueError, np.linalg.LinAlgError):
+        return None
+    if plant is None or not plant.referenced:
+        return None
+    step = cfg.model_options.get("delay_step")
+    return structure_by_frf(plant, axis, **({"delay_step": float(step)} if step else {}))
 
 
 #: Stages :func:`fit` reports per axis (reading is one more per log).
@@ -689,7 +714,7 @@ def fit(
         try:
             train, held_out = split_segments(segs, cfg.block_s)
             next_stage()
-            model = _fit_model(train, axis, cfg)
+            model = _fit_model(train, axis, cfg, _frf_chooser(axis, flights, signals, cfg))
             next_stage()
             val = _validate(model, held_out, cfg)
         except NoExcitationError as exc:

@@ -37,7 +37,7 @@ import copy
 import itertools
 import math
 import warnings
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -61,6 +61,7 @@ from mavsid.estimators.select import (
     LAG_OE_TOL,
     LAG_PRUNE,
     ONE_STEP_NOISE,
+    StructureChoice,
     make_estimator,
     search_structure,
     with_lag,
@@ -193,12 +194,17 @@ def identify_segments(
     oe_covariance: str = "newey-west",
     var_units: Mapping[str, str] | None = None,
     estimator_options: Mapping[str, object] | None = None,
+    choose_structure: StructureChooser | None = None,
 ) -> Model:
     """Search the input structure (when asked), fit, refine: the one path every fit takes.
 
     Parameters are those of :func:`identify` (``segments`` instead of arrays; ``delay`` a
     number of samples or ``"search"``; ``max_delay_s`` the longest delay searched;
-    ``estimator_options`` the estimator's settings).
+    ``estimator_options`` the estimator's settings). ``choose_structure``, when the
+    structure is searched, receives per candidate lag (s) its least-squares model at its
+    best one-step delay and returns the ``(lag_s, delay_samples)`` to fit instead, or None
+    to keep the one-step choice (the pipeline passes one that scores the candidates against
+    a frequency response measured from an injection, :func:`mavsid.loop.structure_by_frf`).
     :func:`fit_axis` calls this with an axis's names and the log's filters.
     """
     segments = list(segments)
@@ -216,6 +222,7 @@ def identify_segments(
     if isinstance(delay, str) and delay != "search":
         raise ConfigError(f"delay must be a number of samples or 'search', got {delay!r}")
     lag, dly, scan = 0.0, 0.0, None
+    picked: tuple[float, float] | None = None
     base = structure
     if search:
         choice = search_structure(
@@ -224,6 +231,11 @@ def identify_segments(
             max_delay_s=DEFAULT_MAX_DELAY_SAMPLES * dt if max_delay_s is None else max_delay_s,
             lags_s=lags_s, structure_tol=structure_tol)
         structure, lag, dly, scan = choice.structure, choice.lag_s, choice.delay, choice.scan
+        picked = (_pick(choice, base, dt, choose_structure)
+                  if choose_structure is not None else None)
+        if picked is not None:
+            lag, dly = picked
+            structure = with_lag(base, lag, dly)
     else:
         dly = float(delay)
         whole = int(np.floor(dly + 1e-9))
@@ -280,7 +292,7 @@ def identify_segments(
     model, cost, failed = fitted(structure)
     scored: dict[float, tuple[Model, float, SolverError | None]] = {lag: (model, cost, failed)}
     floor = min(v[0] for v in choice.by_lag.values()) if search else math.nan  # best one step
-    by_oe = (search and math.isfinite(cost) and len(choice.by_lag) > 1
+    by_oe = (search and picked is None and math.isfinite(cost) and len(choice.by_lag) > 1
              and _one_step_noise(segments, outputs, floor) > ONE_STEP_NOISE)
     if by_oe:
         # noisy: the lag by the free-run cost (see ONE_STEP_NOISE), the delay per lag by one
@@ -330,7 +342,8 @@ def identify_segments(
     prov = dict(model.provenance)
     if scan is not None:
         prov["structure_scan"] = scan
-        prov["lag_chosen_by"] = "output error" if by_oe else "one step"
+        prov["lag_chosen_by"] = ("frequency response" if picked is not None
+                                 else "output error" if by_oe else "one step")
         prov["stderr_includes"] = ("statistical; the lag's grid resolution (the spread to "
                                    f"lags {', '.join(f'{x:g}' for x in neighbours)} s)"
                                    if neighbours else "statistical") + (
@@ -340,6 +353,26 @@ def identify_segments(
     prov["lag_s"] = lag
     prov["delay_s"] = dly * dt
     return replace(model, provenance=prov)
+
+
+#: ``choose_structure`` of :func:`identify_segments`: per candidate lag (s) its least-squares
+#: model -> the (lag s, delay samples) to fit, or None.
+StructureChooser = Callable[[Mapping[float, Model], float], "tuple[float, float] | None"]
+
+
+def _pick(choice: StructureChoice, base: Structure, dt: float, chooser: StructureChooser
+          ) -> tuple[float, float] | None:
+    """``chooser``'s (lag, delay) among the search's candidates, None to keep its own."""
+    models = {}
+    for lg, coef in choice.ls_coef.items():
+        st = with_lag(base, lg, choice.by_lag[lg][1])
+        models[lg] = Model(st.outputs, st.inputs, st.features, coef, dt, delay=st.delay,
+                           filters=st.filters, delay_frac=st.delay_frac)
+    got = chooser(models, choice.lag_s) if len(models) > 1 else None
+    if got is None or got[0] not in choice.by_lag:
+        return None
+    lag, dly = float(got[0]), max(float(got[1]), 0.0)
+    return None if (lag, dly) == (choice.lag_s, choice.delay) else (lag, dly)
 
 
 def _farthest(model: Model, others: Sequence[Model]) -> Model | None:
@@ -546,6 +579,7 @@ def fit_axis(
     continuous: bool = False,
     features: Sequence[str] = (),
     refine: str | None = "auto",
+    choose_structure: StructureChooser | None = None,
     **estimator_kwargs: object,
 ) -> Model:
     """Choose the structure for one axis from the data and the log, fit it, return the model.
@@ -595,6 +629,9 @@ def fit_axis(
         errors then come from its Newey–West sandwich covariance. ``"auto"`` (default): do
         so when the modelled states enter linearly, not for nonlinear libraries. None: the
         estimator's equation-error result as is.
+    choose_structure : callable, optional
+        Chooses the lag and delay among the search's candidates instead of the one-step
+        score (see :func:`identify_segments`).
     **estimator_kwargs
         Passed to the estimator (``alpha``, ``n_bootstrap``, ...).
 
@@ -648,7 +685,8 @@ def fit_axis(
         filters=flt, delay="search" if delay is None else float(delay), delays=delays,
         delay_step=delay_step, max_delay_s=max_delay_s,
         lags_s=(0.0,) if lags_s is None else lags_s,
-        structure_tol=structure_tol, refine=refine, estimator_options=estimator_kwargs)
+        structure_tol=structure_tol, refine=refine, estimator_options=estimator_kwargs,
+        choose_structure=choose_structure)
     prov = dict(model.provenance)
     prov["axis"] = axis
     return replace(model, provenance=prov)

@@ -1963,9 +1963,6 @@ FRF_STRUCTURE_SHIFT = 2.0
 #: FRF error floor (fraction): the composite's bias on a noise-free chirp (leakage where
 #: the sweep is fast: 1 % median, 5 % in gain and 4 deg in phase at worst below 12 Hz)
 FRF_STRUCTURE_FLOOR = 0.03
-#: The one-step choice stands unless its FRF cost exceeds the best candidate's by this
-#: (mean squared error in units of the FRF's error, per frequency)
-FRF_STRUCTURE_TOL = 1.0
 
 
 def plant_response(plant: LinearPlant, freq_hz: np.ndarray) -> np.ndarray:
@@ -2000,9 +1997,8 @@ def structure_by_frf(measured: Any, axis: str, delay_step: float = 0.125
     usable = bool(getattr(measured, "referenced", False)) and f.size >= FRF_STRUCTURE_MIN_POINTS
     w = 1.0 / (np.abs(h) ** 2 * (err**2 + FRF_STRUCTURE_FLOOR**2))
 
-    def score(model: Model) -> tuple[float, float, float] | None:
-        """(lowest cost, delay in samples, cost at its own delay) of one candidate over its
-        delay shifts and poles."""
+    def score(model: Model) -> tuple[float, float] | None:
+        """(lowest cost, delay in samples) of one candidate over its delay shifts and poles."""
         rate, u_name = AXIS_RATE[axis], f"u_{axis}"
         if (model.state_names != (rate,) or set(model.features) - {rate, u_name, "1"}
                 or u_name not in model.features):
@@ -2027,28 +2023,19 @@ def structure_by_frf(measured: Any, axis: str, delay_step: float = 0.125
         if not np.any(np.isfinite(cost)):
             return None
         i = np.unravel_index(int(np.nanargmin(cost)), cost.shape)[0]
-        own = int(np.argmin(np.abs(shifts)))
-        return (float(np.nanmin(cost)), round(d0 + float(shifts[i]), 9),
-                float(np.nanmin(cost[own])))
+        return float(np.nanmin(cost)), round(d0 + float(shifts[i]), 9)
 
     def choose(models: Mapping[float, Model], chosen: float) -> tuple[float, float] | None:
+        """The best candidate's (lag s, delay samples); ``chosen`` (the one-step choice's
+        lag) is not used: the FRF is asked only where the one-step score is not trusted."""
         if not usable:
             return None
         best: tuple[float, float, float] | None = None
-        kept = math.inf
         for lag, model in models.items():
             got = score(model)
-            if got is None:
-                continue
-            if lag == chosen:
-                kept = got[2]
-            if best is None or got[0] < best[0]:
+            if got is not None and (best is None or got[0] < best[0]):
                 best = (got[0], lag, got[1])
-        if os.environ.get("MAVSID_DEBUG_FRF"):
-            print("FRF", chosen, kept, best)
-        if best is None or kept <= best[0] + FRF_STRUCTURE_TOL:
-            return None  # the FRF does not reject the one-step choice
-        return best[1], best[2]
+        return None if best is None else (best[1], best[2])
 
     return choose
 

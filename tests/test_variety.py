@@ -231,9 +231,10 @@ def test_noisy_gyros_get_their_motor_lag_and_a_good_verdict(name: str, axis: str
     prov = dict(f.model.provenance)
     truth = _truth(name)["axes"][axis]
     assert prov["lag_chosen_by"] == "frequency response"
-    assert abs(float(prov["lag_s"]) - truth["motor_tau_s"]) <= 0.0105
+    assert float(prov["lag_s"]) == pytest.approx(truth["motor_tau_s"], abs=1e-6)
     assert f.verdict is not None and f.verdict.level == "good"
-    assert f.validation.fit_summary(f.output)["free_run"] > 80.0
+    # measured: 88.0, 88.5, 89.3 % (by output error: 84.0, 85.0, 83.3 %)
+    assert f.validation.fit_summary(f.output)["free_run"] > 86.0
 
 
 def test_a_25_hz_log_gives_a_usable_model_and_says_what_it_misses(tmp_path) -> None:  # type: ignore[no-untyped-def]
@@ -412,7 +413,8 @@ def test_a_little_fed_back_gyro_noise_does_not_shorten_the_motor_lag(
                                   vehicle=vehicle, gyro_noise_dps=gyro,
                                   vibration_dps=vibration, rate_hz=rate, seed=seed)
     f = result.axes["roll"]
-    assert dict(f.model.provenance)["lag_chosen_by"] == "output error"
+    # noisy: not the one-step score (a SYSTEMID chirp: against the injection's FRF)
+    assert dict(f.model.provenance)["lag_chosen_by"] == "frequency response"
     b, se = f.model.params["B[p,u_roll]"], f.model.stderr["B[p,u_roll]"]
     assert abs(b / truth["effectiveness"] - 1) < B_TOLERANCE
     assert abs(b - truth["effectiveness"]) < 2.5 * se

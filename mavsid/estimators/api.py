@@ -201,8 +201,7 @@ def identify_segments(
     Parameters are those of :func:`identify` (``segments`` instead of arrays; ``delay`` a
     number of samples or ``"search"``; ``max_delay_s`` the longest delay searched;
     ``estimator_options`` the estimator's settings). ``choose_structure``, when the
-    structure is searched on noisy data (:data:`~mavsid.estimators.select.ONE_STEP_NOISE`),
-    receives per candidate lag (s) its least-squares model at its
+    structure is searched, receives per candidate lag (s) its least-squares model at its
     best one-step delay and returns the ``(lag_s, delay_samples)`` to fit instead, or None
     to keep the one-step choice (the pipeline passes one that scores the candidates against
     a frequency response measured from an injection, :func:`mavsid.loop.structure_by_frf`).
@@ -232,12 +231,9 @@ def identify_segments(
             max_delay_s=DEFAULT_MAX_DELAY_SAMPLES * dt if max_delay_s is None else max_delay_s,
             lags_s=lags_s, structure_tol=structure_tol)
         structure, lag, dly, scan = choice.structure, choice.lag_s, choice.delay, choice.scan
-        # noisy data (see ONE_STEP_NOISE): the one-step choice is not trusted; a chooser
-        # (a frequency response against an injection) decides where there is one
-        noisy = (len(choice.by_lag) > 1 and _one_step_noise(
-            segments, outputs, min(v[0] for v in choice.by_lag.values())) > ONE_STEP_NOISE)
+        # a chooser (a frequency response against an injection) decides where there is one
         picked = (_pick(choice, base, dt, choose_structure)
-                  if choose_structure is not None and noisy else None)
+                  if choose_structure is not None else None)
         if picked is not None:
             lag, dly = picked
             structure = with_lag(base, lag, dly)

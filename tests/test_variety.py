@@ -416,3 +416,22 @@ def test_a_little_fed_back_gyro_noise_does_not_shorten_the_motor_lag(
     assert abs(b - truth["effectiveness"]) < 2.5 * se
     assert -f.model.params["A[p,p]"] == pytest.approx(truth["damping"], rel=DAMPING_TOLERANCE)
     assert f.validation.fit_summary("p")["free_run"] > 80.0
+
+
+def test_a_slow_telemetry_log_is_told_about_its_streams_not_only_the_sd_card_log(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """A ground station's .tlog at 10 Hz is refused for its rate, as a .bin would be; but
+    its rate is the telemetry streams' (SRn_EXTRA1 sends ATTITUDE, SRn_RC_CHAN
+    SERVO_OUTPUT_RAW), which LOG_BITMASK does not touch: the advice named only LOG_BITMASK
+    (found by ``bench_variety.py --seed 101`` once it drew .tlog layouts)."""
+    from mavsid.synthetic.run import scenario_from_options, simulate
+
+    path = tmp_path / "t10.tlog"
+    simulate(scenario_from_options(manoeuvre="random", axis="roll", rate_hz=10.0, seed=515),
+             [path])
+    with pytest.raises(NoExcitationError) as err, warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fit([str(path)], PipelineConfig(axes=("roll",)))
+    advice = err.value.details[-1]
+    assert "roll: not identified: rates/outputs logged at 10 Hz" in err.value.details[0]
+    assert "SRn_EXTRA1" in advice and "SRn_RC_CHAN" in advice
+    assert "flight controller's own log" in advice and "LOG_BITMASK" in advice

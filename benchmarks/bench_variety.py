@@ -3,7 +3,8 @@
     python benchmarks/bench_variety.py [--n 30] [--seed 0]
 
 Each flight is drawn from the simulator's whole range: manoeuvre (SYSTEMID mixer chirp, stick
-doublet, 3-2-1-1, random stick), axis, vehicle (small quad, heavier X quad, hexacopter), gyro
+doublet, 3-2-1-1, random stick), axis, vehicle (small quad, heavier X quad, hexacopter, a
+light racer on its own rate tuning), gyro
 white noise fed back through the rate controller (0-6 deg/s), frame vibration (0-5 deg/s),
 logging rate (10-400 Hz; 10 Hz logs every message that slowly) and log layout (ArduCopter
 3.2, 3.3, 3.4-dev, 3.6, 4.x, a 4.x traditional heli, ArduPlane 4.x; PX4 1.11, 1.14; a
@@ -54,7 +55,7 @@ def draw(rng: random.Random) -> dict[str, Any]:
     s = {
         "manoeuvre": rng.choice(["sysid", "sysid", "doublet", "3211", "random"]),
         "axis": rng.choice(["roll", "pitch", "yaw"]),
-        "vehicle": rng.choice(["quad", "heavy-x", "hexa"]),
+        "vehicle": rng.choice(["quad", "heavy-x", "hexa", "racer"]),
         "gyro_noise_dps": rng.choice([0.0, 0.0, 1.0, 3.0, 6.0]),
         "vibration_dps": rng.choice([0.0, 0.0, 2.0, 5.0]),
         "rate_hz": float(rng.choice([10, 25, 50, 100, 200, 400])),

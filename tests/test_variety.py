@@ -435,3 +435,21 @@ def test_a_slow_telemetry_log_is_told_about_its_streams_not_only_the_sd_card_log
     assert "roll: not identified: rates/outputs logged at 10 Hz" in err.value.details[0]
     assert "SRn_EXTRA1" in advice and "SRn_RC_CHAN" in advice
     assert "flight controller's own log" in advice and "LOG_BITMASK" in advice
+
+
+@pytest.mark.parametrize("manoeuvre", ["doublet", "3211"])
+def test_a_light_racer_flown_with_its_own_tuning_is_identified_near_its_truth(
+        tmp_path, manoeuvre: str) -> None:  # type: ignore[no-untyped-def]
+    """Three times the default quad's authority, 10 ms motors, a 40 Hz gyro filter and rate
+    gains a third of the default (its owner's tuning): none of the defaults was chosen on
+    such a vehicle. Measured: B -0.5 / +0.0 %, damping -0.7 / +0.1 %, free run 97 %."""
+    _, truth, result = _simulated(tmp_path, "racer.bin", manoeuvre=manoeuvre, axis="roll",
+                                  vehicle="racer", gyro_noise_dps=1.0, seed=3)
+    f = result.axes["roll"]
+    assert truth["effectiveness"] == 540.0
+    assert f.verdict is not None and f.verdict.level == "good", f.verdict
+    b, se = f.model.params["B[p,u_roll]"], f.model.stderr["B[p,u_roll]"]
+    assert abs(b / truth["effectiveness"] - 1) < B_TOLERANCE
+    assert abs(b - truth["effectiveness"]) < 2.5 * se
+    assert -f.model.params["A[p,p]"] == pytest.approx(truth["damping"], rel=DAMPING_TOLERANCE)
+    assert f.closed_loop is not None and f.closed_loop.fit_percent > 90.0

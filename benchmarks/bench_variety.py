@@ -3,10 +3,13 @@
     python benchmarks/bench_variety.py [--n 30] [--seed 0]
 
 Each flight is drawn from the simulator's whole range: manoeuvre (SYSTEMID mixer chirp, stick
-doublet, 3-2-1-1, random stick), axis, vehicle (small quad, heavier X quad, hexacopter), gyro
+doublet, 3-2-1-1, random stick), axis, vehicle (small quad, heavier X quad, hexacopter, a
+light racer on its own rate tuning), gyro
 white noise fed back through the rate controller (0-6 deg/s), frame vibration (0-5 deg/s),
-logging rate (25-400 Hz) and log layout (ArduCopter 3.2, 3.3, 3.4-dev, 3.6, 4.x, a 4.x
-traditional heli, ArduPlane 4.x; PX4 1.11, 1.14; heli and plane fly their own plants).
+logging rate (10-400 Hz; 10 Hz logs every message that slowly) and log layout (ArduCopter
+3.2, 3.3, 3.4-dev, 3.6, 4.x, a 4.x traditional heli, ArduPlane 4.x; PX4 1.11, 1.14; a
+ground station's MAVLink telemetry, its streams at 50 Hz, or at the logging rate below 25 Hz;
+heli and plane fly their own plants).
 Each is fitted with the defaults (``pipeline.fit``, the axis flown) and compared with the
 simulated plant's truth:
 
@@ -52,17 +55,19 @@ def draw(rng: random.Random) -> dict[str, Any]:
     s = {
         "manoeuvre": rng.choice(["sysid", "sysid", "doublet", "3211", "random"]),
         "axis": rng.choice(["roll", "pitch", "yaw"]),
-        "vehicle": rng.choice(["quad", "heavy-x", "hexa"]),
+        "vehicle": rng.choice(["quad", "heavy-x", "hexa", "racer"]),
         "gyro_noise_dps": rng.choice([0.0, 0.0, 1.0, 3.0, 6.0]),
         "vibration_dps": rng.choice([0.0, 0.0, 2.0, 5.0]),
-        "rate_hz": float(rng.choice([25, 50, 100, 200, 400])),
+        "rate_hz": float(rng.choice([10, 25, 50, 100, 200, 400])),
         "layout": rng.choice(["copter-4", "copter-4", "copter-3.6", "copter-3.3",
                               "copter-3.4-dev", "copter-3.2", "heli", "plane", "px4-1.14",
-                              "px4-1.11"]),
+                              "px4-1.11", "tlog"]),
         "seed": rng.randrange(1000),
     }
     if s["layout"] == "plane" and s["manoeuvre"] == "sysid":  # (ArduPlane has no SYSTEMID)
         s["manoeuvre"] = rng.choice(["doublet", "3211", "random"])
+    if s["layout"] in ("heli", "plane"):  # (their own plants: a heli's or a wing's physics)
+        s["vehicle"] = s["layout"]
     return s
 
 
@@ -71,14 +76,17 @@ def run_one(folder: Path, i: int, s: dict[str, Any]) -> tuple[str, str]:
     opts = {k: v for k, v in s.items() if k != "layout"}
     if s["manoeuvre"] == "sysid":
         opts["sid_axes"] = (SID_AXIS[s["axis"]],)
-    log = folder / f"f{i}{'.ulg' if s['layout'].startswith('px4') else '.bin'}"
+    suffix = (".ulg" if s["layout"].startswith("px4")
+              else ".tlog" if s["layout"] == "tlog" else ".bin")
+    log = folder / f"f{i}{suffix}"
     desc = (f"{s['manoeuvre']:7s} {s['axis']:5s} {s['vehicle']:7s} "
             f"gyro {s['gyro_noise_dps']:g} vib {s['vibration_dps']:g} {s['rate_hz']:g} Hz "
             f"{s['layout']:14s} seed {s['seed']}")
     axis, rate = s["axis"], RATE[s["axis"]]
     try:
         with contextlib.redirect_stdout(io.StringIO()):
-            simulate(scenario_from_options(**opts), [log], layout=s["layout"])
+            simulate(scenario_from_options(**opts), [log],
+                     layout=None if s["layout"] == "tlog" else s["layout"])
         truth = json.loads(log.with_suffix(".truth.json").read_text())["axes"][axis]
         try:
             res = pipeline.fit([str(log)], pipeline.PipelineConfig(axes=(axis,)))

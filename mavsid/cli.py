@@ -214,10 +214,10 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--rate-hz", type=float, default=400.0,
                    help="RATE/SIDD logging rate, must divide 400 Hz (400); below 25 Hz "
                    "every message is logged slowly")
-    p.add_argument("--vehicle", choices=("quad", "heavy-x", "hexa", "heli", "plane"),
+    p.add_argument("--vehicle", choices=("quad", "heavy-x", "hexa", "heli", "plane", "racer"),
                    help="plant: small quad (default), heavier X quad, hexacopter inertia, "
                    "traditional helicopter, fixed-wing plane (default for --layout heli / "
-                   "plane)")
+                   "plane), light racer quad (flown with its own rate tuning)")
     p.add_argument("--gyro-noise", type=float, metavar="DEG_S",
                    help="gyro white noise, deg/s RMS per 400 Hz sample (fed back)")
     p.add_argument("--vibration", type=float, default=0.0, metavar="DEG_S",

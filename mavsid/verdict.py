@@ -196,14 +196,25 @@ def _before_rate(autopilot: str | None) -> bool:
     return bool(autopilot) and bool(re.search(r"ArduCopter V3\.[0-2]\b", str(autopilot)))
 
 
-def logging_advice(autopilot: str | None) -> str:
+def logging_advice(autopilot: str | None, telemetry: bool = False) -> str:
     """Which logging setting to change to log body rates and controller outputs fast.
+
+    ``telemetry``: the logs are a ground station's MAVLink telemetry (``.tlog``), whose
+    rates are the streams' (ArduPilot ``SRn_*``), not the on-board log's: the advice says
+    so and names the on-board log's setting for the log to fit instead.
 
     Examples
     --------
     >>> logging_advice("PX4").startswith("PX4: set SDLOG_PROFILE")
     True
+    >>> logging_advice("ArduPilot", telemetry=True).split(":")[0]
+    'a .tlog holds what the telemetry streams sent (ArduPilot SRn_EXTRA1'
     """
+    if telemetry:
+        return ("a .tlog holds what the telemetry streams sent (ArduPilot SRn_EXTRA1: "
+                "ATTITUDE, SRn_RC_CHAN: SERVO_OUTPUT_RAW; at most 50 Hz): fit the flight "
+                "controller's own log from its SD card instead; "
+                + logging_advice(autopilot))
     if autopilot and "px4" in autopilot.lower():
         return ("PX4: set SDLOG_PROFILE to include 'high rate' (bit 1) or 'system identification'"
                 " (bit 4) so that vehicle_angular_velocity and the torque/actuator setpoints are "
@@ -346,7 +357,7 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
         elif rate < 4 * hi:
             caps.append(f"logged at {rate:.3g} Hz: only the slow part of a {lo:g}–{hi:g} Hz rate "
                         "loop is resolved")
-            advice.append(logging_advice(_autopilot(flights)))
+            advice.append(logging_advice(_autopilot(flights), _telemetry(flights)))
 
     # excitation
     exc = _excitation(windows)
@@ -486,7 +497,13 @@ def _too_slow(rate: float, flights: Sequence[Any]) -> tuple[str, str] | None:
         return None
     reason = (f"rates/outputs logged at {rate:.3g} Hz (Nyquist {rate / 2:.3g} Hz) cannot "
               f"resolve a rate loop of {lo:g}–{hi:g} Hz bandwidth")
-    return reason, logging_advice(_autopilot(flights))
+    return reason, logging_advice(_autopilot(flights), _telemetry(flights))
+
+
+def _telemetry(flights: Sequence[Any]) -> bool:
+    """Whether every flight was read from a ground station's telemetry (``.tlog``)."""
+    formats = [getattr(getattr(fd, "source", None), "format", None) for fd in flights]
+    return bool(formats) and all(f == "tlog" for f in formats)
 
 
 def _autopilot(flights: Sequence[Any]) -> str | None:

@@ -184,6 +184,9 @@ class PlantParams:
 #:   the wing's roll damping), pitch and yaw weaker (short-period and dutch-roll reduced to
 #:   first order), authority lower than a multicopter's; the lag is the surface servos'
 #:   (30 ms). ``hover_throttle`` stands for the cruise throttle.
+#: - ``racer``: a small, light quad with a high thrust-to-weight ratio (3x the default
+#:   quad's authority, stronger damping, fast motors, 40 Hz gyro filter, hovering at 25 %
+#:   throttle), flown with rate gains tuned to it (:data:`RATE_GAIN_SCALE`).
 VEHICLES: dict[str, PlantParams] = {
     "quad": PlantParams(),
     "heavy-x": PlantParams(damping=(2.5, 2.8, 0.8), effectiveness=(95.0, 80.0, 9.0),
@@ -198,7 +201,16 @@ VEHICLES: dict[str, PlantParams] = {
     "plane": PlantParams(damping=(8.0, 3.0, 1.2), effectiveness=(90.0, 45.0, 15.0),
                          motor_tau_s=0.03, delay_s=0.005, gyro_filter_hz=20.0,
                          hover_throttle=0.55),
+    "racer": PlantParams(damping=(6.0, 6.0, 2.5), effectiveness=(540.0, 500.0, 75.0),
+                         motor_tau_s=0.01, delay_s=0.003, gyro_filter_hz=40.0,
+                         hover_throttle=0.25),
 }
+
+#: Vehicles flown with their own rate tuning: the default rate P, I and D (and their
+#: ``IMAX``-free gains only) multiplied by this, so that the loop gain (gain × control
+#: effectiveness) is the default quad's, as its owner's tuning would make it. The others fly
+#: the default gains.
+RATE_GAIN_SCALE: dict[str, float] = {"racer": 1.0 / 3.0}
 
 
 @dataclass(frozen=True)

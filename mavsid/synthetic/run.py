@@ -195,6 +195,8 @@ def scenario_from_options(
     >>> sc = scenario_from_options(vehicle="heavy-x", gyro_noise_dps=3.0)
     >>> sc.plant.effectiveness[0], round(float(np.degrees(sc.plant.gyro_noise)), 6)
     (95.0, 3.0)
+    >>> round(scenario_from_options(vehicle="racer").controller.rll_p, 6)  # its own tuning
+    0.045
 
     >>> sc = scenario_from_options(sid_axes=[10, 12], seed=3)
     >>> [r.axis for r in sc.runs], sc.runs[1].magnitude
@@ -243,7 +245,16 @@ def scenario_from_options(
     slow = min(rate_hz, 10.0) if rate_hz < 25 else None
     rates = LogRates(rate=rate_hz) if slow is None else LogRates(
         rate=rate_hz, att=slow, imu=rate_hz, rcou=slow, rcin=slow, tlog=rate_hz)
+    from mavsid.synthetic.controller import ControllerParams
+    from mavsid.synthetic.plant import RATE_GAIN_SCALE
+
+    controller = ControllerParams()
+    k = RATE_GAIN_SCALE.get(vehicle)
+    if k is not None:  # (a vehicle tuned by its owner: the default loop gain)
+        controller = replace(controller, **{f"{ax}_{g}": getattr(controller, f"{ax}_{g}") * k
+                                            for ax in ("rll", "pit", "yaw")
+                                            for g in ("p", "i", "d")})
     return Scenario(
         manoeuvre=manoeuvre, axis=axis, sysid=tuple(runs), duration_s=duration_s, seed=seed,
-        plant=plant, rates=rates, stick_amplitude=stick_amplitude,
+        plant=plant, rates=rates, stick_amplitude=stick_amplitude, controller=controller,
     )

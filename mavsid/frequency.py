@@ -33,8 +33,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import optimize, signal
 
+from mavsid import dsp
 from mavsid.data import demean
 from mavsid.errors import NoExcitationError
 
@@ -124,21 +124,26 @@ def _welch(us: Sequence[np.ndarray], ys: Sequence[np.ndarray], rs: Sequence[np.n
         u, y, r = u[ok], y[ok], r[ok]
         if len(u) < nper:
             continue
-        kw = {"fs": fs, "nperseg": nper, "noverlap": nper // 2, "detrend": demean}
         k = 1 + (len(u) - nper) // (nper // 2)
-        freq, puu = signal.welch(u, **kw)
+        freq = np.fft.rfftfreq(nper, 1.0 / fs)
+        # each signal's windows transformed once (scipy.signal.welch / csd to rounding)
+        fu, fy = (dsp.segment_ffts(v, nper, nper // 2, demean) for v in (u, y))
+        fr = fu if rs is None else dsp.segment_ffts(r, nper, nper // 2, demean)
+        puu = dsp.density(fu, fu, fs, nper).real
         spectra = {
-            "rr": puu if rs is None else signal.welch(r, **kw)[1], "uu": puu,
-            "yy": signal.welch(y, **kw)[1], "ru": signal.csd(r, u, **kw)[1],
-            "ry": signal.csd(r, y, **kw)[1],
+            "rr": puu if rs is None else dsp.density(fr, fr, fs, nper).real, "uu": puu,
+            "yy": dsp.density(fy, fy, fs, nper).real, "ru": dsp.density(fr, fu, fs, nper),
+            "ry": dsp.density(fr, fy, fs, nper),
         }
         for key, val in spectra.items():
             acc[key] = acc.get(key, 0.0) + k * val
-        # per-window input power: a chirp excites a frequency in few windows only
-        per = signal.spectrogram(r, fs=fs, nperseg=nper, noverlap=nper // 2,
-                                 detrend=demean)[2]
-        acc["p1"] = acc.get("p1", 0.0) + per.sum(axis=1)
-        acc["p2"] = acc.get("p2", 0.0) + (per**2).sum(axis=1)
+        # per-window input power: a chirp excites a frequency in few windows only (the
+        # windows of scipy.signal.spectrogram: Tukey 0.25)
+        win = dsp.tukey(nper, 0.25)
+        tr = dsp.segment_ffts(r, nper, nper // 2, demean, window=win)
+        per = dsp.density(tr, tr, fs, nper, average=False, window=win).real
+        acc["p1"] = acc.get("p1", 0.0) + per.sum(axis=0)
+        acc["p2"] = acc.get("p2", 0.0) + (per**2).sum(axis=0)
         n_avg += k
     if freq is None or n_avg == 0:
         return None
@@ -268,6 +273,8 @@ def fit_tf(r: FRF, max_delay_s: float = 0.1) -> TFFit:
     NoExcitationError
         Fewer than 4 coherent frequencies.
     """
+    from scipy import optimize
+
     m = r.coherent & np.isfinite(r.response)
     if m.sum() < 4:
         raise NoExcitationError(f"{r.input} -> {r.output}: fewer than 4 coherent frequencies")

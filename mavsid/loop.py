@@ -55,8 +55,9 @@ from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
-from scipy import linalg, signal
+from scipy import linalg
 
+from mavsid import dsp
 from mavsid.errors import ConfigError, MavsidError
 
 if TYPE_CHECKING:
@@ -204,7 +205,7 @@ class RatePID:
             y = np.empty(n)
             y[0] = x0
             if n > 1:
-                y[1:] = signal.lfilter([a], [1.0, a - 1.0], x[1:], zi=[(1.0 - a) * x0])[0]
+                y[1:] = dsp.lfilter([a], [1.0, a - 1.0], x[1:], zi=[(1.0 - a) * x0])
             return y
 
         tf = low(tg, self.a_t, float(tg[0]))

@@ -2045,14 +2045,16 @@ def _advice(axis: str, fit: Any, ctrl: AxisController, bandwidth_hz: float,
 
 
 def tune(result: Any, target_pm_deg: float = 50.0, samples: int = 40,
-         measured_out: dict[str, dict[str, Any]] | None = None) -> dict[str, Any]:
+         measured_out: dict[str, dict[str, Any]] | None = None,
+         analyses_out: dict[str, LoopAnalysis] | None = None) -> dict[str, Any]:
     """Per fitted axis of a :class:`mavsid.pipeline.FitResult`: the loop with the logged
     gains (margins, closed loop, uncertainties), the plant FRF and TF fit for SYSTEMID data,
     gains for ``target_pm_deg`` (only when the axis's verdict is ``good``) and next-flight
     advice. The JSON form of ``mavsid tune --json``.
 
     ``measured_out``, when given, receives per axis the :func:`measured_responses` used (the
-    FRF objects), so that a caller plotting them does not measure them again."""
+    FRF objects), so that a caller plotting them does not measure them again; likewise
+    ``analyses_out`` the :class:`LoopAnalysis` with the logged gains (its responses)."""
     from mavsid.frequency import fit_tf
 
     out: dict[str, Any] = {}
@@ -2073,6 +2075,8 @@ def tune(result: Any, target_pm_deg: float = 50.0, samples: int = 40,
             out[axis] = entry
             continue
         entry.update(an.to_dict())
+        if analyses_out is not None:
+            analyses_out[axis] = an
         plant = None
         measured = measured_responses(fit, result.flights, signals, lag=lag)
         if measured_out is not None:

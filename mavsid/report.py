@@ -21,6 +21,7 @@ import html
 import io
 import os
 import re
+import threading
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -70,6 +71,40 @@ def figure_png(fig: Figure) -> str:
     fig.savefig(buf, format="png", dpi=90, pil_kwargs={"compress_level": 1})
     data = base64.b64encode(buf.getvalue()).decode("ascii")
     return f'<img alt="figure" src="data:image/png;base64,{data}">'
+
+
+_POOL = threading.local()
+
+
+def _panels(figsize: tuple[float, float], rows: int = 1, cols: int = 1,
+            **kw: Any) -> tuple[Figure, np.ndarray]:
+    """A figure of ``rows`` x ``cols`` axes (``fig.subplots(..., squeeze=False, **kw)``),
+    the one drawn last with this layout emptied and handed out again when there is one:
+    building axes (their ticks, spines and scales) was a third of the report's figure time,
+    and a figure drawn again reuses its renderer's text metrics. Draw the figure before
+    asking for the same layout again (every figure here goes to :func:`figure_png` at once).
+    """
+    pool: dict[str, tuple[Figure, np.ndarray]] = _POOL.__dict__.setdefault("figures", {})
+    key = repr((figsize, rows, cols, sorted(kw.items())))
+    if key in pool:
+        fig, axes = pool[key]
+        for ax in fig.axes:
+            for art in (*ax.lines, *ax.collections, *ax.patches, *ax.texts):
+                art.remove()
+            legend = ax.get_legend()
+            if legend is not None:
+                legend.remove()
+            ax.set_title("")
+            ax.set_xlabel("")
+            ax.set_ylabel("")
+            ax.set_prop_cycle(None)  # the default colours from the first again
+            ax.relim()
+            ax.set_autoscale_on(True)
+        return fig, axes
+    fig = Figure(figsize=figsize)
+    axes = fig.subplots(rows, cols, squeeze=False, **kw)
+    pool[key] = (fig, axes)
+    return fig, axes
 
 
 def _log_minor(ax: Axes) -> None:
@@ -144,8 +179,8 @@ def _gapped(parts: Sequence[tuple[np.ndarray, np.ndarray]],
 def _time_figure(fit: AxisFit) -> Figure:
     v = fit.validation
     j = v.state_names.index(fit.output)
-    fig = Figure(figsize=(11, 4.5))
-    ax, ax_u = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+    fig, axes = _panels((11, 4.5), 2, 1, sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+    ax, ax_u = axes[:, 0]
     for kind in ("measured", "one_step", "free_run"):
         t, y = _gapped([(s.time_s, getattr(s, kind)[:, j]) for s in v.segments])
         ax.plot(t, y, color=_COLOURS[kind], lw=1.6 if kind == "measured" else 1.0,
@@ -169,8 +204,8 @@ def _time_figure(fit: AxisFit) -> Figure:
 
 
 def _horizon_figure(v: Validation) -> Figure:
-    fig = Figure(figsize=(5.2, 3.4))
-    ax = fig.subplots()
+    fig, axes = _panels((5.2, 3.4))
+    ax = axes[0, 0]
     h = v.horizons_s
     for j, state in enumerate(v.state_names):
         ax.semilogx(h, np.clip(v.fit_vs_horizon[:, j], -100.0, 100.0), "o-", label=state)
@@ -189,8 +224,8 @@ def _horizon_figure(v: Validation) -> Figure:
 
 def _residual_figure(v: Validation) -> Figure:
     r = v.residuals
-    fig = Figure(figsize=(5.2, 4.6))
-    ax, ax_u = fig.subplots(2, 1)
+    fig, axes = _panels((5.2, 4.6), 2, 1)
+    ax, ax_u = axes[:, 0]
     for j, state in enumerate(v.state_names):
         ax.plot(r.lags * v.dt * 1e3, r.autocorr[:, j], ".-", ms=3, label=f"{state}")
         for i, name in enumerate(v.input_names):
@@ -277,8 +312,7 @@ def _bode_figure(fit: AxisFit, lp: _Loop | None = None) -> Figure | None:
     cols = _bode_columns(fit, lp)
     if not cols:
         return None
-    fig = Figure(figsize=(11, 6) if len(cols) < 3 else (14, 6))
-    axes = fig.subplots(3, len(cols), sharex="col", squeeze=False,
+    fig, axes = _panels((11, 6) if len(cols) < 3 else (14, 6), 3, len(cols), sharex="col",
                         gridspec_kw={"height_ratios": [3, 2, 1.3]})
     for i, col in enumerate(cols):
         mag, ph, coh = axes[0, i], axes[1, i], axes[2, i]
@@ -507,8 +541,8 @@ def _twin_figure(fit: AxisFit) -> Figure | None:
     cl = fit.closed_loop
     if cl is None or not cl.blocks:
         return None
-    fig = Figure(figsize=(11, 3.2))
-    ax = fig.subplots()
+    fig, axes = _panels((11, 3.2))
+    ax = axes[0, 0]
     curves: tuple[tuple[str, str, str, float, str], ...] = (
         ("rate", "measured", _COLOURS["measured"], 0.8, "-"),
         ("rate_twin", "closed-loop twin", _COLOURS["free_run"], 0.8, "-"),

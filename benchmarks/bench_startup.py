@@ -13,13 +13,16 @@ With ``--log``: ``mavsid fit LOG`` and ``mavsid fit LOG --rrd --report`` (writte
 temporary directory), min / median / max of ``--runs`` fresh processes, with the bare
 interpreter's time beside; with ``--baseline DIR`` (a checkout of the previous release, e.g.
 ``git worktree add /tmp/mavsid-base main``) the same commands from that checkout, run
-alternately with this one's (a busy machine slows both alike), and the ratio of the medians.
+alternately with this one's (a busy machine slows both alike), and the ratio of the medians
+of wall and of CPU time (user + system of the process; steadier than wall time when other
+work shares the machine).
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -49,29 +52,37 @@ def _whole_fit(log: str, baseline: str | None, runs: int) -> None:
                                             str(Path(tmp) / "o.html")]}
         bare = _time([sys.executable, "-c", "pass"], runs)
         times: dict[tuple[str, str], list[float]] = {}
+        cpu: dict[tuple[str, str], list[float]] = {}
         for _ in range(runs):  # alternate the trees: load on the machine hits both alike
             for case, argv in cases.items():
                 for tree, root in trees.items():
                     env = {**os.environ, "PYTHONPATH": str(root)}
+                    u0 = resource.getrusage(resource.RUSAGE_CHILDREN)
                     t = time.perf_counter()
                     proc = subprocess.run([sys.executable, "-m", "mavsid", *argv], cwd=root,
                                           env=env, capture_output=True, check=False)
                     times.setdefault((case, tree), []).append(time.perf_counter() - t)
+                    u1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+                    cpu.setdefault((case, tree), []).append(
+                        u1.ru_utime - u0.ru_utime + u1.ru_stime - u0.ru_stime)
                     if proc.returncode:
                         raise SystemExit(f"{tree}: {' '.join(argv)}: exit {proc.returncode}: "
                                          f"{proc.stderr.decode()[-300:]}")
     print(f"{Path(log).name}, {runs} fresh processes each; python -c pass "
           f"{statistics.median(bare):.3f} s median")
-    print(f"{'command':24} {'tree':9} {'min':>7} {'median':>7} {'max':>7}  ratio")
+    print(f"{'command':24} {'tree':9} {'min':>7} {'median':>7} {'max':>7} {'CPU med':>8}  ratio "
+          "(wall, CPU medians)")
     for case in cases:
         for tree in trees:
-            ts = times[(case, tree)]
+            ts, cs = times[(case, tree)], cpu[(case, tree)]
             ratio = ""
             if tree == "this" and baseline:
                 base = statistics.median(times[(case, "baseline")])
-                ratio = f"{base / statistics.median(ts):.2f}x faster than the baseline (medians)"
+                base_cpu = statistics.median(cpu[(case, "baseline")])
+                ratio = (f"{base / statistics.median(ts):.2f}x / "
+                         f"{base_cpu / statistics.median(cs):.2f}x faster than the baseline")
             print(f"{case:24} {tree:9} {min(ts):7.3f} {statistics.median(ts):7.3f} "
-                  f"{max(ts):7.3f}  {ratio}")
+                  f"{max(ts):7.3f} {statistics.median(cs):8.3f}  {ratio}")
 
 
 def main() -> None:

@@ -15,8 +15,7 @@ effectiveness in rad/s² per unit of controller output, whichever form was fitte
 Examples
 --------
 >>> import numpy as np
->>> from mavsid import dsp
-from mavsid.data import Segment
+>>> from mavsid.data import Segment
 >>> m = Model(("p",), ("u_roll",), ("p", "u_roll", "1"), np.array([[0.99], [0.5], [0.0]]),
 ...           dt=0.01)
 >>> sorted(m.params)[:3], m.units["B[p,u_roll]"]

@@ -14,8 +14,7 @@ coloured, so ``σ²(JᵀJ)⁻¹`` alone would be far too optimistic).
 Examples
 --------
 >>> import numpy as np
->>> from mavsid import dsp
-from mavsid.data import Segment
+>>> from mavsid.data import Segment
 >>> from mavsid.estimators.model import Model
 >>> rng = np.random.default_rng(0)
 >>> u = np.repeat(rng.standard_normal(100), 10)[:, None] * 0.1

@@ -17,8 +17,7 @@ unit of cross-validation and of the block bootstrap.
 Examples
 --------
 >>> import numpy as np
->>> from mavsid import dsp
-from mavsid.data import Segment
+>>> from mavsid.data import Segment
 >>> t = np.arange(6) * 0.01
 >>> seg = Segment(t, np.arange(6.0)[:, None], np.ones((6, 1)), ("p",), ("u_roll",), 0.01,
 ...               "roll", "scan")

@@ -1,18 +1,32 @@
-"""Start-up cost of the command line against a bare interpreter, in fresh processes.
+"""Start-up cost of the command line against a bare interpreter, in fresh processes; and
+the whole ``mavsid fit`` of a big log against a previous checkout, in the same run.
 
     python benchmarks/bench_startup.py [--runs 5]
+    python benchmarks/bench_startup.py --log ../shared/logs/sitl/flightA_mixer.BIN \
+        [--baseline DIR] [--runs 5]
 
-Prints min and median wall time of ``python -c pass``, ``mavsid --version``, ``mavsid --help``
-and ``mavsid fit`` on the small bundled fixture, and each one's excess over the bare
-interpreter (what importing mavsid costs), cold and warm (first run vs the rest).
+Without ``--log``: min and median wall time of ``python -c pass``, ``mavsid --version``,
+``mavsid --help`` and ``mavsid fit`` on the small bundled fixture, and each one's excess over
+the bare interpreter (what importing mavsid costs), cold and warm (first run vs the rest).
+
+With ``--log``: ``mavsid fit LOG`` and ``mavsid fit LOG --rrd --report`` (written to a
+temporary directory), min / median / max of ``--runs`` fresh processes, with the bare
+interpreter's time beside; with ``--baseline DIR`` (a checkout of the previous release, e.g.
+``git worktree add /tmp/mavsid-base main``) the same commands from that checkout, run
+alternately with this one's (a busy machine slows both alike), and the ratio of the medians
+of wall and of CPU time (user + system of the process; steadier than wall time when other
+work shares the machine).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
+import resource
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -28,10 +42,59 @@ def _time(argv: list[str], runs: int) -> list[float]:
     return out
 
 
+def _whole_fit(log: str, baseline: str | None, runs: int) -> None:
+    """``fit LOG`` and ``fit LOG --rrd --report`` from this checkout (and ``baseline``)."""
+    trees = {"this": ROOT} | ({"baseline": Path(baseline).resolve()} if baseline else {})
+    with tempfile.TemporaryDirectory() as tmp:
+        cases = {"fit LOG": ["fit", log, "--quiet"],
+                 "fit LOG --rrd --report": ["fit", log, "--quiet", "--rrd",
+                                            str(Path(tmp) / "o.rrd"), "--report",
+                                            str(Path(tmp) / "o.html")]}
+        bare = _time([sys.executable, "-c", "pass"], runs)
+        times: dict[tuple[str, str], list[float]] = {}
+        cpu: dict[tuple[str, str], list[float]] = {}
+        for _ in range(runs):  # alternate the trees: load on the machine hits both alike
+            for case, argv in cases.items():
+                for tree, root in trees.items():
+                    env = {**os.environ, "PYTHONPATH": str(root)}
+                    u0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+                    t = time.perf_counter()
+                    proc = subprocess.run([sys.executable, "-m", "mavsid", *argv], cwd=root,
+                                          env=env, capture_output=True, check=False)
+                    times.setdefault((case, tree), []).append(time.perf_counter() - t)
+                    u1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+                    cpu.setdefault((case, tree), []).append(
+                        u1.ru_utime - u0.ru_utime + u1.ru_stime - u0.ru_stime)
+                    if proc.returncode:
+                        raise SystemExit(f"{tree}: {' '.join(argv)}: exit {proc.returncode}: "
+                                         f"{proc.stderr.decode()[-300:]}")
+    print(f"{Path(log).name}, {runs} fresh processes each; python -c pass "
+          f"{statistics.median(bare):.3f} s median")
+    print(f"{'command':24} {'tree':9} {'min':>7} {'median':>7} {'max':>7} {'CPU med':>8}  ratio "
+          "(wall, CPU medians)")
+    for case in cases:
+        for tree in trees:
+            ts, cs = times[(case, tree)], cpu[(case, tree)]
+            ratio = ""
+            if tree == "this" and baseline:
+                base = statistics.median(times[(case, "baseline")])
+                base_cpu = statistics.median(cpu[(case, "baseline")])
+                ratio = (f"{base / statistics.median(ts):.2f}x / "
+                         f"{base_cpu / statistics.median(cs):.2f}x faster than the baseline")
+            print(f"{case:24} {tree:9} {min(ts):7.3f} {statistics.median(ts):7.3f} "
+                  f"{max(ts):7.3f} {statistics.median(cs):8.3f}  {ratio}")
+
+
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=5)
-    runs = ap.parse_args().runs
+    ap.add_argument("--log", help="time the whole `mavsid fit` of this log instead")
+    ap.add_argument("--baseline", metavar="DIR", help="with --log: a checkout to compare with")
+    args = ap.parse_args()
+    runs = args.runs
+    if args.log:
+        _whole_fit(args.log, args.baseline, runs)
+        return
     py = [sys.executable]
     cases = {
         "python -c pass": [*py, "-c", "pass"],

@@ -87,8 +87,8 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
-from scipy import signal
 
+from mavsid import dsp
 from mavsid.data import FlightData, Segment, detrend_linear
 from mavsid.errors import ConfigError
 
@@ -321,8 +321,8 @@ def _coherence(x: np.ndarray, pxx: np.ndarray, y: np.ndarray, fs: float, nper: i
     from ``x``'s spectrum ``pxx`` already measured and ``y``'s kept in ``spectra``: the same
     numbers without measuring them again."""
     if "pyy" not in spectra:
-        spectra["pyy"] = signal.welch(y, fs=fs, nperseg=nper, detrend=detrend_linear)[1]
-    _, pxy = signal.csd(x, y, fs=fs, nperseg=nper, detrend=detrend_linear)
+        spectra["pyy"] = dsp.welch(y, fs, nper, detrend=detrend_linear)[1]
+    _, pxy = dsp.csd(x, y, fs, nper, detrend=detrend_linear)
     return np.asarray(np.abs(pxy) ** 2 / pxx / spectra["pyy"])
 
 
@@ -341,7 +341,7 @@ def _injection_metrics(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOp
     f_lo, f_hi = max(f_lo, 2.0 / ((i1 - i0) * fd.dt)), min(f_hi, 0.4 * fs)
     out = {"injection_rms": rms, "injection_lo_hz": f_lo, "injection_hi_hz": f_hi}
     nper = int(min(v.size, max(16, round(2.0 * fs))))
-    f, pvv = signal.welch(v, fs=fs, nperseg=nper, detrend=detrend_linear)
+    f, pvv = dsp.welch(v, fs, nper, detrend=detrend_linear)
     coh = _coherence(v, pvv, y, fs, nper, spectra)
     sel = (f >= f_lo) & (f <= f_hi)
     if sel.sum() < 2 or not pvv[sel].sum() > 0:
@@ -369,7 +369,7 @@ def _metrics_raw(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions,
     out["band_lo_hz"], out["band_hi_hz"] = f_lo, f_hi
     nper = int(min(u.size, max(16, round(2.0 * fs))))
     if f_hi > f_lo:
-        f, puu = signal.welch(u, fs=fs, nperseg=nper, detrend=detrend_linear)
+        f, puu = dsp.welch(u, fs, nper, detrend=detrend_linear)
         band = (f >= f_lo) & (f <= f_hi)
         if band.sum() >= 2:
             w = np.zeros_like(f)

@@ -33,9 +33,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import optimize
 
-from mavsid.data import demean
+from mavsid import dsp
 from mavsid.errors import NoExcitationError
 
 __all__ = ["FRF", "MIN_COHERENCE", "TFFit", "fit_tf", "frf"]
@@ -125,12 +124,6 @@ def _starts(n: int, nper: int) -> np.ndarray:
     return np.rint(np.linspace(0, n - nper, k)).astype(int)
 
 
-def _spectra(x: np.ndarray, starts: np.ndarray, taper: np.ndarray) -> np.ndarray:
-    """One-sided spectra of the demeaned, tapered windows of ``x`` (rows: windows)."""
-    seg = x[starts[:, None] + np.arange(taper.size)]
-    return np.fft.rfft(demean(seg) * taper, axis=1)
-
-
 def _welch(us: Sequence[np.ndarray], ys: Sequence[np.ndarray], rs: Sequence[np.ndarray] | None,
            nper: int, fs: float
            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
@@ -143,7 +136,6 @@ def _welch(us: Sequence[np.ndarray], ys: Sequence[np.ndarray], rs: Sequence[np.n
     uncorrelated with the noise the feedback puts in ``u``) ``H = S_ry / S_ru`` and
     ``γ² = γ²_ru · γ²_ry``: closed-loop data give the plant, not the inverse of the
     controller."""
-    taper = np.hanning(nper + 1)[:-1]  # periodic Hann, as Welch's default
     acc: dict[str, Any] = {}
     n_avg = 0
     refs = rs if rs is not None else us
@@ -153,8 +145,8 @@ def _welch(us: Sequence[np.ndarray], ys: Sequence[np.ndarray], rs: Sequence[np.n
         if len(u) < nper:
             continue
         starts = _starts(len(u), nper)
-        fu, fy = _spectra(u, starts, taper), _spectra(y, starts, taper)
-        fr = fu if rs is None else _spectra(r, starts, taper)
+        fu, fy = (dsp.segment_ffts(v, nper, starts=starts) for v in (u, y))
+        fr = fu if rs is None else dsp.segment_ffts(r, nper, starts=starts)
         pr = np.abs(fr) ** 2
         # per-window input power: a chirp excites a frequency in few windows only
         sums = {"rr": pr, "uu": np.abs(fu) ** 2, "yy": np.abs(fy) ** 2,
@@ -290,6 +282,8 @@ def fit_tf(r: FRF, max_delay_s: float = 0.1) -> TFFit:
     NoExcitationError
         Fewer than 4 coherent frequencies.
     """
+    from scipy import optimize
+
     m = r.coherent & np.isfinite(r.response)
     if m.sum() < 4:
         raise NoExcitationError(f"{r.input} -> {r.output}: fewer than 4 coherent frequencies")

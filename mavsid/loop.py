@@ -55,8 +55,9 @@ from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
-from scipy import linalg, signal
+from scipy import linalg
 
+from mavsid import dsp
 from mavsid.errors import ConfigError, MavsidError
 
 if TYPE_CHECKING:
@@ -204,7 +205,7 @@ class RatePID:
             y = np.empty(n)
             y[0] = x0
             if n > 1:
-                y[1:] = signal.lfilter([a], [1.0, a - 1.0], x[1:], zi=[(1.0 - a) * x0])[0]
+                y[1:] = dsp.lfilter([a], [1.0, a - 1.0], x[1:], zi=[(1.0 - a) * x0])
             return y
 
         tf = low(tg, self.a_t, float(tg[0]))
@@ -1966,11 +1967,20 @@ FRF_STRUCTURE_FLOOR = 0.03
 
 
 def plant_response(plant: LinearPlant, freq_hz: np.ndarray) -> np.ndarray:
-    """``C (zI − A)⁻¹ B`` of a :class:`LinearPlant` at ``freq_hz``."""
-    num, den = signal.ss2tf(plant.a, plant.b.reshape(-1, 1), plant.c.reshape(1, -1),
-                            np.zeros((1, 1)))
+    """``C (zI − A)⁻¹ B`` of a :class:`LinearPlant` at ``freq_hz`` (one batched solve).
+
+    Examples
+    --------
+    >>> p = LinearPlant(np.array([[0.9]]), np.array([0.5]), np.array([1.0]), 0.01)
+    >>> h = plant_response(p, np.array([0.0]))
+    >>> bool(np.isclose(h[0], 0.5 / (1 - 0.9)))
+    True
+    """
     z = np.exp(2j * np.pi * np.asarray(freq_hz, dtype=float) * plant.dt)
-    return np.polyval(np.atleast_2d(num)[0], z) / np.polyval(den, z)
+    n = plant.a.shape[0]
+    m = z[:, None, None] * np.eye(n) - plant.a[None, :, :]
+    x = np.linalg.solve(m, np.broadcast_to(plant.b.astype(complex), (z.size, n))[..., None])
+    return np.asarray(x[..., 0] @ plant.c, dtype=complex)
 
 
 def structure_by_frf(measured: Any, axis: str, delay_step: float = 0.125
@@ -2129,14 +2139,16 @@ def _advice(axis: str, fit: Any, ctrl: AxisController, bandwidth_hz: float,
 
 
 def tune(result: Any, target_pm_deg: float = 50.0, samples: int = 40,
-         measured_out: dict[str, dict[str, Any]] | None = None) -> dict[str, Any]:
+         measured_out: dict[str, dict[str, Any]] | None = None,
+         analyses_out: dict[str, LoopAnalysis] | None = None) -> dict[str, Any]:
     """Per fitted axis of a :class:`mavsid.pipeline.FitResult`: the loop with the logged
     gains (margins, closed loop, uncertainties), the plant FRF and TF fit for SYSTEMID data,
     gains for ``target_pm_deg`` (only when the axis's verdict is ``good``) and next-flight
     advice. The JSON form of ``mavsid tune --json``.
 
     ``measured_out``, when given, receives per axis the :func:`measured_responses` used (the
-    FRF objects), so that a caller plotting them does not measure them again."""
+    FRF objects), so that a caller plotting them does not measure them again; likewise
+    ``analyses_out`` the :class:`LoopAnalysis` with the logged gains (its responses)."""
     from mavsid.frequency import fit_tf
 
     out: dict[str, Any] = {}
@@ -2157,6 +2169,8 @@ def tune(result: Any, target_pm_deg: float = 50.0, samples: int = 40,
             out[axis] = entry
             continue
         entry.update(an.to_dict())
+        if analyses_out is not None:
+            analyses_out[axis] = an
         plant = None
         measured = measured_responses(fit, result.flights, signals, lag=lag)
         if measured_out is not None:

@@ -16,11 +16,14 @@ True
 from __future__ import annotations
 
 import base64
+import contextlib
 import html
 import io
 import os
 import re
+import threading
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import matplotlib as mpl
@@ -33,12 +36,14 @@ from matplotlib.ticker import NullLocator
 
 from mavsid import __version__
 from mavsid.channels import source_text
+from mavsid.data import decimate
 from mavsid.validation import Validation, horizon_label
 
 if TYPE_CHECKING:
     from mavsid.pipeline import AxisFit, FitResult
 
-__all__ = ["figure_png", "loop_section", "render_html", "render_html_page", "write_report"]
+__all__ = ["figure_png", "loop_analysis", "loop_section", "render_html", "render_html_page",
+           "write_report"]
 
 #: the grids' opacity (major and, from :func:`_log_minor`, minor lines)
 _GRID_ALPHA = 0.3
@@ -66,6 +71,40 @@ def figure_png(fig: Figure) -> str:
     fig.savefig(buf, format="png", dpi=90, pil_kwargs={"compress_level": 1})
     data = base64.b64encode(buf.getvalue()).decode("ascii")
     return f'<img alt="figure" src="data:image/png;base64,{data}">'
+
+
+_POOL = threading.local()
+
+
+def _panels(figsize: tuple[float, float], rows: int = 1, cols: int = 1,
+            **kw: Any) -> tuple[Figure, np.ndarray]:
+    """A figure of ``rows`` x ``cols`` axes (``fig.subplots(..., squeeze=False, **kw)``),
+    the one drawn last with this layout emptied and handed out again when there is one:
+    building axes (their ticks, spines and scales) was a third of the report's figure time,
+    and a figure drawn again reuses its renderer's text metrics. Draw the figure before
+    asking for the same layout again (every figure here goes to :func:`figure_png` at once).
+    """
+    pool: dict[str, tuple[Figure, np.ndarray]] = _POOL.__dict__.setdefault("figures", {})
+    key = repr((figsize, rows, cols, sorted(kw.items())))
+    if key in pool:
+        fig, axes = pool[key]
+        for ax in fig.axes:
+            for art in (*ax.lines, *ax.collections, *ax.patches, *ax.texts):
+                art.remove()
+            legend = ax.get_legend()
+            if legend is not None:
+                legend.remove()
+            ax.set_title("")
+            ax.set_xlabel("")
+            ax.set_ylabel("")
+            ax.set_prop_cycle(None)  # the default colours from the first again
+            ax.relim()
+            ax.set_autoscale_on(True)
+        return fig, axes
+    fig = Figure(figsize=figsize)
+    axes = fig.subplots(rows, cols, squeeze=False, **kw)
+    pool[key] = (fig, axes)
+    return fig, axes
 
 
 def _log_minor(ax: Axes) -> None:
@@ -113,10 +152,23 @@ def _layout(fig: Figure, left: float = 0.85, right: float = 0.15, top: float = 0
                         hspace=hspace * rows / max(inner_h - hspace * (rows - 1), 1e-3))
 
 
-def _gapped(parts: Sequence[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+#: Most samples a time-series curve keeps (a minimum and a maximum per pixel column of the
+#: widest panel, 11 in at 90 dpi); :func:`mavsid.data.decimate` keeps each bucket's extremes
+CURVE_POINTS = 2000
+
+
+def _gapped(parts: Sequence[tuple[np.ndarray, np.ndarray]],
+            max_points: int = CURVE_POINTS) -> tuple[np.ndarray, np.ndarray]:
+    """The pieces joined with a NaN between them (a gap in the line), each decimated to its
+    share of ``max_points`` (its envelope kept: the picture at the figure's resolution)."""
     ts: list[np.ndarray] = []
     vs: list[np.ndarray] = []
+    total = sum(len(t) for t, _ in parts)
     for t, v in parts:
+        v = np.asarray(v, float)
+        if total > max_points:
+            i = decimate(v, max(16, int(max_points * len(v) / total)))
+            t, v = np.asarray(t)[i], v[i]
         ts += [np.asarray(t, float), np.array([np.nan])]
         vs += [np.asarray(v, float), np.array([np.nan])]
     if not ts:
@@ -127,8 +179,8 @@ def _gapped(parts: Sequence[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray,
 def _time_figure(fit: AxisFit) -> Figure:
     v = fit.validation
     j = v.state_names.index(fit.output)
-    fig = Figure(figsize=(11, 4.5))
-    ax, ax_u = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+    fig, axes = _panels((11, 4.5), 2, 1, sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+    ax, ax_u = axes[:, 0]
     for kind in ("measured", "one_step", "free_run"):
         t, y = _gapped([(s.time_s, getattr(s, kind)[:, j]) for s in v.segments])
         ax.plot(t, y, color=_COLOURS[kind], lw=1.6 if kind == "measured" else 1.0,
@@ -152,8 +204,8 @@ def _time_figure(fit: AxisFit) -> Figure:
 
 
 def _horizon_figure(v: Validation) -> Figure:
-    fig = Figure(figsize=(5.2, 3.4))
-    ax = fig.subplots()
+    fig, axes = _panels((5.2, 3.4))
+    ax = axes[0, 0]
     h = v.horizons_s
     for j, state in enumerate(v.state_names):
         ax.semilogx(h, np.clip(v.fit_vs_horizon[:, j], -100.0, 100.0), "o-", label=state)
@@ -172,8 +224,8 @@ def _horizon_figure(v: Validation) -> Figure:
 
 def _residual_figure(v: Validation) -> Figure:
     r = v.residuals
-    fig = Figure(figsize=(5.2, 4.6))
-    ax, ax_u = fig.subplots(2, 1)
+    fig, axes = _panels((5.2, 4.6), 2, 1)
+    ax, ax_u = axes[:, 0]
     for j, state in enumerate(v.state_names):
         ax.plot(r.lags * v.dt * 1e3, r.autocorr[:, j], ".-", ms=3, label=f"{state}")
         for i, name in enumerate(v.input_names):
@@ -189,37 +241,103 @@ def _residual_figure(v: Validation) -> Figure:
     return fig
 
 
-def _bode_figure(v: Validation) -> Figure | None:
-    if not v.frequency:
-        return None
-    fig = Figure(figsize=(11, 6))
-    axes = fig.subplots(3, len(v.frequency), sharex="col", squeeze=False,
-                        gridspec_kw={"height_ratios": [3, 2, 1.3]})
-    for i, fr in enumerate(v.frequency):
+def _semilogx(ax: Axes, f: np.ndarray, h: np.ndarray, colour: str, label: str | None = None,
+              **kw: Any) -> None:
+    """Magnitude (dB) on ``ax``; phase (deg) drawn by the caller from the same ``h``."""
+    ax.semilogx(f, 20 * np.log10(np.abs(h) + 1e-12), color=colour, label=label, **kw)
+
+
+def _bode_columns(fit: AxisFit, lp: _Loop | None) -> list[dict[str, Any]]:
+    """The Bode figure's columns: each validation response (held-out chirp blocks, measured
+    against the model), the loop analysis's curves added to the plant's (the SYSTEMID runs
+    measured with the injection as reference, the TF fit; the model's own response when the
+    validation has none), and the broken loop at the mixer, measured against predicted."""
+    from mavsid import loop
+    from mavsid.errors import MavsidError
+
+    v = fit.validation
+    measured = lp.measured.get(fit.axis, {}) if lp is not None else {}
+    entry = lp.report.get(fit.axis, {}) if lp is not None else {}
+    an = lp.analyses.get(fit.axis) if lp is not None else None
+    plant = measured.get("plant")
+    cols: list[dict[str, Any]] = []
+    for fr in v.frequency:
         lo, hi = fr.band_hz or (fr.freq_hz[1], fr.freq_hz[-1])
         sel = (fr.freq_hz >= lo) & (fr.freq_hz <= hi)
-        f = fr.freq_hz[sel]
+        cols.append({"title": f"{fr.input_name} → {fr.output_name}", "f": fr.freq_hz[sel],
+                     "measured": ("measured", fr.measured[sel]), "coherence": fr.coherence[sel],
+                     "curves": [("model", fr.freq_hz[sel], fr.model[sel],
+                                 _COLOURS["free_run"])],
+                     "plant": fr.input_name == f"u_{fit.axis}" and fr.output_name == fit.output})
+    if plant is not None:
+        col = next((c for c in cols if c["plant"]), None)
+        if col is None:  # no validation response: the loop's plant column on its own
+            dt = fit.model.dt
+            curves = []
+            with contextlib.suppress(MavsidError, ValueError):
+                ss = loop.plant_statespace(fit.model, fit.axis, dt)
+                model = np.asarray(ss(np.exp(2j * np.pi * plant.freq_hz * dt))).ravel()
+                curves.append(("time-domain model", plant.freq_hz, model, _COLOURS["free_run"]))
+            col = {"title": f"plant u_{fit.axis} → {fit.output}", "f": plant.freq_hz,
+                   "measured": ("measured (SYSTEMID runs)", plant.response),
+                   "coherence": plant.coherence, "curves": curves, "plant": True}
+            cols.append(col)
+        else:
+            col["curves"].append(("measured, whole SYSTEMID runs", plant.freq_hz,
+                                  plant.response, "#8c8c8c"))
+        tf = entry.get("plant_tf")
+        if isinstance(tf, dict):
+            from mavsid.frequency import TFFit
+
+            fitted = TFFit(tf["gain"], tf["pole"], tf["delay_s"], tf["cost"],
+                           tuple(tf["band_hz"]))
+            col["curves"].append(("TF fit", plant.freq_hz, fitted.response(plant.freq_hz),
+                                  _COLOURS["one_step"]))
+    lf = measured.get("loop")
+    if lf is not None and an is not None:
+        f = lf.freq_hz
+        inside = (an.freq_hz >= f[0]) & (an.freq_hz <= f[-1])
+        cols.append({"title": "broken loop at the mixer (rate and attitude loops)", "f": f,
+                     "measured": ("measured", lf.response), "coherence": lf.coherence,
+                     "curves": [("predicted (logged gains)", an.freq_hz[inside],
+                                 an.mixer_loop_response[inside], _COLOURS["free_run"])],
+                     "plant": False})
+    return cols
+
+
+def _bode_figure(fit: AxisFit, lp: _Loop | None = None) -> Figure | None:
+    """One Bode figure per axis serving the validation and the loop analysis (see
+    :func:`_bode_columns`): magnitude, phase and coherence rows; the measured response is
+    drawn faint where its coherence is below 0.6."""
+    cols = _bode_columns(fit, lp)
+    if not cols:
+        return None
+    fig, axes = _panels((11, 6) if len(cols) < 3 else (14, 6), 3, len(cols), sharex="col",
+                        gridspec_kw={"height_ratios": [3, 2, 1.3]})
+    for i, col in enumerate(cols):
         mag, ph, coh = axes[0, i], axes[1, i], axes[2, i]
-        trusted = fr.coherence[sel] >= 0.6
-        for label, h, colour in (("measured", fr.measured, _COLOURS["measured"]),
-                                 ("model", fr.model, _COLOURS["free_run"])):
-            db = 20 * np.log10(np.abs(h[sel]) + 1e-12)
-            deg = np.degrees(np.unwrap(np.angle(h[sel])))
-            if label == "measured":  # faint where the coherence says not to trust it
-                mag.semilogx(f, db, color=colour, lw=0.6, alpha=0.35)
-                ph.semilogx(f, deg, color=colour, lw=0.6, alpha=0.35)
-                db, deg = np.where(trusted, db, np.nan), np.where(trusted, deg, np.nan)
-                label = "measured (coherence ≥ 0.6)"
-            mag.semilogx(f, db, color=colour, label=label)
-            ph.semilogx(f, deg, color=colour)
-        coh.semilogx(f, fr.coherence[sel], color="#7a4fd6")
+        f, (label, h), gamma = col["f"], col["measured"], col["coherence"]
+        colour = _COLOURS["measured"]
+        db = 20 * np.log10(np.abs(h) + 1e-12)
+        deg = np.degrees(np.unwrap(np.angle(h)))
+        trusted = gamma >= 0.6  # faint where the coherence says not to trust it
+        mag.semilogx(f, db, color=colour, lw=0.6, alpha=0.35)
+        ph.semilogx(f, deg, color=colour, lw=0.6, alpha=0.35)
+        mag.semilogx(f, np.where(trusted, db, np.nan), color=colour,
+                     label=f"{label} (coherence ≥ 0.6)")
+        ph.semilogx(f, np.where(trusted, deg, np.nan), color=colour)
+        for name, fc, hc, cc in col["curves"]:
+            thin = {"lw": 0.8, "ls": "--"} if cc == "#8c8c8c" else {}
+            _semilogx(mag, fc, hc, cc, name, **thin)
+            ph.semilogx(fc, np.degrees(np.unwrap(np.angle(hc))), color=cc, **thin)
+        coh.semilogx(f, gamma, color="#7a4fd6")
         coh.set_ylim(0, 1.05)
-        mag.set_title(f"{fr.input_name} → {fr.output_name}", fontsize=10, y=1.0)
+        mag.set_title(col["title"], fontsize=10, y=1.0)
         mag.set_ylabel("|H| [dB]")
         ph.set_ylabel("phase [deg]")
         coh.set_ylabel("coherence")
         coh.set_xlabel("frequency [Hz]")
-        mag.legend(fontsize=8)
+        mag.legend(fontsize=7)
         for a in (mag, ph, coh):
             a.grid(True, alpha=_GRID_ALPHA)
     _layout(fig, hspace=0.2)
@@ -314,7 +432,7 @@ def _aircraft(result: FitResult) -> str:
     return "\n".join(parts)
 
 
-def _axis_section(fit: AxisFit) -> str:
+def _axis_section(fit: AxisFit, lp: _Loop | None = None) -> str:
     m, v = fit.model, fit.validation
     stderr = getattr(m, "stderr", {}) or {}
     units = getattr(m, "units", {}) or {}
@@ -352,7 +470,7 @@ def _axis_section(fit: AxisFit) -> str:
         + figure_png(_residual_figure(v))
         + "</div>",
     ]
-    bode = _bode_figure(v)
+    bode = _bode_figure(fit, lp)
     if bode is not None:
         parts.append(figure_png(bode))
     return "\n".join(parts)
@@ -368,8 +486,9 @@ def render_html_page(title: str, sections: Sequence[str]) -> str:
     )
 
 
-def render_html(result: FitResult) -> str:
-    """The report of a :class:`~mavsid.pipeline.FitResult` as one HTML string."""
+def render_html(result: FitResult, lp: _Loop | None = None) -> str:
+    """The report of a :class:`~mavsid.pipeline.FitResult` as one HTML string (with ``lp``,
+    :func:`loop_analysis`, each axis's Bode figure carries the loop's curves too)."""
     logs = ", ".join(html.escape(os.path.basename(p)) for p in result.logs)
     presets = ", ".join(sorted({html.escape(fd.preset) for fd in result.flights}))
     header = (
@@ -400,14 +519,17 @@ def render_html(result: FitResult) -> str:
     verdict_table = ('<table><tr><th class="name">axis</th><th class="name">verdict</th>'
                      f'<th class="name">why</th></tr>{verdicts}</table>') if verdicts else ""
     sections = [header, verdict_table, summary, _aircraft(result),
-                *(_axis_section(f) for f in result.axes.values())]
+                *(_axis_section(f, lp) for f in result.axes.values())]
     return render_html_page(f"mavsid fit: {logs}", sections)
 
 
 def write_report(result: FitResult, path: str | os.PathLike[str]) -> None:
-    """Write :func:`render_html` of ``result`` to ``path``, with :func:`loop_section`."""
-    text = render_html(result)
-    text = text.replace("\n</body></html>", "\n" + loop_section(result) + "\n</body></html>")
+    """Write :func:`render_html` of ``result`` to ``path``, with :func:`loop_section`: the
+    loop analysed once (:func:`loop_analysis`) for both, one Bode figure per axis."""
+    lp = loop_analysis(result)
+    text = render_html(result, lp)
+    text = text.replace("\n</body></html>",
+                        "\n" + loop_section(result, analysis=lp) + "\n</body></html>")
     with open(path, "w", encoding="utf-8") as f:
         f.write(text)
 
@@ -419,15 +541,15 @@ def _twin_figure(fit: AxisFit) -> Figure | None:
     cl = fit.closed_loop
     if cl is None or not cl.blocks:
         return None
-    fig = Figure(figsize=(11, 3.2))
-    ax = fig.subplots()
-    for i, b in enumerate(cl.blocks):
-        ax.plot(b.time_s, b.rate, color=_COLOURS["measured"], lw=0.8,
-                label="measured" if i == 0 else None)
-        ax.plot(b.time_s, b.rate_twin, color=_COLOURS["free_run"], lw=0.8,
-                label="closed-loop twin" if i == 0 else None)
-        ax.plot(b.time_s, b.baseline, color="#999999", lw=0.6, ls="--",
-                label="baseline (target, delayed)" if i == 0 else None)
+    fig, axes = _panels((11, 3.2))
+    ax = axes[0, 0]
+    curves: tuple[tuple[str, str, str, float, str], ...] = (
+        ("rate", "measured", _COLOURS["measured"], 0.8, "-"),
+        ("rate_twin", "closed-loop twin", _COLOURS["free_run"], 0.8, "-"),
+        ("baseline", "baseline (target, delayed)", "#999999", 0.6, "--"))
+    for key, label, colour, lw, ls in curves:
+        ax.plot(*_gapped([(b.time_s, getattr(b, key)) for b in cl.blocks]), label=label,
+                color=colour, lw=lw, ls=ls)
     ax.set_xlabel("time [s]")
     ax.set_ylabel(f"{fit.output} [rad/s]")
     ax.legend(fontsize=8, loc="upper right")
@@ -436,69 +558,47 @@ def _twin_figure(fit: AxisFit) -> Figure | None:
     return fig
 
 
-def _loop_bode(fit: AxisFit, entry: dict[str, Any]) -> Figure | None:
-    from mavsid import loop
-    from mavsid.frequency import TFFit
+@dataclass
+class _Loop:
+    """The loop analysis of a result, computed once for the report (:func:`loop_analysis`):
+    ``loop.tune``'s per-axis report, the measured responses and the loop analyses it drew
+    them from, or the error that stopped it."""
 
-    plant = entry.get("_plant_frf")
-    if plant is None:
-        return None
-    f = plant.freq_hz
-    dt = fit.model.dt
-    ss = loop.plant_statespace(fit.model, fit.axis, dt)
-    model = np.asarray(ss(np.exp(2j * np.pi * f * dt))).ravel()
-    curves = [("measured", plant.response, _COLOURS["measured"]),
-              ("time-domain model", model, _COLOURS["free_run"])]
-    tf = entry.get("plant_tf")
-    if isinstance(tf, dict):
-        fitted = TFFit(tf["gain"], tf["pole"], tf["delay_s"], tf["cost"], tuple(tf["band_hz"]))
-        curves.append(("TF fit", fitted.response(f), _COLOURS["one_step"]))
-    loop_frf = entry.get("_loop_frf")
-    fig = Figure(figsize=(11, 6))
-    cols = 2 if loop_frf is not None else 1
-    axes = fig.subplots(3, cols, sharex="col", squeeze=False,
-                        gridspec_kw={"height_ratios": [3, 2, 1.3]})
-    for label, h, colour in curves:
-        axes[0, 0].semilogx(f, 20 * np.log10(np.abs(h) + 1e-12), color=colour, label=label)
-        axes[1, 0].semilogx(f, np.degrees(np.unwrap(np.angle(h))), color=colour)
-    axes[2, 0].semilogx(f, plant.coherence, color="#7a4fd6")
-    axes[0, 0].set_title(f"plant u_{fit.axis} → {fit.output}", fontsize=10, y=1.0)
-    if loop_frf is not None:
-        lf = loop_frf.freq_hz
-        pred = entry["_mixer_loop"]
-        for label, h, colour in (("measured", loop_frf.response, _COLOURS["measured"]),
-                                 ("predicted (logged gains)", pred, _COLOURS["free_run"])):
-            axes[0, 1].semilogx(lf, 20 * np.log10(np.abs(h) + 1e-12), color=colour, label=label)
-            axes[1, 1].semilogx(lf, np.degrees(np.unwrap(np.angle(h))), color=colour)
-        axes[2, 1].semilogx(lf, loop_frf.coherence, color="#7a4fd6")
-        axes[0, 1].set_title("broken loop at the mixer (rate and attitude loops)",
-                             fontsize=10, y=1.0)
-    for c in range(cols):
-        axes[0, c].set_ylabel("|H| [dB]")
-        axes[1, c].set_ylabel("phase [deg]")
-        axes[2, c].set_ylabel("coherence")
-        axes[2, c].set_ylim(0, 1.05)
-        axes[2, c].set_xlabel("frequency [Hz]")
-        axes[0, c].legend(fontsize=8)
-        for a in axes[:, c]:
-            a.grid(True, alpha=_GRID_ALPHA)
-    _layout(fig, hspace=0.2)
-    return fig
+    report: dict[str, Any] = field(default_factory=dict)
+    measured: dict[str, dict[str, Any]] = field(default_factory=dict)
+    analyses: dict[str, Any] = field(default_factory=dict)
+    error: str | None = None
+    target_pm_deg: float = 50.0
 
 
-def loop_section(result: FitResult, target_pm_deg: float = 50.0) -> str:
-    """The report's "loop" section: per axis the closed-loop twin against the measured rate
-    and the baseline, the margins and bandwidth with the logged gains (± σ), the Bode
-    overlay of measured FRF, time-domain model and TF fit (coherence below), the measured
-    against the predicted broken loop, suggested gains and next-flight advice."""
+def loop_analysis(result: FitResult, target_pm_deg: float = 50.0) -> _Loop:
+    """:func:`mavsid.loop.tune` of ``result`` (20 σ draws) with what the report plots."""
     from mavsid import loop
     from mavsid.errors import MavsidError
 
-    responses: dict[str, dict[str, Any]] = {}
+    out = _Loop(target_pm_deg=target_pm_deg)
     try:
-        report = loop.tune(result, target_pm_deg, samples=20, measured_out=responses)
+        out.report = loop.tune(result, target_pm_deg, samples=20, measured_out=out.measured,
+                               analyses_out=out.analyses)
     except (MavsidError, ValueError, np.linalg.LinAlgError) as exc:
-        return f"<h2>loop</h2><p>loop analysis failed: {html.escape(str(exc))}</p>"
+        out.error = str(exc)
+    return out
+
+
+def loop_section(result: FitResult, target_pm_deg: float = 50.0, *,
+                 analysis: _Loop | None = None) -> str:
+    """The report's "loop" section: per axis the closed-loop twin against the measured rate
+    and the baseline, the margins and bandwidth with the logged gains (± σ), suggested gains
+    and next-flight advice. Given ``analysis`` (:func:`loop_analysis`, as
+    :func:`write_report` does) the Bode overlay of measured FRF, time-domain model and TF fit
+    and the measured against the predicted broken loop are in each axis's section above (one
+    figure); without it they are drawn here."""
+    from mavsid import loop
+
+    lp = loop_analysis(result, target_pm_deg) if analysis is None else analysis
+    if lp.error is not None:
+        return f"<h2>loop</h2><p>loop analysis failed: {html.escape(lp.error)}</p>"
+    report, responses = lp.report, lp.measured
     parts = ["<h2>loop</h2>",
              '<p class="meta">The identified plant inside the vehicle\'s rate controller, '
              "rebuilt from the log's parameters (mavsid.loop).</p>"]
@@ -524,20 +624,14 @@ def loop_section(result: FitResult, target_pm_deg: float = 50.0) -> str:
             continue
         text = loop.format_tune({axis: entry})
         parts.append(f"<pre>{html.escape(text)}</pre>")
-        measured = responses.get(axis, {})
-        if "plant" in measured:
-            entry = {**entry, "_plant_frf": measured["plant"]}
-            if "loop" in measured:
-                ctrl = loop.controller_from_params(result.flights[0].params, axis)
-                an = loop.analyse_loop(
-                    loop.plant_statespace(fit.model, axis, 1.0 / ctrl.loop_hz), ctrl,
-                    cl.lag_loops if cl else 0, measured["loop"].freq_hz)
-                entry.update(_loop_frf=measured["loop"], _mixer_loop=an.mixer_loop_response)
-            try:
-                bode = _loop_bode(fit, entry)
-            except (MavsidError, ValueError) as exc:
-                parts.append(f"<p>no Bode overlay: {html.escape(str(exc))}</p>")
-                bode = None
-            if bode is not None:
-                parts.append(figure_png(bode))
+        if "plant" not in responses.get(axis, {}):
+            continue
+        if analysis is not None:
+            parts.append(f'<p class="meta">Bode of the plant (measured, time-domain model, TF '
+                         f"fit) and of the broken loop at the mixer: in the {html.escape(axis)}"
+                         " section's frequency-response figure.</p>")
+            continue
+        bode = _bode_figure(fit, lp)
+        if bode is not None:
+            parts.append(figure_png(bode))
     return "\n".join(parts)

@@ -36,8 +36,9 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
-from scipy import signal, stats
+from scipy import special
 
+from mavsid import dsp
 from mavsid.data import Segment, demean
 from mavsid.errors import ConfigError, NoExcitationError
 
@@ -276,7 +277,7 @@ class ResidualTest:
         k = self.lags[1 : h + 1].astype(float)
         r = np.nan_to_num(self.autocorr[1 : h + 1])
         q = n * (n + 2) * np.sum(r**2 / (n - k)[:, None], axis=0)
-        return q, stats.chi2.sf(q, h)
+        return q, special.chdtrc(h, q)  # scipy.stats.chi2.sf(q, h)
 
 
 @dataclass(frozen=True)
@@ -590,7 +591,7 @@ def residual_test(
         autocorr = np.where(ee > 0, acc / ee, np.nan)
         scale = np.sqrt(np.outer(uu, ee))
         crosscorr = np.where(scale > 0, ccc / scale, np.nan)
-    z = float(stats.norm.ppf(0.5 + confidence / 2.0))
+    z = float(special.ndtri(0.5 + confidence / 2.0))  # scipy.stats.norm.ppf
     band = z / np.sqrt(total) if total else np.nan
     return ResidualTest(lags, autocorr, cross_lags, crosscorr, float(band), confidence, total)
 
@@ -651,21 +652,25 @@ def frequency_response(
     longest = max(len(s) for s in u)
     nperseg = max(8, min(round(window_s / dt), longest))
     fs = 1.0 / dt
-    suu = syy = 0.0
-    suy = sum_m = 0.0 + 0.0j
+    suu: Any = 0.0
+    syy: Any = 0.0
+    suy: Any = 0.0 + 0.0j
+    sum_m: Any = 0.0 + 0.0j
     weight = 0.0
-    freq = np.zeros(0)
+    freq: np.ndarray = np.zeros(0)
     for ui, yi, mi in zip(u, y, yhat, strict=True):
         ok = np.isfinite(ui) & np.isfinite(yi) & np.isfinite(mi)
         ui, yi, mi = ui[ok], yi[ok], mi[ok]
         if len(ui) < nperseg:
             continue
         w = float(len(ui))
-        kw = {"fs": fs, "nperseg": nperseg, "detrend": demean}
-        freq, puu = signal.welch(ui, **kw)
-        _, pyy = signal.welch(yi, **kw)
-        _, puy = signal.csd(ui, yi, **kw)
-        _, pum = signal.csd(ui, mi, **kw)
+        # each signal's windows transformed once (scipy.signal.welch / csd to rounding)
+        fu, fy, fm = (dsp.segment_ffts(v, nperseg, detrend=demean) for v in (ui, yi, mi))
+        freq = np.fft.rfftfreq(nperseg, 1.0 / fs)
+        puu = dsp.density(fu, fu, fs, nperseg).real
+        pyy = dsp.density(fy, fy, fs, nperseg).real
+        puy = dsp.density(fu, fy, fs, nperseg)
+        pum = dsp.density(fu, fm, fs, nperseg)
         suu = suu + w * puu
         syy = syy + w * pyy
         suy = suy + w * puy

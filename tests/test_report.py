@@ -151,3 +151,36 @@ def test_log_axes_keep_their_minor_grid_and_ticks_without_tick_objects() -> None
     inside, box = fig.get_tightbbox(), fig.bbox_inches  # every drawn label, in inches
     assert box.x0 <= inside.x0 and inside.x1 <= box.x1
     assert box.y0 <= inside.y0 and inside.y1 <= box.y1
+
+
+def test_one_bode_figure_serves_the_validation_and_the_loop(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """The axis section's Bode figure carries the loop analysis's curves (the SYSTEMID runs
+    measured with the injection as reference, the TF fit, the broken loop at the mixer
+    against its prediction); the loop section, analysed once with it, points there instead
+    of drawing the plant's Bode a second time."""
+    import warnings
+
+    from helpers import FIXTURES
+
+    from mavsid.pipeline import fit
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = fit([str(FIXTURES / "sysid_roll.bin")])
+    lp = report.loop_analysis(result)
+    assert lp.error is None and "plant" in lp.measured["roll"] and "roll" in lp.analyses
+    cols = report._bode_columns(result.axes["roll"], lp)
+    assert [c["title"] for c in cols] == ["u_roll → p",
+                                          "broken loop at the mixer (rate and attitude loops)"]
+    names = [c[0] for c in cols[0]["curves"]]
+    assert names == ["model", "measured, whole SYSTEMID runs", "TF fit"]
+    an = lp.analyses["roll"]  # the prediction drawn is the one the text's margins come from
+    f_pred = cols[1]["curves"][0][1]
+    assert np.all(np.isin(f_pred, an.freq_hz))
+    path = tmp_path / "fit.html"
+    report.write_report(result, path)
+    text = path.read_text(encoding="utf-8")
+    sections, loop = text.split("<h2>loop</h2>")
+    assert loop.count("<img") == 1  # the twin; the Bode is the roll section's
+    assert "in the roll section's frequency-response figure" in loop
+    assert sections.count("<img") == 4 * len(result.axes)

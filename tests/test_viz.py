@@ -289,6 +289,46 @@ def test_a_long_flight_is_decimated_outside_the_segments(toy, tmp_path, monkeypa
         assert got.max() == np.nanmax(want) and got.min() == np.nanmin(want)
 
 
+def test_each_series_keeps_every_sample_only_in_its_own_spans(toy, tmp_path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """Spans given per series (as a fit gives them: each axis's model's own series inside
+    that axis's segments): a series keeps every sample in its spans and is decimated
+    elsewhere, its envelope kept; a series without spans is decimated throughout."""
+    flight, _, _ = toy
+    monkeypatch.setattr(viz, "MAX_FLIGHT_POINTS", 300)
+    path = tmp_path / "per_series.rrd"
+    mine, other = flight.state_names[0], flight.state_names[1]
+    rec = viz.new_recording()
+    rec.save(path)
+    viz.log_flight(rec, flight, keep_spans={mine: [(110.0, 112.0)]})
+    rec.flush()
+    rec.disconnect()
+    data, _ = _read(path)
+    inside = (flight.time_s >= 110.0) & (flight.time_s <= 112.0)
+    assert inside.sum() > 100
+    t, got = _series(data, f"/flight/{viz._kind(mine)}/{mine}")
+    k = np.searchsorted(t, flight.time_s[inside] - 1e-9)
+    np.testing.assert_allclose(t[k], flight.time_s[inside], atol=1e-9)
+    np.testing.assert_array_equal(got[k], flight.states[inside, 0])
+    t, got = _series(data, f"/flight/{viz._kind(other)}/{other}")
+    ok = np.isfinite(got)
+    assert ok.sum() <= 300 + 2 * len(flight.blocks) + 4  # decimated, in the spans too
+    assert np.isin(flight.time_s[inside], t).sum() < inside.sum() / 2
+    want = flight.states[:, 1]
+    assert got[ok].max() == np.nanmax(want) and got[ok].min() == np.nanmin(want)
+
+
+def test_attitude_quaternions_match_scipy_rotation() -> None:
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(3)
+    euler = np.column_stack([rng.uniform(-np.pi, np.pi, 2000), rng.uniform(-1.5, 1.5, 2000),
+                             rng.uniform(-np.pi, np.pi, 2000)])
+    want = Rotation.from_euler("ZYX", euler[:, ::-1]).as_quat()
+    np.testing.assert_allclose(viz._quaternions(euler), want, atol=1e-15)
+    euler[7, 1] = np.nan
+    assert viz._quaternions(euler)[7].tolist() == [0.0, 0.0, 0.0, 1.0]
+
+
 def test_several_flights_keep_their_own_series(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """Two logs fitted together: each flight's series and bands are entities of their own
     (named after the log), not one series interleaving two clocks."""

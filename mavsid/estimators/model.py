@@ -41,8 +41,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import linalg, signal
+from scipy import linalg
 
+from mavsid import dsp
 from mavsid.data import Segment
 from mavsid.errors import ConfigError, LogFormatError
 from mavsid.estimators import library
@@ -555,8 +556,8 @@ class Model:
         if self.is_affine:
             phi, f = self._affine(var)
             if m == 1:
-                out[1:, 0] = signal.lfilter([1.0], [1.0, -phi[0, 0]], f[:-1, 0],
-                                            zi=[phi[0, 0] * out[0, 0]])[0]
+                out[1:, 0] = dsp.lfilter([1.0], [1.0, -phi[0, 0]], f[:-1, 0],
+                                         zi=[phi[0, 0] * out[0, 0]])
                 return out
             lam, vec = np.linalg.eig(phi)
             if np.linalg.cond(vec) < 1e8:  # modal form: one first-order recursion per mode
@@ -564,7 +565,7 @@ class Model:
                 g = f[:-1] @ vinv.T
                 z0 = vinv @ out[0]
                 modes = np.column_stack([
-                    signal.lfilter([1.0], [1.0, -lam[i]], g[:, i], zi=[lam[i] * z0[i]])[0]
+                    dsp.lfilter([1.0], [1.0, -lam[i]], g[:, i], zi=[lam[i] * z0[i]])
                     for i in range(m)])
                 out[1:] = np.real(modes @ vec.T)
                 return out
@@ -633,7 +634,7 @@ class Model:
             a = float(phi[0, 0]) if m == 1 else np.inf
             if abs(a) < 1.0 and np.isfinite(f).all():
                 z = np.zeros(n)
-                z[1:] = signal.lfilter([1.0], [1.0, -a], f[:-1, 0])
+                z[1:] = dsp.lfilter([1.0], [1.0, -a], f[:-1, 0])
         for h, out in zip(hs, outs, strict=True):
             if h >= n:
                 continue
@@ -683,8 +684,10 @@ class Model:
         chain = None
         for flt in self.filters:
             if self.continuous:
+                from scipy import signal
+
                 num, den = signal.butter(flt.order, 2 * np.pi * flt.cutoff_hz, analog=True)
-                one = tuple(np.atleast_2d(x) for x in signal.tf2ss(num, den))
+                one = tuple(np.atleast_2d(x) for x in dsp.tf2ss(num, den))
             else:
                 one = tuple(np.atleast_2d(x) for x in flt.statespace(self.dt))
             block = _block_diagonal(one, nin)  # type: ignore[arg-type]
@@ -693,7 +696,7 @@ class Model:
             f = self.delay_frac
             num_d = [1.0 - f, f] if f > 0 else [1.0]
             den_d = [1.0] + [0.0] * (self.delay + (1 if f > 0 else 0))
-            one = tuple(np.atleast_2d(x) for x in signal.tf2ss(num_d, den_d))
+            one = tuple(np.atleast_2d(x) for x in dsp.tf2ss(num_d, den_d))
             block = _block_diagonal(one, nin)  # type: ignore[arg-type]
             chain = block if chain is None else _series(chain, block)
         a, b, c, d = plant if chain is None else _series(chain, plant)

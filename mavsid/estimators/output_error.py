@@ -35,8 +35,9 @@ from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
-from scipy import optimize, signal
+from scipy import optimize
 
+from mavsid import dsp
 from mavsid.data import Segment
 from mavsid.errors import ConfigError, SolverError
 from mavsid.estimators import library
@@ -235,7 +236,7 @@ def output_error_coef(model: Model, segments: Sequence[Segment], max_nfev: int =
         resp = []
         with np.errstate(all="ignore"):
             for y, ft in zip(ys, fts, strict=True):
-                r = signal.lfilter([1.0], [1.0, -a], ft, axis=-1)
+                r = dsp.lfilter([1.0], [1.0, -a], ft, axis=-1)
                 r[k] = y[1:] - a * r[k]  # the target less the start's free decay a^i x[0]
                 gram += r @ r.T
                 resp.append(r)
@@ -279,7 +280,7 @@ def output_error_coef(model: Model, segments: Sequence[Segment], max_nfev: int =
         sa_s = np.zeros(k)
         with np.errstate(all="ignore"):
             for y, r, x in zip(ys, resp, xs, strict=True):
-                sa = signal.lfilter([1.0], [1.0, -a], x[:-1])
+                sa = dsp.lfilter([1.0], [1.0, -a], x[:-1])
                 grad += float(np.sum(sa * (x[1:] - y[1:])))
                 sa_sa += float(np.sum(sa * sa))
                 sa_s += r[:k] @ sa

@@ -36,9 +36,8 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import signal, sparse
-from scipy.sparse import linalg as splinalg
 
+from mavsid import dsp
 from mavsid.data import Segment
 from mavsid.errors import ConfigError, DataQualityWarning, NoExcitationError
 from mavsid.estimators import library
@@ -110,7 +109,7 @@ class InputFilter:
         """The filter as a discrete state space at the data step ``dt`` (input held over the
         step, output read at its last sub-step), exactly what :meth:`apply` computes."""
         b, a = self.coefficients(dt)
-        af, bf, cf, df = signal.tf2ss(b, a)
+        af, bf, cf, df = dsp.tf2ss(b, a)
         r = self.substeps(dt)
         eye = np.eye(af.shape[0])
         powers = [np.linalg.matrix_power(af, i) for i in range(r)]
@@ -128,7 +127,7 @@ class InputFilter:
         u = np.asarray(u, dtype=float)
         fast = np.repeat(u, r, axis=0) if r > 1 else u
         zi = zi.reshape((-1,) + (1,) * (u.ndim - 1)) * u[:1]
-        out, _ = signal.lfilter(b, a, fast, axis=0, zi=zi)
+        out = dsp.lfilter(b, a, fast, axis=0, zi=zi)
         return np.asarray(out[r - 1 :: r] if r > 1 else out)
 
     def to_dict(self) -> dict[str, object]:
@@ -140,9 +139,8 @@ class InputFilter:
 def _design(order: int, cutoff_hz: float, fs: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Butterworth ``(b, a)`` and the steady-state initial condition, designed once per
     (order, cut-off, rate): the structure search and every rollout reuse them."""
-    b, a = signal.butter(order, cutoff_hz, fs=fs)
-    b, a = np.asarray(b, float), np.asarray(a, float)
-    zi = np.asarray(signal.lfilter_zi(b, a), float)
+    b, a = dsp.butter_lowpass(order, cutoff_hz, fs)
+    zi = np.asarray(dsp.lfilter_zi(b, a), float)
     for arr in (b, a, zi):
         arr.flags.writeable = False
     return b, a, zi
@@ -353,9 +351,14 @@ def derivative(x: np.ndarray, dt: float, method: str = "savgol", window: int = 9
         if x.shape[0] < w:
             raise NoExcitationError(f"segment of {x.shape[0]} samples shorter than the "
                                     f"derivative window {w}")
+        from scipy import signal
+
         return np.asarray(signal.savgol_filter(x, w, 3, deriv=1, delta=dt, axis=0))
     if method != "tv":
         raise ConfigError(f"derivative method must be 'savgol' or 'tv', got {method!r}")
+    from scipy import sparse
+    from scipy.sparse import linalg as splinalg
+
     two_d = x.reshape(x.shape[0], -1)
     out = np.empty_like(two_d)
     n = two_d.shape[0]

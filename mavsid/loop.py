@@ -1880,7 +1880,8 @@ def sysid_spans(flight: FlightData, axis: str) -> list[tuple[int, int, int]]:
 
 
 def measured_responses(fit: Any, flights: Sequence[FlightData],
-                       signals: Sequence[TwinSignals] | None = None, lag: int = 0
+                       signals: Sequence[TwinSignals] | None = None, lag: int = 0,
+                       which: Sequence[str] = ("plant", "loop", "closed_loop")
                        ) -> dict[str, Any]:
     """Frequency responses measured on the axis's SYSTEMID runs (whole runs, not the
     train/validation blocks: a chirp's low frequencies need the long windows):
@@ -1893,7 +1894,8 @@ def measured_responses(fit: Any, flights: Sequence[FlightData],
       (``SID_AXIS`` 1-9; with the injection as reference on rate axes 7-9).
 
     Each is a :class:`mavsid.frequency.FRF` on the runs' chirp band; absent without runs.
-    ``fit`` is the axis's :class:`mavsid.pipeline.AxisFit` or the axis's name.
+    ``fit`` is the axis's :class:`mavsid.pipeline.AxisFit` or the axis's name; ``which``
+    the responses wanted.
     """
     from mavsid.frequency import frf
 
@@ -1931,7 +1933,9 @@ def measured_responses(fit: Any, flights: Sequence[FlightData],
     refs = [r[3] for r in other]
     use_ref = bool(other) and all(r is not None for r in refs)
     try:
-        if mixer:
+        if "plant" not in which:
+            pass
+        elif mixer:
             out["plant"] = frf([r[0] for r in mixer], [r[1] for r in mixer], dt,
                                reference=[r[2] for r in mixer], names=(u_name, rate), **grid)
         elif other:
@@ -1940,14 +1944,14 @@ def measured_responses(fit: Any, flights: Sequence[FlightData],
                                names=(u_name, rate), **grid)
     except MavsidError:
         pass
-    if mixer:
+    if mixer and "loop" in which:
         try:
             out["loop"] = frf([r[0] for r in mixer], [-(r[0] - r[2]) for r in mixer], dt,
                               reference=[r[2] for r in mixer], names=(u_name, f"-c_{axis}"),
                               **grid)
         except MavsidError:
             pass
-    if other:
+    if other and "closed_loop" in which:
         try:
             out["closed_loop"] = frf([r[2] for r in other], [r[1] for r in other], dt,
                                      reference=refs if use_ref else None,  # type: ignore[arg-type]
@@ -1984,7 +1988,7 @@ def plant_response(plant: LinearPlant, freq_hz: np.ndarray) -> np.ndarray:
 
 
 def structure_by_frf(measured: Any, axis: str, delay_step: float = 0.125
-                     ) -> Callable[[Mapping[float, Model], float], tuple[float, float] | None]:
+                     ) -> Callable[[Mapping[float, Model]], tuple[float, float] | None]:
     """A ``choose_structure`` for :func:`mavsid.estimators.fit_axis`: the candidate lag and
     delay whose first-order model best matches an FRF measured against an injection.
 
@@ -2025,19 +2029,23 @@ def structure_by_frf(measured: Any, axis: str, delay_step: float = 0.125
         shifts = np.arange(-min(d0, FRF_STRUCTURE_SHIFT), FRF_STRUCTURE_SHIFT + 1e-9,
                            delay_step)
         poles = np.exp(-np.linspace(-2.0, 80.0, 165) * dt)  # damping -2..80 1/s
-        q = (z * r)[None, None, :] * np.exp(-2j * np.pi * np.outer(shifts, f) * dt)[:, None, :]
-        q = q / (z[None, None, :] - poles[None, :, None])
+        # with q = z R e^{-jωs dt} / (z - a) and the best b for each (s, a), the cost is
+        # (Σ w|h|² − (Σ w Re(q̄ h))² / Σ w|q|²) / m: Σ w|q|² does not depend on the shift
+        # and Σ w q̄ h over the frequencies is one product of (shift x f) and (f x pole)
+        zr = z * r
+        gram = (w * np.abs(zr) ** 2) @ (1.0 / np.abs(z[:, None] - poles[None, :]) ** 2)
+        rot = np.exp(2j * np.pi * np.outer(shifts, f) * dt)
+        cross = (rot @ ((w * np.conj(zr) * h)[:, None] / np.conj(z[:, None] - poles[None, :]))
+                 ).real
         with np.errstate(divide="ignore", invalid="ignore"):
-            b = (np.sum(w * (np.conj(q) * h).real, axis=2) / np.sum(w * np.abs(q) ** 2, axis=2))
-            cost = np.mean(w * np.abs(h - b[:, :, None] * q) ** 2, axis=2)
+            cost = (np.sum(w * np.abs(h) ** 2) - cross**2 / gram[None, :]) / f.size
         if not np.any(np.isfinite(cost)):
             return None
         i = np.unravel_index(int(np.nanargmin(cost)), cost.shape)[0]
         return float(np.nanmin(cost)), round(d0 + float(shifts[i]), 9)
 
-    def choose(models: Mapping[float, Model], chosen: float) -> tuple[float, float] | None:
-        """The best candidate's (lag s, delay samples); ``chosen`` (the one-step choice's
-        lag) is not used: the FRF is asked only where the one-step score is not trusted."""
+    def choose(models: Mapping[float, Model]) -> tuple[float, float] | None:
+        """The best candidate's (lag s, delay samples)."""
         if not usable:
             return None
         best: tuple[float, float, float] | None = None

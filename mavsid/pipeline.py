@@ -640,7 +640,7 @@ def _frf_chooser(axis: str, flights: Sequence[FlightData], signals: _Twins,
     if len(sigs) < len(flights):
         return None
     try:
-        plant = measured_responses(axis, flights, sigs).get("plant")
+        plant = measured_responses(axis, flights, sigs, which=("plant",)).get("plant")
     except (MavsidError, ValueError, np.linalg.LinAlgError):
         return None
     if plant is None or not plant.referenced:

@@ -36,3 +36,33 @@ def test_a_plain_fit_loads_neither_the_viewer_nor_plots_nor_cvxpy_nor_scipy_sign
     code = ("from mavsid import cli\nwith contextlib.redirect_stdout(io.StringIO()):\n"
             f"    assert cli.main(['fit', {str(FIXTURES / 'sysid_roll.bin')!r}]) == 0")
     assert _loaded(code) == set()
+
+
+_BLAS_PROBE = """
+import json, os, sys
+from mavsid import cli
+from threadpoolctl import threadpool_info
+before = [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+cli._one_blas_thread()
+after = [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+print(json.dumps({"before": before, "after": after, "env": os.environ.get("OPENBLAS_NUM_THREADS")}))
+"""
+
+
+@pytest.mark.parametrize("user", [None, "2"])
+def test_the_command_line_runs_one_blas_thread_unless_the_user_says(user: str | None) -> None:
+    import os
+
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")}
+    if user:
+        env["OPENBLAS_NUM_THREADS"] = user
+    proc = subprocess.run([sys.executable, "-c", _BLAS_PROBE], capture_output=True, text=True,
+                          timeout=120, env=env)
+    assert proc.returncode == 0, proc.stderr
+    got = json.loads(proc.stdout)
+    assert got["before"], "numpy's BLAS not found by threadpoolctl"
+    if user:
+        assert got["after"] == [int(user)] * len(got["after"]) and got["env"] == user
+    else:
+        assert got["after"] == [1] * len(got["after"]) and got["env"] == "1"

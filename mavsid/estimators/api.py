@@ -358,7 +358,7 @@ def identify_segments(
 
 #: ``choose_structure`` of :func:`identify_segments`: per candidate lag (s) its least-squares
 #: model -> the (lag s, delay samples) to fit, or None.
-StructureChooser = Callable[[Mapping[float, Model], float], "tuple[float, float] | None"]
+StructureChooser = Callable[[Mapping[float, Model]], "tuple[float, float] | None"]
 
 
 def _pick(choice: StructureChoice, base: Structure, dt: float, chooser: StructureChooser
@@ -369,7 +369,7 @@ def _pick(choice: StructureChoice, base: Structure, dt: float, chooser: Structur
         st = with_lag(base, lg, choice.by_lag[lg][1])
         models[lg] = Model(st.outputs, st.inputs, st.features, coef, dt, delay=st.delay,
                            filters=st.filters, delay_frac=st.delay_frac)
-    got = chooser(models, choice.lag_s) if len(models) > 1 else None
+    got = chooser(models) if len(models) > 1 else None
     if got is None or got[0] not in choice.by_lag:
         return None
     lag, dly = float(got[0]), max(float(got[1]), 0.0)

@@ -1181,8 +1181,8 @@ def _backfill(
     """
     # each table's first time in file order (a later record's garbage time cannot pull
     # it earlier); the earliest of those is the log's first timed record
-    finite = [float(v[np.argmax(ok)]) for table in (times, meta_times) for v in table.values()
-              if np.size(v) and (ok := np.isfinite(np.asarray(v, dtype=float))).any()]
+    finite = [f for table in (times, meta_times) for v in table.values()
+              if (f := _first_finite(v)) is not None]
     if not finite:
         return dict(times), dict(meta_times), 0
     first = min(finite)
@@ -1194,9 +1194,9 @@ def _backfill(
         for name, t in table.items():
             d = defs_by_name.get(name)
             t = np.asarray(t, dtype=float)
-            head = ~np.logical_or.accumulate(np.isfinite(t)) if t.size else np.zeros(0, bool)
-            if (d is not None and d.time_field is None and head.any()
-                    and name in _HEADER_TYPES | _EVENT_TYPES):
+            if (d is not None and d.time_field is None and name in _HEADER_TYPES | _EVENT_TYPES
+                    and t.size and not np.isfinite(t[0])):  # (only untimed types: none else)
+                head = ~np.logical_or.accumulate(np.isfinite(t))
                 t = np.where(head, first, t)
                 if count and name in _EVENT_TYPES:
                     placed += int(head.sum())
@@ -1207,6 +1207,21 @@ def _backfill(
     own = meta if times is meta_times else {
         k: fill({k: v}, k not in meta_times)[k] for k, v in times.items()}
     return own, meta, placed
+
+
+def _first_finite(v: np.ndarray) -> float | None:
+    """The first finite value of ``v`` (as float), or None.
+
+    Examples
+    --------
+    >>> _first_finite(np.array([np.nan, 2.0, 1.0])), _first_finite(np.array([np.nan]))
+    (2.0, None)
+    """
+    v = np.asarray(v, dtype=float)
+    if v.size and np.isfinite(v[0]):  # nearly always: no pass over the column
+        return float(v[0])
+    ok = np.isfinite(v)
+    return float(v[np.argmax(ok)]) if ok.any() else None
 
 
 def assemble(
@@ -1246,9 +1261,15 @@ def assemble(
     params: dict[str, float] = {}
     parm = meta_columns.get("PARM", {})
     if "Name" in parm and "Value" in parm:
-        for name, value in zip(parm["Name"].tolist(), parm["Value"].tolist(), strict=True):
-            if (number := _number(value)) is not None:  # another layout: not a number
-                params[str(name)] = number
+        names, values = parm["Name"], parm["Value"]
+        if values.dtype.kind == "f" and names.dtype.kind == "O":  # the usual layout: at once
+            ok = np.isfinite(values)
+            params = {str(name): value for name, value in
+                      zip(names[ok].tolist(), values[ok].astype(float).tolist(), strict=True)}
+        else:
+            for name, value in zip(names.tolist(), values.tolist(), strict=True):
+                if (number := _number(value)) is not None:  # another layout: not a number
+                    params[str(name)] = number
     texts: tuple[TextMessage, ...] = ()
     msg = meta_columns.get("MSG", {})
     if "Message" in msg:

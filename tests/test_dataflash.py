@@ -517,8 +517,12 @@ def test_framing_on_suspects_equals_the_full_length_rules(mutator):
             table = dataflash._read_definitions(a, fmt[fmt <= a.size - 89])
             framing = dataflash._frame(a, cand, types, table)
             pos, defid = _frame_reference(a, cand, types, table)
-            assert framing.pos.tolist() == pos.tolist(), (seed, mutator, k)
-            assert framing.defid.tolist() == defid.tolist()
+            got_pos, got_defid = framing.records()
+            assert got_pos.tolist() == pos.tolist(), (seed, mutator, k)
+            assert got_defid.tolist() == defid.tolist()
+            assert framing.count == pos.size
+            assert framing.pos.tolist() == cand.tolist()  # the others marked, in place
+            assert set(framing.defid.tolist()) - set(defid.tolist()) <= {framing.none}
 
 
 @pytest.mark.parametrize("parts", [SMALL, ("public", "ArduPilot__MethodicConfigurator",

@@ -673,10 +673,26 @@ def _near(
 
 @dataclass
 class _Framing:
-    pos: np.ndarray  # offsets of accepted records, ascending
-    defid: np.ndarray  # their definition index
+    """The header candidates and which of them are records.
+
+    Candidates that are not records (header patterns inside a record, garbage) stay in
+    place, marked by the definition index ``len(defs)`` (:attr:`none`): a log has few, and
+    leaving them costs no copy of the full-length arrays.
+    """
+
+    pos: np.ndarray  # offsets of the candidates, ascending
+    defid: np.ndarray  # their definition index; ``none`` for those that are not records
     skip_at: np.ndarray  # offsets of the byte ranges no record covers
     skip_len: np.ndarray  # and their sizes
+    none: int  # the definition index of a candidate that is not a record
+    count: int  # how many candidates are records
+
+    def records(self) -> tuple[np.ndarray, np.ndarray]:
+        """Offsets and definition indices of the records alone."""
+        if self.count == self.pos.size:
+            return self.pos, self.defid
+        keep = self.defid != self.none
+        return self.pos[keep], self.defid[keep]
 
 
 def _frame(a: np.ndarray, cand: np.ndarray, types: np.ndarray, table: _Definitions) -> _Framing:
@@ -751,23 +767,24 @@ def _frame(a: np.ndarray, cand: np.ndarray, types: np.ndarray, table: _Definitio
     _, starts, stops = _chain_nodes(cand, end, node, (sus, skip - 1), skip, mask=False)
     del node
     skipped = _run_gaps(n, cand, end, starts, stops)
-    return _Framing(_runs_of(cand, starts, stops), _runs_of(defid, starts, stops), *skipped)
+    none = len(table.defs)
+    defid[_outside_runs(m, starts, stops)] = none  # (``defid`` is this function's own)
+    return _Framing(cand, defid, *skipped, none=none, count=int((stops - starts).sum()))
 
 
-def _runs_of(v: np.ndarray, starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
-    """The elements of ``v`` in the index ranges ``starts[k]..stops[k]`` (ascending,
-    disjoint), joined: a view when one range covers ``v``, else one copy of the ranges
-    (no full-length boolean mask: a log's few runs copy at memory speed).
+def _outside_runs(m: int, starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
+    """Indices ``0..m-1`` outside the ranges ``starts[k]..stops[k]`` (ascending, disjoint).
 
     Examples
     --------
-    >>> _runs_of(np.arange(10), np.array([1, 6]), np.array([3, 8])).tolist()
-    [1, 2, 6, 7]
+    >>> _outside_runs(10, np.array([1, 6]), np.array([3, 8])).tolist()
+    [0, 3, 4, 5, 8, 9]
     """
-    if starts.size == 1 and starts[0] == 0 and stops[0] == v.size:
-        return v
-    return np.concatenate([v[lo:hi] for lo, hi in zip(starts.tolist(), stops.tolist(),
-                                                      strict=True)] or [v[:0]])
+    lo = np.concatenate([[0], stops]).astype(np.int64)
+    hi = np.concatenate([starts, [m]]).astype(np.int64)
+    size = np.maximum(hi - lo, 0)
+    total = int(size.sum())
+    return np.arange(total, dtype=np.int64) + np.repeat(lo - (np.cumsum(size) - size), size)
 
 
 def _chain_nodes(
@@ -1402,13 +1419,13 @@ def _read_buffer(
     framing = _frame(a, cand, types, table)
     _release(a, 0, n)
     # definitions only from FMT records that are part of the log (rarely differs)
-    fmt_kept = framing.pos[framing.defid == 0]
+    fmt_kept = framing.pos[framing.defid == 0]  # (FMT is definition 0)
     plausible = np.array(table.plausible, fmt_kept.dtype)
     at = np.minimum(np.searchsorted(fmt_kept, plausible), max(fmt_kept.size - 1, 0))
     if plausible.size and (fmt_kept.size == 0 or np.any(fmt_kept[at] != plausible)):
         table = _read_definitions(a, fmt_kept)
         framing = _frame(a, cand, types, table)
-    if framing.pos.size == 0:
+    if framing.count == 0:
         raise LogFormatError("no DataFlash records found", path=path)
     skip_at, skip_len = framing.skip_at, framing.skip_len
     skipped = int(skip_len.sum())
@@ -1436,11 +1453,13 @@ def _read_buffer(
     def skeleton(name: str) -> bool:  # read for its times only
         return times_only and wanted is not None and name not in wanted \
             and name not in _META_NAMES
-    timed = np.array([d.time_field is not None for d in table.defs])
+    # (one more entry each: the candidates that are not records)
+    timed = np.array([d.time_field is not None for d in table.defs] + [False])
+    decode = np.append(decode, False)
     idx_dt = framing.pos.dtype
-    sel: np.ndarray | None = None  # indices of the decoded records (None: all)
+    sel: np.ndarray | None = None  # indices of the decoded records (None: all candidates)
     defid = framing.defid
-    if not decode.all():
+    if not decode[:ndefs].all() or framing.count < framing.pos.size:
         sel = np.flatnonzero(_lookup(decode, framing.defid)).astype(idx_dt)
         defid = _lookup(framing.defid, sel)
     members = _group(defid, ndefs, idx_dt)
@@ -1488,7 +1507,7 @@ def _read_buffer(
         by_name.setdefault(table.defs[i].name, []).append(i)
     only_format = not set(by_name) - _FORMAT_ONLY
     if only_format and sel is not None:  # and the types not decoded?
-        present = np.bincount(framing.defid, minlength=ndefs) > 0
+        present = np.bincount(framing.defid, minlength=ndefs + 1)[:ndefs] > 0
         only_format = not {d.name for d, p in zip(table.defs, present, strict=True) if p} \
             - _FORMAT_ONLY
     del framing, sel, src

@@ -90,6 +90,9 @@ _HEAD1, _HEAD2 = 0xA3, 0x95
 _FMT_TYPE = 0x80
 _FMT_LEN = 89
 _CHUNK = 1 << 20  # bytes scanned per step when looking for headers
+# chunks scanned between releases of their file pages (8 MB: measured ~10 ms faster over
+# 200 MB than 4, 16 or 32 MB)
+_SCAN_RELEASE = 8
 _NEAR = 16  # candidates looked at around a record when checking overlaps
 _GATHER_BYTES = 1 << 18  # record bytes copied per slice when decoding one type
 _BACKWARDS_S = 0.5  # a time step back larger than this is a discontinuity
@@ -336,14 +339,13 @@ def _find_headers(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             types = np.concatenate([types[:count], np.empty(grow, np.uint8)])
         parity = at_odd[at]
         at *= 2
-        at += parity
-        at += start
-        np.copyto(found[count : count + k], at, casting="unsafe")
-        at += 2
-        types[count : count + k] = a[at]
+        at += parity  # offsets in this chunk
+        np.add(at, start, out=found[count : count + k], casting="unsafe")
+        at += start + 2
+        np.take(a, at, out=types[count : count + k])
         count += k
-        if (start // _CHUNK) % 16 == 15:
-            _release(a, start - 15 * _CHUNK, start)
+        if (start // _CHUNK) % _SCAN_RELEASE == _SCAN_RELEASE - 1:
+            _release(a, start - (_SCAN_RELEASE - 1) * _CHUNK, start)
     return found[:count], types[:count]
 
 

@@ -1016,10 +1016,13 @@ def _quiet_nans(v: np.ndarray) -> None:
     >>> _quiet_nans(v); bool(v.view("<u4")[0] == np.float32("nan").view("<u4"))
     True
     """
+    if v.size == 0:
+        return
     with np.errstate(invalid="ignore"):
+        if not np.isnan(np.max(v)):  # no NaN at all (the maximum keeps any): no mask
+            return
         bad = v != v
-    if bad.any():
-        v[bad] = np.nan
+    v[bad] = np.nan
 
 
 def _gather_times(a: np.ndarray, d: Definition, pos: np.ndarray) -> np.ndarray | None:

@@ -710,12 +710,19 @@ def _frame(a: np.ndarray, cand: np.ndarray, types: np.ndarray, table: _Definitio
     m = cand.size
     defid = _assign_definitions(cand, types, table)
     lengths = np.array([d.length for d in table.defs] + [0], cand.dtype)
-    end = _lookup(lengths, defid)  # undefined (-1) -> the sentinel 0
-    end += cand
+    end = _Ends(cand, defid, lengths)  # undefined (-1) -> the sentinel 0
     # forward evidence: the next header starts where this record ends. The common case, the
-    # very next candidate, is checked first; only the rest needs a binary search.
+    # very next candidate, is checked first (in slices: no full-length array of ends); only
+    # the rest needs a binary search.
     fwd = np.zeros(m, bool)
-    np.equal(end[:-1], cand[1:], out=fwd[:-1])
+    step = 1 << 16
+    buf = np.empty(min(step, m), cand.dtype)
+    for k in range(0, m - 1, step):
+        hi = min(k + step, m - 1)
+        e = _lookup(lengths, defid[k:hi], out=buf[: hi - k])
+        e += cand[k:hi]
+        np.equal(e, cand[k + 1 : hi + 1], out=fwd[k:hi])
+    del buf
     sus = np.flatnonzero(~fwd).astype(cand.dtype)  # not followed at once (few, in a log)
     # outside ``sus`` a candidate is known (defined types have a length), complete (it ends
     # at the next candidate), has forward and backward evidence: a node
@@ -748,7 +755,7 @@ def _frame(a: np.ndarray, cand: np.ndarray, types: np.ndarray, table: _Definitio
                        lambda k, nb: end[nb] > cand[weak[k : k + nb.shape[0]], None])]
     # ... and that has no other header inside it (not one of a flood of header patterns)
     weak = weak[~_near(weak, _NEAR, None,
-                       lambda k, nb: cand[nb] < end[weak[k : k + nb.shape[0]], None], m)]
+                       lambda k, nb: cand[nb] < end[weak[k : k + nb.shape[0]]][:, None], m)]
     node = backed  # reused: every candidate outside ``sus`` is a node
     node[sus] = node_sus
     node[weak] = True
@@ -761,7 +768,7 @@ def _frame(a: np.ndarray, cand: np.ndarray, types: np.ndarray, table: _Definitio
     back_only = sus[node[sus] & ~fwd_sus]
     fwd[plausible] = True  # now: forward evidence or plausible content
     swallows = _near(back_only, _NEAR, fwd,
-                     lambda k, nb: cand[nb] < end[back_only[k : k + nb.shape[0]], None])
+                     lambda k, nb: cand[nb] < end[back_only[k : k + nb.shape[0]]][:, None])
     node[back_only[swallows]] = False
     del fwd, fwd_sus, swallows, plausible
     # a node may break the chain only where it is a suspect or the next one is not a node
@@ -772,6 +779,27 @@ def _frame(a: np.ndarray, cand: np.ndarray, types: np.ndarray, table: _Definitio
     none = len(table.defs)
     defid[_outside_runs(m, starts, stops)] = none  # (``defid`` is this function's own)
     return _Framing(cand, defid, *skipped, none=none, count=int((stops - starts).sum()))
+
+
+class _Ends:
+    """End offsets of header candidates (offset + their definition's length; 0 for an
+    undefined type), computed for the candidates asked for: the framing needs them for a
+    few, and a full-length array would be fresh memory a cold read pays for.
+
+    Examples
+    --------
+    >>> e = _Ends(np.array([0, 5]), np.array([1, -1]), np.array([9, 3, 0]))
+    >>> e[np.array([0, 1])].tolist(), e[:1].tolist()
+    ([3, 5], [3])
+    """
+
+    def __init__(self, cand: np.ndarray, defid: np.ndarray, lengths: np.ndarray) -> None:
+        self.cand, self.defid, self.lengths = cand, defid, lengths
+
+    def __getitem__(self, idx: np.ndarray | slice) -> np.ndarray:
+        ends = self.lengths[self.defid[idx]]
+        ends += self.cand[idx]
+        return ends
 
 
 def _outside_runs(m: int, starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
@@ -790,7 +818,7 @@ def _outside_runs(m: int, starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
 
 
 def _chain_nodes(
-    pos: np.ndarray, end: np.ndarray, node: np.ndarray,
+    pos: np.ndarray, end: np.ndarray | _Ends, node: np.ndarray,
     suspects: Sequence[np.ndarray] | None = None, skip: np.ndarray | None = None,
     mask: bool = True,
 ) -> tuple[np.ndarray | None, np.ndarray, np.ndarray]:
@@ -873,7 +901,7 @@ def _chain_nodes(
 
 
 def _run_gaps(
-    n: int, pos: np.ndarray, end: np.ndarray, starts: np.ndarray, stops: np.ndarray
+    n: int, pos: np.ndarray, end: np.ndarray | _Ends, starts: np.ndarray, stops: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`_skipped_regions` of the records in runs ``starts..stops`` of candidates
     (records within a run leave no gap: only the runs' edges are looked at)."""

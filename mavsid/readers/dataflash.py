@@ -1525,7 +1525,7 @@ def _read_buffer(
     # the times of the decoded records and of those whose time they hold, in file order,
     # for the backwards-steps check
     timeline = np.full(framing.pos.size if sel is None else sel.size, np.nan)
-    where = framing.pos if sel is None else framing.pos[sel]
+    where = framing.pos if sel is None else _lookup(framing.pos, sel)
     inserts: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
     if sel is None:
         timeline[src[0]] = src[1]

@@ -1492,10 +1492,11 @@ def _read_buffer(
     idx_dt = framing.pos.dtype
     sel: np.ndarray | None = None  # indices of the decoded records (None: all candidates)
     defid = framing.defid
-    if not decode[:ndefs].all() or framing.count < framing.pos.size:
+    if not decode[:ndefs].all():
         sel = np.flatnonzero(_lookup(decode, framing.defid)).astype(idx_dt)
         defid = _lookup(framing.defid, sel)
-    members = _group(defid, ndefs, idx_dt)
+    members = _group(defid, ndefs + 1, idx_dt)
+    members.pop(ndefs, None)  # the candidates that are not records
     del defid
     windowed = start is not None or stop is not None
     # per definition: indices into the decoded records (``sel``), their offsets and times

@@ -517,8 +517,12 @@ def test_framing_on_suspects_equals_the_full_length_rules(mutator):
             table = dataflash._read_definitions(a, fmt[fmt <= a.size - 89])
             framing = dataflash._frame(a, cand, types, table)
             pos, defid = _frame_reference(a, cand, types, table)
-            assert framing.pos.tolist() == pos.tolist(), (seed, mutator, k)
-            assert framing.defid.tolist() == defid.tolist()
+            got_pos, got_defid = framing.records()
+            assert got_pos.tolist() == pos.tolist(), (seed, mutator, k)
+            assert got_defid.tolist() == defid.tolist()
+            assert framing.count == pos.size
+            assert framing.pos.tolist() == cand.tolist()  # the others marked, in place
+            assert set(framing.defid.tolist()) - set(defid.tolist()) <= {framing.none}
 
 
 @pytest.mark.parametrize("parts", [SMALL, ("public", "ArduPilot__MethodicConfigurator",
@@ -536,6 +540,23 @@ def test_times_only_columns_equal_the_full_decode(parts):
         assert _same_column(table.time_s, full[name].time_s)
         for column in table.columns:
             assert _same_column(table[column], full[name][column]), (name, column)
+
+
+@pytest.mark.parametrize("chunk", [4, 6, 64])
+def test_header_search_finds_pairs_at_both_parities_across_chunks(monkeypatch, chunk):
+    """The pair is looked for as 16-bit words at even and odd offsets, a chunk at a time:
+    every ``A3 95`` with a type byte after it is found once, at either parity, on either
+    side of a chunk's end, in files of odd and even sizes (brute force as reference)."""
+    monkeypatch.setattr(dataflash, "_CHUNK", chunk)
+    rng = np.random.default_rng(7)
+    for size in [*range(0, 12), 63, 64, 65, 66, 127, 128, 129, 1001]:
+        for _ in range(4):
+            data = rng.choice(np.array([0xA3, 0x95, 0x81], np.uint8), size=size,
+                              p=[0.4, 0.4, 0.2]).tobytes()
+            cand, types = dataflash._find_headers(np.frombuffer(data, np.uint8))
+            pairs = [i for i in range(len(data) - 2) if data[i : i + 2] == b"\xa3\x95"]
+            assert cand.tolist() == pairs, (chunk, size)
+            assert types.tolist() == [data[i + 2] for i in pairs]
 
 
 def test_header_search_grows_past_its_estimate():

@@ -50,7 +50,7 @@ from __future__ import annotations
 import functools
 import math
 import os
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Protocol
 
@@ -1987,10 +1987,10 @@ def plant_response(plant: LinearPlant, freq_hz: np.ndarray) -> np.ndarray:
     return np.asarray(x[..., 0] @ plant.c, dtype=complex)
 
 
-def structure_by_frf(measured: Any, axis: str, delay_step: float = 0.125
-                     ) -> Callable[[Mapping[float, Model]], tuple[float, float] | None]:
+class FrfStructure:
     """A ``choose_structure`` for :func:`mavsid.estimators.fit_axis`: the candidate lag and
-    delay whose first-order model best matches an FRF measured against an injection.
+    delay whose first-order model best matches an FRF measured against an injection, and
+    that FRF's own estimate of the coefficients (:meth:`estimate`).
 
     On closed-loop data the one-step (and free-run) scores are biased by the noise the
     feedback puts into the input: with 1 deg/s of gyro noise fed back they chose a 10 ms
@@ -2000,35 +2000,39 @@ def structure_by_frf(measured: Any, axis: str, delay_step: float = 0.125
     :data:`FRF_STRUCTURE_SHIFT` samples in ``delay_step`` steps) is fitted to the FRF in the
     frequency domain, ``H ≈ b z R(z) / (z − a)`` (``R`` the candidate's filters and delay;
     ``b`` solved exactly for each pole ``a`` on a grid), weighted by the FRF's random error
-    ``ε``; the lowest ``mean(|H − G|² / (|H| ε)²)`` wins. The coefficients are then the
-    time-domain fit's. Returns None (keep the one-step choice) for an FRF that is not
-    referenced to an injection, with under :data:`FRF_STRUCTURE_MIN_POINTS` coherent
-    frequencies, or for a model that is not one rate from one input.
+    ``ε`` (with a floor, :data:`FRF_STRUCTURE_FLOOR`); the lowest
+    ``mean(|H − G|² / (|H| ε)²)`` wins. Calling it returns None (keep the one-step choice)
+    for an FRF that is not referenced to an injection, with under
+    :data:`FRF_STRUCTURE_MIN_POINTS` coherent frequencies, or for models that are not one
+    rate from one input.
     """
-    ok = (measured.coherent & np.isfinite(measured.response) & np.isfinite(measured.error)
-          & (measured.error > 0))
-    f, h, err = measured.freq_hz[ok], measured.response[ok], measured.error[ok]
-    usable = bool(getattr(measured, "referenced", False)) and f.size >= FRF_STRUCTURE_MIN_POINTS
-    w = 1.0 / (np.abs(h) ** 2 * (err**2 + FRF_STRUCTURE_FLOOR**2))
 
-    def score(model: Model) -> tuple[float, float] | None:
-        """(lowest cost, delay in samples) of one candidate over its delay shifts and poles."""
-        rate, u_name = AXIS_RATE[axis], f"u_{axis}"
-        if (model.state_names != (rate,) or set(model.features) - {rate, u_name, "1"}
-                or u_name not in model.features):
+    def __init__(self, measured: Any, axis: str, delay_step: float = 0.125) -> None:
+        ok = (measured.coherent & np.isfinite(measured.response)
+              & np.isfinite(measured.error) & (measured.error > 0))
+        self.axis, self.delay_step = axis, delay_step
+        self.f, self.h = measured.freq_hz[ok], measured.response[ok]
+        self.usable = (bool(getattr(measured, "referenced", False))
+                       and self.f.size >= FRF_STRUCTURE_MIN_POINTS)
+        self.w = 1.0 / (np.abs(self.h) ** 2 * (measured.error[ok] ** 2 + FRF_STRUCTURE_FLOOR**2))
+
+    def _fit(self, model: Model, shifts: np.ndarray, damping: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """Cost and gain ``b`` (shift x pole) of ``model``'s structure with its delay
+        shifted by ``shifts`` (samples), for the poles ``exp(-damping dt)``; and the poles."""
+        rate, u_name = AXIS_RATE[self.axis], f"u_{self.axis}"
+        if (not self.usable or model.state_names != (rate,) or model.continuous
+                or set(model.features) - {rate, u_name, "1"} or u_name not in model.features):
             return None
         unit = np.zeros_like(model.coef)
         unit[model.features.index(u_name), 0] = 1.0  # a = 0, b = 1: R(z) / z
         try:
-            r = plant_response(plant_from_model(replace(model, coef=unit), axis), f)
+            r = plant_response(plant_from_model(replace(model, coef=unit), self.axis), self.f)
         except (MavsidError, ValueError, np.linalg.LinAlgError):
             return None
-        dt = float(model.dt)
+        f, h, w, dt = self.f, self.h, self.w, float(model.dt)
         z = np.exp(2j * np.pi * f * dt)
-        d0 = float(model.delay + model.delay_frac)
-        shifts = np.arange(-min(d0, FRF_STRUCTURE_SHIFT), FRF_STRUCTURE_SHIFT + 1e-9,
-                           delay_step)
-        poles = np.exp(-np.linspace(-2.0, 80.0, 165) * dt)  # damping -2..80 1/s
+        poles = np.exp(-damping * dt)
         # with q = z R e^{-jωs dt} / (z - a) and the best b for each (s, a), the cost is
         # (Σ w|h|² − (Σ w Re(q̄ h))² / Σ w|q|²) / m: Σ w|q|² does not depend on the shift
         # and Σ w q̄ h over the frequencies is one product of (shift x f) and (f x pole)
@@ -2039,23 +2043,60 @@ def structure_by_frf(measured: Any, axis: str, delay_step: float = 0.125
                  ).real
         with np.errstate(divide="ignore", invalid="ignore"):
             cost = (np.sum(w * np.abs(h) ** 2) - cross**2 / gram[None, :]) / f.size
+            gain = cross / gram[None, :]
         if not np.any(np.isfinite(cost)):
             return None
+        return cost, gain, poles
+
+    def _score(self, model: Model) -> tuple[float, float] | None:
+        """(lowest cost, delay in samples) of one candidate over its delay shifts and poles."""
+        d0 = float(model.delay + model.delay_frac)
+        shifts = np.arange(-min(d0, FRF_STRUCTURE_SHIFT), FRF_STRUCTURE_SHIFT + 1e-9,
+                           self.delay_step)
+        got = self._fit(model, shifts, _FRF_DAMPING)
+        if got is None:
+            return None
+        cost = got[0]
         i = np.unravel_index(int(np.nanargmin(cost)), cost.shape)[0]
         return float(np.nanmin(cost)), round(d0 + float(shifts[i]), 9)
 
-    def choose(models: Mapping[float, Model]) -> tuple[float, float] | None:
-        """The best candidate's (lag s, delay samples)."""
-        if not usable:
-            return None
+    def __call__(self, models: Mapping[float, Model]) -> tuple[float, float] | None:
+        """The best candidate's (lag s, delay samples) among ``models`` (per lag, its
+        least-squares model at its best one-step delay)."""
         best: tuple[float, float, float] | None = None
         for lag, model in models.items():
-            got = score(model)
+            got = self._score(model)
             if got is not None and (best is None or got[0] < best[0]):
                 best = (got[0], lag, got[1])
         return None if best is None else (best[1], best[2])
 
-    return choose
+    def estimate(self, model: Model) -> Model | None:
+        """``model`` with its pole and gain fitted to the FRF instead (its structure and
+        trim kept): the estimate the feedback does not bias, for comparison; None where
+        the FRF cannot give one."""
+        got = self._fit(model, np.zeros(1), _FRF_DAMPING)
+        if got is None:
+            return None
+        k = int(np.nanargmin(got[0][0]))
+        lo, hi = _FRF_DAMPING[max(k - 1, 0)], _FRF_DAMPING[min(k + 1, _FRF_DAMPING.size - 1)]
+        got = self._fit(model, np.zeros(1), np.linspace(lo, hi, 81))  # finer about the best
+        if got is None:
+            return None
+        cost, gain, poles = got
+        k = int(np.nanargmin(cost[0]))
+        coef = np.array(model.coef, dtype=float, copy=True)
+        coef[model.features.index(AXIS_RATE[self.axis]), 0] = poles[k]
+        coef[model.features.index(f"u_{self.axis}"), 0] = gain[0, k]
+        return replace(model, coef=coef)
+
+
+#: Damping values (1/s) of the poles :class:`FrfStructure` tries.
+_FRF_DAMPING = np.linspace(-2.0, 80.0, 165)
+
+
+def structure_by_frf(measured: Any, axis: str, delay_step: float = 0.125) -> FrfStructure:
+    """:class:`FrfStructure` of a measured plant FRF."""
+    return FrfStructure(measured, axis, delay_step)
 
 
 def compare_response(measured: Any, freq_hz: np.ndarray, response: np.ndarray

@@ -205,6 +205,8 @@ def identify_segments(
     best one-step delay and returns the ``(lag_s, delay_samples)`` to fit instead, or None
     to keep the one-step choice (the pipeline passes one that scores the candidates against
     a frequency response measured from an injection, :func:`mavsid.loop.structure_by_frf`).
+    A chooser with an ``estimate(model)`` method (the model's coefficients estimated another
+    way, or None) has that estimate's spread join the covariance.
     :func:`fit_axis` calls this with an axis's names and the log's filters.
     """
     segments = list(segments)
@@ -338,6 +340,12 @@ def identify_segments(
             alike = []
         else:
             model = _with_structure_spread(model, [far])
+    # the chooser's own estimate (a frequency response against an injection: not biased by
+    # the feedback, the time-domain fit may be) joins the covariance as another spread
+    estimate = getattr(choose_structure, "estimate", None)
+    by_frf = estimate(model) if estimate is not None and failed is None else None
+    if by_frf is not None:
+        model = _with_structure_spread(model, [by_frf])
     if not isinstance(estimator, str):
         estimator.fit(segments, structure)
     prov = dict(model.provenance)
@@ -349,7 +357,9 @@ def identify_segments(
                                    f"lags {', '.join(f'{x:g}' for x in neighbours)} s)"
                                    if neighbours else "statistical") + (
             f"; the lags the data cannot tell apart ({', '.join(f'{x:g}' for x in sorted(alike))}"
-            " s)" if alike else "")
+            " s)" if alike else "") + (
+            "; the estimate from the frequency response against the injection"
+            if by_frf is not None else "")
     prov["filters"] = [f.to_dict() for f in structure.filters]
     prov["lag_s"] = lag
     prov["delay_s"] = dly * dt

@@ -166,6 +166,47 @@ def _shift_needed(dly: float) -> int:
     return d + (1 if f > 0 else 0)
 
 
+class _StaticRows:
+    """What every candidate lag's :class:`DelayScan` shares: per segment the regressors that
+    are not delayed inputs (the structure's other features, the bias, then the outputs one
+    step ahead) as rows ``(n_stat, n - 1)``, None when not finite, and the Gram of their
+    columns from ``k_max + 1`` on."""
+
+    def __init__(self, segments: Sequence[Segment], structure: Structure, k_max: int) -> None:
+        st = structure
+        self.others = [f for f in st.features if f != library.BIAS and f not in st.inputs]
+        self.outputs = list(st.outputs)
+        self.has_bias = library.BIAS in st.features
+        self.k_max = k_max
+        self.rows: list[np.ndarray | None] = []
+        self.tail: list[np.ndarray | None] = []
+        n_stat = len(self.others) + int(self.has_bias) + len(self.outputs)
+        for seg in segments:
+            n = len(seg)
+            if n < 2:
+                self.rows.append(None)
+                self.tail.append(None)
+                continue
+            w = np.empty((n_stat, n - 1))
+            c = 0
+            for v in self.others:
+                w[c] = np.asarray(_column(seg, v)[0], float)[:-1]
+                c += 1
+            if self.has_bias:
+                w[c] = 1.0
+                c += 1
+            for v in self.outputs:
+                w[c] = np.asarray(_column(seg, v)[0], float)[1:]
+                c += 1
+            if not np.isfinite(w).all():
+                self.rows.append(None)
+                self.tail.append(None)
+                continue
+            head = min(k_max + 1, n - 1)
+            self.rows.append(w)
+            self.tail.append(w[:, head:] @ w[:, head:].T)
+
+
 class DelayScan:
     """One-step mean squared residual of a structure at many input delays, from one Gram.
 
@@ -187,7 +228,8 @@ class DelayScan:
     """
 
     def __init__(self, segments: Sequence[Segment], structure: Structure, max_shift: int,
-                 inputs: Sequence[np.ndarray] | None = None) -> None:
+                 inputs: Sequence[np.ndarray] | None = None,
+                 static: _StaticRows | None = None) -> None:
         st = structure
         if st.continuous or not library.is_linear(st.features):
             raise ValueError("fast delay scan needs a linear discrete-time structure")
@@ -197,11 +239,17 @@ class DelayScan:
         others = [f for f in st.features if f != library.BIAS and f not in st.inputs]
         self._ins, self._others = ins, others
         has_bias = library.BIAS in st.features
+        if static is None:
+            static = _StaticRows(segments, st, k_max)
+        elif (static.others, static.outputs, static.has_bias, static.k_max) != (
+                others, list(st.outputs), has_bias, k_max):
+            raise ValueError("static rows of another structure")
         q = len(others) + len(ins) * (k_max + 1) + int(has_bias) + len(st.outputs)
         suffix = np.zeros((k_max + 2, q, q))
         n_oth, k1 = len(others), k_max + 1
         # the regressors that are not delayed inputs: others, bias, outputs
         stat = np.r_[np.arange(n_oth), np.arange(n_oth + len(ins) * k1, q)].astype(int)
+        dyn = np.arange(n_oth, n_oth + len(ins) * k1)
         self._lengths = []
         for si, seg in enumerate(segments):
             n = len(seg)
@@ -215,69 +263,83 @@ class DelayScan:
                                   .astype(float), seg.dt, st.filters)
             else:
                 u = np.empty((n, 0))
-            # the rows as columns (one contiguous row per regressor): built by slicing,
-            # summed by one symmetric product
-            wt = np.empty((q, n - 1))
-            c = 0
-            for v in others:
-                wt[c] = np.asarray(_column(seg, v)[0], float)[:-1]
-                c += 1
-            for i in range(len(ins)):
-                ui = np.asarray(u[:, i], float)
-                for j in range(k_max + 1):  # u[k - j], held at u[0] before it starts
-                    h = min(j, n - 1)
-                    wt[c, :h] = ui[0]
-                    wt[c, h:] = ui[: n - 1 - h]
-                    c += 1
-            if has_bias:
-                wt[c] = 1.0
-                c += 1
-            for v in st.outputs:
-                wt[c] = np.asarray(_column(seg, v)[0], float)[1:]
-                c += 1
-            if not np.isfinite(wt).all():
+            srows = static.rows[si]
+            if srows is None:
+                raise ValueError("non-finite rows")
+            if ins and not np.isfinite(u[: n - 1]).all():
                 raise ValueError("non-finite rows")
             head = min(k_max + 1, n - 1)
-            tail = wt[:, head:]
-            if head == k_max + 1 and ins:
-                suffix[head] += self._tail_gram(wt, head, u, stat)
-            else:
-                suffix[head] += tail @ tail.T
-            suffix[:head] += np.einsum("ir,jr->rij", wt[:, :head], wt[:, :head])
+            # the rows as columns (one contiguous row per regressor): the first ``head``
+            # rows, where the delayed inputs are held at their first value
+            wh = np.empty((q, head))
+            wh[stat] = srows[:, :head]
+            c = n_oth
+            for i in range(len(ins)):
+                ui = np.asarray(u[:, i], float)
+                for j in range(k1):  # u[k - j], held at u[0] before it starts
+                    h = min(j, head)
+                    wh[c, :h] = ui[0]
+                    wh[c, h:] = ui[: head - h]
+                    c += 1
+            suffix[:head] += np.einsum("ir,jr->rij", wh, wh)
+            if head == k1 and ins and n - 1 > head:
+                suffix[head] += self._tail_gram(srows, static.tail[si], head, u, stat, dyn)
+            else:  # every row is in the head (short record) or nothing is delayed
+                wt = np.empty((q, n - 1 - head))
+                wt[stat] = srows[:, head:]
+                c = n_oth
+                for i in range(len(ins)):
+                    for j in range(k1):
+                        wt[c] = u[head - j : n - 1 - j, i]
+                        c += 1
+                suffix[head] += wt @ wt.T
         # suffix[r]: row r alone (r < head) or every row from head on; summed from the end,
         # _cum[l] is the Gram of the rows k >= l of every segment
         self._cum = np.cumsum(suffix[::-1], axis=0)[::-1]
         self._has_bias = has_bias
 
-    def _tail_gram(self, wt: np.ndarray, head: int, u: np.ndarray, stat: np.ndarray
-                   ) -> np.ndarray:
-        """The entries of the Gram of the rows ``head …`` (columns of ``wt``) that candidates
-        use: every regressor against the undelayed ones (one product), and the delayed
-        inputs against each other only at shifts at most one apart (a delay ``d + f`` uses
-        ``u[k-d]`` and ``u[k-d-1]``), as sums of lagged products over shifted windows: the
-        whole sum less the few terms each window leaves out at either end. Other entries
-        stay zero (no candidate reads them)."""
-        q, n = wt.shape[0], wt.shape[1] + 1
+    def _tail_gram(self, srows: np.ndarray, stat_gram: np.ndarray, head: int, u: np.ndarray,
+                   stat: np.ndarray, dyn: np.ndarray) -> np.ndarray:
+        """The entries of the Gram of the rows ``head …`` that candidates use: the
+        undelayed regressors against each other (``stat_gram``, the same for every lag) and
+        against every delayed input (one product), and the delayed inputs against each other
+        only at shifts at most one apart (a delay ``d + f`` uses ``u[k-d]`` and
+        ``u[k-d-1]``), as sums of lagged products over shifted windows: the whole sum less
+        the few terms each window leaves out at either end. Other entries stay zero (no
+        candidate reads them)."""
+        n = srows.shape[1] + 1
+        q = len(stat) + len(dyn)
         k1 = self.max_shift + 1
         n_oth = len(self._others)
         g = np.zeros((q, q))
-        part = wt[stat, head:] @ wt[:, head:].T
-        g[stat, :] = part
-        g[:, stat] = part.T
+        g[np.ix_(stat, stat)] = stat_gram
+        # each undelayed regressor against u[k - j], j = 0 … k_max, over the rows
+        # k = head … n-2 (head = k_max + 1): one correlation per pair, its lags reversed
+        part = np.empty((len(stat), len(dyn)))
+        for i in range(len(self._ins)):
+            ui = u[1 : n - 1, i]
+            for r, row in enumerate(srows[:, head:]):
+                part[r, i * k1 : (i + 1) * k1] = np.correlate(ui, row, "valid")[::-1]
+        g[np.ix_(stat, dyn)] = part
+        g[np.ix_(dyn, stat)] = part.T
         js = np.arange(k1)
+        ms = np.arange(n - 2 - k1, n - 1)  # the last k1 + 1 terms of a lagged product
         for i in range(len(self._ins)):
             for i2 in range(len(self._ins)):
                 for lag in (0, 1):
                     if lag == 0 and i2 < i:
                         continue
                     # sum over rows k of u_i[k - j] u_i2[k - j - lag], j = 0 … k_max - lag:
-                    # m = k - j runs over [head - j, n - 2 - j]
-                    prod = np.zeros(n - 1)
-                    prod[lag:] = u[lag : n - 1, i] * u[: n - 1 - lag, i2]
-                    pre = np.concatenate([[0.0], np.cumsum(prod[: k1 + 1])])
-                    post = np.concatenate([[0.0], np.cumsum(prod[::-1][: k1 + 1])])
+                    # m = k - j runs over [head - j, n - 2 - j]; prod[m] = u_i[m] u_i2[m - lag]
+                    # (0 for m < lag), summed whole by one product, its ends apart
+                    total = float(u[lag : n - 1, i] @ u[: n - 1 - lag, i2])
+                    first = np.zeros(k1 + 1)
+                    first[lag:] = u[lag : k1 + 1, i] * u[: k1 + 1 - lag, i2]
+                    last = np.where(ms >= lag, u[ms, i] * u[ms - lag, i2], 0.0)
+                    pre = np.concatenate([[0.0], np.cumsum(first)])
+                    post = np.concatenate([[0.0], np.cumsum(last[::-1])])
                     j = js[: k1 - lag]
-                    vals = float(prod.sum()) - pre[head - j] - post[j]
+                    vals = total - pre[head - j] - post[j]
                     r = n_oth + i * k1 + j
                     c = n_oth + i2 * k1 + j + lag
                     g[r, c] = vals
@@ -380,12 +442,12 @@ def _slow_mse(segments: Sequence[Segment], structure: Structure, dly: float) -> 
 
 
 def _scorer(segments: Sequence[Segment], structure: Structure, max_shift: int,
-            inputs: Sequence[np.ndarray] | None = None
+            inputs: Sequence[np.ndarray] | None = None, static: _StaticRows | None = None
             ) -> tuple[Callable[[Sequence[float]], list[float | None]], DelayScan | None]:
     """Candidate delays -> their one-step mean squared residuals (None: no rows), and the
     scan behind it (None when candidates are refitted one by one)."""
     try:
-        scan = DelayScan(segments, structure, max_shift, inputs)
+        scan = DelayScan(segments, structure, max_shift, inputs, static)
     except ValueError:
         return (lambda dlys: [_slow_mse(segments, structure, d) for d in dlys]), None
     return scan.mse_many, scan
@@ -501,6 +563,10 @@ def search_structure(
     if ins:
         base = [filter_inputs(np.column_stack([_column(s, v)[0] for v in ins]).astype(float),
                               s.dt, structure.filters) for s in segments]
+    # the regressors no lag changes (states, bias, outputs), built once for every lag
+    static = None
+    if not structure.continuous and library.is_linear(structure.features):
+        static = _StaticRows(segments, structure, max_shift)
     cands: list[tuple[float, float, float]] = []  # (mse, lag, delay)
     scans: dict[float, DelayScan | None] = {}
     scan: dict[str, float] = {}
@@ -509,7 +575,7 @@ def search_structure(
         st = replace(structure, filters=structure.filters + extra)
         pre = None if base is None else [filter_inputs(u, s.dt, extra)
                                          for u, s in zip(base, segments, strict=True)]
-        score, scans[lag] = _scorer(segments, st, max_shift, pre)
+        score, scans[lag] = _scorer(segments, st, max_shift, pre, static)
         if fixed is not None:
             d_scan = {dly: v for dly, v in zip(fixed, score(fixed), strict=True)
                       if v is not None}

@@ -31,7 +31,7 @@ Examples
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -178,7 +178,9 @@ def refine_output_error(model: Model, segments: Sequence[Segment], max_nfev: int
 
 
 def output_error_coef(model: Model, segments: Sequence[Segment], max_nfev: int = 100,
-                      tol: float = 1e-10) -> tuple[np.ndarray, float] | None:
+                      tol: float = 1e-10,
+                      filtered: Sequence[Mapping[str, np.ndarray]] | None = None
+                      ) -> tuple[np.ndarray, float] | None:
     """The output-error optimum of a one-state affine discrete model, coefficients only.
 
     The free run ``x[k+1] = a x[k] + Σⱼ θⱼ φⱼ[k]`` (``φ`` the terms free of the state, ``x[0]``
@@ -194,6 +196,10 @@ def output_error_coef(model: Model, segments: Sequence[Segment], max_nfev: int =
     and an SVD per step. What the structure search needs of the neighbouring lags'
     refinements (their coefficients and cost); covariances stay with
     :func:`refine_output_error`.
+
+    ``filtered`` (per segment, input name -> column): the inputs already through the model's
+    filters (the structure search's, :attr:`~mavsid.estimators.select.StructureChoice.inputs`),
+    then only delayed here.
 
     Returns
     -------
@@ -213,8 +219,8 @@ def output_error_coef(model: Model, segments: Sequence[Segment], max_nfev: int =
         return None
     feats = [model.features[j] for j in je]
     every, ys, fts = [], [], []
-    for s in segments:
-        x, var = model._measured(s)
+    for i, s in enumerate(segments):
+        x, var = model._measured(s, None if filtered is None else filtered[i])
         every.append(x[:, 0])
         if len(x) >= 2:  # (a one-sample run is its start: no residual)
             ys.append(x[:, 0])

@@ -493,6 +493,9 @@ class StructureChoice:
         Per candidate lag: the least-squares coefficients (p, m) at its chosen delay, solved
         from the search's Gram (the rows' sums a fit at that structure forms again); empty
         when the candidates were refitted one by one.
+    inputs : dict of float to list of dict
+        Per candidate lag: per segment, its inputs (name -> column) through the known
+        filters and that lag, not delayed (what a fit of that lag filters again).
     """
 
     structure: Structure
@@ -501,6 +504,8 @@ class StructureChoice:
     scan: dict[str, float]
     by_lag: dict[float, tuple[float, float]] = field(default_factory=dict)
     ls_coef: dict[float, np.ndarray] = field(default_factory=dict, repr=False)
+    inputs: dict[float, list[dict[str, np.ndarray]]] = field(default_factory=dict, repr=False,
+                                                            compare=False)
 
 
 def search_structure(
@@ -569,6 +574,7 @@ def search_structure(
         static = _StaticRows(segments, structure, max_shift)
     cands: list[tuple[float, float, float]] = []  # (mse, lag, delay)
     scans: dict[float, DelayScan | None] = {}
+    filtered: dict[float, list[dict[str, np.ndarray]]] = {}
     scan: dict[str, float] = {}
     for lag in lag_grid:
         extra = lag_filter(lag)
@@ -576,6 +582,8 @@ def search_structure(
         pre = None if base is None else [filter_inputs(u, s.dt, extra)
                                          for u, s in zip(base, segments, strict=True)]
         score, scans[lag] = _scorer(segments, st, max_shift, pre, static)
+        if pre is not None:
+            filtered[lag] = [{v: u[:, i] for i, v in enumerate(ins)} for u in pre]
         if fixed is not None:
             d_scan = {dly: v for dly, v in zip(fixed, score(fixed), strict=True)
                       if v is not None}
@@ -612,7 +620,7 @@ def search_structure(
             g = lag_scan.gram(d)
             if g.n >= len(structure.features):
                 ls_coef[lg] = solve(g)
-    return StructureChoice(chosen, lag, float(dly), scan, by_lag, ls_coef)
+    return StructureChoice(chosen, lag, float(dly), scan, by_lag, ls_coef, filtered)
 
 
 def with_lag(structure: Structure, lag_s: float, delay: float) -> Structure:

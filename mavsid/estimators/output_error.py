@@ -242,8 +242,15 @@ def output_error_coef(model: Model, segments: Sequence[Segment], max_nfev: int =
         resp = []
         with np.errstate(all="ignore"):
             for y, ft in zip(ys, fts, strict=True):
-                r = dsp.lfilter([1.0], [1.0, -a], ft, axis=-1)
-                r[k] = y[1:] - a * r[k]  # the target less the start's free decay a^i x[0]
+                r = np.empty(ft.shape)
+                r[:k] = dsp.lfilter([1.0], [1.0, -a], ft[:k], axis=-1)
+                # the start's free decay a^i x[0] (the recursion's own products, in order),
+                # then the target less it
+                decay = np.full(ft.shape[1], a)
+                decay[0] = ft[k, 0]
+                np.cumprod(decay, out=r[k])
+                r[k] *= a
+                np.subtract(y[1:], r[k], out=r[k])
                 gram += r @ r.T
                 resp.append(r)
             if not np.isfinite(gram).all():
@@ -256,10 +263,14 @@ def output_error_coef(model: Model, segments: Sequence[Segment], max_nfev: int =
             for y, r in zip(ys, resp, strict=True):
                 x = np.empty(len(y))
                 x[0] = y[0]
-                x[1:] = th @ r[:k] + (y[1:] - r[k])
-                e = (x - y) / scale
+                x[1:] = th @ r[:k]
+                e = np.subtract(y[1:], r[k])
+                x[1:] += e
+                e = np.subtract(x, y)
+                e /= scale
+                e *= e
                 # (an elementwise sum: a long BLAS dot is threaded, slow on a busy machine)
-                cost += 0.5 * float(np.sum(e * e))
+                cost += 0.5 * float(np.sum(e))
                 xs.append(x)
         if not (np.isfinite(th).all() and np.isfinite(cost)):
             return None

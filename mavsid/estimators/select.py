@@ -17,11 +17,15 @@ one column of a single Gram matrix, and a candidate's Gram (including a fraction
 ``(1 − f) u[k−d] + f u[k−d−1]``, which is linear in two delayed copies) is a small projection
 of it plus the few rows at the record's start that only shorter delays use. Scores are
 therefore exact (the same rows and sums as refitting each candidate), and the search costs
-one pass over the data per lag; a lag's candidate delays are projected and solved together
-(:meth:`DelayScan.mse_many`). Other structures (continuous time, nonlinear libraries) are
-scored candidate by candidate. The least-squares coefficients of each lag's best delay come
-from the same Gram (:attr:`StructureChoice.ls_coef`): what the neighbouring lags' output-error
-refinements start from (:func:`~mavsid.estimators.output_error.output_error_coef`).
+one pass over the data per lag: the regressors no lag changes (states, bias, outputs) and
+their Gram are formed once for every lag, a lag adds its inputs' cross-products with them
+(one correlation per regressor) and its lagged input products; a lag's candidate delays are
+projected and solved together (:meth:`DelayScan.mse_many`). Each lag's filtered inputs are
+kept (:attr:`StructureChoice.inputs`) for the neighbouring lags' refinements. Other
+structures (continuous time, nonlinear libraries) are scored candidate by candidate. The
+least-squares coefficients of each lag's best delay come from the same Gram
+(:attr:`StructureChoice.ls_coef`): what the neighbouring lags' output-error refinements start
+from (:func:`~mavsid.estimators.output_error.output_error_coef`).
 
 The default search ranges are the module constants below (``DEFAULT_*``).
 
@@ -219,6 +223,9 @@ class DelayScan:
         Largest delay (whole samples, a fractional delay ``d + f`` needs ``d + 1``).
     inputs : list of numpy.ndarray, optional
         The structure's inputs per segment, already filtered by ``structure.filters``.
+    static : _StaticRows, optional
+        The rows no lag changes, shared by the scans of every candidate lag (built here when
+        not given).
 
     Raises
     ------
@@ -263,8 +270,8 @@ class DelayScan:
                                   .astype(float), seg.dt, st.filters)
             else:
                 u = np.empty((n, 0))
-            srows = static.rows[si]
-            if srows is None:
+            srows, stat_gram = static.rows[si], static.tail[si]
+            if srows is None or stat_gram is None:
                 raise ValueError("non-finite rows")
             if ins and not np.isfinite(u[: n - 1]).all():
                 raise ValueError("non-finite rows")
@@ -283,7 +290,7 @@ class DelayScan:
                     c += 1
             suffix[:head] += np.einsum("ir,jr->rij", wh, wh)
             if head == k1 and ins and n - 1 > head:
-                suffix[head] += self._tail_gram(srows, static.tail[si], head, u, stat, dyn)
+                suffix[head] += self._tail_gram(srows, stat_gram, head, u, stat, dyn)
             else:  # every row is in the head (short record) or nothing is delayed
                 wt = np.empty((q, n - 1 - head))
                 wt[stat] = srows[:, head:]
@@ -340,10 +347,10 @@ class DelayScan:
                     post = np.concatenate([[0.0], np.cumsum(last[::-1])])
                     j = js[: k1 - lag]
                     vals = total - pre[head - j] - post[j]
-                    r = n_oth + i * k1 + j
-                    c = n_oth + i2 * k1 + j + lag
-                    g[r, c] = vals
-                    g[c, r] = vals
+                    at_r = n_oth + i * k1 + j
+                    at_c = n_oth + i2 * k1 + j + lag
+                    g[at_r, at_c] = vals
+                    g[at_c, at_r] = vals
         return g
 
     def _grams(self, dlys: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:

@@ -257,6 +257,7 @@ class DelayScan:
         # the regressors that are not delayed inputs: others, bias, outputs
         stat = np.r_[np.arange(n_oth), np.arange(n_oth + len(ins) * k1, q)].astype(int)
         dyn = np.arange(n_oth, n_oth + len(ins) * k1)
+        self._blocks = (np.ix_(stat, stat), np.ix_(stat, dyn), np.ix_(dyn, stat))
         self._lengths = []
         for si, seg in enumerate(segments):
             n = len(seg)
@@ -280,14 +281,10 @@ class DelayScan:
             # rows, where the delayed inputs are held at their first value
             wh = np.empty((q, head))
             wh[stat] = srows[:, :head]
-            c = n_oth
+            # u[k - j] for j = 0 … k_max, held at u[0] before it starts
+            held = np.maximum(np.arange(head)[None, :] - np.arange(k1)[:, None], 0)
             for i in range(len(ins)):
-                ui = np.asarray(u[:, i], float)
-                for j in range(k1):  # u[k - j], held at u[0] before it starts
-                    h = min(j, head)
-                    wh[c, :h] = ui[0]
-                    wh[c, h:] = ui[: head - h]
-                    c += 1
+                wh[n_oth + i * k1 : n_oth + (i + 1) * k1] = np.asarray(u[:, i], float)[held]
             suffix[:head] += np.einsum("ir,jr->rij", wh, wh)
             if head == k1 and ins and n - 1 > head:
                 suffix[head] += self._tail_gram(srows, stat_gram, head, u, stat, dyn)
@@ -319,7 +316,8 @@ class DelayScan:
         k1 = self.max_shift + 1
         n_oth = len(self._others)
         g = np.zeros((q, q))
-        g[np.ix_(stat, stat)] = stat_gram
+        ss, sd, ds = self._blocks
+        g[ss] = stat_gram
         # each undelayed regressor against u[k - j], j = 0 … k_max, over the rows
         # k = head … n-2 (head = k_max + 1): one correlation per pair, its lags reversed
         part = np.empty((len(stat), len(dyn)))
@@ -327,8 +325,8 @@ class DelayScan:
             ui = u[1 : n - 1, i]
             for r, row in enumerate(srows[:, head:]):
                 part[r, i * k1 : (i + 1) * k1] = np.correlate(ui, row, "valid")[::-1]
-        g[np.ix_(stat, dyn)] = part
-        g[np.ix_(dyn, stat)] = part.T
+        g[sd] = part
+        g[ds] = part.T
         js = np.arange(k1)
         ms = np.arange(n - 2 - k1, n - 1)  # the last k1 + 1 terms of a lagged product
         for i in range(len(self._ins)):
@@ -358,7 +356,7 @@ class DelayScan:
         stacked (k, p + m, p + m), and their row counts (k,)."""
         st = self.structure
         split = [_split_delay(v) for v in dlys]
-        leads = np.array([_shift_needed(v) for v in dlys], dtype=int)
+        leads = np.array([d + (1 if f > 0 else 0) for d, f in split], dtype=int)
         if len(leads) and leads.max() > self.max_shift:
             bad = float(np.asarray(dlys)[int(np.argmax(leads))])
             raise ConfigError(f"delay {bad:g} beyond the scan's {self.max_shift} samples")
@@ -384,7 +382,7 @@ class DelayScan:
             t[:, q - m + i, p + i] = 1.0
         full = np.transpose(t, (0, 2, 1)) @ self._cum[leads] @ t
         lengths = np.asarray(self._lengths, dtype=int)
-        rows = np.array([np.maximum(lengths - 1 - lead, 0).sum() for lead in leads], dtype=int)
+        rows = np.maximum(lengths[None, :] - 1 - leads[:, None], 0).sum(axis=1)
         return full, rows
 
     def gram(self, dly: float) -> Gram:

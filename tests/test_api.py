@@ -19,8 +19,14 @@ from mavsid.errors import ConfigError
 from mavsid.estimators import Structure, fit_axis, load_model, select_delay
 from mavsid.estimators import output_error as oe
 from mavsid.estimators.least_squares import LeastSquares
-from mavsid.estimators.regressors import InputFilter
-from mavsid.estimators.select import DelayScan, _slow_mse, with_lag
+from mavsid.estimators.regressors import InputFilter, filter_inputs
+from mavsid.estimators.select import (
+    DelayScan,
+    _slow_mse,
+    lag_filter,
+    search_structure,
+    with_lag,
+)
 
 # ----------------------------------------------------------------------- lecture examples
 
@@ -358,6 +364,60 @@ def test_fast_delay_scan_equals_refitting_every_candidate():
     assert best in (0.0, 1.0, 2.5)
     dlys = [0.0, 1.0, 2.5, 7.125, 13.875]  # scored together: the numbers of one by one
     assert scan.mse_many(dlys) == pytest.approx([scan.mse(d) for d in dlys], rel=1e-12)
+
+
+def test_every_lag_of_the_search_scores_as_refitting_it():
+    """The lags share the rows no lag changes: each (lag, delay) still scores as its own
+    refit, records as short as the longest delay (and one sample longer) included; the
+    inputs kept per lag are those the whole filter chain gives."""
+    rng = np.random.default_rng(4)
+    gyro = (InputFilter(20.0, 2, "gyro", rate_hz=1000.0),)
+    segs = []
+    for n in (900, 12, 13, 14, 700):  # 11 samples of delay at most: 12 regressor rows
+        u = rng.standard_normal((n, 2))
+        x = np.cumsum(rng.standard_normal((n, 2)), axis=0) * 0.1
+        segs.append(Segment(np.arange(n) * 0.0025, x, u, ("p", "q"), ("u_roll", "u_pitch"),
+                            0.0025, "all", "scan"))
+    st = Structure(("p", "q"), ("p", "q", "u_roll", "u_pitch", "1"), ("u_roll", "u_pitch"),
+                   filters=gyro)
+    choice = search_structure(segs, st, lags_s=(0.01, 0.02), max_delay_s=0.025)
+    assert sorted(choice.inputs) == [0.0, 0.01, 0.02]
+    assert sorted(choice.ls_coef) == [0.0, 0.01, 0.02]  # scored from one Gram per lag
+    checked = 0
+    for key, mse in choice.scan.items():
+        lag, dly = (float(v.split("=")[1].rstrip("s")) for v in key.split(","))
+        if dly not in (0.0, 3.0, 10.0) and dly % 1 == 0:
+            continue
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            slow = _slow_mse(segs, replace(st, filters=gyro + lag_filter(lag)), dly)
+        assert mse == pytest.approx(slow, rel=1e-9), key
+        checked += 1
+    assert checked >= 9
+    for lag, per_seg in choice.inputs.items():
+        for seg, cols in zip(segs, per_seg, strict=True):
+            whole = filter_inputs(seg.inputs, seg.dt, gyro + lag_filter(lag))
+            np.testing.assert_array_equal(np.column_stack([cols["u_roll"], cols["u_pitch"]]),
+                                          whole)
+
+
+def test_output_error_coef_takes_the_search_inputs():
+    """The neighbouring lags' refinement on the search's filtered inputs: the same numbers
+    as filtering them again."""
+    x, u = _plant(3000, 8, a=((0.985,),), b=((0.4,),), noise=0.01)
+    segs = [Segment(np.arange(len(x)) * 0.0025, x, u, ("p",), ("u_roll",), 0.0025, "roll",
+                    "sysid"), Segment(np.arange(900) * 0.0025, x[:900], u[:900] * 0.5,
+                                      ("p",), ("u_roll",), 0.0025, "roll", "sysid")]
+    base = Structure(("p",), ("p", "u_roll", "1"), ("u_roll",),
+                     filters=(InputFilter(20.0, 2, "gyro", rate_hz=1000.0),))
+    choice = search_structure(segs, base, lags_s=(0.01, 0.02), max_delay_s=0.01)
+    for lag, (_, dly) in choice.by_lag.items():
+        start = LeastSquares(with_lag(base, lag, dly), n_bootstrap=0).fit(segs).model_
+        plain = oe.output_error_coef(start, segs)
+        given = oe.output_error_coef(start, segs, filtered=choice.inputs[lag])
+        assert plain is not None and given is not None
+        np.testing.assert_array_equal(given[0], plain[0])
+        assert given[1] == plain[1]
 
 
 def test_output_error_coef_reaches_the_trust_region_optimum():

@@ -287,7 +287,8 @@ def identify_segments(
             return m0, math.nan, None
         # started from the chosen lag's refined pole (nearer than its own least squares)
         start = model.coef if np.array_equal(model.coef != 0, coef0 != 0) else coef0
-        got = output_error_coef(replace(m0, coef=start), segments)
+        got = output_error_coef(replace(m0, coef=start), segments,
+                                filtered=choice.inputs.get(lg))
         if got is None:
             return fitted(st, cheap=True)
         return replace(m0, coef=got[0]), got[1], None

@@ -486,12 +486,14 @@ class Model:
             raise ConfigError(f"segment dt {segment.dt:g} s differs from the model dt {self.dt:g}"
                               " s; resample the data or refit")
 
-    def _measured(self, segment: Segment) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    def _measured(self, segment: Segment, filtered: Mapping[str, np.ndarray] | None = None
+                  ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """Measured modelled states (n, m) and every feature variable (inputs filtered and
-        delayed, other variables as measured)."""
+        delayed, other variables as measured; ``filtered``: the inputs already through the
+        model's filters, see :func:`~mavsid.estimators.regressors.variables`)."""
         self._check_segment(segment)
         var = variables(segment, self.structure,
-                        library.variables_of(self.features) + self.state_names)
+                        library.variables_of(self.features) + self.state_names, filtered)
         x = np.column_stack([var[s] for s in self.state_names])
         return x, var
 

@@ -31,7 +31,7 @@ Examples
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -178,7 +178,9 @@ def refine_output_error(model: Model, segments: Sequence[Segment], max_nfev: int
 
 
 def output_error_coef(model: Model, segments: Sequence[Segment], max_nfev: int = 100,
-                      tol: float = 1e-10) -> tuple[np.ndarray, float] | None:
+                      tol: float = 1e-10,
+                      filtered: Sequence[Mapping[str, np.ndarray]] | None = None
+                      ) -> tuple[np.ndarray, float] | None:
     """The output-error optimum of a one-state affine discrete model, coefficients only.
 
     The free run ``x[k+1] = a x[k] + Σⱼ θⱼ φⱼ[k]`` (``φ`` the terms free of the state, ``x[0]``
@@ -194,6 +196,10 @@ def output_error_coef(model: Model, segments: Sequence[Segment], max_nfev: int =
     and an SVD per step. What the structure search needs of the neighbouring lags'
     refinements (their coefficients and cost); covariances stay with
     :func:`refine_output_error`.
+
+    ``filtered`` (per segment, input name -> column): the inputs already through the model's
+    filters (the structure search's, :attr:`~mavsid.estimators.select.StructureChoice.inputs`),
+    then only delayed here.
 
     Returns
     -------
@@ -213,8 +219,8 @@ def output_error_coef(model: Model, segments: Sequence[Segment], max_nfev: int =
         return None
     feats = [model.features[j] for j in je]
     every, ys, fts = [], [], []
-    for s in segments:
-        x, var = model._measured(s)
+    for i, s in enumerate(segments):
+        x, var = model._measured(s, None if filtered is None else filtered[i])
         every.append(x[:, 0])
         if len(x) >= 2:  # (a one-sample run is its start: no residual)
             ys.append(x[:, 0])
@@ -236,8 +242,15 @@ def output_error_coef(model: Model, segments: Sequence[Segment], max_nfev: int =
         resp = []
         with np.errstate(all="ignore"):
             for y, ft in zip(ys, fts, strict=True):
-                r = dsp.lfilter([1.0], [1.0, -a], ft, axis=-1)
-                r[k] = y[1:] - a * r[k]  # the target less the start's free decay a^i x[0]
+                r = np.empty(ft.shape)
+                r[:k] = dsp.lfilter([1.0], [1.0, -a], ft[:k], axis=-1)
+                # the start's free decay a^i x[0] (the recursion's own products, in order),
+                # then the target less it
+                decay = np.full(ft.shape[1], a)
+                decay[0] = ft[k, 0]
+                np.cumprod(decay, out=r[k])
+                r[k] *= a
+                np.subtract(y[1:], r[k], out=r[k])
                 gram += r @ r.T
                 resp.append(r)
             if not np.isfinite(gram).all():
@@ -250,10 +263,14 @@ def output_error_coef(model: Model, segments: Sequence[Segment], max_nfev: int =
             for y, r in zip(ys, resp, strict=True):
                 x = np.empty(len(y))
                 x[0] = y[0]
-                x[1:] = th @ r[:k] + (y[1:] - r[k])
-                e = (x - y) / scale
+                x[1:] = th @ r[:k]
+                e = np.subtract(y[1:], r[k])
+                x[1:] += e
+                e = np.subtract(x, y)
+                e /= scale
+                e *= e
                 # (an elementwise sum: a long BLAS dot is threaded, slow on a busy machine)
-                cost += 0.5 * float(np.sum(e * e))
+                cost += 0.5 * float(np.sum(e))
                 xs.append(x)
         if not (np.isfinite(th).all() and np.isfinite(cost)):
             return None

@@ -305,16 +305,22 @@ def _shift(u: np.ndarray, d: int, frac: float = 0.0) -> np.ndarray:
 
 
 def variables(
-    segment: Segment, structure: Structure, names: Sequence[str] | None = None
+    segment: Segment, structure: Structure, names: Sequence[str] | None = None,
+    filtered: Mapping[str, np.ndarray] | None = None,
 ) -> dict[str, np.ndarray]:
     """Every variable the structure needs, full segment length: inputs filtered and delayed
-    (held at their first filtered value before the delay has elapsed), states as measured."""
+    (held at their first filtered value before the delay has elapsed), states as measured.
+    ``filtered``: the inputs already through ``structure.filters`` (input name -> column),
+    as the structure search keeps them; they are then only delayed."""
     names = tuple(names) if names is not None else library.variables_of(structure.features)
     out: dict[str, np.ndarray] = {}
     ins = [v for v in names if v in structure.inputs]
-    if ins:
+    if ins and filtered is not None and all(v in filtered for v in ins):
+        u = np.column_stack([filtered[v] for v in ins]).astype(float)
+    elif ins:
         u = np.column_stack([_column(segment, v)[0] for v in ins]).astype(float)
         u = filter_inputs(u, segment.dt, structure.filters)
+    if ins:
         u = _shift(u, structure.delay, structure.delay_frac)
         out.update({v: u[:, i] for i, v in enumerate(ins)})
     for v in names:

@@ -17,11 +17,15 @@ one column of a single Gram matrix, and a candidate's Gram (including a fraction
 ``(1 − f) u[k−d] + f u[k−d−1]``, which is linear in two delayed copies) is a small projection
 of it plus the few rows at the record's start that only shorter delays use. Scores are
 therefore exact (the same rows and sums as refitting each candidate), and the search costs
-one pass over the data per lag; a lag's candidate delays are projected and solved together
-(:meth:`DelayScan.mse_many`). Other structures (continuous time, nonlinear libraries) are
-scored candidate by candidate. The least-squares coefficients of each lag's best delay come
-from the same Gram (:attr:`StructureChoice.ls_coef`): what the neighbouring lags' output-error
-refinements start from (:func:`~mavsid.estimators.output_error.output_error_coef`).
+one pass over the data per lag: the regressors no lag changes (states, bias, outputs) and
+their Gram are formed once for every lag, a lag adds its inputs' cross-products with them
+(one correlation per regressor) and its lagged input products; a lag's candidate delays are
+projected and solved together (:meth:`DelayScan.mse_many`). Each lag's filtered inputs are
+kept (:attr:`StructureChoice.inputs`) for the neighbouring lags' refinements. Other
+structures (continuous time, nonlinear libraries) are scored candidate by candidate. The
+least-squares coefficients of each lag's best delay come from the same Gram
+(:attr:`StructureChoice.ls_coef`): what the neighbouring lags' output-error refinements start
+from (:func:`~mavsid.estimators.output_error.output_error_coef`).
 
 The default search ranges are the module constants below (``DEFAULT_*``).
 
@@ -166,6 +170,47 @@ def _shift_needed(dly: float) -> int:
     return d + (1 if f > 0 else 0)
 
 
+class _StaticRows:
+    """What every candidate lag's :class:`DelayScan` shares: per segment the regressors that
+    are not delayed inputs (the structure's other features, the bias, then the outputs one
+    step ahead) as rows ``(n_stat, n - 1)``, None when not finite, and the Gram of their
+    columns from ``k_max + 1`` on."""
+
+    def __init__(self, segments: Sequence[Segment], structure: Structure, k_max: int) -> None:
+        st = structure
+        self.others = [f for f in st.features if f != library.BIAS and f not in st.inputs]
+        self.outputs = list(st.outputs)
+        self.has_bias = library.BIAS in st.features
+        self.k_max = k_max
+        self.rows: list[np.ndarray | None] = []
+        self.tail: list[np.ndarray | None] = []
+        n_stat = len(self.others) + int(self.has_bias) + len(self.outputs)
+        for seg in segments:
+            n = len(seg)
+            if n < 2:
+                self.rows.append(None)
+                self.tail.append(None)
+                continue
+            w = np.empty((n_stat, n - 1))
+            c = 0
+            for v in self.others:
+                w[c] = np.asarray(_column(seg, v)[0], float)[:-1]
+                c += 1
+            if self.has_bias:
+                w[c] = 1.0
+                c += 1
+            for v in self.outputs:
+                w[c] = np.asarray(_column(seg, v)[0], float)[1:]
+                c += 1
+            if not np.isfinite(w).all():
+                self.rows.append(None)
+                self.tail.append(None)
+                continue
+            head = min(k_max + 1, n - 1)
+            self.rows.append(w)
+            self.tail.append(w[:, head:] @ w[:, head:].T)
+
+
 class DelayScan:
     """One-step mean squared residual of a structure at many input delays, from one Gram.
 
@@ -178,6 +223,9 @@ class DelayScan:
         Largest delay (whole samples, a fractional delay ``d + f`` needs ``d + 1``).
     inputs : list of numpy.ndarray, optional
         The structure's inputs per segment, already filtered by ``structure.filters``.
+    static : _StaticRows, optional
+        The rows no lag changes, shared by the scans of every candidate lag (built here when
+        not given).
 
     Raises
     ------
@@ -187,7 +235,8 @@ class DelayScan:
     """
 
     def __init__(self, segments: Sequence[Segment], structure: Structure, max_shift: int,
-                 inputs: Sequence[np.ndarray] | None = None) -> None:
+                 inputs: Sequence[np.ndarray] | None = None,
+                 static: _StaticRows | None = None) -> None:
         st = structure
         if st.continuous or not library.is_linear(st.features):
             raise ValueError("fast delay scan needs a linear discrete-time structure")
@@ -197,11 +246,18 @@ class DelayScan:
         others = [f for f in st.features if f != library.BIAS and f not in st.inputs]
         self._ins, self._others = ins, others
         has_bias = library.BIAS in st.features
+        if static is None:
+            static = _StaticRows(segments, st, k_max)
+        elif (static.others, static.outputs, static.has_bias, static.k_max) != (
+                others, list(st.outputs), has_bias, k_max):
+            raise ValueError("static rows of another structure")
         q = len(others) + len(ins) * (k_max + 1) + int(has_bias) + len(st.outputs)
         suffix = np.zeros((k_max + 2, q, q))
         n_oth, k1 = len(others), k_max + 1
         # the regressors that are not delayed inputs: others, bias, outputs
         stat = np.r_[np.arange(n_oth), np.arange(n_oth + len(ins) * k1, q)].astype(int)
+        dyn = np.arange(n_oth, n_oth + len(ins) * k1)
+        self._blocks = (np.ix_(stat, stat), np.ix_(stat, dyn), np.ix_(dyn, stat))
         self._lengths = []
         for si, seg in enumerate(segments):
             n = len(seg)
@@ -215,73 +271,84 @@ class DelayScan:
                                   .astype(float), seg.dt, st.filters)
             else:
                 u = np.empty((n, 0))
-            # the rows as columns (one contiguous row per regressor): built by slicing,
-            # summed by one symmetric product
-            wt = np.empty((q, n - 1))
-            c = 0
-            for v in others:
-                wt[c] = np.asarray(_column(seg, v)[0], float)[:-1]
-                c += 1
-            for i in range(len(ins)):
-                ui = np.asarray(u[:, i], float)
-                for j in range(k_max + 1):  # u[k - j], held at u[0] before it starts
-                    h = min(j, n - 1)
-                    wt[c, :h] = ui[0]
-                    wt[c, h:] = ui[: n - 1 - h]
-                    c += 1
-            if has_bias:
-                wt[c] = 1.0
-                c += 1
-            for v in st.outputs:
-                wt[c] = np.asarray(_column(seg, v)[0], float)[1:]
-                c += 1
-            if not np.isfinite(wt).all():
+            srows, stat_gram = static.rows[si], static.tail[si]
+            if srows is None or stat_gram is None:
+                raise ValueError("non-finite rows")
+            if ins and not np.isfinite(u[: n - 1]).all():
                 raise ValueError("non-finite rows")
             head = min(k_max + 1, n - 1)
-            tail = wt[:, head:]
-            if head == k_max + 1 and ins:
-                suffix[head] += self._tail_gram(wt, head, u, stat)
-            else:
-                suffix[head] += tail @ tail.T
-            suffix[:head] += np.einsum("ir,jr->rij", wt[:, :head], wt[:, :head])
+            # the rows as columns (one contiguous row per regressor): the first ``head``
+            # rows, where the delayed inputs are held at their first value
+            wh = np.empty((q, head))
+            wh[stat] = srows[:, :head]
+            # u[k - j] for j = 0 … k_max, held at u[0] before it starts
+            held = np.maximum(np.arange(head)[None, :] - np.arange(k1)[:, None], 0)
+            for i in range(len(ins)):
+                wh[n_oth + i * k1 : n_oth + (i + 1) * k1] = np.asarray(u[:, i], float)[held]
+            suffix[:head] += np.einsum("ir,jr->rij", wh, wh)
+            if head == k1 and ins and n - 1 > head:
+                suffix[head] += self._tail_gram(srows, stat_gram, head, u, stat, dyn)
+            else:  # every row is in the head (short record) or nothing is delayed
+                wt = np.empty((q, n - 1 - head))
+                wt[stat] = srows[:, head:]
+                c = n_oth
+                for i in range(len(ins)):
+                    for j in range(k1):
+                        wt[c] = u[head - j : n - 1 - j, i]
+                        c += 1
+                suffix[head] += wt @ wt.T
         # suffix[r]: row r alone (r < head) or every row from head on; summed from the end,
         # _cum[l] is the Gram of the rows k >= l of every segment
         self._cum = np.cumsum(suffix[::-1], axis=0)[::-1]
         self._has_bias = has_bias
 
-    def _tail_gram(self, wt: np.ndarray, head: int, u: np.ndarray, stat: np.ndarray
-                   ) -> np.ndarray:
-        """The entries of the Gram of the rows ``head …`` (columns of ``wt``) that candidates
-        use: every regressor against the undelayed ones (one product), and the delayed
-        inputs against each other only at shifts at most one apart (a delay ``d + f`` uses
-        ``u[k-d]`` and ``u[k-d-1]``), as sums of lagged products over shifted windows: the
-        whole sum less the few terms each window leaves out at either end. Other entries
-        stay zero (no candidate reads them)."""
-        q, n = wt.shape[0], wt.shape[1] + 1
+    def _tail_gram(self, srows: np.ndarray, stat_gram: np.ndarray, head: int, u: np.ndarray,
+                   stat: np.ndarray, dyn: np.ndarray) -> np.ndarray:
+        """The entries of the Gram of the rows ``head …`` that candidates use: the
+        undelayed regressors against each other (``stat_gram``, the same for every lag) and
+        against every delayed input (one product), and the delayed inputs against each other
+        only at shifts at most one apart (a delay ``d + f`` uses ``u[k-d]`` and
+        ``u[k-d-1]``), as sums of lagged products over shifted windows: the whole sum less
+        the few terms each window leaves out at either end. Other entries stay zero (no
+        candidate reads them)."""
+        n = srows.shape[1] + 1
+        q = len(stat) + len(dyn)
         k1 = self.max_shift + 1
         n_oth = len(self._others)
         g = np.zeros((q, q))
-        part = wt[stat, head:] @ wt[:, head:].T
-        g[stat, :] = part
-        g[:, stat] = part.T
+        ss, sd, ds = self._blocks
+        g[ss] = stat_gram
+        # each undelayed regressor against u[k - j], j = 0 … k_max, over the rows
+        # k = head … n-2 (head = k_max + 1): one correlation per pair, its lags reversed
+        part = np.empty((len(stat), len(dyn)))
+        for i in range(len(self._ins)):
+            ui = u[1 : n - 1, i]
+            for r, row in enumerate(srows[:, head:]):
+                part[r, i * k1 : (i + 1) * k1] = np.correlate(ui, row, "valid")[::-1]
+        g[sd] = part
+        g[ds] = part.T
         js = np.arange(k1)
+        ms = np.arange(n - 2 - k1, n - 1)  # the last k1 + 1 terms of a lagged product
         for i in range(len(self._ins)):
             for i2 in range(len(self._ins)):
                 for lag in (0, 1):
                     if lag == 0 and i2 < i:
                         continue
                     # sum over rows k of u_i[k - j] u_i2[k - j - lag], j = 0 … k_max - lag:
-                    # m = k - j runs over [head - j, n - 2 - j]
-                    prod = np.zeros(n - 1)
-                    prod[lag:] = u[lag : n - 1, i] * u[: n - 1 - lag, i2]
-                    pre = np.concatenate([[0.0], np.cumsum(prod[: k1 + 1])])
-                    post = np.concatenate([[0.0], np.cumsum(prod[::-1][: k1 + 1])])
+                    # m = k - j runs over [head - j, n - 2 - j]; prod[m] = u_i[m] u_i2[m - lag]
+                    # (0 for m < lag), summed whole by one product, its ends apart
+                    total = float(u[lag : n - 1, i] @ u[: n - 1 - lag, i2])
+                    first = np.zeros(k1 + 1)
+                    first[lag:] = u[lag : k1 + 1, i] * u[: k1 + 1 - lag, i2]
+                    last = np.where(ms >= lag, u[ms, i] * u[ms - lag, i2], 0.0)
+                    pre = np.concatenate([[0.0], np.cumsum(first)])
+                    post = np.concatenate([[0.0], np.cumsum(last[::-1])])
                     j = js[: k1 - lag]
-                    vals = float(prod.sum()) - pre[head - j] - post[j]
-                    r = n_oth + i * k1 + j
-                    c = n_oth + i2 * k1 + j + lag
-                    g[r, c] = vals
-                    g[c, r] = vals
+                    vals = total - pre[head - j] - post[j]
+                    at_r = n_oth + i * k1 + j
+                    at_c = n_oth + i2 * k1 + j + lag
+                    g[at_r, at_c] = vals
+                    g[at_c, at_r] = vals
         return g
 
     def _grams(self, dlys: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
@@ -289,7 +356,7 @@ class DelayScan:
         stacked (k, p + m, p + m), and their row counts (k,)."""
         st = self.structure
         split = [_split_delay(v) for v in dlys]
-        leads = np.array([_shift_needed(v) for v in dlys], dtype=int)
+        leads = np.array([d + (1 if f > 0 else 0) for d, f in split], dtype=int)
         if len(leads) and leads.max() > self.max_shift:
             bad = float(np.asarray(dlys)[int(np.argmax(leads))])
             raise ConfigError(f"delay {bad:g} beyond the scan's {self.max_shift} samples")
@@ -315,7 +382,7 @@ class DelayScan:
             t[:, q - m + i, p + i] = 1.0
         full = np.transpose(t, (0, 2, 1)) @ self._cum[leads] @ t
         lengths = np.asarray(self._lengths, dtype=int)
-        rows = np.array([np.maximum(lengths - 1 - lead, 0).sum() for lead in leads], dtype=int)
+        rows = np.maximum(lengths[None, :] - 1 - leads[:, None], 0).sum(axis=1)
         return full, rows
 
     def gram(self, dly: float) -> Gram:
@@ -380,12 +447,12 @@ def _slow_mse(segments: Sequence[Segment], structure: Structure, dly: float) -> 
 
 
 def _scorer(segments: Sequence[Segment], structure: Structure, max_shift: int,
-            inputs: Sequence[np.ndarray] | None = None
+            inputs: Sequence[np.ndarray] | None = None, static: _StaticRows | None = None
             ) -> tuple[Callable[[Sequence[float]], list[float | None]], DelayScan | None]:
     """Candidate delays -> their one-step mean squared residuals (None: no rows), and the
     scan behind it (None when candidates are refitted one by one)."""
     try:
-        scan = DelayScan(segments, structure, max_shift, inputs)
+        scan = DelayScan(segments, structure, max_shift, inputs, static)
     except ValueError:
         return (lambda dlys: [_slow_mse(segments, structure, d) for d in dlys]), None
     return scan.mse_many, scan
@@ -431,6 +498,9 @@ class StructureChoice:
         Per candidate lag: the least-squares coefficients (p, m) at its chosen delay, solved
         from the search's Gram (the rows' sums a fit at that structure forms again); empty
         when the candidates were refitted one by one.
+    inputs : dict of float to list of dict
+        Per candidate lag: per segment, its inputs (name -> column) through the known
+        filters and that lag, not delayed (what a fit of that lag filters again).
     """
 
     structure: Structure
@@ -439,6 +509,8 @@ class StructureChoice:
     scan: dict[str, float]
     by_lag: dict[float, tuple[float, float]] = field(default_factory=dict)
     ls_coef: dict[float, np.ndarray] = field(default_factory=dict, repr=False)
+    inputs: dict[float, list[dict[str, np.ndarray]]] = field(default_factory=dict, repr=False,
+                                                            compare=False)
 
 
 def search_structure(
@@ -501,15 +573,22 @@ def search_structure(
     if ins:
         base = [filter_inputs(np.column_stack([_column(s, v)[0] for v in ins]).astype(float),
                               s.dt, structure.filters) for s in segments]
+    # the regressors no lag changes (states, bias, outputs), built once for every lag
+    static = None
+    if not structure.continuous and library.is_linear(structure.features):
+        static = _StaticRows(segments, structure, max_shift)
     cands: list[tuple[float, float, float]] = []  # (mse, lag, delay)
     scans: dict[float, DelayScan | None] = {}
+    filtered: dict[float, list[dict[str, np.ndarray]]] = {}
     scan: dict[str, float] = {}
     for lag in lag_grid:
         extra = lag_filter(lag)
         st = replace(structure, filters=structure.filters + extra)
         pre = None if base is None else [filter_inputs(u, s.dt, extra)
                                          for u, s in zip(base, segments, strict=True)]
-        score, scans[lag] = _scorer(segments, st, max_shift, pre)
+        score, scans[lag] = _scorer(segments, st, max_shift, pre, static)
+        if pre is not None:
+            filtered[lag] = [{v: u[:, i] for i, v in enumerate(ins)} for u in pre]
         if fixed is not None:
             d_scan = {dly: v for dly, v in zip(fixed, score(fixed), strict=True)
                       if v is not None}
@@ -546,7 +625,7 @@ def search_structure(
             g = lag_scan.gram(d)
             if g.n >= len(structure.features):
                 ls_coef[lg] = solve(g)
-    return StructureChoice(chosen, lag, float(dly), scan, by_lag, ls_coef)
+    return StructureChoice(chosen, lag, float(dly), scan, by_lag, ls_coef, filtered)
 
 
 def with_lag(structure: Structure, lag_s: float, delay: float) -> Structure:

@@ -64,6 +64,8 @@ def draw(rng: random.Random) -> dict[str, Any]:
                               "px4-1.11", "tlog"]),
         "seed": rng.randrange(1000),
     }
+    if s["manoeuvre"] == "sysid":  # the chirp's top: the default, or a short sweep
+        s["f_stop_hz"] = rng.choice([15.0, 15.0, 8.0, 3.0])
     if s["layout"] == "plane" and s["manoeuvre"] == "sysid":  # (ArduPlane has no SYSTEMID)
         s["manoeuvre"] = rng.choice(["doublet", "3211", "random"])
     if s["layout"] in ("heli", "plane"):  # (their own plants: a heli's or a wing's physics)
@@ -81,7 +83,8 @@ def run_one(folder: Path, i: int, s: dict[str, Any]) -> tuple[str, str]:
     log = folder / f"f{i}{suffix}"
     desc = (f"{s['manoeuvre']:7s} {s['axis']:5s} {s['vehicle']:7s} "
             f"gyro {s['gyro_noise_dps']:g} vib {s['vibration_dps']:g} {s['rate_hz']:g} Hz "
-            f"{s['layout']:14s} seed {s['seed']}")
+            f"{s['layout']:14s} seed {s['seed']}"
+            + (f" to {s['f_stop_hz']:g} Hz" if "f_stop_hz" in s else ""))
     axis, rate = s["axis"], RATE[s["axis"]]
     try:
         with contextlib.redirect_stdout(io.StringIO()):

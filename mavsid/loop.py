@@ -77,10 +77,12 @@ __all__ = [
     "TwinSignals",
     "analyse_loop",
     "analyse_model",
+    "analyse_plant",
     "baseline_fit",
     "closed_loop_fit",
     "compare_response",
     "controller_from_params",
+    "controller_polys",
     "controller_tf",
     "format_tune",
     "frd_margins",
@@ -1366,6 +1368,77 @@ def _controller_tf(g: RateGains | PX4RateGains, step: float) -> tuple[Any, Any]:
     return pid, pid * ft + g.ff * ft
 
 
+_Poly = tuple[np.ndarray, np.ndarray]
+
+
+def _tf_add(p: _Poly, q: _Poly) -> _Poly:
+    """``p + q`` of two SISO transfer functions ``(num, den)`` (python-control's sum)."""
+    return _trim((np.polyadd(np.polymul(p[0], q[1]), np.polymul(q[0], p[1])),
+                  np.polymul(p[1], q[1])))
+
+
+def _tf_mul(p: _Poly, q: _Poly) -> _Poly:
+    """``p · q`` of two SISO transfer functions ``(num, den)``."""
+    return _trim((np.polymul(p[0], q[0]), np.polymul(p[1], q[1])))
+
+
+def _tf_gain(k: float, p: _Poly) -> _Poly:
+    """``k · p``."""
+    return _trim((k * np.asarray(p[0], dtype=float), np.asarray(p[1], dtype=float)))
+
+
+def _tf_at(p: _Poly, z: np.ndarray) -> np.ndarray:
+    """The transfer function ``(num, den)`` at the points ``z``."""
+    return np.polyval(p[0], z) / np.polyval(p[1], z)
+
+
+def _trim(p: _Poly) -> _Poly:
+    """``p`` as python-control's transfer functions keep one: no leading zero coefficients,
+    and ``0 / 1`` for a zero numerator (so that adding it does not raise the order)."""
+    num, den = (np.trim_zeros(np.asarray(x, dtype=float), "f") for x in p)
+    return (num, den) if num.size else (np.zeros(1), np.ones(1))
+
+
+def controller_polys(ctrl: AxisController, dt: float | None = None) -> tuple[_Poly, _Poly]:
+    """:func:`controller_tf` as numpy polynomials, ``((num, den) of C_fb, (num, den) of
+    C_t)`` in descending powers of z: the same sums and products of the same parts, without
+    python-control (``tests/test_loop.py`` checks the coefficients against it).
+
+    Examples
+    --------
+    >>> (bf, af), _ = controller_polys(controller_from_params({}, "roll"))
+    >>> z = np.exp(2j * np.pi * 1.0 * 0.0025)
+    >>> round(float(abs(np.polyval(bf, z) / np.polyval(af, z))), 3)   # |C| at 1 Hz
+    0.136
+    """
+    step = 1.0 / ctrl.loop_hz if dt is None else dt
+    return _controller_polys(ctrl.gains, float(step))
+
+
+@functools.lru_cache(maxsize=64)
+def _controller_polys(g: RateGains | PX4RateGains, step: float) -> tuple[_Poly, _Poly]:
+    """:func:`controller_polys` by gains and step, cached (callers never modify them)."""
+    one: _Poly = (np.array([1.0]), np.array([1.0]))
+    integ: _Poly = (np.array([step, 0.0]), np.array([1.0, -1.0]))
+    deriv: _Poly = (np.array([1.0, -1.0]), np.array([step, 0.0]))
+    if isinstance(g, PX4RateGains):
+        fd = one
+        if 0 < g.dgyro_hz < 0.5 / step:
+            from mavsid.synthetic.plant import lowpass2p_coefficients
+
+            b, a = lowpass2p_coefficients(g.dgyro_hz, 1.0 / step)
+            fd = (np.asarray(b, dtype=float), np.asarray(a, dtype=float))
+        pi = _tf_add(_tf_gain(g.k * g.p, one), _tf_gain(g.k * g.i, integ))
+        fb = _tf_add(pi, _tf_gain(g.k * g.d, _tf_mul(fd, deriv)))
+        return fb, _tf_add(pi, _tf_gain(g.ff, one))
+    ft, fe, fd = ((np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+                  for x, y in (_first_order_z(c, step) for c in (g.fltt, g.flte, g.fltd)))
+    inner = _tf_add(_tf_add(_tf_gain(g.p, one), _tf_gain(g.i, integ)),
+                    _tf_gain(g.d, _tf_mul(fd, deriv)))
+    pid = _tf_mul(fe, inner)
+    return pid, _tf_add(_tf_mul(pid, ft), _tf_gain(g.ff, ft))
+
+
 @dataclass(frozen=True)
 class LoopAnalysis:
     """The rate loop of one axis with given gains.
@@ -1624,6 +1697,15 @@ def _tf_poly(system: Any) -> tuple[np.ndarray, np.ndarray]:
     return (np.asarray(system.num[0][0], dtype=float), np.asarray(system.den[0][0], dtype=float))
 
 
+def _ss2tf(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: float = 0.0) -> _Poly:
+    """``scipy.signal.ss2tf`` of a single-input single-output state space (its formula:
+    ``den = poly(A)``, ``num = poly(A − B·C) + (D − 1)·den``)."""
+    a = np.atleast_2d(np.asarray(a, dtype=float))
+    b, c = np.asarray(b, dtype=float).reshape(-1, 1), np.asarray(c, dtype=float).reshape(1, -1)
+    den = np.poly(a)
+    return np.poly(a - b @ c) + (float(d) - 1.0) * den, den
+
+
 def loop_figures(plant: LinearPlant, ctrl: AxisController, lag: int = 0,
                  freq_hz: np.ndarray | None = None, meas_delay: float = 0.0
                  ) -> dict[str, float]:
@@ -1632,18 +1714,27 @@ def loop_figures(plant: LinearPlant, ctrl: AxisController, lag: int = 0,
     state-space products, feedback or simulation objects): the same figures to rounding
     (``tests/test_loop.py`` checks 1e-6), about 10× faster, for :func:`analyse_model`'s
     draws of the coefficients."""
-    from scipy.signal import ss2tf
+    return analyse_plant(plant, ctrl, lag, freq_hz, meas_delay, responses=False).figures()
 
+
+def analyse_plant(plant: LinearPlant, ctrl: AxisController, lag: int = 0,
+                  freq_hz: np.ndarray | None = None, meas_delay: float = 0.0,
+                  responses: bool = True) -> LoopAnalysis:
+    """:func:`analyse_loop` of a :class:`LinearPlant` at the controller's step in numpy (the
+    controller from :func:`controller_polys`, each response the product of its parts'):
+    what ``fit --report`` and ``tune`` use, without importing python-control. Margins,
+    crossovers and the step's figures equal :func:`analyse_loop`'s to rounding; bandwidth,
+    peak and the responses equal python-control's point-by-point evaluation (``analyse_loop``
+    goes through one polynomial ratio of the whole closed loop, off by up to 0.5 %).
+    ``responses=False`` leaves out the broken loop at the mixer and its margins."""
     dt = 1.0 / ctrl.loop_hz
-    cfb, ct = controller_tf(ctrl, dt)
-    (bf, af), (bt, at) = _tf_poly(cfb), _tf_poly(ct)
+    (bf, af), (bt, at) = controller_polys(ctrl, dt)
     if lag:
         at = np.polymul(at, [1.0] + [0.0] * lag)
     tau, num, den = _reads(meas_delay)
     if tau:
         bf, af = np.polymul(bf, num), np.polymul(af, den)
-    num, den = ss2tf(plant.a, plant.b.reshape(-1, 1), plant.c.reshape(1, -1), np.zeros((1, 1)))
-    bp, ap = np.atleast_2d(num)[0], np.asarray(den, dtype=float)
+    bp, ap = _ss2tf(plant.a, plant.b, plant.c)
     f = np.geomspace(0.1, 0.45 / dt, 400) if freq_hz is None else np.asarray(freq_hz)
     fm = _margin_grid(dt)
 
@@ -1651,19 +1742,39 @@ def loop_figures(plant: LinearPlant, ctrl: AxisController, lag: int = 0,
         p = np.polyval(bp, z) / np.polyval(ap, z)
         return p, p * np.polyval(bf, z) / np.polyval(af, z)
 
+    mixer: dict[str, float] = {}
+    m_resp = np.zeros(0, complex)
     with np.errstate(all="ignore"):
-        gm, pm, wcp = _margins_of(fm, loop_at(np.exp(2j * np.pi * fm * dt))[1])
+        zm = np.exp(2j * np.pi * fm * dt)
+        gm, pm, wcp = _margins_of(fm, loop_at(zm)[1])
         zs = np.exp(2j * np.pi * f * dt)
         p, lz = loop_at(zs)
-        t_resp = p * np.polyval(bt, zs) / np.polyval(at, zs) / (1.0 + lz)
-        mag, _ph, bw, dbw, phase_delay = _closed_figures(f, t_resp, 1.0 / (1.0 + lz))
+        ctz = np.polyval(bt, zs) / np.polyval(at, zs)
+        t_resp = p * ctz / (1.0 + lz)
+        mag, ph, bw, dbw, phase_delay = _closed_figures(f, t_resp, 1.0 / (1.0 + lz))
         t = np.arange(0.0, 2.0, dt)
         y = _closed_step(plant, (bf, af), (bt, at), t.size)
+        if responses:
+            # at the mixer the attitude loop closes too: target = angle_p · −∫rate
+            def mixer_at(z: np.ndarray, p: np.ndarray, lz: np.ndarray,
+                         ctz: np.ndarray) -> np.ndarray:
+                return lz + ctz * ctrl.angle_p * (dt * z / (z - 1.0)) * p
+
+            m_resp = mixer_at(zs, p, lz, ctz)
+            pmz, lmz = loop_at(zm)
+            mgm, mpm, mwc = _margins_of(
+                fm, mixer_at(zm, pmz, lmz, np.polyval(bt, zm) / np.polyval(at, zm)))
+            mixer = {"gain_db": _db(mgm), "phase_deg": float(mpm),
+                     "crossover_hz": float(mwc / (2 * np.pi))}
     rise, over = _step_figures(t, y)
-    return {"gain_margin_db": _db(gm), "phase_margin_deg": float(pm),
-            "crossover_hz": float(wcp / (2 * np.pi)), "bandwidth_hz": bw,
-            "peak_db": float(np.max(mag)), "disturbance_bandwidth_hz": dbw,
-            "phase_delay_s": phase_delay, "rise_time_s": rise, "overshoot_percent": over}
+    return LoopAnalysis(
+        gain_margin_db=_db(gm), phase_margin_deg=float(pm),
+        crossover_hz=float(wcp / (2 * np.pi)), bandwidth_hz=bw, peak_db=float(np.max(mag)),
+        disturbance_bandwidth_hz=dbw, phase_delay_s=phase_delay, rise_time_s=rise,
+        overshoot_percent=over, freq_hz=f, magnitude_db=mag, phase_deg=ph,
+        loop_response=lz if responses else np.zeros(0, complex),
+        closed_response=t_resp if responses else np.zeros(0, complex),
+        mixer_loop_response=m_resp, mixer_margins=mixer)
 
 
 def _closed_step(plant: LinearPlant, fb: tuple[np.ndarray, np.ndarray],
@@ -1672,11 +1783,9 @@ def _closed_step(plant: LinearPlant, fb: tuple[np.ndarray, np.ndarray],
     ``C_fb``, ``C_t`` as ``(num, den)`` in z), simulated in state space: plant, feedback and
     target filter states side by side (a single polynomial of the closed loop would carry
     the integrators' cancelling pole-zero pair at z = 1 and drift)."""
-    from scipy.signal import tf2ss
-
     ap, bp, cp = plant.a, plant.b.reshape(-1, 1), plant.c.reshape(1, -1)
-    af, bf, cf, df = tf2ss(*fb)
-    at, bt, ct, dt_ = tf2ss(*tg)
+    af, bf, cf, df = dsp.tf2ss(*fb)
+    at, bt, ct, dt_ = dsp.tf2ss(*tg)
     npl, nf, nt = ap.shape[0], af.shape[0], at.shape[0]
     a = np.zeros((npl + nf + nt,) * 2)
     a[:npl, :npl] = ap - bp @ (df @ cp)
@@ -1739,10 +1848,10 @@ def plant_statespace(model: Any, axis: str, dt: float) -> Any:
 
 def analyse_model(model: Any, axis: str, ctrl: AxisController, lag: int = 0,
                   samples: int = 40, seed: int = 0, meas_delay: float = 0.0) -> LoopAnalysis:
-    """:func:`analyse_loop` of the identified plant, with one-σ uncertainties from
+    """:func:`analyse_plant` of the identified plant, with one-σ uncertainties from
     ``samples`` draws of the model's coefficients from their covariance."""
     dt = 1.0 / ctrl.loop_hz
-    base = analyse_loop(plant_statespace(model, axis, dt), ctrl, lag, meas_delay=meas_delay)
+    base = analyse_plant(plant_from_model(model, axis, dt), ctrl, lag, meas_delay=meas_delay)
     cov = getattr(model, "covariance", None)
     rate = AXIS_RATE[axis]
     if cov is None or samples < 2 or rate not in model.state_names:
@@ -1774,34 +1883,54 @@ def _scaled(ctrl: AxisController, k: float) -> AxisController:
     return replace(ctrl, gains=replace(g, p=g.p * k, i=g.i * k, d=g.d * k))
 
 
+def _as_plant(plant: Any) -> LinearPlant:
+    """A :class:`LinearPlant` as it is, or one of a discrete python-control state space
+    (no feedthrough)."""
+    if isinstance(plant, LinearPlant):
+        return plant
+    d = np.asarray(plant.D, dtype=float)
+    if d.size and np.any(d != 0):
+        raise ConfigError("the plant must have no feedthrough (D = 0)")
+    return LinearPlant(np.atleast_2d(np.asarray(plant.A, dtype=float)),
+                       np.asarray(plant.B, dtype=float).ravel(),
+                       np.asarray(plant.C, dtype=float).ravel(), float(plant.dt))
+
+
 def suggest_gains(plant_ss: Any, ctrl: AxisController, target_pm_deg: float = 50.0,
                   lag: int = 0, meas_delay: float = 0.0
                   ) -> tuple[dict[str, float], LoopAnalysis] | None:
     """P, I and D scaled together (ratios and filters kept) so that the loop's phase margin
-    is ``target_pm_deg``; the vehicle's parameter names and units, and the predicted loop.
-    None when no scale in [0.05, 20] reaches it with a stable loop. (``lag``, ``meas_delay``:
-    :func:`analyse_loop`.)"""
-    import warnings
-
-    import control
-
-    p = control.ss(plant_ss)
-    dt = float(plant_ss.dt)
+    is ``target_pm_deg``; the vehicle's parameter names and units, and the predicted loop
+    (:func:`analyse_plant`). None when no scale in [0.05, 20] reaches it with a stable loop.
+    ``plant_ss``: a :class:`LinearPlant` or a discrete python-control state space at the
+    controller's step. (``lag``, ``meas_delay``: :func:`analyse_loop`.)"""
+    plant = _as_plant(plant_ss)
+    dt = 1.0 / ctrl.loop_hz
     tau, num, den = _reads(meas_delay)
-    reads = control.tf(num, den, dt)
     # P, I and D scaled by k scale C_fb, so the loop, by k: one state space and one
     # response on the margins' grid serve every k (the closed loop's state matrix is
     # A − k·B·C / (1 + k·D)); the same margins as building each scaled loop, to rounding
-    cfb, _ = controller_tf(ctrl, dt)
-    unit = control.ss(cfb * reads if tau else cfb) * p
-    a, b, c, d = (np.asarray(x, dtype=float) for x in (unit.A, unit.B, unit.C, unit.D))
+    cfb, _ = controller_polys(ctrl, dt)
+    if tau:
+        cfb = _tf_mul(cfb, (np.asarray(num), np.asarray(den)))
+    # the plant, then the controller (python-control's ``C_fb * P``)
+    ac, bc, cc, dc = dsp.tf2ss(*cfb)
+    ap, bp, cp = plant.a, plant.b.reshape(-1, 1), plant.c.reshape(1, -1)
+    n_p, n_c = ap.shape[0], ac.shape[0]
+    a = np.zeros((n_p + n_c,) * 2)
+    a[:n_p, :n_p] = ap
+    a[n_p:, :n_p] = bc @ cp
+    a[n_p:, n_p:] = ac
+    b = np.concatenate([bp, np.zeros((n_c, 1))])
+    c = np.concatenate([dc @ cp, cc], axis=1)
     fm = _margin_grid(dt)
-    with np.errstate(all="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        unit_resp = frequency_response(unit, np.exp(2j * np.pi * fm * dt))
+    with np.errstate(all="ignore"):
+        zm = np.exp(2j * np.pi * fm * dt)
+        bpl, apl = _ss2tf(plant.a, plant.b, plant.c)
+        unit_resp = _tf_at((bpl, apl), zm) * _tf_at(cfb, zm)
 
     def pm(k: float) -> float:
-        closed = a - (k / (1.0 + k * float(d[0, 0]))) * (b @ c)
+        closed = a - k * (b @ c)
         if np.any(np.abs(np.linalg.eigvals(closed)) >= 1.0):
             return -1e9  # unstable closed loop
         with np.errstate(all="ignore"):
@@ -1818,7 +1947,7 @@ def suggest_gains(plant_ss: Any, ctrl: AxisController, target_pm_deg: float = 50
         mid = np.sqrt(lo * hi)
         lo, hi = (mid, hi) if pm(mid) >= target_pm_deg else (lo, mid)
     new = _scaled(ctrl, lo)
-    result = analyse_loop(plant_ss, new, lag, meas_delay=tau)
+    result = analyse_plant(plant, new, lag, meas_delay=tau)
     if not (np.isfinite(result.phase_margin_deg) and result.gain_margin_db > 0):
         return None
     return gain_params(new), result
@@ -1834,8 +1963,8 @@ def margins_on_frf(plant_frf: Any, ctrl: AxisController) -> dict[str, float]:
         return nan
     f, p = plant_frf.freq_hz[m], plant_frf.response[m]
     dt = 1.0 / ctrl.loop_hz
-    cfb, _ = controller_tf(ctrl, dt)
-    loop_resp = np.asarray(cfb(np.exp(2j * np.pi * f * dt))).ravel() * p
+    cfb, _ = controller_polys(ctrl, dt)
+    loop_resp = _tf_at(cfb, np.exp(2j * np.pi * f * dt)) * p
     band = replace(plant_frf, freq_hz=f, response=loop_resp, coherence=np.ones(f.size),
                    error=plant_frf.error[m])
     got = frd_margins(band)
@@ -2078,13 +2207,11 @@ def compare_response(measured: Any, freq_hz: np.ndarray, response: np.ndarray
 
 def frd_margins(measured: Any, freq_hz: np.ndarray | None = None,
                 response: np.ndarray | None = None) -> dict[str, float]:
-    """Gain and phase margin (python-control on an FRD) of a measured broken-loop FRF over
-    its coherent band; with ``freq_hz`` and ``response``, those of that (predicted) response
-    over the same band, for a like-for-like comparison."""
-    import warnings
-
-    import control
-
+    """Gain and phase margin of a measured broken-loop FRF over its coherent band; with
+    ``freq_hz`` and ``response``, those of that (predicted) response over the same band, for
+    a like-for-like comparison. The margins are ``control.stability_margins`` of
+    ``control.frd(h, ω)`` (:func:`_frd_margins`: its interpolation and root finding, without
+    importing python-control; ``tests/test_frequency.py`` compares)."""
     m = measured.coherent & np.isfinite(measured.response)
     nan = {"gain_db": float("nan"), "phase_deg": float("nan"), "crossover_hz": float("nan")}
     if m.sum() < 4:
@@ -2093,11 +2220,52 @@ def frd_margins(measured: Any, freq_hz: np.ndarray | None = None,
     h = measured.response[m]
     if freq_hz is not None and response is not None:
         h = np.interp(f, freq_hz, response.real) + 1j * np.interp(f, freq_hz, response.imag)
-    sys = control.frd(h, 2 * np.pi * f)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        gm, pm, _sm, _wg, wc, _ws = control.stability_margins(sys)
+    gm, pm, wc = _frd_margins(h, 2 * np.pi * f)
     return {"gain_db": _db(gm), "phase_deg": float(pm), "crossover_hz": float(wc / (2 * np.pi))}
+
+
+def _frd_margins(h: np.ndarray, w: np.ndarray) -> tuple[float, float, float]:
+    """``(gain margin, phase margin (deg), gain crossover (rad/s))`` of a frequency response
+    ``h`` at ``w`` (rad/s) as python-control's ``stability_margins`` of a smoothed FRD gives
+    them: a parametric interpolating spline through the real and imaginary parts (weights
+    ``1/(|h| + 0.001)``), the −180° and unit-gain crossings between the points located by
+    Brent's method on it; the smallest ``|log GM|`` and ``|PM|``."""
+    from scipy.interpolate import splev, splprep
+    from scipy.optimize import brentq
+
+    order = np.argsort(w, kind="stable")
+    w, h = np.asarray(w, dtype=float)[order], np.asarray(h, dtype=complex)[order]
+    tck, _ = splprep([h.real, h.imag], u=w, w=1.0 / (np.abs(h) + 0.001), s=0.0,
+                     k=3 if w.size > 3 else w.size - 1)
+
+    def at(x: Any) -> Any:
+        re, im = splev(x, tck, der=0)
+        return np.asarray(re) + 1j * np.asarray(im)
+
+    def arg(x: float) -> float:
+        return float(np.angle(-at(x)))
+
+    def mod(x: float) -> float:
+        return float(np.abs(at(x))) - 1.0
+
+    hw = at(w)
+    idx = np.where(np.diff(np.sign(np.angle(-hw))))[0]
+    idx = idx[np.real(hw[idx]) <= 0]
+    w180 = np.array([brentq(arg, w[i], w[i + 1]) for i in idx])
+    idx = np.where(np.diff(np.sign(np.abs(hw) - 1.0)))[0]
+    wc = np.array([brentq(mod, w[i], w[i + 1]) for i in idx])
+    with np.errstate(all="ignore"):
+        gms = 1.0 / np.abs(at(w180)) if w180.size else np.zeros(0)
+        pms = (np.remainder(np.angle(at(wc), deg=True), 360.0) - 180.0 if wc.size
+               else np.zeros(0))
+        gm = float("inf")
+        if gms.size and not np.isinf(gms).all():
+            lg = np.abs(np.log(gms))
+            gm = float(gms[lg == np.min(lg)][0])
+    if not pms.size:
+        return gm, float("inf"), float("nan")
+    i = int(np.flatnonzero(np.abs(pms) == np.min(np.abs(pms)))[0])
+    return gm, float(pms[i]), float(wc[i])
 
 
 # --------------------------------------------------------------------------- tune
@@ -2207,7 +2375,7 @@ def tune(result: Any, target_pm_deg: float = 50.0, samples: int = 40,
             entry["suggested"] = {}
             entry["suggested_note"] = f"no gains suggested: the plant model is {level}"
         else:
-            got = suggest_gains(plant_statespace(fit.model, axis, 1.0 / ctrl.loop_hz), ctrl,
+            got = suggest_gains(plant_from_model(fit.model, axis, 1.0 / ctrl.loop_hz), ctrl,
                                 target_pm_deg, lag, tau)
             if got is None:
                 entry["suggested"] = {}

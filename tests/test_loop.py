@@ -238,6 +238,61 @@ def test_frd_margins_are_python_controls(seed: int) -> None:
     assert got[2] == pytest.approx(wc, rel=1e-12)
 
 
+@pytest.mark.parametrize("case", ["plain", "injection", "warmup", "substeps", "others",
+                                  "clipped"])
+def test_simulate_closed_loop_linear_run_equals_stepping(case: str,
+                                                         monkeypatch: pytest.MonkeyPatch
+                                                         ) -> None:
+    """:func:`loop.simulate_closed_loop` runs the closed loop as one linear system in blocks
+    when no clip binds: the same rates and outputs as stepping the controller (``_BLOCK``
+    raised past the run: every step in Python), to rounding; with a clip that binds it
+    steps (the same numbers exactly)."""
+    rng = np.random.default_rng(5)
+    ctrl = loop.controller_from_params({"ATC_RAT_RLL_FF": 0.05}, "roll")
+    dt = 1.0 / ctrl.loop_hz
+    substeps = 2 if case == "substeps" else 1
+    tp = true_plant(PlantParams(), 0, dt / substeps)
+    n = 3000
+    target = np.convolve(rng.normal(size=n), np.ones(200) / 20.0, "same")
+    target[:100] = 0.0  # (at rest: the warm-up's plant starts in equilibrium)
+    kw: dict = {}
+    if case in ("injection", "clipped", "others"):
+        # (a clipped injection above the crossover: the loop does not take it out)
+        kw.update(injection=1.5 * np.sin(np.arange(n) * 1.0) if case == "clipped"
+                  else 0.05 * np.sin(np.arange(n) * 0.03), lag=1, meas_delay=0.3)
+    if case in ("warmup", "substeps"):
+        sim, sim_u = loop.simulate_closed_loop(tp, ctrl.new_pid(dt / substeps), target,
+                                               substeps=substeps)
+        kw.update(rate=sim, u=sim_u + 0.001 * rng.normal(size=n), warmup=40,
+                  meas_delay=0.5 if case == "substeps" else 0.0)
+    if case == "others":
+        m = tp.a.shape[0]
+        e = np.zeros((m, 2))
+        e[0] = 0.01 * rng.normal(size=2)  # (onto the rate: the other states are filters)
+        tp = replace(tp, e=e, other_inputs=("w1", "w2"), u_offset=0.01)
+        kw["others"] = rng.normal(size=(n, 2))
+    ran: list[bool] = []
+    real = loop._linear_steps
+
+    def spy(*args, **kwargs):  # type: ignore[no-untyped-def]
+        ran.append(real(*args, **kwargs))
+        return ran[-1]
+
+    monkeypatch.setattr(loop, "_linear_steps", spy)
+    got = loop.simulate_closed_loop(tp, ctrl.new_pid(dt / substeps), target,
+                                    substeps=substeps, **kw)
+    assert ran == [case != "clipped"]
+    monkeypatch.setattr(loop, "_BLOCK", 10**9)
+    want = loop.simulate_closed_loop(tp, ctrl.new_pid(dt / substeps), target,
+                                     substeps=substeps, **kw)
+    assert ran == [case != "clipped"]  # (not called again: stepped)
+    for g, w in zip(got, want, strict=True):
+        assert g.shape == w.shape == (n - kw.get("warmup", 0),)
+        np.testing.assert_allclose(g, w, rtol=0, atol=1e-12 * np.max(np.abs(w)))
+    if case == "clipped":
+        assert np.max(np.abs(got[1])) == pytest.approx(1.0)  # the output clip bound
+
+
 @pytest.mark.parametrize("manoeuvre", ["sysid", "doublet"])
 def test_twin_with_the_true_plant_reproduces_a_simulated_flight(manoeuvre: str) -> None:
     # noise-free vehicle: the twin, given the true plant, the logged rate target and the

@@ -293,6 +293,58 @@ def test_simulate_closed_loop_linear_run_equals_stepping(case: str,
         assert np.max(np.abs(got[1])) == pytest.approx(1.0)  # the output clip bound
 
 
+def _baseline_every_delay(pool: list[tuple[np.ndarray, np.ndarray]], max_d: int
+                          ) -> tuple[float, int]:
+    """The exhaustive search :func:`loop.baseline_fit` did: every delay's exact score."""
+    from mavsid.validation import _fit_sums
+
+    best, best_d = -np.inf, 0
+    for d in range(max_d + 1):
+        err = norm = 0.0
+        for t, y in pool:
+            shifted = np.full(t.shape, np.nan)
+            if d < len(t):
+                shifted[d:] = t[: len(t) - d]
+            e, n = _fit_sums(y, shifted)
+            err, norm = err + float(e[0]), norm + float(n[0])
+        sc = -err / norm if norm > 0 else -np.inf
+        if sc > best:
+            best, best_d = sc, d
+    return best, best_d
+
+
+@pytest.mark.parametrize("case", ["lagged", "exact", "nan", "short", "constant", "offset"])
+def test_baseline_fit_chooses_the_exhaustive_delay(case: str) -> None:
+    # the delays scored exactly are picked from running sums; the choice is the exhaustive
+    # search's (ties and near-ties included: the exact scores decide)
+    rng = np.random.default_rng(11)
+    dt = 0.0025
+    pool, held = [], []
+    for n in (900, 1500, 40 if case == "short" else 700):
+        t = np.convolve(rng.normal(size=n), np.ones(min(60, n)) / 8.0, "same")
+        lag = min(68, n // 2)
+        y = np.r_[np.zeros(lag), t[:n - lag]] + (0.0 if case == "exact" else 0.05) * rng.normal(
+            size=n)
+        if case == "nan":
+            y[rng.integers(0, n, 5)] = np.nan
+        if case == "constant":
+            y = np.full(n, 0.3)
+        if case == "offset":
+            t, y = t + 1e3, y + 1e3
+        pool.append((t, y))
+        held.append((t[::-1].copy(), y[::-1].copy()))
+    max_d = round(loop.BASELINE_MAX_DELAY_S / dt)
+    _best, best_d = _baseline_every_delay(pool, max_d)
+    _fit, delay, _preds = loop.baseline_fit(pool, held, dt)
+    assert delay == best_d * dt
+    if case in ("lagged", "exact", "nan"):
+        assert best_d == 68
+    cands = list(loop._baseline_candidates(pool, max_d))
+    assert best_d in cands
+    if case in ("lagged", "exact", "short"):  # (a large offset widens the rounding margin)
+        assert len(cands) <= 3
+
+
 @pytest.mark.parametrize("manoeuvre", ["sysid", "doublet"])
 def test_twin_with_the_true_plant_reproduces_a_simulated_flight(manoeuvre: str) -> None:
     # noise-free vehicle: the twin, given the true plant, the logged rate target and the

@@ -77,10 +77,12 @@ __all__ = [
     "TwinSignals",
     "analyse_loop",
     "analyse_model",
+    "analyse_plant",
     "baseline_fit",
     "closed_loop_fit",
     "compare_response",
     "controller_from_params",
+    "controller_polys",
     "controller_tf",
     "format_tune",
     "frd_margins",
@@ -722,6 +724,13 @@ def simulate_closed_loop(
         Simulated rate and mixer input (controller output plus injection, clipped), sampled
         at the first sub-step of each sample.
 
+    Notes
+    -----
+    An ArduPilot controller without slew limiter runs, after its first step, as one linear
+    system in blocks of steps (:func:`_linear_run`, four times faster on the SITL flight)
+    unless its integrator's or the output's clip would bind; then step by step. The same
+    numbers to rounding (``tests/test_loop.py``).
+
     Examples
     --------
     >>> plant = LinearPlant(np.array([[1.0]]), np.array([0.01]), np.array([1.0]), 0.01)
@@ -764,23 +773,137 @@ def simulate_closed_loop(
         pid.adjust_integrator(float(np.mean(resid[-last:])))
         cc = c.reshape(1, -1)
         x = x + (np.linalg.pinv(cc) @ np.array([ym[warmup] - float((cc @ x)[0])])).ravel()
-    y_out = np.empty(n - warmup)
-    u_out = np.empty(n - warmup)
+    steps = (n - warmup) * substeps
+    y_all, u_all = np.empty(steps), np.empty(steps)
     tgl, ijl = tg.tolist(), ij.tolist()  # Python floats: no numpy scalar per step
     rows = list(ew) if w.shape[1] else None  # no other inputs: nothing to add
-    for k in range(warmup, n):
-        for s in range(substeps):
+
+    def stepped(i0: int, i1: int, x: np.ndarray, y_prev: float) -> tuple[np.ndarray, float]:
+        """Steps ``i0`` to ``i1`` (from the first after the warm-up), one at a time."""
+        for jj in range(j + i0, j + i1):
             y = float(c @ x)
             seen = (1.0 - tau) * y + tau * y_prev
             y_prev = y
-            uk = min(max(pid.update(tgl[j], seen) + ijl[j], -limit), limit)
-            if s == 0:
-                y_out[k - warmup], u_out[k - warmup] = y, uk
+            uk = min(max(pid.update(tgl[jj], seen) + ijl[jj], -limit), limit)
+            y_all[jj - j], u_all[jj - j] = y, uk
             x = a @ x + b * (uk + off)
             if rows is not None:
-                x = x + rows[j]
-            j += 1
-    return y_out, u_out
+                x = x + rows[jj]
+        return x, y_prev
+
+    if isinstance(pid, RatePID) and pid.g.smax <= 0 and steps > 4 * _BLOCK:
+        # the first step one at a time (a fresh controller starts from its inputs), the rest
+        # as one linear system unless the integrator's or the output's clip binds
+        x, y_prev = stepped(0, 1, x, y_prev)
+        if not _linear_steps(pid, plant, x, y_prev, tau, limit, tg[j + 1:j + steps],
+                             ij[j + 1:j + steps],
+                             ew[j + 1:j + steps] if rows is not None else None,
+                             y_all[1:], u_all[1:]):
+            stepped(1, steps, x, y_prev)
+    else:
+        stepped(0, steps, x, y_prev)
+    return y_all[::substeps].copy(), u_all[::substeps].copy()
+
+
+#: steps per block of :func:`_linear_run`
+_BLOCK = 32
+
+
+def _linear_run(f: np.ndarray, g: np.ndarray, h: np.ndarray, k: np.ndarray, s0: np.ndarray,
+                w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Outputs ``h·s[i] + k·w[i]`` of ``s[i+1] = f·s[i] + g·w[i]`` from ``s0`` over the rows of
+    ``w``, and the last state, in blocks of :data:`_BLOCK` steps: one small product per block
+    carries the state (``fᵐ``), the steps inside every block at once (``h·fⁱ`` and the
+    inputs' ``h·fⁱ⁻¹⁻ˡ·g``). The same numbers as stepping, to rounding."""
+    m = _BLOCK
+    n, ns, nw = w.shape[0], f.shape[0], w.shape[1]
+    nb = -(-n // m)
+    wb = np.zeros((nb * m, nw))
+    wb[:n] = w
+    wb = wb.reshape(nb, m, nw)
+    powers = [np.eye(ns)]
+    for _ in range(m):
+        powers.append(f @ powers[-1])
+    hf = np.stack([h @ powers[i] for i in range(m)])  # (m, ny, ns)
+    hfg = np.stack([h @ powers[i] @ g for i in range(m)])  # (m, ny, nw)
+    kern = np.zeros((m, m, h.shape[0], nw))
+    for i in range(1, m):
+        kern[i, :i] = hfg[i - 1::-1]  # l < i: h·f^(i-1-l)·g
+    gam = np.stack([powers[m - 1 - i] @ g for i in range(m)])  # (m, ns, nw)
+    flat = wb.reshape(nb, m * nw)
+    v = flat @ gam.transpose(1, 0, 2).reshape(ns, m * nw).T  # (nb, ns)
+    fm = powers[m]
+    states = np.empty((nb + 1, ns))
+    states[0] = s0
+    for i in range(nb):
+        states[i + 1] = fm @ states[i] + v[i]
+    ny = h.shape[0]
+    y = (states[:nb] @ hf.reshape(m * ny, ns).T
+         + flat @ kern.transpose(1, 3, 0, 2).reshape(m * nw, m * ny)).reshape(nb, m, ny)
+    y = (y + wb @ k.T).reshape(nb * m, ny)[:n]
+    last = states[n // m]
+    for row in w[(n // m) * m:]:
+        last = f @ last + g @ row
+    return y, last
+
+
+def _linear_steps(pid: RatePID, plant: LinearPlant, x: np.ndarray, y_prev: float, tau: float,
+                  limit: float, tg: np.ndarray, ij: np.ndarray, ew: np.ndarray | None,
+                  y_out: np.ndarray, u_out: np.ndarray) -> bool:
+    """:func:`simulate_closed_loop`'s steps after the first (the controller past its reset,
+    no slew limiter) as one linear system, :func:`_linear_run`: the rates and outputs into
+    ``y_out`` and ``u_out`` and the controller's state updated, or False (nothing changed)
+    when the integrator's ``±IMAX`` or the output's ``±limit`` would bind on some step."""
+    gn, dt = pid.g, pid.dt
+    a, b, c = plant.a, plant.b, plant.c
+    n = a.shape[0]
+    # state: x (n), y_prev, target filter T, error E, derivative D, integrator I
+    ns = n + 5
+    iy, it, ie, i_d, ii = n, n + 1, n + 2, n + 3, n + 4
+    ext = ew is not None
+    nw = 3 + (n if ext else 0)  # inputs: target, injection, 1 (offset), other inputs
+    # each quantity of a step as a row over [state, inputs]
+    z = np.zeros(ns + nw)
+    y = z.copy()
+    y[:n] = c
+    seen = (1.0 - tau) * y
+    seen[iy] += tau
+    t_new = z.copy()
+    t_new[it] = 1.0 - pid.a_t
+    t_new[ns] = pid.a_t
+    e_new = -pid.a_e * seen
+    e_new[ie] += 1.0 - pid.a_e
+    e_new += pid.a_e * t_new
+    d_new = pid.a_d / dt * e_new
+    d_new[ie] -= pid.a_d / dt
+    d_new[i_d] += 1.0 - pid.a_d
+    i_new = gn.i * dt * e_new
+    i_new[ii] += 1.0
+    out = gn.p * e_new + i_new + gn.d * d_new + gn.ff * t_new
+    u = out.copy()
+    u[ns + 1] += 1.0
+    fg = np.zeros((ns, ns + nw))
+    fg[:n] = np.outer(b, u)
+    fg[:n, :n] += a
+    fg[:n, ns + 2] += b * plant.u_offset
+    if ext:
+        fg[:n, ns + 3:] += np.eye(n)
+    fg[iy], fg[it], fg[ie], fg[i_d], fg[ii] = y, t_new, e_new, d_new, i_new
+    hk = np.stack([y, u, i_new])
+    s0 = np.r_[x, y_prev, pid.target, pid.error, pid.deriv, pid.integ]
+    steps = tg.size
+    w = np.empty((steps, nw))
+    w[:, 0], w[:, 1], w[:, 2] = tg, ij, 1.0
+    if ext:
+        w[:, 3:] = ew
+    with np.errstate(all="ignore"):
+        outs, last = _linear_run(fg[:, :ns], fg[:, ns:], hk[:, :ns], hk[:, ns:], s0, w)
+    if not (np.all(np.isfinite(outs)) and np.all(np.abs(outs[:, 2]) <= gn.imax)
+            and np.all(np.abs(outs[:, 1]) <= limit)):
+        return False
+    y_out[:steps], u_out[:steps] = outs[:, 0], outs[:, 1]
+    pid.target, pid.error, pid.deriv, pid.integ = (float(v) for v in last[it:])
+    return True
 
 
 def _reads(meas_delay: float) -> tuple[float, list[float], list[float]]:
@@ -1099,19 +1222,57 @@ def baseline_fit(
 
     longest = max((len(t) for t, _ in (*train, *held_out)), default=0)
     max_d = max(0, min(round(max_delay_s / dt), longest - 2))
-    best, best_d = -np.inf, 0
     pool = train or held_out
-    for d in range(max_d + 1):
+
+    def score(d: int) -> float:
         err = norm = 0.0
         for t, y in pool:
             e, n = _fit_sums(y, shifted(t, d))
             err, norm = err + float(e[0]), norm + float(n[0])
-        score = -err / norm if norm > 0 else -np.inf
-        if score > best:
-            best, best_d = score, d
+        return -err / norm if norm > 0 else -np.inf
+
+    best, best_d = -np.inf, 0
+    for d in _baseline_candidates(pool, max_d):
+        sc = score(d)
+        if sc > best:
+            best, best_d = sc, d
     preds = [shifted(t, best_d) for t, _ in held_out]
     fit = _pooled_fit([y for _, y in held_out], preds)
     return fit, best_d * dt, preds
+
+
+def _baseline_candidates(pool: Sequence[tuple[np.ndarray, np.ndarray]], max_d: int
+                         ) -> range | list[int]:
+    """The delays :func:`baseline_fit` scores exactly, in increasing order: every one up to
+    ``max_d`` when a block holds a non-finite sample, else those whose score, from running
+    sums and one dot product per delay and block (rounding differs from the exact sums),
+    is within a rounding margin of the best: the exact scores of these choose the same
+    delay as those of all (the rest are far below)."""
+    blocks = [(np.asarray(t, dtype=float), np.asarray(y, dtype=float)) for t, y in pool]
+    if not all(np.all(np.isfinite(t)) and np.all(np.isfinite(y)) for t, y in blocks):
+        return range(max_d + 1)
+    err = np.zeros(max_d + 1)
+    norm = np.zeros(max_d + 1)
+    scale = 0.0
+    for t, y in blocks:
+        n = y.size
+        k = min(max_d, n - 1) + 1  # delays with samples left
+        if n == 0 or k <= 0:
+            continue
+        s1 = np.cumsum(y[::-1])[::-1][:k]  # sum over i >= d of y[i]
+        s2 = np.cumsum((y * y)[::-1])[::-1][:k]
+        t2 = np.cumsum(t * t)[::-1][:k]  # sum over i < n - d of t[i]
+        cross = np.array([y[d:] @ t[:n - d] for d in range(k)])
+        err[:k] += s2 - 2.0 * cross + t2
+        norm[:k] += s2 - s1 * s1 / (n - np.arange(k))
+        scale += float(y @ y + t @ t)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        approx = np.where(norm > 0, -err / norm, -np.inf)
+    if not np.any(np.isfinite(approx)):
+        return range(max_d + 1)
+    best = float(np.max(approx[np.isfinite(approx)]))
+    margin = 1e-7 * scale / float(np.min(norm[norm > 0])) + 1e-9 * abs(best)
+    return [int(d) for d in np.flatnonzero(~(approx < best - margin))]
 
 
 def _flight_index(flight: FlightData, seg: Segment) -> int | None:
@@ -1364,6 +1525,77 @@ def _controller_tf(g: RateGains | PX4RateGains, step: float) -> tuple[Any, Any]:
     fd = control.tf(*_first_order_z(g.fltd, step), step)
     pid = fe * (g.p * one + g.i * integ + g.d * fd * deriv)
     return pid, pid * ft + g.ff * ft
+
+
+_Poly = tuple[np.ndarray, np.ndarray]
+
+
+def _tf_add(p: _Poly, q: _Poly) -> _Poly:
+    """``p + q`` of two SISO transfer functions ``(num, den)`` (python-control's sum)."""
+    return _trim((np.polyadd(np.polymul(p[0], q[1]), np.polymul(q[0], p[1])),
+                  np.polymul(p[1], q[1])))
+
+
+def _tf_mul(p: _Poly, q: _Poly) -> _Poly:
+    """``p · q`` of two SISO transfer functions ``(num, den)``."""
+    return _trim((np.polymul(p[0], q[0]), np.polymul(p[1], q[1])))
+
+
+def _tf_gain(k: float, p: _Poly) -> _Poly:
+    """``k · p``."""
+    return _trim((k * np.asarray(p[0], dtype=float), np.asarray(p[1], dtype=float)))
+
+
+def _tf_at(p: _Poly, z: np.ndarray) -> np.ndarray:
+    """The transfer function ``(num, den)`` at the points ``z``."""
+    return np.polyval(p[0], z) / np.polyval(p[1], z)
+
+
+def _trim(p: _Poly) -> _Poly:
+    """``p`` as python-control's transfer functions keep one: no leading zero coefficients,
+    and ``0 / 1`` for a zero numerator (so that adding it does not raise the order)."""
+    num, den = (np.trim_zeros(np.asarray(x, dtype=float), "f") for x in p)
+    return (num, den) if num.size else (np.zeros(1), np.ones(1))
+
+
+def controller_polys(ctrl: AxisController, dt: float | None = None) -> tuple[_Poly, _Poly]:
+    """:func:`controller_tf` as numpy polynomials, ``((num, den) of C_fb, (num, den) of
+    C_t)`` in descending powers of z: the same sums and products of the same parts, without
+    python-control (``tests/test_loop.py`` checks the coefficients against it).
+
+    Examples
+    --------
+    >>> (bf, af), _ = controller_polys(controller_from_params({}, "roll"))
+    >>> z = np.exp(2j * np.pi * 1.0 * 0.0025)
+    >>> round(float(abs(np.polyval(bf, z) / np.polyval(af, z))), 3)   # |C| at 1 Hz
+    0.136
+    """
+    step = 1.0 / ctrl.loop_hz if dt is None else dt
+    return _controller_polys(ctrl.gains, float(step))
+
+
+@functools.lru_cache(maxsize=64)
+def _controller_polys(g: RateGains | PX4RateGains, step: float) -> tuple[_Poly, _Poly]:
+    """:func:`controller_polys` by gains and step, cached (callers never modify them)."""
+    one: _Poly = (np.array([1.0]), np.array([1.0]))
+    integ: _Poly = (np.array([step, 0.0]), np.array([1.0, -1.0]))
+    deriv: _Poly = (np.array([1.0, -1.0]), np.array([step, 0.0]))
+    if isinstance(g, PX4RateGains):
+        fd = one
+        if 0 < g.dgyro_hz < 0.5 / step:
+            from mavsid.synthetic.plant import lowpass2p_coefficients
+
+            b, a = lowpass2p_coefficients(g.dgyro_hz, 1.0 / step)
+            fd = (np.asarray(b, dtype=float), np.asarray(a, dtype=float))
+        pi = _tf_add(_tf_gain(g.k * g.p, one), _tf_gain(g.k * g.i, integ))
+        fb = _tf_add(pi, _tf_gain(g.k * g.d, _tf_mul(fd, deriv)))
+        return fb, _tf_add(pi, _tf_gain(g.ff, one))
+    ft, fe, fd = ((np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+                  for x, y in (_first_order_z(c, step) for c in (g.fltt, g.flte, g.fltd)))
+    inner = _tf_add(_tf_add(_tf_gain(g.p, one), _tf_gain(g.i, integ)),
+                    _tf_gain(g.d, _tf_mul(fd, deriv)))
+    pid = _tf_mul(fe, inner)
+    return pid, _tf_add(_tf_mul(pid, ft), _tf_gain(g.ff, ft))
 
 
 @dataclass(frozen=True)
@@ -1624,6 +1856,15 @@ def _tf_poly(system: Any) -> tuple[np.ndarray, np.ndarray]:
     return (np.asarray(system.num[0][0], dtype=float), np.asarray(system.den[0][0], dtype=float))
 
 
+def _ss2tf(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: float = 0.0) -> _Poly:
+    """``scipy.signal.ss2tf`` of a single-input single-output state space (its formula:
+    ``den = poly(A)``, ``num = poly(A − B·C) + (D − 1)·den``)."""
+    a = np.atleast_2d(np.asarray(a, dtype=float))
+    b, c = np.asarray(b, dtype=float).reshape(-1, 1), np.asarray(c, dtype=float).reshape(1, -1)
+    den = np.poly(a)
+    return np.poly(a - b @ c) + (float(d) - 1.0) * den, den
+
+
 def loop_figures(plant: LinearPlant, ctrl: AxisController, lag: int = 0,
                  freq_hz: np.ndarray | None = None, meas_delay: float = 0.0
                  ) -> dict[str, float]:
@@ -1632,18 +1873,27 @@ def loop_figures(plant: LinearPlant, ctrl: AxisController, lag: int = 0,
     state-space products, feedback or simulation objects): the same figures to rounding
     (``tests/test_loop.py`` checks 1e-6), about 10× faster, for :func:`analyse_model`'s
     draws of the coefficients."""
-    from scipy.signal import ss2tf
+    return analyse_plant(plant, ctrl, lag, freq_hz, meas_delay, responses=False).figures()
 
+
+def analyse_plant(plant: LinearPlant, ctrl: AxisController, lag: int = 0,
+                  freq_hz: np.ndarray | None = None, meas_delay: float = 0.0,
+                  responses: bool = True) -> LoopAnalysis:
+    """:func:`analyse_loop` of a :class:`LinearPlant` at the controller's step in numpy (the
+    controller from :func:`controller_polys`, each response the product of its parts'):
+    what ``fit --report`` and ``tune`` use, without importing python-control. Margins,
+    crossovers and the step's figures equal :func:`analyse_loop`'s to rounding; bandwidth,
+    peak and the responses equal python-control's point-by-point evaluation (``analyse_loop``
+    goes through one polynomial ratio of the whole closed loop, off by up to 0.5 %).
+    ``responses=False`` leaves out the broken loop at the mixer and its margins."""
     dt = 1.0 / ctrl.loop_hz
-    cfb, ct = controller_tf(ctrl, dt)
-    (bf, af), (bt, at) = _tf_poly(cfb), _tf_poly(ct)
+    (bf, af), (bt, at) = controller_polys(ctrl, dt)
     if lag:
         at = np.polymul(at, [1.0] + [0.0] * lag)
     tau, num, den = _reads(meas_delay)
     if tau:
         bf, af = np.polymul(bf, num), np.polymul(af, den)
-    num, den = ss2tf(plant.a, plant.b.reshape(-1, 1), plant.c.reshape(1, -1), np.zeros((1, 1)))
-    bp, ap = np.atleast_2d(num)[0], np.asarray(den, dtype=float)
+    bp, ap = _ss2tf(plant.a, plant.b, plant.c)
     f = np.geomspace(0.1, 0.45 / dt, 400) if freq_hz is None else np.asarray(freq_hz)
     fm = _margin_grid(dt)
 
@@ -1651,19 +1901,39 @@ def loop_figures(plant: LinearPlant, ctrl: AxisController, lag: int = 0,
         p = np.polyval(bp, z) / np.polyval(ap, z)
         return p, p * np.polyval(bf, z) / np.polyval(af, z)
 
+    mixer: dict[str, float] = {}
+    m_resp = np.zeros(0, complex)
     with np.errstate(all="ignore"):
-        gm, pm, wcp = _margins_of(fm, loop_at(np.exp(2j * np.pi * fm * dt))[1])
+        zm = np.exp(2j * np.pi * fm * dt)
+        gm, pm, wcp = _margins_of(fm, loop_at(zm)[1])
         zs = np.exp(2j * np.pi * f * dt)
         p, lz = loop_at(zs)
-        t_resp = p * np.polyval(bt, zs) / np.polyval(at, zs) / (1.0 + lz)
-        mag, _ph, bw, dbw, phase_delay = _closed_figures(f, t_resp, 1.0 / (1.0 + lz))
+        ctz = np.polyval(bt, zs) / np.polyval(at, zs)
+        t_resp = p * ctz / (1.0 + lz)
+        mag, ph, bw, dbw, phase_delay = _closed_figures(f, t_resp, 1.0 / (1.0 + lz))
         t = np.arange(0.0, 2.0, dt)
         y = _closed_step(plant, (bf, af), (bt, at), t.size)
+        if responses:
+            # at the mixer the attitude loop closes too: target = angle_p · −∫rate
+            def mixer_at(z: np.ndarray, p: np.ndarray, lz: np.ndarray,
+                         ctz: np.ndarray) -> np.ndarray:
+                return lz + ctz * ctrl.angle_p * (dt * z / (z - 1.0)) * p
+
+            m_resp = mixer_at(zs, p, lz, ctz)
+            pmz, lmz = loop_at(zm)
+            mgm, mpm, mwc = _margins_of(
+                fm, mixer_at(zm, pmz, lmz, np.polyval(bt, zm) / np.polyval(at, zm)))
+            mixer = {"gain_db": _db(mgm), "phase_deg": float(mpm),
+                     "crossover_hz": float(mwc / (2 * np.pi))}
     rise, over = _step_figures(t, y)
-    return {"gain_margin_db": _db(gm), "phase_margin_deg": float(pm),
-            "crossover_hz": float(wcp / (2 * np.pi)), "bandwidth_hz": bw,
-            "peak_db": float(np.max(mag)), "disturbance_bandwidth_hz": dbw,
-            "phase_delay_s": phase_delay, "rise_time_s": rise, "overshoot_percent": over}
+    return LoopAnalysis(
+        gain_margin_db=_db(gm), phase_margin_deg=float(pm),
+        crossover_hz=float(wcp / (2 * np.pi)), bandwidth_hz=bw, peak_db=float(np.max(mag)),
+        disturbance_bandwidth_hz=dbw, phase_delay_s=phase_delay, rise_time_s=rise,
+        overshoot_percent=over, freq_hz=f, magnitude_db=mag, phase_deg=ph,
+        loop_response=lz if responses else np.zeros(0, complex),
+        closed_response=t_resp if responses else np.zeros(0, complex),
+        mixer_loop_response=m_resp, mixer_margins=mixer)
 
 
 def _closed_step(plant: LinearPlant, fb: tuple[np.ndarray, np.ndarray],
@@ -1672,11 +1942,9 @@ def _closed_step(plant: LinearPlant, fb: tuple[np.ndarray, np.ndarray],
     ``C_fb``, ``C_t`` as ``(num, den)`` in z), simulated in state space: plant, feedback and
     target filter states side by side (a single polynomial of the closed loop would carry
     the integrators' cancelling pole-zero pair at z = 1 and drift)."""
-    from scipy.signal import tf2ss
-
     ap, bp, cp = plant.a, plant.b.reshape(-1, 1), plant.c.reshape(1, -1)
-    af, bf, cf, df = tf2ss(*fb)
-    at, bt, ct, dt_ = tf2ss(*tg)
+    af, bf, cf, df = dsp.tf2ss(*fb)
+    at, bt, ct, dt_ = dsp.tf2ss(*tg)
     npl, nf, nt = ap.shape[0], af.shape[0], at.shape[0]
     a = np.zeros((npl + nf + nt,) * 2)
     a[:npl, :npl] = ap - bp @ (df @ cp)
@@ -1739,10 +2007,10 @@ def plant_statespace(model: Any, axis: str, dt: float) -> Any:
 
 def analyse_model(model: Any, axis: str, ctrl: AxisController, lag: int = 0,
                   samples: int = 40, seed: int = 0, meas_delay: float = 0.0) -> LoopAnalysis:
-    """:func:`analyse_loop` of the identified plant, with one-σ uncertainties from
+    """:func:`analyse_plant` of the identified plant, with one-σ uncertainties from
     ``samples`` draws of the model's coefficients from their covariance."""
     dt = 1.0 / ctrl.loop_hz
-    base = analyse_loop(plant_statespace(model, axis, dt), ctrl, lag, meas_delay=meas_delay)
+    base = analyse_plant(plant_from_model(model, axis, dt), ctrl, lag, meas_delay=meas_delay)
     cov = getattr(model, "covariance", None)
     rate = AXIS_RATE[axis]
     if cov is None or samples < 2 or rate not in model.state_names:
@@ -1774,34 +2042,54 @@ def _scaled(ctrl: AxisController, k: float) -> AxisController:
     return replace(ctrl, gains=replace(g, p=g.p * k, i=g.i * k, d=g.d * k))
 
 
+def _as_plant(plant: Any) -> LinearPlant:
+    """A :class:`LinearPlant` as it is, or one of a discrete python-control state space
+    (no feedthrough)."""
+    if isinstance(plant, LinearPlant):
+        return plant
+    d = np.asarray(plant.D, dtype=float)
+    if d.size and np.any(d != 0):
+        raise ConfigError("the plant must have no feedthrough (D = 0)")
+    return LinearPlant(np.atleast_2d(np.asarray(plant.A, dtype=float)),
+                       np.asarray(plant.B, dtype=float).ravel(),
+                       np.asarray(plant.C, dtype=float).ravel(), float(plant.dt))
+
+
 def suggest_gains(plant_ss: Any, ctrl: AxisController, target_pm_deg: float = 50.0,
                   lag: int = 0, meas_delay: float = 0.0
                   ) -> tuple[dict[str, float], LoopAnalysis] | None:
     """P, I and D scaled together (ratios and filters kept) so that the loop's phase margin
-    is ``target_pm_deg``; the vehicle's parameter names and units, and the predicted loop.
-    None when no scale in [0.05, 20] reaches it with a stable loop. (``lag``, ``meas_delay``:
-    :func:`analyse_loop`.)"""
-    import warnings
-
-    import control
-
-    p = control.ss(plant_ss)
-    dt = float(plant_ss.dt)
+    is ``target_pm_deg``; the vehicle's parameter names and units, and the predicted loop
+    (:func:`analyse_plant`). None when no scale in [0.05, 20] reaches it with a stable loop.
+    ``plant_ss``: a :class:`LinearPlant` or a discrete python-control state space at the
+    controller's step. (``lag``, ``meas_delay``: :func:`analyse_loop`.)"""
+    plant = _as_plant(plant_ss)
+    dt = 1.0 / ctrl.loop_hz
     tau, num, den = _reads(meas_delay)
-    reads = control.tf(num, den, dt)
     # P, I and D scaled by k scale C_fb, so the loop, by k: one state space and one
     # response on the margins' grid serve every k (the closed loop's state matrix is
     # A − k·B·C / (1 + k·D)); the same margins as building each scaled loop, to rounding
-    cfb, _ = controller_tf(ctrl, dt)
-    unit = control.ss(cfb * reads if tau else cfb) * p
-    a, b, c, d = (np.asarray(x, dtype=float) for x in (unit.A, unit.B, unit.C, unit.D))
+    cfb, _ = controller_polys(ctrl, dt)
+    if tau:
+        cfb = _tf_mul(cfb, (np.asarray(num), np.asarray(den)))
+    # the plant, then the controller (python-control's ``C_fb * P``)
+    ac, bc, cc, dc = dsp.tf2ss(*cfb)
+    ap, bp, cp = plant.a, plant.b.reshape(-1, 1), plant.c.reshape(1, -1)
+    n_p, n_c = ap.shape[0], ac.shape[0]
+    a = np.zeros((n_p + n_c,) * 2)
+    a[:n_p, :n_p] = ap
+    a[n_p:, :n_p] = bc @ cp
+    a[n_p:, n_p:] = ac
+    b = np.concatenate([bp, np.zeros((n_c, 1))])
+    c = np.concatenate([dc @ cp, cc], axis=1)
     fm = _margin_grid(dt)
-    with np.errstate(all="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        unit_resp = frequency_response(unit, np.exp(2j * np.pi * fm * dt))
+    with np.errstate(all="ignore"):
+        zm = np.exp(2j * np.pi * fm * dt)
+        bpl, apl = _ss2tf(plant.a, plant.b, plant.c)
+        unit_resp = _tf_at((bpl, apl), zm) * _tf_at(cfb, zm)
 
     def pm(k: float) -> float:
-        closed = a - (k / (1.0 + k * float(d[0, 0]))) * (b @ c)
+        closed = a - k * (b @ c)
         if np.any(np.abs(np.linalg.eigvals(closed)) >= 1.0):
             return -1e9  # unstable closed loop
         with np.errstate(all="ignore"):
@@ -1818,7 +2106,7 @@ def suggest_gains(plant_ss: Any, ctrl: AxisController, target_pm_deg: float = 50
         mid = np.sqrt(lo * hi)
         lo, hi = (mid, hi) if pm(mid) >= target_pm_deg else (lo, mid)
     new = _scaled(ctrl, lo)
-    result = analyse_loop(plant_ss, new, lag, meas_delay=tau)
+    result = analyse_plant(plant, new, lag, meas_delay=tau)
     if not (np.isfinite(result.phase_margin_deg) and result.gain_margin_db > 0):
         return None
     return gain_params(new), result
@@ -1834,8 +2122,8 @@ def margins_on_frf(plant_frf: Any, ctrl: AxisController) -> dict[str, float]:
         return nan
     f, p = plant_frf.freq_hz[m], plant_frf.response[m]
     dt = 1.0 / ctrl.loop_hz
-    cfb, _ = controller_tf(ctrl, dt)
-    loop_resp = np.asarray(cfb(np.exp(2j * np.pi * f * dt))).ravel() * p
+    cfb, _ = controller_polys(ctrl, dt)
+    loop_resp = _tf_at(cfb, np.exp(2j * np.pi * f * dt)) * p
     band = replace(plant_frf, freq_hz=f, response=loop_resp, coherence=np.ones(f.size),
                    error=plant_frf.error[m])
     got = frd_margins(band)
@@ -2119,13 +2407,11 @@ def compare_response(measured: Any, freq_hz: np.ndarray, response: np.ndarray
 
 def frd_margins(measured: Any, freq_hz: np.ndarray | None = None,
                 response: np.ndarray | None = None) -> dict[str, float]:
-    """Gain and phase margin (python-control on an FRD) of a measured broken-loop FRF over
-    its coherent band; with ``freq_hz`` and ``response``, those of that (predicted) response
-    over the same band, for a like-for-like comparison."""
-    import warnings
-
-    import control
-
+    """Gain and phase margin of a measured broken-loop FRF over its coherent band; with
+    ``freq_hz`` and ``response``, those of that (predicted) response over the same band, for
+    a like-for-like comparison. The margins are ``control.stability_margins`` of
+    ``control.frd(h, ω)`` (:func:`_frd_margins`: its interpolation and root finding, without
+    importing python-control; ``tests/test_frequency.py`` compares)."""
     m = measured.coherent & np.isfinite(measured.response)
     nan = {"gain_db": float("nan"), "phase_deg": float("nan"), "crossover_hz": float("nan")}
     if m.sum() < 4:
@@ -2134,11 +2420,52 @@ def frd_margins(measured: Any, freq_hz: np.ndarray | None = None,
     h = measured.response[m]
     if freq_hz is not None and response is not None:
         h = np.interp(f, freq_hz, response.real) + 1j * np.interp(f, freq_hz, response.imag)
-    sys = control.frd(h, 2 * np.pi * f)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        gm, pm, _sm, _wg, wc, _ws = control.stability_margins(sys)
+    gm, pm, wc = _frd_margins(h, 2 * np.pi * f)
     return {"gain_db": _db(gm), "phase_deg": float(pm), "crossover_hz": float(wc / (2 * np.pi))}
+
+
+def _frd_margins(h: np.ndarray, w: np.ndarray) -> tuple[float, float, float]:
+    """``(gain margin, phase margin (deg), gain crossover (rad/s))`` of a frequency response
+    ``h`` at ``w`` (rad/s) as python-control's ``stability_margins`` of a smoothed FRD gives
+    them: a parametric interpolating spline through the real and imaginary parts (weights
+    ``1/(|h| + 0.001)``), the −180° and unit-gain crossings between the points located by
+    Brent's method on it; the smallest ``|log GM|`` and ``|PM|``."""
+    from scipy.interpolate import splev, splprep
+    from scipy.optimize import brentq
+
+    order = np.argsort(w, kind="stable")
+    w, h = np.asarray(w, dtype=float)[order], np.asarray(h, dtype=complex)[order]
+    tck, _ = splprep([h.real, h.imag], u=w, w=1.0 / (np.abs(h) + 0.001), s=0.0,
+                     k=3 if w.size > 3 else w.size - 1)
+
+    def at(x: Any) -> Any:
+        re, im = splev(x, tck, der=0)
+        return np.asarray(re) + 1j * np.asarray(im)
+
+    def arg(x: float) -> float:
+        return float(np.angle(-at(x)))
+
+    def mod(x: float) -> float:
+        return float(np.abs(at(x))) - 1.0
+
+    hw = at(w)
+    idx = np.where(np.diff(np.sign(np.angle(-hw))))[0]
+    idx = idx[np.real(hw[idx]) <= 0]
+    w180 = np.array([brentq(arg, w[i], w[i + 1]) for i in idx])
+    idx = np.where(np.diff(np.sign(np.abs(hw) - 1.0)))[0]
+    wc = np.array([brentq(mod, w[i], w[i + 1]) for i in idx])
+    with np.errstate(all="ignore"):
+        gms = 1.0 / np.abs(at(w180)) if w180.size else np.zeros(0)
+        pms = (np.remainder(np.angle(at(wc), deg=True), 360.0) - 180.0 if wc.size
+               else np.zeros(0))
+        gm = float("inf")
+        if gms.size and not np.isinf(gms).all():
+            lg = np.abs(np.log(gms))
+            gm = float(gms[lg == np.min(lg)][0])
+    if not pms.size:
+        return gm, float("inf"), float("nan")
+    i = int(np.flatnonzero(np.abs(pms) == np.min(np.abs(pms)))[0])
+    return gm, float(pms[i]), float(wc[i])
 
 
 # --------------------------------------------------------------------------- tune
@@ -2248,7 +2575,7 @@ def tune(result: Any, target_pm_deg: float = 50.0, samples: int = 40,
             entry["suggested"] = {}
             entry["suggested_note"] = f"no gains suggested: the plant model is {level}"
         else:
-            got = suggest_gains(plant_statespace(fit.model, axis, 1.0 / ctrl.loop_hz), ctrl,
+            got = suggest_gains(plant_from_model(fit.model, axis, 1.0 / ctrl.loop_hz), ctrl,
                                 target_pm_deg, lag, tau)
             if got is None:
                 entry["suggested"] = {}

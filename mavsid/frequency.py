@@ -149,7 +149,7 @@ def _welch(us: Sequence[np.ndarray], ys: Sequence[np.ndarray], rs: Sequence[np.n
         fr = fu if rs is None else dsp.segment_ffts(r, nper, starts=starts)
         pr = np.abs(fr) ** 2
         # per-window input power: a chirp excites a frequency in few windows only
-        sums = {"rr": pr, "uu": np.abs(fu) ** 2, "yy": np.abs(fy) ** 2,
+        sums = {"rr": pr, "uu": pr if rs is None else np.abs(fu) ** 2, "yy": np.abs(fy) ** 2,
                 "ru": np.conj(fr) * fu, "ry": np.conj(fr) * fy, "p2": pr**2}
         for key, val in sums.items():
             acc[key] = acc.get(key, 0.0) + val.sum(axis=0)

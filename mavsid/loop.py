@@ -1851,11 +1851,6 @@ def _closed_figures(f: np.ndarray, t_resp: np.ndarray, s_resp: np.ndarray
     return mag, ph, bw, dbw, phase_delay
 
 
-def _tf_poly(system: Any) -> tuple[np.ndarray, np.ndarray]:
-    """``(num, den)`` in descending powers of z of a SISO python-control transfer function."""
-    return (np.asarray(system.num[0][0], dtype=float), np.asarray(system.den[0][0], dtype=float))
-
-
 def _ss2tf(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: float = 0.0) -> _Poly:
     """``scipy.signal.ss2tf`` of a single-input single-output state space (its formula:
     ``den = poly(A)``, ``num = poly(A − B·C) + (D − 1)·den``)."""
@@ -2085,8 +2080,7 @@ def suggest_gains(plant_ss: Any, ctrl: AxisController, target_pm_deg: float = 50
     fm = _margin_grid(dt)
     with np.errstate(all="ignore"):
         zm = np.exp(2j * np.pi * fm * dt)
-        bpl, apl = _ss2tf(plant.a, plant.b, plant.c)
-        unit_resp = _tf_at((bpl, apl), zm) * _tf_at(cfb, zm)
+        unit_resp = plant_response(plant, fm) * _tf_at(cfb, zm)
 
     def pm(k: float) -> float:
         closed = a - k * (b @ c)
@@ -2251,7 +2245,7 @@ def measured_responses(fit: Any, flights: Sequence[FlightData],
 
 #: Least coherent frequencies an injection's FRF needs to choose the model structure.
 FRF_STRUCTURE_MIN_POINTS = 20
-#: Delay shifts (samples, each way) :func:`structure_by_frf` tries around each candidate.
+#: Delay shifts (samples, each way) :class:`FrfStructure` tries around each candidate.
 FRF_STRUCTURE_SHIFT = 2.0
 #: FRF error floor (fraction): the composite's bias on a noise-free chirp (leakage where
 #: the sweep is fast: 1 % median, 5 % in gain and 4 deg in phase at worst below 12 Hz)
@@ -2259,7 +2253,7 @@ FRF_STRUCTURE_FLOOR = 0.03
 
 
 def plant_response(plant: LinearPlant, freq_hz: np.ndarray) -> np.ndarray:
-    """``C (zI − A)⁻¹ B`` of a :class:`LinearPlant` at ``freq_hz`` (one batched solve).
+    """``C (zI − A)⁻¹ B`` of a :class:`LinearPlant` at ``freq_hz``.
 
     Examples
     --------
@@ -2269,10 +2263,7 @@ def plant_response(plant: LinearPlant, freq_hz: np.ndarray) -> np.ndarray:
     True
     """
     z = np.exp(2j * np.pi * np.asarray(freq_hz, dtype=float) * plant.dt)
-    n = plant.a.shape[0]
-    m = z[:, None, None] * np.eye(n) - plant.a[None, :, :]
-    x = np.linalg.solve(m, np.broadcast_to(plant.b.astype(complex), (z.size, n))[..., None])
-    return np.asarray(x[..., 0] @ plant.c, dtype=complex)
+    return _tf_at(_ss2tf(plant.a, plant.b, plant.c), z)
 
 
 class FrfStructure:
@@ -2380,11 +2371,6 @@ class FrfStructure:
 
 #: Damping values (1/s) of the poles :class:`FrfStructure` tries.
 _FRF_DAMPING = np.linspace(-2.0, 80.0, 165)
-
-
-def structure_by_frf(measured: Any, axis: str, delay_step: float = 0.125) -> FrfStructure:
-    """:class:`FrfStructure` of a measured plant FRF."""
-    return FrfStructure(measured, axis, delay_step)
 
 
 def compare_response(measured: Any, freq_hz: np.ndarray, response: np.ndarray

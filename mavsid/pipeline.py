@@ -630,11 +630,11 @@ def _fit_model(train: Sequence[Segment], axis: str, cfg: PipelineConfig,
 def _frf_chooser(axis: str, flights: Sequence[FlightData], signals: _Twins,
                  cfg: PipelineConfig) -> Any:
     """The structure chooser from the axis's SYSTEMID injection (its FRF against the
-    injection, :func:`mavsid.loop.structure_by_frf`), None where there is none or the
+    injection, :class:`mavsid.loop.FrfStructure`), None where there is none or the
     configuration fixes the delay or lags."""
     if {"delay", "delays", "lags_s"} & set(cfg.model_options):
         return None
-    from mavsid.loop import TwinSignals, measured_responses, structure_by_frf
+    from mavsid.loop import FrfStructure, TwinSignals, measured_responses
 
     sigs = [sg for fd in flights if isinstance(sg := signals.get(id(fd)), TwinSignals)]
     if len(sigs) < len(flights):
@@ -646,7 +646,7 @@ def _frf_chooser(axis: str, flights: Sequence[FlightData], signals: _Twins,
     if plant is None or not plant.referenced:
         return None
     step = cfg.model_options.get("delay_step")
-    return structure_by_frf(plant, axis, **({"delay_step": float(step)} if step else {}))
+    return FrfStructure(plant, axis, **({"delay_step": float(step)} if step else {}))
 
 
 #: Stages :func:`fit` reports per axis (reading is one more per log).

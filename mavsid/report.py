@@ -282,11 +282,10 @@ def _bode_columns(fit: AxisFit, lp: _Loop | None) -> list[dict[str, Any]]:
     if plant is not None:
         col = next((c for c in cols if c["plant"]), None)
         if col is None:  # no validation response: the loop's plant column on its own
-            dt = fit.model.dt
             curves = []
             with contextlib.suppress(MavsidError, ValueError):
-                ss = loop.plant_statespace(fit.model, fit.axis, dt)
-                model = np.asarray(ss(np.exp(2j * np.pi * plant.freq_hz * dt))).ravel()
+                model = loop.plant_response(loop.plant_from_model(fit.model, fit.axis),
+                                            plant.freq_hz)
                 curves.append(("time-domain model", plant.freq_hz, model, _COLOURS["free_run"]))
             col = {"title": f"plant u_{fit.axis} → {fit.output}", "f": plant.freq_hz,
                    "measured": ("measured (SYSTEMID runs)", plant.response),

@@ -204,7 +204,7 @@ def identify_segments(
     structure is searched, receives per candidate lag (s) its least-squares model at its
     best one-step delay and returns the ``(lag_s, delay_samples)`` to fit instead, or None
     to keep the one-step choice (the pipeline passes one that scores the candidates against
-    a frequency response measured from an injection, :func:`mavsid.loop.structure_by_frf`).
+    a frequency response measured from an injection, :class:`mavsid.loop.FrfStructure`).
     A chooser with an ``estimate(model)`` method (the model's coefficients estimated another
     way, or None) has that estimate's spread join the covariance.
     :func:`fit_axis` calls this with an axis's names and the log's filters.
@@ -276,13 +276,11 @@ def identify_segments(
         for its coefficients and cost: least squares from the search's Gram and, for a
         one-state affine model, the output-error optimum by exact-Jacobian Gauss–Newton;
         anything else through :func:`fitted`."""
-        st = with_lag(base, lg, choice.by_lag[lg][1])
-        coef0 = choice.ls_coef.get(lg)
-        if (coef0 is None or estimator != "ls" or continuous
+        m0 = _search_ls_model(choice, base, dt, lg)
+        if (m0 is None or estimator != "ls" or continuous
                 or set(estimator_options or {}) - _LS_SETTINGS_KEEPING_COEF):
-            return fitted(st, cheap=True)
-        m0 = Model(st.outputs, st.inputs, st.features, coef0, dt, delay=st.delay,
-                   filters=st.filters, delay_frac=st.delay_frac)
+            return fitted(with_lag(base, lg, choice.by_lag[lg][1]), cheap=True)
+        coef0 = m0.coef
         if not (refine == "oe" or (refine == "auto" and m0.is_affine)):
             return m0, math.nan, None
         # started from the chosen lag's refined pole (nearer than its own least squares)
@@ -290,7 +288,7 @@ def identify_segments(
         got = output_error_coef(replace(m0, coef=start), segments,
                                 filtered=choice.inputs.get(lg))
         if got is None:
-            return fitted(st, cheap=True)
+            return fitted(with_lag(base, lg, choice.by_lag[lg][1]), cheap=True)
         return replace(m0, coef=got[0]), got[1], None
 
     model, cost, failed = fitted(structure)
@@ -372,14 +370,23 @@ def identify_segments(
 StructureChooser = Callable[[Mapping[float, Model]], "tuple[float, float] | None"]
 
 
+def _search_ls_model(choice: StructureChoice, base: Structure, dt: float, lag: float
+                     ) -> Model | None:
+    """The search's least-squares model of a candidate lag at its best delay (from the
+    search's Gram), None when the search kept none."""
+    coef = choice.ls_coef.get(lag)
+    if coef is None:
+        return None
+    st = with_lag(base, lag, choice.by_lag[lag][1])
+    return Model(st.outputs, st.inputs, st.features, coef, dt, delay=st.delay,
+                 filters=st.filters, delay_frac=st.delay_frac)
+
+
 def _pick(choice: StructureChoice, base: Structure, dt: float, chooser: StructureChooser
           ) -> tuple[float, float] | None:
     """``chooser``'s (lag, delay) among the search's candidates, None to keep its own."""
-    models = {}
-    for lg, coef in choice.ls_coef.items():
-        st = with_lag(base, lg, choice.by_lag[lg][1])
-        models[lg] = Model(st.outputs, st.inputs, st.features, coef, dt, delay=st.delay,
-                           filters=st.filters, delay_frac=st.delay_frac)
+    models = {lg: m for lg in choice.ls_coef
+              if (m := _search_ls_model(choice, base, dt, lg)) is not None}
     got = chooser(models) if len(models) > 1 else None
     if got is None or got[0] not in choice.by_lag:
         return None

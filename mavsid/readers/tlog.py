@@ -77,7 +77,7 @@ import mmap
 import os
 import re
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -369,22 +369,29 @@ def _scan(buf: NDArray[np.uint8], size: int, defs: dict[int, MessageDef]) -> _Fr
     )
 
 
-def _streamed(buf: NDArray[np.uint8], at: NDArray[np.integer], width: int
-              ) -> NDArray[np.uint8]:
-    """:func:`_windows` of offsets ``at`` in ascending (file) order, gathered a block of the
-    file at a time with the pages behind handed back: one gather over the whole file maps
-    all of it into the process again, on top of the arrays being built (a 100 MB .tlog's
-    read peaked 100 MB higher)."""
-    if at.size < 2 or int(at[-1]) - int(at[0]) <= _BLOCK:
-        return _windows(buf, at, width)
-    out = np.empty((at.size, width), np.uint8)
+def _in_blocks(buf: NDArray[np.uint8], at: NDArray[np.integer]) -> Iterator[tuple[int, int]]:
+    """Index ranges ``(a, b)`` of the ascending file offsets ``at``, one per :data:`_BLOCK`
+    of the file; once the caller is done with a range the file's pages behind it are handed
+    back, so that a gather over the whole file never maps all of it into the process again
+    (a 100 MB .tlog's read peaked 100 MB higher)."""
+    if not at.size:
+        return
     edges = np.arange(int(at[0]) + _BLOCK, int(at[-1]) + 1, _BLOCK)
     a = 0
     for b in [*np.searchsorted(at, edges).tolist(), at.size]:
         if b > a:
-            out[a:b] = _windows(buf, at[a:b], width)
+            yield a, b
             _release(buf, int(at[a]) - _BLOCK, int(at[a]))
         a = b
+
+
+def _streamed(buf: NDArray[np.uint8], at: NDArray[np.integer], width: int
+              ) -> NDArray[np.uint8]:
+    """:func:`_windows` of offsets ``at`` in ascending (file) order, a block at a time
+    (:func:`_in_blocks`)."""
+    out = np.empty((at.size, width), np.uint8)
+    for a, b in _in_blocks(buf, at):
+        out[a:b] = _windows(buf, at[a:b], width)
     return out
 
 
@@ -604,21 +611,13 @@ def _own_times(buf: NDArray[np.uint8], frames: _Frames, groups: dict[int, NDArra
               for i in groups if (mdef := defs[i]).time_field is not None}
     raw = {i: np.zeros((groups[i].size, base.itemsize), np.uint8)
            for i, (base, _) in fields.items()}
-    pos = frames.payload
-    edges = (np.arange(int(pos[0]) + _BLOCK, int(pos[-1]) + 1, _BLOCK) if pos.size
-             else np.zeros(0, np.int64))
-    a = 0
-    for b in [*np.searchsorted(pos, edges).tolist(), pos.size]:
-        if b <= a:
-            continue
+    for a, b in _in_blocks(buf, frames.payload):
         for i, (base, offset) in fields.items():
             rows = groups[i]
             ra, rb = np.searchsorted(rows, (a, b)).tolist()
             if rb > ra:
                 raw[i][ra:rb] = _payloads(buf, frames, rows[ra:rb], base.itemsize, offset,
                                           stream=False)
-        _release(buf, int(pos[a]) - _BLOCK, int(pos[a]))
-        a = b
     out: dict[int, NDArray[np.float64] | None] = {i: None for i in groups}
     for i, (base, _) in fields.items():
         value = raw.pop(i).view(base)[:, 0].astype(np.float64)

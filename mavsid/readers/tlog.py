@@ -586,13 +586,10 @@ def _unknown_frames(
 
 def _payloads(
     buf: NDArray[np.uint8], frames: _Frames, rows: NDArray[np.int64], width: int, at: int = 0,
-    stream: bool = True,
 ) -> NDArray[np.uint8]:
-    """``width`` payload bytes from offset ``at`` of the given frames (``rows`` ascending:
-    file order), zeros past their end; with ``stream`` gathered a block of the file at a
-    time, the pages behind handed back (:func:`_streamed`)."""
-    at_ = frames.payload[rows] + at
-    raw = _streamed(buf, at_, width) if stream else _windows(buf, at_, width)
+    """``width`` payload bytes from offset ``at`` of the given frames, zeros past their end
+    (a MAVLink 2 payload is sent without its trailing zeros)."""
+    raw = _windows(buf, frames.payload[rows] + at, width)
     length = frames.length[rows].astype(np.int64) - at
     short = np.flatnonzero(length < width)
     if short.size:
@@ -616,8 +613,7 @@ def _own_times(buf: NDArray[np.uint8], frames: _Frames, groups: dict[int, NDArra
             rows = groups[i]
             ra, rb = np.searchsorted(rows, (a, b)).tolist()
             if rb > ra:
-                raw[i][ra:rb] = _payloads(buf, frames, rows[ra:rb], base.itemsize, offset,
-                                          stream=False)
+                raw[i][ra:rb] = _payloads(buf, frames, rows[ra:rb], base.itemsize, offset)
     out: dict[int, NDArray[np.float64] | None] = {i: None for i in groups}
     for i, (base, _) in fields.items():
         value = raw.pop(i).view(base)[:, 0].astype(np.float64)
@@ -645,12 +641,23 @@ def _table(
     time_s: NDArray[np.float64],
     units: dict[str, str],
 ) -> MessageTable:
-    """Decode one message type's frames into a table."""
-    raw = _payloads(buf, frames, rows, mdef.dtype.itemsize)
-    rec = np.ascontiguousarray(raw).view(mdef.dtype)[:, 0]
-    columns: dict[str, NDArray[Any]] = {}
-    for name in mdef.fields:
-        columns[name] = _strings(rec[name]) if name in mdef.strings else rec[name].copy()
+    """Decode one message type's frames (``rows`` ascending: file order) into a table.
+
+    The payloads are gathered a block of the file at a time (:func:`_in_blocks`, the pages
+    behind handed back) and each block's fields copied into columns made beforehand: the
+    whole type's raw records never exist beside its columns (a 100 MB .tlog's read peaked
+    ~10 MB higher with them)."""
+    dtype = mdef.dtype
+    columns: dict[str, NDArray[Any]] = {
+        name: np.empty((rows.size, *dtype.fields[name][0].shape),  # type: ignore[index]
+                       dtype.fields[name][0].base)  # type: ignore[index]
+        for name in mdef.fields}  # fmt: skip
+    for a, b in _in_blocks(buf, frames.payload[rows]):
+        rec = _payloads(buf, frames, rows[a:b], dtype.itemsize).view(dtype)[:, 0]
+        for name, column in columns.items():
+            column[a:b] = rec[name]
+    for name in mdef.strings:
+        columns[name] = _strings(columns[name])
     columns["_sysid"] = frames.sysid[rows].astype(np.uint8)
     columns["_compid"] = frames.compid[rows].astype(np.uint8)
     columns["_recv_time_s"] = frames.recv_s[rows]

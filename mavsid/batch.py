@@ -418,7 +418,7 @@ def write_trends_html(tables: Mapping[str, pd.DataFrame], path: str | os.PathLik
     points found (:func:`trends`)."""
     import matplotlib.pyplot as plt
 
-    from mavsid.report import figure_png, render_html_page
+    from mavsid.report import figure_img, render_html_page
 
     axes = tables["axes"]
     found = trends(axes)
@@ -443,7 +443,7 @@ def write_trends_html(tables: Mapping[str, pd.DataFrame], path: str | os.PathLik
                               fontsize=7)
             axs[0, 0].set_title(f"{vehicle} — {axis}")
             fig.tight_layout()
-            sections.append(figure_png(fig))
+            sections.append(figure_img(fig))
             plt.close(fig)
     logs = tables["logs"]
     if len(logs):

@@ -43,7 +43,7 @@ from mavsid.validation import Validation, horizon_label
 if TYPE_CHECKING:
     from mavsid.pipeline import AxisFit, FitResult
 
-__all__ = ["figure_png", "loop_analysis", "loop_section", "render_html", "render_html_page",
+__all__ = ["figure_img", "loop_analysis", "loop_section", "render_html", "render_html_page",
            "write_report"]
 
 #: the grids' opacity (major and, from :func:`_log_minor`, minor lines)
@@ -65,13 +65,19 @@ img { max-width: 100%; height: auto; display: block; margin: .5em 0; }
 """
 
 
-def figure_png(fig: Figure) -> str:
-    """A figure as an ``<img>`` tag with the PNG inlined (base64; zlib level 1: the same
-    pixels, 11 % more bytes than the default level 6 for a tenth of the time saving takes)."""
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90, pil_kwargs={"compress_level": 1})
-    data = base64.b64encode(buf.getvalue()).decode("ascii")
-    return f'<img alt="figure" src="data:image/png;base64,{data}">'
+def figure_img(fig: Figure) -> str:
+    """A figure as an ``<img>`` tag with an SVG inlined (base64): vector lines that stay
+    sharp at any zoom, text kept as text (``svg.fonttype`` none: no glyph outlines), no
+    timestamp or random ids (the same result gives the same file). Drawing it costs a
+    quarter less than rasterising a 90-dpi PNG (the SITL flight's report 2.1 -> 1.6 s) and
+    the report is a third smaller."""
+    buf = io.StringIO()
+    with mpl.rc_context({"svg.fonttype": "none", "svg.hashsalt": "mavsid"}):
+        fig.savefig(buf, format="svg", metadata={"Date": None})
+    text = buf.getvalue()
+    text = text[text.find("<svg"):]  # no XML prolog or doctype: what a data URI needs only
+    data = base64.b64encode(text.encode("utf-8")).decode("ascii")
+    return f'<img alt="figure" src="data:image/svg+xml;base64,{data}">'
 
 
 _POOL = threading.local()
@@ -83,7 +89,7 @@ def _panels(figsize: tuple[float, float], rows: int = 1, cols: int = 1,
     the one drawn last with this layout emptied and handed out again when there is one:
     building axes (their ticks, spines and scales) was a third of the report's figure time,
     and a figure drawn again reuses its renderer's text metrics. Draw the figure before
-    asking for the same layout again (every figure here goes to :func:`figure_png` at once).
+    asking for the same layout again (every figure here goes to :func:`figure_img` at once).
     """
     pool: dict[str, tuple[Figure, np.ndarray]] = _POOL.__dict__.setdefault("figures", {})
     key = repr((figsize, rows, cols, sorted(kw.items())))
@@ -473,15 +479,15 @@ def _axis_section(fit: AxisFit, lp: _Loop | None = None) -> str:
         '<table><tr><th class="name">output</th><th>fit % one step</th><th>fit % 0.5 s</th>'
         "<th>fit % free run</th><th>RMSE one step</th><th>RMSE free run</th></tr>"
         f"{fit_rows}</table>",
-        figure_png(_time_figure(fit)),
+        figure_img(_time_figure(fit)),
         '<div class="row">'
-        + figure_png(_horizon_figure(v))
-        + figure_png(_residual_figure(v))
+        + figure_img(_horizon_figure(v))
+        + figure_img(_residual_figure(v))
         + "</div>",
     ]
     bode = _bode_figure(fit, lp)
     if bode is not None:
-        parts.append(figure_png(bode))
+        parts.append(figure_img(bode))
     return "\n".join(parts)
 
 
@@ -624,7 +630,7 @@ def loop_section(result: FitResult, target_pm_deg: float = 50.0, *,
                    if cl.defaults_used else "") + "</p>")
             twin = _twin_figure(fit)
             if twin is not None:
-                parts.append(figure_png(twin))
+                parts.append(figure_img(twin))
         else:
             parts.append(f"<p>closed-loop twin not run: {html.escape(fit.closed_loop_note)}</p>")
         entry: dict[str, Any] = dict(report.get(axis, {}))
@@ -642,5 +648,5 @@ def loop_section(result: FitResult, target_pm_deg: float = 50.0, *,
             continue
         bode = _bode_figure(fit, lp)
         if bode is not None:
-            parts.append(figure_png(bode))
+            parts.append(figure_img(bode))
     return "\n".join(parts)

@@ -68,7 +68,7 @@ def test_fit_writes_model_rrd_and_report(fitted) -> None:  # type: ignore[no-unt
     models = json.loads((out / "model.json").read_text())
     assert list(models["axes"]) == ["roll"]
     html = (out / "fit.html").read_text()
-    assert html.startswith("<!DOCTYPE html>") and "data:image/png;base64," in html
+    assert html.startswith("<!DOCTYPE html>") and "data:image/svg+xml;base64," in html
     entities = {c.entity_path for c in RrdReader(out / "fit.rrd").stream().to_chunks()}
     assert {"/axes/roll/p/measured", "/axes/roll/p/free_run", "/segments/roll"} <= entities
 

@@ -3,16 +3,19 @@
 from __future__ import annotations
 
 import base64
-import io
 import re
+import xml.etree.ElementTree as ET
 from html.parser import HTMLParser
 
-import matplotlib.image as mpimg
 import numpy as np
 import pytest
 from toy_plants import toy_flight
 
 from mavsid import report
+
+_SVG = "{http://www.w3.org/2000/svg}"
+#: the colours of frames, ticks and grids (matplotlib's defaults)
+_FRAME = {"#000000", "#b0b0b0", "#cccccc", "#d9d9d9", "#ffffff"}
 
 
 class _Collect(HTMLParser):
@@ -67,13 +70,19 @@ def test_report_is_self_contained_with_real_figures(page) -> None:  # type: igno
     assert len(parsed.imgs) == 4 * len(result.axes)
     for src in parsed.imgs:
         head, data = src.split(",", 1)
-        assert head == "data:image/png;base64"
-        img = mpimg.imread(io.BytesIO(base64.b64decode(data)), format="png")
-        assert img.shape[0] > 150 and img.shape[1] > 300
-        rgb = img[..., :3].reshape(-1, 3)
-        # a plot: mostly white background, with dark axes and coloured lines
-        assert np.mean(np.all(rgb > 0.95, axis=1)) > 0.4
-        assert len(np.unique((rgb * 31).round(), axis=0)) > 20
+        assert head == "data:image/svg+xml;base64"
+        svg = ET.fromstring(base64.b64decode(data))
+        assert svg.tag == f"{_SVG}svg"
+        width, height = (float(svg.get(k, "0").removesuffix("pt")) for k in ("width", "height"))
+        assert width > 300 and height > 150
+        # a plot: data curves (coloured, several points: not the frame, ticks or grid) and
+        # its labels as text
+        curves = [e for e in svg.iter(f"{_SVG}path")
+                  if (m := re.search(r"stroke: (#\w+)", e.get("style") or ""))
+                  and m.group(1) not in _FRAME and len(re.findall(r"[ML]", e.get("d", ""))) >= 8]
+        assert curves
+        words = " ".join("".join(e.itertext()) for e in svg.iter(f"{_SVG}text"))
+        assert re.search(r"[A-Za-z]{3}", words) and re.search(r"\d", words)
 
 
 def test_parameter_table_shows_the_true_plant(page) -> None:  # type: ignore[no-untyped-def]

@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any
 
 from mavsid import __version__
 from mavsid.errors import ConfigError, MavsidError, MavsidWarning, escape, escape_lines
-from mavsid.outputs import atomic_path, check_outputs
+from mavsid.outputs import ReportWorker, atomic_path, check_outputs
 
 if TYPE_CHECKING:
     from mavsid.pipeline import FitResult, PipelineConfig
@@ -319,19 +319,39 @@ def _progress(args: argparse.Namespace, total: int) -> Iterator[Callable[[str], 
 
 
 def _write_outputs(args: argparse.Namespace, result: FitResult,
-                   step: Callable[[str], None] = lambda stage: None) -> None:
-    if args.rrd:
-        from mavsid.viz import save_rrd
+                   step: Callable[[str], None] = lambda stage: None,
+                   worker: ReportWorker | None = None) -> None:
+    """The ``.rrd`` and the report; the report drawn by ``worker`` (a process started with
+    the command, see :class:`~mavsid.outputs.ReportWorker`) while the ``.rrd`` is written,
+    else here after it."""
+    with contextlib.ExitStack() as stack:
+        report_tmp = None
+        if args.report:
+            step(f"writing {args.report}")
+            report_tmp = stack.enter_context(atomic_path(args.report))
+            if worker is not None:
+                worker.start(result, report_tmp, args.report)
+        if args.rrd:
+            from mavsid.viz import save_rrd
 
-        step(f"writing {args.rrd}")
-        with atomic_path(args.rrd) as tmp:
-            save_rrd(result, tmp)
-    if args.report:
-        from mavsid.report import write_report
+            step(f"writing {args.rrd}")
+            with atomic_path(args.rrd) as tmp:
+                save_rrd(result, tmp)
+        if report_tmp is not None:
+            if worker is not None:
+                worker.wait()
+            else:
+                from mavsid.report import write_report
 
-        step(f"writing {args.report}")
-        with atomic_path(args.report) as tmp:
-            write_report(result, tmp)
+                write_report(result, report_tmp)
+
+
+def _report_worker(args: argparse.Namespace) -> contextlib.AbstractContextManager[Any]:
+    """A :class:`~mavsid.outputs.ReportWorker` when the command writes a report (and one can
+    be started), else nothing (``None``)."""
+    if args.report and ReportWorker.available():
+        return ReportWorker()
+    return contextlib.nullcontext()
 
 
 def _print_result(args: argparse.Namespace, result: FitResult) -> None:
@@ -390,12 +410,13 @@ def _fit(args: argparse.Namespace) -> int:
 
     check_outputs([args.output, args.rrd, args.report], args.logs)
     cfg = _pipeline_config(args)
-    with _progress(args, _stages(args, len(cfg.axes), len(FIT_STAGES))) as step:
+    with _report_worker(args) as worker, \
+            _progress(args, _stages(args, len(cfg.axes), len(FIT_STAGES))) as step:
         result = fit(args.logs, cfg, progress=step)
         if args.output:
             with atomic_path(args.output) as tmp, open(tmp, "w", encoding="utf-8") as f:
                 json.dump(result.models_dict(), f, indent=1)
-        _write_outputs(args, result, step)
+        _write_outputs(args, result, step, worker)
     _print_result(args, result)
     if args.output and not args.json:
         print(f"wrote {args.output}")
@@ -423,9 +444,10 @@ def _validate(args: argparse.Namespace) -> int:
     models = load_models(args.model)
     cfg = _pipeline_config(args)
     axes = len([a for a in models if a in cfg.axes])
-    with _progress(args, _stages(args, axes, len(VALIDATE_STAGES))) as step:
+    with _report_worker(args) as worker, \
+            _progress(args, _stages(args, axes, len(VALIDATE_STAGES))) as step:
         result = validate_logs(models, args.logs, cfg, progress=step)
-        _write_outputs(args, result, step)
+        _write_outputs(args, result, step, worker)
     _print_result(args, result)
     return 0
 

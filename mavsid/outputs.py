@@ -27,12 +27,18 @@ from __future__ import annotations
 
 import contextlib
 import os
+import pickle
+import signal
+import sys
 import tempfile
+import threading
 from collections.abc import Iterable, Iterator
+from typing import Any
 
-from mavsid.errors import ConfigError
+from mavsid import errors
+from mavsid.errors import ConfigError, MavsidError
 
-__all__ = ["atomic_path", "check_outputs"]
+__all__ = ["ReportWorker", "atomic_path", "check_outputs"]
 
 PathLike = str | os.PathLike[str]
 
@@ -108,3 +114,119 @@ def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
     return mask
+
+
+# --------------------------------------------------------------------------- report worker
+_SERVE = "from mavsid.outputs import _serve_report; _serve_report()"
+
+
+class ReportWorker:
+    """:func:`mavsid.report.write_report` in a process of its own, started when a command
+    begins: it imports matplotlib and the report (~0.5 s) while this process reads and fits
+    the logs, then draws the report (~1.5 s on a 100 MB flight) while this one writes the
+    other outputs (the ``.rrd``: ~1 s with rerun's import). On two cores ``fit --rrd
+    --report`` of the SITL flight then ends when the report does.
+
+    Use it as a context manager: leaving the block without :meth:`wait` ends the process
+    (a fit that failed, Ctrl-C), and no file it was writing is left behind (the caller's
+    :func:`atomic_path` removes it).
+
+    Examples
+    --------
+    >>> with ReportWorker() as worker:  # a command that fails before its outputs
+    ...     pass
+    >>> worker.returncode is not None
+    True
+    """
+
+    def __init__(self) -> None:
+        import subprocess  # (not at import: 4 ms of every command's start)
+
+        root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+        paths = [root, *filter(None, [os.environ.get("PYTHONPATH")])]  # this mavsid first
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join(paths)}
+        self._proc: subprocess.Popen[bytes] = subprocess.Popen(
+            [sys.executable, "-c", _SERVE], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+            env=env)
+        self._feeder: threading.Thread | None = None
+        self._target = ""
+
+    @staticmethod
+    def available() -> bool:
+        """Whether a worker can be started (an interpreter to start: not a frozen app)."""
+        return bool(sys.executable) and not getattr(sys, "frozen", False)
+
+    @property
+    def returncode(self) -> int | None:
+        return self._proc.returncode
+
+    def start(self, result: Any, path: str, target: str) -> None:
+        """Hand the worker ``result`` to write to ``path`` (a temporary file of ``target``,
+        the output named in errors); returns at once (a thread feeds the pipe)."""
+        self._target = target
+        stdin = self._proc.stdin
+        assert stdin is not None
+
+        def feed() -> None:
+            with contextlib.suppress(OSError):  # the worker died: wait() says so
+                with stdin:
+                    pickle.dump((result, path), stdin, protocol=pickle.HIGHEST_PROTOCOL)
+
+        self._feeder = threading.Thread(target=feed, daemon=True)
+        self._feeder.start()
+
+    def wait(self) -> None:
+        """Wait for the report.
+
+        Raises
+        ------
+        MavsidError
+            What stopped it, one line naming the output (of the class the worker raised:
+            :class:`~mavsid.errors.ConfigError` when the file could not be written); a
+            defect's traceback is printed by the worker itself.
+        """
+        if self._feeder is not None:
+            self._feeder.join()
+        assert self._proc.stdout is not None
+        said = self._proc.stdout.read().decode("utf-8", "replace").strip()
+        if self._proc.wait() == 0:
+            return
+        kind, _, message = said.partition("\t")
+        cls = getattr(errors, kind, None)
+        if not (isinstance(cls, type) and issubclass(cls, MavsidError) and message):
+            cls, message = MavsidError, "the report could not be drawn (the error above)"
+        raise cls(f"{self._target}: {message}")
+
+    def __enter__(self) -> ReportWorker:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._proc.poll() is None:
+            self._proc.kill()
+        for stream in (self._proc.stdin, self._proc.stdout):
+            with contextlib.suppress(OSError):
+                if stream is not None:
+                    stream.close()
+        self._proc.wait()
+
+
+def _serve_report() -> None:
+    """The worker's side of :class:`ReportWorker`: import the report, read ``(result,
+    path)`` from standard input, write it; a :class:`~mavsid.errors.MavsidError` or a file
+    that cannot be written is one line ``class<TAB>message`` on standard output, exit 1."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the command's Ctrl-C ends it, not this
+    from mavsid import loop, pipeline, report  # noqa: F401  (while the logs are fitted)
+
+    report.warm_up()
+    try:
+        result, path = pickle.load(sys.stdin.buffer)
+    except EOFError:  # the command stopped before its outputs
+        return
+    try:
+        report.write_report(result, path)
+    except MavsidError as exc:
+        print(f"{type(exc).__name__}\t{exc}", flush=True)
+        sys.exit(1)
+    except OSError as exc:
+        print(f"ConfigError\tcannot write: {exc.strerror or exc}", flush=True)
+        sys.exit(1)

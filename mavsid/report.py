@@ -80,6 +80,17 @@ def figure_img(fig: Figure) -> str:
     return f'<img alt="figure" src="data:image/svg+xml;base64,{data}">'
 
 
+def warm_up() -> None:
+    """Draw a throwaway figure: the first drawing in a process loads the fonts and the SVG
+    backend (~60 ms), which a process waiting for its result (:class:`~mavsid.outputs.
+    ReportWorker`) does beforehand."""
+    fig = Figure(figsize=(2, 1.5))
+    ax = fig.subplots()
+    ax.semilogx([1.0, 10.0], [0.0, 1.0])
+    ax.set_title("x")
+    figure_img(fig)
+
+
 _POOL = threading.local()
 
 

@@ -83,3 +83,76 @@ def test_a_failed_fit_leaves_the_old_output_alone(tmp_path: Path) -> None:
     code, _ = _run("fit", str(FIXTURES / "sysid_roll.bin"), "-o", str(out))
     assert code == 0 and out.read_text().startswith("{")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["model.json"]
+
+
+# --------------------------------------------------------------------------- report worker
+@pytest.fixture(scope="module")
+def fitted():  # type: ignore[no-untyped-def]
+    from toy_plants import toy_flight
+
+    return toy_flight()[1]
+
+
+@pytest.fixture(autouse=True)
+def _tests_importable(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """The toy result refers to classes of the tests' own modules: the worker imports them
+    from here."""
+    paths = [str(Path(__file__).parent), *filter(None, [os.environ.get("PYTHONPATH")])]
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join(paths))
+
+
+def test_the_report_worker_writes_the_report_drawn_here(fitted, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """The report drawn in the worker process is the one drawn in this process, byte for
+    byte (its SVG figures carry no date and no random ids)."""
+    from mavsid import report
+    from mavsid.outputs import ReportWorker
+
+    here, there = tmp_path / "here.html", tmp_path / "there.html"
+    report.write_report(fitted, here)
+    with ReportWorker() as worker:
+        worker.start(fitted, str(there), "fit.html")
+        worker.wait()
+    assert worker.returncode == 0
+    assert there.read_bytes() == here.read_bytes()
+
+
+def test_a_report_the_worker_cannot_write_is_one_line(fitted, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    from mavsid.errors import ConfigError
+    from mavsid.outputs import ReportWorker
+
+    with ReportWorker() as worker:
+        worker.start(fitted, str(tmp_path / "gone" / "x.html"), "fit.html")
+        with pytest.raises(ConfigError, match=r"^fit\.html: cannot write: No such file"):
+            worker.wait()
+
+
+def test_a_defect_in_the_worker_is_an_error_naming_the_report(capfd) -> None:  # type: ignore[no-untyped-def]
+    """Not a result (a defect of the caller's): the worker prints its traceback, the
+    command gets one MavsidError naming the output."""
+    from mavsid.errors import MavsidError
+    from mavsid.outputs import ReportWorker
+
+    with ReportWorker() as worker:
+        worker.start(42, os.devnull, "fit.html")
+        with pytest.raises(MavsidError, match=r"^fit\.html: the report could not be drawn"):
+            worker.wait()
+    assert "Traceback" in capfd.readouterr().err
+
+
+def test_a_command_that_stops_ends_its_worker() -> None:
+    from mavsid.outputs import ReportWorker
+
+    with pytest.raises(RuntimeError), ReportWorker() as worker:
+        raise RuntimeError("the fit failed")
+    assert worker.returncode is not None
+
+
+def test_fit_with_a_report_that_fails_leaves_nothing(log: Path, tmp_path: Path) -> None:
+    """``fit --report --rrd`` on a log without excitation: exit 1, and neither output nor a
+    temporary file is left (the worker was ended with the command)."""
+    out = tmp_path / "out"
+    out.mkdir()
+    code, err = _run("fit", str(FIXTURES / "hover.bin"), "--report", str(out / "f.html"),
+                     "--rrd", str(out / "f.rrd"))
+    assert code == 1 and err.count("\n") == 1
+    assert list(out.iterdir()) == []

@@ -115,6 +115,7 @@ from mavsid.data import MessageTable, RawLog
 from mavsid.errors import ConfigError, MissingMessageError
 
 __all__ = [
+    "DESIRED_CHANNELS",
     "INJECTION_CHANNEL",
     "INPUT_NAMES",
     "MIXERS",
@@ -530,6 +531,14 @@ TARGET_CHANNELS: dict[str, tuple[Channel, ...]] = {
     )
     for rate, des, pid, px4 in (("p", "R", "PIDR", "roll"), ("q", "P", "PIDP", "pitch"),
                                 ("r", "Y", "PIDY", "yaw"))
+}
+#: The commanded attitude per axis (roll, pitch), where a log has it: from the pilot's sticks in
+#: the manual modes, which the gyro's noise does not reach (the instruments of
+#: :mod:`mavsid.estimators.instruments`). ArduPilot ATT.DesRoll/DesPitch (deg), logged with
+#: the attitude (a ground station's NAV_CONTROLLER_OUTPUT comes at a few Hz, PX4's setpoint
+#: as a quaternion: not yet used).
+DESIRED_CHANNELS: dict[str, tuple[Channel, ...]] = {
+    axis: (_ch("ATT", f"Des{axis.capitalize()}", "deg"),) for axis in ("roll", "pitch")
 }
 #: ArduPilot SYSTEMID's injected waveform (added to the mixer input on SID_AXIS 10-12)
 INJECTION_CHANNEL = _ch("SIDD", "Targ")

@@ -649,6 +649,53 @@ def _frf_chooser(axis: str, flights: Sequence[FlightData], signals: _Twins,
     return FrfStructure(plant, axis, **({"delay_step": float(step)} if step else {}))
 
 
+class _InstrumentCheck:
+    """``choose_structure`` for :func:`mavsid.estimators.fit_axis` where there is no
+    injection: keeps the search's structure, and estimates the chosen model again with the
+    commanded attitude as instrument (:func:`mavsid.estimators.instruments.
+    instrument_estimate`), whose difference joins the covariance: a fit the fed-back gyro
+    noise biased says so in its σ."""
+
+    estimate_source = "the estimate with the commanded attitude as instrument"
+
+    def __init__(self, segments: Sequence[Segment],
+                 references: Sequence[np.ndarray | None]) -> None:
+        self.segments, self.references = list(segments), list(references)
+
+    def __call__(self, models: Any) -> None:
+        return None
+
+    def estimate(self, model: Any) -> Any:
+        from mavsid.estimators.instruments import instrument_estimate
+
+        return instrument_estimate(model, self.segments, self.references)
+
+
+def _instrument_check(axis: str, flights: Sequence[FlightData], signals: _Twins,
+                      segments: Sequence[Segment]) -> _InstrumentCheck | None:
+    """An :class:`_InstrumentCheck` of ``segments`` (cut from ``flights``), with their
+    commanded attitude on their samples; None where the logs have none for the axis."""
+    from mavsid.loop import TwinSignals
+
+    refs: list[np.ndarray | None] = []
+    for seg in segments:
+        ref = None
+        for fd in flights:
+            sg = signals.get(id(fd))
+            desired = sg.desired.get(axis) if isinstance(sg, TwinSignals) else None
+            if desired is None or not len(seg) or seg.log != fd.source.path:
+                continue
+            i0 = int(np.searchsorted(fd.time_s, seg.time_s[0] - 1e-9))
+            i1 = i0 + len(seg)
+            if i1 <= len(fd.time_s) and np.allclose(fd.time_s[i0:i1], seg.time_s, atol=1e-6):
+                ref = desired[i0:i1]
+                break
+        refs.append(ref)
+    if all(r is None for r in refs):
+        return None
+    return _InstrumentCheck(segments, refs)
+
+
 #: Stages :func:`fit` reports per axis (reading is one more per log).
 FIT_STAGES = ("segments", "fit", "validation", "closed-loop twin")
 
@@ -714,7 +761,8 @@ def fit(
         try:
             train, held_out = split_segments(segs, cfg.block_s)
             next_stage()
-            model = _fit_model(train, axis, cfg, _frf_chooser(axis, flights, signals, cfg))
+            model = _fit_model(train, axis, cfg, _frf_chooser(axis, flights, signals, cfg)
+                               or _instrument_check(axis, flights, signals, train))
             next_stage()
             val = _validate(model, held_out, cfg)
         except NoExcitationError as exc:

@@ -54,6 +54,9 @@ REFUSE_SAMPLES_PER_PARAM = 10
 #: A control effectiveness whose standard error exceeds this fraction of its value is not
 #: identified: the data do not say how strongly the axis responds.
 MAX_EFFECTIVENESS_REL_SE = 0.25
+#: A second estimate of the effectiveness (the frequency response against an injection, the
+#: commanded attitude as instrument) differing by this share or more is said in the notes
+OTHER_ESTIMATE_NOTE = 0.05
 
 
 @dataclass(frozen=True)
@@ -414,6 +417,14 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
                         + " (the data alone would take it past the physical limit)")
         else:
             notes.append("bounded fit, no bound active")
+
+    other = prov.get("other_estimate")
+    eff = rel
+    if isinstance(other, Mapping) and eff is not None:
+        alt = float(dict(other.get("params") or {}).get(eff[0], math.nan))
+        if math.isfinite(alt) and abs(alt / eff[1] - 1) >= OTHER_ESTIMATE_NOTE:
+            notes.append(f"{eff[0]} {alt:.4g} by {other.get('by')} against {eff[1]:.4g} "
+                         f"({100 * (alt / eff[1] - 1):+.0f} %): its σ include the difference")
 
     # open loop
     drift = False

@@ -357,13 +357,20 @@ def identify_segments(
                                    if neighbours else "statistical") + (
             f"; the lags the data cannot tell apart ({', '.join(f'{x:g}' for x in sorted(alike))}"
             " s)" if alike else "") + (
-            "; the estimate from the frequency response against the injection"
+            f"; {getattr(choose_structure, 'estimate_source', _FRF_SOURCE)}"
             if by_frf is not None else "")
+    if by_frf is not None:  # (what the verdict compares; JSON-friendly)
+        prov["other_estimate"] = {
+            "by": getattr(choose_structure, "estimate_source", _FRF_SOURCE),
+            "params": {k: float(v) for k, v in by_frf.params.items()}}
     prov["filters"] = [f.to_dict() for f in structure.filters]
     prov["lag_s"] = lag
     prov["delay_s"] = dly * dt
     return replace(model, provenance=prov)
 
+
+#: what a chooser's estimate is, unless it says (``estimate_source``)
+_FRF_SOURCE = "the estimate from the frequency response against the injection"
 
 #: ``choose_structure`` of :func:`identify_segments`: per candidate lag (s) its least-squares
 #: model -> the (lag s, delay samples) to fit, or None.

@@ -7,9 +7,8 @@ The estimators also stand alone on arrays: :func:`identify` (state-space models)
 :func:`regress` (equation-error regression).
 """
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from mavsid.data import FlightData, MessageTable, ModeChange, RawLog, Segment, SourceInfo
 from mavsid.errors import (
     ConfigError,
     DataQualityWarning,
@@ -20,21 +19,29 @@ from mavsid.errors import (
     NoExcitationError,
     SolverError,
 )
-from mavsid.readers import read_log
+
+if TYPE_CHECKING:  # (served lazily below; the type checker sees them here)
+    from mavsid.data import FlightData, MessageTable, ModeChange, RawLog, Segment, SourceInfo
+    from mavsid.estimators.api import RegressionResult, identify, regress
+    from mavsid.estimators.model import Model, load_model
+    from mavsid.readers import read_log
 
 __version__ = "0.1.0"
 
-#: Names served from :mod:`mavsid.estimators` on first use (it imports scipy: the command
-#: line's start-up does not pay for it unless it fits).
-_LAZY = {"Model": "model", "load_model": "model", "RegressionResult": "api",
-         "identify": "api", "regress": "api"}
+#: Names served from their modules on first use: the data types and the readers import numpy,
+#: the estimators scipy; ``mavsid --help`` and ``--version`` pay for neither.
+_LAZY = {"Model": "estimators.model", "load_model": "estimators.model",
+         "RegressionResult": "estimators.api", "identify": "estimators.api",
+         "regress": "estimators.api", "read_log": "readers",
+         **dict.fromkeys(("FlightData", "MessageTable", "ModeChange", "RawLog", "Segment",
+                          "SourceInfo"), "data")}
 
 
 def __getattr__(name: str) -> Any:
     if name in _LAZY:
         import importlib
 
-        return getattr(importlib.import_module(f"mavsid.estimators.{_LAZY[name]}"), name)
+        return getattr(importlib.import_module(f"mavsid.{_LAZY[name]}"), name)
     raise AttributeError(f"module 'mavsid' has no attribute {name!r}")
 
 

@@ -40,12 +40,22 @@ def test_a_plain_fit_loads_neither_the_viewer_nor_plots_nor_cvxpy_nor_scipy_sign
 
 _BLAS_PROBE = """
 import json, os, sys
+import numpy  # (loaded before, as in a caller's process; the command line loads it after)
 from mavsid import cli
 from threadpoolctl import threadpool_info
 before = [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
 cli._one_blas_thread()
 after = [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
 print(json.dumps({"before": before, "after": after, "env": os.environ.get("OPENBLAS_NUM_THREADS")}))
+"""
+
+_BLAS_FIRST = """
+import json
+from mavsid import cli
+cli._one_blas_thread()  # (numpy not loaded yet: the command line's order)
+import numpy
+from threadpoolctl import threadpool_info
+print(json.dumps([i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]))
 """
 
 
@@ -66,3 +76,8 @@ def test_the_command_line_runs_one_blas_thread_unless_the_user_says(user: str | 
         assert got["after"] == [int(user)] * len(got["after"]) and got["env"] == user
     else:
         assert got["after"] == [1] * len(got["after"]) and got["env"] == "1"
+    first = subprocess.run([sys.executable, "-c", _BLAS_FIRST], capture_output=True, text=True,
+                           timeout=120, env=env)
+    assert first.returncode == 0, first.stderr
+    threads = json.loads(first.stdout)
+    assert threads and threads == [int(user) if user else 1] * len(threads)

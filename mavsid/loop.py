@@ -1056,32 +1056,23 @@ def twin_signals(flight: FlightData, raw: Any = None) -> TwinSignals:
             raw = read_log(path, messages=sorted(wanted))
     grid = flight.time_s
     targets: dict[str, np.ndarray] = {}
-    sources: dict[str, str] = {}
-    for axis in AXES:
-        for ch in TARGET_CHANNELS[AXIS_RATE[axis]]:
-            if ch.message not in raw.messages or not len(raw.messages[ch.message]):
-                continue
-            try:
-                t, v = evaluate(raw, ch, f"target {axis}")
-            except MavsidError:
-                continue
-            if t.size >= 2:
-                scale = dict(flight.meta.get("scales") or {}).get(ch.message, 1.0)  # type: ignore[call-overload]
-                targets[axis] = _on_grid(t, v * scale, grid, hold=True)
-                sources[f"target_{axis}"] = f"{ch.message}.{ch.field}"
-                break
     desired: dict[str, np.ndarray] = {}
-    for axis, chans in DESIRED_CHANNELS.items():
-        for ch in chans:
+    sources: dict[str, str] = {}
+    scales = dict(flight.meta.get("scales") or {})  # type: ignore[call-overload]
+    for into, name, chans, hold in (
+            [(targets, f"target_{a}", TARGET_CHANNELS[AXIS_RATE[a]], True) for a in AXES]
+            + [(desired, f"desired_{a}", c, False) for a, c in DESIRED_CHANNELS.items()]):
+        for ch in chans:  # the first the log has
             if ch.message not in raw.messages or not len(raw.messages[ch.message]):
                 continue
             try:
-                t, v = evaluate(raw, ch, f"commanded {axis}")
+                t, v = evaluate(raw, ch, name.replace("_", " "))
             except MavsidError:
                 continue
             if t.size >= 2:
-                desired[axis] = _on_grid(t, v, grid, hold=False)
-                sources[f"desired_{axis}"] = f"{ch.message}.{ch.field}"
+                into[name.split("_")[1]] = _on_grid(t, v * scales.get(ch.message, 1.0), grid,
+                                                    hold=hold)
+                sources[name] = f"{ch.message}.{ch.field}"
                 break
     injection: dict[str, np.ndarray] = {}
     runs = [r for r in flight.meta.get("sysid_runs", ()) or ()  # type: ignore[attr-defined]

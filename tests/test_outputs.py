@@ -156,3 +156,14 @@ def test_fit_with_a_report_that_fails_leaves_nothing(log: Path, tmp_path: Path) 
                      "--rrd", str(out / "f.rrd"))
     assert code == 1 and err.count("\n") == 1
     assert list(out.iterdir()) == []
+
+
+@pytest.mark.parametrize(("cores", "load", "started"),
+                         [(2, 0.3, True), (2, 1.9, False), (1, 0.0, False), (8, 6.5, True)])
+def test_a_worker_is_started_only_with_a_core_to_spare(monkeypatch, cores: int, load: float,
+                                                        started: bool) -> None:  # type: ignore[no-untyped-def]
+    from mavsid.outputs import ReportWorker
+
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: set(range(cores)), raising=False)
+    monkeypatch.setattr(os, "getloadavg", lambda: (load, load, load))
+    assert ReportWorker.available() is started

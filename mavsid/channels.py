@@ -535,10 +535,12 @@ TARGET_CHANNELS: dict[str, tuple[Channel, ...]] = {
 #: The commanded attitude per axis (roll, pitch), where a log has it: from the pilot's sticks in
 #: the manual modes, which the gyro's noise does not reach (the instruments of
 #: :mod:`mavsid.estimators.instruments`). ArduPilot ATT.DesRoll/DesPitch (deg), logged with
-#: the attitude (a ground station's NAV_CONTROLLER_OUTPUT comes at a few Hz, PX4's setpoint
-#: as a quaternion: not yet used).
+#: the attitude; PX4 vehicle_attitude_setpoint's quaternion ``q_d`` (a ground station's
+#: NAV_CONTROLLER_OUTPUT comes at a few Hz: not used).
 DESIRED_CHANNELS: dict[str, tuple[Channel, ...]] = {
-    axis: (_ch("ATT", f"Des{axis.capitalize()}", "deg"),) for axis in ("roll", "pitch")
+    axis: (_ch("ATT", f"Des{axis.capitalize()}", "deg"),
+           _ch("vehicle_attitude_setpoint", "q_d", "1", transform=f"quat_{axis}"))
+    for axis in ("roll", "pitch")
 }
 #: ArduPilot SYSTEMID's injected waveform (added to the mixer input on SID_AXIS 10-12)
 INJECTION_CHANNEL = _ch("SIDD", "Targ")

@@ -251,3 +251,23 @@ def test_multi_instance_and_multi_system_rows_are_separated():
     assert np.allclose(v, 0.1) and np.allclose(tt, [0.0, 0.01, 0.02])
     assert np.allclose(evaluate(raw, Channel("IMU", "GyrX", "rad/s", instance=1))[1], 9.0)
     assert np.allclose(evaluate(raw, Channel("ATTITUDE", "roll", "rad"))[1], [0.1, 0.2, 0.3])
+
+
+def test_px4s_commanded_attitude_is_its_own_roll_and_pitch_setpoint() -> None:
+    """The commanded attitude (the instruments of mavsid.estimators.instruments) from PX4's
+    setpoint quaternion ``q_d`` is the setpoint's own Euler angles ``roll_body`` /
+    ``pitch_body`` where a log has both (PX4 computed those, not mavsid)."""
+    from mavsid.channels import DESIRED_CHANNELS, evaluate
+    from mavsid.readers import read_log
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        raw = read_log(shared_path("public", "Auterion__px4-ulog-rs", "esc_status_log.ulg"),
+                       messages=["vehicle_attitude_setpoint"])
+    table = raw["vehicle_attitude_setpoint"]
+    for axis in ("roll", "pitch"):
+        channel = next(c for c in DESIRED_CHANNELS[axis] if c.message == table.name)
+        _, got = evaluate(raw, channel)
+        ref = np.asarray(table[f"{axis}_body"], float)
+        assert np.std(ref) > 0.1  # (a flight that moves)
+        np.testing.assert_allclose(got, ref, atol=1e-6)

@@ -61,6 +61,7 @@ from typing import Any
 import numpy as np
 
 from mavsid.channels import (
+    DESIRED_CHANNELS,
     INPUT_NAMES,
     MIXERS,
     PRESETS,
@@ -71,6 +72,7 @@ from mavsid.channels import (
     Preset,
     choose_preset,
     evaluate,
+    first_of,
     frame_name,
     frame_of,
     get_preset,
@@ -883,6 +885,20 @@ def sysid_runs(raw: RawLog) -> list[dict[str, Any]]:
     return runs
 
 
+def _commanded(raw: RawLog, t: np.ndarray) -> dict[str, np.ndarray]:
+    """The commanded attitude (rad) per axis on the grid ``t`` (interpolated; NaN outside
+    its span), from the first of :data:`mavsid.channels.DESIRED_CHANNELS` the log has.
+    Excitation judges a stick manoeuvre's response by its coherence with it, the fit checks
+    the feedback's bias with it (:mod:`mavsid.estimators.instruments`)."""
+    out: dict[str, np.ndarray] = {}
+    for axis, chans in DESIRED_CHANNELS.items():
+        got = first_of(raw, chans, f"commanded {axis}")
+        if got is not None and np.ptp(got[2]) > 0:
+            order = np.argsort(got[1], kind="stable")
+            out[axis] = np.interp(t, got[1][order], got[2][order], left=np.nan, right=np.nan)
+    return out
+
+
 def _sysid_injection(raw: RawLog, t: np.ndarray) -> np.ndarray | None:
     """SYSTEMID's logged waveform ``SIDD.Targ`` on the grid ``t`` (interpolated inside runs,
     0 elsewhere), or None when the log has none. Excitation judges SYSTEMID runs by it."""
@@ -917,9 +933,10 @@ def _chirp_span(enter: float, leave: float, run: Mapping[str, Any]) -> tuple[flo
 
 #: messages alignment reads besides the presets' channels: flags, modes, params, SYSTEMID
 FLAG_MESSAGES: dict[str, tuple[str, ...]] = {
-    "dataflash": ("EV", "ARM", "MODE", "MSG", "PARM", "SIDS", "SIDD"),
+    "dataflash": ("EV", "ARM", "MODE", "MSG", "PARM", "SIDS", "SIDD", "ATT"),
     "tlog": ("HEARTBEAT", "EXTENDED_SYS_STATE", "PARAM_VALUE", "STATUSTEXT"),
-    "ulog": ("actuator_armed", "vehicle_land_detected", "vehicle_status"),
+    "ulog": ("actuator_armed", "vehicle_land_detected", "vehicle_status",
+             "vehicle_attitude_setpoint"),
 }
 FLAG_MESSAGES["dataflash-text"] = FLAG_MESSAGES["dataflash"]
 
@@ -1089,6 +1106,9 @@ def _align(raw: RawLog, preset: Preset | str | None, rate_hz: float | None,
     injection = _sysid_injection(raw, t)
     if injection is not None:
         meta["sysid_injection"] = injection
+    commanded = _commanded(raw, t)
+    if commanded:
+        meta["commanded"] = commanded
     return FlightData(
         time_s=t,
         states=x,

@@ -112,7 +112,7 @@ from typing import Any
 import numpy as np
 
 from mavsid.data import MessageTable, RawLog
-from mavsid.errors import ConfigError, MissingMessageError
+from mavsid.errors import ConfigError, MavsidError, MissingMessageError
 
 __all__ = [
     "DESIRED_CHANNELS",
@@ -129,6 +129,7 @@ __all__ = [
     "Preset",
     "choose_preset",
     "evaluate",
+    "first_of",
     "frame_name",
     "frame_of",
     "get_preset",
@@ -841,6 +842,22 @@ def unit_origin(raw: RawLog, channel: Channel) -> str:
         if all(_column(table, p) is not None for p in parts):
             return ", ".join(_unit_of(table, parts[0], channel))
     return ", ".join(_unit_of(table, "", channel))
+
+
+def first_of(raw: RawLog, channels: Iterable[Channel], what: str = ""
+             ) -> tuple[Channel, np.ndarray, np.ndarray] | None:
+    """The first of ``channels`` the log has (the message with records, the field), with
+    its :func:`evaluate` ``(time_s, values)``; None when it has none of them."""
+    for ch in channels:
+        if ch.message not in raw.messages or not len(raw.messages[ch.message]):
+            continue
+        try:
+            t, v = evaluate(raw, ch, what)
+        except MavsidError:
+            continue
+        if t.size >= 2:
+            return ch, t, v
+    return None
 
 
 def evaluate(raw: RawLog, channel: Channel, what: str = "") -> tuple[np.ndarray, np.ndarray]:

@@ -24,6 +24,14 @@ that output's "noise floor" can be as large as a SYSTEMID injection.
   for windows without a logged injection (a SYSTEMID run with ``SIDD.Targ`` is judged by
   the injection, below: with 6 deg/s of gyro noise fed back a well-identifiable chirp's
   response can sit under 5× that floor while 92 % coherent with the injection).
+- **command** (windows without an injection, where the log has the commanded attitude: a
+  stick manoeuvre's ``ATT.DesRoll``/``DesPitch``, PX4's attitude setpoint): the output's
+  coherence with it (weighted by its PSD) and the share of the band where it reaches
+  ``min_coherence``. A response under ``power_ratio``× its noise floor is kept when it is
+  coherent with the pilot's command (``min_coherence`` on average, over ``min_coverage``
+  of the band): with 6 deg/s of gyro noise fed back a 3-2-1-1 on a racer sat at 4.5× its
+  floor while 0.93 coherent with the command. The fit then checks the feedback's bias with
+  the same command (:mod:`mavsid.estimators.instruments`).
 - **injection** (SYSTEMID runs whose log has ``SIDD.Targ``): the injected waveform's RMS, its
   band (``SID_F_START_HZ``–``SID_F_STOP_HZ``, upper edge at most 0.4× the sample rate) and
   the output's coherence with it (weighted by the injection's PSD). Gate: ``min_coherence``.
@@ -228,6 +236,7 @@ class _Axis:
     y_hp: np.ndarray | None = None  # output without content below the band (per block)
     y_floor: float = math.nan  # output's 1-s RMS where the input has no power
     injection: np.ndarray | None = None  # SYSTEMID's logged waveform (SIDD.Targ), 0 outside
+    command: np.ndarray | None = None  # the commanded attitude (rad), NaN where not logged
 
 
 def _col(fd: FlightData, name: str) -> np.ndarray | None:
@@ -279,7 +288,9 @@ def _axis(fd: FlightData, name: str, opts: ScanOptions, air: np.ndarray) -> _Axi
             y_floor = max(float(np.median(y_env[quiet])), 1e-9)
     inj = fd.meta.get("sysid_injection")
     injection = np.asarray(inj, dtype=float) if isinstance(inj, np.ndarray) else None
-    return _Axis(name, u, u_hp, y, y_name, u_name, floor, y_hp, y_floor, injection)
+    cmd = dict(fd.meta.get("commanded") or {}).get(name)  # type: ignore[call-overload]
+    command = np.asarray(cmd, dtype=float) if isinstance(cmd, np.ndarray) else None
+    return _Axis(name, u, u_hp, y, y_name, u_name, floor, y_hp, y_floor, injection, command)
 
 
 def _highpass(fd: FlightData, x: np.ndarray, opts: ScanOptions) -> np.ndarray:
@@ -312,6 +323,11 @@ def _metrics(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions,
             out["response_ratio"] = out["response_rms"] / ax.y_floor
         if ax.injection is not None and ax.y is not None and i1 - i0 >= 8:
             out.update(_injection_metrics(ax, fd, i0, i1, opts, band, spectra))
+        elif (ax.command is not None and ax.y is not None and i1 - i0 >= 8
+              and np.isfinite(ax.command[i0:i1]).all()):
+            got = _referenced(ax.command[i0:i1], ax.y[i0:i1], fd, opts, opts.band_hz, spectra)
+            out.update({f"command_{k}": v for k, v in got.items() if k in ("coherence",
+                                                                             "coverage")})
         return out
 
 
@@ -331,27 +347,36 @@ def _injection_metrics(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOp
                        spectra: dict[str, np.ndarray] | None = None) -> dict[str, float]:
     """Level, band and output coherence of SYSTEMID's logged injection in ``[i0, i1)``."""
     assert ax.injection is not None and ax.y is not None
+    got = _referenced(ax.injection[i0:i1], ax.y[i0:i1], fd, opts, band, spectra)
+    return {f"injection_{k}": v for k, v in got.items()}
+
+
+def _referenced(v: np.ndarray, y: np.ndarray, fd: FlightData, opts: ScanOptions,
+                band: tuple[float, float] | None,
+                spectra: dict[str, np.ndarray] | None = None) -> dict[str, float]:
+    """A reference ``v``'s RMS, band (``lo_hz``, ``hi_hz``), and the output ``y``'s
+    ``coherence`` with it (weighted by its PSD) and ``coverage`` (log-frequency share of
+    the band where that coherence reaches ``min_coherence``); {} for a silent reference."""
     spectra = {} if spectra is None else spectra
-    v, y = ax.injection[i0:i1], ax.y[i0:i1]
     rms = float(np.sqrt(np.mean(v**2)))
     if not rms > 0:
         return {}
     fs = 1.0 / fd.dt
     f_lo, f_hi = band if band is not None else opts.band_hz
-    f_lo, f_hi = max(f_lo, 2.0 / ((i1 - i0) * fd.dt)), min(f_hi, 0.4 * fs)
-    out = {"injection_rms": rms, "injection_lo_hz": f_lo, "injection_hi_hz": f_hi}
+    f_lo, f_hi = max(f_lo, 2.0 / (v.size * fd.dt)), min(f_hi, 0.4 * fs)
+    out = {"rms": rms, "lo_hz": f_lo, "hi_hz": f_hi}
     nper = int(min(v.size, max(16, round(2.0 * fs))))
     f, pvv = dsp.welch(v, fs, nper, detrend=detrend_linear)
     coh = _coherence(v, pvv, y, fs, nper, spectra)
     sel = (f >= f_lo) & (f <= f_hi)
     if sel.sum() < 2 or not pvv[sel].sum() > 0:
-        out["injection_coherence"] = 0.0
-        out["injection_coverage"] = 0.0
+        out["coherence"] = 0.0
+        out["coverage"] = 0.0
         return out
     coh = np.nan_to_num(coh)
-    out["injection_coherence"] = float(np.sum(pvv[sel] * coh[sel]) / np.sum(pvv[sel]))
+    out["coherence"] = float(np.sum(pvv[sel] * coh[sel]) / np.sum(pvv[sel]))
     w = 1.0 / f[sel]  # log-frequency weighting
-    out["injection_coverage"] = float(np.sum(w * (coh[sel] >= opts.min_coherence)) / np.sum(w))
+    out["coverage"] = float(np.sum(w * (coh[sel] >= opts.min_coherence)) / np.sum(w))
     return out
 
 
@@ -483,7 +508,7 @@ def _gates(ax: _Axis, fd: FlightData, i0: int, i1: int, m: Mapping[str, float],
                 f"rejected: input RMS {_fmt(m['input_rms'])} below {opts.power_ratio:g}× noise "
                 f"floor {_fmt(ax.floor)} ({ax.u_name})"
             )
-    elif by_level and ratio < opts.power_ratio:
+    elif by_level and ratio < opts.power_ratio and not _commanded(m, opts):
         out.append(
             f"rejected: response RMS {_fmt(m['response_rms'])} below {opts.power_ratio:g}× its "
             f"noise floor {_fmt(m['response_floor'])} ({ax.y_name} where {ax.u_name} is quiet;"
@@ -532,6 +557,12 @@ def _gates(ax: _Axis, fd: FlightData, i0: int, i1: int, m: Mapping[str, float],
     return out
 
 
+def _commanded(m: Mapping[str, float], opts: ScanOptions) -> bool:
+    """Whether the window's response follows the pilot's command (see *command*)."""
+    return (m.get("command_coherence", 0.0) >= opts.min_coherence
+            and m.get("command_coverage", 0.0) >= opts.min_coverage)
+
+
 def _kept_reason(ax: _Axis, m: Mapping[str, float]) -> str:
     if "response_ratio" in m and math.isfinite(m["response_ratio"]):
         level = (f"{ax.y_name} response RMS {_fmt(m['response_rms'])} = "
@@ -546,6 +577,10 @@ def _kept_reason(ax: _Axis, m: Mapping[str, float]) -> str:
             f"{m.get('injection_coherence', 0):.2f}); Gram condition "
             f"{_fmt(m.get('condition', math.inf))}"
         )
+    if "command_coherence" in m:
+        level += (f", coherent with the commanded attitude over "
+                  f"{100 * m['command_coverage']:.0f} % of the band (mean "
+                  f"{m['command_coherence']:.2f})")
     return (
         f"kept: {level}; band coverage {100 * m.get('coverage', 0):.0f} %; "
         f"{ax.u_name}→{ax.y_name} coherence {m.get('coherence', 0):.2f}; Gram condition "

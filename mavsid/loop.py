@@ -994,16 +994,12 @@ class TwinSignals:
         Where each came from (``"RATE.RDes"``...).
     rate_injection : Mapping[str, numpy.ndarray]
         SYSTEMID rate-axis injection (rad/s, ``SID_AXIS`` 7-9, part of the rate target).
-    desired : Mapping[str, numpy.ndarray]
-        Commanded attitude (rad) per axis the log has one for
-        (:data:`mavsid.channels.DESIRED_CHANNELS`).
     """
 
     target: Mapping[str, np.ndarray]
     injection: Mapping[str, np.ndarray]
     sources: Mapping[str, str] = field(default_factory=dict)
     rate_injection: Mapping[str, np.ndarray] = field(default_factory=dict)
-    desired: Mapping[str, np.ndarray] = field(default_factory=dict)
 
 
 def _on_grid(t: np.ndarray, v: np.ndarray, grid: np.ndarray, hold: bool) -> np.ndarray:
@@ -1026,21 +1022,20 @@ def _on_grid(t: np.ndarray, v: np.ndarray, grid: np.ndarray, hold: bool) -> np.n
 def twin_messages() -> set[str]:
     """The messages :func:`twin_signals` reads (rate targets, SYSTEMID injection), of every
     format: a caller reading the log anyway reads them in the same pass."""
-    from mavsid.channels import DESIRED_CHANNELS, INJECTION_CHANNEL, TARGET_CHANNELS
+    from mavsid.channels import INJECTION_CHANNEL, TARGET_CHANNELS
 
-    return {ch.message for chans in (*TARGET_CHANNELS.values(), *DESIRED_CHANNELS.values())
-            for ch in chans} | {INJECTION_CHANNEL.message}
+    return {ch.message for chans in TARGET_CHANNELS.values() for ch in chans} | {
+        INJECTION_CHANNEL.message}
 
 
 def twin_signals(flight: FlightData, raw: Any = None) -> TwinSignals:
     """Rate targets and SYSTEMID mixer injections of ``flight``, from its log (re-read for
     the few messages needed unless ``raw`` is given).
 
-    Targets come from the first of :data:`mavsid.channels.TARGET_CHANNELS` the log has,
-    commanded attitudes from :data:`mavsid.channels.DESIRED_CHANNELS`; mixer injections
-    from ``SIDD.Targ`` during the SYSTEMID runs on ``SID_AXIS`` 10-12.
+    Targets come from the first of :data:`mavsid.channels.TARGET_CHANNELS` the log has;
+    mixer injections from ``SIDD.Targ`` during the SYSTEMID runs on ``SID_AXIS`` 10-12.
     """
-    from mavsid.channels import DESIRED_CHANNELS, INJECTION_CHANNEL, TARGET_CHANNELS, evaluate
+    from mavsid.channels import INJECTION_CHANNEL, TARGET_CHANNELS, evaluate, first_of
 
     if raw is None:
         from mavsid.readers import read_log
@@ -1056,24 +1051,14 @@ def twin_signals(flight: FlightData, raw: Any = None) -> TwinSignals:
             raw = read_log(path, messages=sorted(wanted))
     grid = flight.time_s
     targets: dict[str, np.ndarray] = {}
-    desired: dict[str, np.ndarray] = {}
     sources: dict[str, str] = {}
-    scales = dict(flight.meta.get("scales") or {})  # type: ignore[call-overload]
-    for into, name, chans, hold in (
-            [(targets, f"target_{a}", TARGET_CHANNELS[AXIS_RATE[a]], True) for a in AXES]
-            + [(desired, f"desired_{a}", c, False) for a, c in DESIRED_CHANNELS.items()]):
-        for ch in chans:  # the first the log has
-            if ch.message not in raw.messages or not len(raw.messages[ch.message]):
-                continue
-            try:
-                t, v = evaluate(raw, ch, name.replace("_", " "))
-            except MavsidError:
-                continue
-            if t.size >= 2:
-                into[name.split("_")[1]] = _on_grid(t, v * scales.get(ch.message, 1.0), grid,
-                                                    hold=hold)
-                sources[name] = f"{ch.message}.{ch.field}"
-                break
+    for axis in AXES:
+        got = first_of(raw, TARGET_CHANNELS[AXIS_RATE[axis]], f"target {axis}")
+        if got is not None:
+            ch, t, v = got
+            scale = dict(flight.meta.get("scales") or {}).get(ch.message, 1.0)  # type: ignore[call-overload]
+            targets[axis] = _on_grid(t, v * scale, grid, hold=True)
+            sources[f"target_{axis}"] = f"{ch.message}.{ch.field}"
     injection: dict[str, np.ndarray] = {}
     runs = [r for r in flight.meta.get("sysid_runs", ()) or ()  # type: ignore[attr-defined]
             if int(r.get("axis", 0)) in (7, 8, 9, 10, 11, 12)]
@@ -1098,7 +1083,7 @@ def twin_signals(flight: FlightData, raw: Any = None) -> TwinSignals:
                     inj = rate_injection.setdefault(axis, np.zeros(grid.shape))
                     inj[inside] = np.radians(held[inside])
                     sources[f"rate_injection_{axis}"] = src
-    return TwinSignals(targets, injection, sources, rate_injection, desired)
+    return TwinSignals(targets, injection, sources, rate_injection)
 
 
 # --------------------------------------------------------------------------- the twin's fit

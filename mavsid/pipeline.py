@@ -671,18 +671,16 @@ class _InstrumentCheck:
         return instrument_estimate(model, self.segments, self.references)
 
 
-def _instrument_check(axis: str, flights: Sequence[FlightData], signals: _Twins,
+def _instrument_check(axis: str, flights: Sequence[FlightData],
                       segments: Sequence[Segment]) -> _InstrumentCheck | None:
-    """An :class:`_InstrumentCheck` of ``segments`` (cut from ``flights``), with their
-    commanded attitude on their samples; None where the logs have none for the axis."""
-    from mavsid.loop import TwinSignals
-
+    """An :class:`_InstrumentCheck` of ``segments`` (cut from ``flights``), with the flights'
+    commanded attitude (``meta["commanded"]``, from alignment) on their samples; None where
+    the logs have none for the axis."""
     refs: list[np.ndarray | None] = []
     for seg in segments:
         ref = None
         for fd in flights:
-            sg = signals.get(id(fd))
-            desired = sg.desired.get(axis) if isinstance(sg, TwinSignals) else None
+            desired = dict(fd.meta.get("commanded") or {}).get(axis)  # type: ignore[call-overload]
             if desired is None or not len(seg) or seg.log != fd.source.path:
                 continue
             i0 = int(np.searchsorted(fd.time_s, seg.time_s[0] - 1e-9))
@@ -762,7 +760,7 @@ def fit(
             train, held_out = split_segments(segs, cfg.block_s)
             next_stage()
             model = _fit_model(train, axis, cfg, _frf_chooser(axis, flights, signals, cfg)
-                               or _instrument_check(axis, flights, signals, train))
+                               or _instrument_check(axis, flights, train))
             next_stage()
             val = _validate(model, held_out, cfg)
         except NoExcitationError as exc:

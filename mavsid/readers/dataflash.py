@@ -180,7 +180,7 @@ class Definition:
         bad = sorted({c for c in self.format if c not in FORMAT_CHARS})
         if bad:
             return f"unknown format character(s) {''.join(bad)!r}"
-        size = 3 + self.payload_dtype.itemsize
+        size = 3 + _payload_size(self.format)  # (no dtype built: a log defines hundreds)
         if size != self.length:
             return f"declared length {self.length} but format {self.format!r} needs {size}"
         return None
@@ -216,6 +216,20 @@ def _fields(columns: tuple[str, ...], n: int) -> tuple[tuple[str, int], ...]:
             seen.add(name)
             out.append((name, last[name]))
     return tuple(out)
+
+
+_CHAR_SIZES = {c: np.dtype(spec.dtype).itemsize for c, spec in FORMAT_CHARS.items()}
+
+
+def _payload_size(fmt: str) -> int:
+    """Bytes of a payload of format ``fmt`` (known characters only).
+
+    Examples
+    --------
+    >>> _payload_size("QfB"), _payload_size("a")
+    (13, 64)
+    """
+    return sum(_CHAR_SIZES[c] for c in fmt)
 
 
 @lru_cache(maxsize=4096)
@@ -514,7 +528,8 @@ def _counts(index: np.ndarray, size: int) -> np.ndarray:
 
 def _group(key: np.ndarray, size: int, dtype: np.dtype) -> dict[int, np.ndarray]:
     """Indices of each value of ``key`` (``0 <= key < size``), ascending, for the values
-    present: stable radix sorts of cache-sized slices, joined per value.
+    present: stable radix sorts of cache-sized slices, each value's indices written
+    straight into its preallocated result.
 
     Examples
     --------
@@ -522,16 +537,43 @@ def _group(key: np.ndarray, size: int, dtype: np.dtype) -> dict[int, np.ndarray]
     {0: [1], 1: [3], 2: [0, 2]}
     """
     small = key.astype(np.uint8 if size <= 256 else np.uint16 if size <= 1 << 16 else np.int32)
-    pieces: dict[int, list[np.ndarray]] = {}
     step = 1 << 16
-    for k in range(0, small.size, step):
-        part = small[k : k + step]
-        order = np.argsort(part, kind="stable").astype(dtype)
+    counts = [np.bincount(small[k : k + step].astype(np.intp), minlength=size)
+              for k in range(0, small.size, step)]
+    total = np.sum(counts, axis=0) if counts else np.zeros(size, np.int64)
+    out = {i: np.empty(int(total[i]), dtype) for i in np.flatnonzero(total).tolist()}
+    filled = dict.fromkeys(out, 0)
+    for k, count in zip(range(0, small.size, step), counts, strict=True):
+        order = np.argsort(small[k : k + step], kind="stable").astype(dtype)
         order += np.asarray(k, dtype)
-        bounds = [0, *np.cumsum(np.bincount(part.astype(np.intp), minlength=size)).tolist()]
-        for i in np.flatnonzero(np.diff(bounds)).tolist():
-            pieces.setdefault(i, []).append(order[bounds[i] : bounds[i + 1]])
-    return {i: p[0] if len(p) == 1 else np.concatenate(p) for i, p in sorted(pieces.items())}
+        bounds = [0, *np.cumsum(count).tolist()]
+        for i in np.flatnonzero(count).tolist():
+            at = filled[i]
+            out[i][at : at + int(count[i])] = order[bounds[i] : bounds[i + 1]]
+            filled[i] = at + int(count[i])
+    return out
+
+
+def _select(wanted: np.ndarray, index: np.ndarray, dtype: np.dtype) -> np.ndarray:
+    """``np.flatnonzero(wanted[index]).astype(dtype)`` for a compact integer ``index``, in
+    slices (no full-length mask nor ``intp`` copy: the result is the only fresh memory, and
+    only as much of it as is found).
+
+    Examples
+    --------
+    >>> _select(np.array([False, True, True]), np.array([1, 0, 2, 0], np.int16),
+    ...         np.dtype(np.int32)).tolist()
+    [0, 2]
+    """
+    out = np.empty(index.size, dtype)
+    found = 0
+    step = 1 << 16
+    for k in range(0, index.size, step):
+        hit = np.flatnonzero(np.take(wanted, index[k : k + step].astype(np.intp)))
+        hit += k
+        out[found : found + hit.size] = hit
+        found += hit.size
+    return out[:found]
 
 
 def _record_view(a: np.ndarray, dtype: np.dtype) -> np.ndarray:
@@ -1519,7 +1561,7 @@ def _read_buffer(
     defid = framing.defid
     where = framing.pos  # the decoded records' offsets
     if not decode[:ndefs].all():
-        sel = np.flatnonzero(_lookup(decode, framing.defid)).astype(idx_dt)
+        sel = _select(decode, framing.defid, idx_dt)
         defid = _lookup(framing.defid, sel)
         where = _lookup(framing.pos, sel)
     members = _group(defid, ndefs + 1, idx_dt)
@@ -1867,24 +1909,29 @@ def _plan_message(
         t_out = np.empty(total)
         at = 0
         for (d, _, pos, t), (_, _, own) in zip(parts, jobs, strict=True):
-            if t is None:
-                tf = d.time_field
-                t = (_times_of(d, own) if tf is not None and tf[0] in own
-                     else _gather_times(a, d, pos))
+            into = t_out[at : at + pos.size]
+            tf = d.time_field
+            if t is None and tf is not None and tf[0] in own:
+                _times_of(d, own, out=into)
+            else:
+                t = _gather_times(a, d, pos) if t is None else t
                 assert t is not None
-            t_out[at : at + pos.size] = t
+                into[...] = t
             at += pos.size
         return t_out
 
     return out, jobs, finish
 
 
-def _times_of(d: Definition, cols: Mapping[str, np.ndarray]) -> np.ndarray:
-    """Boot time (s) of decoded records of a definition that has a time field."""
+def _times_of(
+    d: Definition, cols: Mapping[str, np.ndarray], out: np.ndarray | None = None
+) -> np.ndarray:
+    """Boot time (s) of decoded records of a definition that has a time field (written
+    into ``out`` when given)."""
     tf = d.time_field
     assert tf is not None
     name, _, scale = tf
-    return np.multiply(cols[name], scale, dtype=np.float64)
+    return np.multiply(cols[name], scale, out=out, dtype=np.float64)
 
 
 @lru_cache(maxsize=4096)

@@ -180,7 +180,7 @@ class Definition:
         bad = sorted({c for c in self.format if c not in FORMAT_CHARS})
         if bad:
             return f"unknown format character(s) {''.join(bad)!r}"
-        size = 3 + self.payload_dtype.itemsize
+        size = 3 + _payload_size(self.format)  # (no dtype built: a log defines hundreds)
         if size != self.length:
             return f"declared length {self.length} but format {self.format!r} needs {size}"
         return None
@@ -216,6 +216,20 @@ def _fields(columns: tuple[str, ...], n: int) -> tuple[tuple[str, int], ...]:
             seen.add(name)
             out.append((name, last[name]))
     return tuple(out)
+
+
+_CHAR_SIZES = {c: np.dtype(spec.dtype).itemsize for c, spec in FORMAT_CHARS.items()}
+
+
+def _payload_size(fmt: str) -> int:
+    """Bytes of a payload of format ``fmt`` (known characters only).
+
+    Examples
+    --------
+    >>> _payload_size("QfB"), _payload_size("a")
+    (13, 64)
+    """
+    return sum(_CHAR_SIZES[c] for c in fmt)
 
 
 @lru_cache(maxsize=4096)
@@ -514,7 +528,8 @@ def _counts(index: np.ndarray, size: int) -> np.ndarray:
 
 def _group(key: np.ndarray, size: int, dtype: np.dtype) -> dict[int, np.ndarray]:
     """Indices of each value of ``key`` (``0 <= key < size``), ascending, for the values
-    present: stable radix sorts of cache-sized slices, joined per value.
+    present: stable radix sorts of cache-sized slices, each value's indices written
+    straight into its preallocated result.
 
     Examples
     --------
@@ -522,16 +537,43 @@ def _group(key: np.ndarray, size: int, dtype: np.dtype) -> dict[int, np.ndarray]
     {0: [1], 1: [3], 2: [0, 2]}
     """
     small = key.astype(np.uint8 if size <= 256 else np.uint16 if size <= 1 << 16 else np.int32)
-    pieces: dict[int, list[np.ndarray]] = {}
     step = 1 << 16
-    for k in range(0, small.size, step):
-        part = small[k : k + step]
-        order = np.argsort(part, kind="stable").astype(dtype)
+    counts = [np.bincount(small[k : k + step].astype(np.intp), minlength=size)
+              for k in range(0, small.size, step)]
+    total = np.sum(counts, axis=0) if counts else np.zeros(size, np.int64)
+    out = {i: np.empty(int(total[i]), dtype) for i in np.flatnonzero(total).tolist()}
+    filled = dict.fromkeys(out, 0)
+    for k, count in zip(range(0, small.size, step), counts, strict=True):
+        order = np.argsort(small[k : k + step], kind="stable").astype(dtype)
         order += np.asarray(k, dtype)
-        bounds = [0, *np.cumsum(np.bincount(part.astype(np.intp), minlength=size)).tolist()]
-        for i in np.flatnonzero(np.diff(bounds)).tolist():
-            pieces.setdefault(i, []).append(order[bounds[i] : bounds[i + 1]])
-    return {i: p[0] if len(p) == 1 else np.concatenate(p) for i, p in sorted(pieces.items())}
+        bounds = [0, *np.cumsum(count).tolist()]
+        for i in np.flatnonzero(count).tolist():
+            at = filled[i]
+            out[i][at : at + int(count[i])] = order[bounds[i] : bounds[i + 1]]
+            filled[i] = at + int(count[i])
+    return out
+
+
+def _select(wanted: np.ndarray, index: np.ndarray, dtype: np.dtype) -> np.ndarray:
+    """``np.flatnonzero(wanted[index]).astype(dtype)`` for a compact integer ``index``, in
+    slices (no full-length mask nor ``intp`` copy: the result is the only fresh memory, and
+    only as much of it as is found).
+
+    Examples
+    --------
+    >>> _select(np.array([False, True, True]), np.array([1, 0, 2, 0], np.int16),
+    ...         np.dtype(np.int32)).tolist()
+    [0, 2]
+    """
+    out = np.empty(index.size, dtype)
+    found = 0
+    step = 1 << 16
+    for k in range(0, index.size, step):
+        hit = np.flatnonzero(np.take(wanted, index[k : k + step].astype(np.intp)))
+        hit += k
+        out[found : found + hit.size] = hit
+        found += hit.size
+    return out[:found]
 
 
 def _record_view(a: np.ndarray, dtype: np.dtype) -> np.ndarray:
@@ -551,34 +593,69 @@ def _records(a: np.ndarray, dtype: np.dtype, offsets: np.ndarray) -> np.ndarray:
 def _assign_definitions(
     pos: np.ndarray, types: np.ndarray, table: _Definitions
 ) -> np.ndarray:
-    """Index into ``table.defs`` for each candidate (-1: type undefined).
+    """Index into ``table.defs`` for each candidate (-1: type undefined); see
+    :func:`_sweep`."""
+    lengths = np.array([d.length for d in table.defs] + [0], pos.dtype)
+    return _sweep(pos, types, table, lengths)[0]
+
+
+def _sweep(
+    pos: np.ndarray, types: np.ndarray, table: _Definitions, lengths: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The definition of each candidate ``pos`` (index into ``table.defs``, -1: type
+    undefined) and its forward evidence (the next candidate starts where it ends, by
+    ``lengths``: per definition, one more entry for -1), in one pass of cache-sized slices
+    (each type converted to an index once, both looked up from it).
 
     A type's first definition applies up to its next FMT record (also before the first one,
     so that a log whose first FMT records are damaged still decodes). The log is cut into
-    epochs at each redefinition; a (epochs x 256) table then gives the candidates of each
-    epoch their definitions in one lookup.
+    epochs at each redefinition; a 256-entry table per epoch then gives its candidates their
+    definitions and lengths.
+
+    Examples
+    --------
+    >>> table = _Definitions(defs=[_FMT_DEF, Definition(1, "A", 5, "h", ("V",))],
+    ...                      by_type={128: [(-1, 0)], 1: [(-1, 1)]})
+    >>> defid, fwd = _sweep(np.array([0, 5, 10]), np.array([1, 1, 7], np.uint8), table,
+    ...                     np.array([89, 5, 0]))
+    >>> defid.tolist(), fwd.tolist()
+    ([1, 1, -1], [True, True, False])
     """
+    m = pos.size
     dt = np.int16 if len(table.defs) < 2**15 else np.int32
     events = sorted((p, t, i) for t, e in table.by_type.items() for p, i in e[1:])
+    # per epoch: candidate range and type -> definition table (None: ``defid`` given)
+    epochs: list[tuple[int, int, np.ndarray | None]]
     if len(events) > 4096:  # pathological: per-type lookup instead of a big table
-        return _assign_per_type(pos, types, table, dt)
-    lut = np.full((len(events) + 1, 256), -1, dt)
-    for t, entries in table.by_type.items():
-        lut[0, t] = entries[0][1]
-    for k, (_, t, i) in enumerate(events, start=1):
-        lut[k] = lut[k - 1]
-        lut[k, t] = i
-    if not events:
-        return _lookup(lut[0], types)
-    starts = np.array([p for p, _, _ in events], pos.dtype)
-    # candidates are sorted: epoch k covers the index range between two events
-    edges = [0, *np.searchsorted(pos, starts, side="left").tolist(), pos.size]
-    out = np.empty(pos.size, dt)
-    for k in range(len(events) + 1):
-        lo, hi = edges[k], edges[k + 1]
-        if hi > lo:
-            _lookup(lut[k], types[lo:hi], out[lo:hi])
-    return out
+        defid = _assign_per_type(pos, types, table, dt)
+        epochs = [(0, m, None)]
+    else:
+        defid = np.empty(m, dt)
+        lut = np.full(256, -1, dt)
+        for t, entries in table.by_type.items():
+            lut[t] = entries[0][1]
+        starts = np.array([p for p, _, _ in events], pos.dtype)
+        edges = [0, *np.searchsorted(pos, starts, side="left").tolist(), m]
+        epochs = [(edges[0], edges[1], lut.copy())]
+        for k, (_, t, i) in enumerate(events, start=1):
+            lut[t] = i
+            epochs.append((edges[k], edges[k + 1], lut.copy()))
+    fwd = np.zeros(m, bool)
+    step = 1 << 16
+    for lo, hi, of_type in epochs:
+        length_of = lengths if of_type is None else lengths[of_type]
+        for k in range(lo, hi, step):
+            e = min(k + step, hi)
+            if of_type is None:
+                key = defid[k:e].astype(np.intp)
+            else:
+                key = types[k:e].astype(np.intp)
+                np.take(of_type, key, out=defid[k:e])
+            ends = np.take(length_of, key)
+            ends += pos[k:e]
+            j = min(e, m - 1) - k  # the last candidate has no next one
+            np.equal(ends[:j], pos[k + 1 : k + 1 + j], out=fwd[k : k + j])
+    return defid, fwd
 
 
 def _assign_per_type(
@@ -708,21 +785,11 @@ def _frame(a: np.ndarray, cand: np.ndarray, types: np.ndarray, table: _Definitio
     """
     n = a.size
     m = cand.size
-    defid = _assign_definitions(cand, types, table)
     lengths = np.array([d.length for d in table.defs] + [0], cand.dtype)
+    # definitions and forward evidence (the next header starts where this record ends: the
+    # common case, checked on the very next candidate; only the rest needs a binary search)
+    defid, fwd = _sweep(cand, types, table, lengths)
     end = _Ends(cand, defid, lengths)  # undefined (-1) -> the sentinel 0
-    # forward evidence: the next header starts where this record ends. The common case, the
-    # very next candidate, is checked first (in slices: no full-length array of ends); only
-    # the rest needs a binary search.
-    fwd = np.zeros(m, bool)
-    step = 1 << 16
-    buf = np.empty(min(step, m), cand.dtype)
-    for k in range(0, m - 1, step):
-        hi = min(k + step, m - 1)
-        e = _lookup(lengths, defid[k:hi], out=buf[: hi - k])
-        e += cand[k:hi]
-        np.equal(e, cand[k + 1 : hi + 1], out=fwd[k:hi])
-    del buf
     sus = np.flatnonzero(~fwd).astype(cand.dtype)  # not followed at once (few, in a log)
     # outside ``sus`` a candidate is known (defined types have a length), complete (it ends
     # at the next candidate), has forward and backward evidence: a node
@@ -1445,14 +1512,16 @@ def _read_buffer(
 ) -> RawLog:
     n = a.size
     notes: list[str] = []
+    wanted = None if messages is None else set(messages)
     cand, types = _find_headers(a)
-    fmt_pos = cand[types == _FMT_TYPE]
-    fmt_pos = fmt_pos[fmt_pos <= n - _FMT_LEN]
-    table = _read_definitions(a, fmt_pos)
+    fmt_at = np.flatnonzero(types == _FMT_TYPE)  # (few)
+    fmt_pos = cand[fmt_at]
+    table = _read_definitions(a, fmt_pos[fmt_pos <= n - _FMT_LEN])
     framing = _frame(a, cand, types, table)
     _release(a, 0, n)
-    # definitions only from FMT records that are part of the log (rarely differs)
-    fmt_kept = framing.pos[framing.defid == 0]  # (FMT is definition 0)
+    # definitions only from FMT records that are part of the log (rarely differs; FMT is
+    # definition 0, that of every FMT record and of no other type)
+    fmt_kept = fmt_pos[framing.defid[fmt_at] == 0]
     plausible = np.array(table.plausible, fmt_kept.dtype)
     at = np.minimum(np.searchsorted(fmt_kept, plausible), max(fmt_kept.size - 1, 0))
     if plausible.size and (fmt_kept.size == 0 or np.any(fmt_kept[at] != plausible)):
@@ -1474,27 +1543,27 @@ def _read_buffer(
                      f"(offset+size: {shown}{', ...' if skip_at.size > 5 else ''})"
                      + (f"; undefined type id(s) {unknown[:10]}" if unknown else ""))
     notes.extend(table.problems)
-    del cand, types, fmt_pos, fmt_kept
+    del cand, types, fmt_at, fmt_pos, fmt_kept
 
     # the records to decode (all of them, or those of the types asked for and the metadata),
     # grouped by definition: a stable radix sort of small integers keeps file order
     ndefs = len(table.defs)
-    wanted = None if messages is None else set(messages)
-    decode = np.array([wanted is None or times_only or d.name in wanted
-                       or d.name in _META_NAMES for d in table.defs])
 
     def skeleton(name: str) -> bool:  # read for its times only
         return times_only and wanted is not None and name not in wanted \
             and name not in _META_NAMES
-    # (one more entry each: the candidates that are not records)
+    # (one more entry: the candidates that are not records)
     timed = np.array([d.time_field is not None for d in table.defs] + [False])
-    decode = np.append(decode, False)
+    decode = np.array([wanted is None or times_only or d.name in wanted
+                       or d.name in _META_NAMES for d in table.defs] + [False])
     idx_dt = framing.pos.dtype
     sel: np.ndarray | None = None  # indices of the decoded records (None: all candidates)
     defid = framing.defid
+    where = framing.pos  # the decoded records' offsets
     if not decode[:ndefs].all():
-        sel = np.flatnonzero(_lookup(decode, framing.defid)).astype(idx_dt)
+        sel = _select(decode, framing.defid, idx_dt)
         defid = _lookup(framing.defid, sel)
+        where = _lookup(framing.pos, sel)
     members = _group(defid, ndefs + 1, idx_dt)
     members.pop(ndefs, None)  # the candidates that are not records
     del defid
@@ -1505,7 +1574,7 @@ def _read_buffer(
     for i, k in members.items():
         d = table.defs[i]
         first[i] = int(k[0])
-        pos = _lookup(framing.pos, k if sel is None else _lookup(sel, k))
+        pos = _lookup(where, k)
         t = _gather_times(a, d, pos) if windowed and d.name not in _META_NAMES else None
         if t is not None:  # timed records outside the window are not decoded
             keep = window_mask(t, start, stop)
@@ -1525,8 +1594,7 @@ def _read_buffer(
             groups[i] = (k_i, pos_i, held[np.searchsorted(k, k_i)])
     # the times of the decoded records and of those whose time they hold, in file order,
     # for the backwards-steps check
-    timeline = np.full(framing.pos.size if sel is None else sel.size, np.nan)
-    where = framing.pos if sel is None else _lookup(framing.pos, sel)
+    timeline = np.full(where.size, np.nan)
     inserts: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
     if sel is None:
         timeline[src[0]] = src[1]
@@ -1841,24 +1909,29 @@ def _plan_message(
         t_out = np.empty(total)
         at = 0
         for (d, _, pos, t), (_, _, own) in zip(parts, jobs, strict=True):
-            if t is None:
-                tf = d.time_field
-                t = (_times_of(d, own) if tf is not None and tf[0] in own
-                     else _gather_times(a, d, pos))
+            into = t_out[at : at + pos.size]
+            tf = d.time_field
+            if t is None and tf is not None and tf[0] in own:
+                _times_of(d, own, out=into)
+            else:
+                t = _gather_times(a, d, pos) if t is None else t
                 assert t is not None
-            t_out[at : at + pos.size] = t
+                into[...] = t
             at += pos.size
         return t_out
 
     return out, jobs, finish
 
 
-def _times_of(d: Definition, cols: Mapping[str, np.ndarray]) -> np.ndarray:
-    """Boot time (s) of decoded records of a definition that has a time field."""
+def _times_of(
+    d: Definition, cols: Mapping[str, np.ndarray], out: np.ndarray | None = None
+) -> np.ndarray:
+    """Boot time (s) of decoded records of a definition that has a time field (written
+    into ``out`` when given)."""
     tf = d.time_field
     assert tf is not None
     name, _, scale = tf
-    return np.multiply(cols[name], scale, dtype=np.float64)
+    return np.multiply(cols[name], scale, out=out, dtype=np.float64)
 
 
 @lru_cache(maxsize=4096)

@@ -388,12 +388,12 @@ def _sizes(formats: dict[str, list[Field]]) -> set[int]:
 
 @dataclass
 class _Sub:
-    """One subscription (``A`` message): a topic instance's message id and record dtype."""
+    """One subscription (``A`` message): a topic instance's message id and record layout."""
 
     msg_id: int
     multi_id: int
     name: str
-    dtype: np.dtype[Any]
+    size: int  # the record size
     ts_offset: int  # bytes before ``timestamp`` (the record size if there is none)
 
 
@@ -489,7 +489,7 @@ class _Reader:
         self.untimed: dict[int, int] = {}  # subscription -> record size, without timestamp
         self.final: list[int] = []  # subscriptions whose data is kept, pyulog's order
         self.flat: dict[str, list[tuple[str, str]]] = {}
-        self.dtypes: dict[str, tuple[np.dtype[Any], int]] = {}
+        self.dtypes: dict[str, tuple[list[str], list[str], int, int]] = {}
         # data messages met: (positions, sizes, ids, their subscriptions), and how many
         self.chunks: list[tuple[NDArray[Any], NDArray[Any], NDArray[Any], NDArray[np.int32]]]
         self.chunks = []
@@ -730,24 +730,25 @@ class _Reader:
         self.flat[name] = out
         return out
 
-    def record(self, name: str) -> tuple[np.dtype[Any], int]:
-        """The record dtype of a topic (trailing padding dropped) and its timestamp offset."""
+    def record(self, name: str) -> tuple[list[str], list[str], int, int]:
+        """A topic's record layout (trailing padding dropped): field names (an empty one
+        named ``f<index>``, as pyulog's dtype has it), basic types, size and timestamp
+        offset; building the dtype waits for :meth:`dtype` (only topics with data)."""
         if name not in self.dtypes:
             fields = list(self.flatten(name))
             while fields and fields[-1][0].startswith("_padding"):
                 fields.pop()
-            offset = 0
-            for fname, kind in fields:
-                if fname == "timestamp":
-                    break
-                offset += _BASIC[kind][1]
-            names = [f for f, _ in fields]
-            formats = [_DTYPE[k] for _, k in fields]
-            # (the list form names an empty field f<index>, as pyulog's dtype has it)
-            dtype = np.dtype({"names": names, "formats": formats}) if all(names) else \
-                np.dtype(list(zip(names, formats, strict=True)))
-            self.dtypes[name] = (dtype, offset)
+            names = [f or f"f{i}" for i, (f, _) in enumerate(fields)]
+            if len(set(names)) < len(names):
+                raise ValueError(name)  # numpy refuses repeated field names
+            sizes = [_BASIC[k][1] for _, k in fields]
+            stamp = names.index("timestamp") if "timestamp" in names else len(names)
+            self.dtypes[name] = (names, [k for _, k in fields], sum(sizes), sum(sizes[:stamp]))
         return self.dtypes[name]
+
+    def dtype(self, name: str) -> np.dtype[Any]:
+        names, kinds, _, _ = self.dtypes[name]
+        return np.dtype({"names": names, "formats": [_DTYPE[k] for k in kinds]})
 
     def subscribe(self, data: bytes) -> None:
         if len(data) < 3:
@@ -755,7 +756,7 @@ class _Reader:
         multi_id, msg_id = data[0], data[1] | data[2] << 8
         name = _text(data[3:])
         try:
-            dtype, offset = self.record(name)
+            _, _, size, offset = self.record(name)
         except (KeyError, ValueError, TypeError):
             raise _Bad from None
         if self.topics is not None and name not in self.topics:
@@ -764,9 +765,9 @@ class _Reader:
                 self.lookup[msg_id] = -2
             return
         self.active[msg_id] = self.lookup[msg_id] = len(self.subs)
-        if offset + 8 > dtype.itemsize:  # no room for the timestamp pyulog reads
-            self.untimed[len(self.subs)] = dtype.itemsize
-        self.subs.append(_Sub(msg_id, multi_id, name, dtype, offset))
+        if offset + 8 > size:  # no room for the timestamp pyulog reads
+            self.untimed[len(self.subs)] = size
+        self.subs.append(_Sub(msg_id, multi_id, name, size, offset))
 
     def end_segment(self) -> None:
         """pyulog turns the subscriptions into data at the end of each section read
@@ -970,7 +971,7 @@ class _Reader:
         if len(self.subs) < (1 << 15):
             sub = sub.astype(np.int16)
         # per subscription (and two zeros for -1, -2): record size, timestamp offset
-        item = np.array([s.dtype.itemsize for s in self.subs] + [0, 0], np.int32)
+        item = np.array([s.size for s in self.subs] + [0, 0], np.int32)
         offset = np.array([s.ts_offset for s in self.subs] + [0, 0], np.int32)
         valid = item[sub] == size.astype(np.int32) - 2
         if sub.size and sub.min() < 0:
@@ -1024,12 +1025,12 @@ class _Reader:
         items = []
         for k in self.final:
             s = self.subs[k]
-            width = s.dtype.itemsize
+            width = s.size
             if not counts[k] or not width:
                 continue
             # (raw records gathered as void: much faster than as the structured dtype)
             raw = np.ndarray((self.n - width + 1,), f"V{width}", buffer=self.buf, strides=(1,))
-            records = np.frombuffer(raw[at[first[k] : first[k + 1]]], s.dtype)
+            records = np.frombuffer(raw[at[first[k] : first[k + 1]]], self.dtype(s.name))
             items.append((s.name, s.multi_id, _Columns(records)))
         items.sort(key=lambda d: (d[0], d[1]))
         self.out.data = items

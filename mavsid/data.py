@@ -15,6 +15,7 @@ Examples
 from __future__ import annotations
 
 import functools
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -224,6 +225,32 @@ class FlightData:
     preset: str
     params: Mapping[str, float] = field(default_factory=dict)
     meta: Mapping[str, object] = field(default_factory=dict)
+
+    def index_of(self, segment: Segment) -> int | None:
+        """Index of ``segment``'s first sample on this flight's grid; None when the segment
+        was not cut from it (another log, other times).
+
+        Examples
+        --------
+        >>> fd = FlightData(np.arange(5) * 0.1, np.zeros((5, 1)), np.zeros((5, 1)), ("p",),
+        ...                 ("u_roll",), ("rad/s",), ("1",), 0.1, np.array([[0, 5]]), {},
+        ...                 SourceInfo("a.bin", "dataflash", 0), "t")
+        >>> seg = Segment(fd.time_s[2:4], fd.states[2:4], fd.inputs[2:4], ("p",), ("u_roll",),
+        ...               0.1, "roll", "scan", log="a.bin")
+        >>> fd.index_of(seg), fd.index_of(Segment(seg.time_s + 0.05, seg.states, seg.inputs,
+        ...                                       ("p",), ("u_roll",), 0.1, "roll", "scan"))
+        (2, None)
+        """
+        if segment.log and self.source.path and \
+                os.fspath(segment.log) != os.fspath(self.source.path):
+            return None
+        t, n = self.time_s, len(segment)
+        i = int(np.searchsorted(t, segment.time_s[0] - 1e-9)) if n else t.size
+        if i >= t.size or i + n > t.size:
+            return None
+        if not np.allclose(t[i:i + n], segment.time_s, atol=1e-6 * max(self.dt, 1e-9)):
+            return None
+        return i
 
 
 @dataclass(frozen=True)

@@ -1269,19 +1269,6 @@ def _baseline_candidates(pool: Sequence[tuple[np.ndarray, np.ndarray]], max_d: i
     return [int(d) for d in np.flatnonzero(~(approx < best - margin))]
 
 
-def _flight_index(flight: FlightData, seg: Segment) -> int | None:
-    """Index of the segment's first sample on the flight's grid (None when not from it)."""
-    if seg.log and flight.source.path and os.fspath(seg.log) != os.fspath(flight.source.path):
-        return None
-    t = flight.time_s
-    i = int(np.searchsorted(t, seg.time_s[0] - 1e-9))
-    if i >= t.size or i + len(seg) > t.size:
-        return None
-    if not np.allclose(t[i:i + len(seg)], seg.time_s, atol=1e-6 * max(flight.dt, 1e-9)):
-        return None
-    return i
-
-
 @dataclass(frozen=True)
 class _Block:
     """A segment located on its flight, with up to ``warm`` samples before it."""
@@ -1398,7 +1385,7 @@ def closed_loop_fit(
         TwinBlock(t, tg, y, ysim, u, usim, bp)
         for (t, tg, y, ysim, u, usim), bp in zip(blocks, b_pred, strict=True)
     )
-    k = flights.index(next(fd for fd in flights if _flight_index(fd, val[0].seg) is not None))
+    k = flights.index(next(fd for fd in flights if fd.index_of(val[0].seg) is not None))
     return ClosedLoopFit(
         fit_percent=_pooled_fit(ys, yts),
         output_fit_percent=float(fit_percent(np.concatenate(us), np.concatenate(uts))),
@@ -1431,7 +1418,7 @@ def _locate(segments: Sequence[Segment], axis: str, flights: Sequence[FlightData
     out = []
     for seg in segments:
         for k, fd in enumerate(flights):
-            i = _flight_index(fd, seg)
+            i = fd.index_of(seg)
             if i is None or axis not in sigs[k].target or u_name not in fd.input_names:
                 continue
             first = max((int(a) for a, _ in fd.blocks if a <= i), default=0)

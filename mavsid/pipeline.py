@@ -681,12 +681,9 @@ def _instrument_check(axis: str, flights: Sequence[FlightData],
         ref = None
         for fd in flights:
             desired = dict(fd.meta.get("commanded") or {}).get(axis)  # type: ignore[call-overload]
-            if desired is None or not len(seg) or seg.log != fd.source.path:
-                continue
-            i0 = int(np.searchsorted(fd.time_s, seg.time_s[0] - 1e-9))
-            i1 = i0 + len(seg)
-            if i1 <= len(fd.time_s) and np.allclose(fd.time_s[i0:i1], seg.time_s, atol=1e-6):
-                ref = desired[i0:i1]
+            i = fd.index_of(seg) if desired is not None else None
+            if i is not None:
+                ref = desired[i:i + len(seg)]
                 break
         refs.append(ref)
     if all(r is None for r in refs):

@@ -419,12 +419,12 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
             notes.append("bounded fit, no bound active")
 
     other = prov.get("other_estimate")
-    eff = rel
-    if isinstance(other, Mapping) and eff is not None:
-        alt = float(dict(other.get("params") or {}).get(eff[0], math.nan))
-        if math.isfinite(alt) and abs(alt / eff[1] - 1) >= OTHER_ESTIMATE_NOTE:
-            notes.append(f"{eff[0]} {alt:.4g} by {other.get('by')} against {eff[1]:.4g} "
-                         f"({100 * (alt / eff[1] - 1):+.0f} %): its σ include the difference")
+    if isinstance(other, Mapping) and rel is not None:
+        name, value, _ = rel
+        alt = float(dict(other.get("params") or {}).get(name, math.nan))
+        if math.isfinite(alt) and abs(alt / value - 1) >= OTHER_ESTIMATE_NOTE:
+            notes.append(f"{name} {alt:.4g} by {other.get('by')} against {value:.4g} "
+                         f"({100 * (alt / value - 1):+.0f} %): its σ include the difference")
 
     # open loop
     drift = False

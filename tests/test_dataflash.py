@@ -460,8 +460,8 @@ def _frame_reference(a, cand, types, table):
     """The framing rules evaluated on every candidate with full-length flags (the
     implementation before the suspects-only one), as the reference it must equal."""
     n, m = a.size, cand.size
-    defid = dataflash._assign_definitions(cand, types, table)
     lengths = np.array([d.length for d in table.defs] + [0], cand.dtype)
+    defid = dataflash._sweep(cand, types, table, lengths)[0]
     end = lengths[defid] + cand
     known = end > cand
     complete = known & (end <= n)

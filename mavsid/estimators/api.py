@@ -348,6 +348,7 @@ def identify_segments(
     # the feedback, the time-domain fit may be) joins the covariance as another spread
     estimate = getattr(choose_structure, "estimate", None)
     by_frf = estimate(model) if estimate is not None and failed is None else None
+    source = getattr(choose_structure, "estimate_source", _FRF_SOURCE)
     if by_frf is not None:
         model = _with_structure_spread(model, [by_frf])
     if not isinstance(estimator, str):
@@ -362,12 +363,10 @@ def identify_segments(
                                    if neighbours else "statistical") + (
             f"; the lags the data cannot tell apart ({', '.join(f'{x:g}' for x in sorted(alike))}"
             " s)" if alike else "") + (
-            f"; {getattr(choose_structure, 'estimate_source', _FRF_SOURCE)}"
-            if by_frf is not None else "")
+            f"; {source}" if by_frf is not None else "")
     if by_frf is not None:  # (what the verdict compares; JSON-friendly)
         prov["other_estimate"] = {
-            "by": getattr(choose_structure, "estimate_source", _FRF_SOURCE),
-            "params": {k: float(v) for k, v in by_frf.params.items()}}
+            "by": source, "params": {k: float(v) for k, v in by_frf.params.items()}}
     prov["filters"] = [f.to_dict() for f in structure.filters]
     prov["lag_s"] = lag
     prov["delay_s"] = dly * dt

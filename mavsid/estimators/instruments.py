@@ -52,7 +52,7 @@ import numpy as np
 
 from mavsid.data import Segment
 from mavsid.estimators.model import Model
-from mavsid.estimators.regressors import filter_inputs, variables
+from mavsid.estimators.regressors import variables
 
 __all__ = ["MAX_INSTRUMENT_SPREAD", "instrument_estimate"]
 
@@ -89,11 +89,10 @@ def instrument_estimate(model: Model, segments: Sequence[Segment],
         if ref is None or len(ref) != len(seg):
             continue
         var = variables(seg, st, names=(state, inp))
-        r = filter_inputs(np.asarray(ref, float)[:, None], seg.dt, st.filters)[:, 0]
-        r = variables(replace(seg, inputs=r[:, None], input_names=(inp,)),
-                      replace(st, filters=()), names=(inp,))[inp]
-        lead = st.delay + (1 if st.delay_frac > 0 else 0) + m
-        k = np.arange(lead, len(seg) - 1)
+        # the command through the input's filters and delay, as the input goes
+        r = variables(replace(seg, inputs=np.asarray(ref, float)[:, None], input_names=(inp,)),
+                      st, names=(inp,))[inp]
+        k = np.arange(st.lead + m, len(seg) - st.trail)
         cols = {state: var[state][k], inp: var[inp][k], "1": np.ones(k.size)}
         xs.append(np.column_stack([cols[f] for f in model.features]))
         zs.append(np.column_stack([r[k], r[k - m], np.ones(k.size)]))

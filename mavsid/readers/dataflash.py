@@ -590,15 +590,6 @@ def _records(a: np.ndarray, dtype: np.dtype, offsets: np.ndarray) -> np.ndarray:
     return raw.view(dtype)
 
 
-def _assign_definitions(
-    pos: np.ndarray, types: np.ndarray, table: _Definitions
-) -> np.ndarray:
-    """Index into ``table.defs`` for each candidate (-1: type undefined); see
-    :func:`_sweep`."""
-    lengths = np.array([d.length for d in table.defs] + [0], pos.dtype)
-    return _sweep(pos, types, table, lengths)[0]
-
-
 def _sweep(
     pos: np.ndarray, types: np.ndarray, table: _Definitions, lengths: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:

@@ -16,6 +16,13 @@ interpreter's time beside; with ``--baseline DIR`` (a checkout of the previous r
 alternately with this one's (a busy machine slows both alike), and the ratio of the medians
 of wall and of CPU time (user + system of the process; steadier than wall time when other
 work shares the machine).
+
+Bytecode: ``pip install .`` (the README's install) compiles every module to bytecode once, at
+install; a checkout run with ``PYTHONDONTWRITEBYTECODE=1`` set (as on some CI machines)
+compiles mavsid's ~20 000 lines again in every process (~0.2 s). By default each tree is
+compiled once beforehand into a temporary ``PYTHONPYCACHEPREFIX`` (the checkout is left
+untouched), so the runs get what an installed mavsid gets; ``--no-bytecode`` times the
+compile-every-run case instead.
 """
 
 from __future__ import annotations
@@ -33,30 +40,46 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def _time(argv: list[str], runs: int) -> list[float]:
+def _env(root: Path, cache: str | None) -> dict[str, str]:
+    """The children's environment: ``root`` on the path; with ``cache``, bytecode read from
+    (and written to) that folder, compiled there beforehand (see the module's *Bytecode*)."""
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    if cache is None:
+        env["PYTHONDONTWRITEBYTECODE"] = "1"
+        return env
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
+    env["PYTHONPYCACHEPREFIX"] = cache
+    subprocess.run([sys.executable, "-m", "compileall", "-q", str(root / "mavsid")],
+                   env=env, check=True)
+    return env
+
+
+def _time(argv: list[str], runs: int, env: dict[str, str]) -> list[float]:
     out = []
     for _ in range(runs):
         t = time.perf_counter()
-        subprocess.run(argv, cwd=ROOT, capture_output=True, check=False)
+        subprocess.run(argv, cwd=ROOT, env=env, capture_output=True, check=False)
         out.append(time.perf_counter() - t)
     return out
 
 
-def _whole_fit(log: str, baseline: str | None, runs: int) -> None:
+def _whole_fit(log: str, baseline: str | None, runs: int, bytecode: bool) -> None:
     """``fit LOG`` and ``fit LOG --rrd --report`` from this checkout (and ``baseline``)."""
     trees = {"this": ROOT} | ({"baseline": Path(baseline).resolve()} if baseline else {})
     with tempfile.TemporaryDirectory() as tmp:
+        envs = {tree: _env(root, str(Path(tmp) / f"pyc-{tree}") if bytecode else None)
+                for tree, root in trees.items()}
         cases = {"fit LOG": ["fit", log, "--quiet"],
                  "fit LOG --rrd --report": ["fit", log, "--quiet", "--rrd",
                                             str(Path(tmp) / "o.rrd"), "--report",
                                             str(Path(tmp) / "o.html")]}
-        bare = _time([sys.executable, "-c", "pass"], runs)
+        bare = _time([sys.executable, "-c", "pass"], runs, envs["this"])
         times: dict[tuple[str, str], list[float]] = {}
         cpu: dict[tuple[str, str], list[float]] = {}
         for _ in range(runs):  # alternate the trees: load on the machine hits both alike
             for case, argv in cases.items():
                 for tree, root in trees.items():
-                    env = {**os.environ, "PYTHONPATH": str(root)}
+                    env = envs[tree]
                     u0 = resource.getrusage(resource.RUSAGE_CHILDREN)
                     t = time.perf_counter()
                     proc = subprocess.run([sys.executable, "-m", "mavsid", *argv], cwd=root,
@@ -69,7 +92,8 @@ def _whole_fit(log: str, baseline: str | None, runs: int) -> None:
                         raise SystemExit(f"{tree}: {' '.join(argv)}: exit {proc.returncode}: "
                                          f"{proc.stderr.decode()[-300:]}")
     print(f"{Path(log).name}, {runs} fresh processes each; python -c pass "
-          f"{statistics.median(bare):.3f} s median")
+          f"{statistics.median(bare):.3f} s median; "
+          + ("bytecode compiled beforehand" if bytecode else "compiled in every run"))
     print(f"{'command':24} {'tree':9} {'min':>7} {'median':>7} {'max':>7} {'CPU med':>8}  ratio "
           "(wall, CPU medians)")
     for case in cases:
@@ -90,10 +114,12 @@ def main() -> None:
     ap.add_argument("--runs", type=int, default=5)
     ap.add_argument("--log", help="time the whole `mavsid fit` of this log instead")
     ap.add_argument("--baseline", metavar="DIR", help="with --log: a checkout to compare with")
+    ap.add_argument("--no-bytecode", action="store_true",
+                    help="compile mavsid in every run (PYTHONDONTWRITEBYTECODE=1)")
     args = ap.parse_args()
     runs = args.runs
     if args.log:
-        _whole_fit(args.log, args.baseline, runs)
+        _whole_fit(args.log, args.baseline, runs, not args.no_bytecode)
         return
     py = [sys.executable]
     cases = {
@@ -103,8 +129,11 @@ def main() -> None:
         "mavsid fit sysid_roll.bin": [*py, "-m", "mavsid.cli", "fit",
                                       str(ROOT / "fixtures" / "sysid_roll.bin")],
     }
-    times = {name: _time(argv, runs) for name, argv in cases.items()}
+    with tempfile.TemporaryDirectory() as tmp:
+        env = _env(ROOT, None if args.no_bytecode else str(Path(tmp) / "pyc"))
+        times = {name: _time(argv, runs, env) for name, argv in cases.items()}
     bare = min(times["python -c pass"])
+    print("bytecode " + ("compiled in every run" if args.no_bytecode else "compiled beforehand"))
     print(f"{'command':28} {'cold':>7} {'min':>7} {'median':>7}  beyond the interpreter")
     for name, ts in times.items():
         print(f"{name:28} {ts[0]:7.3f} {min(ts):7.3f} {statistics.median(ts):7.3f}  "

@@ -895,8 +895,29 @@ def _commanded(raw: RawLog, t: np.ndarray) -> dict[str, np.ndarray]:
         got = first_of(raw, chans, f"commanded {axis}")
         if got is not None and np.ptp(got[2]) > 0:
             order = np.argsort(got[1], kind="stable")
-            out[axis] = np.interp(t, got[1][order], got[2][order], left=np.nan, right=np.nan)
+            ts = got[1][order]
+            cmd = np.interp(t, ts, got[2][order], left=np.nan, right=np.nan)
+            # not published in a gap (PX4's rate-only modes such as ACRO): not a ramp across it
+            cmd[_unsampled(ts, t)] = np.nan
+            out[axis] = cmd
     return out
+
+
+def _unsampled(ts: np.ndarray, t: np.ndarray, min_gap_s: float = 0.05) -> np.ndarray:
+    """Where on the grid ``t`` a signal sampled at the sorted times ``ts`` is not known:
+    inside a gap of more than three of its usual intervals (and ``min_gap_s``) between two
+    samples.
+
+    Examples
+    --------
+    >>> _unsampled(np.array([0.0, 0.1, 0.2, 1.0, 1.1]), np.array([0.15, 0.5, 1.05])).tolist()
+    [False, True, False]
+    """
+    if ts.size < 2:
+        return np.zeros(t.shape, bool)
+    gap = max(float(np.median(np.diff(ts))) * 3, min_gap_s)
+    near = np.searchsorted(ts, t).clip(1, ts.size - 1)
+    return np.minimum(np.abs(t - ts[near]), np.abs(t - ts[near - 1])) > gap
 
 
 def _sysid_injection(raw: RawLog, t: np.ndarray) -> np.ndarray | None:
@@ -909,10 +930,7 @@ def _sysid_injection(raw: RawLog, t: np.ndarray) -> np.ndarray | None:
     targ = np.nan_to_num(np.asarray(sidd.columns["Targ"], dtype=float))
     order = np.argsort(ts, kind="stable")
     out = np.interp(t, ts[order], targ[order], left=0.0, right=0.0)
-    gap = np.median(np.diff(ts[order])) * 3 if ts.size > 2 else 0.0
-    near = np.searchsorted(ts[order], t).clip(1, ts.size - 1)
-    far = np.minimum(np.abs(t - ts[order][near]), np.abs(t - ts[order][near - 1])) > max(gap, 0.05)
-    out[far] = 0.0  # between runs SIDD is not logged: no injection there
+    out[_unsampled(ts[order], t)] = 0.0  # between runs SIDD is not logged: no injection there
     return out
 
 

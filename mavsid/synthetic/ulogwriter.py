@@ -14,7 +14,9 @@ Layouts (:data:`ULOG_LAYOUTS`) are the topic sets mavsid's presets meet in the f
 ``px4-1.11``  ``vehicle_angular_velocity``, ``actuator_controls_0``, ``actuator_outputs``
 ``px4-1.8``   body rates in ``vehicle_attitude`` (``rollspeed``...), ``actuator_controls_0``
 
-plus, in each, ``vehicle_attitude.q``, ``vehicle_rates_setpoint``, ``sensor_combined``,
+plus, in each, ``vehicle_attitude.q``, ``vehicle_rates_setpoint``,
+``vehicle_attitude_setpoint`` (``q_d``; also ``roll_body``... before 1.14; published only
+outside ACRO, where the attitude controller runs), ``sensor_combined``,
 ``vehicle_status`` (``nav_state``, ``arming_state``), ``vehicle_land_detected`` and the
 rate-controller parameters under PX4's names (``MC_ROLLRATE_P``...). The plant and
 controller are the simulator's own (ArduPilot-style PID gains written as PX4's P, I, D, FF
@@ -86,6 +88,17 @@ def _topics(layout: str) -> dict[str, tuple[tuple[str, str], ...]]:
                            ("uint8_t", "vehicle_type")),
         "vehicle_land_detected": (*ts, ("bool", "landed"), ("bool", "maybe_landed")),
     }
+    # the attitude controller's output (published in the attitude-stabilised modes only)
+    if layout == "px4-1.14":  # (roll_body... gone since 1.14: the quaternion q_d alone)
+        topics["vehicle_attitude_setpoint"] = (*ts, ("float", "yaw_sp_move_rate"),
+                                               ("float[4]", "q_d"), ("float[3]", "thrust_body"),
+                                               ("bool", "reset_integral"),
+                                               ("bool", "fw_control_yaw_wheel"))
+    else:
+        topics["vehicle_attitude_setpoint"] = (*ts, ("float", "roll_body"),
+                                               ("float", "pitch_body"), ("float", "yaw_body"),
+                                               ("float", "yaw_sp_move_rate"), ("float[4]", "q_d"),
+                                               ("float[3]", "thrust_body"))
     if layout != "px4-1.8":
         topics["vehicle_angular_velocity"] = (*sample, ("float[3]", "xyz"),
                                               ("float[3]", "xyz_derivative"))
@@ -245,6 +258,17 @@ def write_ulog(
         "roll": flight.rate_target[:, 0], "pitch": flight.rate_target[:, 1],
         "yaw": flight.rate_target[:, 2],
         "thrust_body": np.column_stack([np.zeros_like(thrust), np.zeros_like(thrust), -thrust])})
+    # the attitude setpoint where the attitude controller runs: not in ACRO (rates from the
+    # sticks), so not during the SYSTEMID chirps
+    nav = np.array([_NAV_STATE.get(int(m), _NAV_STAB) for m in flight.mode], dtype=np.uint8)
+    stabilised = slow[nav[slow] == _NAV_STAB]
+    target = flight.attitude_target
+    setpoint: dict[str, Any] = {
+        "q_d": _quaternion(target),
+        "thrust_body": np.column_stack([np.zeros_like(thrust), np.zeros_like(thrust), -thrust])}
+    if layout != "px4-1.14":
+        setpoint.update(roll_body=target[:, 0], pitch_body=target[:, 1], yaw_body=target[:, 2])
+    add("vehicle_attitude_setpoint", stabilised, setpoint)
     if layout == "px4-1.14":
         add("vehicle_torque_setpoint", fast, {"xyz": flight.u})
         add("vehicle_thrust_setpoint", fast, {"xyz": np.column_stack(
@@ -263,7 +287,6 @@ def write_ulog(
                                   "accelerometer_m_s2": flight.accel,
                                   "gyro_integral_dt": int(1e6 / min(rate_hz, 50.0))})
     # status at 1 Hz and at every mode change; landed never (the flight is airborne)
-    nav = np.array([_NAV_STATE.get(int(m), _NAV_STAB) for m in flight.mode], dtype=np.uint8)
     one_hz = _every(flight, 1.0)
     change = np.flatnonzero(np.r_[True, nav[1:] != nav[:-1]])
     status = np.union1d(one_hz, change)

@@ -326,11 +326,11 @@ def _write_outputs(args: argparse.Namespace, result: FitResult,
     else here after it."""
     with contextlib.ExitStack() as stack:
         report_tmp = None
+        handed = False
         if args.report:
             step(f"writing {args.report}")
             report_tmp = stack.enter_context(atomic_path(args.report))
-            if worker is not None:
-                worker.start(result, report_tmp, args.report)
+            handed = worker is not None and worker.start(result, report_tmp, args.report)
         if args.rrd:
             from mavsid.viz import save_rrd
 
@@ -338,7 +338,8 @@ def _write_outputs(args: argparse.Namespace, result: FitResult,
             with atomic_path(args.rrd) as tmp:
                 save_rrd(result, tmp)
         if report_tmp is not None:
-            if worker is not None:
+            if handed:
+                assert worker is not None
                 worker.wait()
             else:
                 from mavsid.report import write_report

@@ -31,7 +31,6 @@ import pickle
 import signal
 import sys
 import tempfile
-import threading
 from collections.abc import Iterable, Iterator
 from typing import Any
 
@@ -127,9 +126,16 @@ class ReportWorker:
     other outputs (the ``.rrd``: ~1 s with rerun's import). On two cores ``fit --rrd
     --report`` of the SITL flight then ends when the report does.
 
+    The result goes over as a pickle in a temporary file (written at once, ~40 MB for the
+    SITL flight), the pipe carrying only its name: fed through the pipe by a thread, its
+    64 kB writes each waited for the interpreter lock while this process wrote the ``.rrd``,
+    and the report began only when the ``.rrd`` was done (0.5 s later). The worker leaves
+    without the interpreter's teardown once the report is written (freeing the result's
+    objects took 0.4 s more).
+
     Use it as a context manager: leaving the block without :meth:`wait` ends the process
     (a fit that failed, Ctrl-C), and no file it was writing is left behind (the caller's
-    :func:`atomic_path` removes it).
+    :func:`atomic_path` removes it), nor the result's temporary file.
 
     Examples
     --------
@@ -148,47 +154,62 @@ class ReportWorker:
         self._proc: subprocess.Popen[bytes] = subprocess.Popen(
             [sys.executable, "-c", _SERVE], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
             env=env)
-        self._feeder: threading.Thread | None = None
+        self._handoff: str | None = None
         self._target = ""
 
     @staticmethod
     def available() -> bool:
         """Whether a worker is worth starting: an interpreter to start (not a frozen app)
         and a core to spare — two usable cores or more, the last minute's load average
-        leaving one idle (as ``make --load-average`` judges it). The worker costs ~1 s of
-        CPU of its own (its imports): on a machine whose cores are all busy it only adds
-        that (``fit --rrd --report`` of the SITL flight 6.4 s against 5.9 s at load ~2 on
-        two cores)."""
+        leaving one idle (as ``make --load-average`` judges it), or, where it does not, the
+        other processes using at most half a core less than that over the next 50 ms
+        (:func:`_others_busy`): the load average also counts this user's own commands of
+        the last minute (a loop of ``mavsid fit`` over logs kept it at 1-1.5 on an idle
+        two-core machine and ran every report in-process: ``fit --rrd --report`` of the
+        SITL flight 4.4 s median instead of 3.6). The worker costs ~1 s of CPU of its own
+        (its imports): on a machine whose cores are all busy it only adds that (6.4 s
+        against 5.9 s at load ~2 on two cores)."""
         if not sys.executable or getattr(sys, "frozen", False):
             return False
         try:
             cores = len(os.sched_getaffinity(0))
         except AttributeError:  # (not on Linux)
             cores = os.cpu_count() or 1
+        if cores < 2:
+            return False
         try:
             load = os.getloadavg()[0]
         except (AttributeError, OSError):  # (Windows: no load average)
             load = 0.0
-        return cores >= 2 and load <= cores - 1
+        if load <= cores - 1:
+            return True
+        others = _others_busy(0.05)
+        return others is not None and others <= cores - 1.5
 
     @property
     def returncode(self) -> int | None:
         return self._proc.returncode
 
-    def start(self, result: Any, path: str, target: str) -> None:
+    def start(self, result: Any, path: str, target: str) -> bool:
         """Hand the worker ``result`` to write to ``path`` (a temporary file of ``target``,
-        the output named in errors); returns at once (a thread feeds the pipe)."""
+        the output named in errors); returns once the result is on disk. False when it
+        could not be put there (a full temporary folder): the caller draws the report
+        itself (the worker, told nothing, ends)."""
         self._target = target
         stdin = self._proc.stdin
         assert stdin is not None
-
-        def feed() -> None:
-            with contextlib.suppress(OSError):  # the worker died: wait() says so
-                with stdin:
-                    pickle.dump((result, path), stdin, protocol=pickle.HIGHEST_PROTOCOL)
-
-        self._feeder = threading.Thread(target=feed, daemon=True)
-        self._feeder.start()
+        try:
+            fd, self._handoff = tempfile.mkstemp(prefix="mavsid-report-", suffix=".pickle")
+            with os.fdopen(fd, "wb") as f:
+                pickle.dump((result, path), f, protocol=pickle.HIGHEST_PROTOCOL)
+        except (OSError, pickle.PicklingError):
+            with contextlib.suppress(OSError):
+                stdin.close()
+            return False
+        with contextlib.suppress(OSError):  # the worker died: wait() says so
+            with stdin:
+                stdin.write(self._handoff.encode() + b"\n")
+        return True
 
     def wait(self) -> None:
         """Wait for the report.
@@ -200,8 +221,6 @@ class ReportWorker:
             :class:`~mavsid.errors.ConfigError` when the file could not be written); a
             defect's traceback is printed by the worker itself.
         """
-        if self._feeder is not None:
-            self._feeder.join()
         assert self._proc.stdout is not None
         said = self._proc.stdout.read().decode("utf-8", "replace").strip()
         if self._proc.wait() == 0:
@@ -223,6 +242,43 @@ class ReportWorker:
                 if stream is not None:
                     stream.close()
         self._proc.wait()
+        if self._handoff is not None:  # (the worker removes it once read)
+            with contextlib.suppress(OSError):
+                os.unlink(self._handoff)
+
+
+def _cpu_times() -> tuple[int, int, int] | None:
+    """The machine's CPU time so far from ``/proc/stat`` (clock ticks): all, idle (with I/O
+    wait) and the number of CPUs; None where there is no such file (not Linux).
+
+    Examples
+    --------
+    >>> got = _cpu_times()
+    >>> got is None or (got[0] >= got[1] >= 0 and got[2] >= 1)
+    True
+    """
+    try:
+        with open("/proc/stat", "rb") as f:
+            lines = f.read().split(b"\n")
+        ticks = [int(x) for x in lines[0].split()[1:9]]
+    except (OSError, ValueError, IndexError):
+        return None
+    cpus = sum(1 for line in lines if line[:3] == b"cpu" and line[3:4].isdigit())
+    return (sum(ticks), ticks[3] + ticks[4], cpus) if len(ticks) == 8 and cpus else None
+
+
+def _others_busy(window_s: float) -> float | None:
+    """How many CPUs the machine's other processes keep busy, measured over ``window_s``
+    while this one sleeps; None where it cannot be measured."""
+    import time
+
+    first = _cpu_times()
+    time.sleep(window_s)
+    last = _cpu_times()
+    if first is None or last is None or last[0] <= first[0]:
+        return None
+    total, idle = last[0] - first[0], last[1] - first[1]
+    return last[2] * (total - idle) / total
 
 
 def _serve_report() -> None:
@@ -230,13 +286,22 @@ def _serve_report() -> None:
     path)`` from standard input, write it; a :class:`~mavsid.errors.MavsidError` or a file
     that cannot be written is one line ``class<TAB>message`` on standard output, exit 1."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the command's Ctrl-C ends it, not this
-    from mavsid import loop, pipeline, report  # noqa: F401  (while the logs are fitted)
+    # while the logs are fitted: the report's modules and those of the result's classes
+    # (unpickling them here after the fit took 0.35 s: scipy.optimize, sparse, fft...)
+    from scipy import interpolate  # noqa: F401  (the loop's margins)
+
+    from mavsid import estimators, excitation, frequency, loop, pipeline, report  # noqa: F401
 
     report.warm_up()
-    try:
-        result, path = pickle.load(sys.stdin.buffer)
-    except EOFError:  # the command stopped before its outputs
+    handoff = sys.stdin.readline().rstrip("\n")
+    if not handoff:  # the command stopped before its outputs
         return
+    try:
+        with open(handoff, "rb") as f:
+            result, path = pickle.load(f)
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(handoff)
     try:
         report.write_report(result, path)
     except MavsidError as exc:
@@ -245,3 +310,6 @@ def _serve_report() -> None:
     except OSError as exc:
         print(f"ConfigError\tcannot write: {exc.strerror or exc}", flush=True)
         sys.exit(1)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(0)  # (the report is closed; freeing the result's objects only costs time)

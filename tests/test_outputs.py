@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import base64
 import contextlib
 import hashlib
 import io
 import os
 import shutil
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -109,11 +111,35 @@ def test_the_report_worker_writes_the_report_drawn_here(fitted, tmp_path: Path) 
 
     here, there = tmp_path / "here.html", tmp_path / "there.html"
     report.write_report(fitted, here)
+    before = set(Path(tempfile.gettempdir()).glob("mavsid-report-*"))
     with ReportWorker() as worker:
-        worker.start(fitted, str(there), "fit.html")
+        assert worker.start(fitted, str(there), "fit.html")
         worker.wait()
     assert worker.returncode == 0
     assert there.read_bytes() == here.read_bytes()
+    assert set(Path(tempfile.gettempdir()).glob("mavsid-report-*")) == before  # (handed over)
+
+
+def test_a_result_that_cannot_be_handed_over_is_drawn_here(log: Path, tmp_path: Path,
+                                                           monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """A temporary folder the result cannot be written to (full): the worker is not used,
+    the command draws the report itself."""
+    from mavsid import outputs
+    from mavsid.outputs import ReportWorker
+
+    mkstemp = tempfile.mkstemp
+
+    def full(*args: object, **kw: object) -> tuple[int, str]:  # (the system's temporary folder)
+        if kw.get("dir") is None:
+            raise OSError(28, "No space left on device")
+        return mkstemp(*args, **kw)  # type: ignore[call-overload,no-any-return]
+
+    monkeypatch.setattr(ReportWorker, "available", staticmethod(lambda: True))
+    monkeypatch.setattr(outputs.tempfile, "mkstemp", full)
+    code, err = _run("fit", str(log), "--quiet", "--report", str(tmp_path / "f.html"))
+    assert code == 0, err
+    assert "<svg" in base64.b64decode(
+        (tmp_path / "f.html").read_text().split("base64,")[1].split('"')[0]).decode()
 
 
 def test_a_report_the_worker_cannot_write_is_one_line(fitted, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
@@ -158,12 +184,52 @@ def test_fit_with_a_report_that_fails_leaves_nothing(log: Path, tmp_path: Path) 
     assert list(out.iterdir()) == []
 
 
-@pytest.mark.parametrize(("cores", "load", "started"),
-                         [(2, 0.3, True), (2, 1.9, False), (1, 0.0, False), (8, 6.5, True)])
-def test_a_worker_is_started_only_with_a_core_to_spare(monkeypatch, cores: int, load: float,
-                                                        started: bool) -> None:  # type: ignore[no-untyped-def]
+@pytest.mark.parametrize(("cores", "load", "others", "started"),
+                         [(2, 0.3, None, True), (2, 1.9, 1.8, False), (1, 0.0, 0.0, False),
+                          (8, 6.5, None, True), (2, 1.4, 0.2, True), (2, 1.4, 0.9, False),
+                          (2, 1.9, None, False)])
+def test_a_worker_is_started_only_with_a_core_to_spare(
+        monkeypatch, cores: int, load: float, others: float | None, started: bool) -> None:  # type: ignore[no-untyped-def]
+    """The load average, or where it says busy (it also counts the user's own commands of
+    the last minute) the other processes' use now."""
+    from mavsid import outputs
     from mavsid.outputs import ReportWorker
 
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: set(range(cores)), raising=False)
     monkeypatch.setattr(os, "getloadavg", lambda: (load, load, load))
+    asked = []
+    monkeypatch.setattr(outputs, "_others_busy", lambda s: asked.append(s) or others)
     assert ReportWorker.available() is started
+    assert bool(asked) == (cores >= 2 and load > cores - 1)
+
+
+def test_the_other_processes_use_is_measured(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """Two /proc/stat readings 50 ms apart: 10 ticks on 2 CPUs, 4 of them idle -> 1.2 CPUs
+    busy; no /proc/stat (not Linux) -> unknown."""
+    from mavsid import outputs
+
+    readings = iter([(1000, 600, 2), (1010, 604, 2)])
+    monkeypatch.setattr(outputs, "_cpu_times", lambda: next(readings))
+    assert outputs._others_busy(0.0) == pytest.approx(1.2)
+    monkeypatch.setattr(outputs, "_cpu_times", lambda: None)
+    assert outputs._others_busy(0.0) is None
+    busy = []
+    import threading
+
+    stop = threading.Event()
+
+    def spin() -> None:
+        while not stop.is_set():
+            pass
+
+    monkeypatch.undo()
+    if outputs._cpu_times() is None:
+        pytest.skip("no /proc/stat here")
+    thread = threading.Thread(target=spin)  # (a spinning thread of this process: one CPU)
+    thread.start()
+    try:
+        busy.append(outputs._others_busy(0.3))
+    finally:
+        stop.set()
+        thread.join()
+    assert busy[0] is not None and busy[0] >= 0.6

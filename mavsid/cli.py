@@ -407,17 +407,17 @@ def _add_fit(sub: argparse._SubParsersAction) -> None:
 def _fit(args: argparse.Namespace) -> int:
     import json
 
-    from mavsid.pipeline import FIT_STAGES, fit
-
     check_outputs([args.output, args.rrd, args.report], args.logs)
-    cfg = _pipeline_config(args)
-    with _report_worker(args) as worker, \
-            _progress(args, _stages(args, len(cfg.axes), len(FIT_STAGES))) as step:
-        result = fit(args.logs, cfg, progress=step)
-        if args.output:
-            with atomic_path(args.output) as tmp, open(tmp, "w", encoding="utf-8") as f:
-                json.dump(result.models_dict(), f, indent=1)
-        _write_outputs(args, result, step, worker)
+    with _report_worker(args) as worker:  # (first: it imports while this one does too)
+        from mavsid.pipeline import FIT_STAGES, fit
+
+        cfg = _pipeline_config(args)
+        with _progress(args, _stages(args, len(cfg.axes), len(FIT_STAGES))) as step:
+            result = fit(args.logs, cfg, progress=step)
+            if args.output:
+                with atomic_path(args.output) as tmp, open(tmp, "w", encoding="utf-8") as f:
+                    json.dump(result.models_dict(), f, indent=1)
+            _write_outputs(args, result, step, worker)
     _print_result(args, result)
     if args.output and not args.json:
         print(f"wrote {args.output}")
@@ -439,16 +439,16 @@ def _add_validate(sub: argparse._SubParsersAction) -> None:
 
 
 def _validate(args: argparse.Namespace) -> int:
-    from mavsid.pipeline import VALIDATE_STAGES, load_models, validate_logs
-
     check_outputs([args.rrd, args.report], [args.model, *args.logs])
-    models = load_models(args.model)
-    cfg = _pipeline_config(args)
-    axes = len([a for a in models if a in cfg.axes])
-    with _report_worker(args) as worker, \
-            _progress(args, _stages(args, axes, len(VALIDATE_STAGES))) as step:
-        result = validate_logs(models, args.logs, cfg, progress=step)
-        _write_outputs(args, result, step, worker)
+    with _report_worker(args) as worker:  # (first: it imports while this one does too)
+        from mavsid.pipeline import VALIDATE_STAGES, load_models, validate_logs
+
+        models = load_models(args.model)
+        cfg = _pipeline_config(args)
+        axes = len([a for a in models if a in cfg.axes])
+        with _progress(args, _stages(args, axes, len(VALIDATE_STAGES))) as step:
+            result = validate_logs(models, args.logs, cfg, progress=step)
+            _write_outputs(args, result, step, worker)
     _print_result(args, result)
     return 0
 

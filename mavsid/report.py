@@ -81,14 +81,22 @@ def figure_img(fig: Figure) -> str:
 
 
 def warm_up() -> None:
-    """Draw a throwaway figure: the first drawing in a process loads the fonts and the SVG
-    backend (~60 ms), which a process waiting for its result (:class:`~mavsid.outputs.
-    ReportWorker`) does beforehand."""
-    fig = Figure(figsize=(2, 1.5))
-    ax = fig.subplots()
-    ax.semilogx([1.0, 10.0], [0.0, 1.0])
-    ax.set_title("x")
-    figure_img(fig)
+    """Build and draw each of the report's figure layouts once, empty: the first drawing in
+    a process loads the fonts and the SVG backend, and a layout's first use builds its axes
+    and tick objects (together ~0.6 s of the SITL flight's report the first time, 1.9 s
+    against 1.3), which a process waiting for its result (:class:`~mavsid.outputs.
+    ReportWorker`) does beforehand: the report's figures then reuse them (see
+    :func:`_panels`)."""
+    for name, (figsize, rows, cols, kw) in _LAYOUTS.items():
+        fig, axes = _panels(figsize, rows, cols, **kw)
+        for ax in axes.ravel():
+            if name in _LOG_X:  # (a linear axis stays linear: its figure only plots on it)
+                ax.set_xscale("log")
+            ax.plot([0.1, 10.0], [0.0, 1.0], label="x")
+            ax.set_title("x")
+            ax.legend(fontsize=7)
+        _layout(fig)
+        figure_img(fig)
 
 
 _POOL = threading.local()
@@ -126,6 +134,27 @@ def _panels(figsize: tuple[float, float], rows: int = 1, cols: int = 1,
     axes = fig.subplots(rows, cols, squeeze=False, **kw)
     pool[key] = (fig, axes)
     return fig, axes
+
+
+_BODE_KW = {"sharex": "col", "gridspec_kw": {"height_ratios": [3, 2, 1.3]}}
+#: the report's figure layouts: figure size (in), rows, columns, ``subplots`` keywords (a
+#: Bode figure of three columns or more, rare, is sized where it is drawn)
+_LAYOUTS: dict[str, tuple[tuple[float, float], int, int, dict[str, Any]]] = {
+    "time": ((11, 4.5), 2, 1, {"sharex": True, "gridspec_kw": {"height_ratios": [3, 1]}}),
+    "horizon": ((5.2, 3.4), 1, 1, {}),
+    "residual": ((5.2, 4.6), 2, 1, {}),
+    "bode1": ((11, 6), 3, 1, _BODE_KW),
+    "bode2": ((11, 6), 3, 2, _BODE_KW),
+    "twin": ((11, 3.2), 1, 1, {}),
+}
+#: the layouts whose x axes are logarithmic
+_LOG_X = frozenset({"horizon", "bode1", "bode2"})
+
+
+def _layout_panels(name: str) -> tuple[Figure, np.ndarray]:
+    """:func:`_panels` of the layout ``name`` of :data:`_LAYOUTS`."""
+    figsize, rows, cols, kw = _LAYOUTS[name]
+    return _panels(figsize, rows, cols, **kw)
 
 
 _PLAIN = FuncFormatter(lambda x, _pos: f"{x:g}")
@@ -206,7 +235,7 @@ def _gapped(parts: Sequence[tuple[np.ndarray, np.ndarray]],
 def _time_figure(fit: AxisFit) -> Figure:
     v = fit.validation
     j = v.state_names.index(fit.output)
-    fig, axes = _panels((11, 4.5), 2, 1, sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+    fig, axes = _layout_panels("time")
     ax, ax_u = axes[:, 0]
     for kind in ("measured", "one_step", "free_run"):
         t, y = _gapped([(s.time_s, getattr(s, kind)[:, j]) for s in v.segments])
@@ -231,7 +260,7 @@ def _time_figure(fit: AxisFit) -> Figure:
 
 
 def _horizon_figure(v: Validation) -> Figure:
-    fig, axes = _panels((5.2, 3.4))
+    fig, axes = _layout_panels("horizon")
     ax = axes[0, 0]
     h = v.horizons_s
     for j, state in enumerate(v.state_names):
@@ -251,7 +280,7 @@ def _horizon_figure(v: Validation) -> Figure:
 
 def _residual_figure(v: Validation) -> Figure:
     r = v.residuals
-    fig, axes = _panels((5.2, 4.6), 2, 1)
+    fig, axes = _layout_panels("residual")
     ax, ax_u = axes[:, 0]
     for j, state in enumerate(v.state_names):
         ax.plot(r.lags * v.dt * 1e3, r.autocorr[:, j], ".-", ms=3, label=f"{state}")
@@ -338,8 +367,9 @@ def _bode_figure(fit: AxisFit, lp: _Loop | None = None) -> Figure | None:
     cols = _bode_columns(fit, lp)
     if not cols:
         return None
-    fig, axes = _panels((11, 6) if len(cols) < 3 else (14, 6), 3, len(cols), sharex="col",
-                        gridspec_kw={"height_ratios": [3, 2, 1.3]})
+    name = f"bode{len(cols)}"
+    fig, axes = (_layout_panels(name) if name in _LAYOUTS
+                 else _panels((14, 6), 3, len(cols), **_BODE_KW))
     for i, col in enumerate(cols):
         mag, ph, coh = axes[0, i], axes[1, i], axes[2, i]
         f, (label, h), gamma = col["f"], col["measured"], col["coherence"]
@@ -567,7 +597,7 @@ def _twin_figure(fit: AxisFit) -> Figure | None:
     cl = fit.closed_loop
     if cl is None or not cl.blocks:
         return None
-    fig, axes = _panels((11, 3.2))
+    fig, axes = _layout_panels("twin")
     ax = axes[0, 0]
     curves: tuple[tuple[str, str, str, float, str], ...] = (
         ("rate", "measured", _COLOURS["measured"], 0.8, "-"),

@@ -193,3 +193,36 @@ def test_one_bode_figure_serves_the_validation_and_the_loop(tmp_path) -> None:  
     assert loop.count("<img") == 1  # the twin; the Bode is the roll section's
     assert "in the roll section's frequency-response figure" in loop
     assert sections.count("<img") == 4 * len(result.axes)
+
+
+def test_the_warm_up_builds_the_figures_a_report_draws(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """:func:`report.warm_up` (done by the report worker while the logs are fitted) builds
+    and draws every figure layout of a SYSTEMID flight's report beforehand: the report then
+    builds none of its own (the first drawing of a layout was ~0.6 s of the SITL report's
+    1.9 s), and is the same, byte for byte, as one drawn without it."""
+    import threading
+    import warnings
+
+    from helpers import FIXTURES
+
+    from mavsid.pipeline import fit
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = fit([str(FIXTURES / "sysid_roll.bin")])
+    got: dict[str, object] = {}
+
+    def draw(warm: bool, name: str) -> None:  # (in a thread of its own: an empty pool)
+        if warm:
+            report.warm_up()
+            got["warm"] = set(report._POOL.figures)
+        report.write_report(result, tmp_path / name)
+        got[name] = set(report._POOL.figures)
+
+    for warm, name in ((True, "warm.html"), (False, "cold.html")):
+        thread = threading.Thread(target=draw, args=(warm, name))
+        thread.start()
+        thread.join()
+    assert got["warm.html"] == got["warm"]  # no layout built by the report itself
+    assert got["cold.html"] <= got["warm"]
+    assert (tmp_path / "warm.html").read_bytes() == (tmp_path / "cold.html").read_bytes()

@@ -910,7 +910,7 @@ def _unsampled(ts: np.ndarray, t: np.ndarray, min_gap_s: float = 0.05) -> np.nda
 
     Examples
     --------
-    >>> _unsampled(np.array([0.0, 0.1, 0.2, 1.0, 1.1]), np.array([0.15, 0.5, 1.05])).tolist()
+    >>> _unsampled(np.array([0.0, 0.1, 0.2, 1.0, 1.1]), np.array([0.15, 0.6, 1.05])).tolist()
     [False, True, False]
     """
     if ts.size < 2:

@@ -121,10 +121,10 @@ _SERVE = "from mavsid.outputs import _serve_report; _serve_report()"
 
 class ReportWorker:
     """:func:`mavsid.report.write_report` in a process of its own, started when a command
-    begins: it imports matplotlib and the report (~0.5 s) while this process reads and fits
-    the logs, then draws the report (~1.5 s on a 100 MB flight) while this one writes the
-    other outputs (the ``.rrd``: ~1 s with rerun's import). On two cores ``fit --rrd
-    --report`` of the SITL flight then ends when the report does.
+    begins: it imports matplotlib, the report and the result's modules and builds the
+    report's figures (:func:`mavsid.report.warm_up`; ~1.7 s of CPU) while this process
+    reads and fits the logs, then draws the report (~1.25 s on a 100 MB flight) while this
+    one writes the other outputs (the ``.rrd``: ~1.25 s with rerun's import).
 
     The result goes over as a pickle in a temporary file (written at once, ~40 MB for the
     SITL flight), the pipe carrying only its name: fed through the pipe by a thread, its
@@ -166,9 +166,9 @@ class ReportWorker:
         (:func:`_others_busy`): the load average also counts this user's own commands of
         the last minute (a loop of ``mavsid fit`` over logs kept it at 1-1.5 on an idle
         two-core machine and ran every report in-process: ``fit --rrd --report`` of the
-        SITL flight 4.4 s median instead of 3.6). The worker costs ~1 s of CPU of its own
-        (its imports): on a machine whose cores are all busy it only adds that (6.4 s
-        against 5.9 s at load ~2 on two cores)."""
+        SITL flight 4.4 s median instead of 3.6). The worker costs ~1.7 s of CPU of its own
+        (its imports, the figures built beforehand): on a machine whose cores are all busy
+        it only adds that (6.4 s against 5.9 s at load ~2 on two cores)."""
         if not sys.executable or getattr(sys, "frozen", False):
             return False
         try:

@@ -553,3 +553,45 @@ def _same_as_pyulog_or_typed_error(path):  # type: ignore[no-untyped-def]
     log, _ = read(path)
     assert_tables_match(log, ref)
     return log, ref
+
+
+def test_runs_across_sync_and_checked_messages_match_pyulog(tmp_path: Path) -> None:
+    """Runs of data messages go on across sync messages (with the magic or not) and ``M`` /
+    ``Q`` messages that carry nothing, and stop at those that do or that pyulog cannot read:
+    a dropout, a parameter change, an ``M`` it reads with another type, a damaged ``Q``,
+    and at last an ``M`` without its key, which ends pyulog's read (the data after it is
+    not taken)."""
+    from fuzz.hostile import ATT_FORMAT, _ulog_msg, ulog_file
+
+    def record(k: int) -> bytes:
+        return _ulog_msg(b"D", struct.pack("<HQf", 0, 10_000 * k, 0.01 * k))
+
+    between = [
+        _ulog_msg(b"S", bytes.fromhex("2f731320250cbb12")),
+        _ulog_msg(b"S", b"xyz"),
+        _ulog_msg(b"M", bytes([0, 11]) + b"char[3] ver" + b"abc"),
+        _ulog_msg(b"Q", bytes([0, 7]) + b"float x" + struct.pack("<f", 1.5)),
+        _ulog_msg(b"S", bytes(8)) + _ulog_msg(b"M", bytes([1, 9]) + b"int32_t n" + bytes(4)),
+        _ulog_msg(b"O", struct.pack("<H", 40)),
+        _ulog_msg(b"P", bytes([9]) + b"float X_Y" + struct.pack("<f", 2.0)),
+        _ulog_msg(b"M", bytes([0, 11]) + b"uint8_t[2] v" + b"ab"),  # read by pyulog: not checked
+        _ulog_msg(b"Q", bytes([0, 40]) + b"float"),  # damaged: corruption
+    ]
+    out = bytearray(ulog_file([ATT_FORMAT], topic=None))
+    out += _ulog_msg(b"A", struct.pack("<BH", 0, 0) + b"att")
+    k = 0
+    for _ in range(3):
+        for message in between:
+            for _ in range(5):
+                out += record(k)
+                k += 1
+            out += message
+    out += record(k) + _ulog_msg(b"M", bytes([0])) + record(k + 1) + record(k + 2)
+    path = tmp_path / "carriers.ulg"
+    path.write_bytes(bytes(out))
+    ref, _ = pyulog(path)
+    log, _ = read(path)
+    assert_tables_match(log, ref)
+    assert len(log["att"]) == k + 1
+    assert log.source.notes[0] == "3 dropouts, 120 ms in all"
+    assert log.params["X_Y"] == 2.0

@@ -51,10 +51,14 @@ runs of consecutive data messages are taken in one step:
    (it is where the next message starts); by induction every candidate from ``i`` up to
    the first index ``b >= i`` with ``follows[b]`` false is a true message, in file
    order. One ``searchsorted`` finds ``b``; the run ``i..b`` is decoded at once.
+   A break between candidates ``i`` and ``i+1`` is bridged when the messages from ``i``'s
+   successor up to candidate ``i+1``, one right after the other, carry nothing the walk
+   keeps: sync messages (any payload) and ``M``/``Q`` messages :func:`_checked` accepts
+   (checked in Python, one step each, but the run goes on); the same induction holds.
 3. *Steps*: at the end of a run (or at a position that is no candidate) one message is
    read in Python, with pyulog's rules: subscriptions, texts, parameters, dropouts, sync
-   messages, a data message with no other right after it (no run to look for: kept in a
-   list, checked with the others at the end); an unknown type with an implausible header
+   messages, a data message with no other (nor a sync, ``M`` or ``Q`` message) right
+   after it (no run to look for: kept in a list, checked with the others at the end); an unknown type with an implausible header
    (type 0, size 0 or > 10000) resynchronises at the next sync message's magic, else (no
    sync in the rest of the file) one byte further; a message cut by the end of the file
    ends the read. The walk then goes on at the next position, which may start a run.
@@ -146,6 +150,12 @@ _DATA_TYPES = frozenset(b"IMPQALCDOS")
 _HEAD = struct.Struct("<HB").unpack_from
 _KNOWN_TYPE = np.zeros(256, bool)
 _KNOWN_TYPE[list(b"FDIMPQARLCOSB")] = True
+#: types of the messages a run of data messages may cross (see :meth:`_Reader.bridged`)
+_CARRIER = np.zeros(256, bool)
+_CARRIER[list(b"SMQ")] = True
+#: a data message followed by one of these types may start a run
+_RUN_ON = _CARRIER.copy()
+_RUN_ON[0x44] = True
 #: an unknown message type with a size above this is taken as corruption (pyulog's rule)
 _MAX_UNKNOWN_SIZE = 10000
 #: a format flattening to more fields than a data message can hold bytes is never decoded
@@ -705,8 +715,36 @@ class _Reader:
         nxt = self.cand[:-1] + 3
         nxt += self.csize[:-1]
         follows[:-1] = nxt == self.cand[1:]
-        self.breaks = np.flatnonzero(~follows)
+        breaks = np.flatnonzero(~follows)
+        if breaks.size > 1:  # a run goes on across the messages that carry nothing
+            k = breaks[:-1]
+            at = self.cand[k] + 3
+            at += self.csize[k]
+            crossed = _CARRIER.take(u8.take(at + 2, mode="clip"))  # (at: up to n)
+            if crossed.any():
+                k = k[crossed]
+                crossed[crossed] = self.bridged(at[crossed].tolist(),
+                                                self.cand[k + 1].tolist())
+                breaks = np.concatenate([breaks[:-1][~crossed], breaks[-1:]])
+        self.breaks = breaks
         self.lo, self.hi, self.taken = lo, hi, 0
+
+    def bridged(self, at: list[int], to: list[int]) -> list[bool]:
+        """Whether the messages from each ``at`` up to its ``to`` (the next data candidate)
+        carry nothing the walk keeps, one right after the other: sync messages, and ``M``
+        or ``Q`` messages :func:`_checked` accepts. A run of data messages goes on across
+        them, as the walk would step over them (see *Framing*)."""
+        buf, out = self.buf, []
+        for q, stop in zip(at, to, strict=True):
+            while q < stop:
+                size, kind = _HEAD(buf, q)
+                end = q + 3 + size
+                if end > stop or not (kind == 0x53 or ((kind == 0x4D or kind == 0x51)
+                                                       and _checked(buf, q, end))):
+                    break
+                q = end
+            out.append(q == stop)
+        return out
 
     # ------------------------------------------------------------------ subscriptions
     def flatten(self, name: str) -> list[tuple[str, str]]:
@@ -790,7 +828,7 @@ class _Reader:
             size, kind = _HEAD(buf, pos)
             end = pos + 3 + size
             if kind == 0x44 and size >= 2 and end <= n and end <= until:
-                if not self.untimed and (end + 3 > n or buf[end + 2] != 0x44):
+                if not self.untimed and (end + 3 > n or not _RUN_ON[buf[end + 2]]):
                     self.single(pos, size, buf[pos + 3] | buf[pos + 4] << 8)  # no run
                     pos = end
                     continue

@@ -58,10 +58,11 @@ runs of consecutive data messages are taken in one step:
 3. *Steps*: at the end of a run (or at a position that is no candidate) one message is
    read in Python, with pyulog's rules: subscriptions, texts, parameters, dropouts, sync
    messages, a data message with no other (nor a sync, ``M`` or ``Q`` message) right
-   after it (no run to look for: kept in a list, checked with the others at the end); an unknown type with an implausible header
-   (type 0, size 0 or > 10000) resynchronises at the next sync message's magic, else (no
-   sync in the rest of the file) one byte further; a message cut by the end of the file
-   ends the read. The walk then goes on at the next position, which may start a run.
+   after it (no run to look for: kept in a list, checked with the others at the end);
+   an unknown type with an implausible header (type 0, size 0 or > 10000) resynchronises
+   at the next sync message's magic, else (no sync in the rest of the file) one byte
+   further; a message cut by the end of the file ends the read. The walk then goes on at
+   the next position, which may start a run.
 
 Every position the walk visits is one pyulog visits, so the framing is pyulog's exactly.
 The Python steps are as many as the messages that are not data plus the false candidates
@@ -104,6 +105,7 @@ mavsid.errors.LogFormatError: ...: not a readable ULog (Invalid file format (Hea
 
 from __future__ import annotations
 
+import functools
 import mmap
 import os
 import re
@@ -253,6 +255,18 @@ def _checked(buf: Any, pos: int, end: int) -> bool:
         return False
     return (stop - key >= 6 and buf[key : key + 6] == b"float ") or (
         stop - key >= 8 and buf[key : key + 8] == b"int32_t ")
+
+
+@functools.lru_cache(maxsize=64)
+def _indices(count: int) -> tuple[str, ...]:
+    """The array suffixes ``[0]`` ... ``[count - 1]`` of a flattened field's names.
+
+    Examples
+    --------
+    >>> _indices(3)
+    ('[0]', '[1]', '[2]')
+    """
+    return tuple(f"[{i}]" for i in range(count))
 
 
 def _format(data: bytes) -> tuple[str, list[Field]]:
@@ -498,7 +512,7 @@ class _Reader:
         self.filtered: set[int] = set()
         self.untimed: dict[int, int] = {}  # subscription -> record size, without timestamp
         self.final: list[int] = []  # subscriptions whose data is kept, pyulog's order
-        self.flat: dict[str, list[tuple[str, str]]] = {}
+        self.flat: dict[str, tuple[list[str], list[str]]] = {}
         self.dtypes: dict[str, tuple[list[str], list[str], int, int]] = {}
         # data messages met: (positions, sizes, ids, their subscriptions), and how many
         self.chunks: list[tuple[NDArray[Any], NDArray[Any], NDArray[Any], NDArray[np.int32]]]
@@ -747,42 +761,54 @@ class _Reader:
         return out
 
     # ------------------------------------------------------------------ subscriptions
-    def flatten(self, name: str) -> list[tuple[str, str]]:
-        """(field name, basic type) of a format, nested types and arrays expanded."""
-        if name in self.flat:
-            return self.flat[name]
-        out: list[tuple[str, str]] = []
+    def flatten(self, name: str) -> tuple[list[str], list[str]]:
+        """The field names and basic types of a format, nested types and arrays expanded."""
+        got = self.flat.get(name)
+        if got is not None:
+            return got
+        names: list[str] = []
+        kinds: list[str] = []
         for kind, count, fname in self.out.formats[name]:  # KeyError: an unknown type
-            if kind in _BASIC and not count:
-                out.append((fname, kind))
-                continue
-            names = [f"{fname}[{i}]" for i in range(count)] if count else [fname]
             if kind in _BASIC:
-                inner = [("", kind)]
-            else:
-                inner = self.flatten(kind)
-                names = [f + "." for f in names]
-            if len(out) + len(names) * len(inner) > _MAX_FIELDS:
+                if not count:
+                    names.append(fname)
+                    kinds.append(kind)
+                    continue
+                if len(names) + count > _MAX_FIELDS:
+                    raise _Bad
+                names += [fname + index for index in _indices(count)]
+                kinds += [kind] * count
+                continue
+            inner, inner_kinds = self.flatten(kind)
+            prefixes = [fname + index + "." for index in _indices(count)] if count else [
+                fname + "."]
+            if len(names) + len(prefixes) * len(inner) > _MAX_FIELDS:
                 raise _Bad
-            out.extend([(prefix + sub, t) for prefix in names for sub, t in inner])
-        self.flat[name] = out
-        return out
+            names += [prefix + sub for prefix in prefixes for sub in inner]
+            kinds += inner_kinds * len(prefixes)
+        self.flat[name] = names, kinds
+        return names, kinds
 
     def record(self, name: str) -> tuple[list[str], list[str], int, int]:
         """A topic's record layout (trailing padding dropped): field names (an empty one
         named ``f<index>``, as pyulog's dtype has it), basic types, size and timestamp
         offset; building the dtype waits for :meth:`dtype` (only topics with data)."""
-        if name not in self.dtypes:
-            fields = list(self.flatten(name))
-            while fields and fields[-1][0].startswith("_padding"):
-                fields.pop()
-            names = [f or f"f{i}" for i, (f, _) in enumerate(fields)]
-            if len(set(names)) < len(names):
+        got = self.dtypes.get(name)
+        if got is None:
+            names, kinds = self.flatten(name)
+            m = len(names)
+            while m and names[m - 1].startswith("_padding"):
+                m -= 1
+            names, kinds = names[:m], kinds[:m]
+            if "" in names:
+                names = [f or f"f{i}" for i, f in enumerate(names)]
+            if len(set(names)) < m:
                 raise ValueError(name)  # numpy refuses repeated field names
-            sizes = [_BASIC[k][1] for _, k in fields]
-            stamp = names.index("timestamp") if "timestamp" in names else len(names)
-            self.dtypes[name] = (names, [k for _, k in fields], sum(sizes), sum(sizes[:stamp]))
-        return self.dtypes[name]
+            sizes = [_SIZE[k] for k in kinds]
+            size = sum(sizes)
+            offset = sum(sizes[: names.index("timestamp")]) if "timestamp" in names else size
+            got = self.dtypes[name] = (names, kinds, size, offset)
+        return got
 
     def dtype(self, name: str) -> np.dtype[Any]:
         names, kinds, _, _ = self.dtypes[name]

@@ -512,8 +512,8 @@ class _Reader:
         self.filtered: set[int] = set()
         self.untimed: dict[int, int] = {}  # subscription -> record size, without timestamp
         self.final: list[int] = []  # subscriptions whose data is kept, pyulog's order
-        self.flat: dict[str, tuple[list[str], list[str]]] = {}
-        self.dtypes: dict[str, tuple[list[str], list[str], int, int]] = {}
+        self.flat: dict[str, tuple[list[str], list[np.dtype[Any]]]] = {}
+        self.dtypes: dict[str, tuple[list[str], list[np.dtype[Any]], int, int]] = {}
         # data messages met: (positions, sizes, ids, their subscriptions), and how many
         self.chunks: list[tuple[NDArray[Any], NDArray[Any], NDArray[Any], NDArray[np.int32]]]
         self.chunks = []
@@ -761,23 +761,24 @@ class _Reader:
         return out
 
     # ------------------------------------------------------------------ subscriptions
-    def flatten(self, name: str) -> tuple[list[str], list[str]]:
-        """The field names and basic types of a format, nested types and arrays expanded."""
+    def flatten(self, name: str) -> tuple[list[str], list[np.dtype[Any]]]:
+        """The field names and basic types (as dtypes) of a format, nested types and arrays
+        expanded."""
         got = self.flat.get(name)
         if got is not None:
             return got
         names: list[str] = []
-        kinds: list[str] = []
+        kinds: list[np.dtype[Any]] = []
         for kind, count, fname in self.out.formats[name]:  # KeyError: an unknown type
             if kind in _BASIC:
                 if not count:
                     names.append(fname)
-                    kinds.append(kind)
+                    kinds.append(_DTYPE[kind])
                     continue
                 if len(names) + count > _MAX_FIELDS:
                     raise _Bad
                 names += [fname + index for index in _indices(count)]
-                kinds += [kind] * count
+                kinds += [_DTYPE[kind]] * count
                 continue
             inner, inner_kinds = self.flatten(kind)
             prefixes = [fname + index + "." for index in _indices(count)] if count else [
@@ -789,7 +790,7 @@ class _Reader:
         self.flat[name] = names, kinds
         return names, kinds
 
-    def record(self, name: str) -> tuple[list[str], list[str], int, int]:
+    def record(self, name: str) -> tuple[list[str], list[np.dtype[Any]], int, int]:
         """A topic's record layout (trailing padding dropped): field names (an empty one
         named ``f<index>``, as pyulog's dtype has it), basic types, size and timestamp
         offset; building the dtype waits for :meth:`dtype` (only topics with data)."""
@@ -804,7 +805,7 @@ class _Reader:
                 names = [f or f"f{i}" for i, f in enumerate(names)]
             if len(set(names)) < m:
                 raise ValueError(name)  # numpy refuses repeated field names
-            sizes = [_SIZE[k] for k in kinds]
+            sizes = [k.itemsize for k in kinds]
             size = sum(sizes)
             offset = sum(sizes[: names.index("timestamp")]) if "timestamp" in names else size
             got = self.dtypes[name] = (names, kinds, size, offset)
@@ -812,7 +813,7 @@ class _Reader:
 
     def dtype(self, name: str) -> np.dtype[Any]:
         names, kinds, _, _ = self.dtypes[name]
-        return np.dtype({"names": names, "formats": [_DTYPE[k] for k in kinds]})
+        return np.dtype({"names": names, "formats": kinds})
 
     def subscribe(self, data: bytes) -> None:
         if len(data) < 3:

@@ -894,30 +894,30 @@ def _commanded(raw: RawLog, t: np.ndarray) -> dict[str, np.ndarray]:
     for axis, chans in DESIRED_CHANNELS.items():
         got = first_of(raw, chans, f"commanded {axis}")
         if got is not None and np.ptp(got[2]) > 0:
-            order = np.argsort(got[1], kind="stable")
-            ts = got[1][order]
-            cmd = np.interp(t, ts, got[2][order], left=np.nan, right=np.nan)
             # not published in a gap (PX4's rate-only modes such as ACRO): not a ramp across it
-            cmd[_unsampled(ts, t)] = np.nan
-            out[axis] = cmd
+            out[axis] = _resampled(got[1], got[2], t, np.nan)
     return out
 
 
-def _unsampled(ts: np.ndarray, t: np.ndarray, min_gap_s: float = 0.05) -> np.ndarray:
-    """Where on the grid ``t`` a signal sampled at the sorted times ``ts`` is not known:
-    inside a gap of more than three of its usual intervals (and ``min_gap_s``) between two
-    samples.
+def _resampled(ts: np.ndarray, v: np.ndarray, t: np.ndarray, fill: float) -> np.ndarray:
+    """Samples ``v`` at times ``ts`` interpolated on the grid ``t``, ``fill`` outside their
+    span and inside a gap of more than three of their usual intervals (and 50 ms) between
+    two samples, where the signal is not known.
 
     Examples
     --------
-    >>> _unsampled(np.array([0.0, 0.1, 0.2, 1.0, 1.1]), np.array([0.15, 0.6, 1.05])).tolist()
-    [False, True, False]
+    >>> _resampled(np.array([0.0, 0.1, 0.2, 1.0, 1.1]), np.arange(5.0),
+    ...            np.array([0.15, 0.6, 1.05, 2.0]), np.nan).tolist()
+    [1.5, nan, 3.5, nan]
     """
-    if ts.size < 2:
-        return np.zeros(t.shape, bool)
-    gap = max(float(np.median(np.diff(ts))) * 3, min_gap_s)
-    near = np.searchsorted(ts, t).clip(1, ts.size - 1)
-    return np.minimum(np.abs(t - ts[near]), np.abs(t - ts[near - 1])) > gap
+    order = np.argsort(ts, kind="stable")
+    ts = ts[order]
+    out = np.interp(t, ts, v[order], left=fill, right=fill)
+    if ts.size >= 2:
+        gap = max(float(np.median(np.diff(ts))) * 3, 0.05)
+        near = np.searchsorted(ts, t).clip(1, ts.size - 1)
+        out[np.minimum(np.abs(t - ts[near]), np.abs(t - ts[near - 1])) > gap] = fill
+    return out
 
 
 def _sysid_injection(raw: RawLog, t: np.ndarray) -> np.ndarray | None:
@@ -928,10 +928,7 @@ def _sysid_injection(raw: RawLog, t: np.ndarray) -> np.ndarray | None:
         return None
     ts = np.asarray(sidd.time_s, dtype=float)
     targ = np.nan_to_num(np.asarray(sidd.columns["Targ"], dtype=float))
-    order = np.argsort(ts, kind="stable")
-    out = np.interp(t, ts[order], targ[order], left=0.0, right=0.0)
-    out[_unsampled(ts[order], t)] = 0.0  # between runs SIDD is not logged: no injection there
-    return out
+    return _resampled(ts, targ, t, 0.0)  # between runs SIDD is not logged: no injection there
 
 
 #: ArduCopter waits this long after entering SYSTEMID before injecting (SYSTEM_ID_DELAY)

@@ -66,7 +66,7 @@ def _add_info(sub: argparse._SubParsersAction) -> None:
     p.add_argument("log", help="flight log (.bin, .log, .tlog, .ulg)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--dialect", help="MAVLink dialect of a .tlog (default ardupilotmega)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.set_defaults(handler=_info)
 
 
@@ -150,7 +150,7 @@ def _add_segments(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     p.add_argument("--window", type=float, default=5.0, help="scan window length, s (5)")
     p.add_argument("--preset", help="channel preset name, or a TOML file of presets")
     p.add_argument("--rate", type=float, help="grid rate, Hz (default: the rate channel's)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.set_defaults(handler=_segments)
 
 
@@ -377,7 +377,7 @@ def _add_output_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rrd", metavar="OUT.rrd", help="write a rerun recording")
     p.add_argument("--report", metavar="OUT.html", help="write a self-contained HTML report")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
-    p.add_argument("--quiet", action="store_true",
+    p.add_argument("-q", "--quiet", action="store_true",
                    help="no progress bar (there is none when stderr is not a terminal)")
 
 
@@ -599,7 +599,7 @@ def _add_batch(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--rrd", metavar="OUT.rrd",
                    help="write the trends as a rerun recording (timelines flight and "
                    "flight_date; parameters with ±σ, change points)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.set_defaults(handler=_batch, axis=None)
 
 

@@ -660,18 +660,16 @@ def build_parser() -> argparse.ArgumentParser:
 _GC_THRESHOLDS = (20_000, 20, 20)
 
 
-#: Variables that set the BLAS libraries' thread counts; one a user set is respected.
-_BLAS_THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
-
-
 def _one_blas_thread() -> None:
     """One BLAS thread for this process and the processes it starts (Dask workers), unless
-    the user set a count. mavsid's matrices are a few columns wide: BLAS threads only wait
-    on each other (on a busy 2-core machine a 33x200 by 200x165 product took 8 ms with
-    them, 0.7 ms without; `fit` of the 104 MB SITL flight 1.1 s of CPU against 0.75 s)."""
-    if any(os.environ.get(v) for v in _BLAS_THREAD_VARS):
+    the user set a count (:mod:`mavsid.threads`: on a busy 2-core machine a 33x200 by
+    200x165 product took 8 ms with them, 0.7 ms without; `fit` of the 104 MB SITL flight
+    1.1 s of CPU against 0.75 s)."""
+    from mavsid.threads import BLAS_THREAD_VARS, user_set
+
+    if user_set():
         return
-    for v in _BLAS_THREAD_VARS:
+    for v in BLAS_THREAD_VARS:
         os.environ[v] = "1"  # (children read it before they load numpy)
     from threadpoolctl import threadpool_limits
 

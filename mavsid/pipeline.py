@@ -59,6 +59,7 @@ import numpy as np
 from mavsid.channels import source_text
 from mavsid.data import FlightData, Segment
 from mavsid.errors import ConfigError, MavsidError, NoExcitationError, escape
+from mavsid.threads import one_blas_thread
 from mavsid.validation import AXIS_RATE, DEFAULT_HORIZONS_S, Model, Validation, validate
 from mavsid.verdict import Verdict, format_fit, judge, unfitted
 
@@ -699,6 +700,7 @@ def _noop(stage: str) -> None:
     pass
 
 
+@one_blas_thread
 def fit(
     logs: Sequence[str | os.PathLike[str]],
     config: PipelineConfig | None = None,
@@ -869,6 +871,7 @@ def load_models(path: str | os.PathLike[str]) -> dict[str, Model]:
 VALIDATE_STAGES = ("segments", "validation", "closed-loop twin")
 
 
+@one_blas_thread
 def validate_logs(
     models: Mapping[str, Model],
     logs: Sequence[str | os.PathLike[str]],

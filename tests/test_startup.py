@@ -8,6 +8,7 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 from helpers import FIXTURES
 
@@ -81,3 +82,58 @@ def test_the_command_line_runs_one_blas_thread_unless_the_user_says(user: str | 
     assert first.returncode == 0, first.stderr
     threads = json.loads(first.stdout)
     assert threads and threads == [int(user) if user else 1] * len(threads)
+
+
+def _blas_threads() -> list[int]:
+    from threadpoolctl import threadpool_info
+
+    return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+
+
+@pytest.mark.parametrize("user", [None, "2"])
+def test_the_library_fits_on_one_blas_thread_and_gives_the_callers_back(
+        user: str | None, monkeypatch: pytest.MonkeyPatch) -> None:
+    """pipeline.fit, validate_logs, estimators.fit_axis, identify and regress called from a
+    user's code run one BLAS thread (a 17x200 by 200x165 product: 23 ms on two threads,
+    0.16 ms on one) and leave the caller's count as it was; a count the user set is kept."""
+    from threadpoolctl import threadpool_limits
+
+    from mavsid import pipeline
+    from mavsid.align import load_flight
+    from mavsid.estimators import api
+    from mavsid.excitation import find_segments, select_segments
+
+    for v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        monkeypatch.delenv(v, raising=False)
+    if user:
+        monkeypatch.setenv("OPENBLAS_NUM_THREADS", user)
+    inside = 2 if user else 1
+    log = str(FIXTURES / "sysid_roll.bin")
+    seen: list[list[int]] = []
+    with threadpool_limits(2, user_api="blas"):  # the caller's count
+        assert _blas_threads() and set(_blas_threads()) == {2}
+        result = pipeline.fit([log], pipeline.PipelineConfig(axes=("roll",)),
+                              progress=lambda stage: seen.append(_blas_threads()))
+        assert _blas_threads() == [2] * len(_blas_threads())
+        pipeline.validate_logs({"roll": result.axes["roll"].model}, [log],
+                               progress=lambda stage: seen.append(_blas_threads()))
+        assert _blas_threads() == [2] * len(_blas_threads())
+        original, original_solve = api.identify_segments, api.solve
+
+        def spy(*args: object, **kwargs: object) -> object:
+            seen.append(_blas_threads())
+            return original(*args, **kwargs)  # type: ignore[arg-type]
+
+        monkeypatch.setattr(api, "identify_segments", spy)
+        monkeypatch.setattr(api, "solve", lambda *a, **k: (seen.append(_blas_threads()),
+                                                              original_solve(*a, **k))[1])
+        flight = load_flight(log)
+        api.fit_axis(select_segments(flight, reports=find_segments(flight, "roll")), "roll")
+        assert _blas_threads() == [2] * len(_blas_threads())
+        seg = select_segments(flight, reports=find_segments(flight, "roll"))[0]
+        x = seg.states[:, [seg.state_names.index("p")]]
+        u = seg.inputs[:, [seg.input_names.index("u_roll")]]
+        api.identify(x, u, seg.dt)
+        api.regress(np.column_stack([x[:-1], u[:-1]]), x[1:, 0])
+        assert _blas_threads() == [2] * len(_blas_threads())
+    assert len(seen) > 5 and all(t == [inside] * len(t) for t in seen), seen

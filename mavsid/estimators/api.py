@@ -66,6 +66,7 @@ from mavsid.estimators.select import (
     search_structure,
     with_lag,
 )
+from mavsid.threads import one_blas_thread
 
 __all__ = [
     "DEFAULT_MAX_DELAY_SAMPLES",
@@ -453,6 +454,7 @@ def _one_step_noise(segments: Sequence[Segment], outputs: Sequence[str], best: f
     return math.sqrt(best / spread) if spread > 0 else 0.0
 
 
+@one_blas_thread
 def identify(
     x: Any,
     u: Any = None,
@@ -591,6 +593,7 @@ def log_params(segments: Iterable[Segment], params: Mapping[str, float] | None =
     return {}
 
 
+@one_blas_thread
 def fit_axis(
     segments: Sequence[Segment],
     axis: str,
@@ -844,6 +847,7 @@ def _toeplitz_times(r: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.asarray(conv[m - 1 : 2 * m - 1])
 
 
+@one_blas_thread
 def regress(
     X: Any,
     y: Any,

@@ -269,18 +269,23 @@ def _indices(count: int) -> tuple[str, ...]:
     return tuple(f"[{i}]" for i in range(count))
 
 
-def _format(data: bytes) -> tuple[str, list[Field]]:
-    """A format definition ``name:type field;type[n] field;...``.
+def _format(data: bytes) -> tuple[str, list[Field], int]:
+    """A format definition ``name:type field;type[n] field;...``: its name, fields and
+    size in bytes when all its fields are of basic types (else -1: nested formats, sized
+    by :func:`_sizes`).
 
     Examples
     --------
     >>> _format(b"att:uint64_t timestamp;float[4] q;")
-    ('att', [('uint64_t', 0, 'timestamp'), ('float', 4, 'q')])
+    ('att', [('uint64_t', 0, 'timestamp'), ('float', 4, 'q')], 24)
+    >>> _format(b"esc:uint64_t timestamp;report[2] r;")[2]
+    -1
     """
     parts = _text(data).split(":")
     if len(parts) < 2:
         raise _Bad
     fields = []
+    size = 0
     for item in parts[1].split(";"):
         if not item:
             continue
@@ -291,6 +296,8 @@ def _format(data: bytes) -> tuple[str, list[Field]]:
         a = kind.find("[")
         if a < 0:
             fields.append((kind, 0, name))
+            width = _SIZE.get(kind)
+            size = -1 if width is None or size < 0 else size + width
             continue
         try:
             count = int(kind[a + 1 : kind.find("]")])
@@ -298,8 +305,11 @@ def _format(data: bytes) -> tuple[str, list[Field]]:
             raise _Bad from None
         if not 0 <= count <= 0xFFFF:
             raise _Bad
-        fields.append((kind[:a], count, name))
-    return parts[0], fields
+        kind = kind[:a]
+        fields.append((kind, count, name))
+        width = _SIZE.get(kind)
+        size = -1 if width is None or size < 0 else size + width * (count or 1)
+    return parts[0], fields, size
 
 
 def _u16(u8: NDArray[np.uint8], at: NDArray[np.int64]) -> NDArray[np.uint16]:
@@ -372,17 +382,19 @@ def _cycle(formats: dict[str, list[Field]]) -> list[str] | None:
     return None
 
 
-def _sizes(formats: dict[str, list[Field]]) -> set[int]:
+def _sizes(formats: dict[str, list[Field]], flat: dict[str, int]) -> set[int]:
     """The payload sizes data messages of the formats can have: 2 (message id) + a
     format's size, with and without its trailing ``_padding`` fields (formats acyclic;
-    a nested type not defined counts 0).
+    a nested type not defined counts 0). ``flat``: the sizes of the formats of basic types
+    only, known from :func:`_format` (the others are summed here).
 
     Examples
     --------
-    >>> sorted(_sizes({"a": [("uint64_t", 0, "timestamp"), ("uint8_t", 3, "_padding0")]}))
-    [10, 13]
+    >>> a = [("uint64_t", 0, "timestamp"), ("uint8_t", 3, "_padding0")]
+    >>> sorted(_sizes({"a": a}, {"a": 11})), sorted(_sizes({"b": [("a", 2, "x")], "a": a}, {}))
+    ([10, 13], [10, 13, 24])
     """
-    memo: dict[str, int] = {}
+    memo = dict(flat)
 
     def part(kind: str, count: int) -> int:
         width = _SIZE.get(kind)
@@ -393,8 +405,7 @@ def _sizes(formats: dict[str, list[Field]]) -> set[int]:
         if got is None:
             got = 0
             for kind, count, _ in formats.get(name, ()):
-                width = _SIZE.get(kind)
-                got += (size(kind) if width is None else width) * (count or 1)
+                got += part(kind, count)
             memo[name] = got
         return got
 
@@ -436,6 +447,7 @@ class _Parsed:
     last_us: int = 0
     info: dict[str, Any] = field(default_factory=dict)
     formats: dict[str, list[Field]] = field(default_factory=dict)
+    flat: dict[str, int] = field(default_factory=dict)  # sizes of formats of basic types
     initial_params: dict[str, Any] = field(default_factory=dict)
     changed_params: list[tuple[int, str, Any]] = field(default_factory=list)
     logged: list[_Text] = field(default_factory=list)
@@ -514,6 +526,7 @@ class _Reader:
         self.final: list[int] = []  # subscriptions whose data is kept, pyulog's order
         self.flat: dict[str, tuple[list[str], list[np.dtype[Any]]]] = {}
         self.dtypes: dict[str, tuple[list[str], list[np.dtype[Any]], int, int]] = {}
+        self.built: dict[str, np.dtype[Any]] = {}
         # data messages met: (positions, sizes, ids, their subscriptions), and how many
         self.chunks: list[tuple[NDArray[Any], NDArray[Any], NDArray[Any], NDArray[np.int32]]]
         self.chunks = []
@@ -609,8 +622,12 @@ class _Reader:
                 elif kind == 0x4D:  # M
                     _info(data, multiple=True)
                 elif kind == 0x46:  # F
-                    name, fields = _format(data)
+                    name, fields, size = _format(data)
                     out.formats[name] = fields
+                    if size >= 0:
+                        out.flat[name] = size
+                    else:
+                        out.flat.pop(name, None)
                 elif kind == 0x50:  # P
                     _, key, value = _info(data)
                     out.initial_params[key] = value
@@ -690,7 +707,7 @@ class _Reader:
         self.start = start
         # the data message sizes the file's formats allow: any message id (a filter only)
         self.allowed = np.zeros(1 << 16, bool)
-        self.allowed[list(_sizes(self.out.formats))] = True
+        self.allowed[list(_sizes(self.out.formats, self.out.flat))] = True
         self.lo = self.hi = -1  # the block whose candidates are loaded
         self.cand = np.zeros(0, np.int64)
         self.csize = self.cmsg = np.zeros(0, np.uint16)
@@ -812,8 +829,12 @@ class _Reader:
         return got
 
     def dtype(self, name: str) -> np.dtype[Any]:
-        names, kinds, _, _ = self.dtypes[name]
-        return np.dtype({"names": names, "formats": kinds})
+        """A topic's dtype (built once per read: instances of a topic share it)."""
+        got = self.built.get(name)
+        if got is None:
+            names, kinds, _, _ = self.dtypes[name]
+            got = self.built[name] = np.dtype({"names": names, "formats": kinds})
+        return got
 
     def subscribe(self, data: bytes) -> None:
         if len(data) < 3:
@@ -1007,7 +1028,8 @@ class _Reader:
     def run(self) -> _Parsed:
         self.header()
         start = self.definitions()
-        cycle = _cycle(self.out.formats)
+        formats, flat = self.out.formats, self.out.flat  # (only nested ones can hold a cycle)
+        cycle = _cycle({k: v for k, v in formats.items() if k not in flat})
         if cycle:
             raise LogFormatError("message format " + " -> ".join(cycle) + " contains itself "
                                  "(a damaged or hostile definition)", path=self.path)

@@ -424,38 +424,50 @@ def _cycle(formats: dict[str, list[Field]]) -> list[str] | None:
     return None
 
 
-def _sizes(formats: dict[str, list[Field]], flat: dict[str, int]) -> set[int]:
-    """The payload sizes data messages of the formats can have: 2 (message id) + a
-    format's size, with and without its trailing ``_padding`` fields (formats acyclic;
-    a nested type not defined counts 0). ``flat``: the sizes of the formats of basic types
-    only, known from :func:`_format` (the others are summed here).
+def _widths(formats: dict[str, list[Field]], flat: dict[str, int]) -> dict[str, int]:
+    """Each format's size in bytes (formats acyclic; a nested type not defined counts 0).
+    ``flat``: the sizes of the formats of basic types only, known from :func:`_format`
+    (the others are summed here).
 
     Examples
     --------
-    >>> a = [("uint64_t", 0, "timestamp"), ("uint8_t", 3, "_padding0")]
-    >>> sorted(_sizes({"a": a}, {"a": 11})), sorted(_sizes({"b": [("a", 2, "x")], "a": a}, {}))
-    ([10, 13], [10, 13, 24])
+    >>> _widths({"b": [("a", 2, "x"), ("float", 0, "y")], "a": [("uint8_t", 3, "z")]}, {"a": 3})
+    {'a': 3, 'b': 10}
     """
     memo = dict(flat)
-
-    def part(kind: str, count: int) -> int:
-        width = _SIZE.get(kind)
-        return (size(kind) if width is None else width) * (count or 1)
 
     def size(name: str) -> int:
         got = memo.get(name)
         if got is None:
             got = 0
             for kind, count, _ in formats.get(name, ()):
-                got += part(kind, count)
+                width = _SIZE.get(kind)
+                got += (size(kind) if width is None else width) * (count or 1)
             memo[name] = got
         return got
 
+    for name in formats:
+        size(name)
+    return memo
+
+
+def _sizes(formats: dict[str, list[Field]], widths: dict[str, int]) -> set[int]:
+    """The payload sizes data messages of the formats can have: 2 (message id) + a
+    format's size (``widths``, from :func:`_widths`), with and without its trailing
+    ``_padding`` fields.
+
+    Examples
+    --------
+    >>> a = [("uint64_t", 0, "timestamp"), ("uint8_t", 3, "_padding0")]
+    >>> sorted(_sizes({"a": a}, {"a": 11}))
+    [10, 13]
+    """
     out: set[int] = set()
     for name, fields in formats.items():
-        full = trimmed = size(name)
+        full = trimmed = widths[name]
         for kind, n, fname in reversed(fields):
-            width = part(kind, n)
+            width = _SIZE.get(kind)
+            width = (widths.get(kind, 0) if width is None else width) * (n or 1)
             if width and not fname.startswith("_padding"):
                 break
             trimmed -= width
@@ -750,7 +762,8 @@ class _Reader:
         self.start = start
         # the data message sizes the file's formats allow: any message id (a filter only)
         self.allowed = np.zeros(1 << 16, bool)
-        self.allowed[list(_sizes(self.out.formats, self.out.flat))] = True
+        self.widths = _widths(self.out.formats, self.out.flat)
+        self.allowed[list(_sizes(self.out.formats, self.widths))] = True
         self.lo = self.hi = -1  # the block whose candidates are loaded
         self.cand = np.zeros(0, np.int64)
         self.csize = self.cmsg = np.zeros(0, np.uint16)
@@ -830,15 +843,16 @@ class _Reader:
         names: list[str] = []
         kinds: list[np.dtype[Any]] = []
         for kind, count, fname in self.out.formats[name]:  # KeyError: an unknown type
-            if kind in _BASIC:
+            dtype = _DTYPE.get(kind)
+            if dtype is not None:
                 if not count:
                     names.append(fname)
-                    kinds.append(_DTYPE[kind])
+                    kinds.append(dtype)
                     continue
                 if len(names) + count > _MAX_FIELDS:
                     raise _Bad
-                names += [fname + index for index in _indices(count)]
-                kinds += [_DTYPE[kind]] * count
+                names += map(fname.__add__, _indices(count))
+                kinds += [dtype] * count
                 continue
             inner, inner_kinds = self.flatten(kind)
             prefixes = [fname + index + "." for index in _indices(count)] if count else [
@@ -860,14 +874,18 @@ class _Reader:
             m = len(names)
             while m and names[m - 1].startswith("_padding"):
                 m -= 1
-            names, kinds = names[:m], kinds[:m]
+            # the format's size (the sum of its fields') less the padding dropped
+            size = self.widths[name] - sum(k.itemsize for k in kinds[m:])
+            if m < len(names):
+                names, kinds = names[:m], kinds[:m]
             if "" in names:
                 names = [f or f"f{i}" for i, f in enumerate(names)]
             if len(set(names)) < m:
                 raise ValueError(name)  # numpy refuses repeated field names
-            sizes = [k.itemsize for k in kinds]
-            size = sum(sizes)
-            offset = sum(sizes[: names.index("timestamp")]) if "timestamp" in names else size
+            try:
+                offset = sum(k.itemsize for k in kinds[: names.index("timestamp")])
+            except ValueError:
+                offset = size
             got = self.dtypes[name] = (names, kinds, size, offset)
         return got
 

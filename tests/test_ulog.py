@@ -335,6 +335,26 @@ def test_parameters_read_at_once_are_pyulogs(tmp_path: Path, odd: bytes | None) 
     assert log.params == numbers
 
 
+def test_runs_of_plain_parameters_are_pyulogs(tmp_path: Path) -> None:
+    """Runs of plain parameters are found at once, a window of the definitions at a time
+    (``_Reader.plain_run``): over several windows, with a key of 255 bytes (a size above
+    255) and bytes inside a key that look like a plain parameter's header, the reader's
+    parameters are pyulog's, in its order."""
+    keys = [b"float P%d" % k for k in range(8000)]
+    keys[10] = b"float " + b"W" * 249
+    keys[20] = keys[5000] = b"int32_t A_\x5f\x00PZ_B"  # "_\0" then "PZ": size 95 = 90 + 5
+    path = tmp_path / "params.ulg"
+    path.write_bytes(_parameter_ulog(keys))
+    assert path.stat().st_size > 2 * ulog._PLAIN_WINDOW
+    ref, _ = pyulog(path)
+    reader = ulog._Reader(path.read_bytes(), path, None)
+    reader.header()
+    reader.definitions()
+    want = [(k, repr(v), type(v)) for k, v in ref.initial_parameters.items()]
+    assert [(k, repr(v), type(v)) for k, v in reader.out.initial_params.items()] == want
+    assert not reader.out.problems
+
+
 def test_a_read_imports_nothing_more() -> None:
     """A cold read (a fresh process, as the command line does it) imports no module the
     reader does not need: numpy.ma, pulled in by np.unique's first call, was 15 ms of a

@@ -165,6 +165,8 @@ _MAX_FIELDS = 0xFFFF
 _NO_LIMIT = 1 << 62
 #: bytes of the file scanned at a time for message candidates
 _BLOCK = 1 << 20
+#: bytes of the definitions scanned at a time for plain parameters
+_PLAIN_WINDOW = 1 << 16
 #: runs of data messages kept apart before they are joined (bounds the memory per run)
 _MAX_CHUNKS = 4096
 
@@ -582,6 +584,8 @@ class _Reader:
         self.dtypes: dict[str, tuple[list[str], list[np.dtype[Any]], int, int]] = {}
         self.built: dict[str, np.dtype[Any]] = {}
         self.kinds = _Kinds()
+        self.plo = self.phi = -1  # the window of plain parameters scanned (plain_run)
+        self.pcand = self.pafter = self.pbreaks = np.zeros(0, np.int64)
         # data messages met: (positions, sizes, ids, their subscriptions), and how many
         self.chunks: list[tuple[NDArray[Any], NDArray[Any], NDArray[Any], NDArray[np.int32]]]
         self.chunks = []
@@ -660,8 +664,7 @@ class _Reader:
             end = pos + 3 + size
             if kind == 0x50:
                 if end <= n and size == buf[pos + 3] + 5:  # the common parameter
-                    plain.append(pos)
-                    pos = end
+                    pos = self.plain_run(pos, plain)
                     continue
                 self.parameters(plain)
             elif kind in (0x41, 0x4C, 0x43):  # A, L, C: the data section begins
@@ -702,6 +705,37 @@ class _Reader:
                 self.problem("file corruption detected while reading file definitions")
             pos = end
         return min(pos, n)
+
+    def plain_run(self, pos: int, plain: list[int]) -> int:
+        """The run of parameters with a 4-byte value (size: key length + 5) that starts at
+        ``pos`` (one): their positions put in ``plain``; the position after them. Found as
+        runs of data messages are (see *Framing*): the candidates of a window of the file
+        from ``pos`` (type byte ``P``, that size, the message inside the file) and where
+        one's successor is not the next; each window is scanned once, the walk's later
+        parameters in it looked up."""
+        if not self.plo <= pos < self.phi:
+            u8, n = self.u8, self.n
+            hi = min(pos + _PLAIN_WINDOW, n - 7)  # (a plain parameter takes 8 bytes or more)
+            at = np.flatnonzero(u8[pos + 2 : hi + 2] == 0x50)
+            at += pos
+            size = _u16(u8, at + 0).astype(np.int64)
+            keep = size == u8.take(at + 3).astype(np.int64) + 5
+            at = at[keep]
+            after = at + 3
+            after += size[keep]
+            keep = after <= n
+            at, after = at[keep], after[keep]
+            self.pcand, self.pafter = at, after
+            self.pbreaks = np.flatnonzero(np.append(after[:-1] != at[1:], True))
+            self.plo, self.phi = pos, hi
+        cand = self.pcand
+        i = int(cand.searchsorted(pos))
+        if i == cand.size or cand[i] != pos:  # (none: a window starts at a candidate)
+            plain.append(pos)
+            return pos + 3 + _HEAD(self.buf, pos)[0]
+        b = int(self.pbreaks[self.pbreaks.searchsorted(i)])
+        plain += cand[i : b + 1].tolist()
+        return int(self.pafter[b])
 
     def parameters(self, plain: list[int]) -> None:
         """The parameters at ``plain`` (whose payload is the key and a 4-byte value), in

@@ -165,13 +165,8 @@ _MAX_FIELDS = 0xFFFF
 _NO_LIMIT = 1 << 62
 #: bytes of the file scanned at a time for message candidates
 _BLOCK = 1 << 20
-#: bytes of the definitions scanned at a time for plain parameters, M and Q messages
-_QUIET_WINDOW = 1 << 16
-#: their types; the first bytes of the keys _checked accepts
-_QUIET = np.zeros(256, bool)
-_QUIET[list(b"PMQ")] = True
-_KEY_AT = np.arange(5, 13)
-_CHAR = np.frombuffer(b"char[", np.uint8)
+#: bytes of the definitions scanned at a time for plain parameters
+_PLAIN_WINDOW = 1 << 16
 #: runs of data messages kept apart before they are joined (bounds the memory per run)
 _MAX_CHUNKS = 4096
 
@@ -589,9 +584,8 @@ class _Reader:
         self.dtypes: dict[str, tuple[list[str], list[np.dtype[Any]], int, int]] = {}
         self.built: dict[str, np.dtype[Any]] = {}
         self.kinds = _Kinds()
-        self.qlo = self.qhi = -1  # the window of the definitions scanned by quiet_run
-        self.qcand = self.qafter = self.qbreaks = np.zeros(0, np.int64)
-        self.qplain = np.zeros(0, bool)
+        self.plo = self.phi = -1  # the window of plain parameters scanned (plain_run)
+        self.pcand = self.pafter = self.pbreaks = np.zeros(0, np.int64)
         # data messages met: (positions, sizes, ids, their subscriptions), and how many
         self.chunks: list[tuple[NDArray[Any], NDArray[Any], NDArray[Any], NDArray[np.int32]]]
         self.chunks = []
@@ -670,13 +664,13 @@ class _Reader:
             end = pos + 3 + size
             if kind == 0x50:
                 if end <= n and size == buf[pos + 3] + 5:  # the common parameter
-                    pos = self.quiet_run(pos, plain)
+                    pos = self.plain_run(pos, plain)
                     continue
                 self.parameters(plain)
             elif kind in (0x41, 0x4C, 0x43):  # A, L, C: the data section begins
                 return pos
             elif (kind == 0x4D or kind == 0x51) and end <= n and _checked(buf, pos, end):
-                pos = self.quiet_run(pos, plain)  # M, Q: only checked
+                pos = end  # M, Q: only checked
                 continue
             data = self.buf[pos + 3 : min(end, n)]
             try:
@@ -712,57 +706,36 @@ class _Reader:
             pos = end
         return min(pos, n)
 
-    def quiet_run(self, pos: int, plain: list[int]) -> int:
-        """The run of messages from ``pos`` (one) that the definitions' walk only collects
-        or checks: parameters with a 4-byte value (size: key length + 5), their positions
-        put in ``plain``, and ``M`` and ``Q`` messages :func:`_checked` accepts; the position
-        after them. Found as runs of data messages are (see *Framing*): the candidates of
-        a window of the file from ``pos`` (such a message, inside the file) and where one's
-        successor is not the next; each window is scanned once (:meth:`quiet_window`), the
-        walk's later messages in it looked up."""
-        if not self.qlo <= pos < self.qhi:
-            self.quiet_window(pos)
-        cand = self.qcand
+    def plain_run(self, pos: int, plain: list[int]) -> int:
+        """The run of parameters with a 4-byte value (size: key length + 5) that starts at
+        ``pos`` (one): their positions put in ``plain``; the position after them. Found as
+        runs of data messages are (see *Framing*): the candidates of a window of the file
+        from ``pos`` (type byte ``P``, that size, the message inside the file) and where
+        one's successor is not the next; each window is scanned once, the walk's later
+        parameters in it looked up."""
+        if not self.plo <= pos < self.phi:
+            u8, n = self.u8, self.n
+            hi = min(pos + _PLAIN_WINDOW, n - 7)  # (a plain parameter takes 8 bytes or more)
+            at = np.flatnonzero(u8[pos + 2 : hi + 2] == 0x50)
+            at += pos
+            size = _u16(u8, at + 0).astype(np.int64)
+            keep = size == u8.take(at + 3).astype(np.int64) + 5
+            at = at[keep]
+            after = at + 3
+            after += size[keep]
+            keep = after <= n
+            at, after = at[keep], after[keep]
+            self.pcand, self.pafter = at, after
+            self.pbreaks = np.flatnonzero(np.append(after[:-1] != at[1:], True))
+            self.plo, self.phi = pos, hi
+        cand = self.pcand
         i = int(cand.searchsorted(pos))
         if i == cand.size or cand[i] != pos:  # (none: a window starts at a candidate)
-            if self.buf[pos + 2] == 0x50:
-                plain.append(pos)
+            plain.append(pos)
             return pos + 3 + _HEAD(self.buf, pos)[0]
-        b = int(self.qbreaks[self.qbreaks.searchsorted(i)])
-        plain += cand[i : b + 1][self.qplain[i : b + 1]].tolist()
-        return int(self.qafter[b])
-
-    def quiet_window(self, lo: int) -> None:
-        """:meth:`quiet_run`'s candidates from ``lo``: a window of the file scanned at once,
-        :func:`_checked`'s rules applied to every ``M`` and ``Q`` message in it."""
-        u8, n = self.u8, self.n
-        hi = min(lo + _QUIET_WINDOW, n - 4)  # (such a message takes 5 bytes or more)
-        at = np.flatnonzero(_QUIET.take(u8[lo + 2 : hi + 2]))
-        at += lo
-        kind = u8.take(at + 2)
-        size = _u16(u8, at + 0).astype(np.int64)
-        after = at + 3
-        after += size
-        key = u8.take(at + 3).astype(np.int64)  # a parameter's key length
-        plain = kind == 0x50
-        ok = plain & (size == key + 5)
-        # M, Q: a byte, the key's length, the key ("type name"), the value
-        key = u8.take(at + 4).astype(np.int64)
-        stop = at + 5 + key
-        head = u8.take(at[:, None] + _KEY_AT, mode="clip")  # the key's first 8 bytes
-        text = (head[:, :5] == _CHAR).all(1) & (at + 10 <= n)
-        top = min(n, hi + 270)  # (a key ends 260 bytes after its message at most)
-        spaces = np.zeros(top - lo + 1, np.int32)
-        np.cumsum(u8[lo:top] == 32, out=spaces[1:])
-        spaced = spaces.take(stop - lo, mode="clip") > spaces.take(at + 10 - lo, mode="clip")
-        number = ~text & (after - stop == 4) & (
-            (key >= 6) & (head[:, :6] == _FLOAT).all(1) | (key >= 8) & (head == _INT32).all(1))
-        ok |= ~plain & (size >= 2) & (stop <= after) & (text & spaced | number)
-        ok &= after <= n
-        at, after = at[ok], after[ok]
-        self.qcand, self.qafter, self.qplain = at, after, plain[ok]
-        self.qbreaks = np.flatnonzero(np.append(after[:-1] != at[1:], True))
-        self.qlo, self.qhi = lo, hi
+        b = int(self.pbreaks[self.pbreaks.searchsorted(i)])
+        plain += cand[i : b + 1].tolist()
+        return int(self.pafter[b])
 
     def parameters(self, plain: list[int]) -> None:
         """The parameters at ``plain`` (whose payload is the key and a 4-byte value), in

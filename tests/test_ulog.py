@@ -337,7 +337,7 @@ def test_parameters_read_at_once_are_pyulogs(tmp_path: Path, odd: bytes | None) 
 
 def test_runs_of_plain_parameters_are_pyulogs(tmp_path: Path) -> None:
     """Runs of plain parameters are found at once, a window of the definitions at a time
-    (``_Reader.quiet_run``): over several windows, with a key of 255 bytes (a size above
+    (``_Reader.plain_run``): over several windows, with a key of 255 bytes (a size above
     255) and bytes inside a key that look like a plain parameter's header, the reader's
     parameters are pyulog's, in its order."""
     keys = [b"float P%d" % k for k in range(8000)]
@@ -345,7 +345,7 @@ def test_runs_of_plain_parameters_are_pyulogs(tmp_path: Path) -> None:
     keys[20] = keys[5000] = b"int32_t A_\x5f\x00PZ_B"  # "_\0" then "PZ": size 95 = 90 + 5
     path = tmp_path / "params.ulg"
     path.write_bytes(_parameter_ulog(keys))
-    assert path.stat().st_size > 2 * ulog._QUIET_WINDOW
+    assert path.stat().st_size > 2 * ulog._PLAIN_WINDOW
     ref, _ = pyulog(path)
     reader = ulog._Reader(path.read_bytes(), path, None)
     reader.header()
@@ -387,8 +387,8 @@ INFO_PAYLOADS = [bytes([9]) + b"char[3] ab" + b"xyz", bytes([7]) + b"char[3]" + 
 def test_checked_info_messages_flag_what_pyulog_flags(
         tmp_path: Path, kind: bytes, where: str, payload: bytes) -> None:
     """``M`` and ``Q`` messages are only checked (plainly valid ones without decoding; in
-    the definitions, with the plain parameters around them, in one step): one that pyulog
-    cannot parse is corruption, as there; the tables and parameters are unchanged."""
+    the definitions also between plain parameters, which are read in runs): one that
+    pyulog cannot parse is corruption, as there; the tables and parameters are unchanged."""
     from fuzz import hostile
 
     raw = hostile.ulog_file([hostile.ATT_FORMAT], samples=5)

@@ -8,10 +8,13 @@ memory map of the file. pyulog is not used at run time.
 
 On a small log (a few MB) the fixed costs weigh most: a thousand or two definition
 messages and a hundred topics. They are kept down so: the plain parameters (``float`` or
-``int32_t`` key, 4-byte value: nearly all) are decoded in one batch, names at once and
-values as arrays; ``M`` and ``Q`` messages, which are only checked, are seen without
-decoding when plainly valid; a table's columns are views made when first asked for; the
-times of all tables are converted, and checked for running backwards, in one go.
+``int32_t`` key, 4-byte value: nearly all) are found in runs, as data messages are (see
+*Framing*), and decoded in one batch, names at once and values as arrays; ``M`` and ``Q``
+messages, which are only checked, are seen without decoding when plainly valid; a
+format's fields are split at once when in the common form and its size summed as they
+are, each field type string parsed once; a topic's layout and dtype are built once per
+read; a table's columns are views made when first asked for; the times of all tables
+are converted, and checked for running backwards, in one go.
 
 What the returned log holds:
 

@@ -1262,8 +1262,9 @@ def _times(tables: list[_Columns]) -> list[NDArray[np.float64]]:
     out: list[NDArray[np.float64] | None] = []
     batch: list[NDArray[Any]] = []
     for data in tables:
-        key = "timestamp_sample" if "timestamp_sample" in data else "timestamp"
-        column = data.get(key)
+        fields = data._fields  # (looked up directly: a hundred tables)
+        key = "timestamp_sample" if "timestamp_sample" in fields else "timestamp"
+        column = data[key] if key in fields else None
         if column is None:
             out.append(np.full(len(data.records), np.nan))
         elif column.dtype == np.uint64:
@@ -1320,7 +1321,7 @@ def _params(parsed: _Parsed) -> tuple[dict[str, float], int, int]:
     """Initial parameters with later changes applied; the number of changes; and how many
     values were not numbers (skipped)."""
     initial = parsed.initial_params
-    if {type(v) for v in initial.values()} <= {float, int}:  # the common case: at once
+    if set(map(type, initial.values())) <= {float, int}:  # the common case: at once
         params = dict(zip(initial, map(float, initial.values()), strict=True))
         entries = [(name, value) for _, name, value in parsed.changed_params]
     else:
@@ -1425,7 +1426,7 @@ def read(
     for (topic, multi_id, data), time_s in zip(parsed.data, times, strict=True):
         name = table_name(topic, multi_id)
         units: dict[str, str] = {k: "us" for k in ("timestamp", "timestamp_sample")
-                                 if k in data}
+                                 if k in data._fields}
         tables[name] = MessageTable(name, data, time_s, units)
     params, n_changes, bad_params = _params(parsed)
     texts = _texts(parsed)

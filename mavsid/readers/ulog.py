@@ -11,10 +11,9 @@ messages and a hundred topics. They are kept down so: the plain parameters (``fl
 ``int32_t`` key, 4-byte value: nearly all) are found in runs, as data messages are (see
 *Framing*), and decoded in one batch, names at once and values as arrays; ``M`` and ``Q``
 messages, which are only checked, are seen without decoding when plainly valid; a
-format's fields are split at once when in the common form and its size summed as they
-are, each field type string parsed once; a topic's layout and dtype are built once per
-read; a table's columns are views made when first asked for; the times of all tables
-are converted, and checked for running backwards, in one go.
+format's size is summed as its fields are parsed; a topic's layout and dtype are built
+once per read; a table's columns are views made when first asked for; the times of all
+tables are converted, and checked for running backwards, in one go.
 
 What the returned log holds:
 
@@ -274,89 +273,47 @@ def _indices(count: int) -> tuple[str, ...]:
     return tuple(f"[{i}]" for i in range(count))
 
 
-#: every byte but the two that end a format's type and name (space, semicolon)
-_NOT_SEPARATOR = bytes(b for b in range(256) if b not in b" ;")
-#: the width of a nested type in a format's sum (makes it negative: not of basic types)
-_NESTED = -(1 << 40)
-
-
-def _kind(raw: str) -> tuple[str, int]:
-    """A field's type ``float`` or ``float[4]``: the type and the array size (0: scalar).
-
-    Examples
-    --------
-    >>> _kind("float"), _kind("uint8_t[16]")
-    (('float', 0), ('uint8_t', 16))
-    """
-    a = raw.find("[")
-    if a < 0:
-        return raw, 0
-    try:
-        count = int(raw[a + 1 : raw.find("]")])
-    except ValueError:
-        raise _Bad from None
-    if not 0 <= count <= 0xFFFF:
-        raise _Bad
-    return raw[:a], count
-
-
-class _Kinds:
-    """The field types of a read's formats, each type string parsed once (a few dozen
-    distinct among a thousand or two fields): its type, array size and width in bytes
-    (:data:`_NESTED` for a nested type)."""
-
-    __slots__ = ("base", "count", "width")
-
-    def __init__(self) -> None:
-        self.base: dict[str, str] = {}
-        self.count: dict[str, int] = {}
-        self.width: dict[str, int] = {}
-
-    def learn(self, raws: list[str]) -> None:
-        for raw in set(raws).difference(self.width):
-            base, count = _kind(raw)  # _Bad: nothing learnt
-            width = _SIZE.get(base)
-            self.base[raw], self.count[raw] = base, count
-            self.width[raw] = _NESTED if width is None else width * (count or 1)
-
-
-def _format(data: bytes, kinds: _Kinds) -> tuple[str, list[Field], int]:
+def _format(data: bytes) -> tuple[str, list[Field], int]:
     """A format definition ``name:type field;type[n] field;...``: its name, fields and
     size in bytes when all its fields are of basic types (else -1: nested formats, sized
-    by :func:`_sizes`). The common form (one space in each item, each ended by ``;``) is
-    split at once; any other item by item, as pyulog reads it (empty items skipped, the
-    second word the name). ``:`` and the separators are ASCII: decoding the parts drops
-    the bytes decoding the whole would.
+    by :func:`_widths`).
 
     Examples
     --------
-    >>> _format(b"att:uint64_t timestamp;float[4] q;", _Kinds())
+    >>> _format(b"att:uint64_t timestamp;float[4] q;")
     ('att', [('uint64_t', 0, 'timestamp'), ('float', 4, 'q')], 24)
-    >>> _format(b"esc:uint64_t timestamp;;report[2] r more", _Kinds())
-    ('esc', [('uint64_t', 0, 'timestamp'), ('report', 2, 'r')], -1)
+    >>> _format(b"esc:uint64_t timestamp;report[2] r;")[2]
+    -1
     """
-    head, colon, rest = data.partition(b":")
-    if not colon:
+    parts = _text(data).split(":")
+    if len(parts) < 2:
         raise _Bad
-    body = rest.partition(b":")[0]
-    if body[-1:] == b";" and body.translate(None, _NOT_SEPARATOR) == b" ;" * body.count(b";"):
-        words = _text(body[:-1]).replace(";", " ").split(" ")
-        types, names = words[0::2], words[1::2]
-    else:
-        types, names = [], []
-        for item in _text(body).split(";"):
-            if not item:
-                continue
-            kind, space, rest_ = item.partition(" ")
-            if not space:
-                raise _Bad
-            types.append(kind)
-            names.append(rest_.partition(" ")[0])
-    kinds.learn(types)
-    fields = list(zip(map(kinds.base.__getitem__, types), map(kinds.count.__getitem__, types),
-                      names, strict=True))
-    size = sum(map(kinds.width.__getitem__, types))
-    return _text(head), fields, max(size, -1)
+    fields = []
+    size = 0
+    for item in parts[1].split(";"):
+        if not item:
+            continue
+        kind, space, rest = item.partition(" ")
+        if not space:
+            raise _Bad
+        name = rest.partition(" ")[0]  # the second word, as pyulog takes it
+        a = kind.find("[")
+        if a < 0:
+            fields.append((kind, 0, name))
+            width = _SIZE.get(kind)
+            size = -1 if width is None or size < 0 else size + width
+            continue
+        try:
+            count = int(kind[a + 1 : kind.find("]")])
+        except ValueError:
+            raise _Bad from None
+        if not 0 <= count <= 0xFFFF:
+            raise _Bad
+        kind = kind[:a]
+        fields.append((kind, count, name))
+        width = _SIZE.get(kind)
+        size = -1 if width is None or size < 0 else size + width * (count or 1)
+    return parts[0], fields, size
 
 
 def _u16(u8: NDArray[np.uint8], at: NDArray[np.int64]) -> NDArray[np.uint16]:
@@ -586,7 +543,6 @@ class _Reader:
         self.flat: dict[str, tuple[list[str], list[np.dtype[Any]]]] = {}
         self.dtypes: dict[str, tuple[list[str], list[np.dtype[Any]], int, int]] = {}
         self.built: dict[str, np.dtype[Any]] = {}
-        self.kinds = _Kinds()
         self.plo = self.phi = -1  # the window of plain parameters scanned (plain_run)
         self.pcand = self.pafter = self.pbreaks = np.zeros(0, np.int64)
         # data messages met: (positions, sizes, ids, their subscriptions), and how many
@@ -683,7 +639,7 @@ class _Reader:
                 elif kind == 0x4D:  # M
                     _info(data, multiple=True)
                 elif kind == 0x46:  # F
-                    name, fields, size = _format(data, self.kinds)
+                    name, fields, size = _format(data)
                     out.formats[name] = fields
                     if size >= 0:
                         out.flat[name] = size

@@ -335,6 +335,26 @@ def test_parameters_read_at_once_are_pyulogs(tmp_path: Path, odd: bytes | None) 
     assert log.params == numbers
 
 
+def test_runs_of_plain_parameters_are_pyulogs(tmp_path: Path) -> None:
+    """Runs of plain parameters are found at once, a window of the definitions at a time
+    (``_Reader.plain_run``): over several windows, with a key of 255 bytes (a size above
+    255) and bytes inside a key that look like a plain parameter's header, the reader's
+    parameters are pyulog's, in its order."""
+    keys = [b"float P%d" % k for k in range(8000)]
+    keys[10] = b"float " + b"W" * 249
+    keys[20] = keys[5000] = b"int32_t A_\x5f\x00PZ_B"  # "_\0" then "PZ": size 95 = 90 + 5
+    path = tmp_path / "params.ulg"
+    path.write_bytes(_parameter_ulog(keys))
+    assert path.stat().st_size > 2 * ulog._PLAIN_WINDOW
+    ref, _ = pyulog(path)
+    reader = ulog._Reader(path.read_bytes(), path, None)
+    reader.header()
+    reader.definitions()
+    want = [(k, repr(v), type(v)) for k, v in ref.initial_parameters.items()]
+    assert [(k, repr(v), type(v)) for k, v in reader.out.initial_params.items()] == want
+    assert not reader.out.problems
+
+
 def test_a_read_imports_nothing_more() -> None:
     """A cold read (a fresh process, as the command line does it) imports no module the
     reader does not need: numpy.ma, pulled in by np.unique's first call, was 15 ms of a
@@ -362,23 +382,28 @@ INFO_PAYLOADS = [bytes([9]) + b"char[3] ab" + b"xyz", bytes([7]) + b"char[3]" + 
 
 
 @pytest.mark.parametrize("kind", [b"M", b"Q"])
-@pytest.mark.parametrize("where", ["definitions", "data"])
+@pytest.mark.parametrize("where", ["definitions", "parameters", "data"])
 @pytest.mark.parametrize("payload", INFO_PAYLOADS, ids=range(len(INFO_PAYLOADS)))
 def test_checked_info_messages_flag_what_pyulog_flags(
         tmp_path: Path, kind: bytes, where: str, payload: bytes) -> None:
-    """``M`` and ``Q`` messages are only checked (plainly valid ones without decoding):
-    one that pyulog cannot parse is corruption, as there; the tables are unchanged."""
+    """``M`` and ``Q`` messages are only checked (plainly valid ones without decoding; in
+    the definitions also between plain parameters, which are read in runs): one that
+    pyulog cannot parse is corruption, as there; the tables and parameters are unchanged."""
     from fuzz import hostile
 
     raw = hostile.ulog_file([hostile.ATT_FORMAT], samples=5)
     message = hostile._ulog_msg(kind, b"\x00" + payload)
     at = raw.index(b"att:") + len(hostile.ATT_FORMAT) if where == "definitions" else \
         len(raw) - 17  # before the last data message (3 + 14 bytes)
+    if where == "parameters":  # between plain parameters
+        raw = _parameter_ulog([b"float A", b"int32_t B", b"float C"])
+        at = raw.index(b"int32_t B") - 4  # (its header and key length before it)
     path = tmp_path / "info.ulg"
     path.write_bytes(raw[:at] + message + raw[at:])
     ref, printed = pyulog(path)
     log, quality = read(path)
     assert_tables_match(log, ref)
+    assert log.params == {k: float(v) for k, v in ref.initial_parameters.items()}
     assert len(quality) == int(bool(ref.file_corruption or printed.strip())), quality
 
 

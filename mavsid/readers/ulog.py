@@ -8,10 +8,12 @@ memory map of the file. pyulog is not used at run time.
 
 On a small log (a few MB) the fixed costs weigh most: a thousand or two definition
 messages and a hundred topics. They are kept down so: the plain parameters (``float`` or
-``int32_t`` key, 4-byte value: nearly all) are decoded in one batch, names at once and
-values as arrays; ``M`` and ``Q`` messages, which are only checked, are seen without
-decoding when plainly valid; a table's columns are views made when first asked for; the
-times of all tables are converted, and checked for running backwards, in one go.
+``int32_t`` key, 4-byte value: nearly all) are found in runs, as data messages are (see
+*Framing*), and decoded in one batch, names at once and values as arrays; ``M`` and ``Q``
+messages, which are only checked, are seen without decoding when plainly valid; a
+format's size is summed as its fields are parsed; a topic's layout and dtype are built
+once per read; a table's columns are views made when first asked for; the times of all
+tables are converted, and checked for running backwards, in one go.
 
 What the returned log holds:
 
@@ -165,6 +167,8 @@ _MAX_FIELDS = 0xFFFF
 _NO_LIMIT = 1 << 62
 #: bytes of the file scanned at a time for message candidates
 _BLOCK = 1 << 20
+#: bytes of the definitions scanned at a time for plain parameters
+_PLAIN_WINDOW = 1 << 16
 #: runs of data messages kept apart before they are joined (bounds the memory per run)
 _MAX_CHUNKS = 4096
 
@@ -269,18 +273,23 @@ def _indices(count: int) -> tuple[str, ...]:
     return tuple(f"[{i}]" for i in range(count))
 
 
-def _format(data: bytes) -> tuple[str, list[Field]]:
-    """A format definition ``name:type field;type[n] field;...``.
+def _format(data: bytes) -> tuple[str, list[Field], int]:
+    """A format definition ``name:type field;type[n] field;...``: its name, fields and
+    size in bytes when all its fields are of basic types (else -1: nested formats, sized
+    by :func:`_widths`).
 
     Examples
     --------
     >>> _format(b"att:uint64_t timestamp;float[4] q;")
-    ('att', [('uint64_t', 0, 'timestamp'), ('float', 4, 'q')])
+    ('att', [('uint64_t', 0, 'timestamp'), ('float', 4, 'q')], 24)
+    >>> _format(b"esc:uint64_t timestamp;report[2] r;")[2]
+    -1
     """
     parts = _text(data).split(":")
     if len(parts) < 2:
         raise _Bad
     fields = []
+    size = 0
     for item in parts[1].split(";"):
         if not item:
             continue
@@ -291,6 +300,8 @@ def _format(data: bytes) -> tuple[str, list[Field]]:
         a = kind.find("[")
         if a < 0:
             fields.append((kind, 0, name))
+            width = _SIZE.get(kind)
+            size = -1 if width is None or size < 0 else size + width
             continue
         try:
             count = int(kind[a + 1 : kind.find("]")])
@@ -298,8 +309,11 @@ def _format(data: bytes) -> tuple[str, list[Field]]:
             raise _Bad from None
         if not 0 <= count <= 0xFFFF:
             raise _Bad
-        fields.append((kind[:a], count, name))
-    return parts[0], fields
+        kind = kind[:a]
+        fields.append((kind, count, name))
+        width = _SIZE.get(kind)
+        size = -1 if width is None or size < 0 else size + width * (count or 1)
+    return parts[0], fields, size
 
 
 def _u16(u8: NDArray[np.uint8], at: NDArray[np.int64]) -> NDArray[np.uint16]:
@@ -372,21 +386,17 @@ def _cycle(formats: dict[str, list[Field]]) -> list[str] | None:
     return None
 
 
-def _sizes(formats: dict[str, list[Field]]) -> set[int]:
-    """The payload sizes data messages of the formats can have: 2 (message id) + a
-    format's size, with and without its trailing ``_padding`` fields (formats acyclic;
-    a nested type not defined counts 0).
+def _widths(formats: dict[str, list[Field]], flat: dict[str, int]) -> dict[str, int]:
+    """Each format's size in bytes (formats acyclic; a nested type not defined counts 0).
+    ``flat``: the sizes of the formats of basic types only, known from :func:`_format`
+    (the others are summed here).
 
     Examples
     --------
-    >>> sorted(_sizes({"a": [("uint64_t", 0, "timestamp"), ("uint8_t", 3, "_padding0")]}))
-    [10, 13]
+    >>> _widths({"b": [("a", 2, "x"), ("float", 0, "y")], "a": [("uint8_t", 3, "z")]}, {"a": 3})
+    {'a': 3, 'b': 10}
     """
-    memo: dict[str, int] = {}
-
-    def part(kind: str, count: int) -> int:
-        width = _SIZE.get(kind)
-        return (size(kind) if width is None else width) * (count or 1)
+    memo = dict(flat)
 
     def size(name: str) -> int:
         got = memo.get(name)
@@ -398,11 +408,28 @@ def _sizes(formats: dict[str, list[Field]]) -> set[int]:
             memo[name] = got
         return got
 
+    for name in formats:
+        size(name)
+    return memo
+
+
+def _sizes(formats: dict[str, list[Field]], widths: dict[str, int]) -> set[int]:
+    """The payload sizes data messages of the formats can have: 2 (message id) + a
+    format's size (``widths``, from :func:`_widths`), with and without its trailing
+    ``_padding`` fields.
+
+    Examples
+    --------
+    >>> a = [("uint64_t", 0, "timestamp"), ("uint8_t", 3, "_padding0")]
+    >>> sorted(_sizes({"a": a}, {"a": 11}))
+    [10, 13]
+    """
     out: set[int] = set()
     for name, fields in formats.items():
-        full = trimmed = size(name)
+        full = trimmed = widths[name]
         for kind, n, fname in reversed(fields):
-            width = part(kind, n)
+            width = _SIZE.get(kind)
+            width = (widths.get(kind, 0) if width is None else width) * (n or 1)
             if width and not fname.startswith("_padding"):
                 break
             trimmed -= width
@@ -436,6 +463,7 @@ class _Parsed:
     last_us: int = 0
     info: dict[str, Any] = field(default_factory=dict)
     formats: dict[str, list[Field]] = field(default_factory=dict)
+    flat: dict[str, int] = field(default_factory=dict)  # sizes of formats of basic types
     initial_params: dict[str, Any] = field(default_factory=dict)
     changed_params: list[tuple[int, str, Any]] = field(default_factory=list)
     logged: list[_Text] = field(default_factory=list)
@@ -514,6 +542,9 @@ class _Reader:
         self.final: list[int] = []  # subscriptions whose data is kept, pyulog's order
         self.flat: dict[str, tuple[list[str], list[np.dtype[Any]]]] = {}
         self.dtypes: dict[str, tuple[list[str], list[np.dtype[Any]], int, int]] = {}
+        self.built: dict[str, np.dtype[Any]] = {}
+        self.plo = self.phi = -1  # the window of plain parameters scanned (plain_run)
+        self.pcand = self.pafter = self.pbreaks = np.zeros(0, np.int64)
         # data messages met: (positions, sizes, ids, their subscriptions), and how many
         self.chunks: list[tuple[NDArray[Any], NDArray[Any], NDArray[Any], NDArray[np.int32]]]
         self.chunks = []
@@ -592,8 +623,7 @@ class _Reader:
             end = pos + 3 + size
             if kind == 0x50:
                 if end <= n and size == buf[pos + 3] + 5:  # the common parameter
-                    plain.append(pos)
-                    pos = end
+                    pos = self.plain_run(pos, plain)
                     continue
                 self.parameters(plain)
             elif kind in (0x41, 0x4C, 0x43):  # A, L, C: the data section begins
@@ -609,8 +639,12 @@ class _Reader:
                 elif kind == 0x4D:  # M
                     _info(data, multiple=True)
                 elif kind == 0x46:  # F
-                    name, fields = _format(data)
+                    name, fields, size = _format(data)
                     out.formats[name] = fields
+                    if size >= 0:
+                        out.flat[name] = size
+                    else:
+                        out.flat.pop(name, None)
                 elif kind == 0x50:  # P
                     _, key, value = _info(data)
                     out.initial_params[key] = value
@@ -630,6 +664,37 @@ class _Reader:
                 self.problem("file corruption detected while reading file definitions")
             pos = end
         return min(pos, n)
+
+    def plain_run(self, pos: int, plain: list[int]) -> int:
+        """The run of parameters with a 4-byte value (size: key length + 5) that starts at
+        ``pos`` (one): their positions put in ``plain``; the position after them. Found as
+        runs of data messages are (see *Framing*): the candidates of a window of the file
+        from ``pos`` (type byte ``P``, that size, the message inside the file) and where
+        one's successor is not the next; each window is scanned once, the walk's later
+        parameters in it looked up."""
+        if not self.plo <= pos < self.phi:
+            u8, n = self.u8, self.n
+            hi = min(pos + _PLAIN_WINDOW, n - 7)  # (a plain parameter takes 8 bytes or more)
+            at = np.flatnonzero(u8[pos + 2 : hi + 2] == 0x50)
+            at += pos
+            size = _u16(u8, at + 0).astype(np.int64)
+            keep = size == u8.take(at + 3).astype(np.int64) + 5
+            at = at[keep]
+            after = at + 3
+            after += size[keep]
+            keep = after <= n
+            at, after = at[keep], after[keep]
+            self.pcand, self.pafter = at, after
+            self.pbreaks = np.flatnonzero(np.append(after[:-1] != at[1:], True))
+            self.plo, self.phi = pos, hi
+        cand = self.pcand
+        i = int(cand.searchsorted(pos))
+        if i == cand.size or cand[i] != pos:  # (none: a window starts at a candidate)
+            plain.append(pos)
+            return pos + 3 + _HEAD(self.buf, pos)[0]
+        b = int(self.pbreaks[self.pbreaks.searchsorted(i)])
+        plain += cand[i : b + 1].tolist()
+        return int(self.pafter[b])
 
     def parameters(self, plain: list[int]) -> None:
         """The parameters at ``plain`` (whose payload is the key and a 4-byte value), in
@@ -690,7 +755,8 @@ class _Reader:
         self.start = start
         # the data message sizes the file's formats allow: any message id (a filter only)
         self.allowed = np.zeros(1 << 16, bool)
-        self.allowed[list(_sizes(self.out.formats))] = True
+        self.widths = _widths(self.out.formats, self.out.flat)
+        self.allowed[list(_sizes(self.out.formats, self.widths))] = True
         self.lo = self.hi = -1  # the block whose candidates are loaded
         self.cand = np.zeros(0, np.int64)
         self.csize = self.cmsg = np.zeros(0, np.uint16)
@@ -770,15 +836,16 @@ class _Reader:
         names: list[str] = []
         kinds: list[np.dtype[Any]] = []
         for kind, count, fname in self.out.formats[name]:  # KeyError: an unknown type
-            if kind in _BASIC:
+            dtype = _DTYPE.get(kind)
+            if dtype is not None:
                 if not count:
                     names.append(fname)
-                    kinds.append(_DTYPE[kind])
+                    kinds.append(dtype)
                     continue
                 if len(names) + count > _MAX_FIELDS:
                     raise _Bad
-                names += [fname + index for index in _indices(count)]
-                kinds += [_DTYPE[kind]] * count
+                names += map(fname.__add__, _indices(count))
+                kinds += [dtype] * count
                 continue
             inner, inner_kinds = self.flatten(kind)
             prefixes = [fname + index + "." for index in _indices(count)] if count else [
@@ -800,20 +867,28 @@ class _Reader:
             m = len(names)
             while m and names[m - 1].startswith("_padding"):
                 m -= 1
-            names, kinds = names[:m], kinds[:m]
+            # the format's size (the sum of its fields') less the padding dropped
+            size = self.widths[name] - sum(k.itemsize for k in kinds[m:])
+            if m < len(names):
+                names, kinds = names[:m], kinds[:m]
             if "" in names:
                 names = [f or f"f{i}" for i, f in enumerate(names)]
             if len(set(names)) < m:
                 raise ValueError(name)  # numpy refuses repeated field names
-            sizes = [k.itemsize for k in kinds]
-            size = sum(sizes)
-            offset = sum(sizes[: names.index("timestamp")]) if "timestamp" in names else size
+            try:
+                offset = sum(k.itemsize for k in kinds[: names.index("timestamp")])
+            except ValueError:
+                offset = size
             got = self.dtypes[name] = (names, kinds, size, offset)
         return got
 
     def dtype(self, name: str) -> np.dtype[Any]:
-        names, kinds, _, _ = self.dtypes[name]
-        return np.dtype({"names": names, "formats": kinds})
+        """A topic's dtype (built once per read: instances of a topic share it)."""
+        got = self.built.get(name)
+        if got is None:
+            names, kinds, _, _ = self.dtypes[name]
+            got = self.built[name] = np.dtype({"names": names, "formats": kinds})
+        return got
 
     def subscribe(self, data: bytes) -> None:
         if len(data) < 3:
@@ -1007,7 +1082,8 @@ class _Reader:
     def run(self) -> _Parsed:
         self.header()
         start = self.definitions()
-        cycle = _cycle(self.out.formats)
+        formats, flat = self.out.formats, self.out.flat  # (only nested ones can hold a cycle)
+        cycle = _cycle({k: v for k, v in formats.items() if k not in flat})
         if cycle:
             raise LogFormatError("message format " + " -> ".join(cycle) + " contains itself "
                                  "(a damaged or hostile definition)", path=self.path)
@@ -1142,8 +1218,9 @@ def _times(tables: list[_Columns]) -> list[NDArray[np.float64]]:
     out: list[NDArray[np.float64] | None] = []
     batch: list[NDArray[Any]] = []
     for data in tables:
-        key = "timestamp_sample" if "timestamp_sample" in data else "timestamp"
-        column = data.get(key)
+        fields = data._fields  # (looked up directly: a hundred tables)
+        key = "timestamp_sample" if "timestamp_sample" in fields else "timestamp"
+        column = data[key] if key in fields else None
         if column is None:
             out.append(np.full(len(data.records), np.nan))
         elif column.dtype == np.uint64:
@@ -1200,7 +1277,7 @@ def _params(parsed: _Parsed) -> tuple[dict[str, float], int, int]:
     """Initial parameters with later changes applied; the number of changes; and how many
     values were not numbers (skipped)."""
     initial = parsed.initial_params
-    if {type(v) for v in initial.values()} <= {float, int}:  # the common case: at once
+    if set(map(type, initial.values())) <= {float, int}:  # the common case: at once
         params = dict(zip(initial, map(float, initial.values()), strict=True))
         entries = [(name, value) for _, name, value in parsed.changed_params]
     else:
@@ -1305,7 +1382,7 @@ def read(
     for (topic, multi_id, data), time_s in zip(parsed.data, times, strict=True):
         name = table_name(topic, multi_id)
         units: dict[str, str] = {k: "us" for k in ("timestamp", "timestamp_sample")
-                                 if k in data}
+                                 if k in data._fields}
         tables[name] = MessageTable(name, data, time_s, units)
     params, n_changes, bad_params = _params(parsed)
     texts = _texts(parsed)

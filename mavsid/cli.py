@@ -322,8 +322,8 @@ def _write_outputs(args: argparse.Namespace, result: FitResult,
                    step: Callable[[str], None] = lambda stage: None,
                    worker: ReportWorker | None = None) -> None:
     """The ``.rrd`` and the report; the report drawn by ``worker`` (a process started with
-    the command, see :class:`~mavsid.outputs.ReportWorker`) while the ``.rrd`` is written,
-    else here after it."""
+    the command, see :class:`~mavsid.outputs.ReportWorker`) while the loop analysis it
+    draws and the ``.rrd`` are worked out here, else here after the ``.rrd``."""
     with contextlib.ExitStack() as stack:
         report_tmp = None
         handed = False
@@ -331,6 +331,11 @@ def _write_outputs(args: argparse.Namespace, result: FitResult,
             step(f"writing {args.report}")
             report_tmp = stack.enter_context(atomic_path(args.report))
             handed = worker is not None and worker.start(result, report_tmp, args.report)
+            if handed:  # (worked out here while the worker draws the first figures)
+                assert worker is not None
+                from mavsid.loop import tune_analysis
+
+                worker.send_analysis(tune_analysis(result))
         if args.rrd:
             from mavsid.viz import save_rrd
 

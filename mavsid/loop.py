@@ -74,6 +74,7 @@ __all__ = [
     "PX4RatePID",
     "RateGains",
     "RatePID",
+    "TuneAnalysis",
     "TwinSignals",
     "analyse_loop",
     "analyse_model",
@@ -94,6 +95,7 @@ __all__ = [
     "suggest_gains",
     "sysid_spans",
     "tune",
+    "tune_analysis",
     "twin_messages",
     "twin_signals",
 ]
@@ -2568,6 +2570,32 @@ def tune(result: Any, target_pm_deg: float = 50.0, samples: int = 40,
 
 #: a suggestion whose phase margin on the measured FRF differs more than this (deg) is flagged
 SUGGESTION_CHECK_DEG = 5.0
+
+
+@dataclass
+class TuneAnalysis:
+    """The loop analysis of a result, computed once for a report (:func:`tune_analysis`):
+    :func:`tune`'s per-axis report, the measured responses and the loop analyses it drew
+    them from, or the error that stopped it. Computed where no plotting library is loaded:
+    ``mavsid fit`` works it out while its report worker draws (:mod:`mavsid.outputs`)."""
+
+    report: dict[str, Any] = field(default_factory=dict)
+    measured: dict[str, dict[str, Any]] = field(default_factory=dict)
+    analyses: dict[str, Any] = field(default_factory=dict)
+    error: str | None = None
+    target_pm_deg: float = 50.0
+
+
+def tune_analysis(result: Any, target_pm_deg: float = 50.0) -> TuneAnalysis:
+    """:func:`tune` of ``result`` (20 σ draws) with what a report plots; an error that stops
+    it is kept in :attr:`TuneAnalysis.error`, not raised."""
+    out = TuneAnalysis(target_pm_deg=target_pm_deg)
+    try:
+        out.report = tune(result, target_pm_deg, samples=20, measured_out=out.measured,
+                          analyses_out=out.analyses)
+    except (MavsidError, ValueError, np.linalg.LinAlgError) as exc:
+        out.error = str(exc)
+    return out
 
 
 def _scale_of(gains: Mapping[str, float], ctrl: AxisController) -> float:

@@ -155,6 +155,7 @@ class ReportWorker:
             [sys.executable, "-c", _SERVE], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
             env=env)
         self._handoff: str | None = None
+        self._analysis: str | None = None
         self._target = ""
 
     @staticmethod
@@ -194,22 +195,52 @@ class ReportWorker:
         """Hand the worker ``result`` to write to ``path`` (a temporary file of ``target``,
         the output named in errors); returns once the result is on disk. False when it
         could not be put there (a full temporary folder): the caller draws the report
-        itself (the worker, told nothing, ends)."""
+        itself (the worker, told nothing, ends). The worker draws the first axis's figures
+        while the caller works out the loop analysis (:meth:`send_analysis`)."""
         self._target = target
         stdin = self._proc.stdin
         assert stdin is not None
+        self._handoff = self._pickled((result, path))
+        if self._handoff is None:
+            self._close_stdin()
+            return False
+        self._line(self._handoff)
+        return True
+
+    def send_analysis(self, analysis: Any) -> None:
+        """Hand the worker the loop analysis of the result (:func:`mavsid.loop.
+        tune_analysis`), which its report draws after the first axis's other figures; one
+        that cannot be handed over the worker works out itself."""
+        self._analysis = self._pickled(analysis)
+        self._line(self._analysis or "")
+        self._close_stdin()
+
+    def _pickled(self, obj: Any) -> str | None:
+        """``obj`` pickled into a new temporary file: its name, None when it cannot be."""
         try:
-            fd, self._handoff = tempfile.mkstemp(prefix="mavsid-report-", suffix=".pickle")
+            fd, name = tempfile.mkstemp(prefix="mavsid-report-", suffix=".pickle")
+        except OSError:
+            return None
+        try:
             with os.fdopen(fd, "wb") as f:
-                pickle.dump((result, path), f, protocol=pickle.HIGHEST_PROTOCOL)
+                pickle.dump(obj, f, protocol=pickle.HIGHEST_PROTOCOL)
         except (OSError, pickle.PicklingError):
             with contextlib.suppress(OSError):
-                stdin.close()
-            return False
-        with contextlib.suppress(OSError):  # the worker died: wait() says so
-            with stdin:
-                stdin.write(self._handoff.encode() + b"\n")
-        return True
+                os.unlink(name)
+            return None
+        return name
+
+    def _line(self, text: str) -> None:
+        stdin = self._proc.stdin
+        with contextlib.suppress(OSError, ValueError):  # the worker died: wait() says so
+            assert stdin is not None
+            stdin.write(text.encode() + b"\n")
+            stdin.flush()
+
+    def _close_stdin(self) -> None:
+        with contextlib.suppress(OSError):
+            if self._proc.stdin is not None:
+                self._proc.stdin.close()
 
     def wait(self) -> None:
         """Wait for the report.
@@ -222,6 +253,7 @@ class ReportWorker:
             defect's traceback is printed by the worker itself.
         """
         assert self._proc.stdout is not None
+        self._close_stdin()  # (no analysis handed over: the worker works it out)
         said = self._proc.stdout.read().decode("utf-8", "replace").strip()
         if self._proc.wait() == 0:
             return
@@ -242,9 +274,10 @@ class ReportWorker:
                 if stream is not None:
                     stream.close()
         self._proc.wait()
-        if self._handoff is not None:  # (the worker removes it once read)
-            with contextlib.suppress(OSError):
-                os.unlink(self._handoff)
+        for name in (self._handoff, self._analysis):  # (the worker removes them once read)
+            if name is not None:
+                with contextlib.suppress(OSError):
+                    os.unlink(name)
 
 
 def _cpu_times() -> tuple[int, int, int] | None:
@@ -281,6 +314,16 @@ def _others_busy(window_s: float) -> float | None:
     return last[2] * (total - idle) / total
 
 
+def _unpickled(name: str) -> Any:
+    """The object pickled in the temporary file ``name``, which is then removed."""
+    try:
+        with open(name, "rb") as f:
+            return pickle.load(f)
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(name)
+
+
 def _serve_report() -> None:
     """The worker's side of :class:`ReportWorker`: import the report, read ``(result,
     path)`` from standard input, write it; a :class:`~mavsid.errors.MavsidError` or a file
@@ -296,14 +339,17 @@ def _serve_report() -> None:
     handoff = sys.stdin.readline().rstrip("\n")
     if not handoff:  # the command stopped before its outputs
         return
+    result, path = _unpickled(handoff)
+
+    def analysis() -> Any:
+        """The loop analysis the command hands over, else worked out here."""
+        name = sys.stdin.readline().rstrip("\n")
+        if not name:
+            return report.loop_analysis(result)
+        return _unpickled(name)
+
     try:
-        with open(handoff, "rb") as f:
-            result, path = pickle.load(f)
-    finally:
-        with contextlib.suppress(OSError):
-            os.unlink(handoff)
-    try:
-        report.write_report(result, path)
+        report.write_report(result, path, analysis=analysis)
     except MavsidError as exc:
         print(f"{type(exc).__name__}\t{exc}", flush=True)
         sys.exit(1)

@@ -17,13 +17,13 @@ from __future__ import annotations
 
 import base64
 import contextlib
+import functools
 import html
 import io
 import os
 import re
 import threading
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 import matplotlib as mpl
@@ -41,7 +41,11 @@ from mavsid.data import decimate
 from mavsid.validation import Validation, horizon_label
 
 if TYPE_CHECKING:
+    from mavsid.loop import TuneAnalysis
     from mavsid.pipeline import AxisFit, FitResult
+
+    #: The loop analysis a report draws, or a function that returns it when first needed.
+    _Analysis = TuneAnalysis | Callable[[], TuneAnalysis] | None
 
 __all__ = ["figure_img", "loop_analysis", "loop_section", "render_html", "render_html_page",
            "write_report"]
@@ -303,7 +307,7 @@ def _semilogx(ax: Axes, f: np.ndarray, h: np.ndarray, colour: str, label: str | 
     ax.semilogx(f, 20 * np.log10(np.abs(h) + 1e-12), color=colour, label=label, **kw)
 
 
-def _bode_columns(fit: AxisFit, lp: _Loop | None) -> list[dict[str, Any]]:
+def _bode_columns(fit: AxisFit, lp: TuneAnalysis | None) -> list[dict[str, Any]]:
     """The Bode figure's columns: each validation response (held-out chirp blocks, measured
     against the model), the loop analysis's curves added to the plant's (the SYSTEMID runs
     measured with the injection as reference, the TF fit; the model's own response when the
@@ -360,7 +364,7 @@ def _bode_columns(fit: AxisFit, lp: _Loop | None) -> list[dict[str, Any]]:
     return cols
 
 
-def _bode_figure(fit: AxisFit, lp: _Loop | None = None) -> Figure | None:
+def _bode_figure(fit: AxisFit, lp: TuneAnalysis | None = None) -> Figure | None:
     """One Bode figure per axis serving the validation and the loop analysis (see
     :func:`_bode_columns`): magnitude, phase and coherence rows; the measured response is
     drawn faint where its coherence is below 0.6."""
@@ -488,7 +492,7 @@ def _aircraft(result: FitResult) -> str:
     return "\n".join(parts)
 
 
-def _axis_section(fit: AxisFit, lp: _Loop | None = None) -> str:
+def _axis_section(fit: AxisFit, lp: _Analysis = None) -> str:
     m, v = fit.model, fit.validation
     stderr = getattr(m, "stderr", {}) or {}
     units = getattr(m, "units", {}) or {}
@@ -526,7 +530,7 @@ def _axis_section(fit: AxisFit, lp: _Loop | None = None) -> str:
         + figure_img(_residual_figure(v))
         + "</div>",
     ]
-    bode = _bode_figure(fit, lp)
+    bode = _bode_figure(fit, lp() if callable(lp) else lp)  # (asked for only now)
     if bode is not None:
         parts.append(figure_img(bode))
     return "\n".join(parts)
@@ -542,9 +546,10 @@ def render_html_page(title: str, sections: Sequence[str]) -> str:
     )
 
 
-def render_html(result: FitResult, lp: _Loop | None = None) -> str:
+def render_html(result: FitResult, lp: _Analysis = None) -> str:
     """The report of a :class:`~mavsid.pipeline.FitResult` as one HTML string (with ``lp``,
-    :func:`loop_analysis`, each axis's Bode figure carries the loop's curves too)."""
+    :func:`loop_analysis` or a function that returns it, called when the first Bode figure
+    is drawn: each axis's Bode figure carries the loop's curves too)."""
     logs = ", ".join(html.escape(os.path.basename(p)) for p in result.logs)
     presets = ", ".join(sorted({html.escape(fd.preset) for fd in result.flights}))
     header = (
@@ -579,13 +584,17 @@ def render_html(result: FitResult, lp: _Loop | None = None) -> str:
     return render_html_page(f"mavsid fit: {logs}", sections)
 
 
-def write_report(result: FitResult, path: str | os.PathLike[str]) -> None:
+def write_report(result: FitResult, path: str | os.PathLike[str],
+                 analysis: Callable[[], TuneAnalysis] | None = None) -> None:
     """Write :func:`render_html` of ``result`` to ``path``, with :func:`loop_section`: the
-    loop analysed once (:func:`loop_analysis`) for both, one Bode figure per axis."""
-    lp = loop_analysis(result)
+    loop analysed once for both (one Bode figure per axis), by :func:`loop_analysis` or by
+    ``analysis`` — a function called when the first Bode figure is drawn, after the axis's
+    other figures: :class:`~mavsid.outputs.ReportWorker` draws those while the command
+    works the analysis out."""
+    lp = functools.cache(analysis or (lambda: loop_analysis(result)))
     text = render_html(result, lp)
     text = text.replace("\n</body></html>",
-                        "\n" + loop_section(result, analysis=lp) + "\n</body></html>")
+                        "\n" + loop_section(result, analysis=lp()) + "\n</body></html>")
     with open(path, "w", encoding="utf-8") as f:
         f.write(text)
 
@@ -614,35 +623,15 @@ def _twin_figure(fit: AxisFit) -> Figure | None:
     return fig
 
 
-@dataclass
-class _Loop:
-    """The loop analysis of a result, computed once for the report (:func:`loop_analysis`):
-    ``loop.tune``'s per-axis report, the measured responses and the loop analyses it drew
-    them from, or the error that stopped it."""
+def loop_analysis(result: FitResult, target_pm_deg: float = 50.0) -> TuneAnalysis:
+    """:func:`mavsid.loop.tune_analysis`: the loop analysis the report draws."""
+    from mavsid.loop import tune_analysis
 
-    report: dict[str, Any] = field(default_factory=dict)
-    measured: dict[str, dict[str, Any]] = field(default_factory=dict)
-    analyses: dict[str, Any] = field(default_factory=dict)
-    error: str | None = None
-    target_pm_deg: float = 50.0
-
-
-def loop_analysis(result: FitResult, target_pm_deg: float = 50.0) -> _Loop:
-    """:func:`mavsid.loop.tune` of ``result`` (20 σ draws) with what the report plots."""
-    from mavsid import loop
-    from mavsid.errors import MavsidError
-
-    out = _Loop(target_pm_deg=target_pm_deg)
-    try:
-        out.report = loop.tune(result, target_pm_deg, samples=20, measured_out=out.measured,
-                               analyses_out=out.analyses)
-    except (MavsidError, ValueError, np.linalg.LinAlgError) as exc:
-        out.error = str(exc)
-    return out
+    return tune_analysis(result, target_pm_deg)
 
 
 def loop_section(result: FitResult, target_pm_deg: float = 50.0, *,
-                 analysis: _Loop | None = None) -> str:
+                 analysis: TuneAnalysis | None = None) -> str:
     """The report's "loop" section: per axis the closed-loop twin against the measured rate
     and the baseline, the margins and bandwidth with the logged gains (± σ), suggested gains
     and next-flight advice. Given ``analysis`` (:func:`loop_analysis`, as

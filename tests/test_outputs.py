@@ -120,6 +120,33 @@ def test_the_report_worker_writes_the_report_drawn_here(fitted, tmp_path: Path) 
     assert set(Path(tempfile.gettempdir()).glob("mavsid-report-*")) == before  # (handed over)
 
 
+def test_the_worker_draws_the_loop_analysis_handed_to_it(fitted, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """The command works the loop analysis out while the worker draws the first figures:
+    the report is the same bytes as one drawn here, the analysis handed over is the one
+    drawn (not worked out again), and its temporary file is gone."""
+    import dataclasses
+
+    from mavsid import report
+    from mavsid.loop import tune_analysis
+    from mavsid.outputs import ReportWorker
+
+    here, there, other = (tmp_path / f"{n}.html" for n in ("here", "there", "other"))
+    report.write_report(fitted, here)
+    before = set(Path(tempfile.gettempdir()).glob("mavsid-report-*"))
+    with ReportWorker() as worker:
+        assert worker.start(fitted, str(there), "fit.html")
+        worker.send_analysis(tune_analysis(fitted))
+        worker.wait()
+    assert there.read_bytes() == here.read_bytes()
+    marked = dataclasses.replace(tune_analysis(fitted), error="handed over by the command")
+    with ReportWorker() as worker:
+        assert worker.start(fitted, str(other), "fit.html")
+        worker.send_analysis(marked)
+        worker.wait()
+    assert "loop analysis failed: handed over by the command" in other.read_text()
+    assert set(Path(tempfile.gettempdir()).glob("mavsid-report-*")) == before
+
+
 def test_a_result_that_cannot_be_handed_over_is_drawn_here(log: Path, tmp_path: Path,
                                                            monkeypatch) -> None:  # type: ignore[no-untyped-def]
     """A temporary folder the result cannot be written to (full): the worker is not used,

@@ -198,8 +198,6 @@ class ReportWorker:
         itself (the worker, told nothing, ends). The worker draws the first axis's figures
         while the caller works out the loop analysis (:meth:`send_analysis`)."""
         self._target = target
-        stdin = self._proc.stdin
-        assert stdin is not None
         self._handoff = self._pickled((result, path))
         if self._handoff is None:
             self._close_stdin()
@@ -344,9 +342,10 @@ def _serve_report() -> None:
     def analysis() -> Any:
         """The loop analysis the command hands over, else worked out here."""
         name = sys.stdin.readline().rstrip("\n")
-        if not name:
-            return report.loop_analysis(result)
-        return _unpickled(name)
+        if name:
+            with contextlib.suppress(OSError, EOFError, pickle.UnpicklingError):
+                return _unpickled(name)
+        return report.loop_analysis(result)
 
     try:
         report.write_report(result, path, analysis=analysis)

@@ -5,8 +5,10 @@ thousands of rows, a 17×200 by 200×165 frequency product): a BLAS library's th
 wait on each other there. With OpenBLAS's default of one thread per core, that product took
 23 ms instead of 0.16 ms on a 2-core machine, and `pipeline.fit` of the 104 MB SITL flight
 2.5 s of CPU instead of 1.1 s. So the library's heavy entry points (:func:`mavsid.pipeline.
-fit`, :func:`mavsid.pipeline.validate_logs`, :func:`mavsid.estimators.fit_axis`) run with
-one BLAS thread and give the caller's setting back when they return (:func:`one_blas_thread`);
+fit`, :func:`mavsid.pipeline.validate_logs`, :func:`mavsid.estimators.fit_axis`,
+:func:`mavsid.estimators.identify`, :func:`mavsid.estimators.regress`) run with one BLAS
+thread and give the caller's setting back when they return (:func:`one_blas_thread`; one
+called from another limits nothing again);
 the command line also sets the variables for the processes it starts (Dask workers). A count
 the user set in one of :data:`BLAS_THREAD_VARS` is respected everywhere.
 
@@ -21,6 +23,7 @@ Examples
 
 from __future__ import annotations
 
+import contextvars
 import functools
 import os
 from collections.abc import Callable
@@ -32,6 +35,10 @@ __all__ = ["BLAS_THREAD_VARS", "one_blas_thread", "user_set"]
 BLAS_THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 
 F = TypeVar("F", bound=Callable[..., Any])
+
+#: Whether this context already runs inside :func:`one_blas_thread` (``pipeline.fit`` calls
+#: ``fit_axis`` per axis: threadpoolctl, ~1.5 ms, is not asked again)
+_LIMITED = contextvars.ContextVar("mavsid_one_blas_thread", default=False)
 
 
 def user_set() -> bool:
@@ -48,15 +55,20 @@ def user_set() -> bool:
 def one_blas_thread(func: F) -> F:
     """``func`` run with the BLAS libraries loaded by then limited to one thread, their
     counts restored when it returns or raises; as it is when the user set a count
-    (:func:`user_set`). Costs ~1.5 ms a call (threadpoolctl finds the libraries)."""
+    (:func:`user_set`), or inside another such call. Costs ~1.5 ms a call (threadpoolctl
+    finds the libraries)."""
 
     @functools.wraps(func)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
-        if user_set():
+        if _LIMITED.get() or user_set():
             return func(*args, **kwargs)
         from threadpoolctl import threadpool_limits
 
-        with threadpool_limits(1, user_api="blas"):
-            return func(*args, **kwargs)
+        token = _LIMITED.set(True)
+        try:
+            with threadpool_limits(1, user_api="blas"):
+                return func(*args, **kwargs)
+        finally:
+            _LIMITED.reset(token)
 
     return wrapper  # type: ignore[return-value]

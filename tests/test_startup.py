@@ -143,3 +143,25 @@ def test_the_library_fits_on_one_blas_thread_and_gives_the_callers_back(
         api.regress(np.column_stack([x[:-1], u[:-1]]), x[1:, 0])
         assert kept()
     assert len(seen) > 5 and all({k: t[k] for k in inside} == inside for t in seen), seen
+
+
+def test_an_entry_point_called_from_another_does_not_limit_again(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """pipeline.fit calls fit_axis per axis: the BLAS libraries are looked up (threadpoolctl,
+    ~1.5 ms) once for the whole fit, not again per axis."""
+    import threadpoolctl
+
+    from mavsid import pipeline
+
+    for v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        monkeypatch.delenv(v, raising=False)
+    made: list[int] = []
+    original = threadpoolctl.threadpool_limits
+
+    def counted(*args: object, **kwargs: object) -> object:
+        made.append(1)
+        return original(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(threadpoolctl, "threadpool_limits", counted)
+    result = pipeline.fit([str(FIXTURES / "sysid_roll.bin")])
+    assert len(result.axes) >= 1 and made == [1]

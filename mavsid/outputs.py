@@ -345,7 +345,7 @@ def _serve_report() -> None:
         if name:
             with contextlib.suppress(OSError, EOFError, pickle.UnpicklingError):
                 return _unpickled(name)
-        return report.loop_analysis(result)
+        return loop.tune_analysis(result)
 
     try:
         report.write_report(result, path, analysis=analysis)

@@ -47,7 +47,7 @@ if TYPE_CHECKING:
     #: The loop analysis a report draws, or a function that returns it when first needed.
     _Analysis = TuneAnalysis | Callable[[], TuneAnalysis] | None
 
-__all__ = ["figure_img", "loop_analysis", "loop_section", "render_html", "render_html_page",
+__all__ = ["figure_img", "loop_section", "render_html", "render_html_page",
            "write_report"]
 
 #: the grids' opacity (major and, from :func:`_log_minor`, minor lines)
@@ -548,8 +548,8 @@ def render_html_page(title: str, sections: Sequence[str]) -> str:
 
 def render_html(result: FitResult, lp: _Analysis = None) -> str:
     """The report of a :class:`~mavsid.pipeline.FitResult` as one HTML string (with ``lp``,
-    :func:`loop_analysis` or a function that returns it, called when the first Bode figure
-    is drawn: each axis's Bode figure carries the loop's curves too)."""
+    :func:`mavsid.loop.tune_analysis` or a function that returns it, called when the first
+    Bode figure is drawn: each axis's Bode figure carries the loop's curves too)."""
     logs = ", ".join(html.escape(os.path.basename(p)) for p in result.logs)
     presets = ", ".join(sorted({html.escape(fd.preset) for fd in result.flights}))
     header = (
@@ -587,11 +587,13 @@ def render_html(result: FitResult, lp: _Analysis = None) -> str:
 def write_report(result: FitResult, path: str | os.PathLike[str],
                  analysis: Callable[[], TuneAnalysis] | None = None) -> None:
     """Write :func:`render_html` of ``result`` to ``path``, with :func:`loop_section`: the
-    loop analysed once for both (one Bode figure per axis), by :func:`loop_analysis` or by
-    ``analysis`` — a function called when the first Bode figure is drawn, after the axis's
-    other figures: :class:`~mavsid.outputs.ReportWorker` draws those while the command
-    works the analysis out."""
-    lp = functools.cache(analysis or (lambda: loop_analysis(result)))
+    loop analysed once for both (one Bode figure per axis), by :func:`mavsid.loop.
+    tune_analysis` or by ``analysis`` — a function called when the first Bode figure is
+    drawn, after the axis's other figures: :class:`~mavsid.outputs.ReportWorker` draws
+    those while the command works the analysis out."""
+    from mavsid.loop import tune_analysis
+
+    lp = functools.cache(analysis or (lambda: tune_analysis(result)))
     text = render_html(result, lp)
     text = text.replace("\n</body></html>",
                         "\n" + loop_section(result, analysis=lp()) + "\n</body></html>")
@@ -623,24 +625,17 @@ def _twin_figure(fit: AxisFit) -> Figure | None:
     return fig
 
 
-def loop_analysis(result: FitResult, target_pm_deg: float = 50.0) -> TuneAnalysis:
-    """:func:`mavsid.loop.tune_analysis`: the loop analysis the report draws."""
-    from mavsid.loop import tune_analysis
-
-    return tune_analysis(result, target_pm_deg)
-
-
 def loop_section(result: FitResult, target_pm_deg: float = 50.0, *,
                  analysis: TuneAnalysis | None = None) -> str:
     """The report's "loop" section: per axis the closed-loop twin against the measured rate
     and the baseline, the margins and bandwidth with the logged gains (± σ), suggested gains
-    and next-flight advice. Given ``analysis`` (:func:`loop_analysis`, as
+    and next-flight advice. Given ``analysis`` (:func:`mavsid.loop.tune_analysis`, as
     :func:`write_report` does) the Bode overlay of measured FRF, time-domain model and TF fit
     and the measured against the predicted broken loop are in each axis's section above (one
     figure); without it they are drawn here."""
     from mavsid import loop
 
-    lp = loop_analysis(result, target_pm_deg) if analysis is None else analysis
+    lp = loop.tune_analysis(result, target_pm_deg) if analysis is None else analysis
     if lp.error is not None:
         return f"<h2>loop</h2><p>loop analysis failed: {html.escape(lp.error)}</p>"
     report, responses = lp.report, lp.measured

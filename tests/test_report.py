@@ -176,7 +176,9 @@ def test_one_bode_figure_serves_the_validation_and_the_loop(tmp_path) -> None:  
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         result = fit([str(FIXTURES / "sysid_roll.bin")])
-    lp = report.loop_analysis(result)
+    from mavsid.loop import tune_analysis
+
+    lp = tune_analysis(result)
     assert lp.error is None and "plant" in lp.measured["roll"] and "roll" in lp.analyses
     cols = report._bode_columns(result.axes["roll"], lp)
     assert [c["title"] for c in cols] == ["u_roll → p",

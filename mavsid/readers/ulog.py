@@ -386,9 +386,9 @@ def _cycle(formats: dict[str, list[Field]]) -> list[str] | None:
     return None
 
 
-def _widths(formats: dict[str, list[Field]], flat: dict[str, int]) -> dict[str, int]:
+def _widths(formats: dict[str, list[Field]], basic: dict[str, int]) -> dict[str, int]:
     """Each format's size in bytes (formats acyclic; a nested type not defined counts 0).
-    ``flat``: the sizes of the formats of basic types only, known from :func:`_format`
+    ``basic``: the sizes of the formats of basic types only, known from :func:`_format`
     (the others are summed here).
 
     Examples
@@ -396,7 +396,7 @@ def _widths(formats: dict[str, list[Field]], flat: dict[str, int]) -> dict[str, 
     >>> _widths({"b": [("a", 2, "x"), ("float", 0, "y")], "a": [("uint8_t", 3, "z")]}, {"a": 3})
     {'a': 3, 'b': 10}
     """
-    memo = dict(flat)
+    memo = dict(basic)
 
     def size(name: str) -> int:
         got = memo.get(name)
@@ -463,7 +463,7 @@ class _Parsed:
     last_us: int = 0
     info: dict[str, Any] = field(default_factory=dict)
     formats: dict[str, list[Field]] = field(default_factory=dict)
-    flat: dict[str, int] = field(default_factory=dict)  # sizes of formats of basic types
+    basic_sizes: dict[str, int] = field(default_factory=dict)  # formats of basic types only
     initial_params: dict[str, Any] = field(default_factory=dict)
     changed_params: list[tuple[int, str, Any]] = field(default_factory=list)
     logged: list[_Text] = field(default_factory=list)
@@ -642,9 +642,9 @@ class _Reader:
                     name, fields, size = _format(data)
                     out.formats[name] = fields
                     if size >= 0:
-                        out.flat[name] = size
+                        out.basic_sizes[name] = size
                     else:
-                        out.flat.pop(name, None)
+                        out.basic_sizes.pop(name, None)
                 elif kind == 0x50:  # P
                     _, key, value = _info(data)
                     out.initial_params[key] = value
@@ -755,7 +755,7 @@ class _Reader:
         self.start = start
         # the data message sizes the file's formats allow: any message id (a filter only)
         self.allowed = np.zeros(1 << 16, bool)
-        self.widths = _widths(self.out.formats, self.out.flat)
+        self.widths = _widths(self.out.formats, self.out.basic_sizes)
         self.allowed[list(_sizes(self.out.formats, self.widths))] = True
         self.lo = self.hi = -1  # the block whose candidates are loaded
         self.cand = np.zeros(0, np.int64)
@@ -1082,8 +1082,8 @@ class _Reader:
     def run(self) -> _Parsed:
         self.header()
         start = self.definitions()
-        formats, flat = self.out.formats, self.out.flat  # (only nested ones can hold a cycle)
-        cycle = _cycle({k: v for k, v in formats.items() if k not in flat})
+        basic = self.out.basic_sizes  # (only the nested formats can hold a cycle)
+        cycle = _cycle({k: v for k, v in self.out.formats.items() if k not in basic})
         if cycle:
             raise LogFormatError("message format " + " -> ".join(cycle) + " contains itself "
                                  "(a damaged or hostile definition)", path=self.path)

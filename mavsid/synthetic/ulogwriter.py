@@ -254,25 +254,22 @@ def write_ulog(
         add("vehicle_attitude", slow, att)
         add("vehicle_angular_velocity", fast, {"xyz": flight.gyro})
     thrust = flight.throttle
+    thrust_body = np.column_stack([np.zeros_like(thrust), np.zeros_like(thrust), -thrust])
     add("vehicle_rates_setpoint", fast, {
         "roll": flight.rate_target[:, 0], "pitch": flight.rate_target[:, 1],
-        "yaw": flight.rate_target[:, 2],
-        "thrust_body": np.column_stack([np.zeros_like(thrust), np.zeros_like(thrust), -thrust])})
+        "yaw": flight.rate_target[:, 2], "thrust_body": thrust_body})
     # the attitude setpoint where the attitude controller runs: not in ACRO (rates from the
     # sticks), so not during the SYSTEMID chirps
     nav = np.array([_NAV_STATE.get(int(m), _NAV_STAB) for m in flight.mode], dtype=np.uint8)
     stabilised = slow[nav[slow] == _NAV_STAB]
     target = flight.attitude_target
-    setpoint: dict[str, Any] = {
-        "q_d": _quaternion(target),
-        "thrust_body": np.column_stack([np.zeros_like(thrust), np.zeros_like(thrust), -thrust])}
+    setpoint: dict[str, Any] = {"q_d": _quaternion(target), "thrust_body": thrust_body}
     if layout != "px4-1.14":
         setpoint.update(roll_body=target[:, 0], pitch_body=target[:, 1], yaw_body=target[:, 2])
     add("vehicle_attitude_setpoint", stabilised, setpoint)
     if layout == "px4-1.14":
         add("vehicle_torque_setpoint", fast, {"xyz": flight.u})
-        add("vehicle_thrust_setpoint", fast, {"xyz": np.column_stack(
-            [np.zeros_like(thrust), np.zeros_like(thrust), -thrust])})
+        add("vehicle_thrust_setpoint", fast, {"xyz": thrust_body})
         motors = np.zeros((len(flight), 12))
         motors[:, :flight.motors.shape[1]] = flight.motors
         add("actuator_motors", slow, {"control": motors})

@@ -17,6 +17,15 @@ Fit % is ``100 * (1 - ||y - yhat|| / ||y - mean(y)||)`` (100 perfect, 0 no bette
 mean, negative worse). Over several segments the sums of squares are pooled, each segment's
 output taken about its own mean.
 
+Each held-out segment starts from its own measured state, and an affine model (a constant
+term ``1`` among its features) runs with the segment's own trim: the constant term
+re-estimated on the segment, one number per output, by least squares on its free run
+(:func:`segment_trim`). A rate plant is nearly an integrator (a yaw pole under 1 1/s), so a
+trim that moves between windows (battery, centre of gravity, a yaw I-term, wind) makes a free
+run with the training windows' trim drift away however right the dynamics are; the trim is a
+nuisance, like the initial state, not what the model claims. The free run with the model's
+own trim is kept too (``fit_free_run_own_trim``).
+
 Examples
 --------
 >>> import numpy as np
@@ -32,7 +41,7 @@ Examples
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -55,6 +64,7 @@ __all__ = [
     "horizon_label",
     "residual_test",
     "rmse",
+    "segment_trim",
     "validate",
 ]
 
@@ -200,6 +210,11 @@ class SegmentValidation:
         Fit % on this segment alone.
     source : str
         The segment's source (``"sysid"`` or ``"scan"``).
+    trim_shift : numpy.ndarray, shape (ny,)
+        The segment's own trim less the model's (the constant term's coefficient, in its
+        units; zeros for a model without one), see :func:`segment_trim`.
+    fit_free_run_own_trim : numpy.ndarray, shape (ny,)
+        Fit % of the free run with the model's own trim.
     """
 
     start_s: float
@@ -211,6 +226,8 @@ class SegmentValidation:
     fit_one_step: np.ndarray
     fit_free_run: np.ndarray
     source: str = ""
+    trim_shift: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    fit_free_run_own_trim: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 @dataclass(frozen=True)
@@ -320,6 +337,7 @@ class Validation:
     fit_vs_horizon : numpy.ndarray, shape (nh, ny)
         Pooled fit % at each horizon.
     fit_free_run : numpy.ndarray, shape (ny,)
+        Pooled free-run fit %, each segment with its own trim (see the module's notes).
     rmse_one_step, rmse_free_run : numpy.ndarray, shape (ny,)
         In the outputs' units.
     eigenvalues : numpy.ndarray or None
@@ -328,6 +346,9 @@ class Validation:
     frequency : tuple of FrequencyResponse
         One per chirp-excited (input, output) pair; empty without SYSTEMID segments.
     segments : tuple of SegmentValidation
+    fit_free_run_own_trim : numpy.ndarray, shape (ny,)
+        Pooled free-run fit % with the model's own trim on every segment (equal to
+        ``fit_free_run`` for a model without a constant term).
     """
 
     state_names: tuple[str, ...]
@@ -343,6 +364,7 @@ class Validation:
     residuals: ResidualTest
     frequency: tuple[FrequencyResponse, ...] = ()
     segments: tuple[SegmentValidation, ...] = field(default_factory=tuple)
+    fit_free_run_own_trim: np.ndarray | None = None
 
     @property
     def horizons_s(self) -> np.ndarray:
@@ -395,6 +417,57 @@ def _as_2d(a: np.ndarray, n: int, ny: int, what: str) -> np.ndarray:
     if out.shape != (n, ny):
         raise ConfigError(f"model {what} returned shape {out.shape}, expected {(n, ny)}")
     return out
+
+
+def segment_trim(model: Any, segment: Segment,
+                 free: np.ndarray | None = None) -> tuple[Any, np.ndarray]:
+    """``model`` with its constant term (feature ``1``) re-estimated on ``segment``: the
+    shift, one number per output, that brings its free run closest to the measured states
+    (least squares; the free run is linear in it), as the initial state is taken from the
+    segment. Returns the model and the shift; the model unchanged (and zeros) when it has no
+    constant term, is not affine in its states, or the shift is not finite.
+
+    ``free``: the model's free run on the segment, if already simulated.
+
+    Examples
+    --------
+    >>> from mavsid.estimators.model import Model as M
+    >>> m = M(("p",), ("u",), ("p", "u", "1"), np.array([[0.9], [1.0], [0.0]]), dt=0.01)
+    >>> u = np.zeros((50, 1))
+    >>> y = m.simulate_inputs(u)  # the model's own free run, trim 0
+    >>> seg = Segment(np.arange(50) * 0.01, y + 0.5, u, ("p",), ("u",), 0.01, "all", "scan")
+    >>> _, shift = segment_trim(m, seg)  # held 0.5 higher: a trim of 0.1 keeps it there
+    >>> round(float(shift[0]), 6)
+    0.05
+    """
+    features = tuple(getattr(model, "features", ()) or ())
+    names = tuple(model.state_names)
+    ny = len(names)
+    none = np.zeros(ny)
+    if "1" not in features or not getattr(model, "is_affine", False) \
+            or not hasattr(model, "__dataclass_fields__"):
+        return model, none
+    k = features.index("1")
+    y = _columns(segment, names, "state")
+
+    def run(shift: np.ndarray) -> tuple[Any, np.ndarray]:
+        coef = np.array(model.coef, dtype=float)
+        coef[k] += shift
+        shifted = replace(model, coef=coef)
+        return shifted, np.asarray(shifted.simulate(segment), dtype=float).reshape(len(y), ny)
+
+    base = run(none)[1] if free is None else free
+    # each output's response to a unit step of its constant term: (n, ny, ny)
+    g = np.stack([run(np.eye(ny)[j])[1] - base for j in range(ny)], axis=-1)
+    ok = np.isfinite(y).all(axis=1) & np.isfinite(base).all(axis=1) \
+        & np.isfinite(g).all(axis=(1, 2))
+    if ok.sum() < 2:
+        return model, none
+    with np.errstate(all="ignore"):
+        shift = np.linalg.lstsq(g[ok].reshape(-1, ny), (y - base)[ok].ravel(), rcond=None)[0]
+    if not np.all(np.isfinite(shift)):
+        return model, none
+    return run(shift)[0], shift
 
 
 def _horizon_samples(dt: float, horizons_s: Sequence[float]) -> np.ndarray:
@@ -454,6 +527,7 @@ def validate(
     err_h = np.zeros((len(horizons), ny))
     norm_h = np.zeros((len(horizons), ny))
     err_free, norm_free = np.zeros(ny), np.zeros(ny)
+    err_own, norm_own = np.zeros(ny), np.zeros(ny)
     sq1, n1, sqf, nf = np.zeros(ny), np.zeros(ny), np.zeros(ny), np.zeros(ny)
     per_segment: list[SegmentValidation] = []
     free_runs: list[np.ndarray] = []
@@ -461,10 +535,12 @@ def validate(
         y = _columns(seg, names, "state")
         _columns(seg, model.input_names, "input")
         n = len(seg)
+        own = _as_2d(model.simulate(seg), n, ny, "simulate")
+        fitted, shift = segment_trim(model, seg, own)  # (this segment's trim)
         one = np.full((n, ny), np.nan)
-        many = getattr(model, "predict_horizons", None)  # (every horizon, inputs filtered once)
+        many = getattr(fitted, "predict_horizons", None)  # (every horizon, inputs filtered once)
         preds = (many(seg, [int(k) for k in horizons]) if many is not None
-                 else [model.predict(seg, horizon=int(k)) for k in horizons])
+                 else [fitted.predict(seg, horizon=int(k)) for k in horizons])
         for i, (k, raw) in enumerate(zip(horizons, preds, strict=True)):
             pred = _as_2d(raw, n, ny, "predict")
             if k == 1:
@@ -472,11 +548,14 @@ def validate(
             e, m = _fit_sums(y, pred)
             err_h[i] += e
             norm_h[i] += m
-        free = _as_2d(model.simulate(seg), n, ny, "simulate")
+        free = own if fitted is model else _as_2d(fitted.simulate(seg), n, ny, "simulate")
         free_runs.append(free)
         e, m = _fit_sums(y, free)
         err_free += e
         norm_free += m
+        e, m = _fit_sums(y, own)
+        err_own += e
+        norm_own += m
         for pred, sq, cnt in ((one, sq1, n1), (free, sqf, nf)):
             ok = np.isfinite(y) & np.isfinite(pred)
             sq += np.where(ok, (y - pred) ** 2, 0.0).sum(axis=0)
@@ -492,11 +571,14 @@ def validate(
                 fit_one_step=np.atleast_1d(fit_percent(y, one)),
                 fit_free_run=np.atleast_1d(fit_percent(y, free)),
                 source=seg.source,
+                trim_shift=shift,
+                fit_free_run_own_trim=np.atleast_1d(fit_percent(y, own)),
             )
         )
     with np.errstate(divide="ignore", invalid="ignore"):
         fit_h = np.where(norm_h > 0, 100.0 * (1.0 - np.sqrt(err_h / norm_h)), np.nan)
         fit_free = np.where(norm_free > 0, 100.0 * (1.0 - np.sqrt(err_free / norm_free)), np.nan)
+        fit_own = np.where(norm_own > 0, 100.0 * (1.0 - np.sqrt(err_own / norm_own)), np.nan)
         rmse1 = np.where(n1 > 0, np.sqrt(sq1 / np.maximum(n1, 1)), np.nan)
         rmsef = np.where(nf > 0, np.sqrt(sqf / np.maximum(nf, 1)), np.nan)
     lam, stable = eigenvalues(model)
@@ -524,6 +606,7 @@ def validate(
         residuals=residuals,
         frequency=frequency,
         segments=tuple(per_segment),
+        fit_free_run_own_trim=fit_own,
     )
 
 

@@ -185,3 +185,42 @@ def test_ljung_box_matches_statsmodels() -> None:
     white = residual_test([e[:, None]], [e[:, None]]).ljung_box(20)[1][0]
     assert white > 0.01
     assert residual_test([coloured[:, None]], [e[:, None]]).ljung_box(20)[1][0] < 1e-10
+
+
+def test_each_held_out_window_runs_with_its_own_trim() -> None:
+    """A rate plant near an integrator, whose trim (the constant term) moved between the
+    training and the held-out window: with the training trim its free run drifts away; each
+    window's own trim (one number, estimated like its initial state) recovers the true
+    dynamics' fit, and the shift found is the trim's true change."""
+    from mavsid.data import Segment
+    from mavsid.estimators.model import Model
+    from mavsid.validation import segment_trim
+
+    dt = 0.01
+    feats = ("r", "u_yaw", "1")
+    trained = Model(("r",), ("u_yaw",), feats, np.array([[0.992], [0.09], [-1e-4]]), dt=dt)
+    held = dataclasses.replace(trained, coef=np.array([[0.992], [0.09], [2.5e-4]]))
+    u = chirp(3000, dt, 0.5, 15.0)[:, None]
+    y = held.simulate_inputs(u, x0=np.array([0.01]))
+    seg = Segment(np.arange(3000) * dt, y, u, ("r",), ("u_yaw",), dt, "yaw", "sysid")
+    v = validate(trained, [seg], horizons_s=(0.5,))
+    assert v.fit_free_run_own_trim is not None and v.fit_free_run_own_trim[0] < 0
+    assert v.fit_free_run[0] == pytest.approx(100.0, abs=1e-6)
+    assert np.allclose(v.fit_vs_horizon, 100.0, atol=1e-6)  # every horizon with the trim
+    assert v.segments[0].trim_shift == pytest.approx([3.5e-4], rel=1e-9)
+    assert v.segments[0].fit_free_run_own_trim[0] == pytest.approx(v.fit_free_run_own_trim[0])
+    # the trim cannot make wrong dynamics (damping 2 1/s for 0.8; effectiveness 22 % low)
+    # good, whatever the trim they start from
+    from mavsid.verdict import GOOD_FREE_RUN_PCT
+
+    for a, b in ((0.98, 0.09), (0.992, 0.07)):
+        for c in (-1e-4, 2.5e-4):
+            wrong = dataclasses.replace(trained, coef=np.array([[a], [b], [c]]))
+            assert validate(wrong, [seg], horizons_s=()).fit_free_run[0] < GOOD_FREE_RUN_PCT
+    # a model without a constant term is run as it is
+    plain = Model(("r",), ("u_yaw",), feats[:2], np.array([[0.992], [0.09]]), dt=dt)
+    same, shift = segment_trim(plain, seg)
+    assert same is plain and shift.tolist() == [0.0]
+    vp = validate(plain, [seg], horizons_s=())
+    assert vp.fit_free_run_own_trim is not None
+    assert vp.fit_free_run[0] == vp.fit_free_run_own_trim[0]

@@ -192,7 +192,7 @@ class Figures:
     def row(self, mb: float) -> str:
         """Cold min/median/max (wall s; CPU median), warm best, and MB/s of the cold median."""
         return (f"cold {min(self.cold_wall):6.3f}/{self.cold:6.3f}/{max(self.cold_wall):6.3f} s "
-                f"(CPU {self.cold_cpu_s:6.3f}, {len(self.cold_wall)} runs)  "
+                f"(CPU {self.cold_cpu_s:6.3f}, {len(self.cold_wall)} run(s))  "
                 f"warm {self.warm_wall:6.3f} s "
                 f"(CPU {self.warm_cpu:6.3f})  {mb / self.cold:7.1f} MB/s cold  "
                 f"{self.count} messages")

@@ -1,15 +1,17 @@
 """Reader benchmark: mavsid against pymavlink on the same data, in the same run.
 
     python benchmarks/bench_readers.py [--prefix-mb 30] [--copies 2] [--tlog-mb 100]
-                                       [--ulog-mb 100] [--cold-runs 3]
+                                       [--ulog-mb 100] [--cold-runs 3] [--ref-runs 1]
                                        [--only dataflash|tlog|ulog]
 
 Every DataFlash and .tlog figure is measured twice: **cold**, the first read in a fresh
 interpreter (what a command-line run gets: fresh arrays fault their pages in), each in its
-own child process, ``--cold-runs`` times (min and median printed); and **warm**, the best of
-repeats of the same read in that child. Each child imports its library before the clock
-starts (start-up is ``bench_startup.py``'s); whatever the read imports itself is counted.
-Ratios are pymavlink's time over mavsid's, both measured in this run.
+own child process, ``--cold-runs`` times (min, median and max printed); and **warm**, the
+best of repeats of the same read in that child. Each child imports its library before the
+clock starts (start-up is ``bench_startup.py``'s); whatever the read imports itself is
+counted. Ratios are pymavlink's time over mavsid's (cold: median over median), both measured
+in this run. The machine may be shared: the DataFlash reads compared are taken in turn (a
+pymavlink run, ``--ref-runs`` of them, among mavsid's) and the load average is printed.
 
 DataFlash: builds a >= 200 MB ``.bin`` by concatenating the shared ``.bin`` logs (the SITL
 flight ``--copies`` times) in a temporary folder, then times
@@ -44,6 +46,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import shutil
 import statistics
 import subprocess
@@ -187,9 +190,10 @@ class Figures:
         return statistics.median(self.cold_cpu)
 
     def row(self, mb: float) -> str:
-        """Cold min/median, warm best, as wall / CPU seconds, and MB/s of the cold median."""
-        return (f"cold {min(self.cold_wall):6.3f}/{self.cold:6.3f} s "
-                f"(CPU {statistics.median(self.cold_cpu):6.3f})  warm {self.warm_wall:6.3f} s "
+        """Cold min/median/max (wall s; CPU median), warm best, and MB/s of the cold median."""
+        return (f"cold {min(self.cold_wall):6.3f}/{self.cold:6.3f}/{max(self.cold_wall):6.3f} s "
+                f"(CPU {self.cold_cpu_s:6.3f}, {len(self.cold_wall)} run(s))  "
+                f"warm {self.warm_wall:6.3f} s "
                 f"(CPU {self.warm_cpu:6.3f})  {mb / self.cold:7.1f} MB/s cold  "
                 f"{self.count} messages")
 
@@ -207,13 +211,30 @@ def measure(who: str, fmt: str, path: Path, types: list[str] | None, runs: int,
             warm: int) -> Figures:
     """``runs`` cold reads, each in a fresh child; the last child also repeats the read
     ``warm`` times."""
+    return measure_in_turn([(who, path, runs)], fmt, types, warm)[0]
+
+
+def measure_in_turn(reads: Sequence[tuple[str, Path, int]], fmt: str,
+                    types: list[str] | None, warm: int) -> list[Figures]:
+    """Cold reads ``(who, file, runs)`` in fresh children, taken in turn (round by round,
+    a read with fewer runs spread evenly over the rounds) so that every figure sees the
+    same spells of machine load; each read's last child also repeats it ``warm`` times."""
     kinds = ",".join(types) if types else "-"
-    res = [_spawn([who, fmt, str(path), kinds, str(warm if k == runs - 1 else 0), "time"])
-           for k in range(runs)]
-    last = res[-1]
-    return Figures([r["wall"] for r in res], [r["cpu"] for r in res], last["warm_wall"],
-                   last["warm_cpu"], last["count"], last["arrays"],
-                   max(r["rss_growth"] for r in res))
+    rounds = max(runs for _, _, runs in reads)
+    res: list[list[dict[str, Any]]] = [[] for _ in reads]
+    for k in range(rounds):
+        for j, (who, path, runs) in enumerate(reads):
+            # this read's runs fall on rounds int((i + 0.5) * rounds / runs)
+            if len(res[j]) < runs and k >= int((len(res[j]) + 0.5) * rounds / runs):
+                repeats = warm if len(res[j]) == runs - 1 else 0
+                res[j].append(_spawn([who, fmt, str(path), kinds, str(repeats), "time"]))
+    out = []
+    for r in res:
+        last = r[-1]
+        out.append(Figures([x["wall"] for x in r], [x["cpu"] for x in r], last["warm_wall"],
+                           last["warm_cpu"], last["count"], last["arrays"],
+                           max(x["rss_growth"] for x in r)))
+    return out
 
 
 def memory(fmt: str, path: Path, types: list[str] | None) -> tuple[int, int]:
@@ -266,7 +287,15 @@ def pymavlink_decode(path: Path, types: list[str] | None) -> int:
     return n
 
 
-def bench_dataflash(prefix_mb: float, copies: int, runs: int) -> None:
+def _load() -> str:
+    """The 1-minute load average (other work on the machine slows every figure)."""
+    try:
+        return f"{os.getloadavg()[0]:.1f}"
+    except OSError:
+        return "?"
+
+
+def bench_dataflash(prefix_mb: float, copies: int, runs: int, ref_runs: int = 1) -> None:
     if not (LOGS / "sitl" / "flightA_mixer.BIN").exists():
         print(f"skipping DataFlash: {LOGS} not present")
         return
@@ -275,15 +304,17 @@ def bench_dataflash(prefix_mb: float, copies: int, runs: int) -> None:
         prefix = cut_prefix(big, prefix_mb * MB, Path(tmp))
         size, psize = big.stat().st_size / MB, prefix.stat().st_size / MB
         print(f"\nDataFlash: {big.name} {size:.1f} MB (SITL x{copies} + the other shared .bin), "
-              f"pymavlink measured on the first {psize:.1f} MB; cold: min/median of {runs} "
-              "fresh processes, warm: best of 3 repeats (wall s)")
+              f"pymavlink measured on the first {psize:.1f} MB; cold: min/median/max of "
+              f"{runs} fresh processes ({ref_runs} for pymavlink), the three reads in turn; "
+              "warm: best of 3 repeats (wall s); ratios: pymavlink's median over mavsid's")
         for label, types in (("all messages", None), ("ATT/RATE/IMU/RCOU", ATTITUDE_TYPES)):
-            ours = measure("mavsid", "bin", big, types, runs, 3)
-            pre = measure("mavsid", "bin", prefix, types, runs, 3)
-            ref = measure("pymavlink", "bin", prefix, types, 1, 1)
+            load = _load()
+            ours, pre, ref = measure_in_turn([("mavsid", big, runs), ("mavsid", prefix, runs),
+                                              ("pymavlink", prefix, ref_runs)], "bin", types, 3)
+            load += f"-{_load()}"
             peak, arrays = memory("bin", big, types)
             scale = size / psize
-            report(f"  {label}", [
+            report(f"  {label} (load {load})", [
                 ("mavsid, whole file", ours.row(size)),
                 ("mavsid, prefix", pre.row(psize)),
                 ("pymavlink, prefix", ref.row(psize)),
@@ -300,6 +331,9 @@ def bench_dataflash(prefix_mb: float, copies: int, runs: int) -> None:
                                       f"cold {ref.cold_cpu_s * scale / ours.cold_cpu_s:5.0f}x  "
                                       f"warm {ref.warm_cpu * scale / ours.warm_cpu:5.0f}x  "
                                       "(pymavlink extrapolated)"),
+                ("cold ratio, spread", f"{ref.cold * scale / max(ours.cold_wall):5.0f}x .. "
+                                       f"{ref.cold * scale / min(ours.cold_wall):5.0f}x  "
+                                       "(on mavsid's slowest .. fastest cold run)"),
                 ("mavsid memory", memory_row(peak, arrays, ours.rss_growth)),
             ])
 
@@ -340,7 +374,7 @@ def bench_tlog(min_mb: float, runs: int) -> None:
         ref = measure("pymavlink", "tlog", big, None, 1, 0)
     cpu = ref.cold_cpu_s / ours.cold_cpu_s
     report(f"tlog: {size:.1f} MB ({len(sources)} shared .tlog x {copies}), all messages; "
-           f"cold: min/median of {runs} fresh processes, warm: best of 3 repeats (wall s)", [
+           f"cold: min/median/max of {runs} fresh processes, warm: best of 3 repeats (wall s)", [
         ("mavsid tlog.read", ours.row(size)),
         ("pymavlink recv_match", ref.row(size) + "  (cold only: its repeat costs the same)"),
         ("ratio (time)", f"cold {ref.cold / ours.cold:5.1f}x  warm "
@@ -481,6 +515,9 @@ def main(argv: Sequence[str] | None = None) -> None:
                         help="size of the simulated long ULog flight, MB (default 100)")
     parser.add_argument("--cold-runs", type=int, default=3,
                         help="fresh processes per cold figure (default 3)")
+    parser.add_argument("--ref-runs", type=int, default=1,
+                        help="fresh processes per cold pymavlink DataFlash figure (default 1: "
+                             "its selective read takes seconds, all messages ~15 s)")
     parser.add_argument("--only", choices=["dataflash", "tlog", "ulog"],
                         help="run one format only")
     parser.add_argument("--child", nargs=6, help=argparse.SUPPRESS)
@@ -489,7 +526,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         child(args.child)
         return
     if args.only in (None, "dataflash"):
-        bench_dataflash(args.prefix_mb, args.copies, args.cold_runs)
+        bench_dataflash(args.prefix_mb, args.copies, args.cold_runs, args.ref_runs)
     if args.only in (None, "ulog"):
         bench_ulog(args.ulog_mb)
     if args.only in (None, "tlog"):

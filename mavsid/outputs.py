@@ -32,7 +32,7 @@ import signal
 import sys
 import tempfile
 from collections.abc import Iterable, Iterator
-from typing import Any
+from typing import IO, Any, NoReturn
 
 from mavsid import errors
 from mavsid.errors import ConfigError, MavsidError
@@ -117,14 +117,25 @@ def _umask() -> int:
 
 # --------------------------------------------------------------------------- report worker
 _SERVE = "from mavsid.outputs import _serve_report; _serve_report()"
+#: Whether :class:`ReportWorker` forks this process (:class:`_Forked`) rather than start an
+#: interpreter
+FORK = sys.platform.startswith("linux") and hasattr(os, "fork")
 
 
 class ReportWorker:
     """:func:`mavsid.report.write_report` in a process of its own, started when a command
-    begins: it imports matplotlib, the report and the result's modules and builds the
-    report's figures (:func:`mavsid.report.warm_up`; ~1.7 s of CPU) while this process
-    reads and fits the logs, then draws the report (~1.25 s on a 100 MB flight) while this
-    one writes the other outputs (the ``.rrd``: ~1.25 s with rerun's import).
+    begins: it imports matplotlib and the report and builds the report's figures
+    (:func:`mavsid.report.warm_up`; ~1 s of CPU) while this process reads and fits the
+    logs, then draws the report (~1.2 s on a 100 MB flight) while this one writes the
+    other outputs (the ``.rrd``: ~1.2 s with rerun's import).
+
+    On Linux the worker is forked from this process once the modules of the result's
+    classes are imported (:class:`_Forked`): a new interpreter imported them again, ~0.8 s
+    of CPU (``fit --rrd --report`` of the SITL flight 7.8 -> 7.0 s of CPU, 11.8 -> 10.2 s
+    wall median at load ~5 on two cores), and on a two-core machine its imports and
+    figures were often not done when the fit was (the report began up to 0.25 s late).
+    Elsewhere (``fork`` without ``exec`` is unsafe on macOS, absent on Windows) it is a
+    new interpreter.
 
     The result goes over as a pickle in a temporary file (written at once, ~40 MB for the
     SITL flight), the pipe carrying only its name: fed through the pipe by a thread, its
@@ -148,12 +159,15 @@ class ReportWorker:
     def __init__(self) -> None:
         import subprocess  # (not at import: 4 ms of every command's start)
 
-        root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-        paths = [root, *filter(None, [os.environ.get("PYTHONPATH")])]  # this mavsid first
-        env = {**os.environ, "PYTHONPATH": os.pathsep.join(paths)}
-        self._proc: subprocess.Popen[bytes] = subprocess.Popen(
-            [sys.executable, "-c", _SERVE], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-            env=env)
+        self._proc: subprocess.Popen[bytes] | _Forked
+        if FORK:
+            self._proc = _Forked()
+        else:
+            root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+            paths = [root, *filter(None, [os.environ.get("PYTHONPATH")])]  # this mavsid first
+            env = {**os.environ, "PYTHONPATH": os.pathsep.join(paths)}
+            self._proc = subprocess.Popen([sys.executable, "-c", _SERVE],
+                                          stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
         self._handoff: str | None = None
         self._analysis: str | None = None
         self._target = ""
@@ -167,9 +181,10 @@ class ReportWorker:
         (:func:`_others_busy`): the load average also counts this user's own commands of
         the last minute (a loop of ``mavsid fit`` over logs kept it at 1-1.5 on an idle
         two-core machine and ran every report in-process: ``fit --rrd --report`` of the
-        SITL flight 4.4 s median instead of 3.6). The worker costs ~1.7 s of CPU of its own
-        (its imports, the figures built beforehand): on a machine whose cores are all busy
-        it only adds that (6.4 s against 5.9 s at load ~2 on two cores)."""
+        SITL flight 4.4 s median instead of 3.6). The worker costs CPU of its own (its
+        imports, the figures built beforehand: ~1.7 s started afresh, ~1 s forked): on a
+        machine whose cores are all busy it only adds that (6.4 s against 5.9 s at load ~2
+        on two cores, started afresh)."""
         if not sys.executable or getattr(sys, "frozen", False):
             return False
         try:
@@ -195,8 +210,8 @@ class ReportWorker:
         """Hand the worker ``result`` to write to ``path`` (a temporary file of ``target``,
         the output named in errors); returns once the result is on disk. False when it
         could not be put there (a full temporary folder): the caller draws the report
-        itself (the worker, told nothing, ends). The worker draws the first axis's figures
-        while the caller works out the loop analysis (:meth:`send_analysis`)."""
+        itself (the worker, told nothing, ends). The worker draws every axis's figures but
+        the Bode ones while the caller works out the loop analysis (:meth:`send_analysis`)."""
         self._target = target
         self._handoff = self._pickled((result, path))
         if self._handoff is None:
@@ -207,8 +222,8 @@ class ReportWorker:
 
     def send_analysis(self, analysis: Any) -> None:
         """Hand the worker the loop analysis of the result (:func:`mavsid.loop.
-        tune_analysis`), which its report draws after the first axis's other figures; one
-        that cannot be handed over the worker works out itself."""
+        tune_analysis`), which its report first needs for the Bode figures, drawn after the
+        others; one that cannot be handed over the worker works out itself."""
         self._analysis = self._pickled(analysis)
         self._line(self._analysis or "")
         self._close_stdin()
@@ -278,9 +293,87 @@ class ReportWorker:
                     os.unlink(name)
 
 
+class _Forked:
+    """The report worker forked from this process, once the modules of the result's
+    classes are imported here (the fit needs them too): :func:`_serve_report` on two pipes,
+    ended by ``os._exit`` whatever happens, never back in the command's code. What
+    :class:`ReportWorker` asks of a :class:`subprocess.Popen`: ``stdin``, ``stdout``,
+    ``returncode``, :meth:`poll`, :meth:`wait` and :meth:`kill`."""
+
+    def __init__(self) -> None:
+        from mavsid import estimators, excitation, frequency, loop, pipeline  # noqa: F401
+
+        down, to_child = os.pipe()
+        from_child, up = os.pipe()
+        for stream in (sys.stdout, sys.stderr):  # (else the child writes them out again)
+            with contextlib.suppress(OSError, ValueError):
+                stream.flush()
+        pid = os.fork()
+        if pid == 0:  # the worker
+            os.close(to_child)
+            os.close(from_child)
+            _serve_forked(down, up)
+        os.close(down)
+        os.close(up)
+        self.pid = pid
+        self.stdin: IO[bytes] | None = open(to_child, "wb")  # (closed by ReportWorker)
+        self.stdout: IO[bytes] | None = open(from_child, "rb")
+        self.returncode: int | None = None
+
+    def poll(self) -> int | None:
+        if self.returncode is None:
+            pid, status = os.waitpid(self.pid, os.WNOHANG)
+            if pid:
+                self.returncode = os.waitstatus_to_exitcode(status)
+        return self.returncode
+
+    def wait(self) -> int:
+        if self.returncode is None:
+            _, status = os.waitpid(self.pid, 0)
+            self.returncode = os.waitstatus_to_exitcode(status)
+        return self.returncode
+
+    def kill(self) -> None:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(self.pid, signal.SIGKILL)
+
+
+def _serve_forked(stdin: int, stdout: int) -> NoReturn:
+    """The forked worker's life: :func:`_serve_report` reading the file descriptor ``stdin``
+    and answering on ``stdout``; its exit code that of a worker started afresh (1 and a
+    traceback on standard error for a defect)."""
+    code = 1
+    try:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)  # (the command's handler raises)
+        sys.stdin = open(stdin, encoding="utf-8")
+        sys.stdout = open(stdout, "w", encoding="utf-8")
+        # a stream of its own: a thread of the command's (none in mavsid's) may have held
+        # the lock of the one copied at the fork
+        sys.stderr = open(2, "w", encoding="utf-8", errors="backslashreplace", closefd=False)
+        _serve_report()
+        code = 0
+    except SystemExit as exc:
+        code = exc.code if isinstance(exc.code, int) else 1
+    except BaseException:
+        import traceback
+
+        traceback.print_exc()
+    finally:
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(Exception):
+                stream.flush()
+        os._exit(code)
+
+
 def _cpu_times() -> tuple[int, int, int] | None:
     """The machine's CPU time so far from ``/proc/stat`` (clock ticks): all, idle (with I/O
     wait) and the number of CPUs; None where there is no such file (not Linux).
+
+    Niced processes' time counts as busy: with autogroup scheduling (Linux's default for
+    desktop sessions) and in cgroups, niceness weighs only within a process's own group,
+    and a nice-19 job of another session takes a core as much as one of nice 0 (two of
+    them on two cores: ``fit --rrd --report`` of the SITL flight 7.2 s median with the
+    worker, 5.7 s in-process).
 
     Examples
     --------

@@ -492,7 +492,9 @@ def _aircraft(result: FitResult) -> str:
     return "\n".join(parts)
 
 
-def _axis_section(fit: AxisFit, lp: _Analysis = None) -> str:
+def _axis_section(fit: AxisFit) -> list[str]:
+    """An axis's section up to its Bode figure (:func:`_bode_img`): what needs no loop
+    analysis."""
     m, v = fit.model, fit.validation
     stderr = getattr(m, "stderr", {}) or {}
     units = getattr(m, "units", {}) or {}
@@ -530,10 +532,13 @@ def _axis_section(fit: AxisFit, lp: _Analysis = None) -> str:
         + figure_img(_residual_figure(v))
         + "</div>",
     ]
-    bode = _bode_figure(fit, lp() if callable(lp) else lp)  # (asked for only now)
-    if bode is not None:
-        parts.append(figure_img(bode))
-    return "\n".join(parts)
+    return parts
+
+
+def _bode_img(fit: AxisFit, lp: _Analysis = None) -> list[str]:
+    """The axis's Bode figure (none or one) with the loop's curves, ``lp`` called only now."""
+    bode = _bode_figure(fit, lp() if callable(lp) else lp)
+    return [] if bode is None else [figure_img(bode)]
 
 
 def render_html_page(title: str, sections: Sequence[str]) -> str:
@@ -549,7 +554,8 @@ def render_html_page(title: str, sections: Sequence[str]) -> str:
 def render_html(result: FitResult, lp: _Analysis = None) -> str:
     """The report of a :class:`~mavsid.pipeline.FitResult` as one HTML string (with ``lp``,
     :func:`mavsid.loop.tune_analysis` or a function that returns it, called when the first
-    Bode figure is drawn: each axis's Bode figure carries the loop's curves too)."""
+    Bode figure is drawn, after every axis's other figures: each axis's Bode figure
+    carries the loop's curves too)."""
     logs = ", ".join(html.escape(os.path.basename(p)) for p in result.logs)
     presets = ", ".join(sorted({html.escape(fd.preset) for fd in result.flights}))
     header = (
@@ -579,8 +585,13 @@ def render_html(result: FitResult, lp: _Analysis = None) -> str:
         for a, v in result.verdicts.items())
     verdict_table = ('<table><tr><th class="name">axis</th><th class="name">verdict</th>'
                      f'<th class="name">why</th></tr>{verdicts}</table>') if verdicts else ""
-    sections = [header, verdict_table, summary, _aircraft(result),
-                *(_axis_section(f, lp) for f in result.axes.values())]
+    # every axis's figures but the Bode ones first: :class:`~mavsid.outputs.ReportWorker`
+    # draws them while the command works ``lp`` out (it waited up to 0.2 s for it when the
+    # first axis's Bode figure came next)
+    heads = [_axis_section(f) for f in result.axes.values()]
+    axes = ["\n".join(head + _bode_img(f, lp))
+            for head, f in zip(heads, result.axes.values(), strict=True)]
+    sections = [header, verdict_table, summary, _aircraft(result), *axes]
     return render_html_page(f"mavsid fit: {logs}", sections)
 
 
@@ -589,7 +600,7 @@ def write_report(result: FitResult, path: str | os.PathLike[str],
     """Write :func:`render_html` of ``result`` to ``path``, with :func:`loop_section`: the
     loop analysed once for both (one Bode figure per axis), by :func:`mavsid.loop.
     tune_analysis` or by ``analysis`` — a function called when the first Bode figure is
-    drawn, after the axis's other figures: :class:`~mavsid.outputs.ReportWorker` draws
+    drawn, after every axis's other figures: :class:`~mavsid.outputs.ReportWorker` draws
     those while the command works the analysis out."""
     from mavsid.loop import tune_analysis
 

@@ -113,12 +113,18 @@ def own_tmp(tmp_path: Path, monkeypatch):  # type: ignore[no-untyped-def]
 
 
 @pytest.mark.usefixtures("own_tmp")
-def test_the_report_worker_writes_the_report_drawn_here(fitted, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
-    """The report drawn in the worker process is the one drawn in this process, byte for
-    byte (its SVG figures carry no date and no random ids)."""
-    from mavsid import report
+@pytest.mark.parametrize("fork", [True, False])
+def test_the_report_worker_writes_the_report_drawn_here(fitted, tmp_path: Path, monkeypatch,  # type: ignore[no-untyped-def]
+                                                        fork: bool) -> None:
+    """The report drawn in the worker process, forked from this one (Linux) or a new
+    interpreter (elsewhere), is the one drawn in this process, byte for byte (its SVG
+    figures carry no date and no random ids)."""
+    from mavsid import outputs, report
     from mavsid.outputs import ReportWorker
 
+    if fork and not outputs.FORK:
+        pytest.skip("no fork here")
+    monkeypatch.setattr(outputs, "FORK", fork)
     here, there = tmp_path / "here.html", tmp_path / "there.html"
     report.write_report(fitted, here)
     with ReportWorker() as worker:
@@ -201,12 +207,35 @@ def test_a_defect_in_the_worker_is_an_error_naming_the_report(capfd) -> None:  #
     assert "Traceback" in capfd.readouterr().err
 
 
-def test_a_command_that_stops_ends_its_worker() -> None:
+@pytest.mark.parametrize("fork", [True, False])
+def test_a_command_that_stops_ends_its_worker(monkeypatch, fork: bool) -> None:  # type: ignore[no-untyped-def]
+    from mavsid import outputs
     from mavsid.outputs import ReportWorker
 
+    monkeypatch.setattr(outputs, "FORK", fork and outputs.FORK)
     with pytest.raises(RuntimeError), ReportWorker() as worker:
         raise RuntimeError("the fit failed")
     assert worker.returncode is not None
+
+
+@pytest.mark.parametrize("fork", [True, False])
+def test_an_interrupted_command_ends_its_worker_and_leaves_no_file(  # type: ignore[no-untyped-def]
+        fitted, tmp_path: Path, own_tmp: Path, monkeypatch, fork: bool) -> None:
+    """Ctrl-C while the worker draws the report: the worker is ended (and reaped), and
+    neither the report's temporary file nor the result handed over is left."""
+    from mavsid import outputs
+    from mavsid.outputs import ReportWorker, atomic_path
+
+    monkeypatch.setattr(outputs, "FORK", fork and outputs.FORK)
+    out = tmp_path / "out"
+    out.mkdir()
+    with pytest.raises(KeyboardInterrupt), ReportWorker() as worker, \
+            atomic_path(out / "fit.html") as tmp:
+        assert worker.start(fitted, tmp, "fit.html")
+        assert worker.returncode is None and os.path.exists(tmp)
+        raise KeyboardInterrupt
+    assert worker.returncode is not None
+    assert list(out.iterdir()) == [] and list(own_tmp.iterdir()) == []
 
 
 def test_fit_with_a_report_that_fails_leaves_nothing(log: Path, tmp_path: Path) -> None:

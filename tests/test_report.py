@@ -228,3 +228,33 @@ def test_the_warm_up_builds_the_figures_a_report_draws(tmp_path) -> None:  # typ
     assert got["warm.html"] == got["warm"]  # no layout built by the report itself
     assert got["cold.html"] <= got["warm"]
     assert (tmp_path / "warm.html").read_bytes() == (tmp_path / "cold.html").read_bytes()
+
+
+def test_the_loop_analysis_is_asked_for_after_every_axis_s_other_figures(page) -> None:  # type: ignore[no-untyped-def]
+    """Every axis's figures but the Bode ones are drawn before the loop analysis is first
+    asked for (the report worker draws them while the command works it out), and the
+    page is the same as one drawn with the analysis at hand."""
+    from mavsid.loop import tune_analysis
+
+    _, result, _ = page
+    analysis = tune_analysis(result)
+    drawn: list[str] = []
+    asked: list[int] = []
+    img = report.figure_img
+
+    def counted(fig):  # type: ignore[no-untyped-def]
+        drawn.append(fig)
+        return img(fig)
+
+    def lp():  # type: ignore[no-untyped-def]
+        asked.append(len(drawn))
+        return analysis
+
+    report.figure_img = counted  # type: ignore[assignment]
+    try:
+        later = report.render_html(result, lp)
+    finally:
+        report.figure_img = img  # type: ignore[assignment]
+    assert len(result.axes) == 3 and asked and asked[0] == 3 * len(result.axes)
+    assert len(drawn) == 4 * len(result.axes)  # then a Bode figure per axis
+    assert later == report.render_html(result, analysis)

@@ -563,7 +563,8 @@ def render_html(result: FitResult, lp: _Analysis = None) -> str:
         f'<p class="meta">mavsid {__version__}; pipeline {html.escape(result.config.name)}; '
         f"channel preset {presets or '–'}. Fit % = 100·(1 − ‖y − ŷ‖ / ‖y − ȳ‖) on segments "
         "held out from fitting; free run feeds the model its own predictions with measured "
-        "inputs.</p>"
+        "inputs, from each segment's first state and with its own trim (the constant term "
+        "re-estimated on it).</p>"
     )
     summary_rows = "".join(
         f'<tr><td class="name">{html.escape(a)}</td><td class="name">{html.escape(f.output)}</td>'

@@ -12,7 +12,8 @@ entity                                content
                                       attitude, heading, rates, inputs, thrust; SI units)
 ``axes/<axis>/<state>/measured``      measured output on the validation segments
 ``axes/<axis>/<state>/one_step``      one-step-ahead prediction
-``axes/<axis>/<state>/free_run``      free-run simulation (measured inputs only)
+``axes/<axis>/<state>/free_run``      free-run simulation (measured inputs only, the
+                                      segment's own trim: :func:`mavsid.validation.segment_trim`)
 ``axes/<axis>/inputs/<name>``         the model's inputs on the validation segments
 ``segments/<axis>``                   text log: each segment's start and end, role, reasons
 ``world/data``                        measured attitude (3-D transform, FRD body in NED)

@@ -450,15 +450,17 @@ def segment_trim(model: Any, segment: Segment,
     k = features.index("1")
     y = _columns(segment, names, "state")
 
-    def run(shift: np.ndarray) -> tuple[Any, np.ndarray]:
+    def shifted(shift: np.ndarray) -> Any:
         coef = np.array(model.coef, dtype=float)
         coef[k] += shift
-        shifted = replace(model, coef=coef)
-        return shifted, np.asarray(shifted.simulate(segment), dtype=float).reshape(len(y), ny)
+        return replace(model, coef=coef)
 
-    base = run(none)[1] if free is None else free
+    def run(m: Any) -> np.ndarray:
+        return np.asarray(m.simulate(segment), dtype=float).reshape(len(y), ny)
+
+    base = run(model) if free is None else free
     # each output's response to a unit step of its constant term: (n, ny, ny)
-    g = np.stack([run(np.eye(ny)[j])[1] - base for j in range(ny)], axis=-1)
+    g = np.stack([run(shifted(np.eye(ny)[j])) - base for j in range(ny)], axis=-1)
     ok = np.isfinite(y).all(axis=1) & np.isfinite(base).all(axis=1) \
         & np.isfinite(g).all(axis=(1, 2))
     if ok.sum() < 2:
@@ -467,7 +469,7 @@ def segment_trim(model: Any, segment: Segment,
         shift = np.linalg.lstsq(g[ok].reshape(-1, ny), (y - base)[ok].ravel(), rcond=None)[0]
     if not np.all(np.isfinite(shift)):
         return model, none
-    return run(shift)[0], shift
+    return shifted(shift), shift
 
 
 def _horizon_samples(dt: float, horizons_s: Sequence[float]) -> np.ndarray:

@@ -4,7 +4,8 @@
 
 Each flight is drawn from the simulator's whole range: manoeuvre (SYSTEMID mixer chirp, stick
 doublet, 3-2-1-1, random stick), axis, vehicle (small quad, heavier X quad, hexacopter, a
-light racer on its own rate tuning), gyro
+light racer on its own rate tuning) and its motor frame (quad-X, hexa-X, coaxial Y6 and
+X8, as ArduPilot mixes them), gyro
 white noise fed back through the rate controller (0-6 deg/s), frame vibration (0-5 deg/s),
 logging rate (10-400 Hz; 10 Hz logs every message that slowly) and log layout (ArduCopter
 3.2, 3.3, 3.4-dev, 3.6, 4.x, a 4.x traditional heli, ArduPlane 4.x; PX4 1.11, 1.14; a
@@ -70,6 +71,12 @@ def draw(rng: random.Random) -> dict[str, Any]:
         s["manoeuvre"] = rng.choice(["doublet", "3211", "random"])
     if s["layout"] in ("heli", "plane"):  # (their own plants: a heli's or a wing's physics)
         s["vehicle"] = s["layout"]
+    # the motor frame, drawn apart (the draws above stay those of earlier sweeps): a hexa's
+    # plant as hexa-X or coaxial Y6, a heavy X's as quad-X or coaxial X8 (ArduCopter 3.2
+    # named its frame only by its build: quad-X there)
+    frames = {"hexa": ["hexa-x", "y6b"], "heavy-x": ["quad-x", "octaquad-x"]}
+    if s["layout"] != "copter-3.2" and s["vehicle"] in frames:
+        s["frame"] = random.Random(f"frame {s['seed']}").choice(frames[s["vehicle"]])
     return s
 
 
@@ -82,6 +89,8 @@ def run_one(folder: Path, i: int, s: dict[str, Any]) -> tuple[str, str]:
               else ".tlog" if s["layout"] == "tlog" else ".bin")
     log = folder / f"f{i}{suffix}"
     desc = (f"{s['manoeuvre']:7s} {s['axis']:5s} {s['vehicle']:7s} "
+            + (f"{s['frame']} " if s.get("frame", "quad-x") != "quad-x" else "")
+            +
             f"gyro {s['gyro_noise_dps']:g} vib {s['vibration_dps']:g} {s['rate_hz']:g} Hz "
             f"{s['layout']:14s} seed {s['seed']}"
             + (f" to {s['f_stop_hz']:g} Hz" if "f_stop_hz" in s else ""))

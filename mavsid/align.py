@@ -78,6 +78,7 @@ from mavsid.channels import (
     get_preset,
     has_mixer,
     mixer_for,
+    motor_channels,
     motor_thrusts,
     preset_messages,
     servo_inputs,
@@ -217,6 +218,10 @@ def _collect(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer]
             DataQualityWarning,
             stacklevel=4,
         )
+    elif preset.motors is not None and (unmapped := _unmapped_motors(raw, preset, mixers,
+                                                                     n_motors)):
+        warnings.warn(f"{raw.source.path}: {unmapped}: {preset.motors.message} not unmixed: "
+                      "no inputs", DataQualityWarning, stacklevel=4)
     elif preset.motors is not None:
         mixer = mixer_for(preset, raw.params, {**MIXERS, **mixers}, n_motors)
         mixer_name = mixer.name
@@ -690,6 +695,18 @@ def _main_sysid(raw: RawLog) -> int | None:
         return None
     ids, counts = np.unique(got[1], return_counts=True)
     return int(ids[np.argmax(counts)])
+
+
+def _unmapped_motors(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer],
+                     n_motors: int | None) -> str:
+    """Why the motors have no outputs to read (:func:`~mavsid.channels.motor_channels`), or
+    "" when they have."""
+    mixer = mixer_for(preset, raw.params, {**MIXERS, **mixers}, n_motors)
+    try:
+        motor_channels(raw.params, mixer.n_motors)
+    except ConfigError as exc:
+        return f"{mixer.name} mixer: {exc}"
+    return ""
 
 
 def _motor_count(raw: RawLog, preset: Preset) -> int | None:

@@ -219,6 +219,11 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
                    help="plant: small quad (default), heavier X quad, hexacopter inertia, "
                    "traditional helicopter, fixed-wing plane (default for --layout heli / "
                    "plane), light racer quad (flown with its own rate tuning)")
+    p.add_argument("--frame", choices=("quad-x", "hexa-x", "y6b", "octaquad-x"),
+                   default="quad-x",
+                   help="multirotor frame the motors are mixed for and logged as "
+                   "(FRAME_CLASS/FRAME_TYPE; RCOU, SERVO_OUTPUT_RAW): quad-x (default), "
+                   "hexa-x, y6b (coaxial Y6), octaquad-x (coaxial X8)")
     p.add_argument("--gyro-noise", type=float, metavar="DEG_S",
                    help="gyro white noise, deg/s RMS per 400 Hz sample (fed back)")
     p.add_argument("--vibration", type=float, default=0.0, metavar="DEG_S",
@@ -253,12 +258,15 @@ def _simulate(args: argparse.Namespace) -> int:
         duration_s=args.duration, seed=args.seed, noise=args.noise, magnitude=args.magnitude,
         f_start_hz=args.f_start, f_stop_hz=args.f_stop, t_rec=args.t_rec, rate_hz=args.rate_hz,
         vehicle=vehicle, gyro_noise_dps=args.gyro_noise, vibration_dps=args.vibration,
+        frame=args.frame,
     )
     faults = Faults.parse(args.faults, seed=args.seed)
     opts = [f"-o {o}" for o in args.output] + [f"--manoeuvre {args.manoeuvre}",
                                                  f"--axis {args.axis}"]
     if vehicle != "quad":
         opts.append(f"--vehicle {vehicle}")
+    if args.frame != "quad-x":
+        opts.append(f"--frame {args.frame}")
     opts += [f"--sid-axis {a}" for a in args.sid_axis or ()]
     for name in ("duration", "seed", "noise", "magnitude", "f_start", "f_stop", "t_rec",
                  "rate_hz", "gyro_noise", "vibration", "faults"):

@@ -85,24 +85,63 @@ def test_pwm_to_thrust_inverts_ardupilot_thrust_curve():
 # --------------------------------------------------------------------------- mixers
 
 
+#: frames whose ArduPilot factors do not cancel at equal thrust: the V-tails' rear motors
+#: tilt; octa V's pitch factors sum to 0.04 and the default Y6's (0.666/1.333) to 0.002
+_UNBALANCED = {"quad-vtail", "quad-atail", "octa-v", "y6"}
+
+
 @pytest.mark.parametrize("name", sorted(MIXERS))
 def test_mixer_geometry_and_inverse(name):
     m = MIXERS[name]
     f = m.factors()
-    angles = np.radians(m.angle_deg)
-    # a motor on the right (0 < angle < 180) must slow down for a right roll (roll factor < 0);
-    # a motor in front must speed up for nose up
-    right = (np.sin(angles) > 1e-6)
-    front = (np.cos(angles) > 1e-6)
-    assert np.all(f[right, 0] < 0) and np.all(f[~right & (np.sin(angles) < -1e-6), 0] > 0)
-    assert np.all(f[front, 1] > 0)
+    if m.angle_deg:
+        angles = np.radians(m.angle_deg)
+        pitch_angles = np.radians(m.pitch_angle_deg or m.angle_deg)
+        # a motor on the right (0 < angle < 180) must slow down for a right roll (roll factor
+        # < 0); a motor in front must speed up for nose up
+        right = (np.sin(angles) > 1e-6)
+        front = (np.cos(pitch_angles) > 1e-6)
+        assert np.all(f[right, 0] < 0) and np.all(f[~right & (np.sin(angles) < -1e-6), 0] > 0)
+        assert np.all(f[front, 1] > 0)
     # balanced frame: no net roll, pitch or yaw at equal thrust
-    assert np.allclose(f.sum(axis=0), 0.0, atol=1e-12)
-    assert math.isclose(np.abs(f[:, :2]).max(), 0.5) and math.isclose(np.abs(f[:, 2]).max(), 0.5)
+    if name not in _UNBALANCED:
+        assert np.allclose(f.sum(axis=0), 0.0, atol=1e-12)
+    # each axis scaled on its own to 0.5, as ArduPilot's normalise_rpy_factors
+    top = np.abs(f).max(axis=0)
+    assert np.allclose(top[:2], 0.5) and top[2] in (0.0, 0.5)
     rng = np.random.default_rng(0)
     u = np.column_stack([rng.uniform(-0.2, 0.2, (50, 3)), rng.uniform(0.2, 0.6, 50)])
     motors = u[:, 3:] + u[:, :3] @ f.T
     assert np.allclose(m.unmix(motors), u, atol=1e-12)
+
+
+def test_mixer_factors_are_ardupilots_normalised_per_axis():
+    """Factors computed by hand from ArduPilot's tables (AP_MotorsMatrix), roll, pitch and
+    yaw each scaled to a largest magnitude of 0.5. A hexa-X's pitch factors are ±0.5, not
+    ±0.433 (cos 30° of a scale shared with roll): unmixed with the shared scale, its pitch
+    input came out 15 % large and its control effectiveness 13 % low."""
+    h = 0.5
+    expect = {
+        # motor angles 90, -90, -30, 150, 30, -150; CW, CCW, CW, CCW, CCW, CW
+        "hexa-x": [[-0.5, 0.0, -0.5], [0.5, 0.0, 0.5], [0.25, 0.5, -0.5],
+                   [-0.25, -0.5, 0.5], [-0.25, 0.5, 0.5], [0.25, -0.5, -0.5]],
+        # motor angles 0, 180, -120, 60, -60, 120
+        "hexa-plus": [[0.0, 0.5, -0.5], [0.0, -0.5, 0.5], [0.5, -0.25, -0.5],
+                      [-0.5, 0.25, 0.5], [0.5, 0.25, 0.5], [-0.5, -0.25, -0.5]],
+        # raw roll -1, -1, 0, 0, 1, 1; pitch 0.5, 0.5, -1, -1, 0.5, 0.5; top CW, bottom CCW
+        "y6b": [[-0.5, 0.25, -0.5], [-0.5, 0.25, 0.5], [0.0, -0.5, -0.5],
+                [0.0, -0.5, 0.5], [0.5, 0.25, -0.5], [0.5, 0.25, 0.5]],
+        # coaxial X8: 45 CCW, -45 CW, -135 CCW, 135 CW, -45 CCW, 45 CW, 135 CCW, -135 CW
+        "octaquad-x": [[-h, h, h], [h, h, -h], [h, -h, h], [-h, -h, -h],
+                       [h, h, h], [-h, h, -h], [-h, -h, h], [h, -h, -h]],
+        # raw roll -1, 0, 0, 1; pitch 1, -1, -1, 1; CCW, CW, CCW, CW
+        "quad-y4": [[-0.5, 0.5, 0.5], [0.0, -0.5, -0.5], [0.0, -0.5, 0.5], [0.5, 0.5, -0.5]],
+        # V-tail: roll from the front motors (roll angles ±60), yaw from the rear only
+        "quad-vtail": [[-0.5, 0.5 * 0.5 / np.cos(np.radians(20)), 0.0], [0.0, -0.5, -0.5],
+                       [0.5, 0.5 * 0.5 / np.cos(np.radians(20)), 0.0], [0.0, -0.5, 0.5]],
+    }
+    for name, rows in expect.items():
+        assert np.allclose(MIXERS[name].factors(), rows, atol=1e-9), name
 
 
 def test_mixer_chosen_from_frame_params():
@@ -112,13 +151,37 @@ def test_mixer_chosen_from_frame_params():
     assert mixer_for(p, {"FRAME_CLASS": 1, "FRAME_TYPE": 1}).name == "quad-x"
     assert mixer_for(p, {"FRAME_CLASS": 2, "FRAME_TYPE": 0}).name == "hexa-plus"
     assert mixer_for(p, {}).name == "quad-x"
-    # a frame without a mixer here (a heli's swash servos, a tricopter) is never unmixed as
-    # a quad: a typed error naming the frame
+    # ArduPilot's frame classes and types (AP_Motors_Class.h)
+    for (cls, kind), name in {(1, 3): "quad-h", (1, 12): "quad-bf-x", (1, 13): "quad-dji-x",
+                              (1, 19): "quad-y4", (2, 3): "hexa-h", (3, 15): "octa-i",
+                              (4, 1): "octaquad-x", (4, 18): "octaquad-bf-x-rev",
+                              (5, 10): "y6b", (5, 11): "y6f", (5, 1): "y6",
+                              (12, 0): "dodecahexa-plus", (14, 14): "deca-x"}.items():
+        assert mixer_for(p, {"FRAME_CLASS": cls, "FRAME_TYPE": kind}).name == name
+    assert mixer_for(p, {"FRAME": 3}, n_motors=4).name == "quad-h"  # ArduCopter 3.4: FRAME
+    # a frame without a mixer here (a heli's swash servos, a tricopter, a QuadPlane's frame
+    # without yaw torque) is never unmixed as a quad: a typed error naming the frame
     for params, name in (({"FRAME_CLASS": 6, "FRAME_TYPE": 0}, "heli"),
                          ({"FRAME_CLASS": 7, "FRAME_TYPE": 0}, "tri"),
-                         ({"FRAME_CLASS": 1, "FRAME_TYPE": 3}, "quad, type 3")):
+                         ({"FRAME_CLASS": 1, "FRAME_TYPE": 16}, "quad, type 16")):
         with pytest.raises(ConfigError, match=f"no mixer for FRAME_CLASS .*\\({name}\\)"):
             mixer_for(p, params)
+
+
+def test_motor_outputs_follow_servo_functions():
+    """Motors on other outputs (SERVOn_FUNCTION 33.. for motors 1-8, 82.. for 9-12) are read
+    from them; a frame with more motors than outputs carry is a typed error."""
+    from mavsid.channels import motor_channels
+
+    params = {f"SERVO{n}_FUNCTION": 0.0 for n in range(1, 17)}
+    params.update({"SERVO9_FUNCTION": 34, "SERVO10_FUNCTION": 33, "SERVO11_FUNCTION": 35,
+                   "SERVO12_FUNCTION": 36, "SERVO3_FUNCTION": 37, "SERVO4_FUNCTION": 38,
+                   "SERVO13_FUNCTION": 39, "SERVO14_FUNCTION": 40, "SERVO15_FUNCTION": 82,
+                   "SERVO16_FUNCTION": 83})
+    assert motor_channels(params, 10) == [10, 9, 11, 12, 3, 4, 13, 14, 15, 16]
+    assert motor_channels({}, 6) == [1, 2, 3, 4, 5, 6]
+    with pytest.raises(ConfigError, match=r"motor\(s\) 11, 12 of 12 \(SERVOn_FUNCTION 84, 85\)"):
+        motor_channels(params, 12)
 
 
 def test_a_heli_log_without_rate_gets_no_quad_mixed_inputs(tmp_path) -> None:  # type: ignore[no-untyped-def]
@@ -271,3 +334,53 @@ def test_px4s_commanded_attitude_is_its_own_roll_and_pitch_setpoint() -> None:
         ref = np.asarray(table[f"{axis}_body"], float)
         assert np.std(ref) > 0.1  # (a flight that moves)
         np.testing.assert_allclose(got, ref, atol=1e-6)
+
+
+def test_motors_on_remapped_outputs_are_unmixed_from_them() -> None:
+    """A quad whose motors sit on outputs 5-8 (SERVO5..8_FUNCTION 33-36), outputs 1-4
+    carrying something else: the unmixed inputs are the motors', as with motors on 1-4;
+    a frame whose motors the outputs do not all carry gives no inputs and says why."""
+    import warnings
+
+    from mavsid.align import align
+    from mavsid.data import MessageTable, RawLog, SourceInfo
+    from mavsid.errors import DataQualityWarning
+
+    t = np.arange(0.0, 20.0, 0.01)
+    u = np.column_stack([0.1 * np.sin(3 * t), 0.08 * np.cos(5 * t), 0.05 * np.sin(7 * t)])
+    thrust = 0.45 + u @ MIXERS["quad-x"].factors().T  # motors 1-4
+    params = {"FRAME_CLASS": 1.0, "FRAME_TYPE": 1.0, "MOT_THST_EXPO": 0.0,
+              "MOT_SPIN_MIN": 0.0, "MOT_SPIN_MAX": 1.0, "MOT_PWM_MIN": 1000.0,
+              "MOT_PWM_MAX": 2000.0}
+    pwm = 1000.0 + 1000.0 * thrust
+    att = MessageTable("ATT", {"Roll": np.sin(t), "Pitch": np.cos(t), "Yaw": t * 0}, t)
+    imu = MessageTable("IMU", {"GyrX": np.cos(t), "GyrY": -np.sin(t), "GyrZ": t * 0}, t)
+
+    def inputs(columns: dict[str, np.ndarray], extra: dict[str, float]) -> np.ndarray:
+        rcou = MessageTable("RCOU", columns, t)
+        raw = RawLog(SourceInfo("q.bin", "dataflash", 0), {"ATT": att, "IMU": imu, "RCOU": rcou},
+                     params={**params, **extra}, autopilot="ardupilot", vehicle="copter")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            fd = align(raw, "ardupilot-rcou")
+        return np.asarray(fd.inputs)[:, :3]
+
+    plain = inputs({f"C{i}": pwm[:, i - 1] for i in range(1, 5)}, {})
+    gimbal = 1500 + 300 * np.sin(0.3 * t)
+    moved = {**{f"C{i}": gimbal for i in range(1, 5)},
+             **{f"C{i}": pwm[:, i - 5] for i in range(5, 9)}}
+    functions = {"SERVO1_FUNCTION": 7.0, "SERVO2_FUNCTION": 8.0, "SERVO3_FUNCTION": 0.0,
+                 "SERVO4_FUNCTION": 0.0, **{f"SERVO{i}_FUNCTION": 28.0 + i for i in range(5, 9)}}
+    remapped = inputs(moved, functions)
+    assert np.allclose(plain, u, atol=1e-6) and np.allclose(remapped, u, atol=1e-6)
+    # a hexa frame on outputs that carry four motors: no inputs, a warning naming motors 5, 6
+    rcou = MessageTable("RCOU", moved, t)
+    raw = RawLog(SourceInfo("h.bin", "dataflash", 0), {"ATT": att, "IMU": imu, "RCOU": rcou},
+                 params={**params, **functions, "FRAME_CLASS": 2.0}, autopilot="ardupilot",
+                 vehicle="copter")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        fd = align(raw, "ardupilot-rcou")
+    assert fd.input_names == ()
+    assert any(issubclass(w.category, DataQualityWarning) and "motor(s) 5, 6 of 6" in
+               str(w.message) for w in caught)

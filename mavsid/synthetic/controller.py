@@ -1,4 +1,4 @@
-"""An ArduPilot-like multicopter attitude controller at loop rate, and the quad-X mixer.
+"""An ArduPilot-like multicopter attitude controller at loop rate, and the motor mixers.
 
 Per axis, each loop:
 
@@ -35,6 +35,7 @@ from mavsid.errors import ConfigError
 from mavsid.loop import RateGains, RatePID
 
 __all__ = [
+    "FRAMES",
     "QUAD_X",
     "AttitudeController",
     "ControlStep",
@@ -57,9 +58,24 @@ QUAD_X = np.array(
     ]
 )
 
-#: motors = _MIX @ (throttle, roll, pitch, yaw)
-_MIX = np.hstack([np.ones((4, 1)), QUAD_X])
-_MIX_INV = np.linalg.inv(_MIX)
+_H = 0.5  # (ArduPilot scales each axis's factors so the largest is 0.5)
+
+#: multirotor frames the simulator flies: name -> ((FRAME_CLASS, FRAME_TYPE), motor factors,
+#: rows motors 1..n, columns roll, pitch, yaw), written out from ArduPilot's AP_MotorsMatrix
+#: tables, each axis scaled to 0.5 (normalise_rpy_factors)
+FRAMES: dict[str, tuple[tuple[int, int], np.ndarray]] = {
+    "quad-x": ((1, 1), QUAD_X),
+    # motors at 90 CW, -90 CCW, -30 CW, 150 CCW, 30 CCW, -150 CW from the nose
+    "hexa-x": ((2, 1), np.array([[-_H, 0, -_H], [_H, 0, _H], [_H / 2, _H, -_H],
+                                 [-_H / 2, -_H, _H], [-_H / 2, _H, _H], [_H / 2, -_H, -_H]])),
+    # coaxial arms left-front, rear, right-front; top propellers CW, bottom CCW
+    "y6b": ((5, 10), np.array([[-_H, _H / 2, -_H], [-_H, _H / 2, _H], [0, -_H, -_H],
+                               [0, -_H, _H], [_H, _H / 2, -_H], [_H, _H / 2, _H]])),
+    # coaxial X8: 45 CCW, -45 CW, -135 CCW, 135 CW, -45 CCW, 45 CW, 135 CCW, -135 CW
+    "octaquad-x": ((4, 1), np.array([[-_H, _H, _H], [_H, _H, -_H], [_H, -_H, _H],
+                                     [-_H, -_H, -_H], [_H, _H, _H], [-_H, _H, -_H],
+                                     [-_H, -_H, _H], [_H, -_H, -_H]])),
+}
 
 
 @dataclass(frozen=True)
@@ -230,8 +246,9 @@ class ControlStep:
     pid_out: np.ndarray
 
 
-def motor_outputs(throttle: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Quad-X mixing: motor thrust demands (0-1) and the axis inputs they really realise.
+def motor_outputs(throttle: np.ndarray, u: np.ndarray, factors: np.ndarray = QUAD_X
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Motor mixing: motor thrust demands (0-1) and the axis inputs they really realise.
 
     Parameters
     ----------
@@ -239,10 +256,12 @@ def motor_outputs(throttle: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.n
         Collective throttle (0-1).
     u : numpy.ndarray, shape (n, 3)
         Roll, pitch, yaw mixer inputs.
+    factors : numpy.ndarray, shape (motors, 3)
+        The frame's roll, pitch and yaw factor of each motor (:data:`FRAMES`); quad-X.
 
     Returns
     -------
-    motors : numpy.ndarray, shape (n, 4)
+    motors : numpy.ndarray, shape (n, motors)
         Demands limited to [0, 1].
     u_eff : numpy.ndarray, shape (n, 3)
         The roll/pitch/yaw the limited motors produce (equal to ``u`` unless saturated).
@@ -252,8 +271,13 @@ def motor_outputs(throttle: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.n
     >>> m, ue = motor_outputs(np.array([0.4]), np.array([[0.1, 0.0, 0.0]]))
     >>> m.round(3).tolist(), ue.round(6).tolist()
     ([[0.35, 0.45, 0.45, 0.35]], [[0.1, 0.0, 0.0]])
+    >>> m, ue = motor_outputs(np.array([0.4]), np.array([[0.0, 0.1, 0.0]]), FRAMES["hexa-x"][1])
+    >>> m.round(3).tolist(), (ue.round(6) + 0.0).tolist()
+    ([[0.4, 0.4, 0.45, 0.35, 0.45, 0.35]], [[0.0, 0.1, 0.0]])
     """
+    mix = np.hstack([np.ones((factors.shape[0], 1)), factors])  # motors = mix @ (thr, r, p, y)
     cmd = np.column_stack([throttle, u])
-    motors = np.clip(cmd @ _MIX.T, 0.0, 1.0)
-    realised = motors @ _MIX_INV.T
+    motors = np.clip(cmd @ mix.T, 0.0, 1.0)
+    inverse = np.linalg.inv(mix) if mix.shape[0] == 4 else np.linalg.pinv(mix)
+    realised = motors @ inverse.T
     return motors, realised[:, 1:]

@@ -400,7 +400,7 @@ def layout_params(flight: Flight, layout: str = "copter-4") -> dict[str, float]:
                 old[f"RATE_{ax}_{k}"] = round(p[f"ATC_RAT_{ax}_{k}"] / scale, 6)
             old[f"RATE_{ax}_IMAX"] = p[f"ATC_RAT_{ax}_IMAX"] * 4500.0
             old[f"STB_{ax}_P"] = p[f"ATC_ANG_{ax}_P"]
-        old.update(FRAME=1.0, RC3_MIN=p["MOT_PWM_MIN"], RC3_MAX=p["MOT_PWM_MAX"],
+        old.update(FRAME=p["FRAME_TYPE"], RC3_MIN=p["MOT_PWM_MIN"], RC3_MAX=p["MOT_PWM_MAX"],
                    THR_MIN=float(round(p["MOT_SPIN_MIN"] * 1000.0)),
                    THR_MAX=float(round(p["MOT_SPIN_MAX"] * 1000.0)),
                    TRIM_THROTTLE=float(round(p["MOT_THST_HOVER"] * 1000.0)),

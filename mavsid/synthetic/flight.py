@@ -22,7 +22,12 @@ from typing import Any
 import numpy as np
 
 from mavsid.errors import ConfigError
-from mavsid.synthetic.controller import AttitudeController, ControllerParams, motor_outputs
+from mavsid.synthetic.controller import (
+    FRAMES,
+    AttitudeController,
+    ControllerParams,
+    motor_outputs,
+)
 from mavsid.synthetic.plant import AXES, Lowpass2p, PlantParams, discretise
 from mavsid.synthetic.sysid import MANOEUVRES, SysIdSettings, chirp, pilot_sticks
 
@@ -85,6 +90,9 @@ class Scenario:
     seed : int
         Seeds every random draw: equal scenarios give equal flights.
     plant, controller : PlantParams, ControllerParams
+    frame : str
+        The multirotor frame the motors are mixed for
+        (:data:`~mavsid.synthetic.controller.FRAMES`; ``FRAME_CLASS``/``FRAME_TYPE``).
     rates : LogRates
     boot_s : float
         Time since boot (s) at the first logged sample.
@@ -101,6 +109,7 @@ class Scenario:
     seed: int = 0
     plant: PlantParams = field(default_factory=PlantParams)
     controller: ControllerParams = field(default_factory=ControllerParams)
+    frame: str = "quad-x"
     rates: LogRates = field(default_factory=LogRates)
     boot_s: float = 30.0
 
@@ -169,7 +178,8 @@ class Flight:
     rate_target : (n, 3) rate-controller targets (rad/s).
     pid_out : (n, 3) rate-PID outputs, before any SYSTEMID mixer injection.
     u : (n, 3) mixer inputs (RATE.ROut/POut/YOut). u_eff : what the motors realised.
-    throttle : (n,) collective (0-1). motors : (n, 4) motor demands (0-1). pwm : (n, 4) (µs).
+    throttle : (n,) collective (0-1). motors : (n, motors) motor demands (0-1), the frame's
+    motor order. pwm : (n, motors) (µs).
     accel : (n, 3) specific force (m/s²). sticks : (n, 4) roll, pitch, throttle, yaw (-1..1;
     throttle 0..1).
     mode : (n,) flight mode number. sid_time, sid_targ, sid_freq : (n,) SYSTEMID waveform clock,
@@ -225,7 +235,7 @@ class Flight:
         p["INS_GYRO_FILTER"] = sc.plant.gyro_filter_hz
         p["INS_ACCEL_FILTER"] = 20.0
         p["MOT_THST_HOVER"] = sc.plant.hover_throttle
-        p["FRAME_CLASS"], p["FRAME_TYPE"] = 1.0, 1.0
+        p["FRAME_CLASS"], p["FRAME_TYPE"] = map(float, FRAMES[sc.frame][0])
         # RCIN, IMU, RCOU bits plus ATTITUDE_FAST/MED as SYSTEMID's logging rate implies:
         # both -> every loop, FAST -> every 2nd, MED -> every 4th, neither -> every 8th
         every_k = sc.rates.step("rate", sc.controller.loop_hz)
@@ -305,6 +315,7 @@ class Flight:
             "generator": "mavsid simulate",
             "seed": sc.seed,
             "manoeuvre": sc.manoeuvre,
+            "frame": sc.frame,
             "axis": sc.axis,
             "loop_hz": loop_hz,
             "t_start_s": float(self.t_s[0]),
@@ -402,7 +413,8 @@ def fly(sc: Scenario) -> Flight:
                                           "attitude_target", "desired", "rate_target", "pid_out",
                                           "u", "u_eff")}
     throttle = np.zeros(n)
-    motors = np.zeros((n, 4))
+    factors = FRAMES[sc.frame][1]
+    motors = np.zeros((n, factors.shape[0]))
     n_hist = disc.delay_steps + 2  # ring buffer of u_eff[k-n-1 .. k]
     u_hist = np.zeros((n_hist, 3))
     # desired roll, pitch angle and yaw rate from the sticks (+ SYSTEMID angle injection)
@@ -425,7 +437,7 @@ def fly(sc: Scenario) -> Flight:
         step = control.update(desired[k], att, g, rate_inj[k], bool(feedforward[k]))
         thr = pl.hover_throttle + mixer_inj[k, 3]
         u = np.clip(step.pid_out + mixer_inj[k, :3], -1.0, 1.0)
-        m, ue = motor_outputs(np.array([thr]), u[None, :])
+        m, ue = motor_outputs(np.array([thr]), u[None, :], factors)
         # plant: x[k+1] from x[k] and the delayed realised inputs
         u_hist[k % n_hist] = ue[0]
         u_prev, u_now = u_hist[(k + 1) % n_hist], u_hist[(k + 2) % n_hist]

@@ -179,6 +179,7 @@ def scenario_from_options(
     vehicle: str = "quad",
     gyro_noise_dps: float | None = None,
     vibration_dps: float = 0.0,
+    frame: str = "quad-x",
 ) -> Scenario:
     """The :class:`Scenario` the command line's options describe.
 
@@ -189,8 +190,9 @@ def scenario_from_options(
     ``vehicle`` names a plant of :data:`~mavsid.synthetic.plant.VEHICLES`; ``gyro_noise_dps``
     sets the gyro's white noise (deg/s RMS per loop sample, fed back through the rate
     controller), after ``noise`` scaling; ``vibration_dps`` adds a frame vibration of that
-    amplitude (deg/s). ``rate_hz`` is the RATE/SIDD logging rate; below 25 Hz every other
-    message is logged at it too (a slow log throughout).
+    amplitude (deg/s). ``frame`` names the multirotor frame whose motors are mixed and logged
+    (:data:`~mavsid.synthetic.controller.FRAMES`). ``rate_hz`` is the RATE/SIDD logging
+    rate; below 25 Hz every other message is logged at it too (a slow log throughout).
 
     >>> sc = scenario_from_options(vehicle="heavy-x", gyro_noise_dps=3.0)
     >>> sc.plant.effectiveness[0], round(float(np.degrees(sc.plant.gyro_noise)), 6)
@@ -239,6 +241,10 @@ def scenario_from_options(
         if not gyro_noise_dps >= 0:
             raise ConfigError(f"--gyro-noise must be >= 0 deg/s, got {gyro_noise_dps}")
         plant = replace(plant, gyro_noise=math.radians(gyro_noise_dps))
+    from mavsid.synthetic.controller import FRAMES
+
+    if frame not in FRAMES:
+        raise ConfigError(f"--frame must be one of {', '.join(FRAMES)}, got {frame!r}")
     if not vibration_dps >= 0:
         raise ConfigError(f"--vibration must be >= 0 deg/s, got {vibration_dps}")
     plant = replace(plant, vibration=math.radians(vibration_dps))
@@ -257,4 +263,5 @@ def scenario_from_options(
     return Scenario(
         manoeuvre=manoeuvre, axis=axis, sysid=tuple(runs), duration_s=duration_s, seed=seed,
         plant=plant, rates=rates, stick_amplitude=stick_amplitude, controller=controller,
+        frame=frame,
     )

@@ -125,8 +125,8 @@ def write_tlog(
         gyr = np.round(flight.gyro[k] * 1000.0).astype(int)
         emit(k, vehicle.scaled_imu_encode(int(ms[k]), *map(int, acc_mg), *map(int, gyr),
                                           0, 0, 0, 4500))
-        pwm = [int(v) for v in flight.pwm[k]]
-        emit(k, vehicle.servo_output_raw_encode(int(us[k]) & 0xFFFFFFFF, 0, *pwm, 0, 0, 0, 0))
+        pwm = [int(v) for v in flight.pwm[k]] + [0] * (8 - flight.pwm.shape[1])
+        emit(k, vehicle.servo_output_raw_encode(int(us[k]) & 0xFFFFFFFF, 0, *pwm))
         emit(k, vehicle.rc_channels_encode(int(ms[k]), 16, *map(int, rc_in[k]), *[0] * 10, 255))
 
     send = np.array([f[0] for f in frames])

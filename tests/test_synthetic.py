@@ -731,3 +731,10 @@ def test_slow_logs_log_everything_slowly(tmp_path):
     assert (sc.rates.rate, sc.rates.att, sc.rates.rcou) == (10.0, 10.0, 10.0)
     with pytest.raises(ConfigError, match="--vehicle"):
         scenario_from_options(vehicle="octo")
+
+
+def test_an_unknown_frame_is_a_config_error():
+    from mavsid.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="frame must be one of quad-x, hexa-x"):
+        Scenario(frame="tri")

@@ -120,6 +120,8 @@ class Scenario:
             )
         if self.axis not in AXES:
             raise ConfigError(f"axis must be one of {', '.join(AXES)}, got {self.axis!r}")
+        if self.frame not in FRAMES:
+            raise ConfigError(f"frame must be one of {', '.join(FRAMES)}, got {self.frame!r}")
         if self.duration_s is not None and not 0 < self.duration_s <= MAX_DURATION_S:
             raise ConfigError(
                 f"duration must lie in (0, {MAX_DURATION_S:g}] s, got {self.duration_s}"

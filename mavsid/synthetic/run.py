@@ -241,10 +241,6 @@ def scenario_from_options(
         if not gyro_noise_dps >= 0:
             raise ConfigError(f"--gyro-noise must be >= 0 deg/s, got {gyro_noise_dps}")
         plant = replace(plant, gyro_noise=math.radians(gyro_noise_dps))
-    from mavsid.synthetic.controller import FRAMES
-
-    if frame not in FRAMES:
-        raise ConfigError(f"--frame must be one of {', '.join(FRAMES)}, got {frame!r}")
     if not vibration_dps >= 0:
         raise ConfigError(f"--vibration must be >= 0 deg/s, got {vibration_dps}")
     plant = replace(plant, vibration=math.radians(vibration_dps))

@@ -8,7 +8,8 @@ light racer on its own rate tuning) and its motor frame (quad-X, hexa-X, coaxial
 X8, as ArduPilot mixes them), gyro
 white noise fed back through the rate controller (0-6 deg/s), frame vibration (0-5 deg/s),
 logging rate (10-400 Hz; 10 Hz logs every message that slowly) and log layout (ArduCopter
-3.2, 3.3, 3.4-dev, 3.6, 4.x, a 4.x traditional heli, ArduPlane 4.x; PX4 1.11, 1.14; a
+3.2, 3.3, 3.4-dev, 3.6, 4.x, a 4.x traditional heli, ArduPlane 4.x, an ArduPlane QuadPlane
+hovering; PX4 1.11, 1.14; a
 ground station's MAVLink telemetry, its streams at 50 Hz, or at the logging rate below 25 Hz;
 heli and plane fly their own plants).
 Each is fitted with the defaults (``pipeline.fit``, the axis flown) and compared with the
@@ -71,6 +72,10 @@ def draw(rng: random.Random) -> dict[str, Any]:
         s["manoeuvre"] = rng.choice(["doublet", "3211", "random"])
     if s["layout"] in ("heli", "plane"):  # (their own plants: a heli's or a wing's physics)
         s["vehicle"] = s["layout"]
+    if s["layout"] == "plane":  # half the ArduPlane logs a QuadPlane hovering (drawn apart)
+        vtol = random.Random(f"vtol {s['seed']}")
+        if vtol.random() < 0.5:
+            s["layout"], s["vehicle"] = "quadplane", vtol.choice(["quad", "heavy-x", "hexa"])
     # the motor frame, drawn apart (the draws above stay those of earlier sweeps): a hexa's
     # plant as hexa-X or coaxial Y6, a heavy X's as quad-X or coaxial X8 (ArduCopter 3.2
     # named its frame only by its build: quad-X there)

@@ -158,6 +158,35 @@ def _resolve_preset(raw: RawLog, preset: Preset | str | None,
     return choose_preset(raw, presets)
 
 
+#: ArduPlane's QuadPlane logs its VTOL rate controllers (PIQR/PIQP/PIQY) while they fly the
+#: aircraft, its fixed-wing ones (PIDR...) with every attitude record
+_VTOL, _WING = "ardupilot-quadplane", ("ardupilot-plane-pid", "ardupilot-plane-servo")
+
+
+def _vtol_or_wing(raw: RawLog, candidates: list[Preset]) -> list[Preset]:
+    """``candidates`` (the applicable presets, in order) with a QuadPlane's VTOL preset
+    after the fixed-wing ones when the VTOL controllers flew less than half the attitude
+    records; when both apply, a warning says which flight is fitted and how to fit the
+    other."""
+    names = [p.name for p in candidates]
+    wing = next((n for n in names if n in _WING), None)
+    if _VTOL not in names or wing is None or names.index(_VTOL) > names.index(wing):
+        return candidates
+    att = len(raw.messages["PIDR"]) if "PIDR" in raw.messages else 0
+    share = len(raw.messages["PIQR"]) / att if att else 1.0
+    if share < 0.5:
+        vtol = candidates.pop(names.index(_VTOL))
+        candidates.insert(names.index(wing), vtol)
+        fitted, other, what = wing, _VTOL, "VTOL"
+    else:
+        fitted, other, what = _VTOL, wing, "fixed-wing"
+    warnings.warn(f"{raw.source.path}: a QuadPlane, its VTOL controllers flying "
+                  f"{100 * min(share, 1.0):.0f} % of the attitude records: preset {fitted} "
+                  f"fitted; --preset {other} fits the {what} flight", DataQualityWarning,
+                  stacklevel=6)
+    return candidates
+
+
 def _first_fitting(raw: RawLog, preset: Preset | str | None,
                    presets: Mapping[str, Preset] | None, mixers: Mapping[str, Mixer]
                    ) -> tuple[Preset, tuple[list[_Series], list[_Series], str | None]]:
@@ -174,8 +203,8 @@ def _first_fitting(raw: RawLog, preset: Preset | str | None,
     if preset is not None:
         chosen = _resolve_preset(raw, preset, presets)
         return chosen, _collect(raw, chosen, mixers)
-    candidates = [p for p in (*(presets or {}).values(), *PRESETS.values())
-                  if p.applies_to(raw)]
+    candidates = _vtol_or_wing(raw, [p for p in (*(presets or {}).values(), *PRESETS.values())
+                                     if p.applies_to(raw)])
     if not candidates:
         choose_preset(raw, presets)  # raises, naming what a preset needs
     tried: list[str] = []

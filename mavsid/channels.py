@@ -19,6 +19,8 @@ Built-in presets (in the order they are tried):
 ============================  ==========  =================================================
 preset                        format      states / inputs
 ============================  ==========  =================================================
+``ardupilot-quadplane``       DataFlash   ArduPlane QuadPlane, VTOL flight: ATT; PIQR/PIQP/
+                                          PIQY Act (rad/s), P+I+D+FF (mixer input)
 ``ardupilot-plane-pid``       DataFlash   ArduPlane only: ATT; PIDR/PIDP/PIDY Act (deg/s),
                                           P+I+D+FF / 45 (surface demand in degrees)
 ``ardupilot-plane-servo``     DataFlash   ArduPlane only: ATT, IMU gyro; RCOU servos by
@@ -515,6 +517,16 @@ PRESETS: dict[str, Preset] = {
     p.name: p
     for p in (
         Preset(
+            "ardupilot-quadplane", _DF,
+            states={**_ATT, "p": _ch("PIQR", "Act", "rad/s"), "q": _ch("PIQP", "Act", "rad/s"),
+                    "r": _ch("PIQY", "Act", "rad/s")},
+            inputs={"u_roll": _ch("PIQR", "P+I+D+FF"), "u_pitch": _ch("PIQP", "P+I+D+FF"),
+                    "u_yaw": _ch("PIQY", "P+I+D+FF")},
+            vehicles=("plane",),
+            description="ArduPlane QuadPlane in VTOL flight: ATT; PIQR/PIQP/PIQY Act (rad/s) "
+                        "and P+I+D+FF (the multicopter mixer's roll/pitch/yaw input)",
+        ),
+        Preset(
             "ardupilot-plane-pid", _DF,
             states={**_ATT, "p": _ch("PIDR", "Act", "deg/s"), "q": _ch("PIDP", "Act", "deg/s"),
                     "r": _ch("PIDY", "Act", "deg/s")},
@@ -630,6 +642,7 @@ PRESETS: dict[str, Preset] = {
 TARGET_CHANNELS: dict[str, tuple[Channel, ...]] = {
     rate: (
         _ch("RATE", f"{des}Des", "deg/s"),
+        _ch(pid.replace("PID", "PIQ"), "Tar", "rad/s"),  # (a QuadPlane's VTOL controller)
         _ch(pid, "Tar", "rad/s"),
         _ch("vehicle_rates_setpoint", px4, "rad/s"),
         _ch("ATTITUDE_TARGET", f"body_{px4}_rate", "rad/s"),

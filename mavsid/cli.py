@@ -230,7 +230,8 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
                    help="frame vibration amplitude on the gyro, deg/s (0)")
     p.add_argument("--layout",
                    choices=("copter-4", "copter-3.6", "copter-3.3", "copter-3.4-dev",
-                            "copter-3.2", "heli", "plane", "px4-1.14", "px4-1.11", "px4-1.8"),
+                            "copter-3.2", "heli", "plane", "quadplane", "px4-1.14", "px4-1.11",
+                            "px4-1.8"),
                    help="log layout. A .bin's ArduCopter generation: 4.x (default); 3.6 "
                    "(no unit records, PARM without Default, no SYSTEMID messages); 3.3 "
                    "(TimeMS, RCOU Ch1-8, no unit records, untimed PARM/MODE, ARM event first); "
@@ -239,7 +240,10 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
                    "heli (ArduCopter 4.x traditional helicopter: FRAME_CLASS 6, H_SW_*, "
                    "swashplate servos on RCOU, inputs from RATE); plane (ArduPlane 4.x: no "
                    "RATE nor SYSTEMID, PIDR/PIDP/PIDY, aileron/elevator/throttle/rudder "
-                   "servos with SERVOn_FUNCTION; needs a pilot manoeuvre). A .ulg's PX4 "
+                   "servos with SERVOn_FUNCTION; needs a pilot manoeuvre); quadplane (ArduPlane "
+                   "4.5 QuadPlane hovering in QSTABILIZE: the VTOL controller's PIQR/PIQP/PIQY, "
+                   "the fixed-wing PIDs idle, surfaces on outputs 1-4, motors from 5 by "
+                   "SERVOn_FUNCTION, Q_* parameters; needs a pilot manoeuvre). A .ulg's PX4 "
                    "topic set: "
                    "1.14 (default; vehicle_torque_setpoint), 1.11 (actuator_controls_0), 1.8 "
                    "(rates in vehicle_attitude)")
@@ -295,7 +299,8 @@ def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     cfg = load_config(args.config) if args.config else PipelineConfig()
     axes = tuple(dict.fromkeys(args.axis)) if args.axis else None
     return cfg.with_overrides(axes=axes, estimator=getattr(args, "estimator", None),
-                              allow_unstable=getattr(args, "allow_unstable", None) or None)
+                              allow_unstable=getattr(args, "allow_unstable", None) or None,
+                              preset=getattr(args, "preset", None))
 
 
 @contextlib.contextmanager
@@ -387,6 +392,8 @@ def _add_output_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument("--axis", action="append", choices=("roll", "pitch", "yaw"),
                    help="axis to fit (repeat for several; default all with excitation)")
     p.add_argument("--config", metavar="FILE.toml", help="pipeline settings (see pipelines/)")
+    p.add_argument("--preset", metavar="NAME",
+                   help="channel preset (mavsid.channels; default: chosen from the log)")
     p.add_argument("--rrd", metavar="OUT.rrd", help="write a rerun recording")
     p.add_argument("--report", metavar="OUT.html", help="write a self-contained HTML report")
     p.add_argument("--json", action="store_true", help="print the result as JSON")

@@ -343,7 +343,8 @@ class AxisController:
     defaults_used : tuple of str
         Parameters the log lacks, taken at their documented defaults.
     naming : str
-        ``"ATC_RAT"`` (ArduPilot >= 3.4), ``"ATC_RAT_FILT"`` (3.5-4.0 single filter),
+        ``"ATC_RAT"`` (ArduPilot >= 3.4), ``"Q_A_RAT"`` (an ArduPlane QuadPlane's VTOL
+        controller), ``"ATC_RAT_FILT"`` (3.5-4.0 single filter),
         ``"RATE"`` (ArduCopter <= 3.3, centidegree scale) or ``"MC"`` (PX4).
     angle_p : float
         The attitude loop's P (1/s) around the rate loop (``ATC_ANG_*_P``, 3.x ``STB_*_P``,
@@ -490,7 +491,10 @@ def controller_from_params(
                               tuple(defaults), "MC", ang)
     ax = _AP[axis]
     modern = any(k.startswith(f"ATC_RAT_{ax}_") for k in params)
-    legacy = not modern and any(k.startswith(f"RATE_{ax}_") for k in params)
+    # an ArduPlane QuadPlane's VTOL controller: the same AC_AttitudeControl, its parameters
+    # named Q_A_* (Q_A_RAT_RLL_P ...)
+    quadplane = not modern and any(k.startswith(f"Q_A_RAT_{ax}_") for k in params)
+    legacy = not modern and not quadplane and any(k.startswith(f"RATE_{ax}_") for k in params)
     if legacy:
         p, i, d, imax, filt = _AP3_DEFAULTS[axis]
         pre = f"RATE_{ax}_"
@@ -503,7 +507,7 @@ def controller_from_params(
         )
         naming = "RATE"
     else:
-        pre = f"ATC_RAT_{ax}_"
+        pre = f"Q_A_RAT_{ax}_" if quadplane else f"ATC_RAT_{ax}_"
         vals = dict(zip(_AP_FIELDS, _AP_DEFAULTS[axis], strict=True))
         if pre + "FLTE" not in params and pre + "FILT" in params:
             # 3.5-4.0: one filter on the error, the derivative taken of the filtered error
@@ -513,7 +517,7 @@ def controller_from_params(
             naming = "ATC_RAT_FILT"
         else:
             names = _AP_FIELDS
-            naming = "ATC_RAT"
+            naming = "Q_A_RAT" if quadplane else "ATC_RAT"
         for n in names:
             vals[n] = get(pre + n, vals[n])
         gains = RateGains(vals["P"], vals["I"], vals["D"], vals["FF"], vals["IMAX"],
@@ -525,7 +529,8 @@ def controller_from_params(
         notch = float(params.get("INS_HNTCH_FREQ", 0.0) or 0.0)
     elif params.get("INS_NOTCH_ENABLE", 0):
         notch = float(params.get("INS_NOTCH_FREQ", 0.0) or 0.0)
-    ang_name = f"STB_{ax}_P" if legacy else f"ATC_ANG_{ax}_P"
+    ang_name = (f"STB_{ax}_P" if legacy else f"Q_A_ANG_{ax}_P" if quadplane
+                else f"ATC_ANG_{ax}_P")
     ang = _angle_p(params, ang_name, 4.5, used)
     return AxisController("ardupilot", axis, gains, loop, gyro, notch, used, tuple(defaults),
                           naming, ang)
@@ -2118,7 +2123,8 @@ def gain_params(ctrl: AxisController) -> dict[str, float]:
     if ctrl.naming == "RATE":
         return {f"RATE_{ax}_{n}": round(v / _AP3_SCALE, 6)
                 for n, v in (("P", g.p), ("I", g.i), ("D", g.d))}
-    return {f"ATC_RAT_{ax}_{n}": round(v, 6) for n, v in (("P", g.p), ("I", g.i), ("D", g.d))}
+    pre = "Q_A_RAT" if ctrl.naming == "Q_A_RAT" else "ATC_RAT"
+    return {f"{pre}_{ax}_{n}": round(v, 6) for n, v in (("P", g.p), ("I", g.i), ("D", g.d))}
 
 
 # --------------------------------------------------------------------------- measured loop

@@ -549,7 +549,8 @@ def _closed_loop(
     from mavsid.loop import closed_loop_fit, twin_signals
 
     planes = [fd for fd in flights
-              if str(fd.meta.get("vehicle") or "").lower().split()[:1] == ["plane"]]
+              if str(fd.meta.get("vehicle") or "").lower().split()[:1] == ["plane"]
+              and fd.preset != "ardupilot-quadplane"]  # (a QuadPlane's VTOL: a multicopter's)
     if planes:  # (the twin would run a multicopter's controller on a plane's targets)
         return dataclasses.replace(
             fitted, closed_loop_note="no closed-loop twin for ArduPlane: the twin rebuilds "

@@ -160,10 +160,15 @@ def excitation_advice(axis: str, autopilot: str | None) -> str:
     'fly a SYSTEMID mixer chirp on roll (SID_AXIS 10)'
     >>> excitation_advice("yaw", "px4")[:52]
     'fly sharp stick doublets or a 3-2-1-1 on yaw in ACRO'
+    >>> excitation_advice("yaw", "ardupilot plane ArduPlane V4.5.7 quadplane")[:60]
+    'fly sharp stick doublets or a 3-2-1-1 on yaw in QACRO or QST'
     """
     if autopilot and "px4" in autopilot.lower():
         return (f"fly sharp stick doublets or a 3-2-1-1 on {axis} in ACRO (PX4 has no SYSTEMID "
                 "chirp mode), with SDLOG_PROFILE logging the rate controller at full rate")
+    if autopilot and autopilot.endswith("quadplane"):
+        return (f"fly sharp stick doublets or a 3-2-1-1 on {axis} in QACRO or QSTABILIZE "
+                "(ArduPlane has no SYSTEMID mode)")
     if _is_plane(autopilot):
         return (f"fly sharp stick doublets or a 3-2-1-1 on {axis} in ACRO or MANUAL (ArduPlane "
                 "has no SYSTEMID mode)")
@@ -224,6 +229,9 @@ def logging_advice(autopilot: str | None, telemetry: bool = False) -> str:
         return ("PX4: set SDLOG_PROFILE to include 'high rate' (bit 1) or 'system identification'"
                 " (bit 4) so that vehicle_angular_velocity and the torque/actuator setpoints are "
                 "logged at 100 Hz or more")
+    if autopilot and autopilot.endswith("quadplane"):
+        return ("ArduPlane: set LOG_BITMASK's fast attitude logging so that PIQR/PIQP/PIQY (the "
+                "body rates and the VTOL rate controllers' outputs) are logged at 100 Hz or more")
     if _is_plane(autopilot):
         return ("ArduPlane: set LOG_BITMASK's fast attitude logging so that PIDR/PIDP/PIDY (the "
                 "body rates and the roll/pitch/yaw controllers' outputs) are logged at 100 Hz "
@@ -532,11 +540,13 @@ def _telemetry(flights: Sequence[Any]) -> bool:
 
 def _autopilot(flights: Sequence[Any]) -> str | None:
     """The platform the flights' metadata names, if any: ``meta["autopilot"]``, then the
-    vehicle and the firmware banner when known (``ardupilot plane ArduPlane V4.3.8 (...)``)."""
+    vehicle and the firmware banner when known (``ardupilot plane ArduPlane V4.3.8 (...)``),
+    ``quadplane`` after them for a QuadPlane's VTOL flight (its preset)."""
     for fd in flights:
         meta = getattr(fd, "meta", None)
         if meta and meta.get("autopilot"):
-            words = (meta.get("autopilot"), meta.get("vehicle"), meta.get("firmware"))
+            vtol = "quadplane" if getattr(fd, "preset", "") == "ardupilot-quadplane" else ""
+            words = (meta.get("autopilot"), meta.get("vehicle"), meta.get("firmware"), vtol)
             return " ".join(str(w) for w in words if w)
     return None
 

@@ -11,7 +11,9 @@ Other layouts (``layout=``, :data:`LAYOUTS`): older ArduCopter generations (3.2 
 RATE, 3.3 with TimeMS, 3.4-dev in centidegrees, 3.6 without unit records), a traditional
 helicopter (``heli``: the 4.x records, FRAME_CLASS 6, swashplate servo PWMs on RCOU) and
 ArduPlane 4.x (``plane``: no RATE nor SYSTEMID records; PIDR/PIDP/PIDY and the aileron,
-elevator, throttle and rudder servos on RCOU).
+elevator, throttle and rudder servos on RCOU) and an ArduPlane QuadPlane hovering
+(``quadplane``: the multicopter controller's PIQR/PIQP/PIQY, the fixed-wing PIDR/PIDP/PIDY
+idle, the surfaces on outputs 1-4 and the motors from 5, ``Q_*`` parameters).
 
 Records are built column-wise in numpy structured arrays and merged into one buffer by a
 stable sort on time; nothing is packed one record at a time.
@@ -252,10 +254,10 @@ def _build(flight: Flight, lo: int, hi: int, shift_s: float, faults: Faults,
     loop_hz = sc.controller.loop_hz
     tus = np.round((flight.t_s - shift_s) * 1e6).astype(np.int64)
     t0 = int(tus[lo])
-    plane = layout == "plane"
+    plane, vtol = layout == "plane", layout == "quadplane"
     b = DataFlashBuilder()
     b.formats.update(_PLANE_PID)
-    _header(b, t0, _PLANE_TYPES if plane else _DATA_TYPES)
+    _header(b, t0, _PLANE_TYPES if plane else _QUADPLANE_TYPES if vtol else _DATA_TYPES)
     params = layout_params(flight, layout)
     b.add("PARM", np.full(len(params), -1), TimeUS=t0, Name=list(params),
           Value=list(params.values()), Default=list(params.values()))
@@ -274,7 +276,8 @@ def _build(flight: Flight, lo: int, hi: int, shift_s: float, faults: Faults,
         data.add(name, tus[idx][keep], **cols)
 
     # mode changes (the first sample states the current mode)
-    m = np.full(len(flight), _PLANE_FBWA) if plane else flight.mode
+    m = (np.full(len(flight), _PLANE_FBWA) if plane
+         else np.full(len(flight), _QSTABILIZE) if vtol else flight.mode)
     change = np.flatnonzero(np.r_[True, m[1:] != m[:-1]])
     change = change[(change >= lo) & (change < hi)]
     if not len(change) or change[0] != lo:
@@ -284,7 +287,7 @@ def _build(flight: Flight, lo: int, hi: int, shift_s: float, faults: Faults,
     run = flight.run_index
     starts = np.flatnonzero((run >= 0) & np.r_[True, run[1:] != run[:-1]])
     starts = starts[(starts >= lo) & (starts < hi)]
-    for k in ([] if plane else starts):
+    for k in ([] if plane or vtol else starts):
         s = sc.runs[run[k]]
         data.add("SIDS", tus[[k]], Ax=s.axis, Mag=s.magnitude, FSt=s.f_start_hz,
                  FSp=s.f_stop_hz, TFin=s.t_fade_in, TC=s.t_const_freq, TR=s.t_rec,
@@ -292,7 +295,7 @@ def _build(flight: Flight, lo: int, hi: int, shift_s: float, faults: Faults,
         data.add("MSG", tus[[k]], Message=[f"SystemID Starting: axis={s.axis}"])
     ends = np.flatnonzero((run >= 0) & np.r_[run[1:] != run[:-1], True])
     ends = ends[(ends >= lo) & (ends < hi)]
-    if not plane:
+    if not plane and not vtol:
         data.add("MSG", tus[ends], Message=["SystemID Finished"] * len(ends))
 
     deg = np.degrees
@@ -305,6 +308,15 @@ def _build(flight: Flight, lo: int, hi: int, shift_s: float, faults: Faults,
             add(pid, i, Tar=rt[:, a], Act=g[:, a], Err=rt[:, a] - g[:, a],
                 P=u[:, a] * _PLANE_SURFACE_DEG, I=0.0, D=0.0, FF=0.0, Dmod=1.0, SRate=0.0,
                 Limit=0)
+    elif vtol:  # QuadPlane in VTOL flight: the multicopter controller's PIDs (rad/s; their
+        # output sum is the mixer input), the fixed-wing ones idle (nothing to the surfaces)
+        rt_r, g_r = flight.rate_target[i], flight.gyro[i]
+        for a, (piq, pid) in enumerate((("PIQR", "PIDR"), ("PIQP", "PIDP"),
+                                        ("PIQY", "PIDY"))):
+            add(piq, i, Tar=rt_r[:, a], Act=g_r[:, a], Err=rt_r[:, a] - g_r[:, a], P=u[:, a],
+                I=0.0, D=0.0, FF=0.0, Dmod=1.0, SRate=0.0, Limit=0)
+            add(pid, i, Tar=0.0, Act=g[:, a], Err=-g[:, a], P=0.0, I=0.0, D=0.0, FF=0.0,
+                Dmod=1.0, SRate=0.0, Limit=0)
     else:
         acc_up = -(flight.accel[i, 2] + GRAVITY) * 100.0  # cm/s/s (multiplier 0.01)
         add("RATE", i, RDes=rt[:, 0], R=g[:, 0], ROut=u[:, 0], PDes=rt[:, 1], P=g[:, 1],
@@ -329,7 +341,7 @@ def _build(flight: Flight, lo: int, hi: int, shift_s: float, faults: Faults,
     i = _every(flight, "rcin", lo, hi)
     rc = flight.rc_in()[i]
     add("RCIN", i, **{f"C{c + 1}": rc[:, c] for c in range(rc.shape[1])})
-    if layout not in ("copter-4", "heli", "plane"):
+    if layout not in ("copter-4", "heli", "plane", "quadplane"):
         return _as_layout(data, b, layout)
     return b.to_bytes() + data.to_bytes()
 
@@ -337,7 +349,7 @@ def _build(flight: Flight, lo: int, hi: int, shift_s: float, faults: Faults,
 #: Layouts the writer can produce (``mavsid simulate --layout``): ArduCopter generations,
 #: a traditional helicopter (ArduCopter 4.x heli) and ArduPlane 4.x.
 LAYOUTS = ("copter-4", "copter-3.6", "copter-3.3", "copter-3.4-dev", "copter-3.2", "heli",
-           "plane")
+           "plane", "quadplane")
 
 #: ArduPlane's roll/pitch/yaw controllers log PIDR/PIDP/PIDY (``log_PID`` of
 #: libraries/AP_Logger/LogStructure.h: TimeUS,Tar,Act,Err,P,I,D,FF,Dmod,SRate,Limit, no
@@ -348,19 +360,25 @@ _PLANE_PID: dict[str, MessageFormat] = {
     for f in (
         _fmt(n, name, "QfffffffffB", "TimeUS,Tar,Act,Err,P,I,D,FF,Dmod,SRate,Limit",
              "s----------", "F----------")
-        for n, name in ((48, "PIDR"), (49, "PIDP"), (50, "PIDY"))
+        for n, name in ((48, "PIDR"), (49, "PIDP"), (50, "PIDY"), (51, "PIQR"), (52, "PIQP"),
+                        (53, "PIQY"))
     )
 }
 _PLANE_TYPES = ("PARM", "MSG", "MODE", "ATT", "PIDR", "PIDP", "PIDY", "IMU", "RCOU", "RCIN")
+#: ArduPlane QuadPlane: also the VTOL attitude controller's PIDs (logged while it flies)
+_QUADPLANE_TYPES = (*_PLANE_TYPES[:7], "PIQR", "PIQP", "PIQY", *_PLANE_TYPES[7:])
+#: ArduPlane mode number of QSTABILIZE (VTOL, sticks set bank and pitch angles)
+_QSTABILIZE = 17
 #: the surface demand (degrees) of a full deflection: ArduPlane's +-4500 centidegrees
 _PLANE_SURFACE_DEG = 45.0
 #: ArduPlane mode number of FBWA (fly-by-wire: sticks set bank and pitch angles)
 _PLANE_FBWA = 5
 _BANNER = {"copter-3.2": "ArduCopter V3.2.1 (mavsid00)",
-           "plane": "ArduPlane V4.3.8 (mavsid00)"}
+           "plane": "ArduPlane V4.3.8 (mavsid00)", "quadplane": "ArduPlane V4.5.7 (mavsid00)"}
 #: the frame texts each firmware writes after its banner (ArduPlane writes none)
 _FRAME_TEXT: dict[str, tuple[str, ...]] = {"copter-3.2": ("Frame: QUAD",),
-                                           "heli": ("Frame: HELI",), "plane": ()}
+                                           "heli": ("Frame: HELI",), "plane": (),
+                                           "quadplane": ()}
 #: servo functions (SERVOn_FUNCTION, SRV_Channel::Aux_servo_function_t) of the outputs
 _PLANE_SERVOS = {1: 4, 2: 19, 3: 70, 4: 21}  # aileron, elevator, throttle, rudder
 _HELI_SERVOS = {1: 33, 2: 34, 3: 35, 4: 36, 8: 31}  # swash 1-3 (motor1-3), tail, RSC
@@ -419,6 +437,17 @@ def layout_params(flight: Flight, layout: str = "copter-4") -> dict[str, float]:
         q.update(FLTMODE1=float(_PLANE_FBWA), FLTMODE6=float(_PLANE_FBWA))
         q.update(_servo_params(_PLANE_SERVOS))
         return dict(sorted(q.items()))
+    if layout == "quadplane":  # the VTOL controller's and motors' parameters as Q_*
+        q = {k: p[k] for k in ("INS_GYRO_FILTER", "INS_ACCEL_FILTER", "SCHED_LOOP_RATE",
+                               "LOG_BITMASK")}
+        q.update({"Q_A_" + k[4:]: v for k, v in p.items() if k.startswith("ATC_")})
+        q.update({"Q_M_" + k[4:]: v for k, v in p.items() if k.startswith("MOT_")})
+        q.update(Q_ENABLE=1.0, Q_FRAME_CLASS=p["FRAME_CLASS"], Q_FRAME_TYPE=p["FRAME_TYPE"],
+                 FLTMODE1=float(_QSTABILIZE), FLTMODE6=float(_QSTABILIZE))
+        q.update(_servo_params(_PLANE_SERVOS))
+        motors = {4 + m: 33 + m for m in range(flight.motors.shape[1])}
+        q.update(_servo_params(motors))
+        return dict(sorted(q.items()))
     return p
 
 
@@ -464,6 +493,11 @@ def servo_outputs(flight: Flight, layout: str = "copter-4") -> np.ndarray:
         return np.column_stack([_angle_pwm(u[:, 0]), _angle_pwm(u[:, 1]),
                                 np.round(_SERVO_MIN + thr * (_SERVO_MAX - _SERVO_MIN)),
                                 _angle_pwm(u[:, 2])])
+    if layout == "quadplane":  # surfaces at trim, throttle off; the motors on 5 and up
+        n = flight.pwm.shape[0]
+        surfaces = np.column_stack([np.full(n, _SERVO_TRIM), np.full(n, _SERVO_TRIM),
+                                    np.full(n, _SERVO_MIN), np.full(n, _SERVO_TRIM)])
+        return np.column_stack([surfaces, flight.pwm])
     if layout == "heli":
         out = np.zeros((len(flight), 8))
         collective = 0.5

@@ -50,6 +50,7 @@ _FIELDS = {
     "copter-3.2": (("IMU.Gyr{xyz}", "RCOU.Chan1-Chan4 (quad-X motor mix of u)")),
     "plane": (("IMU.Gyr{xyz}", "PID{rpy}.P+I+D+FF / 45 = RCOU servo {servo} through "
                "SERVO{servo}_MIN/TRIM/MAX")),
+    "quadplane": (("PIQ{rpy}.Act", "PIQ{rpy}.P+I+D+FF")),
 }
 #: what the effectiveness is per unit of, for layouts whose input is not RATE.ROut/POut/YOut
 _INPUT_UNIT = {
@@ -59,7 +60,7 @@ _INPUT_UNIT = {
              "-1..1 over the servo's SERVOn_MIN/TRIM/MAX travel",
 }
 #: layouts whose firmware has no SYSTEMID mode (ArduPlane 4.x)
-_NO_SYSTEMID = ("plane",)
+_NO_SYSTEMID = ("plane", "quadplane")
 
 
 @dataclass(frozen=True)

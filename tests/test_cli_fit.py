@@ -110,6 +110,10 @@ def test_model_from_one_flight_predicts_the_next(fitted, tmp_path: Path) -> None
         (["fit", "TEXT"], "not a DataFlash"),
         (["fit", str(FIXTURES / "hover.bin")], "nothing identifiable"),
         (["fit", str(FIXTURES / "sysid_roll.bin"), "--config", "BADTOML"], "not valid TOML"),
+        (["fit", str(FIXTURES / "sysid_roll.bin"), "--preset", "nope"],
+         "unknown channel preset 'nope'"),
+        (["fit", str(FIXTURES / "sysid_roll.bin"), "--preset", "px4-torque"],
+         "vehicle_attitude"),
         (["validate", "TEXT", str(FIXTURES / "sysid_roll.bin")], "not a mavsid model"),
         (["view", "EMPTY", "--save", "x.rrd"], "empty file"),
     ],
@@ -298,3 +302,17 @@ def test_info_and_segments_show_their_stages_on_a_terminal(command: str, second:
         text = err.getvalue()
         assert (f"reading {log}" in text and second in text) is not bool(quiet)
         assert (text == "") is bool(quiet)
+
+
+
+def test_fit_uses_the_preset_named() -> None:
+    """``fit --preset NAME`` reads the log through that preset: the bundled flight's motor
+    PWMs (RCOU, logged at 10 Hz) instead of its RATE outputs, which it says cannot resolve
+    the rate loop."""
+    proc = run("fit", str(FIXTURES / "sysid_roll.bin"), "--preset", "ardupilot-rcou",
+               "--axis", "roll", "-q")
+    assert proc.returncode == 1
+    assert "inputs from RCOU are logged at 10.0 Hz" in proc.stderr
+    assert "roll: not identified: rates/outputs logged at 10 Hz" in proc.stdout
+    default = run("fit", str(FIXTURES / "sysid_roll.bin"), "--axis", "roll", "--json", "-q")
+    assert json.loads(default.stdout)["presets"] == ["ardupilot-rate"]

@@ -524,15 +524,9 @@ def test_px4s_attitude_setpoint_is_not_ramped_across_a_gap(tmp_path) -> None:  #
 
     from mavsid.align import _commanded
     from mavsid.data import MessageTable
-    from mavsid.readers import read_log
-    from mavsid.synthetic.run import scenario_from_options, simulate
 
-    path = tmp_path / "s.ulg"
-    simulate(scenario_from_options(manoeuvre="doublet", axis="roll", seed=3), [path],
-             layout="px4-1.11")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        raw = read_log(path)
+    raw = _simulated_raw(tmp_path / "s.ulg", "px4-1.11", manoeuvre="doublet", axis="roll",
+                         seed=3)
     sp = raw["vehicle_attitude_setpoint"]
     t0, t1 = float(sp.time_s[0]), float(sp.time_s[-1])
     cut = (sp.time_s > t0 + 0.4 * (t1 - t0)) & (sp.time_s < t0 + 0.6 * (t1 - t0))
@@ -680,15 +674,9 @@ def test_a_quadplane_flying_mostly_as_a_wing_is_fitted_as_one(tmp_path) -> None:
     """When the VTOL controllers flew less than half of the attitude records, the fixed-wing
     preset is chosen, and the warning names the other."""
     from mavsid.align import align
-    from mavsid.readers import read_log
-    from mavsid.synthetic.run import scenario_from_options, simulate
 
-    path = tmp_path / "qp.bin"
-    simulate(scenario_from_options(manoeuvre="doublet", axis="roll", seed=2), [path],
-             layout="quadplane")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        raw = read_log(path)
+    raw = _simulated_raw(tmp_path / "qp.bin", "quadplane", manoeuvre="doublet", axis="roll",
+                         seed=2)
     piqr = raw.messages["PIQR"]
     cut = len(piqr) // 3
     short = dataclasses.replace(piqr, columns={k: v[:cut] for k, v in piqr.columns.items()},
@@ -710,3 +698,13 @@ def _simulated_warned(tmp_path, name: str, layout: str | None = None, **options)
     truth = json.loads(path.with_suffix(".truth.json").read_text())["axes"][axis]
     return path, truth, fit([str(path)], PipelineConfig(axes=(axis,)))
 
+
+def _simulated_raw(path, layout: str, **options):  # type: ignore[no-untyped-def]
+    """The log simulated from ``options`` in ``layout`` at ``path``, read (warnings muted)."""
+    from mavsid.readers import read_log
+    from mavsid.synthetic.run import scenario_from_options, simulate
+
+    simulate(scenario_from_options(**options), [path], layout=layout)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return read_log(path)

@@ -741,15 +741,33 @@ def frame_of(params: Mapping[str, float], n_motors: int | None = None
     >>> frame_of({})
     ((1, 1), 'no frame parameters (FRAME_CLASS/FRAME_TYPE or FRAME): quad-X assumed')
     """
-    if "FRAME_CLASS" in params:
-        return (int(params["FRAME_CLASS"]), int(params.get("FRAME_TYPE", 1))), \
-            "FRAME_CLASS/FRAME_TYPE"
-    if "FRAME" in params:
+    cls_p, type_p, frame_p = (_whole(params, k) for k in ("FRAME_CLASS", "FRAME_TYPE", "FRAME"))
+    if cls_p is not None:
+        if type_p is None and "FRAME_TYPE" in params:
+            return (cls_p, 1), "FRAME_CLASS (FRAME_TYPE not a number: X assumed)"
+        return (cls_p, 1 if type_p is None else type_p), "FRAME_CLASS/FRAME_TYPE"
+    if frame_p is not None:
         cls = _CLASS_BY_MOTORS.get(n_motors or 0)
         where = (f"FRAME (ArduCopter < 3.5) and {n_motors} motor outputs" if cls else
                  "FRAME (ArduCopter < 3.5), class unknown: quad assumed")
-        return (cls or 1, int(params["FRAME"])), where
+        return (cls or 1, frame_p), where
+    if {"FRAME_CLASS", "FRAME_TYPE", "FRAME"} & set(params):
+        return (1, 1), "frame parameters that are not numbers (a damaged log): quad-X assumed"
     return (1, 1), "no frame parameters (FRAME_CLASS/FRAME_TYPE or FRAME): quad-X assumed"
+
+
+def _whole(params: Mapping[str, float], key: str) -> int | None:
+    """A parameter as a whole number; None when absent or not a finite number (a damaged
+    log's).
+
+    >>> _whole({"A": 2.0}, "A"), _whole({"A": float("nan")}, "A"), _whole({}, "A")
+    (2, None, None)
+    """
+    value = params.get(key)
+    try:
+        return int(value) if value is not None and math.isfinite(value) else None
+    except (TypeError, OverflowError):
+        return None
 
 
 #: ArduPilot FRAME_CLASS names (for messages about frames without a mixer here)
@@ -1139,8 +1157,9 @@ def servo_inputs(raw: RawLog, preset: Preset) -> list[tuple[str, str, np.ndarray
 def motor_channels(params: Mapping[str, float], n_motors: int) -> list[int]:
     """The output (servo channel, 1-based) of each motor: the lowest-numbered one whose
     ``SERVOn_FUNCTION`` is that motor's (33-40: motors 1-8, 82-85: motors 9-12), when the log
-    has the parameters; motor ``i`` on output ``i`` otherwise (ArduCopter's default, and the
-    only layout before ``SERVOn_FUNCTION``).
+    has them for any motor; motor ``i`` on output ``i`` otherwise (ArduCopter's default, the
+    only layout before ``SERVOn_FUNCTION``, and what a .tlog whose ground station fetched
+    some parameters only can say).
 
     Raises
     ------
@@ -1156,21 +1175,22 @@ def motor_channels(params: Mapping[str, float], n_motors: int) -> list[int]:
     [5, 6, 7, 8]
     """
     outputs: dict[int, int] = {}
-    for key, value in params.items():
+    for key in params:
         m = re.fullmatch(r"SERVO(\d+)_FUNCTION", key)
-        if m and math.isfinite(value):
+        fn = _whole(params, key) if m else None
+        if m and fn is not None:
             n = int(m.group(1))
-            outputs[int(value)] = min(n, outputs.get(int(value), n))
-    if not outputs:
+            outputs[fn] = min(n, outputs.get(fn, n))
+    functions = [33 + i if i < 8 else 82 + i - 8 for i in range(n_motors)]
+    if not set(outputs) & {*range(33, 41), *range(82, 86)}:  # (none, or not all downloaded)
         return list(range(1, n_motors + 1))
-    got = [outputs.get(33 + i if i < 8 else 82 + i - 8) for i in range(n_motors)]
-    missing = [i + 1 for i, o in enumerate(got) if o is None]
+    got = [outputs.get(fn) for fn in functions]
+    missing = [i for i, o in enumerate(got) if o is None]
     if missing:
-        functions = ", ".join(str(32 + i if i <= 8 else 73 + i) for i in missing)
         raise ConfigError(
-            f"no output carries motor(s) {', '.join(map(str, missing))} of {n_motors} "
-            f"(SERVOn_FUNCTION {functions}): the frame (FRAME_CLASS/FRAME_TYPE) and the "
-            "outputs disagree")
+            f"no output carries motor(s) {', '.join(str(i + 1) for i in missing)} of "
+            f"{n_motors} (SERVOn_FUNCTION {', '.join(str(functions[i]) for i in missing)}): "
+            "the frame (FRAME_CLASS/FRAME_TYPE) and the outputs disagree")
     return [int(o) for o in got if o is not None]
 
 

@@ -384,6 +384,10 @@ class AxisController:
         }
 
 
+#: Loop rates (Hz) a flight controller runs at (ArduPilot's SCHED_LOOP_RATE 50-2000, PX4's
+#: IMU_GYRO_RATEMAX up to 8000); a logged one outside is damaged and the default is used
+_LOOP_HZ_RANGE = (50.0, 8000.0)
+
 #: ArduCopter 4.x defaults (ATC_RAT_*), per axis: P, I, D, FF, IMAX, FLTT, FLTE, FLTD, SMAX
 _AP_DEFAULTS = {
     "roll": (0.135, 0.135, 0.0036, 0.0, 0.5, 20.0, 0.0, 20.0, 0.0),
@@ -474,6 +478,15 @@ def controller_from_params(
         used[name] = value
         return value
 
+    def get_rate(name: str, default: float) -> float:
+        """A loop rate (Hz): the default where the log's is outside what a flight controller
+        runs (a damaged parameter; it sets how many controller steps are simulated)."""
+        value = get(name, default)
+        if not _LOOP_HZ_RANGE[0] <= value <= _LOOP_HZ_RANGE[1]:
+            value = used[name] = float(default)
+            defaults.append(name)
+        return value
+
     if kind == "px4":
         pre = f"MC_{_PX4[axis]}RATE_"
         p, i, d, ff, k, lim = _PX4_DEFAULTS[axis]
@@ -483,7 +496,7 @@ def controller_from_params(
             get("IMU_DGYRO_CUTOFF", _PX4_DGYRO_CUTOFF_HZ),
         )
         old = "IMU_GYRO_RATEMAX" not in params and "IMU_GYRO_CUTOFF" not in params
-        loop = get("IMU_GYRO_RATEMAX", _PX4_OLD_LOOP_HZ if old else _PX4_LOOP_HZ)
+        loop = get_rate("IMU_GYRO_RATEMAX", _PX4_OLD_LOOP_HZ if old else _PX4_LOOP_HZ)
         gyro = get("IMU_GYRO_CUTOFF", _PX4_GYRO_CUTOFF_HZ)
         notch = float(params.get("IMU_GYRO_NF0_FRQ", params.get("IMU_GYRO_NF_FREQ", 0.0)) or 0)
         ang = _angle_p(params, f"MC_{_PX4[axis]}_P", _PX4_ANGLE_P[axis], used)
@@ -522,7 +535,7 @@ def controller_from_params(
             vals[n] = get(pre + n, vals[n])
         gains = RateGains(vals["P"], vals["I"], vals["D"], vals["FF"], vals["IMAX"],
                           vals["FLTT"], vals["FLTD"], vals["FLTE"], vals["SMAX"])
-    loop = get("SCHED_LOOP_RATE", _AP_LOOP_HZ) or _AP_LOOP_HZ
+    loop = get_rate("SCHED_LOOP_RATE", _AP_LOOP_HZ)
     gyro = get("INS_GYRO_FILTER", _AP_GYRO_FILTER_HZ)
     notch = 0.0
     if params.get("INS_HNTCH_ENABLE", 0):

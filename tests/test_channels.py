@@ -384,3 +384,32 @@ def test_motors_on_remapped_outputs_are_unmixed_from_them() -> None:
     assert fd.input_names == ()
     assert any(issubclass(w.category, DataQualityWarning) and "motor(s) 5, 6 of 6" in
                str(w.message) for w in caught)
+
+
+@pytest.mark.parametrize(("params", "said"), [
+    ({"FRAME_CLASS": float("nan")}, "not numbers (a damaged log): quad-X assumed"),
+    ({"FRAME": float("inf")}, "not numbers (a damaged log): quad-X assumed"),
+    ({"FRAME_CLASS": 2.0, "FRAME_TYPE": float("nan")}, "FRAME_TYPE not a number: X assumed"),
+])
+def test_damaged_frame_parameters_are_said_not_a_crash(params, said) -> None:  # type: ignore[no-untyped-def]
+    """A NaN or infinite FRAME_CLASS/FRAME_TYPE/FRAME (a damaged PARM record) raised
+    ValueError out of the motor-output preset; now the frame is assumed and said so, and
+    non-number SERVOn_FUNCTIONs leave the motors on outputs 1..n."""
+    import warnings
+
+    from mavsid.align import align
+    from mavsid.channels import motor_channels
+    from mavsid.data import MessageTable, RawLog, SourceInfo
+
+    t = np.arange(0.0, 20.0, 0.01)
+    att = MessageTable("ATT", {"Roll": np.sin(t), "Pitch": np.cos(t), "Yaw": t * 0}, t)
+    rcou = MessageTable("RCOU", {f"C{i}": 1500 + 100 * np.sin(t + i) for i in range(1, 9)}, t)
+    raw = RawLog(SourceInfo("x.bin", "dataflash", 0), {"ATT": att, "RCOU": rcou},
+                 params=params, autopilot="ardupilot", vehicle="copter")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        fd = align(raw, "ardupilot-rcou")
+    assert fd.input_names[:3] == ("u_roll", "u_pitch", "u_yaw")
+    assert any(said in str(w.message) for w in caught), [str(w.message) for w in caught]
+    bad = {"SERVO1_FUNCTION": float("nan"), "SERVO2_FUNCTION": 1e300, "SERVO3_FUNCTION": 7.0}
+    assert motor_channels(bad, 4) == [1, 2, 3, 4]

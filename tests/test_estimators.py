@@ -536,3 +536,19 @@ def test_rows_with_nan_are_left_out_with_a_warning():
     with pytest.warns(DataQualityWarning, match="2 of 1496 rows"):
         m = LeastSquares(LIN2, n_bootstrap=0).fit([bad]).model_
     np.testing.assert_allclose(m.coef, truth_coef(), atol=2e-3)
+
+
+@pytest.mark.parametrize("params", [
+    {"IMU_GYRO_CUTOFF": 30.0, "IMU_GYRO_RATEMAX": float("inf")},
+    {"IMU_GYRO_CUTOFF": 30.0, "IMU_GYRO_RATEMAX": 1e9},
+    {"INS_GYRO_FILTER": 20.0, "INS_GYRO_RATE": float("nan")},
+    {"INS_GYRO_FILTER": 20.0, "INS_GYRO_RATE": 1e6},
+    {"INS_GYRO_FILTER": float("inf")},
+])
+def test_damaged_gyro_filter_parameters_do_not_crash_or_oversample(params) -> None:  # type: ignore[no-untyped-def]
+    """A non-finite or absurd gyro rate raised OverflowError (or asked for millions of
+    filter sub-steps per sample); the filter now runs at its nominal rate or not at all."""
+    from mavsid.estimators.regressors import filters_from_params
+
+    for f in filters_from_params(params, dt=0.0025):
+        assert f.substeps(0.0025) <= 20

@@ -573,3 +573,17 @@ def test_real_px4_log_controller_and_twin() -> None:
     assert verdict.numbers["fit_closed_loop_pct"] == cl.fit_percent
     if cl.fit_percent <= cl.baseline_percent:
         assert any("does not beat the baseline" in r for r in verdict.reasons)
+
+
+@pytest.mark.parametrize("value", [1e9, float("inf"), 0.0, 5.0])
+def test_a_damaged_loop_rate_is_not_simulated(value: float) -> None:
+    """A loop rate no flight controller runs (a damaged SCHED_LOOP_RATE or IMU_GYRO_RATEMAX)
+    set how many controller steps the twin simulates per sample: 1e9 Hz asked numpy for
+    78 GiB. The default is used instead, and said among the defaults."""
+    from mavsid.loop import controller_from_params
+
+    ap = controller_from_params({"ATC_RAT_RLL_P": 0.1, "SCHED_LOOP_RATE": value}, "roll")
+    assert ap.loop_hz == 400.0 and "SCHED_LOOP_RATE" in ap.defaults_used
+    px4 = controller_from_params({"MC_ROLLRATE_P": 0.1, "IMU_GYRO_RATEMAX": value}, "roll")
+    assert 100.0 <= px4.loop_hz <= 8000.0 and "IMU_GYRO_RATEMAX" in px4.defaults_used
+    assert controller_from_params({"SCHED_LOOP_RATE": 1000.0}, "roll").loop_hz == 1000.0

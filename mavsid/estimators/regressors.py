@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import functools
 import itertools
+import math
 import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -164,18 +165,25 @@ def filters_from_params(params: Mapping[str, float], dt: float) -> tuple[InputFi
     """
     out = []
     fc = float(params.get("INS_GYRO_FILTER", 0.0) or 0.0)
-    if fc > 0.0:
-        rate = 1000.0 * 2 ** int(params.get("INS_GYRO_RATE", 0) or 0)
+    if math.isfinite(fc) and fc > 0.0:
+        k = params.get("INS_GYRO_RATE", 0)  # 0-3: 1, 2, 4, 8 kHz (other values: damaged)
+        rate = 1000.0 * 2 ** (int(k) if isinstance(k, (int, float)) and 0 <= k <= 3 else 0)
         flt = InputFilter(fc, 2, "INS_GYRO_FILTER", rate_hz=max(rate, 1.0 / dt))
         if fc < 0.5 * flt.substeps(dt) / dt:
             out.append(flt)
     fc = float(params.get("IMU_GYRO_CUTOFF", 0.0) or 0.0)
-    if fc > 0.0:
+    if math.isfinite(fc) and fc > 0.0:
         rate = float(params.get("IMU_GYRO_RATEMAX", 0.0) or 0.0)
+        if not 0.0 < rate <= _MAX_GYRO_RATE_HZ:  # (beyond any IMU's: a damaged parameter)
+            rate = 0.0
         flt = InputFilter(fc, 2, "IMU_GYRO_CUTOFF", rate_hz=max(rate, 1.0 / dt))
         if fc < 0.5 * flt.substeps(dt) / dt:
             out.append(flt)
     return tuple(out)
+
+
+#: Fastest gyro sampling a parameter can state (PX4's IMU_GYRO_RATEMAX reaches 8 kHz)
+_MAX_GYRO_RATE_HZ = 8000.0
 
 
 @dataclass(frozen=True)

@@ -108,6 +108,7 @@ mavsid.errors.LogFormatError: ...: not a readable ULog (Invalid file format (Hea
 from __future__ import annotations
 
 import functools
+import math
 import mmap
 import os
 import re
@@ -1297,6 +1298,18 @@ def _params(parsed: _Parsed) -> tuple[dict[str, float], int, int]:
     return params, len(parsed.changed_params), bad
 
 
+def _vehicle(mav_type: Any) -> str | None:
+    """The vehicle class of a ``MAV_TYPE`` parameter; None when absent or not a whole number
+    (a damaged log's).
+
+    >>> _vehicle(2), _vehicle(float("nan")), _vehicle(None)
+    ('copter', None, None)
+    """
+    if isinstance(mav_type, (int, float)) and math.isfinite(mav_type):
+        return vehicle_class(int(mav_type))
+    return None
+
+
 def _firmware(info: dict[str, Any]) -> str | None:
     """``PX4 v1.14.0 (board)`` from ``ver_sw_release`` (0xMMmmpptt), else the git hash."""
     name = str(info.get("sys_name", "PX4"))
@@ -1422,7 +1435,7 @@ def read(
         texts=tuple(texts),
         modes=tuple(modes),
         autopilot="px4",
-        vehicle=vehicle_class(int(params["MAV_TYPE"])) if "MAV_TYPE" in params else None,
+        vehicle=_vehicle(params.get("MAV_TYPE")),
         firmware=_firmware(parsed.info),
         span_s=span,
     )

@@ -298,9 +298,17 @@ def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
 
     cfg = load_config(args.config) if args.config else PipelineConfig()
     axes = tuple(dict.fromkeys(args.axis)) if args.axis else None
+    preset = getattr(args, "preset", None)
+    if preset and preset.lower().endswith(".toml"):  # (your presets, tried before the built-in)
+        from mavsid.channels import load_presets
+
+        presets, mixers = load_presets(preset)
+        cfg = cfg.with_overrides(presets={**cfg.presets, **presets},
+                                 mixers={**cfg.mixers, **mixers})
+        preset = None
     return cfg.with_overrides(axes=axes, estimator=getattr(args, "estimator", None),
                               allow_unstable=getattr(args, "allow_unstable", None) or None,
-                              preset=getattr(args, "preset", None))
+                              preset=preset)
 
 
 @contextlib.contextmanager
@@ -393,7 +401,8 @@ def _add_output_flags(p: argparse.ArgumentParser) -> None:
                    help="axis to fit (repeat for several; default all with excitation)")
     p.add_argument("--config", metavar="FILE.toml", help="pipeline settings (see pipelines/)")
     p.add_argument("--preset", metavar="NAME",
-                   help="channel preset (mavsid.channels; default: chosen from the log)")
+                   help="channel preset name (mavsid.channels), or a TOML file of presets and "
+                   "mixers to choose from (default: chosen from the log)")
     p.add_argument("--rrd", metavar="OUT.rrd", help="write a rerun recording")
     p.add_argument("--report", metavar="OUT.html", help="write a self-contained HTML report")
     p.add_argument("--json", action="store_true", help="print the result as JSON")

@@ -316,3 +316,21 @@ def test_fit_uses_the_preset_named() -> None:
     assert "roll: not identified: rates/outputs logged at 10 Hz" in proc.stdout
     default = run("fit", str(FIXTURES / "sysid_roll.bin"), "--axis", "roll", "--json", "-q")
     assert json.loads(default.stdout)["presets"] == ["ardupilot-rate"]
+
+
+def test_fit_takes_presets_from_a_toml_file(tmp_path: Path) -> None:
+    """``fit --preset FILE.toml``: the file's presets and mixers, tried before the built-in
+    ones (as ``segments --preset`` and a config's ``presets_file``)."""
+    toml = tmp_path / "my.toml"
+    toml.write_text(
+        '[preset.my-rcou]\nformats = ["dataflash"]\nmixer = "my-quad"\n'
+        'motors = { message = "RCOU", field = "C{i}", unit = "pwm" }\n'
+        '[preset.my-rcou.states]\nroll = { message = "ATT", field = "Roll", unit = "deg" }\n'
+        'p = { message = "RATE", field = "R", unit = "deg/s" }\n'
+        '[mixer.my-quad]\nangle_deg = [45, -135, -45, 135]\nyaw = [1, 1, -1, -1]\n')
+    proc = run("fit", str(FIXTURES / "sysid_roll.bin"), "--preset", str(toml), "--axis", "roll",
+               "-q")
+    assert "inputs from RCOU are logged at 10.0 Hz" in proc.stderr
+    bad = run("fit", str(FIXTURES / "sysid_roll.bin"), "--preset", str(tmp_path / "no.toml"))
+    assert bad.returncode == 1 and bad.stderr.count("\n") == 1 and "no.toml" in bad.stderr
+

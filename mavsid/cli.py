@@ -396,13 +396,17 @@ def _print_result(args: argparse.Namespace, result: FitResult) -> None:
                                          if flag == "rrd" else ""))
 
 
+def _add_preset_flag(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--preset", metavar="NAME",
+                   help="channel preset name (mavsid.channels), or a TOML file of presets and "
+                   "mixers to choose from (default: chosen from the log)")
+
+
 def _add_output_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument("--axis", action="append", choices=("roll", "pitch", "yaw"),
                    help="axis to fit (repeat for several; default all with excitation)")
     p.add_argument("--config", metavar="FILE.toml", help="pipeline settings (see pipelines/)")
-    p.add_argument("--preset", metavar="NAME",
-                   help="channel preset name (mavsid.channels), or a TOML file of presets and "
-                   "mixers to choose from (default: chosen from the log)")
+    _add_preset_flag(p)
     p.add_argument("--rrd", metavar="OUT.rrd", help="write a rerun recording")
     p.add_argument("--report", metavar="OUT.html", help="write a self-contained HTML report")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
@@ -578,6 +582,7 @@ def _add_tune(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--axis", action="append", choices=("roll", "pitch", "yaw"),
                    help="axis to analyse (repeat for several; default all)")
     p.add_argument("--config", metavar="FILE.toml", help="pipeline settings (see pipelines/)")
+    _add_preset_flag(p)
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.set_defaults(handler=_tune)
 

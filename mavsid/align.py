@@ -85,6 +85,7 @@ from mavsid.channels import (
     unit_origin,
     vehicle_kind,
 )
+from mavsid.channels import _resolve as _resolve
 from mavsid.channels import _rows as _rows
 from mavsid.data import FlightData, MessageTable, RawLog
 from mavsid.errors import (
@@ -247,6 +248,10 @@ def _collect(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer]
             DataQualityWarning,
             stacklevel=4,
         )
+    elif preset.motors is not None and (more := _more_motors(raw, preset, mixers, n_motors)):
+        warnings.warn(f"{raw.source.path}: {more}: {preset.motors.message} not unmixed: no "
+                      "inputs (log the parameters, or choose a preset with this frame's mixer)",
+                      DataQualityWarning, stacklevel=4)
     elif preset.motors is not None and (unmapped := _unmapped_motors(raw, preset, mixers,
                                                                      n_motors)):
         warnings.warn(f"{raw.source.path}: {unmapped}: {preset.motors.message} not unmixed: "
@@ -724,6 +729,37 @@ def _main_sysid(raw: RawLog) -> int | None:
         return None
     ids, counts = np.unique(got[1], return_counts=True)
     return int(ids[np.argmax(counts)])
+
+
+def _more_motors(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer],
+                 n_motors: int | None) -> str:
+    """Why an assumed frame (no FRAME_CLASS/FRAME_TYPE, no motor count) cannot be trusted:
+    outputs beyond its motors that move in the PWM range (800-2200 µs) — a hexa's 5 and 6
+    in a .tlog whose parameters were not fetched, unmixed as a quad-X's four, give a wrong
+    model; a quad's gimbal servos there look the same, so neither is guessed. "" when no
+    such output moves or the frame is known."""
+    _, source = frame_of(raw.params, n_motors)
+    ch = preset.motors
+    if (ch is None or preset.mixer != "auto" or source == "FRAME_CLASS/FRAME_TYPE"
+            or n_motors is not None or ch.message not in raw.messages):
+        return ""
+    n = mixer_for(preset, raw.params, {**MIXERS, **mixers}, n_motors).n_motors
+    table = raw.messages[ch.message]
+    rows = _rows(table)
+    more = []
+    for i in range(n + 1, 17):
+        got = _resolve(table, ch.field.replace("{i}", str(i)))
+        if got is None:
+            break
+        v = np.asarray(got[0], dtype=np.float64)
+        v = v[(rows if rows is not None else np.ones(v.size, bool)) & np.isfinite(v)]
+        if v.size > 2 and 800.0 <= float(np.median(v)) <= 2200.0 and np.std(v) > 2.0:
+            more.append(i)
+    if not more:
+        return ""
+    return (f"{source.split(':')[0]}, and output(s) {', '.join(map(str, more))} move as "
+            f"motors or servos do: a frame with more than the {n} motors assumed cannot be "
+            "told from a quad with servos")
 
 
 def _unmapped_motors(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer],

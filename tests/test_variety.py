@@ -699,7 +699,7 @@ def _simulated_warned(tmp_path, name: str, layout: str | None = None, **options)
     return path, truth, fit([str(path)], PipelineConfig(axes=(axis,)))
 
 
-def _simulated_raw(path, layout: str, **options):  # type: ignore[no-untyped-def]
+def _simulated_raw(path, layout: str | None, **options):  # type: ignore[no-untyped-def]
     """The log simulated from ``options`` in ``layout`` at ``path``, read (warnings muted)."""
     from mavsid.readers import read_log
     from mavsid.synthetic.run import scenario_from_options, simulate
@@ -708,3 +708,23 @@ def _simulated_raw(path, layout: str, **options):  # type: ignore[no-untyped-def
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         return read_log(path)
+
+
+def test_a_tlog_without_frame_parameters_is_not_unmixed_as_a_quad_when_it_is_not_one(
+        tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """A .tlog whose ground station fetched no parameters holds no FRAME_CLASS: a quad-X was
+    assumed, and a hexa's first four motors unmixed as a quad's gave a wrong model. Outputs
+    beyond the fourth that move (motors, or a quad's servos: they cannot be told apart) now
+    stop the guess; a quad with idle outputs 5-8 is still unmixed as one."""
+    from mavsid.align import align
+
+    for frame, vehicle, unmixed in (("hexa-x", "hexa", False), ("quad-x", "quad", True)):
+        raw = _simulated_raw(tmp_path / f"{frame}.tlog", None, manoeuvre="doublet",
+                             axis="pitch", vehicle=vehicle, frame=frame, seed=1)
+        raw = dataclasses.replace(raw, params={})
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            fd = align(raw)
+        assert bool(fd.input_names) is unmixed
+        said = [str(w.message) for w in caught if "cannot be told from a quad" in str(w.message)]
+        assert bool(said) is not unmixed and (unmixed or "output(s) 5, 6" in said[0])

@@ -403,7 +403,9 @@ def test_damaged_frame_parameters_are_said_not_a_crash(params, said) -> None:  #
 
     t = np.arange(0.0, 20.0, 0.01)
     att = MessageTable("ATT", {"Roll": np.sin(t), "Pitch": np.cos(t), "Yaw": t * 0}, t)
-    rcou = MessageTable("RCOU", {f"C{i}": 1500 + 100 * np.sin(t + i) for i in range(1, 9)}, t)
+    motors = 6 if params.get("FRAME_CLASS") == 2.0 else 4  # (the other outputs unused)
+    rcou = MessageTable("RCOU", {f"C{i}": (1500 + 100 * np.sin(t + i)) * (i <= motors)
+                                 for i in range(1, 9)}, t)
     raw = RawLog(SourceInfo("x.bin", "dataflash", 0), {"ATT": att, "RCOU": rcou},
                  params=params, autopilot="ardupilot", vehicle="copter")
     with warnings.catch_warnings(record=True) as caught:

@@ -1350,8 +1350,11 @@ def closed_loop_fit(
     tr = _locate(train, axis, flights, sigs)
     val = _locate(held_out, axis, flights, sigs)
     if not val:
+        from mavsid.channels import TARGET_CHANNELS
+
+        names = [f"{c.message}.{c.field}" for c in TARGET_CHANNELS[AXIS_RATE[axis]]]
         raise ConfigError(f"{axis}: no rate target logged for the held-out blocks "
-                          "(RATE.RDes, PIDR.Tar or vehicle_rates_setpoint)")
+                          f"({', '.join(names[:-1])} or {names[-1]})")
     ctrl = val[0].ctrl
     dt = val[0].seg.dt
     substeps = max(1, round(ctrl.loop_hz * dt))

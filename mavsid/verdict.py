@@ -239,9 +239,8 @@ def logging_advice(autopilot: str | None, telemetry: bool = False) -> str:
     if _before_rate(autopilot):
         return ("ArduCopter before 3.3 logs no RATE record and RCOU at 10 Hz: fly 3.3 or later "
                 "with LOG_BITMASK bits ATTITUDE_FAST and ATTITUDE_MED (RATE at loop rate)")
-    return ("ArduPilot: set LOG_BITMASK bits ATTITUDE_FAST and ATTITUDE_MED (RATE at loop rate) "
-            "and INS_LOG_BAT_MASK=1 (gyro batches) so that RATE and its outputs are logged at "
-            "100 Hz or more")
+    return ("ArduPilot: set LOG_BITMASK bit ATTITUDE_FAST (with ATTITUDE_MED) so that RATE, "
+            "the body rates and the rate controller's outputs, is logged at loop rate")
 
 
 def _pole(z: complex, dt: float) -> float:

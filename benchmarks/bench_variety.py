@@ -4,7 +4,7 @@
 
 Each flight is drawn from the simulator's whole range: manoeuvre (SYSTEMID mixer chirp, stick
 doublet, 3-2-1-1, random stick), axis, vehicle (small quad, heavier X quad, hexacopter, a
-light racer on its own rate tuning) and its motor frame (quad-X, hexa-X, coaxial Y6 and
+light racer on its own rate tuning, a heavy-lift on 120-ms motors) and its motor frame (quad-X, hexa-X, coaxial Y6 and
 X8, as ArduPilot mixes them), gyro
 white noise fed back through the rate controller (0-6 deg/s), frame vibration (0-5 deg/s),
 logging rate (10-400 Hz; 10 Hz logs every message that slowly) and log layout (ArduCopter
@@ -76,6 +76,8 @@ def draw(rng: random.Random) -> dict[str, Any]:
         vtol = random.Random(f"vtol {s['seed']}")
         if vtol.random() < 0.5:
             s["layout"], s["vehicle"] = "quadplane", vtol.choice(["quad", "heavy-x", "hexa"])
+    if s["vehicle"] == "heavy-x" and random.Random(f"lift {s['seed']}").random() < 0.25:
+        s["vehicle"] = "heavy-lift"  # a quarter of the heavy quads on 120-ms motors (apart)
     # the motor frame, drawn apart (the draws above stay those of earlier sweeps): a hexa's
     # plant as hexa-X or coaxial Y6, a heavy X's as quad-X or coaxial X8 (ArduCopter 3.2
     # named its frame only by its build: quad-X there)

@@ -215,10 +215,12 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--rate-hz", type=float, default=400.0,
                    help="RATE/SIDD logging rate, must divide 400 Hz (400); below 25 Hz "
                    "every message is logged slowly")
-    p.add_argument("--vehicle", choices=("quad", "heavy-x", "hexa", "heli", "plane", "racer"),
+    p.add_argument("--vehicle", choices=("quad", "heavy-x", "hexa", "heli", "plane", "racer",
+                                         "heavy-lift"),
                    help="plant: small quad (default), heavier X quad, hexacopter inertia, "
                    "traditional helicopter, fixed-wing plane (default for --layout heli / "
-                   "plane), light racer quad (flown with its own rate tuning)")
+                   "plane), light racer quad (flown with its own rate tuning), heavy-lift "
+                   "(120-ms motors, flown with its own tuning)")
     p.add_argument("--frame", choices=("quad-x", "hexa-x", "y6b", "octaquad-x"),
                    default="quad-x",
                    help="multirotor frame the motors are mixed for and logged as "

@@ -70,6 +70,7 @@ __all__ = [
     "ESTIMATORS",
     "LAG_OE_TOL",
     "LAG_PRUNE",
+    "LONG_LAGS_S",
     "ONE_STEP_NOISE",
     "DelayScan",
     "StructureChoice",
@@ -90,6 +91,9 @@ AXES: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
 
 #: Default candidates for a first-order input (motor) lag, s.
 DEFAULT_LAGS_S: tuple[float, ...] = (0.0, 0.005, 0.01, 0.015, 0.02, 0.03, 0.04, 0.06)
+#: Longer lags searched too when the best of the default ones is the longest (a heavy-lift
+#: frame's large propellers: motor time constants of 80-150 ms)
+LONG_LAGS_S: tuple[float, ...] = (0.08, 0.1, 0.13, 0.17)
 
 #: Noisy data (best one-step residual RMS over ``ONE_STEP_NOISE`` of the output's RMS about
 #: its mean, i.e. a one-step fit under 99 %; clean simulated and SITL chirps reach 0.2-0.8 %,
@@ -543,7 +547,8 @@ def search_structure(
     lags_s : iterable of float, optional
         Candidate time constants (s) of a first-order input lag; 0 is always a candidate;
         None: no lag. Lags whose corner lies above the Nyquist frequency are left out (they
-        cannot be told from a fraction of a sample of delay).
+        cannot be told from a fraction of a sample of delay). The default grid is searched
+        again with :data:`LONG_LAGS_S` added when its longest lag scores best.
     structure_tol : float
         Parsimony: the simplest (shortest lag, then shortest delay) candidate whose mean
         squared one-step residual is within this fraction of the best is chosen.
@@ -606,6 +611,15 @@ def search_structure(
     if not cands:
         raise NoExcitationError("segments too short for every candidate delay")
     floor = min(c[0] for c in cands)
+    best = {lg: min((c[0] for c in cands if c[1] == lg), default=np.inf) for lg in lag_grid}
+    if (lags_s is DEFAULT_LAGS_S and len(lag_grid) > 1 and lag_grid[-1] == DEFAULT_LAGS_S[-1]
+            and best[lag_grid[-1]] < best[lag_grid[-2]] * (1 - structure_tol)):
+        # the grid's longest lag scores best, and clearly (not a flat score: a yaw plant's
+        # slow pole tells lags apart little): the motors may be slower than it reaches
+        return search_structure(segments, structure, delay=delay, delays=delays,
+                                delay_step=delay_step, max_delay_s=max_delay_s,
+                                lags_s=DEFAULT_LAGS_S + LONG_LAGS_S,
+                                structure_tol=structure_tol)
     _, lag, dly = min((c for c in cands if c[0] <= floor * (1 + structure_tol)),
                       key=lambda c: (c[1], c[2]))
     whole, frac = _split_delay(dly)

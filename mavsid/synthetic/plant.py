@@ -187,6 +187,9 @@ class PlantParams:
 #: - ``racer``: a small, light quad with a high thrust-to-weight ratio (3x the default
 #:   quad's authority, stronger damping, fast motors, 40 Hz gyro filter, hovering at 25 %
 #:   throttle), flown with rate gains tuned to it (:data:`RATE_GAIN_SCALE`).
+#: - ``heavy-lift``: a large multirotor on big propellers: motors with a 120-ms time
+#:   constant, a quarter of the default quad's authority, weak damping, a 10-Hz gyro filter;
+#:   flown with twice the default rate gains.
 VEHICLES: dict[str, PlantParams] = {
     "quad": PlantParams(),
     "heavy-x": PlantParams(damping=(2.5, 2.8, 0.8), effectiveness=(95.0, 80.0, 9.0),
@@ -204,13 +207,17 @@ VEHICLES: dict[str, PlantParams] = {
     "racer": PlantParams(damping=(6.0, 6.0, 2.5), effectiveness=(540.0, 500.0, 75.0),
                          motor_tau_s=0.01, delay_s=0.003, gyro_filter_hz=40.0,
                          hover_throttle=0.25),
+    # large propellers: slow motors (120 ms), little authority, a 10-Hz gyro filter
+    "heavy-lift": PlantParams(damping=(1.5, 1.5, 0.5), effectiveness=(40.0, 36.0, 8.0),
+                              motor_tau_s=0.12, delay_s=0.01, gyro_filter_hz=10.0,
+                              hover_throttle=0.55),
 }
 
 #: Vehicles flown with their own rate tuning: the default rate P, I and D (and their
 #: ``IMAX``-free gains only) multiplied by this, so that the loop gain (gain × control
 #: effectiveness) is the default quad's, as its owner's tuning would make it. The others fly
 #: the default gains.
-RATE_GAIN_SCALE: dict[str, float] = {"racer": 1.0 / 3.0}
+RATE_GAIN_SCALE: dict[str, float] = {"racer": 1.0 / 3.0, "heavy-lift": 2.0}
 
 
 @dataclass(frozen=True)

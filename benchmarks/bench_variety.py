@@ -4,14 +4,13 @@
 
 Each flight is drawn from the simulator's whole range: manoeuvre (SYSTEMID mixer chirp, stick
 doublet, 3-2-1-1, random stick), axis, vehicle (small quad, heavier X quad, hexacopter, a
-light racer on its own rate tuning, a heavy-lift on 120-ms motors) and its motor frame (quad-X, hexa-X, coaxial Y6 and
-X8, as ArduPilot mixes them), gyro
-white noise fed back through the rate controller (0-6 deg/s), frame vibration (0-5 deg/s),
-logging rate (10-400 Hz; 10 Hz logs every message that slowly) and log layout (ArduCopter
-3.2, 3.3, 3.4-dev, 3.6, 4.x, a 4.x traditional heli, ArduPlane 4.x, an ArduPlane QuadPlane
-hovering; PX4 1.11, 1.14; a
-ground station's MAVLink telemetry, its streams at 50 Hz, or at the logging rate below 25 Hz;
-heli and plane fly their own plants).
+light racer on its own rate tuning, a heavy-lift on 120-ms motors) and its motor frame
+(quad-X, hexa-X, coaxial Y6 and X8, as ArduPilot mixes them), gyro white noise fed back
+through the rate controller (0-6 deg/s), frame vibration (0-5 deg/s), logging rate
+(10-400 Hz; 10 Hz logs every message that slowly) and log layout (ArduCopter 3.2, 3.3,
+3.4-dev, 3.6, 4.x, a 4.x traditional heli, ArduPlane 4.x, an ArduPlane QuadPlane hovering;
+PX4 1.11, 1.14; a ground station's MAVLink telemetry, its streams at 50 Hz, or at the
+logging rate below 25 Hz; heli and plane fly their own plants).
 Each is fitted with the defaults (``pipeline.fit``, the axis flown) and compared with the
 simulated plant's truth:
 

@@ -91,8 +91,8 @@ AXES: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
 
 #: Default candidates for a first-order input (motor) lag, s.
 DEFAULT_LAGS_S: tuple[float, ...] = (0.0, 0.005, 0.01, 0.015, 0.02, 0.03, 0.04, 0.06)
-#: Longer lags searched too when the best of the default ones is the longest (a heavy-lift
-#: frame's large propellers: motor time constants of 80-150 ms)
+#: Longer lags searched too when the longest default one scores best by more than the
+#: parsimony margin (a heavy-lift frame's large propellers: motor time constants of 80-150 ms)
 LONG_LAGS_S: tuple[float, ...] = (0.08, 0.1, 0.13, 0.17)
 
 #: Noisy data (best one-step residual RMS over ``ONE_STEP_NOISE`` of the output's RMS about
@@ -548,7 +548,8 @@ def search_structure(
         Candidate time constants (s) of a first-order input lag; 0 is always a candidate;
         None: no lag. Lags whose corner lies above the Nyquist frequency are left out (they
         cannot be told from a fraction of a sample of delay). The default grid is searched
-        again with :data:`LONG_LAGS_S` added when its longest lag scores best.
+        again with :data:`LONG_LAGS_S` added when its longest lag scores best by more than
+        ``structure_tol``.
     structure_tol : float
         Parsimony: the simplest (shortest lag, then shortest delay) candidate whose mean
         squared one-step residual is within this fraction of the best is chosen.

@@ -65,6 +65,7 @@ from mavsid.channels import (
     INPUT_NAMES,
     MIXERS,
     PRESETS,
+    QUADPLANE,
     STATE_NAMES,
     STATE_UNITS,
     Channel,
@@ -78,7 +79,6 @@ from mavsid.channels import (
     get_preset,
     has_mixer,
     mixer_for,
-    motor_channels,
     motor_thrusts,
     preset_messages,
     servo_inputs,
@@ -159,9 +159,10 @@ def _resolve_preset(raw: RawLog, preset: Preset | str | None,
     return choose_preset(raw, presets)
 
 
-#: ArduPlane's QuadPlane logs its VTOL rate controllers (PIQR/PIQP/PIQY) while they fly the
-#: aircraft, its fixed-wing ones (PIDR...) with every attitude record
-_VTOL, _WING = "ardupilot-quadplane", ("ardupilot-plane-pid", "ardupilot-plane-servo")
+#: The fixed-wing presets of an ArduPlane log. A QuadPlane logs its VTOL rate controllers
+#: (PIQR/PIQP/PIQY) while they fly the aircraft, its fixed-wing ones (PIDR...) with every
+#: attitude record
+_WING = ("ardupilot-plane-pid", "ardupilot-plane-servo")
 
 
 def _vtol_or_wing(raw: RawLog, candidates: list[Preset]) -> list[Preset]:
@@ -171,16 +172,16 @@ def _vtol_or_wing(raw: RawLog, candidates: list[Preset]) -> list[Preset]:
     other."""
     names = [p.name for p in candidates]
     wing = next((n for n in names if n in _WING), None)
-    if _VTOL not in names or wing is None or names.index(_VTOL) > names.index(wing):
+    if QUADPLANE not in names or wing is None or names.index(QUADPLANE) > names.index(wing):
         return candidates
     att = len(raw.messages["PIDR"]) if "PIDR" in raw.messages else 0
     share = len(raw.messages["PIQR"]) / att if att else 1.0
     if share < 0.5:
-        vtol = candidates.pop(names.index(_VTOL))
+        vtol = candidates.pop(names.index(QUADPLANE))
         candidates.insert(names.index(wing), vtol)
-        fitted, other, what = wing, _VTOL, "VTOL"
+        fitted, other, what = wing, QUADPLANE, "VTOL"
     else:
-        fitted, other, what = _VTOL, wing, "fixed-wing"
+        fitted, other, what = QUADPLANE, wing, "fixed-wing"
     warnings.warn(f"{raw.source.path}: a QuadPlane, its VTOL controllers flying "
                   f"{100 * min(share, 1.0):.0f} % of the attitude records: preset {fitted} "
                   f"fitted; --preset {other} fits the {what} flight", DataQualityWarning,
@@ -230,54 +231,8 @@ def _collect(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer]
     inputs: list[_Series] = []
     mixer_name = None
     kind = (raw.vehicle or "").split()[0].lower() if (raw.vehicle or "").strip() else ""
-    n_motors = _motor_count(raw, preset)
-    if preset.motors is not None and kind in _NOT_MULTICOPTER:
-        warnings.warn(
-            f"{raw.source.path}: a {raw.vehicle}'s {preset.motors.message} outputs are not a "
-            "multicopter's motors: no inputs (the mixer presets are for multicopters)",
-            DataQualityWarning,
-            stacklevel=4,
-        )
-    elif preset.motors is not None and preset.mixer == "auto" and not has_mixer(
-            raw.params, n_motors):
-        key, _ = frame_of(raw.params, n_motors)
-        warnings.warn(
-            f"{raw.source.path}: FRAME_CLASS {key[0]} FRAME_TYPE {key[1]} "
-            f"({frame_name(key)}): no motor mixer for it here, {preset.motors.message} not "
-            "unmixed: no inputs (choose a preset with a mixer of your own for this frame)",
-            DataQualityWarning,
-            stacklevel=4,
-        )
-    elif preset.motors is not None and (more := _more_motors(raw, preset, mixers, n_motors)):
-        warnings.warn(f"{raw.source.path}: {more}: {preset.motors.message} not unmixed: no "
-                      "inputs (log the parameters, or choose a preset with this frame's mixer)",
-                      DataQualityWarning, stacklevel=4)
-    elif preset.motors is not None and (unmapped := _unmapped_motors(raw, preset, mixers,
-                                                                     n_motors)):
-        warnings.warn(f"{raw.source.path}: {unmapped}: {preset.motors.message} not unmixed: "
-                      "no inputs", DataQualityWarning, stacklevel=4)
-    elif preset.motors is not None:
-        mixer = mixer_for(preset, raw.params, {**MIXERS, **mixers}, n_motors)
-        mixer_name = mixer.name
-        _, frame_source = frame_of(raw.params, n_motors)
-        if preset.mixer == "auto" and frame_source != "FRAME_CLASS/FRAME_TYPE":
-            warnings.warn(
-                f"{raw.source.path}: {frame_source}: {preset.motors.message} unmixed as "
-                f"{mixer.name} (choose a preset with another mixer if the frame differs)",
-                DataQualityWarning,
-                stacklevel=4,
-            )
-        t, thrust = motor_thrusts(raw, preset, mixer)
-        u = mixer.unmix(thrust)
-        late, bad_t = _mistimed(t)
-        excluded: tuple[tuple[str, int], ...] = ()
-        if late.any():
-            excluded = (("mistimed", int(late.sum())),)
-            t, u = t[~late], u[~late]
-        for j, name in enumerate(INPUT_NAMES):
-            inputs.append(_Series(name, f"{preset.motors.message} ({mixer.name} mixer)", t,
-                                  u[:, j], bad_t, excluded,
-                                  "PWM us through the thrust curve, unmixed"))
+    if preset.motors is not None:
+        inputs, mixer_name = _motor_inputs(raw, preset, mixers, kind)
     elif preset.servos is not None:
         for name, source, t, v in servo_inputs(raw, preset):
             late, bad_t = _mistimed(t)
@@ -731,19 +686,65 @@ def _main_sysid(raw: RawLog) -> int | None:
     return int(ids[np.argmax(counts)])
 
 
-def _more_motors(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer],
-                 n_motors: int | None) -> str:
-    """Why an assumed frame (no FRAME_CLASS/FRAME_TYPE, no motor count) cannot be trusted:
-    outputs beyond its motors that move in the PWM range (800-2200 µs) — a hexa's 5 and 6
-    in a .tlog whose parameters were not fetched, unmixed as a quad-X's four, give a wrong
-    model; a quad's gimbal servos there look the same, so neither is guessed. "" when no
-    such output moves or the frame is known."""
-    _, source = frame_of(raw.params, n_motors)
+def _motor_inputs(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer], kind: str
+                  ) -> tuple[list[_Series], str | None]:
+    """The inputs a motor-output preset gives: the motors' PWM through the thrust curve,
+    unmixed by the frame's mixer, and its name; none (and a warning saying why) for a
+    vehicle that is not a multicopter, a frame without a mixer here, an assumed frame the
+    outputs contradict (:func:`_more_motors`) or outputs that do not carry the motors."""
     ch = preset.motors
-    if (ch is None or preset.mixer != "auto" or source == "FRAME_CLASS/FRAME_TYPE"
-            or n_motors is not None or ch.message not in raw.messages):
-        return ""
-    n = mixer_for(preset, raw.params, {**MIXERS, **mixers}, n_motors).n_motors
+    assert ch is not None
+    path = raw.source.path
+
+    def none(why: str) -> tuple[list[_Series], str | None]:
+        warnings.warn(f"{path}: {why}", DataQualityWarning, stacklevel=6)
+        return [], None
+
+    if kind in _NOT_MULTICOPTER:
+        return none(f"a {raw.vehicle}'s {ch.message} outputs are not a multicopter's motors: "
+                    "no inputs (the mixer presets are for multicopters)")
+    n_motors = _motor_count(raw, preset)
+    key, frame_source = frame_of(raw.params, n_motors)
+    if preset.mixer == "auto" and not has_mixer(raw.params, n_motors):
+        return none(f"FRAME_CLASS {key[0]} FRAME_TYPE {key[1]} ({frame_name(key)}): no motor "
+                    f"mixer for it here, {ch.message} not unmixed: no inputs (choose a preset "
+                    "with a mixer of your own for this frame)")
+    mixer = mixer_for(preset, raw.params, {**MIXERS, **mixers}, n_motors)
+    assumed = preset.mixer == "auto" and frame_source != "FRAME_CLASS/FRAME_TYPE"
+    more = _more_motors(raw, preset, mixer.n_motors) if assumed and n_motors is None else []
+    if more:
+        return none(f"{frame_source.split(':')[0]}, and output(s) {', '.join(map(str, more))} "
+                    f"move as motors or servos do: a frame with more than the "
+                    f"{mixer.n_motors} motors assumed cannot be told from a quad with servos: "
+                    f"{ch.message} not unmixed: no inputs (log the parameters, or choose a "
+                    "preset with this frame's mixer)")
+    try:
+        t, thrust = motor_thrusts(raw, preset, mixer)
+    except ConfigError as exc:  # (SERVOn_FUNCTION: the outputs do not carry every motor)
+        return none(f"{mixer.name} mixer: {exc}: {ch.message} not unmixed: no inputs")
+    if assumed:
+        warnings.warn(f"{path}: {frame_source}: {ch.message} unmixed as {mixer.name} (choose a "
+                      "preset with another mixer if the frame differs)", DataQualityWarning,
+                      stacklevel=5)
+    u = mixer.unmix(thrust)
+    late, bad_t = _mistimed(t)
+    excluded: tuple[tuple[str, int], ...] = ()
+    if late.any():
+        excluded = (("mistimed", int(late.sum())),)
+        t, u = t[~late], u[~late]
+    return [_Series(name, f"{ch.message} ({mixer.name} mixer)", t, u[:, j], bad_t, excluded,
+                    "PWM us through the thrust curve, unmixed")
+            for j, name in enumerate(INPUT_NAMES)], mixer.name
+
+
+def _more_motors(raw: RawLog, preset: Preset, n: int) -> list[int]:
+    """The outputs beyond an assumed frame's ``n`` motors that move in the PWM range
+    (800-2200 µs): a hexa's 5 and 6 in a .tlog whose parameters were not fetched, unmixed
+    as a quad-X's four, give a wrong model, and a quad's gimbal servos there look the same,
+    so neither is guessed."""
+    ch = preset.motors
+    if ch is None or ch.message not in raw.messages:
+        return []
     table = raw.messages[ch.message]
     rows = _rows(table)
     more = []
@@ -755,23 +756,7 @@ def _more_motors(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer],
         v = v[(rows if rows is not None else np.ones(v.size, bool)) & np.isfinite(v)]
         if v.size > 2 and 800.0 <= float(np.median(v)) <= 2200.0 and np.std(v) > 2.0:
             more.append(i)
-    if not more:
-        return ""
-    return (f"{source.split(':')[0]}, and output(s) {', '.join(map(str, more))} move as "
-            f"motors or servos do: a frame with more than the {n} motors assumed cannot be "
-            "told from a quad with servos")
-
-
-def _unmapped_motors(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer],
-                     n_motors: int | None) -> str:
-    """Why the motors have no outputs to read (:func:`~mavsid.channels.motor_channels`), or
-    "" when they have."""
-    mixer = mixer_for(preset, raw.params, {**MIXERS, **mixers}, n_motors)
-    try:
-        motor_channels(raw.params, mixer.n_motors)
-    except ConfigError as exc:
-        return f"{mixer.name} mixer: {exc}"
-    return ""
+    return more
 
 
 def _motor_count(raw: RawLog, preset: Preset) -> int | None:

@@ -126,6 +126,7 @@ __all__ = [
     "MIXERS",
     "PLANE_SURFACE_DEG",
     "PRESETS",
+    "QUADPLANE",
     "SERVO_FUNCTIONS",
     "STATE_NAMES",
     "TARGET_CHANNELS",
@@ -512,12 +513,15 @@ _PX4_AC0 = {
 #: centidegrees limited to ±4500 (libraries/APM_Control/AP_RollController.cpp)
 PLANE_SURFACE_DEG = 45.0
 
+#: The preset of an ArduPlane QuadPlane's VTOL flight (its multicopter rate controller)
+QUADPLANE = "ardupilot-quadplane"
+
 #: built-in presets, most informative first (the order :func:`choose_preset` tries them)
 PRESETS: dict[str, Preset] = {
     p.name: p
     for p in (
         Preset(
-            "ardupilot-quadplane", _DF,
+            QUADPLANE, _DF,
             states={**_ATT, "p": _ch("PIQR", "Act", "rad/s"), "q": _ch("PIQP", "Act", "rad/s"),
                     "r": _ch("PIQY", "Act", "rad/s")},
             inputs={"u_roll": _ch("PIQR", "P+I+D+FF"), "u_pitch": _ch("PIQP", "P+I+D+FF"),

@@ -148,7 +148,7 @@ def _add_segments(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     p.add_argument("--scan", action="store_true",
                    help="scan sliding windows also on axes that have a SYSTEMID run")
     p.add_argument("--window", type=float, default=5.0, help="scan window length, s (5)")
-    p.add_argument("--preset", help="channel preset name, or a TOML file of presets")
+    _add_preset_flag(p)
     p.add_argument("--rate", type=float, help="grid rate, Hz (default: the rate channel's)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.set_defaults(handler=_segments)
@@ -158,13 +158,9 @@ def _segments(args: argparse.Namespace) -> int:
     import json
 
     from mavsid.align import load_flight
-    from mavsid.channels import load_presets
     from mavsid.excitation import ScanOptions, find_segments, format_reports
 
-    preset, presets, mixers = args.preset, None, None
-    if preset and preset.lower().endswith(".toml"):
-        presets, mixers = load_presets(preset)
-        preset = None
+    preset, presets, mixers = _preset_arg(args.preset)
     with _progress(args, 2) as step:
         step(f"reading {args.log}")
         flight = load_flight(args.log, preset, args.rate, presets=presets, mixers=mixers)
@@ -300,14 +296,10 @@ def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
 
     cfg = load_config(args.config) if args.config else PipelineConfig()
     axes = tuple(dict.fromkeys(args.axis)) if args.axis else None
-    preset = getattr(args, "preset", None)
-    if preset and preset.lower().endswith(".toml"):  # (your presets, tried before the built-in)
-        from mavsid.channels import load_presets
-
-        presets, mixers = load_presets(preset)
-        cfg = cfg.with_overrides(presets={**cfg.presets, **presets},
-                                 mixers={**cfg.mixers, **mixers})
-        preset = None
+    preset, presets, mixers = _preset_arg(getattr(args, "preset", None))
+    if presets or mixers:  # (your presets, tried before the built-in ones)
+        cfg = cfg.with_overrides(presets={**cfg.presets, **(presets or {})},
+                                 mixers={**cfg.mixers, **(mixers or {})})
     return cfg.with_overrides(axes=axes, estimator=getattr(args, "estimator", None),
                               allow_unstable=getattr(args, "allow_unstable", None) or None,
                               preset=preset)
@@ -396,6 +388,17 @@ def _print_result(args: argparse.Namespace, result: FitResult) -> None:
             if path:
                 print(f"wrote {path}" + (f" (open it with: rerun --bind 127.0.0.1 {path})"
                                          if flag == "rrd" else ""))
+
+
+def _preset_arg(preset: str | None) -> tuple[str | None, dict[str, Any] | None,
+                                              dict[str, Any] | None]:
+    """``--preset``: a preset's name, or a TOML file's presets and mixers (name None)."""
+    if preset and preset.lower().endswith(".toml"):
+        from mavsid.channels import load_presets
+
+        presets, mixers = load_presets(preset)
+        return None, dict(presets), dict(mixers)
+    return preset, None, None
 
 
 def _add_preset_flag(p: argparse.ArgumentParser) -> None:

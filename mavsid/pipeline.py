@@ -56,7 +56,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from mavsid.channels import source_text
+from mavsid.channels import QUADPLANE, source_text
 from mavsid.data import FlightData, Segment
 from mavsid.errors import ConfigError, MavsidError, NoExcitationError, escape
 from mavsid.threads import one_blas_thread
@@ -550,7 +550,7 @@ def _closed_loop(
 
     planes = [fd for fd in flights
               if str(fd.meta.get("vehicle") or "").lower().split()[:1] == ["plane"]
-              and fd.preset != "ardupilot-quadplane"]  # (a QuadPlane's VTOL: a multicopter's)
+              and fd.preset != QUADPLANE]  # (a QuadPlane's VTOL: a multicopter's)
     if planes:  # (the twin would run a multicopter's controller on a plane's targets)
         return dataclasses.replace(
             fitted, closed_loop_note="no closed-loop twin for ArduPlane: the twin rebuilds "

@@ -544,7 +544,9 @@ def _autopilot(flights: Sequence[Any]) -> str | None:
     for fd in flights:
         meta = getattr(fd, "meta", None)
         if meta and meta.get("autopilot"):
-            vtol = "quadplane" if getattr(fd, "preset", "") == "ardupilot-quadplane" else ""
+            from mavsid.channels import QUADPLANE
+
+            vtol = "quadplane" if getattr(fd, "preset", "") == QUADPLANE else ""
             words = (meta.get("autopilot"), meta.get("vehicle"), meta.get("firmware"), vtol)
             return " ".join(str(w) for w in words if w)
     return None

@@ -9,8 +9,12 @@ interpreter (what a command-line run gets: fresh arrays fault their pages in), e
 own child process, ``--cold-runs`` times (min, median and max printed); and **warm**, the
 best of repeats of the same read in that child. Each child imports its library before the
 clock starts (start-up is ``bench_startup.py``'s); whatever the read imports itself is
-counted. Ratios are pymavlink's time over mavsid's (cold: median over median), both measured
-in this run. The machine may be shared: the DataFlash reads compared are taken in turn (a
+counted. Children run with one BLAS thread (:func:`child_env`), as the ``mavsid`` command
+sets for itself before numpy loads: otherwise OpenBLAS's threads, started with numpy, spin
+for the first ~0.1 s of a process and take a core from the first read (a cold 30-MB
+selective read: 75-95 ms of wall time, 105-120 ms of CPU, against 64 ms with one thread).
+Ratios are pymavlink's time over mavsid's (cold: median over median), both measured in this
+run. The machine may be shared: the DataFlash reads compared are taken in turn (a
 pymavlink run, ``--ref-runs`` of them, among mavsid's) and the load average is printed.
 
 DataFlash: builds a >= 200 MB ``.bin`` by concatenating the shared ``.bin`` logs (the SITL
@@ -198,9 +202,20 @@ class Figures:
                 f"{self.count} messages")
 
 
+def child_env() -> dict[str, str]:
+    """The environment of a child: this one, with the BLAS thread counts the ``mavsid``
+    command sets (one thread) unless the user set one (:mod:`mavsid.threads`)."""
+    from mavsid.threads import BLAS_THREAD_VARS, user_set
+
+    env = dict(os.environ)
+    if not user_set():
+        env.update(dict.fromkeys(BLAS_THREAD_VARS, "1"))
+    return env
+
+
 def _spawn(args: list[str]) -> dict[str, Any]:
     proc = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--child", *args],
-                          capture_output=True, text=True, check=False)
+                          capture_output=True, text=True, check=False, env=child_env())
     lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
     if proc.returncode or not lines:
         raise RuntimeError(f"child {args} failed: {proc.stderr.strip()[-2000:]}")
@@ -419,7 +434,7 @@ def cold(path: Path, which: str) -> tuple[float, float]:
     import sys
 
     out = subprocess.run([sys.executable, "-c", _COLD, str(path), which], check=True,
-                         capture_output=True, text=True, cwd=ROOT).stdout.split()
+                         capture_output=True, text=True, cwd=ROOT, env=child_env()).stdout.split()
     return float(out[0]), float(out[1])
 
 

@@ -83,6 +83,10 @@ TOML presets
     [mixer.my-hexa]                  # angle_deg and yaw (+1 CCW, -1 CW) per motor
     angle_deg = [90, -90, -30, 150, 30, -150]
     yaw = [-1, 1, -1, 1, 1, -1]
+    [mixer.my-y6]                    # or raw roll and pitch factors (add_motor_raw's)
+    roll = [-1, -1, 0, 0, 1, 1]
+    pitch = [0.5, 0.5, -1, -1, 0.5, 0.5]
+    yaw = [-1, 1, -1, 1, -1, 1]
 
     [preset.my-plane]                # servo PWMs by SERVOn_FUNCTION, for ArduPlane logs only
     vehicles = ["plane"]
@@ -1255,6 +1259,60 @@ def _channel_from(spec: Any, where: str) -> Channel:
     )
 
 
+#: the keys of a TOML mixer (each a list, one number per motor, motor 1 first)
+_MIXER_KEYS = ("angle_deg", "pitch_angle_deg", "roll", "pitch", "yaw")
+
+
+def _mixer_from(name: str, spec: Any, path: str | os.PathLike[str]) -> Mixer:
+    """A TOML ``[mixer.NAME]`` table as a :class:`Mixer`: motor directions (``angle_deg``,
+    optionally ``pitch_angle_deg``) or raw ``roll`` and ``pitch`` factors, and ``yaw``; each a
+    list of finite numbers; the motors must set each axis they have factors for (a
+    tricopter's yaw, all zeros, is its servo's) and the thrust apart.
+
+    Examples
+    --------
+    >>> m = _mixer_from("t", {"roll": [-1, 1, 0], "pitch": [0.5, 0.5, -1], "yaw": [0, 0, 0]}, "x")
+    >>> np.round(m.factors(), 2).tolist()[2]
+    [0.0, -0.5, 0.0]
+    >>> _mixer_from("t", {"angle_deg": [60, -60, 180], "yaw": [0, 0, 1]}, "f.toml")
+    ... # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    mavsid.errors.ConfigError: f.toml: mixer 't' cannot set roll, pitch, yaw and thrust ...
+    """
+    where = f"{path}: mixer {name!r}"
+    if not isinstance(spec, Mapping):
+        raise ConfigError(f"{where}: must be a table")
+    unknown = set(spec) - set(_MIXER_KEYS)
+    if unknown:
+        raise ConfigError(f"{where}: unknown key(s) {', '.join(sorted(unknown))} "
+                          f"(known: {', '.join(_MIXER_KEYS)})")
+    lists: dict[str, tuple[float, ...]] = {}
+    for key in _MIXER_KEYS:
+        value = spec.get(key, [])
+        try:
+            if not isinstance(value, list):
+                raise TypeError
+            lists[key] = tuple(float(v) for v in value)
+        except (TypeError, ValueError):
+            raise ConfigError(f"{where}: {key} must be a list of numbers, one per motor") from None
+        if not all(math.isfinite(v) for v in lists[key]):
+            raise ConfigError(f"{where}: {key} holds a value that is not a finite number")
+    try:
+        mixer = Mixer(name, lists["angle_deg"], lists["yaw"], lists["pitch_angle_deg"],
+                      lists["roll"], lists["pitch"])
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: {exc}") from None
+    factors = mixer.factors()
+    used = [k for k in range(3) if factors[:, k].any()]
+    rank = int(np.linalg.matrix_rank(np.column_stack([factors[:, used],
+                                                      np.ones(mixer.n_motors)])))
+    if rank < len(used) + 1:
+        axes = ", ".join(("roll", "pitch", "yaw")[k] for k in used)
+        raise ConfigError(f"{where} cannot set {axes} and thrust apart (rank {rank} of "
+                          f"{len(used) + 1})")
+    return mixer
+
+
 def load_presets(path: str | os.PathLike[str]) -> tuple[dict[str, Preset], dict[str, Mixer]]:
     """Read user presets and mixers from a TOML file (format in the module docstring).
 
@@ -1272,17 +1330,10 @@ def load_presets(path: str | os.PathLike[str]) -> tuple[dict[str, Preset], dict[
     unknown = set(doc) - {"preset", "mixer"}
     if unknown:
         raise ConfigError(f"{path}: unknown table(s) {', '.join(sorted(unknown))}")
-    mixers: dict[str, Mixer] = {}
-    for name, spec in doc.get("mixer", {}).items():
-        try:
-            mixers[name] = Mixer(
-                name, tuple(float(a) for a in spec["angle_deg"]),
-                tuple(float(y) for y in spec["yaw"]),
-            )
-        except ConfigError as exc:
-            raise ConfigError(f"{path}: {exc}") from None
-        except (KeyError, TypeError, ValueError):
-            raise ConfigError(f"{path}: mixer {name!r} needs numeric angle_deg and yaw") from None
+    for table in ("preset", "mixer"):
+        if not isinstance(doc.get(table, {}), Mapping):
+            raise ConfigError(f"{path}: {table} must be a table ([{table}.NAME])")
+    mixers = {name: _mixer_from(name, spec, path) for name, spec in doc.get("mixer", {}).items()}
     presets: dict[str, Preset] = {}
     for name, spec in doc.get("preset", {}).items():
         where = f"{path}: preset {name!r}"

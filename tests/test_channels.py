@@ -260,7 +260,7 @@ u_roll = { message = "CTRL", field = "R", scale = -1.0 }
 
 [mixer.my-tri]
 angle_deg = [60, -60, 180]
-yaw = [0, 0, 1]
+yaw = [0, 0, 0]
 """,
         encoding="utf-8",
     )
@@ -287,6 +287,21 @@ yaw = [0, 0, 1]
         ("[preset.a.states]\nalpha = { message = 'ATT', field = 'A' }\n", "unknown state"),
         ("[preset.a]\nstates = {}\n", "defines no states"),
         ("[mixer.m]\nangle_deg = [1, 2]\nyaw = [1]\n", "same number"),
+        ("[mixer.m]\nangle_deg = [1, 2, 3]\nyaw = [1, 1, 1]\ntilt = [0, 0, 0]\n",
+         "unknown key.*tilt"),
+        ("[mixer.m]\nangle_deg = '45'\nyaw = [1, 1, 1, 1]\n", "angle_deg must be a list"),
+        ("[mixer.m]\nroll = [1, -1, 0, 0]\npitch = [0, 0, 'a', 1]\nyaw = [1, 1, -1, -1]\n",
+         "pitch must be a list of numbers"),
+        ("[mixer.m]\nangle_deg = [45, -135, nan, 135]\nyaw = [1, 1, -1, -1]\n",
+         "not a finite number"),
+        ("[mixer.m]\nangle_deg = [60, -60, 180]\nyaw = [0, 0, 1]\n",
+         "cannot set roll, pitch, yaw and thrust apart"),
+        ("[mixer.m]\nangle_deg = [0, 0, 180, 180]\nyaw = [1, 1, -1, -1]\n",
+         "cannot set pitch, yaw and thrust apart"),
+        ("[mixer.m]\nroll = [1, -1]\nangle_deg = [0, 90]\nyaw = [1, 1]\n", "same number"),
+        ("mixer = 3\n", "mixer must be a table"),
+        ("preset = 'x'\n", "preset must be a table"),
+        ("[mixer]\nm = 3\n", "mixer 'm': must be a table"),
         ("[other]\nx = 1\n", "unknown table"),
     ],
 )
@@ -295,6 +310,23 @@ def test_bad_toml_is_a_config_error(tmp_path, text, match):
     f.write_text(text, encoding="utf-8")
     with pytest.raises(ConfigError, match=match):
         load_presets(f)
+
+
+@pytest.mark.parametrize("name", sorted(MIXERS))
+def test_every_built_in_mixer_can_be_written_in_toml(tmp_path, name):
+    """Each built-in motor matrix copied into a TOML file (raw factors where ArduPilot gives
+    them, directions otherwise) is read back with the same factors: a user can start from
+    any of them."""
+    m = MIXERS[name]
+    keys = ({"roll": m.roll, "pitch": m.pitch} if m.roll else
+            {"angle_deg": m.angle_deg, **({"pitch_angle_deg": m.pitch_angle_deg}
+                                          if m.pitch_angle_deg else {})})
+    lines = [f"{k} = [{', '.join(str(float(v)) for v in vals)}]"
+             for k, vals in {**keys, "yaw": m.yaw}.items()]
+    f = tmp_path / "m.toml"
+    f.write_text("[mixer.copy]\n" + "\n".join(lines) + "\n", encoding="utf-8")
+    _, mixers = load_presets(f)
+    assert np.allclose(mixers["copy"].factors(), m.factors())
 
 
 def test_missing_toml_file_is_a_config_error(tmp_path):

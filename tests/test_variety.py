@@ -730,6 +730,54 @@ def test_a_tlog_without_frame_parameters_is_not_unmixed_as_a_quad_when_it_is_not
         assert bool(said) is not unmixed and (unmixed or "output(s) 5, 6" in said[0])
 
 
+def test_a_toml_mixer_of_raw_factors_unmixes_a_frame_the_log_does_not_name(
+        tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """A Y6B's .tlog whose ground station fetched no parameters: no inputs (its outputs 5-6
+    move). A TOML file with the frame's motor matrix, as ArduPilot's ``add_motor_raw`` gives
+    it (raw roll and pitch factors; a TOML mixer took only ``angle_deg`` before), and a
+    preset naming it: the inputs are the ones the frame's parameters give, and the model's
+    B is near the truth."""
+    from mavsid.align import align
+    from mavsid.channels import load_presets
+
+    raw = _simulated_raw(tmp_path / "y6b.tlog", None, manoeuvre="sysid", axis="roll",
+                         vehicle="hexa", frame="y6b", seed=3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        named = align(raw)  # FRAME_CLASS 5, FRAME_TYPE 10: the built-in Y6B
+        bare = dataclasses.replace(raw, params={})
+        assert not align(bare).input_names
+    toml = tmp_path / "y6.toml"
+    toml.write_text(
+        '[mixer.my-y6b]\n'
+        'roll = [-1, -1, 0, 0, 1, 1]\npitch = [0.5, 0.5, -1, -1, 0.5, 0.5]\n'
+        'yaw = [-1, 1, -1, 1, -1, 1]\n'
+        '[preset.my-tlog]\nformats = ["tlog"]\nmixer = "my-y6b"\n'
+        'motors = { message = "SERVO_OUTPUT_RAW", field = "servo{i}_raw", unit = "pwm" }\n'
+        '[preset.my-tlog.states]\n'
+        + "".join(f'{s} = {{ message = "ATTITUDE", field = "{f}", unit = "{u}" }}\n'
+                  for s, f, u in (("roll", "roll", "rad"), ("pitch", "pitch", "rad"),
+                                  ("yaw", "yaw", "rad"), ("p", "rollspeed", "rad/s"),
+                                  ("q", "pitchspeed", "rad/s"), ("r", "yawspeed", "rad/s"))),
+        encoding="utf-8")
+    presets, mixers = load_presets(toml)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        mine = align(bare, presets=presets, mixers=mixers)
+    assert mine.preset == "my-tlog" and mine.input_names == named.input_names
+    assert np.allclose(mine.inputs, named.inputs, equal_nan=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = fit([str(tmp_path / "y6b.tlog")], PipelineConfig(
+            axes=("roll",), presets=presets, mixers=mixers, preset="my-tlog"))
+    truth = json.loads((tmp_path / "y6b.truth.json").read_text())["axes"]["roll"]
+    f = result.axes["roll"]
+    assert f.model is not None
+    b, se = f.model.params["B[p,u_roll]"], f.model.stderr["B[p,u_roll]"]
+    assert abs(b / truth["effectiveness"] - 1) < B_TOLERANCE
+    assert abs(b - truth["effectiveness"]) < 2.5 * se
+
+
 def test_a_heavy_lift_frames_slow_motors_are_searched_for(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """Motors with a 120-ms time constant (large propellers) lie beyond the default lags
     (up to 60 ms): the search took the longest with a long delay, and a stick doublet gave

@@ -120,7 +120,7 @@ from typing import Any
 
 import numpy as np
 
-from mavsid.data import MessageTable, RawLog
+from mavsid.data import LOG_FORMATS, MessageTable, RawLog
 from mavsid.errors import ConfigError, MavsidError, MissingMessageError
 
 __all__ = [
@@ -1001,6 +1001,10 @@ def first_of(raw: RawLog, channels: Iterable[Channel], what: str = ""
     return None
 
 
+#: a channel's transforms: the Euler angle (its index) taken from a quaternion field
+_TRANSFORMS = {"quat_roll": 0, "quat_pitch": 1, "quat_yaw": 2}
+
+
 def evaluate(raw: RawLog, channel: Channel, what: str = "") -> tuple[np.ndarray, np.ndarray]:
     """A channel's samples in SI units: ``(time_s, values)`` in record order, NaN-free.
 
@@ -1019,7 +1023,7 @@ def evaluate(raw: RawLog, channel: Channel, what: str = "") -> tuple[np.ndarray,
         q = _quaternion(table, channel.field)
         if q is None:
             raise MissingMessageError(f"{channel.message}.{channel.field}", table.columns, "field")
-        axis = {"quat_roll": 0, "quat_pitch": 1, "quat_yaw": 2}[channel.transform]
+        axis = _TRANSFORMS[channel.transform]
         values = quat_to_euler(q)[:, axis]
     else:
         got = _resolve(table, channel.field)
@@ -1241,22 +1245,68 @@ def _read_toml(path: str | os.PathLike[str]) -> dict[str, Any]:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
 
 
-def _channel_from(spec: Any, where: str) -> Channel:
+def _number(value: Any) -> bool:
+    """Whether a TOML value is a number (not a boolean, which Python counts as one)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _strings(spec: Mapping[str, Any], key: str, where: str,
+             known: Iterable[str] | None = None) -> tuple[str, ...]:
+    """``spec[key]`` (absent: empty), a list of strings, each one of ``known`` if given."""
+    value = spec.get(key, [])
+    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+        raise ConfigError(f"{where}: {key} must be a list of strings")
+    if known is not None:
+        known = tuple(known)
+        wrong = [v for v in value if v not in known]
+        if wrong:
+            raise ConfigError(f"{where}: unknown {key} {', '.join(map(repr, wrong))} (known: "
+                              f"{', '.join(known)})")
+    return tuple(value)
+
+
+def _table(spec: Mapping[str, Any], key: str, where: str) -> Mapping[str, Any]:
+    """``spec[key]`` (absent: empty), a TOML table."""
+    value = spec.get(key, {})
+    if not isinstance(value, Mapping):
+        raise ConfigError(f"{where}: {key} must be a table")
+    return value
+
+
+def _channel_from(spec: Any, where: str, pwm: bool = False) -> Channel:
+    """A TOML channel ``{ message, field, unit, scale, transform, optional, instance }``, every
+    value checked; ``pwm``: motor or servo outputs (unit ``pwm``, the only unit they take,
+    and the only channels that take it)."""
     if not isinstance(spec, Mapping) or "message" not in spec or "field" not in spec:
         raise ConfigError(f"{where}: needs a table with 'message' and 'field'")
     unknown = set(spec) - {"message", "field", "unit", "scale", "transform", "optional",
                            "instance"}
     if unknown:
         raise ConfigError(f"{where}: unknown key(s) {', '.join(sorted(unknown))}")
-    unit = str(spec.get("unit", "1"))
-    if unit not in _UNIT_TO_SI and unit != "pwm":
+    for key in ("message", "field"):
+        if not isinstance(spec[key], str) or not spec[key].strip():
+            raise ConfigError(f"{where}: {key} must be a non-empty string")
+    unit = spec.get("unit", "pwm" if pwm else "1")
+    if not isinstance(unit, str) or (unit not in _UNIT_TO_SI and unit != "pwm"):
         raise ConfigError(f"{where}: unknown unit {unit!r}")
+    if (unit == "pwm") is not pwm:
+        raise ConfigError(f"{where}: unit {unit!r}: " + (
+            "motor and servo outputs are PWM (unit 'pwm')" if pwm else
+            "only motors and servos take PWM (unit 'pwm')"))
+    scale = spec.get("scale", 1.0)
+    if not _number(scale) or not math.isfinite(scale) or scale == 0:
+        raise ConfigError(f"{where}: scale must be a finite number other than 0")
+    transform = spec.get("transform", "")
+    if transform not in ("", *_TRANSFORMS):
+        raise ConfigError(f"{where}: unknown transform {transform!r} (known: "
+                          f"{', '.join(_TRANSFORMS)})")
+    optional = spec.get("optional", False)
+    if not isinstance(optional, bool):
+        raise ConfigError(f"{where}: optional must be true or false")
     inst = spec.get("instance")
-    return Channel(
-        str(spec["message"]), str(spec["field"]), unit, float(spec.get("scale", 1.0)),
-        str(spec.get("transform", "")), bool(spec.get("optional", False)),
-        None if inst is None else int(inst),
-    )
+    if inst is not None and (not isinstance(inst, int) or isinstance(inst, bool) or inst < 0):
+        raise ConfigError(f"{where}: instance must be a whole number >= 0")
+    return Channel(spec["message"], spec["field"], unit, float(scale), transform, optional, inst)
 
 
 #: the keys of a TOML mixer (each a list, one number per motor, motor 1 first)
@@ -1289,12 +1339,9 @@ def _mixer_from(name: str, spec: Any, path: str | os.PathLike[str]) -> Mixer:
     lists: dict[str, tuple[float, ...]] = {}
     for key in _MIXER_KEYS:
         value = spec.get(key, [])
-        try:
-            if not isinstance(value, list):
-                raise TypeError
-            lists[key] = tuple(float(v) for v in value)
-        except (TypeError, ValueError):
-            raise ConfigError(f"{where}: {key} must be a list of numbers, one per motor") from None
+        if not isinstance(value, list) or not all(map(_number, value)):
+            raise ConfigError(f"{where}: {key} must be a list of numbers, one per motor")
+        lists[key] = tuple(float(v) for v in value)
         if not all(math.isfinite(v) for v in lists[key]):
             raise ConfigError(f"{where}: {key} holds a value that is not a finite number")
     try:
@@ -1346,21 +1393,29 @@ def load_presets(path: str | os.PathLike[str]) -> tuple[dict[str, Preset], dict[
         if unknown:
             raise ConfigError(f"{where}: unknown key(s) {', '.join(sorted(unknown))}")
         states = {k: _channel_from(v, f"{where} state {k}") for k, v in
-                  spec.get("states", {}).items()}
+                  _table(spec, "states", where).items()}
         inputs = {k: _channel_from(v, f"{where} input {k}") for k, v in
-                  spec.get("inputs", {}).items()}
-        motors = _channel_from(spec["motors"], f"{where} motors") if "motors" in spec else None
-        servos = _channel_from(spec["servos"], f"{where} servos") if "servos" in spec else None
-        mixer = str(spec.get("mixer", "auto"))
-        if mixer != "auto" and mixer not in mixers and mixer not in MIXERS:
+                  _table(spec, "inputs", where).items()}
+        if "motors" in spec and "servos" in spec:
+            raise ConfigError(f"{where}: motors (through a mixer) or servos, not both")
+        motors = (_channel_from(spec["motors"], f"{where} motors", pwm=True)
+                  if "motors" in spec else None)
+        servos = (_channel_from(spec["servos"], f"{where} servos", pwm=True)
+                  if "servos" in spec else None)
+        mixer = spec.get("mixer", "auto")
+        if not isinstance(mixer, str) or (mixer != "auto" and mixer not in mixers
+                                          and mixer not in MIXERS):
             raise ConfigError(f"{where}: unknown mixer {mixer!r}")
+        description = spec.get("description", "")
+        if not isinstance(description, str):
+            raise ConfigError(f"{where}: description must be a string")
+        formats = _strings(spec, "formats", where, LOG_FORMATS)
+        requires = _strings(spec, "requires", where)
+        vehicles, not_vehicles = (tuple(v.lower() for v in _strings(spec, key, where))
+                                  for key in ("vehicles", "not_vehicles"))
         try:
-            presets[name] = Preset(
-                name, tuple(spec.get("formats", ())), states, inputs, motors, mixer,
-                tuple(spec.get("requires", ())), str(spec.get("description", "")), servos,
-                tuple(str(v).lower() for v in spec.get("vehicles", ())),
-                tuple(str(v).lower() for v in spec.get("not_vehicles", ())),
-            )
+            presets[name] = Preset(name, formats, states, inputs, motors, mixer, requires,
+                                   description, servos, vehicles, not_vehicles)
         except ConfigError as exc:
             raise ConfigError(f"{path}: {exc}") from None
     return presets, mixers

@@ -24,6 +24,7 @@ import numpy as np
 from mavsid.errors import MissingMessageError
 
 __all__ = [
+    "LOG_FORMATS",
     "FlightData",
     "MessageTable",
     "ModeChange",
@@ -32,6 +33,10 @@ __all__ = [
     "SourceInfo",
     "TextMessage",
 ]
+
+
+#: the formats a reader gives (:attr:`SourceInfo.format`)
+LOG_FORMATS = ("dataflash", "dataflash-text", "tlog", "ulog")
 
 
 @dataclass(frozen=True)

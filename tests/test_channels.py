@@ -276,6 +276,9 @@ yaw = [0, 0, 0]
     assert np.allclose(evaluate(raw, p.states["roll"])[1], [math.pi / 2, 0.0])
 
 
+_ROLL = "roll = { message = 'ATT', field = 'Roll', unit = 'deg' }\n"
+
+
 @pytest.mark.parametrize(
     ("text", "match"),
     [
@@ -300,6 +303,33 @@ yaw = [0, 0, 0]
          "cannot set pitch, yaw and thrust apart"),
         ("[mixer.m]\nroll = [1, -1]\nangle_deg = [0, 90]\nyaw = [1, 1]\n", "same number"),
         ("mixer = 3\n", "mixer must be a table"),
+        # wrong types took a traceback, or were read as something else (a string's letters)
+        ("[preset.a]\nstates = 3\n", "states must be a table"),
+        ("[preset.a]\nformats = 'ulog'\n[preset.a.states]\n" + _ROLL, "formats must be a list"),
+        ("[preset.a]\nformats = ['ulg']\n[preset.a.states]\n" + _ROLL, "unknown formats 'ulg'"),
+        ("[preset.a]\nrequires = 5\n[preset.a.states]\n" + _ROLL, "requires must be a list"),
+        ("[preset.a]\nvehicles = 'plane'\n[preset.a.states]\n" + _ROLL,
+         "vehicles must be a list"),
+        ("[preset.a]\nmixer = [3]\n[preset.a.states]\n" + _ROLL, "unknown mixer"),
+        ("[preset.a]\nmotors = { message = 'RCOU', field = 'C{i}', unit = 'deg' }\n"
+         "[preset.a.states]\n" + _ROLL, "motor and servo outputs are PWM"),
+        ("[preset.a]\nmotors = { message = 'RCOU', field = 'C{i}' }\n"
+         "servos = { message = 'RCOU', field = 'C{i}' }\n[preset.a.states]\n" + _ROLL,
+         "motors .* or servos, not both"),
+        ("[preset.a.states]\nroll = { message = 'ATT', field = 'Roll', unit = 'pwm' }\n",
+         "only motors and servos take PWM"),
+        ("[preset.a.states]\nroll = { message = 'ATT', field = 'Roll', scale = 'x' }\n",
+         "scale must be a finite number"),
+        ("[preset.a.states]\nroll = { message = 'ATT', field = 'Roll', scale = nan }\n",
+         "scale must be a finite number"),
+        ("[preset.a.states]\nroll = { message = 'ATT', field = 'Roll', instance = 'x' }\n",
+         "instance must be a whole number"),
+        ("[preset.a.states]\nroll = { message = 'ATT', field = 'Roll', transform = 'q' }\n",
+         "unknown transform 'q'"),
+        ("[preset.a.states]\nroll = { message = 'ATT', field = 'Roll', optional = 'y' }\n",
+         "optional must be true or false"),
+        ("[preset.a.states]\nroll = { message = 'ATT', field = '' }\n",
+         "field must be a non-empty string"),
         ("preset = 'x'\n", "preset must be a table"),
         ("[mixer]\nm = 3\n", "mixer 'm': must be a table"),
         ("[other]\nx = 1\n", "unknown table"),

@@ -51,6 +51,7 @@ Examples
 from __future__ import annotations
 
 import itertools
+import math
 import os
 import re
 import warnings
@@ -593,11 +594,15 @@ def _grid(series: list[_Series], ref: _Series, rate_hz: float | None, max_gap: f
         ok = d <= max_gap * ref.median_dt
         dt = float(d[ok].mean()) if ok.any() else float("nan")
     else:
-        if not rate_hz > 0:
-            raise ConfigError(f"rate_hz must be positive, got {rate_hz}")
+        if not 0 < rate_hz < math.inf:
+            raise ConfigError(f"rate_hz must be a positive finite number, got {rate_hz}")
         dt = 1.0 / float(rate_hz)
     start = max(float(s.t[0]) for s in series)
     stop = min(float(s.t[-1]) for s in series)
+    if rate_hz is not None and 0 < stop - start < dt:
+        raise ConfigError(f"{path}: a grid step of {dt:.3g} s (rate_hz {rate_hz:g}) is longer "
+                          f"than the {stop - start:.3g} s the channels share: choose a higher "
+                          "rate_hz")
     if not np.isfinite(dt) or dt <= 0 or stop - start < dt:
         return np.empty(0), np.empty((0, 2), dtype=np.int64), dt
     n = int(np.floor((stop - start) / dt + 1e-9)) + 1

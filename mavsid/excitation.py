@@ -89,6 +89,7 @@ Examples
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -127,6 +128,25 @@ def sid_axis_name(sid_axis: int) -> tuple[str, str]:
     if sid_axis == 13:
         return "thrust", "mixer"
     return "other", f"SID_AXIS {sid_axis}"
+
+
+def _interval(lo: float, hi: float) -> str:
+    """``[lo, hi]`` as text (``(0, hi]`` where 0 is excluded).
+
+    >>> _interval(0.0, 1.0), _interval(1.0, math.inf)
+    ('[0, 1]', '[1, inf)')
+    """
+    right = "inf)" if hi == math.inf else f"{hi:g}]"
+    return f"[{lo:g}, {right}"
+
+
+#: the numeric scan options and the values each may take (inclusive)
+_SCAN_RANGES = (
+    ("window_s", 1e-3, math.inf), ("power_ratio", 0.0, math.inf), ("min_floor", 0.0, math.inf),
+    ("min_coverage", 0.0, 1.0), ("min_coherence", 0.0, 1.0), ("max_condition", 1.0, math.inf),
+    ("min_airborne", 0.0, 1.0), ("max_angle_deg", 1e-3, 180.0), ("saturation", 1e-3, math.inf),
+    ("max_saturated", 0.0, 1.0),
+)
 
 
 @dataclass(frozen=True)
@@ -169,10 +189,45 @@ class ScanOptions:
     max_saturated: float = 0.05
 
     def __post_init__(self) -> None:
-        if not self.window_s > 0 or (self.step_s is not None and not self.step_s > 0):
-            raise ConfigError("window_s and step_s must be positive")
-        if not 0 < self.band_hz[0] < self.band_hz[1]:
-            raise ConfigError(f"band_hz must be increasing and positive, got {self.band_hz}")
+        def number(x: Any) -> bool:  # finite, and not a boolean
+            return isinstance(x, (int, float, np.floating, np.integer)) and not isinstance(
+                x, (bool, np.bool_)) and math.isfinite(x)
+
+        band = self.band_hz
+        if not (isinstance(band, (tuple, list)) and len(band) == 2 and all(map(number, band))
+                and 0 < band[0] < band[1]):
+            raise ConfigError(f"band_hz must be [low, high] Hz, 0 < low < high, got {band!r}")
+        if self.step_s is not None and not (number(self.step_s) and self.step_s > 0):
+            raise ConfigError(f"step_s must be a positive number of seconds, got {self.step_s!r}")
+        for name, lo, hi in _SCAN_RANGES:
+            x = getattr(self, name)
+            if not (number(x) and lo <= x <= hi):
+                raise ConfigError(f"{name} must be a number in {_interval(lo, hi)}, got {x!r}")
+
+    @classmethod
+    def from_options(cls, options: Mapping[str, Any]) -> ScanOptions:
+        """Options given by name (a pipeline config's ``[segments] options``), each checked.
+
+        Examples
+        --------
+        >>> ScanOptions.from_options({"window_s": 4, "band_hz": [0.3, 8]}).band_hz
+        (0.3, 8)
+        >>> ScanOptions.from_options({"windows": 4})  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        mavsid.errors.ConfigError: segments.options: unknown option(s) windows (known: ...)
+        """
+        known = [f.name for f in dataclasses.fields(cls)]
+        unknown = sorted(set(options) - set(known))
+        if unknown:
+            raise ConfigError(f"segments.options: unknown option(s) {', '.join(unknown)} "
+                              f"(known: {', '.join(known)})")
+        values = dict(options)
+        if isinstance(values.get("band_hz"), list):
+            values["band_hz"] = tuple(values["band_hz"])
+        try:
+            return cls(**values)
+        except ConfigError as exc:
+            raise ConfigError(f"segments.options: {exc}") from None
 
     @property
     def step(self) -> float:

@@ -192,33 +192,39 @@ def _checked(v: dict[str, Any]) -> PipelineConfig:
             "segments.source",
             f"{v['segment_source']!r} is not one of {', '.join(SEGMENT_SOURCES)}",
         )
+    def positive(x: Any) -> bool:  # a finite number > 0 (TOML's true is no number here)
+        return isinstance(x, int | float) and not isinstance(x, bool) and 0 < x < math.inf
+
     for key, name in (("rate_hz", "pipeline.rate_hz"), ("block_s", "segments.block_s"),
                       ("fft_window_s", "validation.fft_window_s")):
         if key in v:
             x = v[key]
-            need(
-                isinstance(x, int | float) and not isinstance(x, bool) and x > 0,
-                name,
-                f"{x!r} is not a positive number",
-            )
+            need(positive(x), name, f"{x!r} is not a positive finite number")
             v[key] = float(x)
+    if "block_s" in v:
+        need(v["block_s"] >= MIN_BLOCK_S, "segments.block_s",
+             f"{v['block_s']!r} s: a training or validation block must hold at least "
+             f"{MIN_BLOCK_S} s of flight")
     if "horizons_s" in v:
         h = v["horizons_s"]
         need(
-            isinstance(h, list) and all(isinstance(x, int | float) and x > 0 for x in h),
+            isinstance(h, list) and all(positive(x) for x in h),
             "validation.horizons_s",
-            f"{h!r} is not a list of positive numbers",
+            f"{h!r} is not a list of positive finite numbers",
         )
         v["horizons_s"] = tuple(float(x) for x in h)
     if "max_lag" in v:
-        need(isinstance(v["max_lag"], int) and v["max_lag"] > 0, "validation.max_lag",
+        need(isinstance(v["max_lag"], int) and not isinstance(v["max_lag"], bool)
+             and v["max_lag"] > 0, "validation.max_lag",
              f"{v['max_lag']!r} is not a positive integer")
     if "allow_unstable" in v:
         need(isinstance(v["allow_unstable"], bool), "pipeline.allow_unstable",
              f"{v['allow_unstable']!r} is not true or false")
-    for key in ("segment_options",):
-        if key in v:
-            need(isinstance(v[key], Mapping), "segments.options", "must be a table")
+    if "segment_options" in v:
+        need(isinstance(v["segment_options"], Mapping), "segments.options", "must be a table")
+        from mavsid.excitation import ScanOptions
+
+        ScanOptions.from_options(v["segment_options"])  # (its errors name the option)
     for key in ("name", "preset"):
         if key in v:
             need(isinstance(v[key], str), f"pipeline.{key}", f"{v[key]!r} is not a string")
@@ -264,6 +270,10 @@ def _slice(seg: Segment, a: int, b: int, block: int) -> Segment:
     )
 
 
+#: the shortest training or validation block a configuration may ask for, s
+MIN_BLOCK_S = 0.5
+
+
 def split_segments(
     segments: Sequence[Segment], block_s: float = 10.0
 ) -> tuple[tuple[Segment, ...], tuple[Segment, ...]]:
@@ -302,7 +312,7 @@ def split_segments(
     pieces: list[tuple[Segment, int, int]] = []
     for seg in sorted(segments, key=lambda s: s.start_s):
         n = len(seg)
-        k = max(1, round(n * seg.dt / block_s))
+        k = max(1, min(round(n * seg.dt / block_s), n // 2))  # (blocks of 2 samples or more)
         edges = np.linspace(0, n, k + 1).round().astype(int)
         pieces += [(seg, int(a), int(b)) for a, b in itertools.pairwise(edges)]
     if len(pieces) == 1:
@@ -508,10 +518,7 @@ def _windows(flight: FlightData, axis: str, cfg: PipelineConfig) -> list[WindowR
     """Every window considered on ``axis``, kept or rejected, as the config asks."""
     from mavsid.excitation import ScanOptions, find_segments
 
-    try:
-        options = ScanOptions(**dict(cfg.segment_options))
-    except TypeError as exc:
-        raise ConfigError(f"segments.options: {exc}") from None
+    options = ScanOptions.from_options(cfg.segment_options)
     scan = {"auto": None, "sysid": False, "scan": True}[cfg.segment_source]
     reports = find_segments(flight, axis, scan=scan, options=options)
     if cfg.segment_source == "scan":
@@ -861,6 +868,8 @@ def load_models(path: str | os.PathLike[str]) -> dict[str, Model]:
         raise ConfigError(f"{path}: not a mavsid model file (no 'axes' table)")
     out: dict[str, Model] = {}
     for axis, d in data["axes"].items():
+        if axis not in AXES:
+            raise ConfigError(f"{path}: axis {axis!r} is not one of {', '.join(AXES)}")
         try:
             out[axis] = estimators.Model.from_dict(d)
         except MavsidError as exc:

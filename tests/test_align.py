@@ -136,6 +136,20 @@ def test_no_overlap_is_a_typed_error():
         align(raw, _PRESET)
 
 
+@pytest.mark.parametrize(("rate_hz", "match"), [
+    (0.01, r"a grid step of 100 s \(rate_hz 0.01\) is longer than the 4 s the channels share"),
+    (1e9, r"a grid step of 1e-09 s gives .* choose a lower rate_hz"),
+])
+def test_a_grid_rate_the_data_cannot_hold_is_named(rate_hz, match):
+    """A grid step longer than the data said "the channels never overlap"; a very fine one
+    is refused before it is allocated."""
+    s = MessageTable("S", {"x": np.zeros(5), "y": np.zeros(5)}, time_s=np.arange(5.0))
+    u = MessageTable("U", {"v": np.zeros(5)}, time_s=np.arange(5.0))
+    raw = RawLog(SourceInfo("c.bin", "dataflash", 0), {"S": s, "U": u})
+    with pytest.raises(MavsidError, match="c.bin: " + match):
+        align(raw, _PRESET, rate_hz=rate_hz)
+
+
 # --------------------------------------------------------------------------- references
 
 

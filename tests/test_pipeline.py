@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 import warnings
 from pathlib import Path
 
@@ -53,11 +54,48 @@ def test_every_bundled_pipeline_parses() -> None:
         ({"segments": {"source": "guess"}}, "segments.source"),
         ({"validation": {"horizons_s": [0.1, "x"]}}, "validation.horizons_s"),
         ({"validation": {"max_lag": 0}}, "validation.max_lag"),
+        # values that passed and then crashed or ran with nonsense (a traceback, 149 GiB
+        # asked for, a NaN ridge penalty taken as none)
+        ({"validation": {"horizons_s": [math.inf]}}, "validation.horizons_s"),
+        ({"validation": {"horizons_s": [True]}}, "validation.horizons_s"),
+        ({"validation": {"max_lag": True}}, "validation.max_lag"),
+        ({"pipeline": {"rate_hz": math.inf}}, "pipeline.rate_hz"),
+        ({"segments": {"block_s": math.nan}}, "segments.block_s"),
+        ({"segments": {"block_s": 1e-9}}, "segments.block_s: 1e-09 s: a training or "
+                                          "validation block must hold at least 0.5 s"),
+        ({"segments": {"options": {"windows": 4}}}, "segments.options: unknown option"),
+        ({"segments": {"options": {"window_s": "x"}}}, "segments.options: window_s must be"),
+        ({"segments": {"options": {"band_hz": "x"}}}, "segments.options: band_hz must be"),
+        ({"segments": {"options": {"band_hz": [5, 1]}}}, "segments.options: band_hz must be"),
+        ({"segments": {"options": {"min_coherence": 2}}},
+         "segments.options: min_coherence must be a number in [0, 1]"),
+        ({"segments": {"options": {"max_angle_deg": math.nan}}},
+         "segments.options: max_angle_deg must be"),
     ],
 )
 def test_bad_config_names_the_key(data: dict, message: str) -> None:
     with pytest.raises(ConfigError, match=message.replace("[", r"\[").replace("]", r"\]")):
         config_from_dict(data)
+
+
+def test_split_segments_bounds_the_blocks_a_tiny_block_length_asks_for() -> None:
+    """``block_s=1e-9`` on 30 s asked for 3e10 blocks (149 GiB of edges): blocks hold two
+    samples or more, and a config refuses such a length before (above)."""
+    t = np.arange(0, 30, 0.01)
+    seg = Segment(t, t[:, None], t[:, None], ("p",), ("u_roll",), 0.01, "roll", "sysid")
+    train, val = split_segments([seg], block_s=1e-9)
+    assert len(train) + len(val) == len(t) // 2
+    assert min(len(b) for b in (*train, *val)) >= 2
+
+
+@pytest.mark.parametrize("alpha", [math.nan, math.inf, -1.0, True, "lots"])
+def test_a_penalty_that_is_not_a_finite_number_is_refused(alpha: object) -> None:
+    """A NaN ridge penalty was taken as none (``nan > 0`` is false): the fit ran as least
+    squares, said to be ridge."""
+    from mavsid.estimators.least_squares import Ridge
+
+    with pytest.raises(ConfigError, match="alpha must be"):
+        Ridge(alpha=alpha)  # type: ignore[arg-type]
 
 
 def test_config_file_errors(tmp_path: Path) -> None:

@@ -24,6 +24,7 @@ Examples
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -361,6 +362,13 @@ class Estimator:
                  cv_horizon: int | None = None, n_bootstrap: int = 100, hac: bool = True,
                  min_blocks: int = 10, max_condition: float = 1e10,
                  random_state: int = 0) -> None:
+        if isinstance(alpha, str):
+            if alpha != "cv":
+                raise ConfigError(f"alpha must be a number or 'cv', got {alpha!r}")
+        elif isinstance(alpha, bool) or not 0 <= alpha < math.inf:
+            raise ConfigError(f"alpha must be a finite number >= 0 or 'cv', got {alpha!r}")
+        if isinstance(n_bootstrap, bool) or not isinstance(n_bootstrap, int) or n_bootstrap < 0:
+            raise ConfigError(f"n_bootstrap must be a whole number >= 0, got {n_bootstrap!r}")
         self.structure = structure
         self.alpha = alpha
         self.alphas = alphas
@@ -414,9 +422,7 @@ class Estimator:
         g = sum(grams[1:], grams[0])
         check_identifiable(reg, g, self.max_condition)
         self.cv_scores_: dict[float, float] = {}
-        if isinstance(self.alpha, str):
-            if self.alpha != "cv":
-                raise ConfigError(f"alpha must be a number or 'cv', got {self.alpha!r}")
+        if isinstance(self.alpha, str):  # ("cv": checked when made)
             alpha = self._cross_validate(reg, grams, g)
         else:
             alpha = float(self.alpha)

@@ -951,8 +951,8 @@ def regress(
         raise ConfigError(f"select must be None, 'stepwise' or 'threshold', got {select!r}")
     if colored not in ("all-lags", "newey-west"):
         raise ConfigError(f"colored must be 'all-lags' or 'newey-west', got {colored!r}")
-    if alpha < 0:
-        raise ConfigError(f"alpha must be >= 0, got {alpha}")
+    if not 0 <= alpha < math.inf:
+        raise ConfigError(f"alpha must be a finite number >= 0, got {alpha}")
     unknown = set(keep) - set(nm)
     if unknown:
         raise ConfigError(f"keep names unknown regressors {sorted(unknown)}")

@@ -40,9 +40,10 @@ Examples
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+import functools
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
 from scipy import special
@@ -130,7 +131,8 @@ def _fit_sums(y: np.ndarray, yhat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     y2 = np.asarray(y, dtype=float).reshape(len(y), -1)
     p2 = np.asarray(yhat, dtype=float).reshape(len(yhat), -1)
     ok = np.isfinite(y2) & np.isfinite(p2)
-    err = np.where(ok, (y2 - p2) ** 2, 0.0).sum(axis=0)
+    with np.errstate(over="ignore", invalid="ignore"):  # (a diverging free run: inf, said so)
+        err = np.where(ok, (y2 - p2) ** 2, 0.0).sum(axis=0)
     count = ok.sum(axis=0)
     mean = np.where(ok, y2, 0.0).sum(axis=0) / np.maximum(count, 1)
     norm = np.where(ok, (y2 - mean) ** 2, 0.0).sum(axis=0)
@@ -419,6 +421,22 @@ def _as_2d(a: np.ndarray, n: int, ny: int, what: str) -> np.ndarray:
     return out
 
 
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def _quiet_divergence(func: F) -> F:
+    """``func`` run without numpy's overflow and invalid-value warnings: a diverging model's
+    rollout overflows by design, and the result says so (``diverges``), not a warning."""
+
+    @functools.wraps(func)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        with np.errstate(over="ignore", invalid="ignore"):
+            return func(*args, **kwargs)
+
+    return wrapper  # type: ignore[return-value]
+
+
+@_quiet_divergence
 def segment_trim(model: Any, segment: Segment,
                  free: np.ndarray | None = None) -> tuple[Any, np.ndarray]:
     """``model`` with its constant term (feature ``1``) re-estimated on ``segment``: the
@@ -477,6 +495,7 @@ def _horizon_samples(dt: float, horizons_s: Sequence[float]) -> np.ndarray:
     return np.array(sorted(ks), dtype=int)
 
 
+@_quiet_divergence
 def validate(
     model: Model,
     segments: Sequence[Segment],
@@ -743,10 +762,13 @@ def frequency_response(
     sum_m: Any = 0.0 + 0.0j
     weight = 0.0
     freq: np.ndarray = np.zeros(0)
+    diverged = False  # a segment long enough but for the model's non-finite prediction
     for ui, yi, mi in zip(u, y, yhat, strict=True):
-        ok = np.isfinite(ui) & np.isfinite(yi) & np.isfinite(mi)
+        measured_ok = np.isfinite(ui) & np.isfinite(yi)
+        ok = measured_ok & np.isfinite(mi)
         ui, yi, mi = ui[ok], yi[ok], mi[ok]
         if len(ui) < nperseg:
+            diverged |= int(measured_ok.sum()) >= nperseg
             continue
         w = float(len(ui))
         # each signal's windows transformed once (scipy.signal.welch / csd to rounding)
@@ -763,6 +785,8 @@ def frequency_response(
         weight += w
     if weight == 0:
         raise NoExcitationError(
+            "the model's prediction is not a finite number on the held-out data (it diverges)"
+            if diverged else
             f"segments shorter than the {window_s:g} s frequency-response window"
         )
     suu_a, syy_a = np.asarray(suu), np.asarray(syy)

@@ -334,3 +334,29 @@ def test_fit_takes_presets_from_a_toml_file(tmp_path: Path) -> None:
     bad = run("fit", str(FIXTURES / "sysid_roll.bin"), "--preset", str(tmp_path / "no.toml"))
     assert bad.returncode == 1 and bad.stderr.count("\n") == 1 and "no.toml" in bad.stderr
 
+
+
+def test_validating_a_diverging_or_foreign_model_says_so_in_one_line(tmp_path: Path) -> None:
+    """A saved model edited to diverge (A_d 1e300) printed numpy's overflow warnings and
+    "segments shorter than the 4 s frequency-response window"; an axis the tool does not
+    know was taken and found no segment. Now: the verdict says the prediction diverges,
+    stderr holds the one error line; the unknown axis is named."""
+    model = tmp_path / "m.json"
+    assert run("fit", str(FIXTURES / "sysid_roll.bin"), "-q", "-o", str(model)).returncode == 0
+    data = json.loads(model.read_text())
+    roll = data["axes"]["roll"]
+    roll["coef"] = [[1e300] * len(row) for row in roll["coef"]]
+    model.write_text(json.dumps(data))
+    proc = subprocess.run([sys.executable, "-m", "mavsid", "validate", str(model),
+                           str(FIXTURES / "sysid_roll.bin"), "-q"],
+                          capture_output=True, text=True, timeout=300, check=False)
+    assert proc.returncode == 1
+    assert "roll: not identified: the model's prediction is not a finite number on the " \
+           "held-out data (it diverges)" in proc.stdout
+    assert proc.stderr.count("\n") == 1 and proc.stderr.startswith("mavsid: error: "), \
+        proc.stderr
+    data["axes"] = {"spin": roll}
+    model.write_text(json.dumps(data))
+    bad = run("validate", str(model), str(FIXTURES / "sysid_roll.bin"), "-q")
+    assert bad.returncode == 1
+    assert bad.stderr == f"mavsid: error: {model}: axis 'spin' is not one of roll, pitch, yaw\n"

@@ -4,6 +4,7 @@ independent numpy/scipy/cvxpy computations of the same problems."""
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -442,6 +443,35 @@ def test_json_round_trip(tmp_path):
     bad.write_text(json.dumps({"format": "other"}))
     with pytest.raises(LogFormatError):
         load_model(bad)
+
+
+@pytest.mark.parametrize(("change", "said"), [
+    ({"dt": 0.0}, "dt 0.0 s is not a sample step"),  # was a ZeroDivisionError
+    ({"dt": float("nan")}, "dt nan s is not a sample step"),  # a ValueError traceback
+    ({"delay": 10**9}, "delay 1000000000 samples"),  # took the machine's memory
+    ({"delay": -3}, "is not an input delay"),
+    ({"delay_frac": 7.5}, "delay_frac 7.5 is not a fraction"),
+    ({"filters": [{"cutoff_hz": 20.0, "order": 10**6, "rate_hz": 1000.0}]},
+     "order 1000000"),  # ran for minutes
+    ({"filters": [{"cutoff_hz": 900.0, "order": 2, "rate_hz": 1000.0}]},
+     "cutoff below half the rate"),
+    ({"coef": "nan"}, "coef holds a value that is not a finite"),
+    ({"coef": [[0.9, 1.0]]}, "coef has shape"),
+    ({"coef_stderr": [[float("inf")], [0.1]]}, "coef_stderr holds an infinite"),
+    ({"version": 99}, "model format version 99"),
+])
+def test_a_stored_model_that_no_fit_gives_is_refused(tmp_path, change, said):
+    """A model file is input: each value no fit writes is one typed error naming the file
+    and the value."""
+    seg = plant(np.array([[0.995]]), np.array([[0.77]]), np.array([0.0]), 2, 800, 3)
+    d = fit_axis([seg], "roll", n_bootstrap=0, features=("p", "u_roll")).to_dict()
+    path = tmp_path / "m.json"
+    if change.get("coef") == "nan":
+        change = {"coef": [[float("nan")] * len(row) for row in d["coef"]]}
+    path.write_text(json.dumps({**d, **change}))
+    with pytest.raises(LogFormatError, match=re.escape(said)) as err:
+        load_model(path)
+    assert str(path) in str(err.value)
 
 
 def test_gyro_filter_from_params_runs_at_the_gyro_rate():

@@ -59,6 +59,7 @@ UNITS: dict[str, str] = {
 }
 
 _FORMAT = "mavsid-model"
+_VERSION = 1  # of the stored form (:meth:`Model.to_dict`)
 
 
 def _unit(var: str, units: Mapping[str, str] | None = None) -> str:
@@ -172,6 +173,54 @@ def _block_diagonal(one: _SS, n: int) -> _SS:
     if n == 1:
         return one
     return tuple(linalg.block_diag(*([x] * n)) for x in one)
+
+
+#: what a stored model's sample step, input delay and input filters may be (a file is
+#: input: a step of 0 divided by zero, a delay of 10⁹ samples took the machine's memory, a
+#: filter of order 10⁶ ran for minutes)
+STORED_DT_S = (1e-5, 1.0)
+STORED_MAX_DELAY_S = 2.0
+STORED_MAX_FILTER_ORDER = 8
+
+
+def _check_stored(dt: float, delay: int, delay_frac: float, filters: Sequence[InputFilter],
+                  coef: np.ndarray, n_features: int, n_states: int,
+                  spread: Mapping[str, np.ndarray | None]) -> None:
+    """Raise :class:`LogFormatError` naming what a stored model holds that no fit gives
+    (``spread``: its covariance, standard errors and noise, NaN where unknown).
+
+    Examples
+    --------
+    >>> _check_stored(0.0025, 2, 0.0, (), np.zeros((2, 1)), 2, 1, {})
+    >>> _check_stored(0.0, 2, 0.0, (), np.zeros((2, 1)), 2, 1, {})
+    Traceback (most recent call last):
+    mavsid.errors.LogFormatError: dt 0.0 s is not a sample step (1e-05 to 1 s)
+    """
+    lo, hi = STORED_DT_S
+    if not lo <= dt <= hi:
+        raise LogFormatError(f"dt {dt!r} s is not a sample step ({lo:g} to {hi:g} s)")
+    if not 0 <= delay * dt <= STORED_MAX_DELAY_S:
+        raise LogFormatError(f"delay {delay} samples ({delay * dt:.3g} s) is not an input delay "
+                             f"(0 to {STORED_MAX_DELAY_S:g} s)")
+    if not 0 <= delay_frac < 1:
+        raise LogFormatError(f"delay_frac {delay_frac!r} is not a fraction of a sample [0, 1)")
+    for f in filters:
+        if not (1 <= f.order <= STORED_MAX_FILTER_ORDER and 0 < f.cutoff_hz < math.inf
+                and 0 <= f.rate_hz < math.inf
+                and (f.rate_hz == 0 or f.cutoff_hz < f.rate_hz / 2)):
+            raise LogFormatError(f"input filter {f.source or '?'}: order {f.order}, cutoff "
+                                 f"{f.cutoff_hz:g} Hz, rate {f.rate_hz:g} Hz is not a filter "
+                                 f"(order 1 to {STORED_MAX_FILTER_ORDER}, positive finite "
+                                 "frequencies, the cutoff below half the rate)")
+    if coef.shape != (n_features, n_states):
+        raise LogFormatError(f"coef has shape {coef.shape}, not {n_features} features × "
+                             f"{n_states} states")
+    if not np.isfinite(coef).all():
+        raise LogFormatError("coef holds a value that is not a finite number")
+    for key, values in spread.items():  # (NaN: not known, as to_dict writes None)
+        if values is not None and (np.isinf(values).any() or (
+                key != "covariance" and (values < 0).any())):
+            raise LogFormatError(f"{key} holds an infinite or negative value")
 
 
 @dataclass(frozen=True)
@@ -723,7 +772,7 @@ class Model:
         """JSON-safe dictionary (non-finite numbers become ``null``)."""
         return _jsonable({
             "format": _FORMAT,
-            "version": 1,
+            "version": _VERSION,
             "state_names": self.state_names,
             "input_names": self.input_names,
             "features": self.features,
@@ -749,6 +798,10 @@ class Model:
         """Rebuild a model written by :meth:`to_dict`."""
         if d.get("format") != _FORMAT:
             raise LogFormatError(f"not a mavsid model (format {d.get('format')!r})")
+        version = d.get("version", _VERSION)
+        if not isinstance(version, int) or isinstance(version, bool) or version > _VERSION:
+            raise LogFormatError(f"model format version {version!r}: this mavsid reads "
+                                 f"version {_VERSION} and older (a newer mavsid wrote it?)")
 
         def arr(key: str) -> np.ndarray | None:
             v = d.get(key)
@@ -757,20 +810,27 @@ class Model:
             return np.array(_none_to_nan(v), dtype=float)
 
         try:
+            dt, delay = float(d["dt"]), int(d["delay"])
+            filters = tuple(InputFilter(float(f["cutoff_hz"]), int(f["order"]),
+                                        str(f.get("source", "")),
+                                        float(f.get("rate_hz", 0.0) or 0.0))
+                            for f in d["filters"])
+            coef = np.asarray(d["coef"], dtype=float)
+            delay_frac = float(d.get("delay_frac", 0.0))
+            spread = {k: arr(k) for k in ("covariance", "coef_stderr", "sigma")}
+            _check_stored(dt, delay, delay_frac, filters, coef, len(d["features"]),
+                          len(d["state_names"]), spread)
             return cls(
                 state_names=tuple(d["state_names"]), input_names=tuple(d["input_names"]),
-                features=tuple(d["features"]), coef=np.asarray(d["coef"], dtype=float),
-                dt=float(d["dt"]), delay=int(d["delay"]), continuous=bool(d["continuous"]),
-                delay_frac=float(d.get("delay_frac", 0.0)),
-                filters=tuple(InputFilter(float(f["cutoff_hz"]), int(f["order"]),
-                                          str(f.get("source", "")),
-                                          float(f.get("rate_hz", 0.0) or 0.0))
-                              for f in d["filters"]),
-                covariance=arr("covariance"), coef_stderr=arr("coef_stderr"),
-                sigma=arr("sigma"), provenance=d.get("provenance") or {},
+                features=tuple(d["features"]), coef=coef, dt=dt, delay=delay,
+                continuous=bool(d["continuous"]), delay_frac=delay_frac, filters=filters,
+                covariance=spread["covariance"], coef_stderr=spread["coef_stderr"],
+                sigma=spread["sigma"], provenance=d.get("provenance") or {},
                 var_units={str(k): str(v) for k, v in (d.get("var_units") or {}).items()},
             )
-        except (KeyError, TypeError, ValueError) as exc:
+        except LogFormatError:
+            raise
+        except (KeyError, TypeError, ValueError, OverflowError) as exc:
             raise LogFormatError(f"model dictionary is incomplete or malformed: {exc}") from None
 
     def save(self, path: str | Path) -> None:

@@ -66,6 +66,8 @@ __all__ = ["CHANGE_REL", "CHANGE_Z", "LOG_SUFFIXES", "SCHEMA_VERSION", "config_h
 
 SCHEMA_VERSION = 1
 LOG_SUFFIXES = (".bin", ".log", ".tlog", ".ulg")
+#: how long a batch waits to reach the scheduler given by address, s
+SCHEDULER_TIMEOUT_S = 30
 #: change point: jump over this many standard errors, and this fraction of the mean
 CHANGE_Z, CHANGE_REL = 4.0, 0.05
 
@@ -320,7 +322,12 @@ def run_batch(
         return done
     cluster = None
     if scheduler:
-        client = Client(scheduler, timeout="30s")
+        try:
+            client = Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S}s")
+        except (OSError, ValueError, TypeError) as exc:  # (asyncio's TimeoutError is an OSError)
+            raise ConfigError(f"--scheduler {scheduler}: cannot connect: "
+                              f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}"
+                              ) from None
     else:
         import logging
 

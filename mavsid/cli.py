@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import gc
+import math
 import os
 import signal
 import sys
@@ -106,6 +107,11 @@ def _extract(args: argparse.Namespace) -> int:
 
     check_outputs([args.output], [args.log])
     names = [m.strip() for m in args.messages.split(",") if m.strip()] if args.messages else None
+    if names == []:
+        raise ConfigError(f"--messages {args.messages!r} names no message type")
+    for flag, value in (("--start", args.start), ("--stop", args.stop)):
+        if value is not None and not math.isfinite(value):
+            raise ConfigError(f"{flag} {value}: not a time in seconds")
     # what the output can hold, said before the log is read (and naming the output, not the
     # temporary file it is written through)
     suffix = Path(args.output).suffix.lower()

@@ -132,3 +132,23 @@ def test_batch_refuses_bad_outputs_and_workers(fleet: Path) -> None:
     lines = err.getvalue().splitlines()
     assert len(lines) == 2 and "must be a .parquet file" in lines[0]
     assert "--workers 0" in lines[1]
+
+
+def test_a_scheduler_that_cannot_be_reached_is_one_line(fleet: Path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """``--scheduler`` naming an address nobody listens on printed two tracebacks after the
+    wait; now one line naming the address, exit 1."""
+    import socket
+
+    from mavsid import batch
+
+    with socket.socket() as s:  # a port just freed: nothing listens there
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    monkeypatch.setattr(batch, "SCHEDULER_TIMEOUT_S", 1)
+    err = io.StringIO()
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        assert cli.main(["batch", str(fleet), "-o", str(fleet / "x.parquet"), "-q",
+                         "--scheduler", f"tcp://127.0.0.1:{port}"]) == 1
+    lines = err.getvalue().splitlines()
+    assert len(lines) == 1 and f"--scheduler tcp://127.0.0.1:{port}: cannot connect" in lines[0]
+    assert "Traceback" not in err.getvalue() and not (fleet / "x.parquet").exists()

@@ -155,6 +155,20 @@ def test_extract_errors_are_one_line_and_exit_1(small_ref, tmp_path, capsys):
         assert any(Path(a).name in lines[0] for a in argv if "/" in a), lines[0]
 
 
+def test_extract_flags_that_are_not_values_are_named(small_ref, tmp_path, capsys):
+    """``--start nan`` kept every sample, silently; ``--messages ,,,`` said "log has no
+    message '(any)'": each is now one line naming the flag, exit 1, nothing written."""
+    path, _ = small_ref
+    out = tmp_path / "x.npz"
+    for flags, said in ((["--start", "nan"], "--start nan: not a time"),
+                        (["--stop", "inf"], "--stop inf: not a time"),
+                        (["--messages", ",,,"], "--messages ',,,' names no message type")):
+        assert main(["extract", str(path), *flags, "-o", str(out)]) == 1
+        lines = capsys.readouterr().err.splitlines()
+        assert lines == [f"mavsid: error: {said}" + lines[0].split(said, 1)[1]], lines
+        assert not out.exists()
+
+
 def test_bad_input_via_the_console(tmp_path):
     bad = tmp_path / "garbage.bin"
     bad.write_bytes(b"\xa3\x95\x80" + bytes(200))

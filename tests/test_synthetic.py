@@ -9,6 +9,7 @@ written out here.
 from __future__ import annotations
 
 import json
+import math
 from collections import defaultdict
 from dataclasses import replace
 from pathlib import Path
@@ -632,6 +633,18 @@ def test_multi_run_log(tmp_path):
     assert res.flight.scenario.runs[2].magnitude == 0.1
     with pytest.raises(ConfigError, match="duration"):
         scenario_from_options(sid_axes=[10], duration_s=10.0)
+
+
+@pytest.mark.parametrize(("option", "value"), [("gyro_noise_dps", math.inf),
+                                             ("gyro_noise_dps", -1.0),
+                                             ("vibration_dps", math.nan),
+                                             ("vibration_dps", math.inf)])
+def test_noise_that_is_not_a_finite_amount_is_refused(option, value):
+    """``--gyro-noise inf`` wrote a log of infinite gyro readings and its truth."""
+    from mavsid.synthetic.run import scenario_from_options
+
+    with pytest.raises(ConfigError, match="must be a finite number >= 0 deg/s"):
+        scenario_from_options(**{option: value})
 
 
 # --------------------------------------------------------------------------- faults

@@ -239,11 +239,12 @@ def scenario_from_options(
         raise ConfigError(f"--vehicle must be one of {', '.join(VEHICLES)}, got {vehicle!r}")
     plant = VEHICLES[vehicle].scaled_noise(noise)
     if gyro_noise_dps is not None:
-        if not gyro_noise_dps >= 0:
-            raise ConfigError(f"--gyro-noise must be >= 0 deg/s, got {gyro_noise_dps}")
+        if not 0 <= gyro_noise_dps < math.inf:
+            raise ConfigError(f"--gyro-noise must be a finite number >= 0 deg/s, got "
+                              f"{gyro_noise_dps}")
         plant = replace(plant, gyro_noise=math.radians(gyro_noise_dps))
-    if not vibration_dps >= 0:
-        raise ConfigError(f"--vibration must be >= 0 deg/s, got {vibration_dps}")
+    if not 0 <= vibration_dps < math.inf:
+        raise ConfigError(f"--vibration must be a finite number >= 0 deg/s, got {vibration_dps}")
     plant = replace(plant, vibration=math.radians(vibration_dps))
     slow = min(rate_hz, 10.0) if rate_hz < 25 else None
     rates = LogRates(rate=rate_hz) if slow is None else LogRates(

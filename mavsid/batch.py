@@ -53,7 +53,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from mavsid.errors import ConfigError, MavsidError
+from mavsid.errors import ConfigError, MavsidError, MavsidWarning
 from mavsid.outputs import atomic_path
 
 if TYPE_CHECKING:
@@ -257,17 +257,31 @@ def _mapping(path: str | os.PathLike[str] | None) -> dict[str, tuple[str, str]]:
         return {}
     import csv
 
-    out = {}
+    out: dict[str, tuple[str, str]] = {}
+    line: dict[str, int] = {}
     try:
         with open(path, newline="", encoding="utf-8") as f:
             for k, rec in enumerate(csv.reader(f)):
                 if not rec or rec[0].startswith("#") or (k == 0 and rec[0] == "log"):
                     continue
+                where = f"{path}: line {k + 1}"
                 if len(rec) < 2:
-                    raise ConfigError(f"{path}: line {k + 1}: need log,vehicle[,date]")
-                out[rec[0].strip()] = (rec[1].strip(), rec[2].strip() if len(rec) > 2 else "")
+                    raise ConfigError(f"{where}: need log,vehicle[,date]")
+                log, vehicle = rec[0].strip(), rec[1].strip()
+                date = rec[2].strip() if len(rec) > 2 else ""
+                if log in line:
+                    raise ConfigError(f"{where}: {log} is named again (line {line[log]})")
+                if date:
+                    try:
+                        _dt.datetime.fromisoformat(date)
+                    except ValueError:
+                        raise ConfigError(f"{where}: date {date!r} is not an ISO date "
+                                          "(YYYY-MM-DD, or with a time)") from None
+                out[log], line[log] = (vehicle, date), k + 1
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise ConfigError(f"{path}: not a UTF-8 CSV file ({exc})") from None
     return out
 
 
@@ -305,6 +319,11 @@ def run_batch(
 
     logs = find_logs(inputs)
     mapping = _mapping(vehicles)
+    unused = sorted(set(mapping) - set(logs) - {os.path.basename(p) for p in logs})
+    if unused:
+        shown = ", ".join(unused[:5]) + (" ..." if len(unused) > 5 else "")
+        warnings.warn(f"{vehicles}: {len(unused)} log(s) named that are not in this batch: "
+                      f"{shown}", MavsidWarning, stacklevel=2)
     chash = config_hash(config)
     done = read_tables(out)
     rows: dict[str, list[dict[str, Any]]] = {

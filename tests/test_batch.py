@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import re
 import shutil
 import warnings
 from pathlib import Path
@@ -152,3 +153,35 @@ def test_a_scheduler_that_cannot_be_reached_is_one_line(fleet: Path, monkeypatch
     lines = err.getvalue().splitlines()
     assert len(lines) == 1 and f"--scheduler tcp://127.0.0.1:{port}: cannot connect" in lines[0]
     assert "Traceback" not in err.getvalue() and not (fleet / "x.parquet").exists()
+
+
+@pytest.mark.parametrize(("text", "said"), [
+    ("log,vehicle,date\nnan.log,q1,notadate\n", "line 2: date 'notadate' is not an ISO date"),
+    ("log,vehicle\nnan.log,q1\nnan.log,q2\n", "line 3: nan.log is named again (line 2)"),
+    (b"\xff\xfe\x00", "not a UTF-8 CSV file"),
+])
+def test_a_vehicles_file_that_cannot_be_meant_is_refused(tmp_path: Path, text, said) -> None:  # type: ignore[no-untyped-def]
+    """A date that is no date was stored and sorted as text; a log named twice took the last
+    line; a file that is not UTF-8 was a UnicodeDecodeError traceback."""
+    from mavsid.batch import _mapping
+    from mavsid.errors import ConfigError
+
+    csv = tmp_path / "v.csv"
+    (csv.write_bytes if isinstance(text, bytes) else csv.write_text)(text)
+    with pytest.raises(ConfigError, match=re.escape(f"{csv}: {said}")):
+        _mapping(csv)
+
+
+def test_a_vehicles_file_naming_logs_not_in_the_batch_warns(tmp_path: Path) -> None:
+    """Names that match no log (a typo, another folder) were dropped silently: the run goes
+    on, and a warning lists them."""
+    from mavsid.errors import MavsidWarning
+
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    shutil.copy(FIXTURES / "sysid_roll.bin", logs / "a.bin")
+    csv = tmp_path / "v.csv"
+    csv.write_text("log,vehicle\na.bin,q1\nb.bin,q2\n")
+    with pytest.warns(MavsidWarning, match=r"1 log\(s\) named that are not in this batch: b.bin"):
+        tables = run_batch([logs], tmp_path / "out.parquet", vehicles=csv, workers=1)
+    assert tables["logs"]["vehicle"].tolist() == ["q1"]

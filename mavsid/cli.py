@@ -543,6 +543,7 @@ def _view(args: argparse.Namespace) -> int:
     with contextlib.ExitStack() as stack:
         if save:
             sink["save"] = stack.enter_context(atomic_path(save))
+            stack.enter_context(viz.write_errors())
         if args.model:
             result = validate_logs(load_models(args.model), [args.log], cfg)
             served = viz.open_sink(

@@ -82,20 +82,30 @@ def check_outputs(outputs: Iterable[PathLike | None], inputs: Iterable[PathLike]
 @contextlib.contextmanager
 def atomic_path(path: PathLike) -> Iterator[str]:
     """A temporary path beside ``path`` (same suffix) to write to; renamed over ``path`` when
-    the block ends without an exception, removed otherwise.
+    the block ends without an exception, removed otherwise. A symbolic link's file is
+    replaced, not the link; a device or a pipe (``/dev/stdout``, a FIFO) is written in place
+    (renaming over one replaced the device node: as root, ``-o /dev/full`` made it a file).
 
     Raises
     ------
     ConfigError
-        The temporary file cannot be created or renamed (one line naming ``path``).
+        The temporary file cannot be created or renamed, or the device not written (one
+        line naming ``path``).
     """
     target = os.fspath(path)
-    folder = os.path.dirname(os.path.abspath(target))
+    if os.path.exists(target) and not os.path.isfile(target):  # (directories: check_outputs)
+        try:
+            yield target
+        except OSError as exc:
+            raise ConfigError(f"{target}: cannot write: {exc.strerror or exc}") from None
+        return
+    shown, target = target, os.path.realpath(target)
+    folder = os.path.dirname(target)
     stem, suffix = os.path.splitext(os.path.basename(target))
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{stem}.", suffix=f".tmp{suffix}", dir=folder)
     except OSError as exc:
-        raise ConfigError(f"{target}: cannot write: {exc.strerror or exc}") from None
+        raise ConfigError(f"{shown}: cannot write: {exc.strerror or exc}") from None
     os.close(fd)
     try:
         yield tmp
@@ -103,7 +113,7 @@ def atomic_path(path: PathLike) -> Iterator[str]:
         os.chmod(tmp, mode)
         os.replace(tmp, target)
     except OSError as exc:
-        raise ConfigError(f"{target}: cannot write: {exc.strerror or exc}") from None
+        raise ConfigError(f"{shown}: cannot write: {exc.strerror or exc}") from None
     finally:
         with contextlib.suppress(OSError):
             os.remove(tmp)

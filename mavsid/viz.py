@@ -45,7 +45,7 @@ import subprocess
 import sys
 import time
 import urllib.parse
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -976,8 +976,16 @@ def save_trends_rrd(axes: pd.DataFrame, path: str | os.PathLike[str]) -> rrb.Blu
         rrb.TimePanel(timeline="flight"),
         collapse_panels=True,
     )
-    rec = new_recording()
-    rec.save(os.fspath(path), default_blueprint=bp)
+    with _rrd_file(path, bp) as rec:
+        _log_trends(rec, ok, sends, trends(axes))
+    return bp
+
+
+def _log_trends(rec: rr.RecordingStream, ok: pd.DataFrame,
+                sends: list[tuple[str, str, tuple[int, int, int], float, list[rr.TimeColumn],
+                                  np.ndarray]],
+                found: pd.DataFrame) -> None:
+    """:func:`save_trends_rrd`'s series and change points, into ``rec``."""
     for entity, label, colour, width, indexes, series in sends:
         rec.log(entity, rr.SeriesLines(colors=[colour], names=[label], widths=[width]),
                 static=True)
@@ -986,7 +994,6 @@ def save_trends_rrd(axes: pd.DataFrame, path: str | os.PathLike[str]) -> rrb.Blu
                                             marker_sizes=[3.0]), static=True)
         rr.send_columns(entity, indexes=indexes, columns=rr.Scalars.columns(scalars=series),
                         recording=rec)
-    found = trends(axes)
     for r in found[found["changed"]].to_dict("records") if len(found) else []:
         mine = ok[(ok["vehicle"] == r["vehicle"]) & (ok["axis"] == r["axis"])]
         at = int((mine["flight_date"].astype(str) <= str(r["change_after"])).sum())
@@ -994,9 +1001,32 @@ def save_trends_rrd(axes: pd.DataFrame, path: str | os.PathLike[str]) -> rrb.Blu
                 f"{r['after']:.4g} after {r['change_after']} ({r['z']:.1f} standard errors)")
         rec.set_time("flight", sequence=at)  # the first flight after the change
         rec.log("changes", rr.TextLog(text.encode("ascii", "replace").decode(), level="WARN"))
-    rec.flush()
-    rec.disconnect()
-    return bp
+
+
+@contextlib.contextmanager
+def write_errors() -> Iterator[None]:
+    """rerun reports a failed write (a full disk, ``/dev/full``) as a ``RuntimeError`` naming
+    the OS error: raised here as an ``OSError``, which :func:`mavsid.outputs.atomic_path`
+    turns into one line naming the output."""
+    try:
+        yield
+    except RuntimeError as exc:
+        text = str(exc)
+        if "os error" not in text and "write" not in text.lower():
+            raise
+        raise OSError(text.rsplit(": ", 1)[-1]) from None
+
+
+@contextlib.contextmanager
+def _rrd_file(path: str | os.PathLike[str], bp: rrb.Blueprint) -> Iterator[rr.RecordingStream]:
+    """A recording saved to ``path`` with the blueprint ``bp``, flushed and closed when the
+    block ends (:func:`write_errors`)."""
+    rec = new_recording()
+    with write_errors():
+        rec.save(os.fspath(path), default_blueprint=bp)
+        yield rec
+        rec.flush()
+        rec.disconnect()
 
 
 def save_rrd(
@@ -1004,11 +1034,8 @@ def save_rrd(
 ) -> rrb.Blueprint:
     """Write ``result`` with its blueprint to an ``.rrd`` file; returns the blueprint."""
     bp = blueprint(list(result.axes), with_flight=flight, focus=result_focus(result))
-    rec = new_recording()
-    rec.save(os.fspath(path), default_blueprint=bp)
-    log_fit_result(rec, result, flight=flight)
-    rec.flush()
-    rec.disconnect()
+    with _rrd_file(path, bp) as rec:
+        log_fit_result(rec, result, flight=flight)
     return bp
 
 

@@ -6,9 +6,12 @@ import base64
 import contextlib
 import hashlib
 import io
+import json
 import os
 import shutil
+import stat
 import tempfile
+import threading
 from pathlib import Path
 
 import pytest
@@ -54,6 +57,56 @@ def test_a_link_to_the_log_is_the_log(log: Path, tmp_path: Path) -> None:
         code, err = _run("fit", str(log), "-o", str(out))
         assert code == 1 and "is an input" in err
     assert _digest(log) == before
+
+
+def test_an_output_through_a_link_replaces_the_file_not_the_link(log: Path,
+                                                                   tmp_path: Path) -> None:
+    """The new file was renamed over the link itself: the link was gone, its file stale."""
+    real = tmp_path / "real.json"
+    real.write_text("old")
+    link = tmp_path / "model.json"
+    os.symlink(real, link)
+    assert _run("fit", str(log), "-q", "-o", str(link))[0] == 0
+    assert link.is_symlink() and os.readlink(link) == str(real)
+    assert json.loads(real.read_text())["mavsid_models"] == 1
+
+
+def test_an_output_that_is_a_pipe_is_written_in_place(log: Path, tmp_path: Path) -> None:
+    """An output that exists and is no regular file (a FIFO, ``/dev/stdout``, a device) was
+    replaced by a regular file renamed over it: as root, ``fit -o /dev/full`` turned the
+    device into a JSON file. Now it is written in place."""
+    fifo = tmp_path / "pipe.json"
+    os.mkfifo(fifo)
+    got: list[bytes] = []
+    reader = threading.Thread(target=lambda: got.append(fifo.read_bytes()), daemon=True)
+    reader.start()
+    try:
+        code, err = _run("fit", str(log), "-q", "-o", str(fifo))
+    finally:
+        if reader.is_alive():  # (the command failed before it opened the pipe)
+            with open(fifo, "wb"):
+                pass
+        reader.join(timeout=60)
+    assert code == 0, err
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode)
+    assert json.loads(got[0])["mavsid_models"] == 1
+
+
+def test_a_recording_that_cannot_be_written_is_one_line(log: Path, tmp_path: Path,
+                                                        monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """rerun reports a failed write (a full disk) as a RuntimeError: it was a traceback."""
+    import rerun as rr
+
+    def full(self, *args, **kwargs):  # type: ignore[no-untyped-def]
+        raise RuntimeError("Failed to encode LogMsg: Failed to write: No space left on device "
+                           "(os error 28)")
+
+    monkeypatch.setattr(rr.RecordingStream, "save", full)
+    out = tmp_path / "f.rrd"
+    code, err = _run("fit", str(log), "-q", "--rrd", str(out))
+    assert code == 1
+    assert err == f"mavsid: error: {out}: cannot write: No space left on device (os error 28)\n"
+    assert not out.exists() and not list(tmp_path.glob(".f.*"))
 
 
 def test_extract_and_view_never_overwrite_their_log(log: Path) -> None:

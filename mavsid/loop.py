@@ -2029,8 +2029,8 @@ def analyse_model(model: Any, axis: str, ctrl: AxisController, lag: int = 0,
             continue
     if len(draws) < 2:
         return base
-    err = {k: float(np.nanstd([d[k] for d in draws if np.isfinite(d[k])] or [np.nan]))
-           for k in _FIGURES}
+    finite = {k: [d[k] for d in draws if np.isfinite(d[k])] for k in _FIGURES}
+    err = {k: float(np.std(v)) if v else math.nan for k, v in finite.items()}
     return replace(base, stderr=err)
 
 
@@ -2525,7 +2525,11 @@ def tune(result: Any, target_pm_deg: float = 50.0, samples: int = 40,
     for axis, fit in result.axes.items():
         entry: dict[str, Any] = {}
         fd = result.flights[0]
-        ctrl = controller_from_params(fd.params, axis, _autopilot(fd))
+        try:
+            ctrl = controller_from_params(fd.params, axis, _autopilot(fd))
+        except ConfigError as exc:  # (a damaged gain: this axis only)
+            out[axis] = {"error": f"{fd.source.path}: {exc}"}
+            continue
         lag = fit.closed_loop.lag_loops if fit.closed_loop is not None else 0
         tau = fit.closed_loop.measurement_delay_loops if fit.closed_loop is not None else 0.0
         entry["controller"] = ctrl.to_dict()

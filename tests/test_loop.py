@@ -587,3 +587,21 @@ def test_a_damaged_loop_rate_is_not_simulated(value: float) -> None:
     px4 = controller_from_params({"MC_ROLLRATE_P": 0.1, "IMU_GYRO_RATEMAX": value}, "roll")
     assert 100.0 <= px4.loop_hz <= 8000.0 and "IMU_GYRO_RATEMAX" in px4.defaults_used
     assert controller_from_params({"SCHED_LOOP_RATE": 1000.0}, "roll").loop_hz == 1000.0
+
+
+def test_a_damaged_gain_stops_only_its_axis_in_tune() -> None:
+    """A log whose ATC_RAT_RLL_P is negative (damaged): ``mavsid tune`` stopped with "parameter
+    ATC_RAT_RLL_P = -1 must be >= 0", naming no file and analysing no axis. Now that axis
+    says why it was not analysed, naming the log (the others are analysed as before)."""
+    from pathlib import Path
+
+    from mavsid import pipeline
+
+    path = Path(__file__).resolve().parents[1] / "fixtures" / "sysid_roll.bin"
+    res = pipeline.fit([str(path)], pipeline.PipelineConfig(axes=("roll",)))
+    fd = res.flights[0]
+    bad = replace(res, flights=(replace(fd, params={**fd.params, "ATC_RAT_RLL_P": -1.0}),
+                                *res.flights[1:]))
+    out = loop.tune(bad)
+    assert out["roll"] == {"error": f"{path}: parameter ATC_RAT_RLL_P = -1 must be >= 0"}
+    assert "error" not in loop.tune(res)["roll"]

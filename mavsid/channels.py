@@ -114,6 +114,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import warnings
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -121,7 +122,7 @@ from typing import Any
 import numpy as np
 
 from mavsid.data import LOG_FORMATS, MessageTable, RawLog
-from mavsid.errors import ConfigError, MavsidError, MissingMessageError
+from mavsid.errors import ConfigError, DataQualityWarning, MavsidError, MissingMessageError
 
 __all__ = [
     "DESIRED_CHANNELS",
@@ -151,6 +152,7 @@ __all__ = [
     "preset_messages",
     "pwm_to_thrust",
     "servo_inputs",
+    "thrust_curve",
     "to_si",
     "vehicle_kind",
 ]
@@ -1042,6 +1044,68 @@ def evaluate(raw: RawLog, channel: Channel, what: str = "") -> tuple[np.ndarray,
     return t[ok], values[ok]
 
 
+#: ArduPilot's defaults for a multirotor's spin range and thrust-curve exponent
+#: (AP_Motors_Thrust_Linearization: MOT_SPIN_MIN 0.15, MOT_SPIN_MAX 0.95, MOT_THST_EXPO 0.65)
+_SPIN_DEFAULT = (0.15, 0.95)
+_EXPO_DEFAULT = 0.65
+#: the widest PWM range (µs) an output's end points can stand for
+_PWM_SPAN = (1.0, 3000.0)
+
+
+def thrust_curve(params: Mapping[str, float]) -> tuple[tuple[float, ...], list[str]]:
+    """The ``(pwm_min, pwm_max, spin_min, spin_max, expo)`` :func:`pwm_to_thrust` uses, and a
+    note for each value of the log it could not use (a damaged parameter: ArduPilot's own
+    default taken instead; the exponent clipped to [-1, 1], as ArduPilot clips it).
+
+    Examples
+    --------
+    >>> thrust_curve({"MOT_SPIN_MIN": 0.1, "MOT_SPIN_MAX": 0.9, "MOT_THST_EXPO": 0.5})
+    ((1000.0, 2000.0, 0.1, 0.9, 0.5), [])
+    >>> for note in thrust_curve({"MOT_SPIN_MIN": float("nan"), "MOT_THST_EXPO": 3.0})[1]:
+    ...     print(note)
+    MOT_SPIN_MIN nan, MOT_SPIN_MAX 0.95: not a spin range (0 <= min < max <= 1): 0.15, 0.95 assumed
+    MOT_THST_EXPO 3 clipped to 1, as ArduPilot does
+    """
+    notes: list[str] = []
+
+    def number(name: str, default: float) -> float:
+        value = params.get(name, default)
+        return float(value) if isinstance(value, (int, float)) else math.nan
+
+    lo, hi = number("MOT_PWM_MIN", 0.0), number("MOT_PWM_MAX", 0.0)
+    if not hi > lo > 0:  # ArduCopter < 3.5 (and MOT_PWM_* = 0): the throttle channel's range
+        lo, hi = number("RC3_MIN", 0.0), number("RC3_MAX", 0.0)
+    if not hi > lo > 0:
+        lo, hi = 1000.0, 2000.0
+    elif not _PWM_SPAN[0] <= lo < hi <= _PWM_SPAN[1]:
+        notes.append(f"PWM range {lo:g}..{hi:g} us is no output's: 1000..2000 assumed")
+        lo, hi = 1000.0, 2000.0
+    # ArduCopter < 3.4: THR_MIN (0-1000) is the lowest throttle in flight; <= 3.3 (THR_MIN,
+    # no MOT_SPIN_*/MOT_THST_EXPO): THR_MAX (0-1000) the top, and no thrust-curve exponent
+    # (outputs taken as linear in thrust)
+    old = "THR_MIN" in params and "MOT_SPIN_MIN" not in params
+    names = ("THR_MIN", "THR_MAX") if old else ("MOT_SPIN_MIN", "MOT_SPIN_MAX")
+    spin_min = (number("THR_MIN", 150.0) / 1000.0 if old
+                else number("MOT_SPIN_MIN", number("THR_MIN", 150.0) / 1000.0))
+    spin_max = (number("MOT_SPIN_MAX", number("THR_MAX", 950.0) / 1000.0) if old
+                else number("MOT_SPIN_MAX", _SPIN_DEFAULT[1]))
+    if not 0.0 <= spin_min < spin_max <= 1.0:
+        scale = 1000.0 if old else 1.0
+        notes.append(f"{names[0]} {spin_min * scale:g}, {names[1]} {spin_max * scale:g}: not a "
+                     f"spin range (0 <= min < max <= {scale:g}): {_SPIN_DEFAULT[0] * scale:g}, "
+                     f"{_SPIN_DEFAULT[1] * scale:g} assumed")
+        spin_min, spin_max = _SPIN_DEFAULT
+    expo = number("MOT_THST_EXPO", 0.0 if old else _EXPO_DEFAULT)
+    if not math.isfinite(expo):
+        notes.append(f"MOT_THST_EXPO {expo:g}: {_EXPO_DEFAULT:g} assumed")
+        expo = _EXPO_DEFAULT
+    elif not -1.0 <= expo <= 1.0:
+        clipped = min(max(expo, -1.0), 1.0)
+        notes.append(f"MOT_THST_EXPO {expo:g} clipped to {clipped:g}, as ArduPilot does")
+        expo = clipped
+    return (lo, hi, spin_min, spin_max, expo), notes
+
+
 def pwm_to_thrust(pwm: np.ndarray, params: Mapping[str, float]) -> np.ndarray:
     """Motor PWM (µs) -> normalised thrust 0..1 through ArduPilot's output and thrust curve.
 
@@ -1053,28 +1117,16 @@ def pwm_to_thrust(pwm: np.ndarray, params: Mapping[str, float]) -> np.ndarray:
     takes ``THR_MIN``/1000. Such a log (``THR_MIN``, no ``MOT_SPIN_*``: ArduCopter 3.2's
     parameter table has ``THR_MIN``/``THR_MAX`` and neither) takes ``THR_MAX``/1000 for the
     top of the range and, without ``MOT_THST_EXPO``, outputs linear in thrust (exponent 0;
-    the old ``MOT_TCRV_*`` curve is not modelled).
+    the old ``MOT_TCRV_*`` curve is not modelled). Damaged values: :func:`thrust_curve`.
 
     Examples
     --------
     >>> pwm_to_thrust(np.array([1000.0, 2000.0]), {"MOT_SPIN_MIN": 0, "MOT_SPIN_MAX": 1}).tolist()
     [0.0, 1.0]
     """
-    lo, hi = params.get("MOT_PWM_MIN", 0.0), params.get("MOT_PWM_MAX", 0.0)
-    if not hi > lo > 0:  # ArduCopter < 3.5 (and MOT_PWM_* = 0): the throttle channel's range
-        lo, hi = params.get("RC3_MIN", 0.0), params.get("RC3_MAX", 0.0)
-    if not hi > lo > 0:
-        lo, hi = 1000.0, 2000.0
-    # ArduCopter < 3.4: THR_MIN (0-1000) is the lowest throttle in flight
-    spin_min = params.get("MOT_SPIN_MIN", params.get("THR_MIN", 150.0) / 1000.0)
-    # ArduCopter <= 3.3 (THR_MIN, no MOT_SPIN_*/MOT_THST_EXPO): THR_MAX (0-1000) the top,
-    # and no thrust-curve exponent (outputs taken as linear in thrust)
-    old = "THR_MIN" in params and "MOT_SPIN_MIN" not in params
-    spin_max = params.get("MOT_SPIN_MAX", params.get("THR_MAX", 950.0) / 1000.0 if old
-                          else 0.95)
-    expo = params.get("MOT_THST_EXPO", 0.0 if old else 0.65)
+    (lo, hi, spin_min, spin_max, expo), _ = thrust_curve(params)
     actuator = (np.asarray(pwm, dtype=float) - lo) / (hi - lo)
-    r = np.clip((actuator - spin_min) / max(spin_max - spin_min, 1e-6), 0.0, 1.0)
+    r = np.clip((actuator - spin_min) / (spin_max - spin_min), 0.0, 1.0)
     return (1.0 - expo) * r + expo * r * r
 
 
@@ -1227,6 +1279,10 @@ def motor_thrusts(raw: RawLog, preset: Preset, mixer: Mixer) -> tuple[np.ndarray
     rows = _rows(table, ch.instance)
     if rows is not None:
         ok &= rows
+    notes = thrust_curve(raw.params)[1]
+    if notes:
+        warnings.warn(f"{raw.source.path}: motor parameters that are no motor's (damaged?): "
+                      f"{'; '.join(notes)}", DataQualityWarning, stacklevel=3)
     return t[ok], pwm_to_thrust(pwm[ok], raw.params)
 
 

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import math
+import re
 import warnings
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -18,11 +20,13 @@ from mavsid.channels import (
     evaluate,
     get_preset,
     load_presets,
+    motor_thrusts,
     pwm_to_thrust,
     quat_to_euler,
+    thrust_curve,
 )
 from mavsid.data import MessageTable, RawLog, SourceInfo
-from mavsid.errors import ConfigError, MissingMessageError
+from mavsid.errors import ConfigError, DataQualityWarning, MissingMessageError
 
 
 def _log(fmt: str, tables: dict[str, dict[str, np.ndarray]], **kw) -> RawLog:
@@ -80,6 +84,33 @@ def test_pwm_to_thrust_inverts_ardupilot_thrust_curve():
     act = params["MOT_SPIN_MIN"] + (params["MOT_SPIN_MAX"] - params["MOT_SPIN_MIN"]) * r
     pwm = params["MOT_PWM_MIN"] + (params["MOT_PWM_MAX"] - params["MOT_PWM_MIN"]) * act
     assert np.allclose(pwm_to_thrust(pwm, params), thrust, atol=1e-9)
+
+
+@pytest.mark.parametrize(("name", "value", "said"), [
+    ("MOT_THST_EXPO", 1e9, "MOT_THST_EXPO 1e+09 clipped to 1, as ArduPilot does"),
+    ("MOT_THST_EXPO", float("nan"), "MOT_THST_EXPO nan: 0.65 assumed"),
+    ("MOT_SPIN_MIN", float("nan"), "MOT_SPIN_MIN nan, MOT_SPIN_MAX 0.95: not a spin range"),
+    ("MOT_SPIN_MAX", 0.0, "MOT_SPIN_MIN 0.15, MOT_SPIN_MAX 0: not a spin range"),
+    ("MOT_PWM_MAX", 1e9, "PWM range 1000..1e+09 us is no output's: 1000..2000 assumed"),
+])
+def test_damaged_motor_parameters_take_ardupilots_values_and_say_so(name, value, said):
+    """Motor PWMs through a thrust curve of damaged parameters: MOT_THST_EXPO 1e9 made
+    inputs 10^7 times too large, a NaN spin range made every input NaN, MOT_PWM_MAX 1e9 made
+    them all 0 — silently. Now ArduPilot's own rule (the exponent clipped to [-1, 1]) or
+    default is used, and the warning names the file and the value."""
+    ok = {"MOT_PWM_MIN": 1000.0, "MOT_PWM_MAX": 2000.0, "MOT_SPIN_MIN": 0.15,
+          "MOT_SPIN_MAX": 0.95, "MOT_THST_EXPO": 0.65, "FRAME_CLASS": 1.0, "FRAME_TYPE": 1.0}
+    pwm = np.linspace(1200.0, 1800.0, 50)
+    raw = _log("dataflash", {"RCOU": {f"C{i}": pwm for i in range(1, 5)}})
+    fixed = {**ok, name: value}
+    if name == "MOT_THST_EXPO" and value > 1:
+        ok["MOT_THST_EXPO"] = 1.0  # (what ArduPilot flies with)
+    preset = PRESETS["ardupilot-rcou"]
+    told = f"x.dataflash: motor parameters that are no motor's (damaged?): {said}"
+    with pytest.warns(DataQualityWarning, match=re.escape(told)):
+        _, got = motor_thrusts(replace(raw, params=fixed), preset, MIXERS["quad-x"])
+    assert np.allclose(got[:, 0], pwm_to_thrust(pwm, ok))
+    assert thrust_curve(ok)[1] == []
 
 
 # --------------------------------------------------------------------------- mixers

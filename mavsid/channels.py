@@ -1155,7 +1155,7 @@ def servo_inputs(raw: RawLog, preset: Preset) -> list[tuple[str, str, np.ndarray
     MissingMessageError
         No servo carries roll, pitch or yaw (``SERVOn_FUNCTION``), or its PWM field is absent.
     ConfigError
-        An angle servo's ``SERVOn_MIN/TRIM/MAX`` are not increasing (a throttle's need only
+        An angle servo's ``SERVOn_MIN/TRIM/MAX`` are not increasing PWMs (a throttle's need only
         ``MIN < MAX``; one without is left out).
 
     Examples
@@ -1201,11 +1201,13 @@ def servo_inputs(raw: RawLog, preset: Preset) -> list[tuple[str, str, np.ndarray
         trim = float(params.get(f"SERVO{n}_TRIM", 1500.0))
         hi = float(params.get(f"SERVO{n}_MAX", 1900.0))
         # (a range output's trim is usually its minimum: a throttle idles there)
-        if not (hi > trim > lo if angle else hi > lo):
+        if not (hi > trim > lo if angle else hi > lo) or not (
+                _PWM_SPAN[0] <= lo and hi <= _PWM_SPAN[1]):
             if name == "u_thrust":  # (optional: the attitude axes do not need it)
                 continue
             raise ConfigError(f"{raw.source.path}: SERVO{n}_MIN/TRIM/MAX {lo:g}/{trim:g}/{hi:g} "
-                              f"are not increasing: the {label} output cannot be normalised")
+                              f"are not increasing PWMs within {_PWM_SPAN[0]:g}..{_PWM_SPAN[1]:g} "
+                              f"us: the {label} output cannot be normalised")
         rev = bool(params.get(f"SERVO{n}_REVERSED", 0.0))
         if angle:
             v = np.where(pwm >= trim, (pwm - trim) / (hi - trim), (pwm - trim) / (trim - lo))

@@ -559,6 +559,11 @@ def test_servo_inputs_follow_the_servo_parameters() -> None:
         servo_inputs(raw({"SERVO5_FUNCTION": 4}), preset)
     with pytest.raises(ConfigError, match="SERVO5_MIN/TRIM/MAX 1000/2000/1900"):
         servo_inputs(raw({**base, "SERVO5_TRIM": 2000}), preset)
+    # a damaged end point (0, or 1e9) scaled one side of the deflections 3.75 or 2.5e6
+    # times wrong, silently
+    for end, value in (("MIN", 0.0), ("MAX", 1e9)):
+        with pytest.raises(ConfigError, match="are not increasing PWMs within 1..3000 us"):
+            servo_inputs(raw({**base, f"SERVO5_{end}": value}), preset)
     # a throttle idles at its trim = MIN (ArduPlane's default): a range, normalised from MIN
     pwm["C3"] = np.array([1100.0, 1500, 1900, 1100])
     thr = {**base, "SERVO3_FUNCTION": 70, "SERVO3_MIN": 1100, "SERVO3_TRIM": 1100,

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import re
+import warnings
 
 import numpy as np
 import pytest
@@ -474,6 +475,21 @@ def test_a_stored_model_that_no_fit_gives_is_refused(tmp_path, change, said):
     assert str(path) in str(err.value)
 
 
+@pytest.mark.parametrize(("name", "value"), [("INS_GYRO_FILTER", -20.0),
+                                           ("INS_GYRO_FILTER", float("nan")),
+                                           ("IMU_GYRO_CUTOFF", float("inf"))])
+def test_a_damaged_gyro_filter_parameter_is_said(name, value):
+    """A gyro filter that is no frequency was left out of the model silently (the fitted
+    delay took its lag): now a warning names it."""
+    from mavsid.errors import DataQualityWarning
+
+    with pytest.warns(DataQualityWarning, match=f"{name} = {value:g} is no filter frequency"):
+        assert filters_from_params({name: value}, DT) == ()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        filters_from_params({"INS_GYRO_FILTER": 0.0}, DT)  # 0: no filter, as ArduPilot's
+
+
 def test_gyro_filter_from_params_runs_at_the_gyro_rate():
     flt = filters_from_params({"INS_GYRO_FILTER": 20.0, "INS_GYRO_RATE": 1}, DT)
     assert flt == (InputFilter(20.0, 2, "INS_GYRO_FILTER", rate_hz=2000.0),)
@@ -580,5 +596,8 @@ def test_damaged_gyro_filter_parameters_do_not_crash_or_oversample(params) -> No
     filter sub-steps per sample); the filter now runs at its nominal rate or not at all."""
     from mavsid.estimators.regressors import filters_from_params
 
-    for f in filters_from_params(params, dt=0.0025):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # (an infinite cut-off is said: see above)
+        got = filters_from_params(params, dt=0.0025)
+    for f in got:
         assert f.substeps(0.0025) <= 20

@@ -562,7 +562,7 @@ def test_servo_inputs_follow_the_servo_parameters() -> None:
     # a damaged end point (0, or 1e9) scaled one side of the deflections 3.75 or 2.5e6
     # times wrong, silently
     for end, value in (("MIN", 0.0), ("MAX", 1e9)):
-        with pytest.raises(ConfigError, match="are not increasing PWMs within 1..3000 us"):
+        with pytest.raises(ConfigError, match=r"are not increasing PWMs within 1\.\.3000 us"):
             servo_inputs(raw({**base, f"SERVO5_{end}": value}), preset)
     # a throttle idles at its trim = MIN (ArduPlane's default): a range, normalised from MIN
     pwm["C3"] = np.array([1100.0, 1500, 1900, 1100])

@@ -164,6 +164,12 @@ def filters_from_params(params: Mapping[str, float], dt: float) -> tuple[InputFi
     ()
     """
     out = []
+    for name in ("INS_GYRO_FILTER", "IMU_GYRO_CUTOFF"):
+        value = params.get(name)
+        if value is not None and not 0.0 <= float(value) < math.inf:
+            warnings.warn(f"{name} = {float(value):g} is no filter frequency (a damaged "
+                          "parameter?): the logged rates are modelled as unfiltered",
+                          DataQualityWarning, stacklevel=2)
     fc = float(params.get("INS_GYRO_FILTER", 0.0) or 0.0)
     if math.isfinite(fc) and fc > 0.0:
         k = params.get("INS_GYRO_RATE", 0)  # 0-3: 1, 2, 4, 8 kHz (other values: damaged)

@@ -1069,8 +1069,10 @@ def thrust_curve(params: Mapping[str, float]) -> tuple[tuple[float, ...], list[s
     notes: list[str] = []
 
     def number(name: str, default: float) -> float:
-        value = params.get(name, default)
-        return float(value) if isinstance(value, (int, float)) else math.nan
+        try:
+            return float(params.get(name, default))
+        except (TypeError, ValueError):
+            return math.nan
 
     lo, hi = number("MOT_PWM_MIN", 0.0), number("MOT_PWM_MAX", 0.0)
     if not hi > lo > 0:  # ArduCopter < 3.5 (and MOT_PWM_* = 0): the throttle channel's range

@@ -138,6 +138,85 @@ _KEYS: dict[str, dict[str, str]] = {
 }
 
 
+#: ``[model]`` options a configuration may set (those of
+#: :func:`mavsid.estimators.fit_axis` and its estimators): kind and the values it may take.
+#: Kinds: ``number`` (finite, in ``[lo, hi]``), ``numbers`` (a list of them; ``lo`` below
+#: 0 for a non-empty list), ``whole`` (an integer in ``[lo, hi]``), ``bool``, ``names`` (a
+#: list of strings) and ``choice`` (one of ``hi``). Bounds keep a run finite: a delay step
+#: of 1e-9 samples took the machine's memory, a 1e9-s delay search or 10^6 bootstrap draws
+#: ran for hours.
+MODEL_OPTIONS: dict[str, tuple[str, float, Any]] = {
+    "delay": ("number", 0.0, 1000.0),  # samples
+    "delays": ("numbers", -1.0, 1000.0),  # samples, at least one
+    "delay_step": ("number", 0.01, 1.0),  # samples
+    "max_delay_s": ("number", 0.0, 1.0),
+    "lags_s": ("numbers", 0.0, 1.0),
+    "structure_tol": ("number", 0.0, 1.0),
+    "inputs": ("names", 0, None),
+    "bias": ("bool", 0, None),
+    "continuous": ("bool", 0, None),
+    "features": ("names", 0, None),
+    "refine": ("choice", 0, ("auto", "oe")),
+    "alpha": ("number", 0.0, 1e12),  # or "cv"
+    "alphas": ("numbers", -1.0, 1e12),
+    "l1_ratio": ("number", 0.0, 1.0),
+    "threshold": ("number", 0.0, 1e12),
+    "cv_horizon": ("whole", 1, 100_000),
+    "n_bootstrap": ("whole", 0, 10_000),
+    "hac": ("bool", 0, None),
+    "min_blocks": ("whole", 2, 10_000),
+    "max_condition": ("number", 1.0, 1e300),
+    "random_state": ("whole", 0, 2**32 - 1),
+    "max_iter": ("whole", 1, 10_000),
+}
+
+
+def _model_option(key: str, value: Any) -> None:
+    """Raise :class:`ConfigError` when ``[model] key = value`` is not one
+    :data:`MODEL_OPTIONS` allows.
+
+    Examples
+    --------
+    >>> _model_option("lags_s", [0.02, 0.04])
+    >>> _model_option("delay_step", 0)
+    Traceback (most recent call last):
+    mavsid.errors.ConfigError: model.delay_step: 0 is not a finite number in [0.01, 1]
+    """
+    if key not in MODEL_OPTIONS:
+        raise ConfigError(f"unknown key model.{key} (known: {', '.join(MODEL_OPTIONS)})")
+    kind, lo, hi = MODEL_OPTIONS[key]
+
+    def number(x: Any) -> bool:
+        return (isinstance(x, int | float) and not isinstance(x, bool)
+                and math.isfinite(x) and max(lo, 0.0) <= x <= hi)
+
+    if key == "alpha" and value == "cv":
+        return
+    ok = {
+        "number": lambda: number(value),
+        "numbers": lambda: isinstance(value, list) and all(map(number, value))
+        and (lo >= 0 or bool(value)),
+        "whole": lambda: isinstance(value, int) and not isinstance(value, bool)
+        and lo <= value <= hi,
+        "bool": lambda: isinstance(value, bool),
+        "names": lambda: isinstance(value, list) and all(isinstance(v, str) for v in value),
+        "choice": lambda: value in hi,
+    }[kind]()
+    if not ok:
+        if kind in ("number", "numbers"):
+            want = (("a " if kind == "number" else
+                     f"a {'non-empty ' if lo < 0 else ''}list of ")
+                    + f"finite number{'s' * (kind == 'numbers')} in [{max(lo, 0.0):g}, {hi:g}]")
+        elif kind == "whole":
+            want = f"a whole number in [{lo:g}, {hi}]"
+        elif kind == "choice":
+            want = f"one of {', '.join(map(repr, hi))}"
+        else:
+            want = {"bool": "true or false", "names": "a list of strings"}[kind]
+        raise ConfigError(f"model.{key}: {value!r} is not {want}" + (
+            " or 'cv'" if key == "alpha" else ""))
+
+
 def config_from_dict(data: Mapping[str, Any], path: str | None = None) -> PipelineConfig:
     """Build a :class:`PipelineConfig` from the TOML structure; unknown keys are errors."""
     where = f"{path}: " if path else ""
@@ -146,6 +225,11 @@ def config_from_dict(data: Mapping[str, Any], path: str | None = None) -> Pipeli
         if section == "model":
             if not isinstance(content, Mapping):
                 raise ConfigError(f"{where}[model] must be a table")
+            try:
+                for key, value in content.items():
+                    _model_option(key, value)
+            except ConfigError as exc:
+                raise ConfigError(f"{where}{exc}") from None
             values["model_options"] = dict(content)
             continue
         if section not in _KEYS or not isinstance(content, Mapping):

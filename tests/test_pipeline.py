@@ -71,9 +71,24 @@ def test_every_bundled_pipeline_parses() -> None:
          "segments.options: min_coherence must be a number in [0, 1]"),
         ({"segments": {"options": {"max_angle_deg": math.nan}}},
          "segments.options: max_angle_deg must be"),
+        # [model] options: tracebacks (delay "x", delays [], features 3, delay_step 0), the
+        # machine's memory taken (delay_step 1e-9), hours of work (max_delay_s 1e9,
+        # n_bootstrap 10^6), or passed on silently (bias "yes")
+        ({"model": {"delay": "x"}}, "model.delay: 'x' is not a finite number in [0, 1000]"),
+        ({"model": {"delays": []}}, "model.delays: [] is not a non-empty list"),
+        ({"model": {"delay_step": 1e-9}}, "model.delay_step: 1e-09 is not a finite number"),
+        ({"model": {"max_delay_s": 1e9}}, "model.max_delay_s"),
+        ({"model": {"lags_s": [-0.1]}}, "model.lags_s: [-0.1] is not a list of finite"),
+        ({"model": {"n_bootstrap": 10**6}}, "model.n_bootstrap: 1000000 is not a whole number"),
+        ({"model": {"features": 3}}, "model.features: 3 is not a list of strings"),
+        ({"model": {"bias": "yes"}}, "model.bias: 'yes' is not true or false"),
+        ({"model": {"refine": "bogus"}}, "model.refine: 'bogus' is not one of 'auto', 'oe'"),
+        ({"model": {"alpha": -1}}, "model.alpha: -1 is not a finite number"),
+        ({"model": {"params": 3}}, "unknown key model.params"),
     ],
 )
 def test_bad_config_names_the_key(data: dict, message: str) -> None:
+    """Each bad value is one ConfigError naming its key."""
     with pytest.raises(ConfigError, match=message.replace("[", r"\[").replace("]", r"\]")):
         config_from_dict(data)
 
@@ -96,6 +111,17 @@ def test_a_penalty_that_is_not_a_finite_number_is_refused(alpha: object) -> None
 
     with pytest.raises(ConfigError, match="alpha must be"):
         Ridge(alpha=alpha)  # type: ignore[arg-type]
+
+
+def test_model_options_a_config_may_set_are_taken() -> None:
+    """The bounds are not tighter than real use: the bundled pipelines' options, "cv" and
+    every kind of option at a plain value pass."""
+    cfg = config_from_dict({"model": {
+        "lags_s": [0.02, 0.04, 0.08], "alpha": "cv", "delays": [0, 1.5], "delay_step": 0.25,
+        "max_delay_s": 0.05, "structure_tol": 0.01, "n_bootstrap": 50, "bias": False,
+        "features": ["p*u_roll"], "refine": "oe", "random_state": 7, "min_blocks": 4}})
+    assert cfg.model_options["alpha"] == "cv" and cfg.model_options["lags_s"] == [0.02, 0.04,
+                                                                                    0.08]
 
 
 def test_config_file_errors(tmp_path: Path) -> None:

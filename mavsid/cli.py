@@ -596,6 +596,8 @@ def _add_tune(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--config", metavar="FILE.toml", help="pipeline settings (see pipelines/)")
     _add_preset_flag(p)
     p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.add_argument("-q", "--quiet", action="store_true",
+                   help="no progress bar (there is none when stderr is not a terminal)")
     p.set_defaults(handler=_tune)
 
 
@@ -603,12 +605,15 @@ def _tune(args: argparse.Namespace) -> int:
     import json
 
     from mavsid.loop import format_tune, tune
-    from mavsid.pipeline import _json_safe, fit
+    from mavsid.pipeline import FIT_STAGES, _json_safe, fit
 
     if not 0 < args.target_pm < 90:
         raise ConfigError(f"--target-pm {args.target_pm:g}: must lie in (0, 90) degrees")
-    result = fit([args.log], _pipeline_config(args))
-    report = tune(result, args.target_pm)
+    cfg = _pipeline_config(args)
+    with _progress(args, 1 + len(FIT_STAGES) * len(cfg.axes) + 1) as step:
+        result = fit([args.log], cfg, progress=step)
+        step("loop analysis")
+        report = tune(result, args.target_pm)
     if args.json:
         print(json.dumps({"axes": _json_safe(report), "log": args.log,
                           "target_pm_deg": args.target_pm}))

@@ -292,8 +292,9 @@ def test_pipeline_reports_every_stage_even_skipped_ones() -> None:
 
 
 @pytest.mark.parametrize("command, second", [("info", "summarising"),
-                                             ("segments", "scoring windows")])
-def test_info_and_segments_show_their_stages_on_a_terminal(command: str, second: str) -> None:
+                                             ("segments", "scoring windows"),
+                                             ("tune", "loop analysis")])
+def test_info_segments_and_tune_show_their_stages_on_a_terminal(command: str, second: str) -> None:
     log = str(FIXTURES / "sysid_roll.bin")
     for quiet in (None, "--quiet", "-q"):
         err = _Terminal()

@@ -112,6 +112,8 @@ def _extract(args: argparse.Namespace) -> int:
     for flag, value in (("--start", args.start), ("--stop", args.stop)):
         if value is not None and not math.isfinite(value):
             raise ConfigError(f"{flag} {value}: not a time in seconds")
+    if args.start is not None and args.stop is not None and args.start > args.stop:
+        raise ConfigError(f"--start {args.start:g} s is after --stop {args.stop:g} s")
     # what the output can hold, said before the log is read (and naming the output, not the
     # temporary file it is written through)
     suffix = Path(args.output).suffix.lower()
@@ -536,6 +538,7 @@ def _view(args: argparse.Namespace) -> int:
     from mavsid.pipeline import find_windows, load_models, validate_logs
 
     check_outputs([args.save], [args.log, *([args.model] if args.model else [])])
+    _check_viewer_address(args)
     cfg = _pipeline_config(args)
     rec = viz.new_recording()
     sink = _sink_args(args)
@@ -544,6 +547,8 @@ def _view(args: argparse.Namespace) -> int:
         if save:
             sink["save"] = stack.enter_context(atomic_path(save))
             stack.enter_context(viz.write_errors())
+        if args.connect:
+            stack.enter_context(_viewer_errors(args.url))
         if args.model:
             result = validate_logs(load_models(args.model), [args.log], cfg)
             served = viz.open_sink(
@@ -570,6 +575,39 @@ def _view(args: argparse.Namespace) -> int:
     if args.save:
         print(f"wrote {args.save}")
     return 0
+
+
+#: the addresses a rerun viewer takes (``--url``)
+_VIEWER_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
+
+
+def _check_viewer_address(args: argparse.Namespace) -> None:
+    """``view``'s ``--url`` (with ``--connect``) or ``--bind`` (a viewer mavsid starts) before
+    the log is read: a bad one was a traceback from rerun or from the socket layer."""
+    if args.connect:
+        if not args.url.startswith(_VIEWER_SCHEMES):
+            raise ConfigError(f"--url {args.url}: not a rerun viewer address (one of "
+                              f"{', '.join(s + '...' for s in _VIEWER_SCHEMES)})")
+    elif not (args.save or args.stdout or args.headless):
+        from mavsid.viz import free_port
+
+        try:
+            free_port(args.bind)
+        except OSError as exc:
+            raise ConfigError(f"--bind {args.bind}: cannot listen there "
+                              f"({exc.strerror or exc})") from None
+
+
+@contextlib.contextmanager
+def _viewer_errors(url: str) -> Iterator[None]:
+    """rerun's failure to reach the viewer at ``url`` (a ``RuntimeError`` when the recording
+    is flushed) as one line naming it."""
+    try:
+        yield
+    except RuntimeError as exc:
+        if "connect" not in str(exc):
+            raise
+        raise ConfigError(f"--url {url}: cannot reach the viewer ({exc})") from None
 
 
 def _sink_args(args: argparse.Namespace) -> dict[str, Any]:

@@ -162,6 +162,27 @@ def test_view_flags_are_mavsids_own(capsys) -> None:  # type: ignore[no-untyped-
     assert "0.0.0.0 offers the flight to the network" in text and "Rerun" not in text
 
 
+@pytest.mark.parametrize(("flags", "said"), [
+    (["--connect", "--url", "bogus://x"], "--url bogus://x: not a rerun viewer address"),
+    (["--serve", "--bind", "999.1.1.1"], "--bind 999.1.1.1: cannot listen there"),
+])
+def test_a_viewer_address_that_cannot_be_used_is_one_line(flags: list[str], said: str) -> None:
+    """A --url rerun does not take, or a --bind that is no address of this machine, were
+    tracebacks from rerun or the socket layer after the log was read."""
+    got = run("view", str(FIXTURES / "sysid_roll.bin"), *flags)
+    assert got.returncode == 1 and got.stderr.startswith(f"mavsid: error: {said}")
+    assert got.stderr.count("\n") == 1
+
+
+def test_a_viewer_that_cannot_be_reached_is_one_line() -> None:
+    """rerun says so as a RuntimeError when the recording is flushed (after ~6 s)."""
+    with pytest.raises(cli.ConfigError, match=r"--url rerun\+http://h:1/proxy: cannot reach"):
+        with cli._viewer_errors("rerun+http://h:1/proxy"):
+            raise RuntimeError("gRPC has been unable to connect for 6s, uri: rerun+http://h:1")
+    with pytest.raises(RuntimeError, match="other"), cli._viewer_errors("rerun://h"):
+        raise RuntimeError("other")
+
+
 def _listening(port: int) -> list[str]:
     """Local addresses (hex, as in /proc/net/tcp*) listening on ``port``."""
     out = []

@@ -162,7 +162,8 @@ def test_extract_flags_that_are_not_values_are_named(small_ref, tmp_path, capsys
     out = tmp_path / "x.npz"
     for flags, said in ((["--start", "nan"], "--start nan: not a time"),
                         (["--stop", "inf"], "--stop inf: not a time"),
-                        (["--messages", ",,,"], "--messages ',,,' names no message type")):
+                        (["--messages", ",,,"], "--messages ',,,' names no message type"),
+                        (["--start", "10", "--stop", "5"], "--start 10 s is after --stop 5 s")):
         assert main(["extract", str(path), *flags, "-o", str(out)]) == 1
         lines = capsys.readouterr().err.splitlines()
         assert lines == [f"mavsid: error: {said}" + lines[0].split(said, 1)[1]], lines

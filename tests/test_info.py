@@ -7,6 +7,7 @@ update is always a deliberate, reviewed change).
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import warnings
@@ -211,3 +212,23 @@ def test_info_reading_times_only_gives_the_same_summary(path) -> None:  # type: 
     skeletons = [t for t in fast_log.messages.values() if t.declared]
     assert all(len(t.columns) <= len(t.declared) for t in skeletons)
     assert not fast_log.messages or any(len(t.columns) < len(t.declared) for t in skeletons)
+
+
+def test_a_log_given_as_a_pipe_is_refused_at_once(tmp_path):
+    """A FIFO nobody writes to made `mavsid fit` wait for ever; a pipe with the log in it
+    (`mavsid info <(cat log.bin)`, /dev/stdin) was sniffed, then read from where sniffing
+    stopped: "not a DataFlash .bin/.log, MAVLink .tlog or ULog .ulg file". Now one line saying
+    what it is, at once."""
+    fifo = tmp_path / "pipe.bin"
+    os.mkfifo(fifo)
+    proc = subprocess.run([sys.executable, "-m", "mavsid.cli", "fit", str(fifo), "-q"],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 1
+    assert proc.stderr == (f"mavsid: error: {fifo}: a pipe or a device, not a file: save the "
+                           "log to a file first\n")
+    from helpers import FIXTURES
+
+    piped = subprocess.run([sys.executable, "-m", "mavsid.cli", "info", "/dev/stdin"],
+                           input=(FIXTURES / "sysid_roll.bin").read_bytes(),
+                           capture_output=True, timeout=120)
+    assert piped.returncode == 1 and b"/dev/stdin: a pipe or a device" in piped.stderr

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import importlib
 import os
+import stat
 from collections.abc import Sequence
 from typing import Any
 
@@ -71,8 +72,17 @@ def sniff_format(path: str | os.PathLike[str]) -> str:
     Raises
     ------
     LogFormatError
-        The file is empty, unreadable or of no known format.
+        The file is empty, unreadable, a pipe or a device, or of no known format.
     """
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        mode = 0  # (open says why)
+    if mode and not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):
+        # a pipe has no size and cannot be mapped (or read twice: sniffed, then read), and
+        # opening a FIFO nobody writes to waits for ever
+        raise LogFormatError("a pipe or a device, not a file: save the log to a file first",
+                             path=path)
     try:
         with open(path, "rb") as f:
             head = f.read(_SNIFF_BYTES)

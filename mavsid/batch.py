@@ -81,15 +81,22 @@ def find_logs(inputs: Iterable[str | os.PathLike[str]]) -> list[str]:
         A path that does not exist, or no log at all.
     """
     out: list[str] = []
+    skipped: list[str] = []
     for item in inputs:
         p = Path(item)
         if p.is_dir():
-            out += sorted(str(f) for f in p.rglob("*") if f.is_file()
-                          and f.suffix.lower() in LOG_SUFFIXES)
+            named = sorted(f for f in p.rglob("*") if f.suffix.lower() in LOG_SUFFIXES)
+            out += [str(f) for f in named if f.is_file()]
+            skipped += [f"{f} ({'a broken link' if f.is_symlink() else 'not a file'})"
+                        for f in named if not f.is_file() and not f.is_dir()]
         elif p.exists():
             out.append(str(p))
         else:
             raise ConfigError(f"{p}: no such file or directory")
+    if skipped:  # (named like logs, but nothing to read: said, not dropped)
+        shown = ", ".join(skipped[:5]) + (" ..." if len(skipped) > 5 else "")
+        warnings.warn(f"{len(skipped)} entries named like logs skipped: {shown}",
+                      MavsidWarning, stacklevel=2)
     if not out:
         raise ConfigError("no log found (" + ", ".join(map(str, inputs)) + ")")
     return list(dict.fromkeys(out))

@@ -185,3 +185,18 @@ def test_a_vehicles_file_naming_logs_not_in_the_batch_warns(tmp_path: Path) -> N
     with pytest.warns(MavsidWarning, match=r"1 log\(s\) named that are not in this batch: b.bin"):
         tables = run_batch([logs], tmp_path / "out.parquet", vehicles=csv, workers=1)
     assert tables["logs"]["vehicle"].tolist() == ["q1"]
+
+
+def test_entries_named_like_logs_that_are_no_files_are_said(tmp_path: Path) -> None:
+    """A broken link or a FIFO named *.bin in a folder was dropped silently."""
+    import os
+
+    from mavsid.batch import find_logs
+    from mavsid.errors import MavsidWarning
+
+    shutil.copy(FIXTURES / "sysid_roll.bin", tmp_path / "a.bin")
+    os.symlink(tmp_path / "gone.bin", tmp_path / "broken.bin")
+    os.mkfifo(tmp_path / "pipe.tlog")
+    with pytest.warns(MavsidWarning, match=r"2 entries named like logs skipped: .*broken\.bin "
+                                           r"\(a broken link\), .*pipe\.tlog \(not a file\)"):
+        assert find_logs([tmp_path]) == [str(tmp_path / "a.bin")]

@@ -547,8 +547,9 @@ def _view(args: argparse.Namespace) -> int:
         if save:
             sink["save"] = stack.enter_context(atomic_path(save))
             stack.enter_context(viz.write_errors())
-        if args.connect:
-            stack.enter_context(_viewer_errors(args.url))
+        if not (save or args.stdout or args.headless):
+            stack.enter_context(_viewer_errors(f"--url {args.url}" if args.connect else
+                                               "the rerun viewer mavsid started"))
         if args.model:
             result = validate_logs(load_models(args.model), [args.log], cfg)
             served = viz.open_sink(
@@ -589,6 +590,10 @@ def _check_viewer_address(args: argparse.Namespace) -> None:
             raise ConfigError(f"--url {args.url}: not a rerun viewer address (one of "
                               f"{', '.join(s + '...' for s in _VIEWER_SCHEMES)})")
     elif not (args.save or args.stdout or args.headless):
+        if (not args.serve and sys.platform.startswith("linux")
+                and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))):
+            raise ConfigError("no display for the rerun viewer (DISPLAY and WAYLAND_DISPLAY "
+                              "unset): --serve offers a web viewer, --save OUT.rrd a file")
         from mavsid.viz import free_port
 
         try:
@@ -599,15 +604,15 @@ def _check_viewer_address(args: argparse.Namespace) -> None:
 
 
 @contextlib.contextmanager
-def _viewer_errors(url: str) -> Iterator[None]:
-    """rerun's failure to reach the viewer at ``url`` (a ``RuntimeError`` when the recording
-    is flushed) as one line naming it."""
+def _viewer_errors(viewer: str) -> Iterator[None]:
+    """rerun's failure to reach a viewer, or the viewer's end (a ``RuntimeError`` when the
+    recording is flushed), as one line naming ``viewer``."""
     try:
         yield
     except RuntimeError as exc:
         if "connect" not in str(exc):
             raise
-        raise ConfigError(f"--url {url}: cannot reach the viewer ({exc})") from None
+        raise ConfigError(f"{viewer}: cannot reach the viewer ({exc})") from None
 
 
 def _sink_args(args: argparse.Namespace) -> dict[str, Any]:

@@ -165,10 +165,17 @@ def test_view_flags_are_mavsids_own(capsys) -> None:  # type: ignore[no-untyped-
 @pytest.mark.parametrize(("flags", "said"), [
     (["--connect", "--url", "bogus://x"], "--url bogus://x: not a rerun viewer address"),
     (["--serve", "--bind", "999.1.1.1"], "--bind 999.1.1.1: cannot listen there"),
-])
-def test_a_viewer_address_that_cannot_be_used_is_one_line(flags: list[str], said: str) -> None:
+    ([], "no display for the rerun viewer"),  # (the viewer died after it began listening:
+])                                           # a traceback, or "exited before listening")
+def test_a_viewer_address_that_cannot_be_used_is_one_line(flags: list[str], said: str,
+                                                          monkeypatch) -> None:  # type: ignore[no-untyped-def]
     """A --url rerun does not take, or a --bind that is no address of this machine, were
-    tracebacks from rerun or the socket layer after the log was read."""
+    tracebacks from rerun or the socket layer after the log was read; so was a native
+    viewer started with no display to open."""
+    if not flags:
+        monkeypatch.delenv("DISPLAY", raising=False)
+        monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+        monkeypatch.setattr(sys, "platform", "linux")
     got = run("view", str(FIXTURES / "sysid_roll.bin"), *flags)
     assert got.returncode == 1 and got.stderr.startswith(f"mavsid: error: {said}")
     assert got.stderr.count("\n") == 1
@@ -177,7 +184,7 @@ def test_a_viewer_address_that_cannot_be_used_is_one_line(flags: list[str], said
 def test_a_viewer_that_cannot_be_reached_is_one_line() -> None:
     """rerun says so as a RuntimeError when the recording is flushed (after ~6 s)."""
     with pytest.raises(cli.ConfigError, match=r"--url rerun\+http://h:1/proxy: cannot reach"):
-        with cli._viewer_errors("rerun+http://h:1/proxy"):
+        with cli._viewer_errors("--url rerun+http://h:1/proxy"):
             raise RuntimeError("gRPC has been unable to connect for 6s, uri: rerun+http://h:1")
     with pytest.raises(RuntimeError, match="other"), cli._viewer_errors("rerun://h"):
         raise RuntimeError("other")

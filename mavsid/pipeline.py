@@ -50,6 +50,7 @@ import dataclasses
 import itertools
 import math
 import os
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -58,7 +59,13 @@ import numpy as np
 
 from mavsid.channels import QUADPLANE, source_text
 from mavsid.data import FlightData, Segment
-from mavsid.errors import ConfigError, MavsidError, NoExcitationError, escape
+from mavsid.errors import (
+    ConfigError,
+    DataQualityWarning,
+    MavsidError,
+    NoExcitationError,
+    escape,
+)
 from mavsid.threads import one_blas_thread
 from mavsid.validation import AXIS_RATE, DEFAULT_HORIZONS_S, Model, Validation, validate
 from mavsid.verdict import Verdict, format_fit, judge, unfitted
@@ -595,7 +602,30 @@ def _read_flights(logs: Sequence[str | os.PathLike[str]], cfg: PipelineConfig,
     for p in logs[1:]:
         step(f"reading {os.fspath(p)}")
         flights.append(_read_flight(p, same_rate, twins))
+    slow = [(fd, rate) for fd in flights[1:]
+            if (rate := _slowest_rate(fd)) is not None and rate < POOL_RATE_RATIO / fd.dt]
+    if slow:
+        shown = ", ".join(f"{fd.source.path} at {rate:.3g} Hz" for fd, rate in slow)
+        warnings.warn(f"pooled on {first.source.path}'s {1 / first.dt:.3g} Hz grid: {shown} "
+                      "(interpolated samples between its own weigh on the model as measured "
+                      "ones would; fit the slower logs apart, or give them first)",
+                      DataQualityWarning, stacklevel=3)
     return tuple(flights)
+
+
+#: a pooled log whose rate channels are slower than this share of the grid's rate is said
+#: (most of its grid points interpolated)
+POOL_RATE_RATIO = 0.5
+
+
+def _slowest_rate(fd: FlightData) -> float | None:
+    """The slowest native rate (Hz) of a flight's body rates and attitude inputs (what the
+    rate models are fitted on), if known."""
+    found = fd.meta.get("native_rate_hz")
+    native = found if isinstance(found, Mapping) else {}
+    rates = [float(native[n]) for n in ("p", "q", "r", "u_roll", "u_pitch", "u_yaw")
+             if native.get(n)]
+    return min(rates) if rates else None
 
 
 def _windows(flight: FlightData, axis: str, cfg: PipelineConfig) -> list[WindowReport]:

@@ -315,6 +315,24 @@ def test_several_logs_pool_their_segments_at_one_rate() -> None:
     assert sorted(set(d["train_segment_logs"])) == sorted(str(p) for p in logs)
 
 
+def test_pooling_a_slower_log_on_a_faster_ones_grid_is_said() -> None:
+    """The SITL flight's .bin (400 Hz) pooled with its .tlog (50 Hz) gave free runs of 75 %
+    against 99 % for the .bin alone, the telemetry's interpolated grid points weighing as
+    measured ones, and nothing said it. Now a warning names the slower log; two logs at
+    200 and 400 Hz (the grid the first's) are not warned about."""
+    from mavsid.errors import DataQualityWarning
+
+    with pytest.warns(DataQualityWarning, match=r"pooled on .*sysid_roll\.bin's 200 Hz grid: "
+                      r".*sysid_roll\.tlog at 50 Hz"):
+        fit([FIXTURES / "sysid_roll.bin", FIXTURES / "sysid_roll.tlog"],
+            PipelineConfig(axes=("roll",)))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        fit([FIXTURES / "sysid_roll.bin", FIXTURES / "doublets.bin"],
+            PipelineConfig(axes=("roll",)))
+    assert not [w for w in caught if "pooled on" in str(w.message)]
+
+
 def test_no_excitation_is_a_typed_error() -> None:
     with pytest.raises(NoExcitationError, match=r"hover\.bin: nothing identifiable"):
         fit([FIXTURES / "hover.bin"])

@@ -147,14 +147,14 @@ _KEYS: dict[str, dict[str, str]] = {
 
 #: ``[model]`` options a configuration may set (those of
 #: :func:`mavsid.estimators.fit_axis` and its estimators): kind and the values it may take.
-#: Kinds: ``number`` (finite, in ``[lo, hi]``), ``numbers`` (a list of them; ``lo`` below
-#: 0 for a non-empty list), ``whole`` (an integer in ``[lo, hi]``), ``bool``, ``names`` (a
-#: list of strings) and ``choice`` (one of ``hi``). Bounds keep a run finite: a delay step
-#: of 1e-9 samples took the machine's memory, a 1e9-s delay search or 10^6 bootstrap draws
-#: ran for hours.
+#: Kinds: ``number`` (finite, in ``[lo, hi]``), ``numbers`` (a list of them, ``numbers+``
+#: not empty), ``whole`` (an integer in ``[lo, hi]``), ``bool``, ``names`` (a list of
+#: strings) and ``choice`` (one of ``hi``). Bounds keep a run finite: a delay step of 1e-9
+#: samples took the machine's memory, a 1e9-s delay search or 10^6 bootstrap draws ran for
+#: hours.
 MODEL_OPTIONS: dict[str, tuple[str, float, Any]] = {
     "delay": ("number", 0.0, 1000.0),  # samples
-    "delays": ("numbers", -1.0, 1000.0),  # samples, at least one
+    "delays": ("numbers+", 0.0, 1000.0),  # samples
     "delay_step": ("number", 0.01, 1.0),  # samples
     "max_delay_s": ("number", 0.0, 1.0),
     "lags_s": ("numbers", 0.0, 1.0),
@@ -165,7 +165,7 @@ MODEL_OPTIONS: dict[str, tuple[str, float, Any]] = {
     "features": ("names", 0, None),
     "refine": ("choice", 0, ("auto", "oe")),
     "alpha": ("number", 0.0, 1e12),  # or "cv"
-    "alphas": ("numbers", -1.0, 1e12),
+    "alphas": ("numbers+", 0.0, 1e12),
     "l1_ratio": ("number", 0.0, 1.0),
     "threshold": ("number", 0.0, 1e12),
     "cv_horizon": ("whole", 1, 100_000),
@@ -192,34 +192,31 @@ def _model_option(key: str, value: Any) -> None:
     if key not in MODEL_OPTIONS:
         raise ConfigError(f"unknown key model.{key} (known: {', '.join(MODEL_OPTIONS)})")
     kind, lo, hi = MODEL_OPTIONS[key]
+    if key == "alpha" and value == "cv":
+        return
 
     def number(x: Any) -> bool:
         return (isinstance(x, int | float) and not isinstance(x, bool)
-                and math.isfinite(x) and max(lo, 0.0) <= x <= hi)
+                and math.isfinite(x) and lo <= x <= hi)
 
-    if key == "alpha" and value == "cv":
-        return
-    ok = {
-        "number": lambda: number(value),
-        "numbers": lambda: isinstance(value, list) and all(map(number, value))
-        and (lo >= 0 or bool(value)),
-        "whole": lambda: isinstance(value, int) and not isinstance(value, bool)
-        and lo <= value <= hi,
-        "bool": lambda: isinstance(value, bool),
-        "names": lambda: isinstance(value, list) and all(isinstance(v, str) for v in value),
-        "choice": lambda: value in hi,
-    }[kind]()
+    if kind == "number":
+        ok, want = number(value), f"a finite number in [{lo:g}, {hi:g}]"
+    elif kind in ("numbers", "numbers+"):
+        ok = (isinstance(value, list) and all(map(number, value))
+              and (kind == "numbers" or bool(value)))
+        want = (f"a {'non-empty ' * (kind == 'numbers+')}list of finite numbers in "
+                f"[{lo:g}, {hi:g}]")
+    elif kind == "whole":
+        ok = isinstance(value, int) and not isinstance(value, bool) and lo <= value <= hi
+        want = f"a whole number in [{lo:g}, {hi}]"
+    elif kind == "choice":
+        ok, want = value in hi, f"one of {', '.join(map(repr, hi))}"
+    elif kind == "bool":
+        ok, want = isinstance(value, bool), "true or false"
+    else:  # names
+        ok = isinstance(value, list) and all(isinstance(v, str) for v in value)
+        want = "a list of strings"
     if not ok:
-        if kind in ("number", "numbers"):
-            want = (("a " if kind == "number" else
-                     f"a {'non-empty ' if lo < 0 else ''}list of ")
-                    + f"finite number{'s' * (kind == 'numbers')} in [{max(lo, 0.0):g}, {hi:g}]")
-        elif kind == "whole":
-            want = f"a whole number in [{lo:g}, {hi}]"
-        elif kind == "choice":
-            want = f"one of {', '.join(map(repr, hi))}"
-        else:
-            want = {"bool": "true or false", "names": "a list of strings"}[kind]
         raise ConfigError(f"model.{key}: {value!r} is not {want}" + (
             " or 'cv'" if key == "alpha" else ""))
 

@@ -53,7 +53,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from mavsid.errors import ConfigError, MavsidError, MavsidWarning
+from mavsid.errors import ConfigError, MavsidError, MavsidWarning, first_few
 from mavsid.outputs import atomic_path
 
 if TYPE_CHECKING:
@@ -94,8 +94,7 @@ def find_logs(inputs: Iterable[str | os.PathLike[str]]) -> list[str]:
         else:
             raise ConfigError(f"{p}: no such file or directory")
     if skipped:  # (named like logs, but nothing to read: said, not dropped)
-        shown = ", ".join(skipped[:5]) + (" ..." if len(skipped) > 5 else "")
-        warnings.warn(f"{len(skipped)} entries named like logs skipped: {shown}",
+        warnings.warn(f"{len(skipped)} entries named like logs skipped: {first_few(skipped)}",
                       MavsidWarning, stacklevel=2)
     if not out:
         raise ConfigError("no log found (" + ", ".join(map(str, inputs)) + ")")
@@ -328,9 +327,8 @@ def run_batch(
     mapping = _mapping(vehicles)
     unused = sorted(set(mapping) - set(logs) - {os.path.basename(p) for p in logs})
     if unused:
-        shown = ", ".join(unused[:5]) + (" ..." if len(unused) > 5 else "")
         warnings.warn(f"{vehicles}: {len(unused)} log(s) named that are not in this batch: "
-                      f"{shown}", MavsidWarning, stacklevel=2)
+                      f"{first_few(unused)}", MavsidWarning, stacklevel=2)
     chash = config_hash(config)
     done = read_tables(out)
     rows: dict[str, list[dict[str, Any]]] = {

@@ -122,7 +122,14 @@ from typing import Any
 import numpy as np
 
 from mavsid.data import LOG_FORMATS, MessageTable, RawLog
-from mavsid.errors import ConfigError, DataQualityWarning, MavsidError, MissingMessageError
+from mavsid.errors import (
+    ConfigError,
+    DataQualityWarning,
+    MavsidError,
+    MissingMessageError,
+    finite_number,
+    whole_number,
+)
 
 __all__ = [
     "DESIRED_CHANNELS",
@@ -1305,11 +1312,6 @@ def _read_toml(path: str | os.PathLike[str]) -> dict[str, Any]:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
 
 
-def _number(value: Any) -> bool:
-    """Whether a TOML value is a number (not a boolean, which Python counts as one)."""
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
-
-
 def _strings(spec: Mapping[str, Any], key: str, where: str,
              known: Iterable[str] | None = None) -> tuple[str, ...]:
     """``spec[key]`` (absent: empty), a list of strings, each one of ``known`` if given."""
@@ -1354,7 +1356,7 @@ def _channel_from(spec: Any, where: str, pwm: bool = False) -> Channel:
             "motor and servo outputs are PWM (unit 'pwm')" if pwm else
             "only motors and servos take PWM (unit 'pwm')"))
     scale = spec.get("scale", 1.0)
-    if not _number(scale) or not math.isfinite(scale) or scale == 0:
+    if not finite_number(scale) or scale == 0:
         raise ConfigError(f"{where}: scale must be a finite number other than 0")
     transform = spec.get("transform", "")
     if transform not in ("", *_TRANSFORMS):
@@ -1364,7 +1366,7 @@ def _channel_from(spec: Any, where: str, pwm: bool = False) -> Channel:
     if not isinstance(optional, bool):
         raise ConfigError(f"{where}: optional must be true or false")
     inst = spec.get("instance")
-    if inst is not None and (not isinstance(inst, int) or isinstance(inst, bool) or inst < 0):
+    if inst is not None and not (whole_number(inst) and inst >= 0):
         raise ConfigError(f"{where}: instance must be a whole number >= 0")
     return Channel(spec["message"], spec["field"], unit, float(scale), transform, optional, inst)
 
@@ -1399,7 +1401,9 @@ def _mixer_from(name: str, spec: Any, path: str | os.PathLike[str]) -> Mixer:
     lists: dict[str, tuple[float, ...]] = {}
     for key in _MIXER_KEYS:
         value = spec.get(key, [])
-        if not isinstance(value, list) or not all(map(_number, value)):
+        # (a float is a number: TOML's nan and inf are refused as not finite, below)
+        if not isinstance(value, list) or not all(finite_number(v) or isinstance(v, float)
+                                                  for v in value):
             raise ConfigError(f"{where}: {key} must be a list of numbers, one per motor")
         lists[key] = tuple(float(v) for v in value)
         if not all(math.isfinite(v) for v in lists[key]):

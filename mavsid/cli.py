@@ -67,7 +67,7 @@ def _add_info(sub: argparse._SubParsersAction) -> None:
     p.add_argument("log", help="flight log (.bin, .log, .tlog, .ulg)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--dialect", help="MAVLink dialect of a .tlog (default ardupilotmega)")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    _add_quiet_flag(p)
     p.set_defaults(handler=_info)
 
 
@@ -158,7 +158,7 @@ def _add_segments(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     p.add_argument("--window", type=float, default=5.0, help="scan window length, s (5)")
     _add_preset_flag(p)
     p.add_argument("--rate", type=float, help="grid rate, Hz (default: the rate channel's)")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    _add_quiet_flag(p)
     p.set_defaults(handler=_segments)
 
 
@@ -409,6 +409,11 @@ def _preset_arg(preset: str | None) -> tuple[str | None, dict[str, Any] | None,
     return preset, None, None
 
 
+def _add_quiet_flag(p: argparse.ArgumentParser) -> None:
+    p.add_argument("-q", "--quiet", action="store_true",
+                   help="no progress bar (there is none when stderr is not a terminal)")
+
+
 def _add_preset_flag(p: argparse.ArgumentParser) -> None:
     p.add_argument("--preset", metavar="NAME",
                    help="channel preset name (mavsid.channels), or a TOML file of presets and "
@@ -423,8 +428,7 @@ def _add_output_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rrd", metavar="OUT.rrd", help="write a rerun recording")
     p.add_argument("--report", metavar="OUT.html", help="write a self-contained HTML report")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
-    p.add_argument("-q", "--quiet", action="store_true",
-                   help="no progress bar (there is none when stderr is not a terminal)")
+    _add_quiet_flag(p)
 
 
 def _stages(args: argparse.Namespace, axes: int, per_axis: int) -> int:
@@ -548,8 +552,8 @@ def _view(args: argparse.Namespace) -> int:
             sink["save"] = stack.enter_context(atomic_path(save))
             stack.enter_context(viz.write_errors())
         if not (save or args.stdout or args.headless):
-            stack.enter_context(_viewer_errors(f"--url {args.url}" if args.connect else
-                                               "the rerun viewer mavsid started"))
+            stack.enter_context(viz.viewer_errors(f"--url {args.url}" if args.connect else
+                                                  "the rerun viewer mavsid started"))
         if args.model:
             result = validate_logs(load_models(args.model), [args.log], cfg)
             served = viz.open_sink(
@@ -603,18 +607,6 @@ def _check_viewer_address(args: argparse.Namespace) -> None:
                               f"({exc.strerror or exc})") from None
 
 
-@contextlib.contextmanager
-def _viewer_errors(viewer: str) -> Iterator[None]:
-    """rerun's failure to reach a viewer, or the viewer's end (a ``RuntimeError`` when the
-    recording is flushed), as one line naming ``viewer``."""
-    try:
-        yield
-    except RuntimeError as exc:
-        if "connect" not in str(exc):
-            raise
-        raise ConfigError(f"{viewer}: cannot reach the viewer ({exc})") from None
-
-
 def _sink_args(args: argparse.Namespace) -> dict[str, Any]:
     return {"save": args.save, "serve": args.serve, "connect": args.connect, "url": args.url,
             "stdout": args.stdout, "headless": args.headless, "bind": args.bind}
@@ -639,8 +631,7 @@ def _add_tune(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--config", metavar="FILE.toml", help="pipeline settings (see pipelines/)")
     _add_preset_flag(p)
     p.add_argument("--json", action="store_true", help="print the result as JSON")
-    p.add_argument("-q", "--quiet", action="store_true",
-                   help="no progress bar (there is none when stderr is not a terminal)")
+    _add_quiet_flag(p)
     p.set_defaults(handler=_tune)
 
 
@@ -693,7 +684,7 @@ def _add_batch(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--rrd", metavar="OUT.rrd",
                    help="write the trends as a rerun recording (timelines flight and "
                    "flight_date; parameters with ±σ, change points)")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    _add_quiet_flag(p)
     p.set_defaults(handler=_batch, axis=None)
 
 

@@ -23,8 +23,10 @@ cannot move the cursor, recolour or clear a terminal:
 
 from __future__ import annotations
 
+import math
+import numbers
 import re
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 
 __all__ = [
     "ConfigError",
@@ -37,7 +39,10 @@ __all__ = [
     "SolverError",
     "escape",
     "escape_lines",
+    "finite_number",
+    "first_few",
     "naming_file",
+    "whole_number",
 ]
 
 
@@ -193,3 +198,42 @@ class MavsidWarning(UserWarning):
 
 class DataQualityWarning(MavsidWarning):
     """Data was skipped, repaired or is of doubtful use (corrupt bytes, low rates, gaps)."""
+
+
+# --------------------------------------------------------------------------- checking input
+
+
+def finite_number(value: object) -> bool:
+    """Whether a value a user gave (TOML, JSON, a parameter) is a finite real number; a
+    boolean is not one (Python and TOML count ``true`` as 1).
+
+    Examples
+    --------
+    >>> finite_number(2), finite_number(0.5), finite_number(float("nan")), finite_number(True)
+    (True, True, False, False)
+    """
+    return (isinstance(value, numbers.Real) and not isinstance(value, bool)
+            and math.isfinite(value))
+
+
+def whole_number(value: object) -> bool:
+    """Whether a value a user gave is an integer (not a boolean, nor a float).
+
+    Examples
+    --------
+    >>> whole_number(3), whole_number(3.0), whole_number(False)
+    (True, False, False)
+    """
+    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
+
+
+def first_few(items: Sequence[str], n: int = 5) -> str:
+    """The first ``n`` of ``items``, comma-separated, ``...`` after them when there are more
+    (a list in a one-line message).
+
+    Examples
+    --------
+    >>> first_few(["a", "b", "c"], 2)
+    'a, b ...'
+    """
+    return ", ".join(items[:n]) + (" ..." if len(items) > n else "")

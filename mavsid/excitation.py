@@ -99,7 +99,7 @@ import numpy as np
 
 from mavsid import dsp
 from mavsid.data import FlightData, Segment, detrend_linear
-from mavsid.errors import ConfigError
+from mavsid.errors import ConfigError, finite_number
 
 __all__ = [
     "AXES",
@@ -189,19 +189,16 @@ class ScanOptions:
     max_saturated: float = 0.05
 
     def __post_init__(self) -> None:
-        def number(x: Any) -> bool:  # finite, and not a boolean
-            return isinstance(x, (int, float, np.floating, np.integer)) and not isinstance(
-                x, (bool, np.bool_)) and math.isfinite(x)
-
         band = self.band_hz
-        if not (isinstance(band, (tuple, list)) and len(band) == 2 and all(map(number, band))
+        if not (isinstance(band, (tuple, list)) and len(band) == 2
+                and all(map(finite_number, band))
                 and 0 < band[0] < band[1]):
             raise ConfigError(f"band_hz must be [low, high] Hz, 0 < low < high, got {band!r}")
-        if self.step_s is not None and not (number(self.step_s) and self.step_s > 0):
+        if self.step_s is not None and not (finite_number(self.step_s) and self.step_s > 0):
             raise ConfigError(f"step_s must be a positive number of seconds, got {self.step_s!r}")
         for name, lo, hi in _SCAN_RANGES:
             x = getattr(self, name)
-            if not (number(x) and lo <= x <= hi):
+            if not (finite_number(x) and lo <= x <= hi):
                 raise ConfigError(f"{name} must be a number in {_interval(lo, hi)}, got {x!r}")
 
     @classmethod

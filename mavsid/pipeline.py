@@ -65,6 +65,8 @@ from mavsid.errors import (
     MavsidError,
     NoExcitationError,
     escape,
+    finite_number,
+    whole_number,
 )
 from mavsid.threads import one_blas_thread
 from mavsid.validation import AXIS_RATE, DEFAULT_HORIZONS_S, Model, Validation, validate
@@ -196,8 +198,7 @@ def _model_option(key: str, value: Any) -> None:
         return
 
     def number(x: Any) -> bool:
-        return (isinstance(x, int | float) and not isinstance(x, bool)
-                and math.isfinite(x) and lo <= x <= hi)
+        return finite_number(x) and lo <= x <= hi
 
     if kind == "number":
         ok, want = number(value), f"a finite number in [{lo:g}, {hi:g}]"
@@ -207,7 +208,7 @@ def _model_option(key: str, value: Any) -> None:
         want = (f"a {'non-empty ' * (kind == 'numbers+')}list of finite numbers in "
                 f"[{lo:g}, {hi:g}]")
     elif kind == "whole":
-        ok = isinstance(value, int) and not isinstance(value, bool) and lo <= value <= hi
+        ok = whole_number(value) and lo <= value <= hi
         want = f"a whole number in [{lo:g}, {hi}]"
     elif kind == "choice":
         ok, want = value in hi, f"one of {', '.join(map(repr, hi))}"
@@ -280,8 +281,8 @@ def _checked(v: dict[str, Any]) -> PipelineConfig:
             "segments.source",
             f"{v['segment_source']!r} is not one of {', '.join(SEGMENT_SOURCES)}",
         )
-    def positive(x: Any) -> bool:  # a finite number > 0 (TOML's true is no number here)
-        return isinstance(x, int | float) and not isinstance(x, bool) and 0 < x < math.inf
+    def positive(x: Any) -> bool:
+        return finite_number(x) and x > 0
 
     for key, name in (("rate_hz", "pipeline.rate_hz"), ("block_s", "segments.block_s"),
                       ("fft_window_s", "validation.fft_window_s")):
@@ -302,8 +303,7 @@ def _checked(v: dict[str, Any]) -> PipelineConfig:
         )
         v["horizons_s"] = tuple(float(x) for x in h)
     if "max_lag" in v:
-        need(isinstance(v["max_lag"], int) and not isinstance(v["max_lag"], bool)
-             and v["max_lag"] > 0, "validation.max_lag",
+        need(whole_number(v["max_lag"]) and v["max_lag"] > 0, "validation.max_lag",
              f"{v['max_lag']!r} is not a positive integer")
     if "allow_unstable" in v:
         need(isinstance(v["allow_unstable"], bool), "pipeline.allow_unstable",

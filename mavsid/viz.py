@@ -55,6 +55,7 @@ import rerun.blueprint as rrb
 
 from mavsid.channels import STATE_UNITS
 from mavsid.data import FlightData, Segment, decimate
+from mavsid.errors import ConfigError
 from mavsid.validation import AXIS_RATE, Validation, horizon_label
 
 if TYPE_CHECKING:
@@ -86,7 +87,9 @@ __all__ = [
     "save_trends_rrd",
     "serve_command",
     "viewer_command",
+    "viewer_errors",
     "wait_listening",
+    "write_errors",
 ]
 
 APPLICATION_ID = "mavsid"
@@ -1018,6 +1021,19 @@ def write_errors() -> Iterator[None]:
 
 
 @contextlib.contextmanager
+def viewer_errors(viewer: str) -> Iterator[None]:
+    """rerun's failure to reach a viewer, or the viewer's end (a ``RuntimeError`` when the
+    recording is flushed), as one :class:`~mavsid.errors.ConfigError` line naming
+    ``viewer`` (as :func:`write_errors` does for a file)."""
+    try:
+        yield
+    except RuntimeError as exc:
+        if "connect" not in str(exc):
+            raise
+        raise ConfigError(f"{viewer}: cannot reach the viewer ({exc})") from None
+
+
+@contextlib.contextmanager
 def _rrd_file(path: str | os.PathLike[str], bp: rrb.Blueprint) -> Iterator[rr.RecordingStream]:
     """A recording saved to ``path`` with the blueprint ``bp``, flushed and closed when the
     block ends (:func:`write_errors`)."""
@@ -1108,8 +1124,6 @@ def wait_listening(process: subprocess.Popen[bytes], host: str, port: int,
                    timeout_s: float = 20.0) -> None:
     """Return once ``host:port`` accepts connections; raise if the process exits first or
     the time runs out (never send data to a server that is not ours)."""
-    from mavsid.errors import ConfigError
-
     deadline = time.monotonic() + timeout_s
     plain = host.strip("[]")
     while time.monotonic() < deadline:

@@ -24,7 +24,6 @@ Examples
 
 from __future__ import annotations
 
-import math
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -34,7 +33,14 @@ import numpy as np
 from scipy import linalg
 
 from mavsid.data import Segment
-from mavsid.errors import ConfigError, DataQualityWarning, NoExcitationError, SolverError
+from mavsid.errors import (
+    ConfigError,
+    DataQualityWarning,
+    NoExcitationError,
+    SolverError,
+    finite_number,
+    whole_number,
+)
 from mavsid.estimators import library
 from mavsid.estimators.model import Model, provenance
 from mavsid.estimators.regressors import Regression, Structure, stack
@@ -365,9 +371,9 @@ class Estimator:
         if isinstance(alpha, str):
             if alpha != "cv":
                 raise ConfigError(f"alpha must be a number or 'cv', got {alpha!r}")
-        elif isinstance(alpha, bool) or not 0 <= alpha < math.inf:
+        elif not (finite_number(alpha) and alpha >= 0):
             raise ConfigError(f"alpha must be a finite number >= 0 or 'cv', got {alpha!r}")
-        if isinstance(n_bootstrap, bool) or not isinstance(n_bootstrap, int) or n_bootstrap < 0:
+        if not (whole_number(n_bootstrap) and n_bootstrap >= 0):
             raise ConfigError(f"n_bootstrap must be a whole number >= 0, got {n_bootstrap!r}")
         self.structure = structure
         self.alpha = alpha

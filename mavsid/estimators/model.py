@@ -45,7 +45,7 @@ from scipy import linalg
 
 from mavsid import dsp
 from mavsid.data import Segment
-from mavsid.errors import ConfigError, LogFormatError
+from mavsid.errors import ConfigError, LogFormatError, whole_number
 from mavsid.estimators import library
 from mavsid.estimators.regressors import InputFilter, Structure, variables
 
@@ -799,7 +799,7 @@ class Model:
         if d.get("format") != _FORMAT:
             raise LogFormatError(f"not a mavsid model (format {d.get('format')!r})")
         version = d.get("version", _VERSION)
-        if not isinstance(version, int) or isinstance(version, bool) or version > _VERSION:
+        if not whole_number(version) or version > _VERSION:
             raise LogFormatError(f"model format version {version!r}: this mavsid reads "
                                  f"version {_VERSION} and older (a newer mavsid wrote it?)")
 

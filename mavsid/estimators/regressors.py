@@ -165,27 +165,31 @@ def filters_from_params(params: Mapping[str, float], dt: float) -> tuple[InputFi
     """
     out = []
     for name in ("INS_GYRO_FILTER", "IMU_GYRO_CUTOFF"):
-        value = params.get(name)
-        if value is not None and not 0.0 <= float(value) < math.inf:
-            warnings.warn(f"{name} = {float(value):g} is no filter frequency (a damaged "
-                          "parameter?): the logged rates are modelled as unfiltered",
-                          DataQualityWarning, stacklevel=2)
-    fc = float(params.get("INS_GYRO_FILTER", 0.0) or 0.0)
-    if math.isfinite(fc) and fc > 0.0:
-        k = params.get("INS_GYRO_RATE", 0)  # 0-3: 1, 2, 4, 8 kHz (other values: damaged)
-        rate = 1000.0 * 2 ** (int(k) if isinstance(k, (int, float)) and 0 <= k <= 3 else 0)
-        flt = InputFilter(fc, 2, "INS_GYRO_FILTER", rate_hz=max(rate, 1.0 / dt))
-        if fc < 0.5 * flt.substeps(dt) / dt:
-            out.append(flt)
-    fc = float(params.get("IMU_GYRO_CUTOFF", 0.0) or 0.0)
-    if math.isfinite(fc) and fc > 0.0:
-        rate = float(params.get("IMU_GYRO_RATEMAX", 0.0) or 0.0)
-        if not 0.0 < rate <= _MAX_GYRO_RATE_HZ:  # (beyond any IMU's: a damaged parameter)
-            rate = 0.0
-        flt = InputFilter(fc, 2, "IMU_GYRO_CUTOFF", rate_hz=max(rate, 1.0 / dt))
-        if fc < 0.5 * flt.substeps(dt) / dt:
-            out.append(flt)
+        fc = float(params.get(name, 0.0) or 0.0)
+        if not 0.0 <= fc < math.inf:
+            warnings.warn(f"{name} = {fc:g} is no filter frequency (a damaged parameter?): "
+                          "the logged rates are modelled as unfiltered", DataQualityWarning,
+                          stacklevel=2)
+        elif fc > 0.0:
+            flt = InputFilter(fc, 2, name, rate_hz=max(_gyro_rate_hz(params, name), 1.0 / dt))
+            if fc < 0.5 * flt.substeps(dt) / dt:
+                out.append(flt)
     return tuple(out)
+
+
+def _gyro_rate_hz(params: Mapping[str, float], filter_name: str) -> float:
+    """The rate the gyro filter ``filter_name`` runs at by the log's parameters; 0 when
+    unknown or damaged (the caller takes the log's rate). ArduPilot's ``INS_GYRO_RATE``
+    0-3 is 1, 2, 4, 8 kHz (1 kHz otherwise); PX4's ``IMU_GYRO_RATEMAX`` up to 8 kHz.
+
+    >>> _gyro_rate_hz({"INS_GYRO_RATE": 2}, "INS_GYRO_FILTER"), _gyro_rate_hz({}, "IMU_GYRO_CUTOFF")
+    (4000.0, 0.0)
+    """
+    if filter_name == "INS_GYRO_FILTER":
+        k = params.get("INS_GYRO_RATE", 0)
+        return 1000.0 * 2 ** (int(k) if isinstance(k, (int, float)) and 0 <= k <= 3 else 0)
+    rate = float(params.get("IMU_GYRO_RATEMAX", 0.0) or 0.0)
+    return rate if 0.0 < rate <= _MAX_GYRO_RATE_HZ else 0.0  # (beyond any IMU's: damaged)
 
 
 #: Fastest gyro sampling a parameter can state (PX4's IMU_GYRO_RATEMAX reaches 8 kHz)

@@ -122,7 +122,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mavsid.data import MessageTable, ModeChange, RawLog, SourceInfo, TextMessage
-from mavsid.errors import DataQualityWarning, LogFormatError
+from mavsid.errors import DataQualityWarning, LogFormatError, first_few
 from mavsid.readers.modes import NAV_STATES
 from mavsid.readers.tlog import vehicle_class
 
@@ -1453,8 +1453,8 @@ def _notes(parsed: _Parsed, tables: dict[str, MessageTable], n_changes: int) -> 
         notes.append(f"{n_changes} parameter changes during the log")
     backwards = _backwards(tables)
     if backwards:
-        shown = ", ".join(backwards[:5]) + (" ..." if len(backwards) > 5 else "")
-        notes.append(f"time runs backwards in {len(backwards)} topics ({shown})")
+        notes.append(f"time runs backwards in {len(backwards)} topics "
+                     f"({first_few(backwards)})")
     return notes
 
 

@@ -615,13 +615,14 @@ def _read_flights(logs: Sequence[str | os.PathLike[str]], cfg: PipelineConfig,
 POOL_RATE_RATIO = 0.5
 
 
-def _slowest_rate(fd: FlightData) -> float | None:
-    """The slowest native rate (Hz) of a flight's body rates and attitude inputs (what the
-    rate models are fitted on), if known."""
+def _slowest_rate(fd: FlightData,
+                  names: Sequence[str] = ("p", "q", "r", "u_roll", "u_pitch", "u_yaw")
+                  ) -> float | None:
+    """The slowest native rate (Hz) of a flight's channels ``names`` (default: the body
+    rates and attitude inputs the rate models are fitted on), if known."""
     found = fd.meta.get("native_rate_hz")
     native = found if isinstance(found, Mapping) else {}
-    rates = [float(native[n]) for n in ("p", "q", "r", "u_roll", "u_pitch", "u_yaw")
-             if native.get(n)]
+    rates = [float(native[n]) for n in names if native.get(n)]
     return min(rates) if rates else None
 
 
@@ -1078,13 +1079,9 @@ def _resampling_note(model: Model, flights: Sequence[FlightData]) -> str:
     model_hz = 1.0 / model.dt
     notes = []
     for fd in flights:
-        found = fd.meta.get("native_rate_hz")
-        native: dict[str, Any] = dict(found) if isinstance(found, Mapping) else {}
-        names = (*model.state_names, *model.input_names)
-        rates = [float(native[n]) for n in names if native.get(n)]
-        if not rates:
+        slow = _slowest_rate(fd, (*model.state_names, *model.input_names))
+        if slow is None:
             continue
-        slow = min(rates)
         if abs(slow - model_hz) > 0.05 * model_hz:
             how = ("upsampled: states interpolated, inputs held, one-step fit optimistic"
                    if slow < model_hz else "downsampled to the model's step")

@@ -21,7 +21,8 @@ DataFlash: builds a >= 200 MB ``.bin`` by concatenating the shared ``.bin`` logs
 flight ``--copies`` times) in a temporary folder, then times
 
 * mavsid ``read_log`` on the whole file: all messages, and ATT/RATE/IMU/RCOU only (what
-  ``fit`` reads);
+  ``fit`` reads); the same with the numpy header scan a package built without a C compiler
+  uses, instead of the compiled one (``mavsid/readers/_scan.c``);
 * pymavlink (``mavlink_connection``, ``recv_match`` + ``to_dict``; with ``type=`` for the
   selective read, which pymavlink serves from its index of record offsets) on a prefix of
   ``--prefix-mb`` MB cut at a record header (a full pymavlink decode of 200 MB takes
@@ -134,9 +135,12 @@ def _reader(who: str, fmt: str, path: Path, types: list[str] | None) -> Callable
 
         tlog.load_dialect()  # the dialect import, as pymavlink's at its import
         return quiet(lambda: tlog.read(path, messages=types))
-    if who == "mavsid":
-        import mavsid.readers.dataflash  # noqa: F401  (read_log imports it on first use)
+    if who in ("mavsid", "mavsid-numpy"):
+        import mavsid.readers.dataflash  # (read_log imports it on first use)
         from mavsid.readers import read_log
+
+        if who == "mavsid-numpy":  # as built without a C compiler: the numpy header scan
+            mavsid.readers.dataflash._scan = None
 
         return quiet(lambda: read_log(path, messages=types))
     from pymavlink import DFReader, mavutil  # noqa: F401
@@ -320,17 +324,19 @@ def bench_dataflash(prefix_mb: float, copies: int, runs: int, ref_runs: int = 1)
         size, psize = big.stat().st_size / MB, prefix.stat().st_size / MB
         print(f"\nDataFlash: {big.name} {size:.1f} MB (SITL x{copies} + the other shared .bin), "
               f"pymavlink measured on the first {psize:.1f} MB; cold: min/median/max of "
-              f"{runs} fresh processes ({ref_runs} for pymavlink), the three reads in turn; "
+              f"{runs} fresh processes ({ref_runs} for pymavlink), the four reads in turn; "
               "warm: best of 3 repeats (wall s); ratios: pymavlink's median over mavsid's")
         for label, types in (("all messages", None), ("ATT/RATE/IMU/RCOU", ATTITUDE_TYPES)):
             load = _load()
-            ours, pre, ref = measure_in_turn([("mavsid", big, runs), ("mavsid", prefix, runs),
-                                              ("pymavlink", prefix, ref_runs)], "bin", types, 3)
+            ours, plain, pre, ref = measure_in_turn(
+                [("mavsid", big, runs), ("mavsid-numpy", big, runs), ("mavsid", prefix, runs),
+                 ("pymavlink", prefix, ref_runs)], "bin", types, 3)
             load += f"-{_load()}"
             peak, arrays = memory("bin", big, types)
             scale = size / psize
             report(f"  {label} (load {load})", [
                 ("mavsid, whole file", ours.row(size)),
+                ("  the same, numpy scan", plain.row(size) + "  (built without a C compiler)"),
                 ("mavsid, prefix", pre.row(psize)),
                 ("pymavlink, prefix", ref.row(psize)),
                 ("pymavlink, whole file", f"cold {ref.cold * scale:6.1f} s  warm "
@@ -349,6 +355,10 @@ def bench_dataflash(prefix_mb: float, copies: int, runs: int, ref_runs: int = 1)
                 ("cold ratio, spread", f"{ref.cold * scale / max(ours.cold_wall):5.0f}x .. "
                                        f"{ref.cold * scale / min(ours.cold_wall):5.0f}x  "
                                        "(on mavsid's slowest .. fastest cold run)"),
+                ("  numpy scan", f"cold {ref.cold * scale / plain.cold:5.0f}x  warm "
+                                 f"{ref.warm_wall * scale / plain.warm_wall:5.0f}x  (the compiled "
+                                 f"scan {plain.cold / ours.cold:.2f}x faster cold, "
+                                 f"{plain.warm_wall / ours.warm_wall:.2f}x warm)"),
                 ("mavsid memory", memory_row(peak, arrays, ours.rss_growth)),
             ])
 

@@ -542,11 +542,41 @@ def test_times_only_columns_equal_the_full_decode(parts):
             assert _same_column(table[column], full[name][column]), (name, column)
 
 
+def _compiled_or_skip() -> Any:
+    if dataflash._scan is None:
+        pytest.skip("mavsid built without a C compiler: the numpy header scan only")
+    return dataflash._scan
+
+
+@pytest.fixture(params=["compiled", "numpy"])
+def scan(request, monkeypatch):
+    """The header scan both ways: the compiled one (``_scan.c``) and the numpy one a package
+    built without a C compiler uses."""
+    if request.param == "compiled":
+        _compiled_or_skip()
+    else:
+        monkeypatch.setattr(dataflash, "_scan", None)
+    return request.param
+
+
+def test_the_compiled_header_scan_is_built():
+    """Where a C compiler is (as on this project's machines and CI), ``pip install .`` builds
+    the scan: without it reads still work (numpy), ~1.3x slower, so a build that silently
+    dropped it must not pass."""
+    import shutil
+    import sysconfig
+
+    compiler = (sysconfig.get_config_var("CC") or "cc").split()[0]
+    if shutil.which(compiler) is None:
+        pytest.skip(f"no C compiler ({compiler}): the numpy header scan is used")
+    assert dataflash._scan is not None, "mavsid.readers._scan was not built (see setup.py)"
+
+
 @pytest.mark.parametrize("chunk", [4, 6, 64])
-def test_header_search_finds_pairs_at_both_parities_across_chunks(monkeypatch, chunk):
-    """The pair is looked for as 16-bit words at even and odd offsets, a chunk at a time:
-    every ``A3 95`` with a type byte after it is found once, at either parity, on either
-    side of a chunk's end, in files of odd and even sizes (brute force as reference)."""
+def test_header_search_finds_pairs_at_both_parities_across_chunks(monkeypatch, scan, chunk):
+    """Every ``A3 95`` with a type byte after it is found once, at either parity, on either
+    side of a chunk's (numpy) or window's (compiled: 8 chunks) end, in files of odd and even
+    sizes (brute force as reference)."""
     monkeypatch.setattr(dataflash, "_CHUNK", chunk)
     rng = np.random.default_rng(7)
     for size in [*range(0, 12), 63, 64, 65, 66, 127, 128, 129, 1001]:
@@ -559,12 +589,63 @@ def test_header_search_finds_pairs_at_both_parities_across_chunks(monkeypatch, c
             assert types.tolist() == [data[i + 2] for i in pairs]
 
 
-def test_header_search_grows_past_its_estimate():
-    """A file denser in header patterns than a log (its result grows by doubling)."""
+def test_header_search_grows_past_its_estimate(scan):
+    """A file denser in header patterns than a log (its result grows)."""
     data = bytes(3000) + b"\xa3\x95\x81" * 50_000 + b"\xa3\x95"
     cand, types = dataflash._find_headers(np.frombuffer(data, np.uint8))
     assert cand.tolist() == list(range(3000, 3000 + 150_000, 3))
     assert set(types.tolist()) == {0x81}
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.binary(max_size=300), st.integers(0, 300), st.integers(0, 300))
+def test_compiled_pairs_equal_brute_force(data, start, room):
+    """``_scan.pairs`` on any bytes, from any start, into outputs of any room: the pairs of
+    the range in order, stopping at the first one without room (int32 and int64 offsets)."""
+    pairs_fn = _compiled_or_skip().pairs
+    last = len(data) - 2
+    start = min(start, max(last, 0))
+    if last < 0:
+        with pytest.raises(ValueError):
+            pairs_fn(data, 0, 0, np.empty(1, np.int32), np.empty(1, np.uint8))
+        return
+    want = [i for i in range(start, last) if data[i : i + 2] == b"\xa3\x95"]
+    for dtype in (np.int32, np.int64):
+        off, types = np.zeros(room, dtype), np.zeros(room + 3, np.uint8)
+        count, reached = pairs_fn(data, start, last, off, types)
+        assert off[:count].tolist() == want[:room]
+        assert types[:count].tolist() == [data[i + 2] for i in want[:room]]
+        assert reached == (want[room] if len(want) > room else last)
+
+
+def test_compiled_pairs_refuse_what_they_cannot_write():
+    pairs_fn = _compiled_or_skip().pairs
+    data = b"\xa3\x95\x81" * 4
+    with pytest.raises(TypeError, match="int32 or int64"):
+        pairs_fn(data, 0, 10, np.empty(4, np.float64), np.empty(4, np.uint8))
+    with pytest.raises(TypeError, match="byte buffers"):
+        pairs_fn(data, 0, 10, np.empty(4, np.int64), np.empty(4, np.uint16))
+    with pytest.raises(ValueError, match="start <= stop"):
+        pairs_fn(data, 0, 11, np.empty(4, np.int64), np.empty(4, np.uint8))
+    with pytest.raises(ValueError, match="start <= stop"):
+        pairs_fn(data, 5, 4, np.empty(4, np.int64), np.empty(4, np.uint8))
+    with pytest.raises(BufferError):  # a read-only output
+        pairs_fn(data, 0, 10, np.empty(4, np.int64), b"xxxx")
+
+
+def test_compiled_and_numpy_header_scans_agree_on_shared_logs():
+    """The compiled scan and the numpy one find the same headers in every shared .bin (the
+    104-MB SITL flight among them: windows, page releases and growth on a real file)."""
+    require_shared()
+    _compiled_or_skip()
+    paths = shared_logs(".bin")
+    assert paths
+    for path in paths:
+        a = np.memmap(path, np.uint8, mode="r")
+        got, ref = dataflash._find_headers(a), dataflash._find_headers_numpy(a)
+        assert got[0].dtype == ref[0].dtype, path
+        assert np.array_equal(got[0], ref[0]) and np.array_equal(got[1], ref[1]), path
+        del a
 
 
 def test_columns_from_one_block_are_independent():

@@ -1,0 +1,3 @@
+from typing import Any
+
+def pairs(data: Any, start: int, stop: int, offsets: Any, types: Any, /) -> tuple[int, int]: ...

@@ -40,8 +40,10 @@ over ``VmRSS`` before the read: also the file's pages mapped while reading).
 
 ULog: per shared ``.ulg`` and on a simulated long flight of ``--ulog-mb`` MB
 (built in a temporary folder), mavsid's ``ulog.read`` against ``pyulog.ULog`` in the same
-run, warm (best CPU time, the two in turn) and cold (first read in a fresh process), mavsid
-reading the attitude topics only, and mavsid's peak memory against its returned arrays.
+run, warm (best CPU time, the two in turn) and cold (first read in a fresh process, median
+of ``--cold-runs``), mavsid reading the attitude topics only, mavsid as built without a C
+compiler (the numpy walk instead of the compiled one), and mavsid's peak memory against
+its returned arrays.
 
 Each format has its own ``bench_<format>()``; ``main()`` calls them, so a section for another
 format is one more function.
@@ -428,6 +430,8 @@ if which == "pyulog":
             return ULog(path)
 else:
     from mavsid.readers import ulog
+    if which == "mavsid-numpy":  # as built without a C compiler: the numpy walk
+        ulog._scan = None
     def run():
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -438,14 +442,20 @@ print(time.perf_counter() - t0, time.process_time() - c0)
 """
 
 
-def cold(path: Path, which: str) -> tuple[float, float]:
-    """Wall and CPU time of the first read in a fresh process (imports not timed)."""
+def cold(path: Path, which: str, runs: int = 1) -> tuple[float, float]:
+    """Wall and CPU time of the first read in a fresh process (imports not timed): the
+    medians of ``runs`` processes (one cold run moves by up to 2x on a shared machine)."""
     import subprocess
     import sys
 
-    out = subprocess.run([sys.executable, "-c", _COLD, str(path), which], check=True,
-                         capture_output=True, text=True, cwd=ROOT, env=child_env()).stdout.split()
-    return float(out[0]), float(out[1])
+    wall, cpu = [], []
+    for _ in range(runs):
+        out = subprocess.run([sys.executable, "-c", _COLD, str(path), which], check=True,
+                             capture_output=True, text=True, cwd=ROOT,
+                             env=child_env()).stdout.split()
+        wall.append(float(out[0]))
+        cpu.append(float(out[1]))
+    return statistics.median(wall), statistics.median(cpu)
 
 
 def warm_pair(a: Callable[[], Any], b: Callable[[], Any], repeat: int) -> tuple[float, float]:
@@ -471,11 +481,12 @@ def build_big_ulog(folder: Path, min_mb: float) -> Path:
     return path
 
 
-def bench_ulog(min_mb: float = 100.0, repeat: int = 5) -> None:
+def bench_ulog(min_mb: float = 100.0, repeat: int = 5, runs: int = 3) -> None:
     """Per shared .ulg and on a >= ``min_mb`` MB simulated flight: mavsid's ``ulog.read``
     against ``pyulog.ULog`` measured in the same run, warm (best CPU of ``repeat``, in
-    turn) and cold (first read in a fresh process); mavsid reading the attitude topics
-    only; mavsid's peak memory against the arrays it returns."""
+    turn) and cold (first read in a fresh process, median of ``runs``); mavsid reading the
+    attitude topics only; mavsid as built without a C compiler; mavsid's peak memory
+    against the arrays it returns."""
     import contextlib
     import io
 
@@ -493,14 +504,25 @@ def bench_ulog(min_mb: float = 100.0, repeat: int = 5) -> None:
                 return ULog(str(path))
         return run
 
-    totals = [0.0] * 5  # the shared logs one after another: warm, cold (pyulog, mavsid), sel
+    def numpy_walk(path: Path) -> Callable[[], Any]:
+        def run() -> Any:  # as built without a C compiler
+            compiled, ulog._scan = ulog._scan, None
+            try:
+                return ulog.read(path)
+            finally:
+                ulog._scan = compiled
+        return quiet(run)
+
+    # the shared logs one after another: warm, cold (pyulog, mavsid), selective, numpy walk
+    totals = [0.0] * 7
 
     def measure(path: Path, n: int) -> tuple[str, str]:
         ref, ours = warm_pair(plain(path), quiet(lambda: ulog.read(path)), n)
-        _, sel = warm_pair(lambda: None, quiet(lambda: ulog.read(path, messages=ULOG_TOPICS)),
-                           n)
-        (_, cold_ref), (_, cold_ours) = cold(path, "pyulog"), cold(path, "mavsid")
-        for k, value in enumerate((ref, ours, cold_ref, cold_ours, sel)):
+        sel, numpy_ = warm_pair(quiet(lambda: ulog.read(path, messages=ULOG_TOPICS)),
+                                numpy_walk(path), n)
+        (_, cold_ref), (_, cold_ours) = cold(path, "pyulog", runs), cold(path, "mavsid", runs)
+        _, cold_numpy = cold(path, "mavsid-numpy", runs)
+        for k, value in enumerate((ref, ours, cold_ref, cold_ours, sel, numpy_, cold_numpy)):
             totals[k] += value
         log = quiet(lambda: ulog.read(path))()
         arrays = decoded_bytes(log)
@@ -509,22 +531,26 @@ def bench_ulog(min_mb: float = 100.0, repeat: int = 5) -> None:
         return (path.name[:44], f"{path.stat().st_size / MB:7.1f} {ref:7.3f} {ours:7.3f} "
                                 f"{ref / ours:6.1f}x  {cold_ref:7.3f} {cold_ours:7.3f} "
                                 f"{cold_ref / cold_ours:6.1f}x  {ref / sel:6.1f}x  "
+                                f"{ref / numpy_:6.1f}x {cold_ref / cold_numpy:6.1f}x  "
                                 f"{peak / max(arrays, 1):5.2f}x")  # fmt: skip
 
     header = ("file", "     MB  pyulog  mavsid  ratio   (warm, best CPU s)  pyulog  mavsid  "
-                      "ratio  (cold, CPU s)  selective  peak/arrays")  # fmt: skip
+                      f"ratio  (cold: median CPU s of {runs})  selective  numpy walk (warm, cold)  "
+                      "peak/arrays")  # fmt: skip
     rows = [header] + [measure(path, repeat) for path in paths]
     if paths:  # what a batch over them waits: each read's fixed costs paid once per log
-        ref, ours, cold_ref, cold_ours, sel = totals
+        ref, ours, cold_ref, cold_ours, sel, numpy_, cold_numpy = totals
         rows.append((f"all {len(paths)} above, one after another",
                      f"{sum(p.stat().st_size for p in paths) / MB:7.1f} {ref:7.3f} {ours:7.3f} "
                      f"{ref / ours:6.1f}x  {cold_ref:7.3f} {cold_ours:7.3f} "
-                     f"{cold_ref / cold_ours:6.1f}x  {ref / sel:6.1f}x"))  # fmt: skip
+                     f"{cold_ref / cold_ours:6.1f}x  {ref / sel:6.1f}x  "
+                     f"{ref / numpy_:6.1f}x {cold_ref / cold_numpy:6.1f}x"))  # fmt: skip
     with tempfile.TemporaryDirectory() as tmp:
         big = build_big_ulog(Path(tmp), min_mb)
         rows.append(measure(big, 3))
     report(f"ULog: pyulog.ULog against mavsid ulog.read, same run; selective = full pyulog "
-           f"/ mavsid on {', '.join(ULOG_TOPICS)}; peak = tracemalloc peak of mavsid's read "
+           f"/ mavsid on {', '.join(ULOG_TOPICS)}; numpy walk = pyulog / mavsid as built "
+           "without a C compiler; peak = tracemalloc peak of mavsid's read "
            "/ bytes of its returned arrays (the memory map is not counted)", rows)
 
 
@@ -553,7 +579,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     if args.only in (None, "dataflash"):
         bench_dataflash(args.prefix_mb, args.copies, args.cold_runs, args.ref_runs)
     if args.only in (None, "ulog"):
-        bench_ulog(args.ulog_mb)
+        bench_ulog(args.ulog_mb, runs=args.cold_runs)
     if args.only in (None, "tlog"):
         bench_tlog(args.tlog_mb, args.cold_runs)
 

@@ -1,5 +1,6 @@
 """PX4 ULog reader against pyulog: every shared .ulg field by field, selective loading,
-damaged files."""
+damaged files; each test both ways, with the compiled data walk and with the numpy
+candidates and runs a package built without a C compiler uses."""
 
 from __future__ import annotations
 
@@ -29,6 +30,56 @@ from mavsid.readers import read_log, ulog
 ULOGS = shared_logs(".ulg")
 FIXTURE_ULOGS = sorted(FIXTURES.glob("*.ulg"))
 PX4_ULOG_RS = ("public", "Auterion__px4-ulog-rs")
+
+
+@pytest.fixture(autouse=True, params=["compiled", "numpy"])
+def walk(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
+    """The data section walked by ``_scan.ulog_data`` (where the package was built with a C
+    compiler) or by the numpy candidates and runs (see ``ulog``'s *Framing*)."""
+    if request.param == "compiled":
+        if ulog._scan is None:
+            pytest.skip("mavsid built without a C compiler: the numpy walk only")
+    else:
+        monkeypatch.setattr(ulog, "_scan", None)
+    return str(request.param)
+
+
+def test_compiled_walk_takes_data_and_sync_messages_up_to_the_first_other() -> None:
+    """``_scan.ulog_data`` directly: data messages written out, sync messages stepped over,
+    stopped by another type, a data message under 2 bytes, ``until``, the end of the
+    buffer, or outputs without room (then resumed where it stopped)."""
+    walk_fn = pytest.importorskip("mavsid.readers._scan").ulog_data  # (the fixture's
+    # "numpy" run hides it from the reader only)
+
+    def msg(kind: bytes, payload: bytes) -> bytes:
+        return struct.pack("<HB", len(payload), kind[0]) + payload
+
+    d1, d2 = msg(b"D", b"\x01\x00abc"), msg(b"D", b"\x02\x01")
+    sync = msg(b"S", bytes(8))
+    data = d1 + sync + d2 + d1 + msg(b"L", b"x" * 9) + d1 + msg(b"D", b"\x05") + d1
+
+    def run(start: int, until: int, room: int) -> tuple[list[int], list[int], list[int], int]:
+        pos, size, ids_ = np.zeros(room, np.int64), np.zeros(room, np.uint16), np.zeros(
+            room, np.uint16)
+        k, reached = walk_fn(data, start, until, pos, size, ids_)
+        return pos[:k].tolist(), size[:k].tolist(), ids_[:k].tolist(), reached
+
+    a, b = len(d1), len(d1) + len(sync)
+    c, stop_l = b + len(d2), b + len(d2) + len(d1)
+    assert run(0, 1 << 40, 8) == ([0, b, c], [5, 2, 5], [1, 0x102, 1], stop_l)
+    assert run(0, 1 << 40, 2) == ([0, b], [5, 2], [1, 0x102], c)  # no room: resume at c
+    assert run(0, c, 8) == ([0, b], [5, 2], [1, 0x102], c)  # d1 at c would pass until
+    after_l = stop_l + 3 + 9
+    assert run(after_l, 1 << 40, 8)[1:] == ([5], [1], after_l + a)  # a 1-byte data message
+    assert run(len(data) - a, 1 << 40, 8)[3] == len(data)  # up to the end
+    assert run(len(data) - 2, 1 << 40, 8)[3] == len(data) - 2  # no room for a header
+    assert run(0, len(data), 8)[3] == stop_l
+    with pytest.raises(TypeError):
+        walk_fn(data, 0, 10, np.zeros(4, np.int32), np.zeros(4, np.uint16),
+                np.zeros(4, np.uint16))
+    with pytest.raises(ValueError):
+        walk_fn(data, len(data) + 1, 10, np.zeros(4, np.int64), np.zeros(4, np.uint16),
+                np.zeros(4, np.uint16))
 
 
 def pyulog(path: Path, topics: list[str] | None = None) -> tuple[ULog, str]:

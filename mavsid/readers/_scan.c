@@ -1,8 +1,10 @@
-/* The DataFlash header scan, compiled: every 0xA3 0x95 byte pair of a buffer with the byte
- * after it (its message type), as mavsid.readers.dataflash._find_headers' numpy loop finds
- * them, in one pass over the bytes instead of five over masks. Optional: where the package
- * is built without a C compiler the numpy loop is used (same offsets, same types; tests
- * compare the two).
+/* The two loops of mavsid's readers that numpy does in several passes, compiled. Optional:
+ * where the package is built without a C compiler the readers use their numpy code instead
+ * (same results; tests compare the two).
+ *
+ * The DataFlash header scan: every 0xA3 0x95 byte pair of a buffer with the byte after it
+ * (its message type), as mavsid.readers.dataflash._find_headers_numpy finds them, in one
+ * pass over the bytes instead of five over masks.
  *
  * pairs(data, start, stop, offsets, types) -> (count, reached)
  *   data     a readable buffer of bytes (n of them)
@@ -121,17 +123,104 @@ static PyObject *pairs(PyObject *self, PyObject *args)
     return result;
 }
 
+/* The ULog data walk: from a data message, the messages one after the other (each a uint16
+ * size, a type byte, size bytes) as long as they are data messages ('D', size >= 2: their
+ * positions, sizes and message ids written out) or sync messages ('S': stepped over), end
+ * inside the buffer and no later than `until`. Every other message stops the walk there
+ * (the reader reads it in Python, with pyulog's rules), as does an output without room.
+ *
+ * ulog_data(data, start, until, positions, sizes, ids) -> (count, reached)
+ *   positions  a writable int64 buffer; sizes and ids writable uint16 buffers
+ *   count      data messages written
+ *   reached    where the walk stopped: the first message it did not take
+ */
+static PyObject *ulog_data(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *data_obj, *pos_obj, *size_obj, *id_obj;
+    Py_ssize_t start, until;
+    if (!PyArg_ParseTuple(args, "OnnOOO:ulog_data", &data_obj, &start, &until, &pos_obj,
+                          &size_obj, &id_obj))
+        return NULL;
+    Py_buffer data, pos, size, id;
+    if (PyObject_GetBuffer(data_obj, &data, PyBUF_C_CONTIGUOUS) < 0)
+        return NULL;
+    if (PyObject_GetBuffer(pos_obj, &pos, PyBUF_C_CONTIGUOUS | PyBUF_WRITABLE) < 0) {
+        PyBuffer_Release(&data);
+        return NULL;
+    }
+    if (PyObject_GetBuffer(size_obj, &size, PyBUF_C_CONTIGUOUS | PyBUF_WRITABLE) < 0) {
+        PyBuffer_Release(&pos);
+        PyBuffer_Release(&data);
+        return NULL;
+    }
+    if (PyObject_GetBuffer(id_obj, &id, PyBUF_C_CONTIGUOUS | PyBUF_WRITABLE) < 0) {
+        PyBuffer_Release(&size);
+        PyBuffer_Release(&pos);
+        PyBuffer_Release(&data);
+        return NULL;
+    }
+    PyObject *result = NULL;
+    if (data.itemsize != 1 || pos.itemsize != 8 || size.itemsize != 2 || id.itemsize != 2) {
+        PyErr_SetString(PyExc_TypeError,
+                        "ulog_data: bytes in; int64 positions, uint16 sizes and ids out");
+    } else if (start < 0 || start > data.len) {
+        PyErr_SetString(PyExc_ValueError, "ulog_data: start outside the data");
+    } else {
+        const uint8_t *a = (const uint8_t *)data.buf;
+        int64_t *p_out = (int64_t *)pos.buf;
+        uint16_t *s_out = (uint16_t *)size.buf, *i_out = (uint16_t *)id.buf;
+        Py_ssize_t n = data.len, cap = pos.len / 8, p = start, c = 0;
+        if (size.len / 2 < cap)
+            cap = size.len / 2;
+        if (id.len / 2 < cap)
+            cap = id.len / 2;
+        if (until > n)
+            until = n;
+        Py_BEGIN_ALLOW_THREADS
+        while (p + 3 <= n) {
+            Py_ssize_t length = (Py_ssize_t)(a[p] | (a[p + 1] << 8)), end = p + 3 + length;
+            uint8_t kind = a[p + 2];
+            if (end > until)
+                break;
+            if (kind == 'D') {
+                if (length < 2 || c == cap)
+                    break;
+                p_out[c] = (int64_t)p;
+                s_out[c] = (uint16_t)length;
+                i_out[c] = (uint16_t)(a[p + 3] | (a[p + 4] << 8));
+                c++;
+            } else if (kind != 'S') {
+                break;
+            }
+            p = end;
+        }
+        Py_END_ALLOW_THREADS
+        result = Py_BuildValue("nn", c, p);
+    }
+    PyBuffer_Release(&id);
+    PyBuffer_Release(&size);
+    PyBuffer_Release(&pos);
+    PyBuffer_Release(&data);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"pairs", pairs, METH_VARARGS,
      "pairs(data, start, stop, offsets, types) -> (count, reached): the offsets of the "
      "0xA3 0x95 pairs at start..stop-1 of data and their type bytes, written to offsets "
      "and types; reached is stop, or where the outputs ran out of room."},
+    {"ulog_data", ulog_data, METH_VARARGS,
+     "ulog_data(data, start, until, positions, sizes, ids) -> (count, reached): the run of "
+     "ULog data (and sync) messages from start, ending by until: the data messages' "
+     "positions, sizes and ids written out; reached is the first message not taken."},
     {NULL, NULL, 0, NULL},
 };
 
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT, "_scan",
-    "The DataFlash header scan, compiled (see mavsid.readers.dataflash._find_headers).", -1,
+    "Readers' byte loops, compiled (mavsid.readers.dataflash._find_headers, "
+    "mavsid.readers.ulog)", -1,
     methods, NULL, NULL, NULL, NULL,
 };
 

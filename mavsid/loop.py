@@ -2566,9 +2566,16 @@ def tune(result: Any, target_pm_deg: float = 50.0, samples: int = 40,
                 measured["closed_loop"], an.freq_hz, an.closed_response)
         level = fit.verdict.level if fit.verdict is not None else "not identified"
         entry["verdict"] = level
+        mismatch = _gains_mismatch(entry.get("loop_frf_vs_predicted"), ctrl)
+        if mismatch:
+            entry["gains_mismatch"] = mismatch
         if level != "good":
             entry["suggested"] = {}
             entry["suggested_note"] = f"no gains suggested: the plant model is {level}"
+        elif mismatch:
+            entry["suggested"] = {}
+            entry["suggested_note"] = ("no gains suggested: the logged gains they would scale "
+                                       "do not describe this flight")
         else:
             got = suggest_gains(plant_from_model(fit.model, axis, 1.0 / ctrl.loop_hz), ctrl,
                                 target_pm_deg, lag, tau)
@@ -2596,6 +2603,36 @@ def tune(result: Any, target_pm_deg: float = 50.0, samples: int = 40,
 
 #: a suggestion whose phase margin on the measured FRF differs more than this (deg) is flagged
 SUGGESTION_CHECK_DEG = 5.0
+
+#: the loop predicted from the logged gains and the model, against the loop measured in flight
+#: (SYSTEMID at the mixer), median over the coherent band: off by more than this in gain (dB,
+#: a factor 2) or phase (deg), the logged gains are not the ones flown (a damaged or changed
+#: parameter). Simulated flights of every vehicle, with and without gyro noise: 0.15-0.6 dB
+#: and 0.3-2 deg.
+LOOP_MISMATCH_DB = 6.0
+LOOP_MISMATCH_DEG = 30.0
+
+
+def _gains_mismatch(compared: Mapping[str, Any] | None, ctrl: AxisController | None
+                    ) -> str | None:
+    """Why the loop analysed with the logged gains is not the loop flown (a measured loop
+    far from the predicted one), or None.
+
+    Examples
+    --------
+    >>> _gains_mismatch({"median_db": 0.4, "median_deg": 1.0}, None) is None
+    True
+    """
+    if not compared:
+        return None
+    db, deg = compared.get("median_db", math.nan), compared.get("median_deg", math.nan)
+    if not (db > LOOP_MISMATCH_DB or deg > LOOP_MISMATCH_DEG):  # (NaN: nothing measured)
+        return None
+    names = ", ".join(k for k in (ctrl.params if ctrl else {}) if k.endswith(("_P", "_I", "_D")))
+    return (f"the loop predicted from the logged gains is {db:.1f} dB / {deg:.0f} deg (median) "
+            "off the loop measured in flight: the logged rate-controller parameters do not "
+            "describe this flight (damaged, or changed during it), so the margins above are "
+            "not the flight's" + (f"; check {names}" if names else ""))
 
 
 @dataclass
@@ -2631,6 +2668,22 @@ def _scale_of(gains: Mapping[str, float], ctrl: AxisController) -> float:
     return float(new_p / old_p) if old_p else 1.0
 
 
+def _figure(v: float | None, fmt: str, unit: str, sd: float | None = None) -> str:
+    """A loop figure as ``mavsid tune`` prints it, with its σ; ``none`` where it does not
+    exist (a loop whose gain never crosses 1 has no phase margin nor crossover; an unstable
+    one no rise time).
+
+    Examples
+    --------
+    >>> _figure(34.12, ".1f", "deg", 1.5), _figure(float("inf"), ".1f", "deg", 1.5)
+    ('34.1 ± 1.5 deg', 'none')
+    """
+    if v is None or not math.isfinite(v):
+        return "none"
+    return f"{v:{fmt}}" + (f" ± {sd:{fmt}}" if sd is not None and math.isfinite(sd)
+                           else "") + f" {unit}"
+
+
 def format_tune(report: Mapping[str, Any]) -> str:
     """The text ``mavsid tune`` prints."""
     lines = []
@@ -2640,25 +2693,31 @@ def format_tune(report: Mapping[str, Any]) -> str:
             continue
         m, c, sd = e["margins"], e["closed_loop"], e.get("stderr", {})
 
-        def pm(v: float, key: str, fmt: str = ".1f", sd: Mapping[str, float] = sd) -> str:
-            s = sd.get(key)
-            return f"{v:{fmt}}" + (f" ± {s:{fmt}}" if s is not None and np.isfinite(s) else "")
+        def pm(v: float, key: str, fmt: str, unit: str,
+               sd: Mapping[str, float] = sd) -> str:
+            return _figure(v, fmt, unit, sd.get(key))
 
         lines.append(
-            f"{axis}: phase margin {pm(m['phase_deg'], 'phase_margin_deg')} deg, gain margin "
-            f"{pm(m['gain_db'], 'gain_margin_db')} dB, crossover "
-            f"{pm(m['crossover_hz'], 'crossover_hz', '.2f')} Hz; closed-loop bandwidth "
-            f"{pm(c['bandwidth_hz'], 'bandwidth_hz', '.2f')} Hz, peak {c['peak_db']:.1f} dB, "
-            f"rise {c['rise_time_s'] * 1e3:.0f} ms, overshoot {c['overshoot_percent']:.0f} %")
+            f"{axis}: phase margin {pm(m['phase_deg'], 'phase_margin_deg', '.1f', 'deg')}, "
+            f"gain margin {pm(m['gain_db'], 'gain_margin_db', '.1f', 'dB')}, crossover "
+            f"{pm(m['crossover_hz'], 'crossover_hz', '.2f', 'Hz')}; closed-loop bandwidth "
+            f"{pm(c['bandwidth_hz'], 'bandwidth_hz', '.2f', 'Hz')}, peak "
+            f"{_figure(c['peak_db'], '.1f', 'dB')}, rise "
+            f"{_figure(c['rise_time_s'] * 1e3, '.0f', 'ms')}, overshoot "
+            f"{_figure(c['overshoot_percent'], '.0f', '%')}")
         if "loop_frf_margins" in e:
             mm, pr = e["loop_frf_margins"], e["loop_predicted_margins"]
             cmp_ = e["loop_frf_vs_predicted"]
             lines.append(
                 f"  at the mixer (rate and attitude loops): measured phase margin "
-                f"{mm['phase_deg']:.1f} deg at {mm['crossover_hz']:.2f} Hz, predicted "
-                f"{pr['phase_deg']:.1f} deg at {pr['crossover_hz']:.2f} Hz; prediction within "
+                f"{_figure(mm['phase_deg'], '.1f', 'deg')} at "
+                f"{_figure(mm['crossover_hz'], '.2f', 'Hz')}, predicted "
+                f"{_figure(pr['phase_deg'], '.1f', 'deg')} at "
+                f"{_figure(pr['crossover_hz'], '.2f', 'Hz')}; prediction within "
                 f"{cmp_['median_db']:.1f} dB / {cmp_['median_deg']:.1f} deg (median) over "
                 f"{cmp_['band_hz'][0]:.2g}-{cmp_['band_hz'][1]:.2g} Hz")
+        if e.get("gains_mismatch"):
+            lines.append(f"  warning: {e['gains_mismatch']}")
         if e.get("suggested"):
             lines.append("  suggested: " + ", ".join(f"{k} {v:.4g}"
                                                      for k, v in e["suggested"].items()))

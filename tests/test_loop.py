@@ -605,3 +605,34 @@ def test_a_damaged_gain_stops_only_its_axis_in_tune() -> None:
     out = loop.tune(bad)
     assert out["roll"] == {"error": f"{path}: parameter ATC_RAT_RLL_P = -1 must be >= 0"}
     assert "error" not in loop.tune(res)["roll"]
+
+
+@pytest.mark.parametrize("p_gain", [1e30, 0.135 * 8])
+def test_logged_gains_that_are_not_the_flights_are_said_and_not_scaled(p_gain: float) -> None:
+    """The SYSTEMID fixture (flown on P 0.135) analysed with a logged ATC_RAT_RLL_P that is
+    not the one flown (damaged: 1e30; changed: 8x): ``tune`` printed "phase margin inf deg",
+    "crossover nan Hz" and "prediction within 614.6 dB" as figures, and would have scaled
+    the wrong gains. Now the loop measured at the mixer against the one predicted from the
+    logged gains says so, no gains are suggested, and figures that do not exist print as
+    ``none``. With the gains flown: no warning, gains suggested."""
+    from pathlib import Path
+
+    from mavsid import pipeline
+
+    path = Path(__file__).resolve().parents[1] / "fixtures" / "sysid_roll.bin"
+    res = pipeline.fit([str(path)], pipeline.PipelineConfig(axes=("roll",)))
+    fd = res.flights[0]
+    bad = replace(res, flights=(replace(fd, params={**fd.params, "ATC_RAT_RLL_P": p_gain}),
+                                *res.flights[1:]))
+    entry = loop.tune(bad, samples=5)["roll"]
+    assert entry["loop_frf_vs_predicted"]["median_db"] > loop.LOOP_MISMATCH_DB
+    assert "do not describe this flight" in entry["gains_mismatch"]
+    assert "ATC_RAT_RLL_P" in entry["gains_mismatch"]
+    assert entry["suggested"] == {}
+    text = loop.format_tune({"roll": entry})
+    assert "warning: the loop predicted from the logged gains" in text
+    assert "nan" not in text and "inf" not in text.replace("info", "")
+    good = loop.tune(res, samples=5)["roll"]
+    assert "gains_mismatch" not in good
+    assert good["loop_frf_vs_predicted"]["median_db"] < 1.0
+    assert good["suggested"] and "warning" not in loop.format_tune({"roll": good})

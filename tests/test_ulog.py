@@ -598,6 +598,24 @@ def test_many_short_runs_match_pyulog(tmp_path: Path) -> None:
     assert len(log["att"]) == 10_000
 
 
+def test_data_messages_between_texts_match_pyulog(tmp_path: Path) -> None:
+    """Each data message between two logged texts: every walk takes one message (kept as
+    a single, not a run's bookkeeping each), values and texts as pyulog's."""
+    from fuzz.hostile import ATT_FORMAT, _ulog_msg, ulog_file
+
+    out = bytearray(ulog_file([ATT_FORMAT], samples=0))
+    for k in range(3000):
+        out += _ulog_msg(b"D", struct.pack("<HQf", 0, 1000 * k, k / 7))
+        out += _ulog_msg(b"L", struct.pack("<BQ", ord("6"), 1000 * k + 1) + b"x")
+    path = tmp_path / "between_texts.ulg"
+    path.write_bytes(bytes(out))
+    ref, _ = pyulog(path)
+    log, quality = read(path)
+    assert quality == []
+    assert_tables_match(log, ref)
+    assert len(log["att"]) == 3000 and len(log.texts) == len(ref.logged_messages) == 3000
+
+
 def test_a_file_of_data_header_look_alikes_matches_pyulog(tmp_path: Path) -> None:
     """Every byte after the subscription is ``D``: every position is a framing candidate
     (size 0x4444 = the subscribed format's + 2, id 0x4444 subscribed); the candidates are

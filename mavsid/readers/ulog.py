@@ -1008,7 +1008,9 @@ class _Reader:
                                 np.empty(size, np.uint16))
         while True:
             k, nxt = _scan.ulog_data(self.buf, pos, until, *room)
-            if k:
+            if k == 1 and not self.untimed:  # one between others: no run's bookkeeping
+                self.single(int(room[0][0]), int(room[1][0]), int(room[2][0]))
+            elif k:
                 stop_at = self.chunk(room[0][:k].copy(), room[1][:k].copy(), room[2][:k].copy())
                 if stop_at:
                     return stop_at, nxt

@@ -572,6 +572,18 @@ def test_the_compiled_header_scan_is_built():
     assert dataflash._scan is not None, "mavsid.readers._scan was not built (see setup.py)"
 
 
+def test_version_says_whether_the_readers_are_compiled(capsys: pytest.CaptureFixture[str]
+                                                       ) -> None:
+    """``mavsid --version`` tells a user whose reads are slower than the README's that the
+    package was built without a C compiler."""
+    from mavsid import cli
+
+    assert cli.main(["--version"]) == 0
+    out = capsys.readouterr().out
+    assert ("(compiled readers)" in out) == (dataflash._scan is not None)
+    assert ("built without a C compiler" in out) == (dataflash._scan is None)
+
+
 @pytest.mark.parametrize("chunk", [4, 6, 64])
 def test_header_search_finds_pairs_at_both_parities_across_chunks(monkeypatch, scan, chunk):
     """Every ``A3 95`` with a type byte after it is found once, at either parity, on either

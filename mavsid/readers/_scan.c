@@ -74,25 +74,39 @@ static Py_ssize_t scan(const uint8_t *a, Py_ssize_t i, Py_ssize_t stop, void *of
     return stop;
 }
 
+/* Take a view of each object (the flags of each); on failure, give back those taken. */
+static int get_buffers(PyObject *const *objs, Py_buffer *views, const int *flags, int n)
+{
+    for (int k = 0; k < n; k++) {
+        if (PyObject_GetBuffer(objs[k], &views[k], flags[k]) < 0) {
+            while (k--)
+                PyBuffer_Release(&views[k]);
+            return -1;
+        }
+    }
+    return 0;
+}
+
+static void release_buffers(Py_buffer *views, int n)
+{
+    while (n--)
+        PyBuffer_Release(&views[n]);
+}
+
 static PyObject *pairs(PyObject *self, PyObject *args)
 {
     (void)self;
-    PyObject *data_obj, *off_obj, *types_obj;
+    PyObject *objs[3];
     Py_ssize_t start, stop;
-    if (!PyArg_ParseTuple(args, "OnnOO:pairs", &data_obj, &start, &stop, &off_obj, &types_obj))
+    if (!PyArg_ParseTuple(args, "OnnOO:pairs", &objs[0], &start, &stop, &objs[1], &objs[2]))
         return NULL;
-    Py_buffer data, off, types;
-    if (PyObject_GetBuffer(data_obj, &data, PyBUF_C_CONTIGUOUS) < 0)
+    Py_buffer views[3];
+    const int flags[3] = {PyBUF_C_CONTIGUOUS,
+                          PyBUF_C_CONTIGUOUS | PyBUF_WRITABLE | PyBUF_FORMAT,
+                          PyBUF_C_CONTIGUOUS | PyBUF_WRITABLE};
+    if (get_buffers(objs, views, flags, 3) < 0)
         return NULL;
-    if (PyObject_GetBuffer(off_obj, &off, PyBUF_C_CONTIGUOUS | PyBUF_WRITABLE | PyBUF_FORMAT) < 0) {
-        PyBuffer_Release(&data);
-        return NULL;
-    }
-    if (PyObject_GetBuffer(types_obj, &types, PyBUF_C_CONTIGUOUS | PyBUF_WRITABLE) < 0) {
-        PyBuffer_Release(&off);
-        PyBuffer_Release(&data);
-        return NULL;
-    }
+    Py_buffer data = views[0], off = views[1], types = views[2];
     PyObject *result = NULL;
     const char *fmt = off.format ? off.format : "B";
     if (*fmt == '<' || *fmt == '=' || *fmt == '@')
@@ -117,9 +131,7 @@ static PyObject *pairs(PyObject *self, PyObject *args)
         Py_END_ALLOW_THREADS
         result = Py_BuildValue("nn", count, reached);
     }
-    PyBuffer_Release(&types);
-    PyBuffer_Release(&off);
-    PyBuffer_Release(&data);
+    release_buffers(views, 3);
     return result;
 }
 
@@ -137,29 +149,17 @@ static PyObject *pairs(PyObject *self, PyObject *args)
 static PyObject *ulog_data(PyObject *self, PyObject *args)
 {
     (void)self;
-    PyObject *data_obj, *pos_obj, *size_obj, *id_obj;
+    PyObject *objs[4];
     Py_ssize_t start, until;
-    if (!PyArg_ParseTuple(args, "OnnOOO:ulog_data", &data_obj, &start, &until, &pos_obj,
-                          &size_obj, &id_obj))
+    if (!PyArg_ParseTuple(args, "OnnOOO:ulog_data", &objs[0], &start, &until, &objs[1],
+                          &objs[2], &objs[3]))
         return NULL;
-    Py_buffer data, pos, size, id;
-    if (PyObject_GetBuffer(data_obj, &data, PyBUF_C_CONTIGUOUS) < 0)
+    Py_buffer views[4];
+    const int out = PyBUF_C_CONTIGUOUS | PyBUF_WRITABLE;
+    const int flags[4] = {PyBUF_C_CONTIGUOUS, out, out, out};
+    if (get_buffers(objs, views, flags, 4) < 0)
         return NULL;
-    if (PyObject_GetBuffer(pos_obj, &pos, PyBUF_C_CONTIGUOUS | PyBUF_WRITABLE) < 0) {
-        PyBuffer_Release(&data);
-        return NULL;
-    }
-    if (PyObject_GetBuffer(size_obj, &size, PyBUF_C_CONTIGUOUS | PyBUF_WRITABLE) < 0) {
-        PyBuffer_Release(&pos);
-        PyBuffer_Release(&data);
-        return NULL;
-    }
-    if (PyObject_GetBuffer(id_obj, &id, PyBUF_C_CONTIGUOUS | PyBUF_WRITABLE) < 0) {
-        PyBuffer_Release(&size);
-        PyBuffer_Release(&pos);
-        PyBuffer_Release(&data);
-        return NULL;
-    }
+    Py_buffer data = views[0], pos = views[1], size = views[2], id = views[3];
     PyObject *result = NULL;
     if (data.itemsize != 1 || pos.itemsize != 8 || size.itemsize != 2 || id.itemsize != 2) {
         PyErr_SetString(PyExc_TypeError,
@@ -198,10 +198,7 @@ static PyObject *ulog_data(PyObject *self, PyObject *args)
         Py_END_ALLOW_THREADS
         result = Py_BuildValue("nn", c, p);
     }
-    PyBuffer_Release(&id);
-    PyBuffer_Release(&size);
-    PyBuffer_Release(&pos);
-    PyBuffer_Release(&data);
+    release_buffers(views, 4);
     return result;
 }
 

@@ -580,15 +580,19 @@ def test_huge_claimed_sizes_and_garbage_are_bounded(tmp_path: Path) -> None:
         assert len(log["att"]) >= 10
 
 
-def test_many_short_runs_match_pyulog(tmp_path: Path) -> None:
-    """Data messages each followed by a sync message: thousands of one-message runs (their
-    bookkeeping joined as it grows) give pyulog's values."""
+@pytest.mark.parametrize("between", ["sync", "text"])
+def test_data_messages_each_before_another_match_pyulog(tmp_path: Path, between: str) -> None:
+    """Data messages each followed by a sync message (one-message runs for the numpy walk,
+    their bookkeeping joined as it grows; one run for the compiled walk, which steps over
+    sync messages) or by a logged text (every walk takes one message, kept as a single, not
+    a run's bookkeeping each): pyulog's values and texts."""
     from fuzz.hostile import ATT_FORMAT, _ulog_msg, ulog_file
 
     out = bytearray(ulog_file([ATT_FORMAT], samples=0))
-    sync = _ulog_msg(b"S", b"\x2f\x73\x13\x20\x25\x0c\xbb\x12")
+    other = (_ulog_msg(b"S", b"\x2f\x73\x13\x20\x25\x0c\xbb\x12") if between == "sync"
+             else _ulog_msg(b"L", struct.pack("<BQ", ord("6"), 7) + b"x"))
     for k in range(10_000):
-        out += _ulog_msg(b"D", struct.pack("<HQf", 0, 1000 * k, k / 7)) + sync
+        out += _ulog_msg(b"D", struct.pack("<HQf", 0, 1000 * k, k / 7)) + other
     path = tmp_path / "short_runs.ulg"
     path.write_bytes(bytes(out))
     ref, _ = pyulog(path)
@@ -596,24 +600,7 @@ def test_many_short_runs_match_pyulog(tmp_path: Path) -> None:
     assert quality == []
     assert_tables_match(log, ref)
     assert len(log["att"]) == 10_000
-
-
-def test_data_messages_between_texts_match_pyulog(tmp_path: Path) -> None:
-    """Each data message between two logged texts: every walk takes one message (kept as
-    a single, not a run's bookkeeping each), values and texts as pyulog's."""
-    from fuzz.hostile import ATT_FORMAT, _ulog_msg, ulog_file
-
-    out = bytearray(ulog_file([ATT_FORMAT], samples=0))
-    for k in range(3000):
-        out += _ulog_msg(b"D", struct.pack("<HQf", 0, 1000 * k, k / 7))
-        out += _ulog_msg(b"L", struct.pack("<BQ", ord("6"), 1000 * k + 1) + b"x")
-    path = tmp_path / "between_texts.ulg"
-    path.write_bytes(bytes(out))
-    ref, _ = pyulog(path)
-    log, quality = read(path)
-    assert quality == []
-    assert_tables_match(log, ref)
-    assert len(log["att"]) == 3000 and len(log.texts) == len(ref.logged_messages) == 3000
+    assert len(log.texts) == len(ref.logged_messages) == (10_000 if between == "text" else 0)
 
 
 def test_a_file_of_data_header_look_alikes_matches_pyulog(tmp_path: Path) -> None:

@@ -613,6 +613,20 @@ def test_header_search_finds_pairs_at_both_parities_across_chunks(monkeypatch, s
             assert types.tolist() == [data[i + 2] for i in pairs]
 
 
+def test_a_scan_built_without_vectors_leaves_the_search_to_numpy(monkeypatch):
+    """Built for a machine without SSE2 (ARM), the compiled scan would be a byte loop,
+    slower than numpy's vectorised compares: the reader keeps numpy's scan there."""
+    import types
+
+    def refuse(*args: Any) -> None:
+        raise AssertionError("the byte loop was used")
+
+    monkeypatch.setattr(dataflash, "_scan", types.SimpleNamespace(vectorised=0, pairs=refuse))
+    data = b"\x00\xa3\x95\x81" * 10
+    cand, types_ = dataflash._find_headers(np.frombuffer(data, np.uint8))
+    assert cand.tolist() == list(range(1, 40, 4)) and set(types_.tolist()) == {0x81}
+
+
 def test_header_search_grows_past_its_estimate(scan):
     """A file denser in header patterns than a log (its result grows)."""
     data = bytes(3000) + b"\xa3\x95\x81" * 50_000 + b"\xa3\x95"

@@ -15,6 +15,9 @@
  *   count    pairs written (at most the shorter output's length)
  *   reached  stop when the range is done; else the offset of the first pair that found no
  *            room (call again from there with more room)
+ * `vectorised` says whether the SSE2 loop was compiled: without it (ARM...) the byte loop is
+ * slower than numpy's vectorised compares (51 against 34 ms on 104 MB here), and the reader
+ * keeps numpy's scan.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -221,4 +224,17 @@ static struct PyModuleDef module = {
     methods, NULL, NULL, NULL, NULL,
 };
 
-PyMODINIT_FUNC PyInit__scan(void) { return PyModule_Create(&module); }
+PyMODINIT_FUNC PyInit__scan(void)
+{
+    PyObject *m = PyModule_Create(&module);
+#ifdef MAVSID_SSE2
+    const int vectorised = 1;
+#else
+    const int vectorised = 0; /* a byte loop: slower than numpy's vectorised compares */
+#endif
+    if (m != NULL && PyModule_AddIntConstant(m, "vectorised", vectorised) < 0) {
+        Py_DECREF(m);
+        return NULL;
+    }
+    return m;
+}

@@ -321,12 +321,12 @@ def _find_headers(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Offsets of every ``0xA3 0x95`` byte pair followed by a type byte, ascending, and
     those type bytes.
 
-    Compiled (``mavsid/readers/_scan.c``: 16 bytes a step, one pass over the file instead of
-    the numpy scan's passes over its masks; about 40 % of a selective read's time) where the
-    package was built with a C compiler, else :func:`_find_headers_numpy`: the same offsets
-    and types either way (tests). The file is scanned 8 MB at a time, each window's pages
-    handed back once scanned; the result starts at a size for a record per ~40 bytes and
-    grows when a file holds more.
+    Compiled (``mavsid/readers/_scan.c``: 16 bytes a step with SSE2, one pass over the file
+    instead of the numpy scan's passes over its masks; a selective read ~1.2x faster) where
+    the package was built with a C compiler for a machine with SSE2, else
+    :func:`_find_headers_numpy`: the same offsets and types either way (tests). The file
+    is scanned 8 MB at a time, each window's pages handed back once scanned; the result
+    starts at a size for a record per ~40 bytes and grows when a file holds more.
 
     Examples
     --------
@@ -334,7 +334,7 @@ def _find_headers(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     >>> [v.tolist() for v in _find_headers(data)]
     [[0, 3, 5], [7, 163, 9]]
     """
-    if _scan is None:
+    if _scan is None or not _scan.vectorised:  # (a byte loop is slower than numpy's)
         return _find_headers_numpy(a)
     n = a.size
     dt = _index_dtype(n)

@@ -547,9 +547,8 @@ def search_structure(
     lags_s : iterable of float, optional
         Candidate time constants (s) of a first-order input lag; 0 is always a candidate;
         None: no lag. Lags whose corner lies above the Nyquist frequency are left out (they
-        cannot be told from a fraction of a sample of delay). The default grid is searched
-        again with :data:`LONG_LAGS_S` added when its longest lag scores best by more than
-        ``structure_tol``.
+        cannot be told from a fraction of a sample of delay). :data:`LONG_LAGS_S` are searched
+        too when the default grid's longest lag scores best by more than ``structure_tol``.
     structure_tol : float
         Parsimony: the simplest (shortest lag, then shortest delay) candidate whose mean
         squared one-step residual is within this fraction of the best is chosen.
@@ -587,7 +586,8 @@ def search_structure(
     scans: dict[float, DelayScan | None] = {}
     filtered: dict[float, list[dict[str, np.ndarray]]] = {}
     scan: dict[str, float] = {}
-    for lag in lag_grid:
+
+    def add(lag: float) -> None:  # the delays of one lag scored, into cands
         extra = lag_filter(lag)
         st = replace(structure, filters=structure.filters + extra)
         pre = None if base is None else [filter_inputs(u, s.dt, extra)
@@ -609,18 +609,21 @@ def search_structure(
                                if v is not None})
         scan.update({f"lag={lag:g}s,delay={k:g}": v for k, v in d_scan.items()})
         cands.extend((v, lag, k) for k, v in d_scan.items())
-    if not cands:
-        raise NoExcitationError("segments too short for every candidate delay")
-    floor = min(c[0] for c in cands)
+
+    for lag in lag_grid:
+        add(lag)
     best = {lg: min((c[0] for c in cands if c[1] == lg), default=np.inf) for lg in lag_grid}
     if (lags_s is DEFAULT_LAGS_S and len(lag_grid) > 1 and lag_grid[-1] == DEFAULT_LAGS_S[-1]
             and best[lag_grid[-1]] < best[lag_grid[-2]] * (1 - structure_tol)):
         # the grid's longest lag scores best, and clearly (not a flat score: a yaw plant's
         # slow pole tells lags apart little): the motors may be slower than it reaches
-        return search_structure(segments, structure, delay=delay, delays=delays,
-                                delay_step=delay_step, max_delay_s=max_delay_s,
-                                lags_s=DEFAULT_LAGS_S + LONG_LAGS_S,
-                                structure_tol=structure_tol)
+        longer = [lag for lag in LONG_LAGS_S if lag * 2 * np.pi * nyquist_hz > 1.0]
+        for lag in longer:
+            add(lag)
+        lag_grid += longer
+    if not cands:
+        raise NoExcitationError("segments too short for every candidate delay")
+    floor = min(c[0] for c in cands)
     _, lag, dly = min((c for c in cands if c[0] <= floor * (1 + structure_tol)),
                       key=lambda c: (c[1], c[2]))
     whole, frac = _split_delay(dly)

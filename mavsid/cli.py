@@ -76,6 +76,7 @@ def _info(args: argparse.Namespace) -> int:
 
     from mavsid.info import format_summary, read_for_summary, summarize
 
+    _check_inputs([args.log])
     with _progress(args, 2) as step:
         step(f"reading {args.log}")
         raw = read_for_summary(args.log, **_dialect(args))
@@ -84,6 +85,30 @@ def _info(args: argparse.Namespace) -> int:
     print(json.dumps(summary, indent=1, ensure_ascii=True) if args.json
           else escape_lines(format_summary(summary)))
     return 0
+
+
+def _check_inputs(logs: Sequence[str], files: Sequence[str] = ()) -> None:
+    """Refuse a log that is missing, a directory, empty or of no known format, and a file
+    (a model) that cannot be opened, before the command imports its heavy modules or
+    starts a report worker: a mistyped name is said at once, not after a second of
+    start-up.
+
+    Raises
+    ------
+    MavsidError
+        One line naming the file: :class:`~mavsid.errors.LogFormatError` for a log (as
+        reading it would say), :class:`~mavsid.errors.ConfigError` for another file.
+    """
+    from mavsid.readers import sniff_format
+
+    for path in files:
+        try:
+            with open(path, "rb"):
+                pass
+        except OSError as exc:
+            raise ConfigError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    for log in logs:
+        sniff_format(log)
 
 
 def _add_extract(sub: argparse._SubParsersAction) -> None:
@@ -165,6 +190,7 @@ def _add_segments(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
 def _segments(args: argparse.Namespace) -> int:
     import json
 
+    _check_inputs([args.log])
     from mavsid.align import load_flight
     from mavsid.excitation import ScanOptions, find_segments, format_reports
 
@@ -458,6 +484,7 @@ def _fit(args: argparse.Namespace) -> int:
     import json
 
     check_outputs([args.output, args.rrd, args.report], args.logs)
+    _check_inputs(args.logs)
     with _report_worker(args) as worker:  # (first: it imports while this one does too)
         from mavsid.pipeline import FIT_STAGES, fit
 
@@ -490,6 +517,7 @@ def _add_validate(sub: argparse._SubParsersAction) -> None:
 
 def _validate(args: argparse.Namespace) -> int:
     check_outputs([args.rrd, args.report], [args.model, *args.logs])
+    _check_inputs(args.logs, [args.model])
     with _report_worker(args) as worker:  # (first: it imports while this one does too)
         from mavsid.pipeline import VALIDATE_STAGES, load_models, validate_logs
 
@@ -538,10 +566,11 @@ def _add_view(sub: argparse._SubParsersAction) -> None:
 
 
 def _view(args: argparse.Namespace) -> int:
+    check_outputs([args.save], [args.log, *([args.model] if args.model else [])])
+    _check_inputs([args.log], [args.model] if args.model else [])
     from mavsid import viz
     from mavsid.pipeline import find_windows, load_models, validate_logs
 
-    check_outputs([args.save], [args.log, *([args.model] if args.model else [])])
     _check_viewer_address(args)
     cfg = _pipeline_config(args)
     rec = viz.new_recording()
@@ -638,11 +667,12 @@ def _add_tune(sub: argparse._SubParsersAction) -> None:
 def _tune(args: argparse.Namespace) -> int:
     import json
 
+    if not 0 < args.target_pm < 90:
+        raise ConfigError(f"--target-pm {args.target_pm:g}: must lie in (0, 90) degrees")
+    _check_inputs([args.log])
     from mavsid.loop import format_tune, tune
     from mavsid.pipeline import FIT_STAGES, _json_safe, fit
 
-    if not 0 < args.target_pm < 90:
-        raise ConfigError(f"--target-pm {args.target_pm:g}: must lie in (0, 90) degrees")
     cfg = _pipeline_config(args)
     with _progress(args, 1 + len(FIT_STAGES) * len(cfg.axes) + 1) as step:
         result = fit([args.log], cfg, progress=step)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,9 +18,9 @@ HEAVY = ("rerun", "matplotlib", "cvxpy", "control", "dask", "distributed", "stat
          "scipy.signal", "scipy.stats")
 
 
-def _loaded(code: str) -> set[str]:
+def _loaded(code: str, heavy: tuple[str, ...] = HEAVY) -> set[str]:
     probe = (f"import sys, json, contextlib, io, warnings\nwarnings.simplefilter('ignore')\n"
-             f"{code}\nprint(json.dumps(sorted(m for m in {list(HEAVY)!r} if m in sys.modules)))")
+             f"{code}\nprint(json.dumps(sorted(m for m in {list(heavy)!r} if m in sys.modules)))")
     proc = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
                           timeout=300)
     assert proc.returncode == 0, proc.stderr
@@ -37,6 +38,40 @@ def test_a_plain_fit_loads_neither_the_viewer_nor_plots_nor_cvxpy_nor_scipy_sign
     code = ("from mavsid import cli\nwith contextlib.redirect_stdout(io.StringIO()):\n"
             f"    assert cli.main(['fit', {str(FIXTURES / 'sysid_roll.bin')!r}]) == 0")
     assert _loaded(code) == set()
+
+
+@pytest.mark.parametrize("argv", [
+    ["fit", "{missing}", "--rrd", "{out}.rrd", "--report", "{out}.html"],
+    ["fit", "{folder}"],
+    ["fit", "{text}", "--report", "{out}.html"],
+    ["validate", "{missing}.json", "{log}", "--rrd", "{out}.rrd"],
+    ["validate", "{log}.json", "{missing}"],
+    ["tune", "{missing}"],
+    ["segments", "{folder}"],
+    ["view", "{missing}", "--save", "{out}.rrd"],
+    ["info", "{text}"],
+], ids=lambda argv: "-".join(a.strip("{}") for a in argv[:2]))
+def test_an_input_that_cannot_be_read_is_refused_before_the_heavy_imports(
+        argv: list[str], tmp_path: Path) -> None:
+    """A mistyped log or model name, a folder or a file of no log format: one line, exit 1,
+    before the fit's modules (scipy, the estimators: ~0.7 s), the viewer or the plots are
+    imported and before a report worker starts (it imports the estimators first)."""
+    text = tmp_path / "notes.bin"
+    text.write_text("not a log\n")
+    model = tmp_path / "model.bin.json"
+    model.write_text("{}")
+    names = {"missing": str(tmp_path / "missing.bin"), "folder": str(tmp_path),
+             "text": str(text), "log": str(tmp_path / "model.bin"),
+             "out": str(tmp_path / "out")}
+    argv = [a.format(**names) for a in argv]
+    code = ("from mavsid import cli\nerr = io.StringIO()\n"
+            "with contextlib.redirect_stderr(err):\n"
+            f"    code = cli.main({argv!r})\n"
+            "said = err.getvalue().strip()\n"
+            "assert code == 1 and len(said.splitlines()) == 1 and 'error: ' in said, said\n"
+            f"assert any(p in said for p in {list(names.values())!r}), said")
+    assert _loaded(code, (*HEAVY, "scipy", "mavsid.estimators", "mavsid.pipeline")) == set()
+    assert not list(tmp_path.glob("out*"))
 
 
 _BLAS_PROBE = """

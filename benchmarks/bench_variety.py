@@ -22,6 +22,12 @@ simulated plant's truth:
 * ``refused``: a typed error or ``not identified``, with its reason;
 * ``CRASH``: anything else (must never happen).
 
+With ``--faults``, each flight's log is also damaged as a logger can damage it (drawn apart:
+the flights are those of the same ``--seed`` without it): records dropped at random (none,
+0.5 %, 2 % or 5 % of each message type's, as an SD card that stalls loses them), a reboot
+(the clock restarting at 5 s) in a quarter of them, the last 0-3000 bytes cut off (power
+lost mid-write).
+
 It prints one line per flight and the counts. Not a test (a sweep takes minutes); run it
 after changing a default, on several ``--seed`` values.
 """
@@ -45,6 +51,7 @@ sys.path.insert(0, str(ROOT))
 
 from mavsid import pipeline  # noqa: E402
 from mavsid.errors import MavsidError  # noqa: E402
+from mavsid.synthetic.faults import Faults  # noqa: E402
 from mavsid.synthetic.run import scenario_from_options, simulate  # noqa: E402
 
 RATE = {"roll": "p", "pitch": "q", "yaw": "r"}
@@ -86,7 +93,19 @@ def draw(rng: random.Random) -> dict[str, Any]:
     return s
 
 
-def run_one(folder: Path, i: int, s: dict[str, Any]) -> tuple[str, str]:
+def draw_faults(s: dict[str, Any]) -> dict[str, float]:
+    """Damage for the flight ``s`` (see the module's ``--faults``), drawn from its seed apart
+    from :func:`draw`: the fraction of records dropped, where a reboot falls (a fraction of
+    the flight, 0 for none; a ULog holds one boot: none there), bytes cut off the end."""
+    rng = random.Random(f"faults {s['seed']} {s['manoeuvre']} {s['axis']} {s['layout']}")
+    reboot = rng.uniform(0.25, 0.75) if rng.random() < 0.25 else 0.0
+    return {"drop": rng.choice([0.0, 0.005, 0.02, 0.05]),
+            "reboot": 0.0 if s["layout"].startswith("px4") else reboot,
+            "cut": rng.choice([0, 0, 100, 3000]), "seed": rng.randrange(1000)}
+
+
+def run_one(folder: Path, i: int, s: dict[str, Any],
+            damage: dict[str, float] | None = None) -> tuple[str, str]:
     """Simulate, fit and judge one flight: (outcome, line)."""
     opts = {k: v for k, v in s.items() if k != "layout"}
     if s["manoeuvre"] == "sysid":
@@ -99,11 +118,17 @@ def run_one(folder: Path, i: int, s: dict[str, Any]) -> tuple[str, str]:
             +
             f"gyro {s['gyro_noise_dps']:g} vib {s['vibration_dps']:g} {s['rate_hz']:g} Hz "
             f"{s['layout']:14s} seed {s['seed']}"
-            + (f" to {s['f_stop_hz']:g} Hz" if "f_stop_hz" in s else ""))
+            + (f" to {s['f_stop_hz']:g} Hz" if "f_stop_hz" in s else "")
+            + (f" [drop {damage['drop']:g} reboot {damage['reboot']:.2f} cut "
+               f"{damage['cut']:g}]" if damage is not None else ""))
     axis, rate = s["axis"], RATE[s["axis"]]
     try:
+        scenario = scenario_from_options(**opts)
+        faults = None if damage is None else Faults(
+            drop_fraction=damage["drop"], truncate_bytes=int(damage["cut"]),
+            reboot_at_s=damage["reboot"] * scenario.length_s or None, seed=int(damage["seed"]))
         with contextlib.redirect_stdout(io.StringIO()):
-            simulate(scenario_from_options(**opts), [log],
+            simulate(scenario, [log], faults,
                      layout=None if s["layout"] == "tlog" else s["layout"])
         truth = json.loads(log.with_suffix(".truth.json").read_text())["axes"][axis]
         try:
@@ -138,6 +163,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--n", type=int, default=30, help="flights (30)")
     ap.add_argument("--seed", type=int, default=0, help="draws the flights (0)")
+    ap.add_argument("--faults", action="store_true",
+                    help="damage each log as a logger can (dropped records, a reboot, a cut end)")
     args = ap.parse_args(argv)
     rng = random.Random(args.seed)
     counts: dict[str, int] = {}
@@ -145,7 +172,8 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():
         warnings.simplefilter("ignore")
         for i in range(args.n):
-            outcome, line = run_one(Path(tmp), i, draw(rng))
+            s = draw(rng)
+            outcome, line = run_one(Path(tmp), i, s, draw_faults(s) if args.faults else None)
             counts[outcome] = counts.get(outcome, 0) + 1
             print(f"{outcome:8s} {line}", flush=True)
     print(f"\n{args.n} flights in {time.perf_counter() - t0:.0f} s: "

@@ -7,7 +7,8 @@ doublet, 3-2-1-1, random stick), axis, vehicle (small quad, heavier X quad, hexa
 light racer on its own rate tuning, a heavy-lift on 120-ms motors) and its motor frame
 (quad-X, hexa-X, coaxial Y6 and X8, as ArduPilot mixes them), gyro white noise fed back
 through the rate controller (0-6 deg/s), frame vibration (0-5 deg/s), logging rate
-(10-400 Hz; 10 Hz logs every message that slowly) and log layout (ArduCopter 3.2, 3.3,
+(10-400 Hz; 10 Hz logs every message that slowly), a third of the stick flights flown
+without a hover before or after (the stick never let go) and log layout (ArduCopter 3.2, 3.3,
 3.4-dev, 3.6, 4.x, a 4.x traditional heli, ArduPlane 4.x, an ArduPlane QuadPlane hovering;
 PX4 1.11, 1.14; a ground station's MAVLink telemetry, its streams at 50 Hz, or at the
 logging rate below 25 Hz; heli and plane fly their own plants).
@@ -36,6 +37,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import io
 import json
 import random
@@ -90,6 +92,10 @@ def draw(rng: random.Random) -> dict[str, Any]:
     frames = {"hexa": ["hexa-x", "y6b"], "heavy-x": ["quad-x", "octaquad-x"]}
     if s["layout"] != "copter-3.2" and s["vehicle"] in frames:
         s["frame"] = random.Random(f"frame {s['seed']}").choice(frames[s["vehicle"]])
+    # a third of the stick flights flown without a hover before or after (the pilot never
+    # lets go of the stick: no quiet stretch in the log), drawn apart
+    if s["manoeuvre"] != "sysid" and random.Random(f"hover {s['seed']}").random() < 1 / 3:
+        s["stirred"] = True
     return s
 
 
@@ -107,7 +113,7 @@ def draw_faults(s: dict[str, Any]) -> dict[str, float]:
 def run_one(folder: Path, i: int, s: dict[str, Any],
             damage: dict[str, float] | None = None) -> tuple[str, str]:
     """Simulate, fit and judge one flight: (outcome, line)."""
-    opts = {k: v for k, v in s.items() if k != "layout"}
+    opts = {k: v for k, v in s.items() if k not in ("layout", "stirred")}
     if s["manoeuvre"] == "sysid":
         opts["sid_axes"] = (SID_AXIS[s["axis"]],)
     suffix = (".ulg" if s["layout"].startswith("px4")
@@ -115,6 +121,7 @@ def run_one(folder: Path, i: int, s: dict[str, Any],
     log = folder / f"f{i}{suffix}"
     desc = (f"{s['manoeuvre']:7s} {s['axis']:5s} {s['vehicle']:7s} "
             + (f"{s['frame']} " if s.get("frame", "quad-x") != "quad-x" else "")
+            + ("no hover " if s.get("stirred") else "")
             +
             f"gyro {s['gyro_noise_dps']:g} vib {s['vibration_dps']:g} {s['rate_hz']:g} Hz "
             f"{s['layout']:14s} seed {s['seed']}"
@@ -124,6 +131,8 @@ def run_one(folder: Path, i: int, s: dict[str, Any],
     axis, rate = s["axis"], RATE[s["axis"]]
     try:
         scenario = scenario_from_options(**opts)
+        if s.get("stirred"):
+            scenario = dataclasses.replace(scenario, hover_before_s=0.0, hover_after_s=0.0)
         faults = None if damage is None else Faults(
             drop_fraction=damage["drop"], truncate_bytes=int(damage["cut"]),
             reboot_at_s=damage["reboot"] * scenario.length_s or None, seed=int(damage["seed"]))

@@ -958,17 +958,42 @@ def sysid_runs(raw: RawLog) -> list[dict[str, Any]]:
 
 
 def _commanded(raw: RawLog, t: np.ndarray) -> dict[str, np.ndarray]:
-    """The commanded attitude (rad) per axis on the grid ``t`` (interpolated; NaN outside
-    its span), from the first of :data:`mavsid.channels.DESIRED_CHANNELS` the log has.
-    Excitation judges a stick manoeuvre's response by its coherence with it, the fit checks
-    the feedback's bias with it (:mod:`mavsid.estimators.instruments`)."""
+    """The commanded attitude per axis on the grid ``t`` (interpolated; NaN outside its
+    span), from the first of :data:`mavsid.channels.DESIRED_CHANNELS` the log has: roll and
+    pitch angles (rad), and for yaw the commanded heading's rate (rad/s, :func:`_heading_rate`:
+    the pilot commands a yaw rate, which the body rate follows). Excitation judges a stick
+    manoeuvre's response by its coherence with it, the fit checks the feedback's bias with
+    it (:mod:`mavsid.estimators.instruments`)."""
     out: dict[str, np.ndarray] = {}
     for axis, chans in DESIRED_CHANNELS.items():
         got = first_of(raw, chans, f"commanded {axis}")
-        if got is not None and np.ptp(got[2]) > 0:
+        if got is None:
+            continue
+        ts, v = _heading_rate(got[1], got[2]) if axis == "yaw" else got[1:]
+        if ts.size >= 2 and np.ptp(v) > 0:
             # not published in a gap (PX4's rate-only modes such as ACRO): not a ramp across it
-            out[axis] = _resampled(got[1], got[2], t, np.nan)
+            out[axis] = _resampled(ts, v, t, np.nan)
     return out
+
+
+def _heading_rate(ts: np.ndarray, heading: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A commanded heading's samples (rad, wrapped) as its rate (rad/s): in time order, one
+    sample per time (the last), unwrapped and differentiated (central differences).
+
+    Examples
+    --------
+    >>> ts = np.array([0.0, 0.1, 0.2, 0.3, 0.3])
+    >>> _, rate = _heading_rate(ts, np.array([6.1, 6.2, 0.0167, 0.1, 0.1]))
+    >>> np.round(rate, 3).tolist()
+    [1.0, 0.999, 0.916, 0.833]
+    """
+    order = np.argsort(ts, kind="stable")
+    ts, heading = ts[order], heading[order]
+    last = np.append(np.diff(ts) > 0, True)
+    ts, heading = ts[last], np.unwrap(heading[last])
+    if ts.size < 2:
+        return ts, np.zeros(ts.size)
+    return ts, np.gradient(heading, ts)
 
 
 def _resampled(ts: np.ndarray, v: np.ndarray, t: np.ndarray, fill: float) -> np.ndarray:

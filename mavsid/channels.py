@@ -667,15 +667,16 @@ TARGET_CHANNELS: dict[str, tuple[Channel, ...]] = {
     for rate, des, pid, px4 in (("p", "R", "PIDR", "roll"), ("q", "P", "PIDP", "pitch"),
                                 ("r", "Y", "PIDY", "yaw"))
 }
-#: The commanded attitude per axis (roll, pitch), where a log has it: from the pilot's sticks in
-#: the manual modes, which the gyro's noise does not reach (the instruments of
-#: :mod:`mavsid.estimators.instruments`). ArduPilot ATT.DesRoll/DesPitch (deg), logged with
-#: the attitude; PX4 vehicle_attitude_setpoint's quaternion ``q_d`` (a ground station's
-#: NAV_CONTROLLER_OUTPUT comes at a few Hz: not used).
+#: The commanded attitude per axis, where a log has it: from the pilot's sticks in the manual
+#: modes, which the gyro's noise does not reach (the instruments of
+#: :mod:`mavsid.estimators.instruments`). ArduPilot ATT.DesRoll/DesPitch/DesYaw (deg), logged
+#: with the attitude; PX4 vehicle_attitude_setpoint's quaternion ``q_d`` (a ground station's
+#: NAV_CONTROLLER_OUTPUT comes at a few Hz: not used). The commanded heading is the integral
+#: of the pilot's yaw-rate stick: alignment takes its rate (:func:`mavsid.align.align`).
 DESIRED_CHANNELS: dict[str, tuple[Channel, ...]] = {
     axis: (_ch("ATT", f"Des{axis.capitalize()}", "deg"),
            _ch("vehicle_attitude_setpoint", "q_d", "1", transform=f"quat_{axis}"))
-    for axis in ("roll", "pitch")
+    for axis in ("roll", "pitch", "yaw")
 }
 #: ArduPilot SYSTEMID's injected waveform (added to the mixer input on SID_AXIS 10-12)
 INJECTION_CHANNEL = _ch("SIDD", "Targ")

@@ -25,7 +25,8 @@ that output's "noise floor" can be as large as a SYSTEMID injection.
   the injection, below: with 6 deg/s of gyro noise fed back a well-identifiable chirp's
   response can sit under 5× that floor while 92 % coherent with the injection).
 - **command** (windows without an injection, where the log has the commanded attitude: a
-  stick manoeuvre's ``ATT.DesRoll``/``DesPitch``, PX4's attitude setpoint): the output's
+  stick manoeuvre's ``ATT.DesRoll``/``DesPitch``, the rate of ``DesYaw``, PX4's attitude
+  setpoint): the output's
   coherence with it (weighted by its PSD) and the share of the band where it reaches
   ``min_coherence``. A response under ``power_ratio``× its noise floor is kept when it is
   coherent with the pilot's command (``min_coherence`` on average, over ``min_coverage``
@@ -42,7 +43,10 @@ that output's "noise floor" can be as large as a SYSTEMID injection.
   ``min_floor``).
 - **band coverage** (without an injection): share of the ``band_hz`` band (log-frequency
   weighted; upper edge at most 0.4× the sample rate) where the input's Welch PSD is above
-  10× the input floor's white level. Gate: ``min_coverage``.
+  10× the input floor's white level. Gate: ``min_coverage``, waived for a response coherent
+  with the pilot's command over that share of the band (see *command*): a pilot who never
+  lets go of the stick leaves no quiet stretch to measure the input's floor by, which is
+  then the manoeuvre's own level (a random-stick flight without a hover: 0 % coverage).
 - **conditioning**: condition number of the Gram matrix of the regressors of the model to be
   fitted, ``[rate, input]``, centred (which accounts for the constant term), the rate scaled
   by its own spread in the window and the input by the spread of all attitude inputs
@@ -288,7 +292,7 @@ class _Axis:
     y_hp: np.ndarray | None = None  # output without content below the band (per block)
     y_floor: float = math.nan  # output's 1-s RMS where the input has no power
     injection: np.ndarray | None = None  # SYSTEMID's logged waveform (SIDD.Targ), 0 outside
-    command: np.ndarray | None = None  # the commanded attitude (rad), NaN where not logged
+    command: np.ndarray | None = None  # commanded attitude (rad; yaw: rate), NaN if not logged
 
 
 def _col(fd: FlightData, name: str) -> np.ndarray | None:
@@ -479,9 +483,15 @@ def _score(m: Mapping[str, float]) -> float:
         return 0.0
     ratio = m.get("response_ratio", m["power_ratio"])
     inj = "injection_rms" in m
+    # a response that follows the pilot's command: its coherence and coverage with the
+    # command stand for its level and the input's coverage (measured against floors that
+    # a flight without a quiet stretch does not show, see _gates)
+    cmd = "command_coherence" in m and not inj
     terms = [
-        min(1.0, max(0.0, math.log10(max(ratio, 1e-12)) / 2)) if math.isfinite(ratio) else 0.0,
-        m.get("injection_coverage" if inj else "coverage", 0.0),
+        max(min(1.0, max(0.0, math.log10(max(ratio, 1e-12)) / 2)) if math.isfinite(ratio)
+            else 0.0, m["command_coherence"] if cmd else 0.0),
+        max(m.get("injection_coverage" if inj else "coverage", 0.0),
+            m["command_coverage"] if cmd else 0.0),
         m.get("injection_coherence" if inj else "coherence", 0.0),
         min(1.0, max(0.0, 1 - math.log10(max(m.get("condition", math.inf), 1.0)) / 2))
         if math.isfinite(m.get("condition", math.inf)) else 0.0,
@@ -596,7 +606,7 @@ def _gates(ax: _Axis, fd: FlightData, i0: int, i1: int, m: Mapping[str, float],
             )
         return out
     band = f"{m.get('band_lo_hz', 0):.3g}–{m.get('band_hi_hz', 0):.3g} Hz"
-    if m.get("coverage", 0.0) < opts.min_coverage:
+    if m.get("coverage", 0.0) < opts.min_coverage and not _commanded(m, opts):
         out.append(
             f"rejected: input covers {100 * m.get('coverage', 0.0):.0f} % of the {band} band "
             f"(need {100 * opts.min_coverage:.0f} %)"
@@ -630,7 +640,8 @@ def _kept_reason(ax: _Axis, m: Mapping[str, float]) -> str:
             f"{_fmt(m.get('condition', math.inf))}"
         )
     if "command_coherence" in m:
-        level += (f", coherent with the commanded attitude over "
+        what = "yaw rate" if ax.name == "yaw" else "attitude"
+        level += (f", coherent with the commanded {what} over "
                   f"{100 * m['command_coverage']:.0f} % of the band (mean "
                   f"{m['command_coherence']:.2f})")
     return (

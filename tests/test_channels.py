@@ -409,10 +409,11 @@ def test_multi_instance_and_multi_system_rows_are_separated():
     assert np.allclose(evaluate(raw, Channel("ATTITUDE", "roll", "rad"))[1], [0.1, 0.2, 0.3])
 
 
-def test_px4s_commanded_attitude_is_its_own_roll_and_pitch_setpoint() -> None:
+def test_px4s_commanded_attitude_is_its_own_roll_pitch_and_yaw_setpoint() -> None:
     """The commanded attitude (the instruments of mavsid.estimators.instruments) from PX4's
     setpoint quaternion ``q_d`` is the setpoint's own Euler angles ``roll_body`` /
-    ``pitch_body`` where a log has both (PX4 computed those, not mavsid)."""
+    ``pitch_body`` / ``yaw_body`` where a log has both (PX4 computed those, not mavsid; yaw
+    compared across its wrap at ±180 deg)."""
     from mavsid.channels import DESIRED_CHANNELS, evaluate
     from mavsid.readers import read_log
 
@@ -421,12 +422,12 @@ def test_px4s_commanded_attitude_is_its_own_roll_and_pitch_setpoint() -> None:
         raw = read_log(shared_path("public", "Auterion__px4-ulog-rs", "esc_status_log.ulg"),
                        messages=["vehicle_attitude_setpoint"])
     table = raw["vehicle_attitude_setpoint"]
-    for axis in ("roll", "pitch"):
+    for axis in ("roll", "pitch", "yaw"):
         channel = next(c for c in DESIRED_CHANNELS[axis] if c.message == table.name)
         _, got = evaluate(raw, channel)
         ref = np.asarray(table[f"{axis}_body"], float)
         assert np.std(ref) > 0.1  # (a flight that moves)
-        np.testing.assert_allclose(got, ref, atol=1e-6)
+        np.testing.assert_allclose(np.angle(np.exp(1j * (got - ref))), 0.0, atol=1e-6)
 
 
 def test_motors_on_remapped_outputs_are_unmixed_from_them() -> None:

@@ -280,7 +280,11 @@ def _checked_scales(raw: RawLog, states: list[_Series], inputs: list[_Series]
         ok = np.isfinite(gyro[0]) & np.isfinite(gyro[1])
         if ok.sum() < 10:
             continue
-        ref = np.interp(s.t, gyro[0][ok], gyro[1][ok].astype(float))
+        gt, gv = gyro[0][ok], gyro[1][ok].astype(float)
+        if (np.diff(gt) >= 0).all() and (np.diff(s.t) >= 0).all():
+            ref = np.interp(s.t, gt, gv)  # the gyro at the rate's samples
+        else:  # the clock restarts (a reboot): times mix boots; the whole of each, then
+            ref = gv
         ref_rms = float(np.sqrt(np.mean(ref**2)))
         checked.append((ref_rms, float(np.sqrt(np.mean(s.v**2))) / max(ref_rms, 1e-12), s))
     if checked:

@@ -611,3 +611,32 @@ roll = { message = "ATT", field = "Roll", unit = "deg" }
     assert roll[0] == "u_roll" and roll[3].tolist() == [0, 1, -1]
     copter = RawLog(src, msgs, params=params, vehicle="copter QUAD/X")
     assert choose_preset(copter, presets).name != "my-plane"
+
+
+@pytest.mark.parametrize(("layout", "centi"), [("copter-4", False), ("copter-3.4-dev", True)])
+def test_the_rate_scale_is_judged_right_across_a_reboot(tmp_path, layout: str,  # type: ignore[no-untyped-def]
+                                                        centi: bool) -> None:
+    """A log whose clock restarts (a reboot mid-flight: times mix two boots) compared its
+    RATE channel with the IMU gyro interpolated on times that run backwards: a deg/s log
+    came out "46x the gyro", was divided by 100 and fitted with B 1 % of the truth, and an
+    ArduCopter 3.4-dev log in centideg/s was left unscaled (B 94x the truth), both called
+    `usable` (bench_variety.py --faults, seeds 367 and 369). Across a reboot the two series
+    are compared whole."""
+    from mavsid.pipeline import PipelineConfig, fit
+    from mavsid.synthetic.faults import Faults
+    from mavsid.synthetic.run import scenario_from_options, simulate
+
+    sc = scenario_from_options(manoeuvre="sysid", axis="roll", sid_axes=(10,), seed=615,
+                               rate_hz=50.0)
+    path = tmp_path / "rebooted.bin"
+    simulate(sc, [path], Faults(reboot_at_s=9.0, truncate_bytes=3000), layout=layout)
+    truth = json.loads(path.with_suffix(".truth.json").read_text())["axes"]["roll"]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = fit([str(path)], PipelineConfig(axes=("roll",)))
+    said = " ".join(str(w.message) for w in caught)
+    assert "clock restarts" in said
+    assert ("centidegrees/s" in said) == centi
+    f = result.axes["roll"]
+    assert f.model is not None
+    assert f.model.params["B[p,u_roll]"] == pytest.approx(truth["effectiveness"], rel=0.1)

@@ -522,17 +522,30 @@ def _one_boot(path: str, states: list[_Series], inputs: list[_Series]
         )
 
     def fix(s: _Series) -> _Series:
-        boots = _boots(s.t)
-        sl = boots[min(k, len(boots) - 1)]
-        t, v = s.t[sl], s.v[sl]
-        order = np.argsort(t, kind="stable")
-        t, v = _dedupe(t[order], v[order])
+        t, v = _boot_records(s.t, s.v, k)
         if s.name == "yaw":
             v = np.unwrap(v)
         bad_t = s.bad_t[(s.bad_t >= t[0]) & (s.bad_t <= t[-1])] if t.size else s.bad_t[:0]
         return replace(s, t=t, v=v, bad_t=np.sort(bad_t))
 
     return [fix(s) for s in states], [fix(s) for s in inputs], boot
+
+
+def _boot_records(t: np.ndarray, v: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """A channel's records (``t``, ``v`` in record order) of boot ``k`` (its last when it has
+    fewer boots, see :func:`_boots`), in time order, one per time stamp.
+
+    Examples
+    --------
+    >>> t = np.array([30.0, 31.0, 31.0, 5.0, 6.0])
+    >>> [a.tolist() for a in _boot_records(t, np.arange(5.0), 1)]
+    [[5.0, 6.0], [3.0, 4.0]]
+    """
+    boots = _boots(t)
+    sl = boots[min(k, len(boots) - 1)]
+    t, v = t[sl], v[sl]
+    order = np.argsort(t, kind="stable")
+    return _dedupe(t[order], v[order])
 
 
 def _reference(states: Sequence[_Series]) -> _Series:
@@ -961,43 +974,28 @@ def sysid_runs(raw: RawLog) -> list[dict[str, Any]]:
     return runs
 
 
-def _commanded(raw: RawLog, t: np.ndarray) -> dict[str, np.ndarray]:
+def _commanded(raw: RawLog, t: np.ndarray, boot: int = 0) -> dict[str, np.ndarray]:
     """The commanded attitude per axis on the grid ``t`` (interpolated; NaN outside its
-    span), from the first of :data:`mavsid.channels.DESIRED_CHANNELS` the log has: roll and
-    pitch angles (rad), and for yaw the commanded heading's rate (rad/s, :func:`_heading_rate`:
-    the pilot commands a yaw rate, which the body rate follows). Excitation judges a stick
-    manoeuvre's response by its coherence with it, the fit checks the feedback's bias with
-    it (:mod:`mavsid.estimators.instruments`)."""
+    span), from the first of :data:`mavsid.channels.DESIRED_CHANNELS` the log has, its
+    records of the boot the grid is laid on (``boot``, see :func:`_boot_records`): roll and
+    pitch angles (rad), and for yaw the commanded heading's rate (rad/s: the pilot commands
+    a yaw rate, which the body rate follows; the heading unwrapped, central differences).
+    Excitation judges a stick manoeuvre's response by its coherence with it, the fit checks
+    the feedback's bias with it (:mod:`mavsid.estimators.instruments`)."""
     out: dict[str, np.ndarray] = {}
     for axis, chans in DESIRED_CHANNELS.items():
         got = first_of(raw, chans, f"commanded {axis}")
         if got is None:
             continue
-        ts, v = _heading_rate(got[1], got[2]) if axis == "yaw" else got[1:]
-        if ts.size >= 2 and np.ptp(v) > 0:
+        ts, v = _boot_records(got[1], got[2], boot)
+        if ts.size < 2:
+            continue
+        if axis == "yaw":
+            v = np.gradient(np.unwrap(v), ts)
+        if np.ptp(v) > 0:
             # not published in a gap (PX4's rate-only modes such as ACRO): not a ramp across it
             out[axis] = _resampled(ts, v, t, np.nan)
     return out
-
-
-def _heading_rate(ts: np.ndarray, heading: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """A commanded heading's samples (rad, wrapped) as its rate (rad/s): in time order, one
-    sample per time (the last), unwrapped and differentiated (central differences).
-
-    Examples
-    --------
-    >>> ts = np.array([0.0, 0.1, 0.2, 0.3, 0.3])
-    >>> _, rate = _heading_rate(ts, np.array([6.1, 6.2, 0.0167, 0.1, 0.1]))
-    >>> np.round(rate, 3).tolist()
-    [1.0, 0.999, 0.916, 0.833]
-    """
-    order = np.argsort(ts, kind="stable")
-    ts, heading = ts[order], heading[order]
-    last = np.append(np.diff(ts) > 0, True)
-    ts, heading = ts[last], np.unwrap(heading[last])
-    if ts.size < 2:
-        return ts, np.zeros(ts.size)
-    return ts, np.gradient(heading, ts)
 
 
 def _resampled(ts: np.ndarray, v: np.ndarray, t: np.ndarray, fill: float) -> np.ndarray:
@@ -1021,14 +1019,15 @@ def _resampled(ts: np.ndarray, v: np.ndarray, t: np.ndarray, fill: float) -> np.
     return out
 
 
-def _sysid_injection(raw: RawLog, t: np.ndarray) -> np.ndarray | None:
+def _sysid_injection(raw: RawLog, t: np.ndarray, boot: int = 0) -> np.ndarray | None:
     """SYSTEMID's logged waveform ``SIDD.Targ`` on the grid ``t`` (interpolated inside runs,
-    0 elsewhere), or None when the log has none. Excitation judges SYSTEMID runs by it."""
+    0 elsewhere; its records of the grid's ``boot``), or None when the log has none.
+    Excitation judges SYSTEMID runs by it."""
     sidd = raw.messages.get("SIDD")
     if sidd is None or "Targ" not in sidd.columns or len(sidd) < 2:
         return None
-    ts = np.asarray(sidd.time_s, dtype=float)
-    targ = np.nan_to_num(np.asarray(sidd.columns["Targ"], dtype=float))
+    ts, targ = _boot_records(np.asarray(sidd.time_s, dtype=float),
+                             np.nan_to_num(np.asarray(sidd.columns["Targ"], dtype=float)), boot)
     return _resampled(ts, targ, t, 0.0)  # between runs SIDD is not logged: no injection there
 
 
@@ -1219,10 +1218,10 @@ def _align(raw: RawLog, preset: Preset | str | None, rate_hz: float | None,
     }
     if mixer is not None:
         meta["mixer"] = mixer
-    injection = _sysid_injection(raw, t)
+    injection = _sysid_injection(raw, t, boot["used"] - 1)
     if injection is not None:
         meta["sysid_injection"] = injection
-    commanded = _commanded(raw, t)
+    commanded = _commanded(raw, t, boot["used"] - 1)
     if commanded:
         meta["commanded"] = commanded
     return FlightData(

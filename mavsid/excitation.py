@@ -486,12 +486,14 @@ def _score(m: Mapping[str, float]) -> float:
     # a response that follows the pilot's command: its coherence and coverage with the
     # command stand for its level and the input's coverage (measured against floors that
     # a flight without a quiet stretch does not show, see _gates)
-    cmd = "command_coherence" in m and not inj
+    level = min(1.0, max(0.0, math.log10(max(ratio, 1e-12)) / 2)) if math.isfinite(ratio) else 0.0
+    coverage = m.get("injection_coverage" if inj else "coverage", 0.0)
+    if "command_coherence" in m and not inj:
+        level = max(level, m["command_coherence"])
+        coverage = max(coverage, m["command_coverage"])
     terms = [
-        max(min(1.0, max(0.0, math.log10(max(ratio, 1e-12)) / 2)) if math.isfinite(ratio)
-            else 0.0, m["command_coherence"] if cmd else 0.0),
-        max(m.get("injection_coverage" if inj else "coverage", 0.0),
-            m["command_coverage"] if cmd else 0.0),
+        level,
+        coverage,
         m.get("injection_coherence" if inj else "coherence", 0.0),
         min(1.0, max(0.0, 1 - math.log10(max(m.get("condition", math.inf), 1.0)) / 2))
         if math.isfinite(m.get("condition", math.inf)) else 0.0,

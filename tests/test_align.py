@@ -306,3 +306,29 @@ def test_reboot_keeps_the_longest_boot_only():
         fd = align(raw)
     assert np.all(np.diff(fd.time_s) > 0) and fd.time_s[0] >= 10 and fd.time_s[-1] < 20
     assert np.allclose(fd.states[:, fd.state_names.index("roll")], np.radians(5.0))
+
+
+def test_the_command_and_the_injection_come_from_the_boot_used():
+    """The commanded attitude (yaw: the commanded heading's rate) and SYSTEMID's injection
+    are read from the records of the boot the grid is laid on, as the states are: sorted
+    together, two boots whose clocks overlap (and whose stamps differ) interleave two
+    flights, and a heading's rate taken across them is nonsense."""
+    t1, t2 = np.arange(10, 20, 0.01), np.arange(5.005, 12, 0.01)
+    t = np.concatenate([t1, t2])
+    one, two = np.ones(t1.size), np.ones(t2.size)
+    heading = np.concatenate([np.degrees(0.5 * t1), np.degrees(-1.0 * t2)]) % 360.0
+    att = MessageTable("ATT", {"Roll": 0 * t, "Pitch": 0 * t, "Yaw": 0 * t,
+                               "DesRoll": np.concatenate([5 * np.sin(t1), -5 * two]),
+                               "DesYaw": heading}, time_s=t)
+    rate = MessageTable("RATE", {k: 0 * t for k in ("R", "P", "Y", "ROut", "POut", "YOut")},
+                        time_s=t)
+    sidd = MessageTable("SIDD", {"Targ": np.concatenate([one, -two])}, time_s=t)
+    raw = RawLog(SourceInfo("r.bin", "dataflash", 0), {"ATT": att, "RATE": rate, "SIDD": sidd})
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        fd = align(raw)
+    assert any("boot 1 of 2" in str(w.message) for w in caught)
+    cmd = fd.meta["commanded"]
+    np.testing.assert_allclose(cmd["roll"], np.radians(5 * np.sin(fd.time_s)), atol=1e-4)
+    np.testing.assert_allclose(cmd["yaw"], 0.5, atol=1e-6)
+    assert np.allclose(fd.meta["sysid_injection"], 1.0)

@@ -770,14 +770,19 @@ class _Reader:
         subscriptions allow; each block's candidates are found when the walk gets there
         (:meth:`load`), so that memory stays bounded whatever the file holds."""
         self.start = start
-        # the data message sizes the file's formats allow: any message id (a filter only)
-        self.allowed = np.zeros(1 << 16, bool)
         self.widths = _widths(self.out.formats, self.out.basic_sizes)
-        self.allowed[list(_sizes(self.out.formats, self.widths))] = True
         self.lo = self.hi = -1  # the block whose candidates are loaded
         self.cand = np.zeros(0, np.int64)
         self.csize = self.cmsg = np.zeros(0, np.uint16)
         self.breaks = np.zeros(0, np.int64)
+
+    @functools.cached_property
+    def allowed(self) -> NDArray[np.bool_]:
+        """The data message sizes the file's formats allow, any message id (a filter only):
+        made when :meth:`load` first needs it (the compiled walk has no candidates)."""
+        out = np.zeros(1 << 16, bool)
+        out[list(_sizes(self.out.formats, self.widths))] = True
+        return out
 
     def load(self, pos: int) -> None:
         """The candidates of the block of the file holding ``pos``: positions of type byte

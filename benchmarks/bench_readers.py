@@ -421,36 +421,40 @@ ULOG_TOPICS = ["vehicle_attitude", "vehicle_angular_velocity", "vehicle_torque_s
 ULOG_BYTES_PER_S = 68_000
 
 _COLD = """
-import contextlib, io, sys, time, warnings
-path, which = sys.argv[1], sys.argv[2]
+import contextlib, io, os, sys, time, warnings
+paths, which = sys.argv[1].split(os.pathsep), sys.argv[2]
 if which == "pyulog":
     from pyulog import ULog
-    def run():
+    def run(path):
         with contextlib.redirect_stdout(io.StringIO()):
             return ULog(path)
 else:
     from mavsid.readers import ulog
     if which == "mavsid-numpy":  # as built without a C compiler: the numpy walk
         ulog._scan = None
-    def run():
+    def run(path):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             return ulog.read(path)
 t0, c0 = time.perf_counter(), time.process_time()
-run()
+for path in paths:
+    run(path)
 print(time.perf_counter() - t0, time.process_time() - c0)
 """
 
 
-def cold(path: Path, which: str, runs: int = 1) -> tuple[float, float]:
-    """Wall and CPU time of the first read in a fresh process (imports not timed): the
-    medians of ``runs`` processes (one cold run moves by up to 2x on a shared machine)."""
+def cold(path: Path | Sequence[Path], which: str, runs: int = 1) -> tuple[float, float]:
+    """Wall and CPU time of the first read in a fresh process (imports not timed), of
+    ``path`` or of several paths one after another: the medians of ``runs`` processes (one
+    cold run moves by up to 2x on a shared machine)."""
     import subprocess
     import sys
 
     wall, cpu = [], []
+    paths = [path] if isinstance(path, Path) else list(path)
     for _ in range(runs):
-        out = subprocess.run([sys.executable, "-c", _COLD, str(path), which], check=True,
+        out = subprocess.run([sys.executable, "-c", _COLD, os.pathsep.join(map(str, paths)),
+                              which], check=True,
                              capture_output=True, text=True, cwd=ROOT,
                              env=child_env()).stdout.split()
         wall.append(float(out[0]))
@@ -486,7 +490,14 @@ def bench_ulog(min_mb: float = 100.0, repeat: int = 5, runs: int = 3) -> None:
     against ``pyulog.ULog`` measured in the same run, warm (best CPU of ``repeat``, in
     turn) and cold (first read in a fresh process, median of ``runs``); mavsid reading the
     attitude topics only; mavsid as built without a C compiler; mavsid's peak memory
-    against the arrays it returns."""
+    against the arrays it returns.
+
+    mavsid keeps the formats and record layouts it parsed for the process (logs of one
+    firmware repeat them): every warm figure but one is taken with them forgotten before
+    each read, as for a log of a firmware not met before; the column "known" is the warm
+    read with them kept (another log of the same firmware). The shared logs are also read
+    all one after another in one fresh process each (pyulog, mavsid): what a batch over them
+    waits, a format met in an earlier log then known."""
     import contextlib
     import io
 
@@ -504,6 +515,13 @@ def bench_ulog(min_mb: float = 100.0, repeat: int = 5, runs: int = 3) -> None:
                 return ULog(str(path))
         return run
 
+    def forgetting(fn: Callable[[], Any]) -> Callable[[], Any]:
+        def run() -> Any:  # a log of a firmware not met before: no format known
+            for kept in (ulog._format, ulog._layout, ulog._record_dtype):
+                kept.clear()
+            return fn()
+        return run
+
     def numpy_walk(path: Path) -> Callable[[], Any]:
         def run() -> Any:  # as built without a C compiler
             compiled, ulog._scan = ulog._scan, None
@@ -511,40 +529,50 @@ def bench_ulog(min_mb: float = 100.0, repeat: int = 5, runs: int = 3) -> None:
                 return ulog.read(path)
             finally:
                 ulog._scan = compiled
-        return quiet(run)
+        return forgetting(quiet(run))
 
-    # the shared logs one after another: warm, cold (pyulog, mavsid), selective, numpy walk
-    totals = [0.0] * 7
+    # the per-file figures summed: warm, cold (pyulog, mavsid), selective, numpy walk, known
+    totals = [0.0] * 8
 
     def measure(path: Path, n: int) -> tuple[str, str]:
-        ref, ours = warm_pair(plain(path), quiet(lambda: ulog.read(path)), n)
-        sel, numpy_ = warm_pair(quiet(lambda: ulog.read(path, messages=ULOG_TOPICS)),
+        ref, ours = warm_pair(plain(path), forgetting(quiet(lambda: ulog.read(path))), n)
+        sel, numpy_ = warm_pair(forgetting(quiet(lambda: ulog.read(path,
+                                                                   messages=ULOG_TOPICS))),
                                 numpy_walk(path), n)
+        known = warm_pair(quiet(lambda: ulog.read(path)), quiet(lambda: ulog.read(path)), n)[1]
         (_, cold_ref), (_, cold_ours) = cold(path, "pyulog", runs), cold(path, "mavsid", runs)
         _, cold_numpy = cold(path, "mavsid-numpy", runs)
-        for k, value in enumerate((ref, ours, cold_ref, cold_ours, sel, numpy_, cold_numpy)):
+        for k, value in enumerate((ref, ours, cold_ref, cold_ours, sel, numpy_, cold_numpy,
+                                   known)):
             totals[k] += value
         log = quiet(lambda: ulog.read(path))()
         arrays = decoded_bytes(log)
         del log
-        peak, _ = peak_memory(quiet(lambda: ulog.read(path)))
+        peak, _ = peak_memory(forgetting(quiet(lambda: ulog.read(path))))
         return (path.name[:44], f"{path.stat().st_size / MB:7.1f} {ref:7.3f} {ours:7.3f} "
                                 f"{ref / ours:6.1f}x  {cold_ref:7.3f} {cold_ours:7.3f} "
                                 f"{cold_ref / cold_ours:6.1f}x  {ref / sel:6.1f}x  "
                                 f"{ref / numpy_:6.1f}x {cold_ref / cold_numpy:6.1f}x  "
-                                f"{peak / max(arrays, 1):5.2f}x")  # fmt: skip
+                                f"{ref / known:6.1f}x  {peak / max(arrays, 1):5.2f}x")  # fmt: skip
 
     header = ("file", "     MB  pyulog  mavsid  ratio   (warm, best CPU s)  pyulog  mavsid  "
                       f"ratio  (cold: median CPU s of {runs})  selective  numpy walk (warm, cold)  "
-                      "peak/arrays")  # fmt: skip
+                      "known  peak/arrays")  # fmt: skip
     rows = [header] + [measure(path, repeat) for path in paths]
-    if paths:  # what a batch over them waits: each read's fixed costs paid once per log
-        ref, ours, cold_ref, cold_ours, sel, numpy_, cold_numpy = totals
-        rows.append((f"all {len(paths)} above, one after another",
-                     f"{sum(p.stat().st_size for p in paths) / MB:7.1f} {ref:7.3f} {ours:7.3f} "
+    if paths:
+        ref, ours, cold_ref, cold_ours, sel, numpy_, cold_numpy, known = totals
+        mb = sum(p.stat().st_size for p in paths) / MB
+        rows.append((f"the {len(paths)} above, figures summed",
+                     f"{mb:7.1f} {ref:7.3f} {ours:7.3f} "
                      f"{ref / ours:6.1f}x  {cold_ref:7.3f} {cold_ours:7.3f} "
                      f"{cold_ref / cold_ours:6.1f}x  {ref / sel:6.1f}x  "
-                     f"{ref / numpy_:6.1f}x {cold_ref / cold_numpy:6.1f}x"))  # fmt: skip
+                     f"{ref / numpy_:6.1f}x {cold_ref / cold_numpy:6.1f}x  "
+                     f"{ref / known:6.1f}x"))  # fmt: skip
+        # what a batch over them waits: one fresh process each, the logs one after another
+        (_, batch_ref), (_, batch_ours) = cold(paths, "pyulog", runs), cold(paths, "mavsid", runs)
+        rows.append((f"the {len(paths)} in one fresh process",
+                     f"{mb:7.1f}                         {batch_ref:7.3f} {batch_ours:7.3f} "
+                     f"{batch_ref / batch_ours:6.1f}x"))  # fmt: skip
     with tempfile.TemporaryDirectory() as tmp:
         big = build_big_ulog(Path(tmp), min_mb)
         rows.append(measure(big, 3))

@@ -676,3 +676,38 @@ def test_runs_across_sync_and_checked_messages_match_pyulog(tmp_path: Path) -> N
     assert len(log["att"]) == k + 1
     assert log.source.notes[0] == "3 dropouts, 120 ms in all"
     assert log.params["X_Y"] == 2.0
+
+
+def test_formats_kept_for_the_process_never_mix_two_logs(tmp_path: Path) -> None:
+    """Parsed formats and record layouts are kept between reads (logs of one firmware repeat
+    them), keyed by the texts of a topic's format and of every format it nests: logs whose
+    ``att`` has the same text but a nested type defined otherwise, or not at all, read one
+    after another in one process (and again, in another order), each as pyulog reads it."""
+    from fuzz.hostile import _ulog_msg, ulog_file
+
+    att = "att:uint64_t timestamp;inner x;uint8_t[2] _padding0;"
+    variants = {
+        "two_floats": ("inner:float a;float b;", "<ff", (0.5, -2.0)),
+        "int_and_bytes": ("inner:int32_t c;float d;uint8_t[4] e;", "<if4B", (-7, 1.5, 1, 2, 3, 4)),
+        "undefined": (None, "<ff", (0.5, -2.0)),  # att nests a type the log never defines
+    }
+    paths = {}
+    for name, (inner, code, values) in variants.items():
+        out = bytearray(ulog_file([f for f in (inner, att) if f], topic=None,
+                                  params=[("float MC_ROLL_P", struct.pack("<f", 6.5))]))
+        out += _ulog_msg(b"A", struct.pack("<BH", 0, 0) + b"att")
+        for k in range(20):
+            out += _ulog_msg(b"D", struct.pack("<HQ", 0, 10_000 * k)
+                             + struct.pack(code, *values))  # (trailing padding: not written)
+        paths[name] = tmp_path / f"{name}.ulg"
+        paths[name].write_bytes(bytes(out))
+    for name in ("two_floats", "int_and_bytes", "undefined", "two_floats", "undefined",
+                 "int_and_bytes"):
+        got = _same_as_pyulog_or_typed_error(paths[name])
+        if name == "undefined":  # pyulog reads the file, without the unreadable topic
+            assert got is not None and "att" not in got[0].messages
+        else:
+            assert got is not None and len(got[0]["att"]) == 20
+            assert sorted(got[0]["att"].columns) == sorted(
+                ["timestamp", "x.a", "x.b"] if name == "two_floats"
+                else ["timestamp", "x.c", "x.d"] + [f"x.e[{i}]" for i in range(4)])

@@ -94,6 +94,11 @@ moves the read one byte forward, where pyulog may read the same bytes again; a f
 flattens to more fields than a data message can hold bytes (nested arrays) is an unreadable
 subscription instead of minutes of expansion.
 
+Formats parsed, record layouts and their dtypes are kept for the process (within a budget
+of fields, :class:`_Kept`), keyed by the texts of a topic's format and of every format it
+nests: the logs of one firmware repeat them, so a batch parses each once; two logs that
+define a type differently never share a layout.
+
 Bad input is one :class:`~mavsid.errors.LogFormatError` naming the file: a bad header,
 incompatible flags, formats that contain themselves (pyulog would recurse without end)
 or nest too deeply, an empty log. A file with corruption is returned with what could be
@@ -120,10 +125,10 @@ import os
 import re
 import struct
 import warnings
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Hashable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from types import ModuleType
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -178,6 +183,8 @@ _RUN_ON[0x44] = True
 _MAX_UNKNOWN_SIZE = 10000
 #: a format flattening to more fields than a data message can hold bytes is never decoded
 _MAX_FIELDS = 0xFFFF
+#: fields of the parsed formats, and of the record layouts, kept per process (see _Kept)
+_KEPT_FIELDS = 1 << 19
 _NO_LIMIT = 1 << 62
 #: bytes of the file scanned at a time for message candidates
 _BLOCK = 1 << 20
@@ -277,6 +284,49 @@ def _checked(buf: Any, pos: int, end: int) -> bool:
         stop - key >= 8 and buf[key : key + 8] == b"int32_t ")
 
 
+_A = TypeVar("_A", bound=Hashable)
+_R = TypeVar("_R")
+
+
+class _Kept(Generic[_A, _R]):
+    """``fn`` with its results kept for the process, within a budget: each result weighs
+    ``weight(result)`` (its fields), the oldest are dropped when the total would pass
+    ``budget``, one heavier than the budget is not kept. Logs of one firmware repeat the
+    same definitions (10 of the 13 shared ULogs share most of theirs), and a hostile
+    stream of huge formats cannot grow the memory without bound.
+
+    Examples
+    --------
+    >>> twice = _Kept(lambda x: 2 * x, weight=lambda r: r, budget=10)
+    >>> twice(3), twice(4), twice.total, twice(2), twice.total, twice(9), twice.total
+    (6, 8, 8, 4, 4, 18, 4)
+    """
+
+    def __init__(self, fn: Callable[[_A], _R], weight: Callable[[_R], int],
+                 budget: int = _KEPT_FIELDS) -> None:
+        self.fn, self.weight, self.budget = fn, weight, budget
+        self.kept: dict[_A, tuple[_R, int]] = {}
+        self.total = 0
+        functools.update_wrapper(self, fn)
+
+    def __call__(self, arg: _A) -> _R:
+        got = self.kept.get(arg)
+        if got is not None:
+            return got[0]
+        result = self.fn(arg)
+        w = self.weight(result)
+        if w <= self.budget:
+            while self.total + w > self.budget:
+                self.total -= self.kept.pop(next(iter(self.kept)))[1]
+            self.kept[arg] = result, w
+            self.total += w
+        return result
+
+    def clear(self) -> None:
+        self.kept.clear()
+        self.total = 0
+
+
 @functools.lru_cache(maxsize=64)
 def _indices(count: int) -> tuple[str, ...]:
     """The array suffixes ``[0]`` ... ``[count - 1]`` of a flattened field's names.
@@ -289,15 +339,15 @@ def _indices(count: int) -> tuple[str, ...]:
     return tuple(f"[{i}]" for i in range(count))
 
 
-def _format(data: bytes) -> tuple[str, list[Field], int]:
+def _parse_format(data: bytes) -> tuple[str, tuple[Field, ...], int]:
     """A format definition ``name:type field;type[n] field;...``: its name, fields and
     size in bytes when all its fields are of basic types (else -1: nested formats, sized
-    by :func:`_widths`).
+    by :func:`_widths`). Kept for the process as :func:`_format`.
 
     Examples
     --------
     >>> _format(b"att:uint64_t timestamp;float[4] q;")
-    ('att', [('uint64_t', 0, 'timestamp'), ('float', 4, 'q')], 24)
+    ('att', (('uint64_t', 0, 'timestamp'), ('float', 4, 'q')), 24)
     >>> _format(b"esc:uint64_t timestamp;report[2] r;")[2]
     -1
     """
@@ -329,7 +379,10 @@ def _format(data: bytes) -> tuple[str, list[Field], int]:
         fields.append((kind, count, name))
         width = _SIZE.get(kind)
         size = -1 if width is None or size < 0 else size + width * (count or 1)
-    return parts[0], fields, size
+    return parts[0], tuple(fields), size
+
+
+_format = _Kept(_parse_format, weight=lambda parsed: len(parsed[1]) + 1)
 
 
 def _u16(u8: NDArray[np.uint8], at: NDArray[np.int64]) -> NDArray[np.uint16]:
@@ -372,7 +425,7 @@ def _joined(u8: NDArray[np.uint8], start: NDArray[np.int64],
     return joined.tobytes().decode("utf-8", "ignore").split("\n")[:-1]
 
 
-def _cycle(formats: dict[str, list[Field]]) -> list[str] | None:
+def _cycle(formats: Mapping[str, Sequence[Field]]) -> list[str] | None:
     """A chain of formats that contain themselves (``a`` → ``b`` → ``a``); None if none.
 
     Examples
@@ -402,7 +455,7 @@ def _cycle(formats: dict[str, list[Field]]) -> list[str] | None:
     return None
 
 
-def _widths(formats: dict[str, list[Field]], basic: dict[str, int]) -> dict[str, int]:
+def _widths(formats: Mapping[str, Sequence[Field]], basic: dict[str, int]) -> dict[str, int]:
     """Each format's size in bytes (formats acyclic; a nested type not defined counts 0).
     ``basic``: the sizes of the formats of basic types only, known from :func:`_format`
     (the others are summed here).
@@ -429,7 +482,7 @@ def _widths(formats: dict[str, list[Field]], basic: dict[str, int]) -> dict[str,
     return memo
 
 
-def _sizes(formats: dict[str, list[Field]], widths: dict[str, int]) -> set[int]:
+def _sizes(formats: Mapping[str, Sequence[Field]], widths: dict[str, int]) -> set[int]:
     """The payload sizes data messages of the formats can have: 2 (message id) + a
     format's size (``widths``, from :func:`_widths`), with and without its trailing
     ``_padding`` fields.
@@ -451,6 +504,120 @@ def _sizes(formats: dict[str, list[Field]], widths: dict[str, int]) -> set[int]:
             trimmed -= width
         out.update(s + 2 for s in (full, trimmed) if 0 < s <= 0xFFFF - 2)
     return out
+
+
+_Key = tuple[tuple[str, "bytes | None"], ...]
+
+
+def _closure(name: str, formats: Mapping[str, Sequence[Field]],
+             definitions: Mapping[str, bytes]) -> _Key:
+    """What a topic's layout depends on: its format's text and those of the formats it
+    nests (None for one not defined), in a fixed order: the key of :func:`_layout`.
+
+    Examples
+    --------
+    >>> fmts = {"a": (("b", 2, "x"),), "b": (("float", 0, "y"),)}
+    >>> _closure("a", fmts, {"a": b"a:b[2] x;", "b": b"b:float y;"})
+    (('a', b'a:b[2] x;'), ('b', b'b:float y;'))
+    >>> _closure("a", {"a": (("c", 0, "z"),)}, {"a": b"a:c z;"})
+    (('a', b'a:c z;'), ('c', None))
+    """
+    key: list[tuple[str, bytes | None]] = []
+    seen: set[str] = set()
+    stack = [name]
+    while stack:
+        node = stack.pop()
+        if node in seen:
+            continue
+        seen.add(node)
+        text = definitions.get(node)
+        key.append((node, text))
+        if text is not None:
+            stack += [kind for kind, _, _ in reversed(formats[node]) if kind not in _SIZE]
+    return tuple(key)
+
+
+_Layout = tuple[tuple[str, ...], tuple[np.dtype[Any], ...], int, int]
+
+
+def _new_layout(key: _Key) -> _Layout:
+    """A topic's record layout from its :func:`_closure`: field names (nested types and
+    arrays expanded; an empty one named ``f<index>``, as pyulog's dtype has it), basic
+    types, size and timestamp offset (the size if none), trailing padding dropped; kept
+    for the process as :func:`_layout`. Raises KeyError (a nested type not defined),
+    ValueError (repeated field names, which numpy refuses) or :class:`_Bad` (more fields
+    than a message can hold bytes).
+
+    Examples
+    --------
+    >>> names, kinds, size, offset = _new_layout((
+    ...     ("a", b"a:uint64_t timestamp;b[2] r;uint8_t[2] _padding0;"),
+    ...     ("b", b"b:float y;uint8_t _padding0;")))
+    >>> names, size, offset
+    (('timestamp', 'r[0].y', 'r[0]._padding0', 'r[1].y', 'r[1]._padding0'), 18, 0)
+    """
+    formats = {}
+    for node, text in key:
+        if text is not None:
+            formats[node] = _format(text)[1]
+    flat: dict[str, tuple[list[str], list[np.dtype[Any]]]] = {}
+
+    def flatten(name: str) -> tuple[list[str], list[np.dtype[Any]]]:
+        got = flat.get(name)
+        if got is not None:
+            return got
+        names: list[str] = []
+        kinds: list[np.dtype[Any]] = []
+        for kind, count, fname in formats[name]:  # KeyError: an unknown type
+            dtype = _DTYPE.get(kind)
+            if dtype is not None:
+                if not count:
+                    names.append(fname)
+                    kinds.append(dtype)
+                    continue
+                if len(names) + count > _MAX_FIELDS:
+                    raise _Bad
+                names += map(fname.__add__, _indices(count))
+                kinds += [dtype] * count
+                continue
+            inner, inner_kinds = flatten(kind)
+            prefixes = [fname + index + "." for index in _indices(count)] if count else [
+                fname + "."]
+            if len(names) + len(prefixes) * len(inner) > _MAX_FIELDS:
+                raise _Bad
+            names += [prefix + sub for prefix in prefixes for sub in inner]
+            kinds += inner_kinds * len(prefixes)
+        flat[name] = names, kinds
+        return names, kinds
+
+    name = key[0][0]
+    names, kinds = flatten(name)
+    m = len(names)
+    while m and names[m - 1].startswith("_padding"):
+        m -= 1
+    # the format's size (the sum of its fields') less the padding dropped
+    size = _widths(formats, {})[name] - sum(k.itemsize for k in kinds[m:])
+    names, kinds = names[:m], kinds[:m]
+    if "" in names:
+        names = [f or f"f{i}" for i, f in enumerate(names)]
+    if len(set(names)) < m:
+        raise ValueError(name)
+    try:
+        offset = sum(k.itemsize for k in kinds[: names.index("timestamp")])
+    except ValueError:
+        offset = size
+    return tuple(names), tuple(kinds), size, offset
+
+
+def _new_record_dtype(key: _Key) -> np.dtype[Any]:
+    """The dtype of :func:`_layout`'s records (instances of a topic, and logs of one
+    firmware, share it): :func:`_record_dtype`."""
+    names, kinds, _, _ = _layout(key)
+    return np.dtype({"names": list(names), "formats": list(kinds)})
+
+
+_layout = _Kept(_new_layout, weight=lambda layout: len(layout[0]) + 1)
+_record_dtype = _Kept(_new_record_dtype, weight=lambda dtype: len(dtype.names or ()) + 1)
 
 
 @dataclass
@@ -478,7 +645,8 @@ class _Parsed:
     start_us: int = 0
     last_us: int = 0
     info: dict[str, Any] = field(default_factory=dict)
-    formats: dict[str, list[Field]] = field(default_factory=dict)
+    formats: dict[str, tuple[Field, ...]] = field(default_factory=dict)
+    definitions: dict[str, bytes] = field(default_factory=dict)  # each format's own text
     basic_sizes: dict[str, int] = field(default_factory=dict)  # formats of basic types only
     initial_params: dict[str, Any] = field(default_factory=dict)
     changed_params: list[tuple[int, str, Any]] = field(default_factory=list)
@@ -556,9 +724,7 @@ class _Reader:
         self.filtered: set[int] = set()
         self.untimed: dict[int, int] = {}  # subscription -> record size, without timestamp
         self.final: list[int] = []  # subscriptions whose data is kept, pyulog's order
-        self.flat: dict[str, tuple[list[str], list[np.dtype[Any]]]] = {}
-        self.dtypes: dict[str, tuple[list[str], list[np.dtype[Any]], int, int]] = {}
-        self.built: dict[str, np.dtype[Any]] = {}
+        self.keys: dict[str, _Key] = {}  # topic -> its layout's key (_closure)
         self.plo = self.phi = -1  # the window of plain parameters scanned (plain_run)
         self.pcand = self.pafter = self.pbreaks = np.zeros(0, np.int64)
         # data messages met: (positions, sizes, ids, their subscriptions), and how many
@@ -658,6 +824,7 @@ class _Reader:
                 elif kind == 0x46:  # F
                     name, fields, size = _format(data)
                     out.formats[name] = fields
+                    out.definitions[name] = data
                     if size >= 0:
                         out.basic_sizes[name] = size
                     else:
@@ -849,68 +1016,18 @@ class _Reader:
         return out
 
     # ------------------------------------------------------------------ subscriptions
-    def flatten(self, name: str) -> tuple[list[str], list[np.dtype[Any]]]:
-        """The field names and basic types (as dtypes) of a format, nested types and arrays
-        expanded."""
-        got = self.flat.get(name)
-        if got is not None:
-            return got
-        names: list[str] = []
-        kinds: list[np.dtype[Any]] = []
-        for kind, count, fname in self.out.formats[name]:  # KeyError: an unknown type
-            dtype = _DTYPE.get(kind)
-            if dtype is not None:
-                if not count:
-                    names.append(fname)
-                    kinds.append(dtype)
-                    continue
-                if len(names) + count > _MAX_FIELDS:
-                    raise _Bad
-                names += map(fname.__add__, _indices(count))
-                kinds += [dtype] * count
-                continue
-            inner, inner_kinds = self.flatten(kind)
-            prefixes = [fname + index + "." for index in _indices(count)] if count else [
-                fname + "."]
-            if len(names) + len(prefixes) * len(inner) > _MAX_FIELDS:
-                raise _Bad
-            names += [prefix + sub for prefix in prefixes for sub in inner]
-            kinds += inner_kinds * len(prefixes)
-        self.flat[name] = names, kinds
-        return names, kinds
-
-    def record(self, name: str) -> tuple[list[str], list[np.dtype[Any]], int, int]:
-        """A topic's record layout (trailing padding dropped): field names (an empty one
-        named ``f<index>``, as pyulog's dtype has it), basic types, size and timestamp
-        offset; building the dtype waits for :meth:`dtype` (only topics with data)."""
-        got = self.dtypes.get(name)
-        if got is None:
-            names, kinds = self.flatten(name)
-            m = len(names)
-            while m and names[m - 1].startswith("_padding"):
-                m -= 1
-            # the format's size (the sum of its fields') less the padding dropped
-            size = self.widths[name] - sum(k.itemsize for k in kinds[m:])
-            if m < len(names):
-                names, kinds = names[:m], kinds[:m]
-            if "" in names:
-                names = [f or f"f{i}" for i, f in enumerate(names)]
-            if len(set(names)) < m:
-                raise ValueError(name)  # numpy refuses repeated field names
-            try:
-                offset = sum(k.itemsize for k in kinds[: names.index("timestamp")])
-            except ValueError:
-                offset = size
-            got = self.dtypes[name] = (names, kinds, size, offset)
-        return got
+    def record(self, name: str) -> tuple[int, int]:
+        """A topic's record size and timestamp offset (:func:`_layout`), its layout's key
+        kept for :meth:`dtype`."""
+        key = self.keys.get(name)
+        if key is None:
+            key = self.keys[name] = _closure(name, self.out.formats, self.out.definitions)
+        _, _, size, offset = _layout(key)
+        return size, offset
 
     def dtype(self, name: str) -> np.dtype[Any]:
-        """A topic's dtype (built once per read: instances of a topic share it)."""
-        got = self.built.get(name)
-        if got is None:
-            names, kinds, _, _ = self.dtypes[name]
-            got = self.built[name] = np.dtype({"names": names, "formats": kinds})
-        return got
+        """A topic's dtype (built only for topics with data)."""
+        return _record_dtype(self.keys[name])
 
     def subscribe(self, data: bytes) -> None:
         if len(data) < 3:
@@ -918,7 +1035,7 @@ class _Reader:
         multi_id, msg_id = data[0], data[1] | data[2] << 8
         name = _text(data[3:])
         try:
-            _, _, size, offset = self.record(name)
+            size, offset = self.record(name)
         except (KeyError, ValueError, TypeError):
             raise _Bad from None
         if self.topics is not None and name not in self.topics:

@@ -45,8 +45,9 @@ def walk(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str
 
 
 def test_compiled_walk_takes_data_and_sync_messages_up_to_the_first_other() -> None:
-    """``_scan.ulog_data`` directly: data messages written out, sync messages stepped over,
-    stopped by another type, a data message under 2 bytes, ``until``, the end of the
+    """``_scan.ulog_data`` directly: data messages written out, sync messages and ``M`` / ``Q``
+    messages that carry nothing stepped over (``ulog._checked`` on each), stopped by another
+    type, a data message under 2 bytes, ``until``, the end of the
     buffer, or outputs without room (then resumed where it stopped)."""
     walk_fn = pytest.importorskip("mavsid.readers._scan").ulog_data  # (the fixture's
     # "numpy" run hides it from the reader only)
@@ -55,8 +56,12 @@ def test_compiled_walk_takes_data_and_sync_messages_up_to_the_first_other() -> N
         return struct.pack("<HB", len(payload), kind[0]) + payload
 
     d1, d2 = msg(b"D", b"\x01\x00abc"), msg(b"D", b"\x02\x01")
-    sync = msg(b"S", bytes(8))
-    data = d1 + sync + d2 + d1 + msg(b"L", b"x" * 9) + d1 + msg(b"D", b"\x05") + d1
+    # sync, a text and a parameter default that carry nothing (stepped over, as _checked
+    # says), then an M whose value is not 4 bytes: it stops the walk
+    sync = (msg(b"S", bytes(8)) + msg(b"M", b"\x00\x09char[1] ab")
+            + msg(b"Q", b"\x01\x07float x" + bytes(4)))
+    data = d1 + sync + d2 + d1 + msg(b"M", b"\x00\x07float x" + bytes(3)) + d1 + msg(
+        b"D", b"\x05") + d1
 
     def run(start: int, until: int, room: int) -> tuple[list[int], list[int], list[int], int]:
         pos, size, ids_ = np.zeros(room, np.int64), np.zeros(room, np.uint16), np.zeros(
@@ -69,7 +74,7 @@ def test_compiled_walk_takes_data_and_sync_messages_up_to_the_first_other() -> N
     assert run(0, 1 << 40, 8) == ([0, b, c], [5, 2, 5], [1, 0x102, 1], stop_l)
     assert run(0, 1 << 40, 2) == ([0, b], [5, 2], [1, 0x102], c)  # no room: resume at c
     assert run(0, c, 8) == ([0, b], [5, 2], [1, 0x102], c)  # d1 at c would pass until
-    after_l = stop_l + 3 + 9
+    after_l = stop_l + 3 + 12
     assert run(after_l, 1 << 40, 8)[1:] == ([5], [1], after_l + a)  # a 1-byte data message
     assert run(len(data) - a, 1 << 40, 8)[3] == len(data)  # up to the end
     assert run(len(data) - 2, 1 << 40, 8)[3] == len(data) - 2  # no room for a header
@@ -80,6 +85,34 @@ def test_compiled_walk_takes_data_and_sync_messages_up_to_the_first_other() -> N
     with pytest.raises(ValueError):
         walk_fn(data, len(data) + 1, 10, np.zeros(4, np.int64), np.zeros(4, np.uint16),
                 np.zeros(4, np.uint16))
+
+
+def test_compiled_walk_steps_over_the_info_messages_python_checks() -> None:
+    """The compiled walk steps over an ``M`` / ``Q`` message exactly when ``ulog._checked``
+    accepts it: 4 000 random messages near the forms it accepts (texts, 4-byte values, keys
+    cut short or running past the message, spaces and none)."""
+    walk_fn = pytest.importorskip("mavsid.readers._scan").ulog_data
+    rng = np.random.default_rng(7)
+    d1 = struct.pack("<HBH", 5, ord("D"), 1) + b"abc"
+    room = [np.zeros(4, np.int64), np.zeros(4, np.uint16), np.zeros(4, np.uint16)]
+    keys = [b"char[3] a", b"char[3]a", b"char[", b"float x", b"float ", b"floatx",
+            b"int32_t n", b"int32_t", b"int32_tn", b"double d", b""]
+    taken = 0
+    for _ in range(4000):
+        junk = rng.integers(0, 256, rng.integers(0, 3), dtype=np.uint8).tobytes()
+        key = keys[rng.integers(len(keys))] + junk
+        value = rng.integers(0, 256, rng.choice([4, 4, 0, 3, 5]), dtype=np.uint8).tobytes()
+        length = len(key) if rng.random() < 0.6 else (len(key) + rng.integers(-2, 3)) % 256
+        payload = bytes([rng.integers(0, 2), length]) + key + value
+        if rng.random() < 0.3:
+            payload = payload[: rng.integers(len(payload) - 3, len(payload))]
+        info = struct.pack("<HB", len(payload), ord(rng.choice(["M", "Q"]))) + payload
+        data = d1 + info + d1
+        k, _ = walk_fn(data, 0, len(data), *room)
+        want = ulog._checked(data, len(d1), len(d1) + len(info))
+        assert k == (2 if want else 1), (info, want)
+        taken += want
+    assert 400 < taken < 3600, taken  # both outcomes met
 
 
 def pyulog(path: Path, topics: list[str] | None = None) -> tuple[ULog, str]:

@@ -22,6 +22,7 @@
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 #include <stdint.h>
+#include <string.h>
 
 #if defined(__SSE2__) || defined(_M_X64)
 #include <emmintrin.h>
@@ -138,11 +139,31 @@ static PyObject *pairs(PyObject *self, PyObject *args)
     return result;
 }
 
+/* Whether the ULog 'M' or 'Q' message from p to end (a byte, then an info: key length, key
+ * "type name", value) is one pyulog reads without error, seen without decoding it: a text
+ * (type "char[N]") or a 4-byte parameter value; 0: not known to be. As
+ * mavsid.readers.ulog._checked, byte for byte. */
+static int ulog_checked(const uint8_t *a, Py_ssize_t p, Py_ssize_t end)
+{
+    if (end - p < 5)
+        return 0;
+    Py_ssize_t key = p + 5, stop = key + a[p + 4];
+    if (stop > end)
+        return 0;
+    if (stop - key >= 5 && memcmp(a + key, "char[", 5) == 0)
+        return memchr(a + key + 5, ' ', (size_t)(stop - key - 5)) != NULL;
+    if (end - stop != 4)
+        return 0;
+    return (stop - key >= 6 && memcmp(a + key, "float ", 6) == 0) ||
+           (stop - key >= 8 && memcmp(a + key, "int32_t ", 8) == 0);
+}
+
 /* The ULog data walk: from a data message, the messages one after the other (each a uint16
  * size, a type byte, size bytes) as long as they are data messages ('D', size >= 2: their
- * positions, sizes and message ids written out) or sync messages ('S': stepped over), end
- * inside the buffer and no later than `until`. Every other message stops the walk there
- * (the reader reads it in Python, with pyulog's rules), as does an output without room.
+ * positions, sizes and message ids written out), sync messages ('S') or 'M' / 'Q' messages
+ * that carry nothing the reader keeps (ulog_checked; both stepped over), end inside the
+ * buffer and no later than `until`. Every other message stops the walk there (the reader
+ * reads it in Python, with pyulog's rules), as does an output without room.
  *
  * ulog_data(data, start, until, positions, sizes, ids) -> (count, reached)
  *   positions  a writable int64 buffer; sizes and ids writable uint16 buffers
@@ -193,7 +214,8 @@ static PyObject *ulog_data(PyObject *self, PyObject *args)
                 s_out[c] = (uint16_t)length;
                 i_out[c] = (uint16_t)(a[p + 3] | (a[p + 4] << 8));
                 c++;
-            } else if (kind != 'S') {
+            } else if (kind != 'S' &&
+                       !((kind == 'M' || kind == 'Q') && ulog_checked(a, p, end))) {
                 break;
             }
             p = end;
@@ -212,8 +234,9 @@ static PyMethodDef methods[] = {
      "and types; reached is stop, or where the outputs ran out of room."},
     {"ulog_data", ulog_data, METH_VARARGS,
      "ulog_data(data, start, until, positions, sizes, ids) -> (count, reached): the run of "
-     "ULog data (and sync) messages from start, ending by until: the data messages' "
-     "positions, sizes and ids written out; reached is the first message not taken."},
+     "ULog data (and sync, and checked M/Q) messages from start, ending by until: the data "
+     "messages' positions, sizes and ids written out; reached is the first message not "
+     "taken."},
     {NULL, NULL, 0, NULL},
 };
 

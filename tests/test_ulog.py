@@ -115,6 +115,52 @@ def test_compiled_walk_steps_over_the_info_messages_python_checks() -> None:
     assert 400 < taken < 3600, taken  # both outcomes met
 
 
+def _formats_of(path: Path) -> list[bytes]:
+    """The payloads of a ULog's format messages (its definitions section)."""
+    raw, out, pos = path.read_bytes(), [], 16
+    while pos + 3 <= len(raw):
+        size, kind = struct.unpack_from("<HB", raw, pos)
+        if kind in b"ALC":
+            break
+        if kind == ord("F"):
+            out.append(raw[pos + 3 : pos + 3 + size])
+        pos += 3 + size
+    return out
+
+
+def test_the_compiled_format_parser_is_the_python_one() -> None:
+    """``_scan.ulog_format`` gives ``_parse_format``'s objects, or fails where it does: on
+    every format of the shared and fixture ULogs, and on 20 000 of them damaged (bytes
+    replaced by separators, brackets, digits, spaces, non-ASCII and invalid UTF-8)."""
+    scan = pytest.importorskip("mavsid.readers._scan")
+    texts = [t for p in [*ULOGS, *FIXTURE_ULOGS] for t in _formats_of(p)]
+    texts += [b"", b":", b"a:", b"a:;;", b"a:float[]x;", b"a:float[3 x;", b"a:float]3[ x;",
+              b"a:float[-1] x;", b"a:float[65536] x;", b"a:float[65535] x;", b"a:x[ 2 ] y;",
+              b"a:float[2_0] x;", "a:float[\u0663] x;".encode(), b"a:b:c d;", b"a:float  x;"]
+    assert len(texts) > 500
+    rng = np.random.default_rng(3)
+    alphabet = list(b":;[] 0123456789ab\xc3\xa9\xff\x80\xe2")
+    for k in range(20_000):
+        raw = bytearray(texts[k % len(texts)])
+        for _ in range(rng.integers(1, 4)):
+            if raw:
+                raw[rng.integers(len(raw))] = alphabet[rng.integers(len(alphabet))]
+        texts.append(bytes(raw))
+    outcomes = set()
+    for text in texts:
+        try:
+            want: Any = ulog._parse_format(text)
+        except ulog._Bad:
+            want = "bad"
+        try:
+            got: Any = scan.ulog_format(text, ulog._SIZE)
+        except ValueError:
+            got = "bad"
+        assert got == want, text
+        outcomes.add(want == "bad")
+    assert outcomes == {True, False}
+
+
 def pyulog(path: Path, topics: list[str] | None = None) -> tuple[ULog, str]:
     """pyulog's parse and what it printed."""
     printed = io.StringIO()

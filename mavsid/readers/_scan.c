@@ -1,4 +1,5 @@
-/* The two loops of mavsid's readers that numpy does in several passes, compiled. Optional:
+/* The loops of mavsid's readers that numpy does in several passes (or Python one step at a
+ * time), compiled. Optional:
  * where the package is built without a C compiler the readers use their numpy code instead
  * (same results; tests compare the two).
  *
@@ -227,6 +228,143 @@ static PyObject *ulog_data(PyObject *self, PyObject *args)
     return result;
 }
 
+/* A ULog format definition "name:type field;type[n] field;..." parsed as
+ * mavsid.readers.ulog._parse_format does it, to the same objects: the text decoded as UTF-8
+ * (invalid bytes dropped), its name (before the first ':'), its fields (between the first
+ * and the second ':', split at ';', empty items skipped; each "type name ..." split at its
+ * first space, the name the next word; an array "type[n]" with n read as int() reads it)
+ * and its size in bytes when every field's type is in `sizes` (else -1).
+ *
+ * ulog_format(data, sizes) -> (name, ((type, count, name), ...), size)
+ *   sizes  a dict: basic type name -> size in bytes
+ * ValueError where _parse_format raises _Bad (no ':', an item without a space, a count that
+ * is no number or is outside 0..65535). */
+static Py_ssize_t find_char(int kind, const void *d, Py_ssize_t from, Py_ssize_t to,
+                            Py_UCS4 c)
+{
+    for (Py_ssize_t i = from; i < to; i++)
+        if (PyUnicode_READ(kind, d, i) == c)
+            return i;
+    return -1;
+}
+
+static PyObject *format_field(PyObject *text, int kind, const void *d, Py_ssize_t s,
+                              Py_ssize_t e, PyObject *sizes, Py_ssize_t *size)
+{
+    Py_ssize_t sp = find_char(kind, d, s, e, ' ');
+    if (sp < 0) {
+        PyErr_SetString(PyExc_ValueError, "a format field without a space");
+        return NULL;
+    }
+    Py_ssize_t name_end = find_char(kind, d, sp + 1, e, ' ');
+    PyObject *fname = PyUnicode_Substring(text, sp + 1, name_end < 0 ? e : name_end);
+    if (fname == NULL)
+        return NULL;
+    Py_ssize_t a = find_char(kind, d, s, sp, '['), count = 0;
+    PyObject *type;
+    if (a < 0) {
+        type = PyUnicode_Substring(text, s, sp);
+    } else {
+        /* kind[a + 1 : kind.find("]")]: -1 (none) is up to the type's last character */
+        Py_ssize_t rb = find_char(kind, d, s, sp, ']');
+        Py_ssize_t lo = a + 1, hi = rb >= 0 ? rb : sp - 1;
+        if (hi < lo)
+            hi = lo;
+        PyObject *digits = PyUnicode_Substring(text, lo, hi);
+        PyObject *number = digits == NULL ? NULL : PyLong_FromUnicodeObject(digits, 10);
+        Py_XDECREF(digits);
+        if (number == NULL) {
+            Py_DECREF(fname);
+            return NULL;
+        }
+        int overflow = 0;
+        long long value = PyLong_AsLongLongAndOverflow(number, &overflow);
+        Py_DECREF(number);
+        if (overflow || value < 0 || value > 0xFFFF) {
+            Py_DECREF(fname);
+            if (!PyErr_Occurred())
+                PyErr_SetString(PyExc_ValueError, "an array count outside 0..65535");
+            return NULL;
+        }
+        count = (Py_ssize_t)value;
+        type = PyUnicode_Substring(text, s, a);
+    }
+    if (type == NULL) {
+        Py_DECREF(fname);
+        return NULL;
+    }
+    PyObject *width = PyDict_GetItemWithError(sizes, type);
+    if (width == NULL && PyErr_Occurred()) {
+        Py_DECREF(type);
+        Py_DECREF(fname);
+        return NULL;
+    }
+    if (width == NULL || *size < 0) {
+        *size = -1;
+    } else {
+        Py_ssize_t w = PyLong_AsSsize_t(width);
+        if (w == -1 && PyErr_Occurred()) {
+            Py_DECREF(type);
+            Py_DECREF(fname);
+            return NULL;
+        }
+        *size += w * (count ? count : 1);
+    }
+    PyObject *field = Py_BuildValue("(NnN)", type, count, fname);
+    return field;
+}
+
+static PyObject *ulog_format(PyObject *self, PyObject *args)
+{
+    (void)self;
+    Py_buffer data;
+    PyObject *sizes;
+    if (!PyArg_ParseTuple(args, "y*O!:ulog_format", &data, &PyDict_Type, &sizes))
+        return NULL;
+    PyObject *text = PyUnicode_DecodeUTF8((const char *)data.buf, data.len, "ignore");
+    PyBuffer_Release(&data);
+    if (text == NULL)
+        return NULL;
+    PyObject *result = NULL, *name = NULL, *fields = NULL;
+    int kind = PyUnicode_KIND(text);
+    const void *d = PyUnicode_DATA(text);
+    Py_ssize_t n = PyUnicode_GET_LENGTH(text), size = 0;
+    Py_ssize_t c1 = find_char(kind, d, 0, n, ':');
+    if (c1 < 0) {
+        PyErr_SetString(PyExc_ValueError, "a format without ':'");
+        goto done;
+    }
+    Py_ssize_t c2 = find_char(kind, d, c1 + 1, n, ':');
+    if (c2 < 0)
+        c2 = n;
+    name = PyUnicode_Substring(text, 0, c1);
+    fields = PyList_New(0);
+    if (name == NULL || fields == NULL)
+        goto done;
+    for (Py_ssize_t s = c1 + 1; s <= c2;) {
+        Py_ssize_t e = find_char(kind, d, s, c2, ';');
+        if (e < 0)
+            e = c2;
+        if (e > s) {
+            PyObject *field = format_field(text, kind, d, s, e, sizes, &size);
+            if (field == NULL || PyList_Append(fields, field) < 0) {
+                Py_XDECREF(field);
+                goto done;
+            }
+            Py_DECREF(field);
+        }
+        s = e + 1;
+    }
+    PyObject *as_tuple = PyList_AsTuple(fields);
+    if (as_tuple != NULL)
+        result = Py_BuildValue("(ONn)", name, as_tuple, size);
+done:
+    Py_XDECREF(name);
+    Py_XDECREF(fields);
+    Py_DECREF(text);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"pairs", pairs, METH_VARARGS,
      "pairs(data, start, stop, offsets, types) -> (count, reached): the offsets of the "
@@ -237,6 +375,9 @@ static PyMethodDef methods[] = {
      "ULog data (and sync, and checked M/Q) messages from start, ending by until: the data "
      "messages' positions, sizes and ids written out; reached is the first message not "
      "taken."},
+    {"ulog_format", ulog_format, METH_VARARGS,
+     "ulog_format(data, sizes) -> (name, fields, size): a ULog format definition parsed as "
+     "mavsid.readers.ulog._parse_format parses it (ValueError where it raises _Bad)."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -383,7 +383,18 @@ def _parse_format(data: bytes) -> tuple[str, tuple[Field, ...], int]:
     return parts[0], tuple(fields), size
 
 
-_format = _Kept(_parse_format, weight=lambda parsed: len(parsed[1]) + 1)
+def _parsed_format(data: bytes) -> tuple[str, tuple[Field, ...], int]:
+    """:func:`_parse_format`, compiled where the package was (``_scan.ulog_format``: the
+    same objects, ~5x faster; the tests compare the two)."""
+    if _scan is None:
+        return _parse_format(data)
+    try:
+        return _scan.ulog_format(data, _SIZE)
+    except ValueError:
+        raise _Bad from None
+
+
+_format = _Kept(_parsed_format, weight=lambda parsed: len(parsed[1]) + 1)
 
 
 def _u16(u8: NDArray[np.uint8], at: NDArray[np.int64]) -> NDArray[np.uint16]:

@@ -790,3 +790,36 @@ def test_formats_kept_for_the_process_never_mix_two_logs(tmp_path: Path) -> None
             assert sorted(got[0]["att"].columns) == sorted(
                 ["timestamp", "x.a", "x.b"] if name == "two_floats"
                 else ["timestamp", "x.c", "x.d"] + [f"x.e[{i}]" for i in range(4)])
+
+
+def _content(table: Any) -> tuple[Any, bytes, bytes]:
+    """A table's layout and bytes: its records' dtype and bytes, and its times'."""
+    records = table.columns.records
+    return records.dtype.descr, records.tobytes(), table.time_s.tobytes()
+
+
+def test_logs_read_in_threads_with_little_kept_are_each_their_own(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Logs read at once in threads (a threaded Dask worker), with a budget so small that
+    kept formats and layouts are dropped all the time: every read equals the same log's
+    read alone (each compared with pyulog elsewhere)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    require_shared()
+    paths = ULOGS[:6]
+    alone = {}
+    for p in paths:
+        log, _ = read(p)
+        alone[p] = {name: _content(table) for name, table in log.messages.items()}
+    for kept in (ulog._format, ulog._layout, ulog._record_dtype):
+        monkeypatch.setattr(kept, "budget", 400)
+        kept.clear()
+
+    def check(p: Path) -> bool:
+        got = ulog.read(p).messages
+        return {name: _content(table) for name, table in got.items()} == alone[p]
+
+    with warnings.catch_warnings(), ThreadPoolExecutor(6) as pool:  # (corruption warned)
+        warnings.simplefilter("ignore", DataQualityWarning)
+        assert all(pool.map(check, paths * 4))
+    assert all(k.total <= 400 for k in (ulog._format, ulog._layout, ulog._record_dtype))

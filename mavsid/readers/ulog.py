@@ -125,6 +125,7 @@ import mmap
 import os
 import re
 import struct
+import threading
 import warnings
 from collections.abc import Callable, Hashable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -308,6 +309,7 @@ class _Kept(Generic[_A, _R]):
         self.fn, self.weight, self.budget = fn, weight, budget
         self.kept: dict[_A, tuple[_R, int]] = {}
         self.total = 0
+        self.lock = threading.Lock()  # (logs read in threads: a threaded Dask worker)
         functools.update_wrapper(self, fn)
 
     def __call__(self, arg: _A) -> _R:
@@ -317,15 +319,18 @@ class _Kept(Generic[_A, _R]):
         result = self.fn(arg)
         w = self.weight(result)
         if w <= self.budget:
-            while self.total + w > self.budget:
-                self.total -= self.kept.pop(next(iter(self.kept)))[1]
-            self.kept[arg] = result, w
-            self.total += w
+            with self.lock:
+                if arg not in self.kept:
+                    while self.kept and self.total + w > self.budget:
+                        self.total -= self.kept.pop(next(iter(self.kept)))[1]
+                    self.kept[arg] = result, w
+                    self.total += w
         return result
 
     def clear(self) -> None:
-        self.kept.clear()
-        self.total = 0
+        with self.lock:
+            self.kept.clear()
+            self.total = 0
 
 
 @functools.lru_cache(maxsize=64)

@@ -87,32 +87,58 @@ def test_compiled_walk_takes_data_and_sync_messages_up_to_the_first_other() -> N
                 np.zeros(4, np.uint16))
 
 
+INFO_KEYS = [b"char[3] a", b"char[3]a", b"char[", b"float x", b"float ", b"floatx",
+             b"int32_t n", b"int32_t", b"int32_tn", b"double d", b""]
+
+
+def _random_info(rng: np.random.Generator) -> bytes:
+    """An ``M`` or ``Q`` message near the forms ``ulog._checked`` accepts: texts, 4-byte
+    values, keys cut short or running past the message, spaces and none."""
+    junk = rng.integers(0, 256, rng.integers(0, 3), dtype=np.uint8).tobytes()
+    key = INFO_KEYS[rng.integers(len(INFO_KEYS))] + junk
+    value = rng.integers(0, 256, rng.choice([4, 4, 0, 3, 5]), dtype=np.uint8).tobytes()
+    length = len(key) if rng.random() < 0.6 else (len(key) + rng.integers(-2, 3)) % 256
+    payload = bytes([rng.integers(0, 2), length]) + key + value
+    if rng.random() < 0.3:
+        payload = payload[: rng.integers(len(payload) - 3, len(payload))]
+    return struct.pack("<HB", len(payload), ord(rng.choice(["M", "Q"]))) + payload
+
+
 def test_compiled_walk_steps_over_the_info_messages_python_checks() -> None:
     """The compiled walk steps over an ``M`` / ``Q`` message exactly when ``ulog._checked``
-    accepts it: 4 000 random messages near the forms it accepts (texts, 4-byte values, keys
-    cut short or running past the message, spaces and none)."""
+    accepts it (4 000 random ones)."""
     walk_fn = pytest.importorskip("mavsid.readers._scan").ulog_data
     rng = np.random.default_rng(7)
     d1 = struct.pack("<HBH", 5, ord("D"), 1) + b"abc"
     room = [np.zeros(4, np.int64), np.zeros(4, np.uint16), np.zeros(4, np.uint16)]
-    keys = [b"char[3] a", b"char[3]a", b"char[", b"float x", b"float ", b"floatx",
-            b"int32_t n", b"int32_t", b"int32_tn", b"double d", b""]
     taken = 0
     for _ in range(4000):
-        junk = rng.integers(0, 256, rng.integers(0, 3), dtype=np.uint8).tobytes()
-        key = keys[rng.integers(len(keys))] + junk
-        value = rng.integers(0, 256, rng.choice([4, 4, 0, 3, 5]), dtype=np.uint8).tobytes()
-        length = len(key) if rng.random() < 0.6 else (len(key) + rng.integers(-2, 3)) % 256
-        payload = bytes([rng.integers(0, 2), length]) + key + value
-        if rng.random() < 0.3:
-            payload = payload[: rng.integers(len(payload) - 3, len(payload))]
-        info = struct.pack("<HB", len(payload), ord(rng.choice(["M", "Q"]))) + payload
+        info = _random_info(rng)
         data = d1 + info + d1
         k, _ = walk_fn(data, 0, len(data), *room)
         want = ulog._checked(data, len(d1), len(d1) + len(info))
         assert k == (2 if want else 1), (info, want)
         taken += want
     assert 400 < taken < 3600, taken  # both outcomes met
+
+
+def test_compiled_info_runs_end_where_python_checks_stop() -> None:
+    """``_scan.ulog_infos`` (the definitions' runs of ``M`` / ``Q`` messages) ends a run
+    where stepping message by message with ``ulog._checked`` does: 3 000 random runs of 0 to
+    6 of them, then a format message, some with ``until`` inside."""
+    infos = pytest.importorskip("mavsid.readers._scan").ulog_infos
+    rng = np.random.default_rng(11)
+    for _ in range(3000):
+        data = b"".join(_random_info(rng) for _ in range(rng.integers(0, 7)))
+        data += struct.pack("<HB", 4, ord("F")) + b"a:b;"
+        until = len(data) if rng.random() < 0.7 else int(rng.integers(0, len(data) + 1))
+        pos = 0
+        while pos + 3 <= len(data):
+            end = pos + 3 + int.from_bytes(data[pos : pos + 2], "little")
+            if end > until or data[pos + 2] not in b"MQ" or not ulog._checked(data, pos, end):
+                break
+            pos = end
+        assert infos(data, 0, until) == pos, data
 
 
 def _formats_of(path: Path) -> list[bytes]:

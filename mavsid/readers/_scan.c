@@ -228,6 +228,33 @@ static PyObject *ulog_data(PyObject *self, PyObject *args)
     return result;
 }
 
+/* The run of ULog 'M' / 'Q' messages from start that carry nothing the reader keeps
+ * (ulog_checked), each ending by `until`: where it stops (start if none is). The
+ * definitions section has runs of them (texts and defaults the reader only checks).
+ *
+ * ulog_infos(data, start, until) -> reached */
+static PyObject *ulog_infos(PyObject *self, PyObject *args)
+{
+    (void)self;
+    Py_buffer data;
+    Py_ssize_t start, until;
+    if (!PyArg_ParseTuple(args, "y*nn:ulog_infos", &data, &start, &until))
+        return NULL;
+    const uint8_t *a = (const uint8_t *)data.buf;
+    Py_ssize_t n = data.len, p = start < 0 ? 0 : start;
+    if (until > n)
+        until = n;
+    while (p + 3 <= n) {
+        Py_ssize_t end = p + 3 + (Py_ssize_t)(a[p] | (a[p + 1] << 8));
+        uint8_t kind = a[p + 2];
+        if (end > until || !((kind == 'M' || kind == 'Q') && ulog_checked(a, p, end)))
+            break;
+        p = end;
+    }
+    PyBuffer_Release(&data);
+    return PyLong_FromSsize_t(p);
+}
+
 /* A ULog format definition "name:type field;type[n] field;..." parsed as
  * mavsid.readers.ulog._parse_format does it, to the same objects: the text decoded as UTF-8
  * (invalid bytes dropped), its name (before the first ':'), its fields (between the first
@@ -375,6 +402,9 @@ static PyMethodDef methods[] = {
      "ULog data (and sync, and checked M/Q) messages from start, ending by until: the data "
      "messages' positions, sizes and ids written out; reached is the first message not "
      "taken."},
+    {"ulog_infos", ulog_infos, METH_VARARGS,
+     "ulog_infos(data, start, until) -> reached: the end of the run of ULog M / Q messages "
+     "from start that carry nothing (as mavsid.readers.ulog._checked), ending by until."},
     {"ulog_format", ulog_format, METH_VARARGS,
      "ulog_format(data, sizes) -> (name, fields, size): a ULog format definition parsed as "
      "mavsid.readers.ulog._parse_format parses it (ValueError where it raises _Bad)."},

@@ -829,7 +829,8 @@ class _Reader:
             elif kind in (0x41, 0x4C, 0x43):  # A, L, C: the data section begins
                 return pos
             elif (kind == 0x4D or kind == 0x51) and end <= n and _checked(buf, pos, end):
-                pos = end  # M, Q: only checked
+                # M, Q: only checked (the run of them that follows, at once where compiled)
+                pos = end if _scan is None else _scan.ulog_infos(buf, end, n)
                 continue
             data = self.buf[pos + 3 : min(end, n)]
             try:

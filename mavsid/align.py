@@ -412,7 +412,7 @@ def time_outliers(t: np.ndarray, half: int = _OUTLIER_HALF,
     if not jumps.size:
         return out
     # the records within ``half`` of a jump, each against its window's median
-    near = np.unique((jumps[:, None] + np.arange(-half + 1, half + 1)).ravel())
+    near = _sorted_unique((jumps[:, None] + np.arange(-half + 1, half + 1)).ravel())
     near = near[(near >= 0) & (near < t.size)]
     width = min(2 * half + 1, t.size)  # near either end, the window is shifted inwards
     first = np.clip(near - half, 0, t.size - width)
@@ -597,6 +597,23 @@ def _gaps(series: list[_Series], max_gap: float) -> np.ndarray:
     return np.asarray(merged)
 
 
+def _sorted_unique(x: np.ndarray) -> np.ndarray:
+    """``np.unique(x)`` for integers that are nearly sorted already (runs that overlap a
+    little): a stable sort (a merge of the runs) and the repeats dropped. numpy 2's
+    ``np.unique`` hashes first: 0.35 s for the 400 000 grid indices of a 27-min flight,
+    against 0.3 ms.
+
+    Examples
+    --------
+    >>> _sorted_unique(np.array([0, 1, 2, 1, 2, 3, 7, 7])).tolist()
+    [0, 1, 2, 3, 7]
+    """
+    x = np.sort(x, kind="stable")
+    keep = np.ones(x.size, bool)
+    np.not_equal(x[1:], x[:-1], out=keep[1:])
+    return x[keep]
+
+
 def _grid(series: list[_Series], ref: _Series, rate_hz: float | None, max_gap: float,
           path: str = "") -> tuple[np.ndarray, np.ndarray, float]:
     """Uniform grid times, ``[start, stop)`` blocks and the step.
@@ -639,7 +656,7 @@ def _grid(series: list[_Series], ref: _Series, rate_hz: float | None, max_gap: f
             "lower rate_hz"
         )
     starts = np.repeat(k_lo.astype(np.int64) - np.cumsum(counts) + counts, counts)
-    k = np.unique(np.arange(total, dtype=np.int64) + starts)
+    k = _sorted_unique(np.arange(total, dtype=np.int64) + starts)
     t = start + dt * k
     t = t[t <= stop]
     # index of the first gap starting at or after each time; inside a gap when that gap's

@@ -293,6 +293,9 @@ class _Axis:
     y_floor: float = math.nan  # output's 1-s RMS where the input has no power
     injection: np.ndarray | None = None  # SYSTEMID's logged waveform (SIDD.Targ), 0 outside
     command: np.ndarray | None = None  # commanded attitude (rad; yaw: rate), NaN if not logged
+    # the collective thrust, where it was really logged (a constant column was not): judged
+    # once per flight, not per window (a 27-min flight has ~600 windows an axis)
+    thrust: np.ndarray | None = None
 
 
 def _col(fd: FlightData, name: str) -> np.ndarray | None:
@@ -346,7 +349,11 @@ def _axis(fd: FlightData, name: str, opts: ScanOptions, air: np.ndarray) -> _Axi
     injection = np.asarray(inj, dtype=float) if isinstance(inj, np.ndarray) else None
     cmd = dict(fd.meta.get("commanded") or {}).get(name)  # type: ignore[call-overload]
     command = np.asarray(cmd, dtype=float) if isinstance(cmd, np.ndarray) else None
-    return _Axis(name, u, u_hp, y, y_name, u_name, floor, y_hp, y_floor, injection, command)
+    thrust = _col(fd, "u_thrust")
+    if thrust is not None and not np.ptp(thrust) > 1e-6:
+        thrust = None
+    return _Axis(name, u, u_hp, y, y_name, u_name, floor, y_hp, y_floor, injection, command,
+                 thrust)
 
 
 def _highpass(fd: FlightData, x: np.ndarray, opts: ScanOptions) -> np.ndarray:
@@ -547,10 +554,9 @@ def _gates(ax: _Axis, fd: FlightData, i0: int, i1: int, m: Mapping[str, float],
             f"rejected: {ax.u_name} saturated (|u| >= {opts.saturation:g}) for "
             f"{100 * sat.mean():.0f} % of the window (limit {100 * opts.max_saturated:.0f} %)"
         )
-    thr = _col(fd, "u_thrust")
-    if thr is not None:
-        tw = thr[i0:i1][air[i0:i1]]
-        if tw.size and np.ptp(thr) > 1e-6:  # a constant thrust column was not really logged
+    if ax.thrust is not None:
+        tw = ax.thrust[i0:i1][air[i0:i1]]
+        if tw.size:
             ts = (tw >= opts.saturation) | (tw <= 0.02)
             if ts.mean() > opts.max_saturated:
                 out.append(

@@ -332,3 +332,16 @@ def test_the_command_and_the_injection_come_from_the_boot_used():
     np.testing.assert_allclose(cmd["roll"], np.radians(5 * np.sin(fd.time_s)), atol=1e-4)
     np.testing.assert_allclose(cmd["yaw"], 0.5, atol=1e-6)
     assert np.allclose(fd.meta["sysid_injection"], 1.0)
+
+
+def test_sorted_unique_is_numpys_unique_on_overlapping_runs() -> None:
+    """The grid's indices (ascending runs that overlap at their ends) made unique without
+    numpy's hashing: the same as ``np.unique`` on 200 random sets of runs."""
+    from mavsid.align import _sorted_unique
+
+    rng = np.random.default_rng(5)
+    for _ in range(200):
+        runs = [np.arange(lo, lo + rng.integers(0, 40))
+                for lo in np.cumsum(rng.integers(-3, 30, rng.integers(0, 12)))]
+        x = np.concatenate([np.zeros(0, np.int64), *runs]).astype(np.int64)
+        assert np.array_equal(_sorted_unique(x), np.unique(x))

@@ -241,3 +241,31 @@ def test_cli_segments_text_and_errors(capsys, tmp_path):
     bad.write_text("[preset.x\n", encoding="utf-8")
     assert main(["segments", str(path), "--preset", str(bad)]) == 1
     assert "not valid TOML" in capsys.readouterr().err
+
+
+def test_gram_condition_and_correlation_are_lapacks() -> None:
+    """Each window's Gram condition, input share and correlation (closed forms of a 2x2)
+    against numpy's ``eigvalsh`` and ``corrcoef`` of the same regressors: the rate and its
+    input centred, the rate scaled by its spread, the input by the spread of all attitude
+    inputs in the window."""
+    fd = load_flight(FIXTURES / "doublets.bin")
+    checked = 0
+    for axis in AXES:
+        for rep in find_segments(fd, axis, scan=True):
+            m, i0, i1 = rep.metrics, rep.i0, rep.i1
+            if "input_share" not in m:
+                continue
+            y = fd.states[i0:i1, fd.state_names.index({"roll": "p", "pitch": "q",
+                                                       "yaw": "r"}[axis])]
+            u = fd.inputs[i0:i1, fd.input_names.index(f"u_{axis}")]
+            ref = np.sqrt(np.mean([np.var(fd.inputs[i0:i1, fd.input_names.index(f"u_{a}")])
+                                   for a in AXES]))
+            phi = np.column_stack([y - y.mean(), u - u.mean()])
+            z = phi / np.array([phi[:, 0].std(), ref])
+            ev = np.linalg.eigvalsh(z.T @ z / z.shape[0])
+            assert m["condition"] == pytest.approx(ev[-1] / ev[0], rel=1e-9)
+            assert m["correlation"] == pytest.approx(np.corrcoef(phi.T)[0, 1], rel=1e-9,
+                                                     abs=1e-12)
+            assert m["input_share"] == pytest.approx(u.std() / ref, rel=1e-12)
+            checked += 1
+    assert checked >= 10

@@ -477,7 +477,8 @@ def _metrics_raw(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions,
     if syy > 0 and ref > 0:
         # the Gram [[1, b], [b, d]] of [y / its spread, u / ref], its eigenvalues in closed
         # form (a window's 2x2 eigvalsh and corrcoef cost ~0.4 ms; a long flight has
-        # thousands of windows); the smaller one as det / the larger, without cancellation
+        # thousands of windows); the smaller one as det / the larger, not as the difference
+        # of two nearly equal terms
         b, d = syu / math.sqrt(syy) / ref, suu / ref**2
         hi = (1 + d) / 2 + math.hypot((1 - d) / 2, b)
         lo = (d - b * b) / hi

@@ -375,10 +375,13 @@ def _envelope(fd: FlightData, x_hp: np.ndarray) -> np.ndarray:
 
 
 def _metrics(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions,
-             band: tuple[float, float] | None = None) -> dict[str, float]:
-    """Excitation metrics of samples ``[i0, i1)`` for one axis (``band``: a SYSTEMID run's)."""
+             band: tuple[float, float] | None = None,
+             segments: Mapping[str, np.ndarray] | None = None) -> dict[str, float]:
+    """Excitation metrics of samples ``[i0, i1)`` for one axis (``band``: a SYSTEMID run's;
+    ``segments``: the window's Welch segments' transforms, :func:`_window_segments`)."""
     with np.errstate(divide="ignore", invalid="ignore"):  # constant signals give NaN, handled
-        spectra: dict[str, np.ndarray] = {}  # the output's, measured once for both coherences
+        # the signals' segment transforms and the output's spectrum, each measured once
+        spectra: dict[str, np.ndarray] = dict(segments or {})
         out = _metrics_raw(ax, fd, i0, i1, opts, spectra)
         if ax.y_hp is not None and i1 - i0 >= 8:
             out["response_rms"] = float(np.sqrt(np.mean(ax.y_hp[i0:i1] ** 2)))
@@ -388,20 +391,42 @@ def _metrics(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions,
             out.update(_injection_metrics(ax, fd, i0, i1, opts, band, spectra))
         elif (ax.command is not None and ax.y is not None and i1 - i0 >= 8
               and np.isfinite(ax.command[i0:i1]).all()):
-            got = _referenced(ax.command[i0:i1], ax.y[i0:i1], fd, opts, opts.band_hz, spectra)
+            got = _referenced(ax.command[i0:i1], ax.y[i0:i1], fd, opts, opts.band_hz, spectra,
+                              "command")
             out.update({f"command_{k}": v for k, v in got.items() if k in ("coherence",
                                                                              "coverage")})
         return out
 
 
-def _coherence(x: np.ndarray, pxx: np.ndarray, y: np.ndarray, fs: float, nper: int,
+def _segments(spectra: dict[str, np.ndarray], key: str, x: np.ndarray, nper: int
+              ) -> np.ndarray:
+    """The transforms of ``x``'s Welch segments (:func:`mavsid.dsp.segment_ffts`, linear
+    detrend), as ``spectra[key]`` holds them (:func:`_window_segments`) or measured now and
+    kept there."""
+    got = spectra.get(key)
+    if got is None:
+        got = spectra[key] = dsp.segment_ffts(x, min(nper, x.size), detrend=detrend_linear)
+    return got
+
+
+def _welch(spectra: dict[str, np.ndarray], key: str, x: np.ndarray, fs: float, nper: int
+           ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`mavsid.dsp.welch` of ``x`` (linear detrend) from its :func:`_segments`."""
+    n = min(nper, x.size)
+    s = _segments(spectra, key, x, nper)
+    return np.fft.rfftfreq(n, 1.0 / fs), dsp.density(s, s, fs, n).real
+
+
+def _coherence(x: np.ndarray, key: str, pxx: np.ndarray, y: np.ndarray, fs: float, nper: int,
                spectra: dict[str, np.ndarray]) -> np.ndarray:
     """``scipy.signal.coherence(x, y)`` (linear detrend: :func:`mavsid.data.detrend_linear`)
-    from ``x``'s spectrum ``pxx`` already measured and ``y``'s kept in ``spectra``: the same
-    numbers without measuring them again."""
+    from ``x``'s spectrum ``pxx`` already measured and the segments of ``x`` (``key``) and
+    ``y`` (``"y"``) and ``y``'s spectrum kept in ``spectra``: the same numbers without
+    measuring them again."""
     if "pyy" not in spectra:
-        spectra["pyy"] = dsp.welch(y, fs, nper, detrend=detrend_linear)[1]
-    _, pxy = dsp.csd(x, y, fs, nper, detrend=detrend_linear)
+        spectra["pyy"] = _welch(spectra, "y", y, fs, nper)[1]
+    n = min(nper, x.size)
+    pxy = dsp.density(_segments(spectra, key, x, nper), _segments(spectra, "y", y, nper), fs, n)
     return np.asarray(np.abs(pxy) ** 2 / pxx / spectra["pyy"])
 
 
@@ -410,16 +435,18 @@ def _injection_metrics(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOp
                        spectra: dict[str, np.ndarray] | None = None) -> dict[str, float]:
     """Level, band and output coherence of SYSTEMID's logged injection in ``[i0, i1)``."""
     assert ax.injection is not None and ax.y is not None
-    got = _referenced(ax.injection[i0:i1], ax.y[i0:i1], fd, opts, band, spectra)
+    got = _referenced(ax.injection[i0:i1], ax.y[i0:i1], fd, opts, band, spectra, "injection")
     return {f"injection_{k}": v for k, v in got.items()}
 
 
 def _referenced(v: np.ndarray, y: np.ndarray, fd: FlightData, opts: ScanOptions,
                 band: tuple[float, float] | None,
-                spectra: dict[str, np.ndarray] | None = None) -> dict[str, float]:
-    """A reference ``v``'s RMS, band (``lo_hz``, ``hi_hz``), and the output ``y``'s
-    ``coherence`` with it (weighted by its PSD) and ``coverage`` (log-frequency share of
-    the band where that coherence reaches ``min_coherence``); {} for a silent reference."""
+                spectra: dict[str, np.ndarray] | None = None, key: str = "v"
+                ) -> dict[str, float]:
+    """A reference ``v``'s (``key`` in ``spectra``) RMS, band (``lo_hz``, ``hi_hz``), and the
+    output ``y``'s ``coherence`` with it (weighted by its PSD) and ``coverage``
+    (log-frequency share of the band where that coherence reaches ``min_coherence``); {}
+    for a silent reference."""
     spectra = {} if spectra is None else spectra
     rms = float(np.sqrt(np.mean(v**2)))
     if not rms > 0:
@@ -429,8 +456,8 @@ def _referenced(v: np.ndarray, y: np.ndarray, fd: FlightData, opts: ScanOptions,
     f_lo, f_hi = max(f_lo, 2.0 / (v.size * fd.dt)), min(f_hi, 0.4 * fs)
     out = {"rms": rms, "lo_hz": f_lo, "hi_hz": f_hi}
     nper = int(min(v.size, max(16, round(2.0 * fs))))
-    f, pvv = dsp.welch(v, fs, nper, detrend=detrend_linear)
-    coh = _coherence(v, pvv, y, fs, nper, spectra)
+    f, pvv = _welch(spectra, key, v, fs, nper)
+    coh = _coherence(v, key, pvv, y, fs, nper, spectra)
     sel = (f >= f_lo) & (f <= f_hi)
     if sel.sum() < 2 or not pvv[sel].sum() > 0:
         out["coherence"] = 0.0
@@ -457,14 +484,15 @@ def _metrics_raw(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions,
     out["band_lo_hz"], out["band_hi_hz"] = f_lo, f_hi
     nper = int(min(u.size, max(16, round(2.0 * fs))))
     if f_hi > f_lo:
-        f, puu = dsp.welch(u, fs, nper, detrend=detrend_linear)
+        spectra = {} if spectra is None else spectra
+        f, puu = _welch(spectra, "u", u, fs, nper)
         band = (f >= f_lo) & (f <= f_hi)
         if band.sum() >= 2:
             w = np.zeros_like(f)
             w[band] = 1.0 / f[band]  # log-frequency weighting
             white = ax.floor**2 / (fs / 2)
             out["coverage"] = float(np.sum(w * (puu > 10 * white)) / np.sum(w))
-            coh = _coherence(u, puu, y, fs, nper, {} if spectra is None else spectra)
+            coh = _coherence(u, "u", puu, y, fs, nper, spectra)
             wp = puu * band
             out["coherence"] = float(np.sum(wp * np.nan_to_num(coh)) / np.sum(wp)) if wp.sum(
             ) > 0 else 0.0
@@ -665,12 +693,13 @@ def _kept_reason(ax: _Axis, m: Mapping[str, float]) -> str:
 
 
 def _report(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions, air: np.ndarray,
-            source: str, meta: Mapping[str, Any]) -> WindowReport:
+            source: str, meta: Mapping[str, Any],
+            segments: Mapping[str, np.ndarray] | None = None) -> WindowReport:
     band = None
     sysid = meta.get("sysid") if source == "sysid" else None
     if isinstance(sysid, Mapping) and "f_start_hz" in sysid and "f_stop_hz" in sysid:
         band = (float(sysid["f_start_hz"]), float(sysid["f_stop_hz"]))
-    m = _metrics(ax, fd, i0, i1, opts, band)
+    m = _metrics(ax, fd, i0, i1, opts, band, segments)
     reasons = _gates(ax, fd, i0, i1, m, opts, air, source == "scan")
     kept = not reasons
     if kept:
@@ -776,6 +805,32 @@ def _trim(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions) -> tup
     return (i0 + a, i0 + b) if b - a >= n else (i0, i1)
 
 
+#: windows whose segments are transformed in one call (bounds the transforms kept: ~4 MB)
+_BATCH = 64
+
+
+def _window_segments(ax: _Axis, fd: FlightData, starts: Sequence[int], win: int
+                     ) -> list[dict[str, np.ndarray]]:
+    """For windows of ``win`` samples at ``starts``: the transforms of the Welch segments
+    (:func:`mavsid.dsp.segment_ffts`, linear detrend) of the input, output, command and
+    injection, each window's as :func:`_segments` measures them alone, all made in one call
+    per signal (a long flight has thousands of windows; one call each cost ~0.3 ms)."""
+    fs = 1.0 / fd.dt
+    nper = int(min(win, max(16, round(2.0 * fs))))  # as _metrics_raw and _referenced take it
+    hop = nper - nper // 2
+    count = (win - nper) // hop + 1
+    at = (np.asarray(starts, np.int64)[:, None] + hop * np.arange(count)).ravel()
+    out: list[dict[str, np.ndarray]] = [{} for _ in starts]
+    for key, x in (("u", ax.u), ("y", ax.y), ("command", ax.command),
+                   ("injection", ax.injection)):
+        if x is None:
+            continue
+        rows = dsp.segment_ffts(x, nper, detrend=detrend_linear, starts=at)
+        for k, one in enumerate(out):
+            one[key] = rows[k * count : (k + 1) * count]
+    return out
+
+
 def _scan_windows(fd: FlightData, ax: _Axis, opts: ScanOptions, air: np.ndarray,
                   exclude: Sequence[tuple[int, int]]) -> list[WindowReport]:
     win = max(8, round(opts.window_s / fd.dt))
@@ -789,11 +844,14 @@ def _scan_windows(fd: FlightData, ax: _Axis, opts: ScanOptions, air: np.ndarray,
             starts = list(range(a, b - win + 1, step))
             if starts[-1] + win < b:
                 starts.append(b - win)
-        for s in starts:
-            e = min(b, s + win)
-            if any(s < x1 and x0 < e for x0, x1 in exclude):
-                continue
-            reports.append(_report(ax, fd, s, e, opts, air, "scan", {}))
+        starts = [s for s in starts if not any(s < x1 and x0 < min(b, s + win)
+                                               for x0, x1 in exclude)]
+        for k in range(0, len(starts), _BATCH):
+            batch = starts[k : k + _BATCH]
+            full = ax.u is not None and ax.y is not None and b - a >= win
+            segments = _window_segments(ax, fd, batch, win) if full else [{} for _ in batch]
+            for s, seg in zip(batch, segments, strict=True):
+                reports.append(_report(ax, fd, s, min(b, s + win), opts, air, "scan", {}, seg))
     return _merge(fd, ax, reports, opts, air)
 
 

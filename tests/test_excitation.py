@@ -4,6 +4,7 @@ excitation windows, the SITL SYSTEMID flight, every shared log."""
 from __future__ import annotations
 
 import json
+import math
 import warnings
 
 import numpy as np
@@ -269,3 +270,26 @@ def test_gram_condition_and_correlation_are_lapacks() -> None:
             assert m["input_share"] == pytest.approx(u.std() / ref, rel=1e-12)
             checked += 1
     assert checked >= 10
+
+
+@pytest.mark.parametrize("name", ["doublets.bin", "sysid_roll.bin", "px4_hexa_doublets.ulg"])
+def test_windows_measured_together_are_measured_as_alone(name: str,
+                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    """The scan transforms its windows' Welch segments in one call per signal and batch of
+    windows: every window's metrics, verdict and reasons are those of the window measured
+    alone, number for number (input, output and the command's or injection's coherence)."""
+    from mavsid import excitation
+
+    fd = load_flight(FIXTURES / name)
+    together = find_segments(fd, scan=True)
+    monkeypatch.setattr(excitation, "_window_segments",
+                        lambda ax, fd, starts, win: [{} for _ in starts])
+    alone = find_segments(fd, scan=True)
+    assert len(together) > 5
+    assert name != "px4_hexa_doublets.ulg" or any("command_coherence" in r.metrics
+                                                 for r in together)
+    for a, b in zip(together, alone, strict=True):
+        assert (a.axis, a.i0, a.i1, a.kept, a.reasons) == (b.axis, b.i0, b.i1, b.kept, b.reasons)
+        assert a.metrics.keys() == b.metrics.keys()
+        for key, value in a.metrics.items():
+            assert value == b.metrics[key] or (math.isnan(value) and math.isnan(b.metrics[key]))

@@ -398,6 +398,17 @@ def _metrics(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions,
         return out
 
 
+def _nper(n: int, fs: float) -> int:
+    """The Welch segment length of a window of ``n`` samples: 2 s (16 samples at least),
+    the whole window if shorter (one value for every signal, so that
+    :func:`_window_segments` and a window measured alone take the same segments).
+
+    >>> _nper(2000, 400.0), _nper(500, 400.0), _nper(100, 5.0)
+    (800, 500, 16)
+    """
+    return int(min(n, max(16, round(2.0 * fs))))
+
+
 def _segments(spectra: dict[str, np.ndarray], key: str, x: np.ndarray, nper: int
               ) -> np.ndarray:
     """The transforms of ``x``'s Welch segments (:func:`mavsid.dsp.segment_ffts`, linear
@@ -432,7 +443,7 @@ def _coherence(x: np.ndarray, key: str, pxx: np.ndarray, y: np.ndarray, fs: floa
 
 def _injection_metrics(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions,
                        band: tuple[float, float] | None,
-                       spectra: dict[str, np.ndarray] | None = None) -> dict[str, float]:
+                       spectra: dict[str, np.ndarray]) -> dict[str, float]:
     """Level, band and output coherence of SYSTEMID's logged injection in ``[i0, i1)``."""
     assert ax.injection is not None and ax.y is not None
     got = _referenced(ax.injection[i0:i1], ax.y[i0:i1], fd, opts, band, spectra, "injection")
@@ -441,13 +452,11 @@ def _injection_metrics(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOp
 
 def _referenced(v: np.ndarray, y: np.ndarray, fd: FlightData, opts: ScanOptions,
                 band: tuple[float, float] | None,
-                spectra: dict[str, np.ndarray] | None = None, key: str = "v"
-                ) -> dict[str, float]:
+                spectra: dict[str, np.ndarray], key: str) -> dict[str, float]:
     """A reference ``v``'s (``key`` in ``spectra``) RMS, band (``lo_hz``, ``hi_hz``), and the
     output ``y``'s ``coherence`` with it (weighted by its PSD) and ``coverage``
     (log-frequency share of the band where that coherence reaches ``min_coherence``); {}
     for a silent reference."""
-    spectra = {} if spectra is None else spectra
     rms = float(np.sqrt(np.mean(v**2)))
     if not rms > 0:
         return {}
@@ -455,7 +464,7 @@ def _referenced(v: np.ndarray, y: np.ndarray, fd: FlightData, opts: ScanOptions,
     f_lo, f_hi = band if band is not None else opts.band_hz
     f_lo, f_hi = max(f_lo, 2.0 / (v.size * fd.dt)), min(f_hi, 0.4 * fs)
     out = {"rms": rms, "lo_hz": f_lo, "hi_hz": f_hi}
-    nper = int(min(v.size, max(16, round(2.0 * fs))))
+    nper = _nper(v.size, fs)
     f, pvv = _welch(spectra, key, v, fs, nper)
     coh = _coherence(v, key, pvv, y, fs, nper, spectra)
     sel = (f >= f_lo) & (f <= f_hi)
@@ -482,7 +491,7 @@ def _metrics_raw(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions,
     out["power_ratio"] = rms / ax.floor
     f_lo, f_hi = opts.band_hz[0], min(opts.band_hz[1], 0.4 * fs)
     out["band_lo_hz"], out["band_hi_hz"] = f_lo, f_hi
-    nper = int(min(u.size, max(16, round(2.0 * fs))))
+    nper = _nper(u.size, fs)
     if f_hi > f_lo:
         spectra = {} if spectra is None else spectra
         f, puu = _welch(spectra, "u", u, fs, nper)
@@ -816,7 +825,7 @@ def _window_segments(ax: _Axis, fd: FlightData, starts: Sequence[int], win: int
     injection, each window's as :func:`_segments` measures them alone, all made in one call
     per signal (a long flight has thousands of windows; one call each cost ~0.3 ms)."""
     fs = 1.0 / fd.dt
-    nper = int(min(win, max(16, round(2.0 * fs))))  # as _metrics_raw and _referenced take it
+    nper = _nper(win, fs)
     hop = nper - nper // 2
     count = (win - nper) // hop + 1
     at = (np.asarray(starts, np.int64)[:, None] + hop * np.arange(count)).ravel()
@@ -846,9 +855,9 @@ def _scan_windows(fd: FlightData, ax: _Axis, opts: ScanOptions, air: np.ndarray,
                 starts.append(b - win)
         starts = [s for s in starts if not any(s < x1 and x0 < min(b, s + win)
                                                for x0, x1 in exclude)]
+        full = ax.u is not None and ax.y is not None and b - a >= win  # windows of win
         for k in range(0, len(starts), _BATCH):
             batch = starts[k : k + _BATCH]
-            full = ax.u is not None and ax.y is not None and b - a >= win
             segments = _window_segments(ax, fd, batch, win) if full else [{} for _ in batch]
             for s, seg in zip(batch, segments, strict=True):
                 reports.append(_report(ax, fd, s, min(b, s + win), opts, air, "scan", {}, seg))

@@ -956,7 +956,6 @@ class _Reader:
         subscriptions allow; each block's candidates are found when the walk gets there
         (:meth:`load`), so that memory stays bounded whatever the file holds."""
         self.start = start
-        self.widths = _widths(self.out.formats, self.out.basic_sizes)
         self.lo = self.hi = -1  # the block whose candidates are loaded
         self.cand = np.zeros(0, np.int64)
         self.csize = self.cmsg = np.zeros(0, np.uint16)
@@ -967,7 +966,8 @@ class _Reader:
         """The data message sizes the file's formats allow, any message id (a filter only):
         made when :meth:`load` first needs it (the compiled walk has no candidates)."""
         out = np.zeros(1 << 16, bool)
-        out[list(_sizes(self.out.formats, self.widths))] = True
+        widths = _widths(self.out.formats, self.out.basic_sizes)
+        out[list(_sizes(self.out.formats, widths))] = True
         return out
 
     def load(self, pos: int) -> None:

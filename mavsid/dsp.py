@@ -10,7 +10,8 @@ compares them); none has that function's full set of options, only those mavsid 
   ``scipy.signal.lfilter``'s initial conditions ``zi`` (its transposed direct form II: ``zi``
   adds to the right-hand side of the first samples).
 - :func:`butter_lowpass` and :func:`lfilter_zi`: a digital Butterworth low-pass by the
-  bilinear transform of the prewarped analog prototype, and its steady-state state.
+  bilinear transform of the prewarped analog prototype, and its steady-state state;
+  :class:`Lowpass2p`, the autopilots' streaming second-order one (gyro, rate derivative).
 - :func:`segment_ffts`, :func:`density`, :func:`welch` and :func:`csd`: Welch's averaged,
   periodic-Hann-windowed, density-scaled one-sided spectra; the transforms of a signal's
   windows taken once serve every spectrum that signal is part of.
@@ -32,9 +33,10 @@ import numpy as np
 from scipy import linalg
 
 from mavsid.data import demean
+from mavsid.errors import ConfigError
 
-__all__ = ["butter_lowpass", "csd", "density", "hann", "lfilter", "lfilter_zi",
-           "segment_ffts", "tf2ss", "tukey", "welch"]
+__all__ = ["Lowpass2p", "butter_lowpass", "csd", "density", "hann", "lfilter", "lfilter_zi",
+           "lowpass2p_coefficients", "segment_ffts", "tf2ss", "tukey", "welch"]
 
 
 def lfilter(b: Sequence[complex] | np.ndarray, a: Sequence[complex] | np.ndarray,
@@ -96,6 +98,60 @@ def butter_lowpass(order: int, cutoff_hz: float, fs: float) -> tuple[np.ndarray,
     b, a = np.asarray(b, float), np.asarray(a, float)
     b.flags.writeable = a.flags.writeable = False
     return b, a
+
+
+def lowpass2p_coefficients(cutoff_hz: float, sample_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    """Biquad ``(b, a)`` of a second-order Butterworth low pass (bilinear, pre-warped).
+
+    This is the filter ArduPilot applies to the gyro (``INS_GYRO_FILTER``) and PX4 to the
+    rate derivative (``IMU_DGYRO_CUTOFF``); raises :class:`~mavsid.errors.ConfigError` for a
+    cut-off outside ``(0, sample_hz / 2)``.
+
+    Examples
+    --------
+    >>> b, a = lowpass2p_coefficients(20.0, 400.0)
+    >>> round(float(b.sum() / a.sum()), 6)   # unit DC gain
+    1.0
+    """
+    if not 0 < cutoff_hz < sample_hz / 2:
+        raise ConfigError(f"gyro filter cutoff {cutoff_hz} Hz must lie in (0, {sample_hz / 2})")
+    b, a = butter_lowpass(2, cutoff_hz, sample_hz)  # bilinear transform, pre-warped
+    return b.copy(), a.copy()
+
+
+class Lowpass2p:
+    """Streaming biquad (direct form II) over vectors, started at steady state on the first
+    sample as ArduPilot's ``LowPassFilter2p`` is (a cut-off of 0: no filter).
+
+    Examples
+    --------
+    >>> f = Lowpass2p(20.0, 400.0, 1)
+    >>> [round(float(f(np.array([v]))[0]), 4) for v in (1.0, 1.0, 0.0, 0.0)]
+    [1.0, 1.0, 0.9799, 0.9084]
+    """
+
+    def __init__(self, cutoff_hz: float, sample_hz: float, width: int) -> None:
+        self.enabled = cutoff_hz > 0
+        self.b, self.a = (
+            lowpass2p_coefficients(cutoff_hz, sample_hz) if self.enabled
+            else (np.array([1.0, 0, 0]), np.array([1.0, 0, 0]))
+        )
+        self.d1 = np.zeros(width)
+        self.d2 = np.zeros(width)
+        self.started = False
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        if not self.enabled:
+            return np.array(x, dtype=float)
+        b, a = self.b, self.a
+        if not self.started:
+            # delay elements at the steady state for a constant input x
+            self.d1 = self.d2 = x / (1.0 + a[1] + a[2])
+            self.started = True
+        d0 = x - a[1] * self.d1 - a[2] * self.d2
+        y = b[0] * d0 + b[1] * self.d1 + b[2] * self.d2
+        self.d2, self.d1 = self.d1, d0
+        return np.asarray(y, dtype=float)
 
 
 def lfilter_zi(b: np.ndarray, a: np.ndarray) -> np.ndarray:

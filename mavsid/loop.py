@@ -268,13 +268,11 @@ class PX4RatePID:
     """
 
     def __init__(self, gains: PX4RateGains, dt: float) -> None:
-        from mavsid.synthetic.plant import Lowpass2p
-
         self.g = gains
         self.dt = dt
         fs = 1.0 / dt
         cut = gains.dgyro_hz if 0 < gains.dgyro_hz < 0.5 * fs else 0.0
-        self.accel_filter = Lowpass2p(cut, fs, 1)
+        self.accel_filter = dsp.Lowpass2p(cut, fs, 1)
         self.integ = 0.0
         self.last = 0.0
         self.reset = True
@@ -1516,11 +1514,9 @@ def _controller_tf(g: RateGains | PX4RateGains, step: float) -> tuple[Any, Any]:
     integ = control.tf([step, 0.0], [1.0, -1.0], step)  # dt / (1 - z^-1)
     deriv = control.tf([1.0, -1.0], [step, 0.0], step)  # (1 - z^-1) / dt
     if isinstance(g, PX4RateGains):
-        from mavsid.synthetic.plant import lowpass2p_coefficients
-
         fd = one
         if 0 < g.dgyro_hz < 0.5 / step:
-            b, a = lowpass2p_coefficients(g.dgyro_hz, 1.0 / step)
+            b, a = dsp.lowpass2p_coefficients(g.dgyro_hz, 1.0 / step)
             fd = control.tf(list(b), list(a), step)
         pi = g.k * g.p * one + g.k * g.i * integ
         return pi + g.k * g.d * fd * deriv, pi + g.ff * one
@@ -1587,9 +1583,7 @@ def _controller_polys(g: RateGains | PX4RateGains, step: float) -> tuple[_Poly, 
     if isinstance(g, PX4RateGains):
         fd = one
         if 0 < g.dgyro_hz < 0.5 / step:
-            from mavsid.synthetic.plant import lowpass2p_coefficients
-
-            b, a = lowpass2p_coefficients(g.dgyro_hz, 1.0 / step)
+            b, a = dsp.lowpass2p_coefficients(g.dgyro_hz, 1.0 / step)
             fd = (np.asarray(b, dtype=float), np.asarray(a, dtype=float))
         pi = _tf_add(_tf_gain(g.k * g.p, one), _tf_gain(g.k * g.i, integ))
         fb = _tf_add(pi, _tf_gain(g.k * g.d, _tf_mul(fd, deriv)))

@@ -35,14 +35,16 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
-from scipy.signal import butter, cont2discrete
+from scipy.signal import cont2discrete
 
+from mavsid.dsp import Lowpass2p, lowpass2p_coefficients
 from mavsid.errors import ConfigError
 
 __all__ = [
     "AXES",
     "VEHICLES",
     "DiscretePlant",
+    "Lowpass2p",
     "PlantParams",
     "discretise",
     "lowpass2p_coefficients",
@@ -259,45 +261,6 @@ def discretise(p: PlantParams, dt: float) -> DiscretePlant:
         phi=phi, gamma_prev=phi_late @ g_early, gamma_now=g_late, gamma_w=gw,
         delay_steps=n, dt=dt, n_state=a.shape[0],
     )
-
-
-def lowpass2p_coefficients(cutoff_hz: float, sample_hz: float) -> tuple[np.ndarray, np.ndarray]:
-    """Biquad ``(b, a)`` of a second-order Butterworth low pass (bilinear, pre-warped).
-
-    This is the filter ArduPilot applies to the gyro (``INS_GYRO_FILTER``).
-    """
-    if not 0 < cutoff_hz < sample_hz / 2:
-        raise ConfigError(f"gyro filter cutoff {cutoff_hz} Hz must lie in (0, {sample_hz / 2})")
-    b, a = butter(2, cutoff_hz, fs=sample_hz)  # bilinear transform, pre-warped at the cutoff
-    return np.asarray(b, dtype=float), np.asarray(a, dtype=float)
-
-
-class Lowpass2p:
-    """Streaming biquad (direct form II) over vectors, started at steady state on the first
-    sample as ArduPilot's filter is."""
-
-    def __init__(self, cutoff_hz: float, sample_hz: float, width: int) -> None:
-        self.enabled = cutoff_hz > 0
-        self.b, self.a = (
-            lowpass2p_coefficients(cutoff_hz, sample_hz) if self.enabled
-            else (np.array([1.0, 0, 0]), np.array([1.0, 0, 0]))
-        )
-        self.d1 = np.zeros(width)
-        self.d2 = np.zeros(width)
-        self.started = False
-
-    def __call__(self, x: np.ndarray) -> np.ndarray:
-        if not self.enabled:
-            return np.array(x, dtype=float)
-        b, a = self.b, self.a
-        if not self.started:
-            # delay elements at the steady state for a constant input x
-            self.d1 = self.d2 = x / (1.0 + a[1] + a[2])
-            self.started = True
-        d0 = x - a[1] * self.d1 - a[2] * self.d2
-        y = b[0] * d0 + b[1] * self.d1 + b[2] * self.d2
-        self.d2, self.d1 = self.d1, d0
-        return np.asarray(y, dtype=float)
 
 
 def lowpass2p_filter(x: np.ndarray, cutoff_hz: float, sample_hz: float) -> np.ndarray:

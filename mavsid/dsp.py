@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 from scipy import linalg
@@ -136,22 +137,30 @@ class Lowpass2p:
             lowpass2p_coefficients(cutoff_hz, sample_hz) if self.enabled
             else (np.array([1.0, 0, 0]), np.array([1.0, 0, 0]))
         )
-        self.d1 = np.zeros(width)
-        self.d2 = np.zeros(width)
+        self._k = tuple(float(v) for v in (*self.b, self.a[1], self.a[2]))
+        self.d1: Any = np.zeros(width)
+        self.d2: Any = np.zeros(width)
         self.started = False
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         if not self.enabled:
             return np.array(x, dtype=float)
-        b, a = self.b, self.a
+        return np.asarray(self.advance(x), dtype=float)
+
+    def advance(self, x: Any) -> Any:
+        """One step of a vector or of a single float (a float out: a controller replayed
+        sample by sample, ~10× faster than through one-element arrays)."""
+        if not self.enabled:
+            return x
+        b0, b1, b2, a1, a2 = self._k
         if not self.started:
             # delay elements at the steady state for a constant input x
-            self.d1 = self.d2 = x / (1.0 + a[1] + a[2])
+            self.d1 = self.d2 = x / (1.0 + a1 + a2)
             self.started = True
-        d0 = x - a[1] * self.d1 - a[2] * self.d2
-        y = b[0] * d0 + b[1] * self.d1 + b[2] * self.d2
+        d0 = x - a1 * self.d1 - a2 * self.d2
+        y = b0 * d0 + b1 * self.d1 + b2 * self.d2
         self.d2, self.d1 = self.d1, d0
-        return np.asarray(y, dtype=float)
+        return y
 
 
 def lfilter_zi(b: np.ndarray, a: np.ndarray) -> np.ndarray:

@@ -283,7 +283,7 @@ class PX4RatePID:
         if self.reset:
             self.last = measured
             self.reset = False
-        accel = float(self.accel_filter(np.array([(measured - self.last) / self.dt]))[0])
+        accel = float(self.accel_filter.advance((measured - self.last) / self.dt))
         self.last = measured
         err = target - measured
         out = g.k * g.p * err + self.integ - g.k * g.d * accel + g.ff * target

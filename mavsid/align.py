@@ -50,6 +50,7 @@ Examples
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 import os
@@ -131,8 +132,10 @@ class _Series:
     #: the unit the field was read in and where it came from (declared, preset, inferred)
     unit_from: str = ""
 
-    @property
+    @functools.cached_property
     def median_dt(self) -> float:
+        """The median of the positive sample intervals (s), measured once (the grid, the
+        gaps and the rates ask for it: ~5 ms a long channel)."""
         d = np.diff(self.t)
         d = d[d > 0]
         return float(np.median(d)) if d.size else float("nan")

@@ -307,12 +307,26 @@ def _col(fd: FlightData, name: str) -> np.ndarray | None:
 
 
 def _moving(x: np.ndarray, n: int) -> np.ndarray:
-    """Centred moving average over ``n`` samples (same length, shrinking at the ends)."""
-    n = max(1, min(int(n), x.size))
+    """Centred moving average over ``n`` samples (same length; the first ``n // 2`` take the
+    first ``n``, the last ones what is left after their window's start).
+
+    >>> _moving(np.array([1.0, 2.0, 3.0, 4.0, 5.0]), 3).tolist()
+    [2.0, 2.0, 3.0, 4.0, 4.5]
+    """
+    size = x.size
+    n = max(1, min(int(n), size))
+    h = n // 2
     c = np.concatenate([[0.0], np.cumsum(x)])
-    lo = np.clip(np.arange(x.size) - n // 2, 0, x.size)
-    hi = np.clip(lo + n, 0, x.size)
-    return (c[hi] - c[lo]) / np.maximum(hi - lo, 1)
+    out = np.empty(size)
+    if not size:
+        return out
+    # sample i averages c[lo..hi) with lo = max(i - h, 0), hi = min(lo + n, size), by slices
+    out[:h] = (c[n] - c[0]) / n
+    out[h : size - n + h + 1] = c[n:] - c[: size - n + 1]
+    out[h : size - n + h + 1] /= n
+    lo = np.arange(size - n + 1, size - h)
+    out[size - n + h + 1 :] = (c[size] - c[lo]) / (size - lo)
+    return out
 
 
 def _airborne(fd: FlightData) -> np.ndarray:
@@ -375,24 +389,22 @@ def _envelope(fd: FlightData, x_hp: np.ndarray) -> np.ndarray:
 
 
 def _metrics(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions,
-             band: tuple[float, float] | None = None,
-             segments: Mapping[str, np.ndarray] | None = None) -> dict[str, float]:
+             band: tuple[float, float] | None, st: Mapping[str, Any]) -> dict[str, float]:
     """Excitation metrics of samples ``[i0, i1)`` for one axis (``band``: a SYSTEMID run's;
-    ``segments``: the window's Welch segments' transforms, :func:`_window_segments`)."""
+    ``st``: the window's :func:`_window_stats`)."""
+    if i1 - i0 < 8:
+        return {"noise_floor": ax.floor}
     with np.errstate(divide="ignore", invalid="ignore"):  # constant signals give NaN, handled
-        # the signals' segment transforms and the output's spectrum, each measured once
-        spectra: dict[str, np.ndarray] = dict(segments or {})
-        out = _metrics_raw(ax, fd, i0, i1, opts, spectra)
-        if ax.y_hp is not None and i1 - i0 >= 8:
-            out["response_rms"] = float(np.sqrt(np.mean(ax.y_hp[i0:i1] ** 2)))
+        out = _metrics_raw(ax, fd, i0, i1, opts, st)
+        if ax.y_hp is not None:
+            out["response_rms"] = math.sqrt(st["y_ms"])
             out["response_floor"] = ax.y_floor
             out["response_ratio"] = out["response_rms"] / ax.y_floor
-        if ax.injection is not None and ax.y is not None and i1 - i0 >= 8:
-            out.update(_injection_metrics(ax, fd, i0, i1, opts, band, spectra))
-        elif (ax.command is not None and ax.y is not None and i1 - i0 >= 8
-              and np.isfinite(ax.command[i0:i1]).all()):
-            got = _referenced(ax.command[i0:i1], ax.y[i0:i1], fd, opts, opts.band_hz, spectra,
-                              "command")
+        if ax.injection is not None and ax.y is not None:
+            got = _referenced(st, "injection", i1 - i0, fd, opts, band)
+            out.update({f"injection_{k}": v for k, v in got.items()})
+        elif ax.command is not None and ax.y is not None and st["command_finite"]:
+            got = _referenced(st, "command", i1 - i0, fd, opts, opts.band_hz)
             out.update({f"command_{k}": v for k, v in got.items() if k in ("coherence",
                                                                              "coverage")})
         return out
@@ -400,8 +412,7 @@ def _metrics(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions,
 
 def _nper(n: int, fs: float) -> int:
     """The Welch segment length of a window of ``n`` samples: 2 s (16 samples at least),
-    the whole window if shorter (one value for every signal, so that
-    :func:`_window_segments` and a window measured alone take the same segments).
+    the whole window if shorter.
 
     >>> _nper(2000, 400.0), _nper(500, 400.0), _nper(100, 5.0)
     (800, 500, 16)
@@ -409,64 +420,117 @@ def _nper(n: int, fs: float) -> int:
     return int(min(n, max(16, round(2.0 * fs))))
 
 
-def _segments(spectra: dict[str, np.ndarray], key: str, x: np.ndarray, nper: int
-              ) -> np.ndarray:
-    """The transforms of ``x``'s Welch segments (:func:`mavsid.dsp.segment_ffts`, linear
-    detrend), as ``spectra[key]`` holds them (:func:`_window_segments`) or measured now and
-    kept there."""
-    got = spectra.get(key)
-    if got is None:
-        got = spectra[key] = dsp.segment_ffts(x, min(nper, x.size), detrend=detrend_linear)
+#: the signals whose spectra a window's metrics use: input, output, command, injection
+_SIGNALS = ("u", "y", "command", "injection")
+
+
+def _window_stats(ax: _Axis, fd: FlightData, air: np.ndarray, opts: ScanOptions,
+                  starts: Sequence[int], win: int) -> list[dict[str, Any]]:
+    """What :func:`_metrics` and :func:`_gates` measure of windows of ``win`` samples at
+    ``starts``, for all of them at once, one dict per window. For the gates: the airborne
+    share, the first mode change (its index in the window, -1 none), the peak ``|roll|`` and
+    ``|pitch|``, the input's saturated share and the thrust's share at its limits while
+    airborne (NaN when never airborne). Of windows of 8 samples or more, for the metrics:
+    the frequencies ``f`` of the Welch spectra (segments of :func:`_nper` samples, half
+    overlapping, linear detrend, Hann: :mod:`mavsid.dsp`); per signal present
+    (:data:`_SIGNALS`) its spectrum ``psd:<key>`` and, against the output, the
+    cross-spectrum ``csd:<key>``; the mean squares of the high-passed input and output
+    (``u_ms``, ``y_ms``) and of the command and injection (``<key>_ms``); whether the
+    command is finite; the attitude inputs' mean variance ``att_var``; the centred sums
+    ``syy``, ``suu``, ``syu`` of the output and input.
+
+    A window measured alone is a batch of one: its numbers are those it gets in any batch
+    (a long flight has thousands of windows; measured one by one they cost ~0.5 ms each).
+    """
+    first = np.asarray(starts, np.int64)
+    rows = first[:, None] + np.arange(win)  # (windows, samples)
+    got = _gate_stats(ax, fd, air, opts, rows)
+    if win < 8:
+        return [{k: v[i] for k, v in got.items()} for i in range(first.size)]
+    fs = 1.0 / fd.dt
+    nper = _nper(win, fs)
+    hop = nper - nper // 2
+    count = (win - nper) // hop + 1
+    at = (first[:, None] + hop * np.arange(count)).ravel()
+    seg: dict[str, np.ndarray] = {}
+    signals = dict(zip(_SIGNALS, (ax.u, ax.y, ax.command, ax.injection), strict=True))
+    for key, x in signals.items():
+        if x is None:
+            continue
+        s = seg[key] = dsp.segment_ffts(x, nper, detrend=detrend_linear, starts=at).reshape(
+            first.size, count, -1)
+        got[f"psd:{key}"] = dsp.density(s, s, fs, nper, average=False).mean(axis=1).real
+        if key in ("command", "injection"):
+            got[f"{key}_ms"] = np.mean(x[rows] ** 2, axis=1)
+    if "y" in seg:
+        for key in ("u", "command", "injection"):
+            if key in seg:
+                got[f"csd:{key}"] = dsp.density(seg[key], seg["y"], fs, nper,
+                                                average=False).mean(axis=1)
+    if ax.command is not None:
+        got["command_finite"] = np.isfinite(ax.command[rows]).all(axis=1)
+    for key, x in (("u_ms", ax.u_hp), ("y_ms", ax.y_hp)):
+        if x is not None:
+            got[key] = np.mean(x[rows] ** 2, axis=1)
+    att = [c for c in (_col(fd, f"u_{a}") for a in AXES) if c is not None]
+    if att:
+        got["att_var"] = np.mean([np.var(c[rows], axis=1) for c in att], axis=0)
+    if ax.u is not None and ax.y is not None:
+        y, u = ax.y[rows], ax.u[rows]
+        y -= y.mean(axis=1, keepdims=True)
+        u -= u.mean(axis=1, keepdims=True)
+        got["syy"] = np.sum(y * y, axis=1) / win
+        got["suu"] = np.sum(u * u, axis=1) / win
+        got["syu"] = np.sum(y * u, axis=1) / win
+    f = np.fft.rfftfreq(nper, 1.0 / fs)
+    return [{"f": f, **{k: v[i] for k, v in got.items()}} for i in range(first.size)]
+
+
+def _gate_stats(ax: _Axis, fd: FlightData, air: np.ndarray, opts: ScanOptions,
+                rows: np.ndarray) -> dict[str, np.ndarray]:
+    """:func:`_window_stats`' measures for the gates, of the windows of sample indices
+    ``rows`` (windows, samples)."""
+    on = air[rows]
+    got: dict[str, np.ndarray] = {"airborne": on.mean(axis=1)}
+    mode = fd.flags.get("mode")
+    if mode is not None and rows.shape[1] > 1:
+        change = np.diff(np.asarray(mode)[rows], axis=1) != 0
+        got["mode_change"] = np.where(change.any(axis=1), change.argmax(axis=1), -1)
+    for ang in ("roll", "pitch"):
+        a = _col(fd, ang)
+        if a is not None:
+            got[f"peak_{ang}"] = np.max(np.abs(a[rows]), axis=1)
+    if ax.u is not None:
+        got["saturated"] = (np.abs(ax.u[rows]) >= opts.saturation).mean(axis=1)
+    if ax.thrust is not None:
+        tw = ax.thrust[rows]
+        limits = ((tw >= opts.saturation) | (tw <= 0.02)) & on
+        with np.errstate(divide="ignore", invalid="ignore"):
+            got["thrust_limits"] = limits.sum(axis=1) / on.sum(axis=1)
     return got
 
 
-def _welch(spectra: dict[str, np.ndarray], key: str, x: np.ndarray, fs: float, nper: int
-           ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`mavsid.dsp.welch` of ``x`` (linear detrend) from its :func:`_segments`."""
-    n = min(nper, x.size)
-    s = _segments(spectra, key, x, nper)
-    return np.fft.rfftfreq(n, 1.0 / fs), dsp.density(s, s, fs, n).real
+def _coherence(st: Mapping[str, Any], key: str) -> np.ndarray:
+    """``scipy.signal.coherence`` of signal ``key`` and the output (linear detrend) from
+    the window's spectra (:func:`_window_stats`)."""
+    return np.asarray(np.abs(st[f"csd:{key}"]) ** 2 / st[f"psd:{key}"] / st["psd:y"])
 
 
-def _coherence(x: np.ndarray, key: str, pxx: np.ndarray, y: np.ndarray, fs: float, nper: int,
-               spectra: dict[str, np.ndarray]) -> np.ndarray:
-    """``scipy.signal.coherence(x, y)`` (linear detrend: :func:`mavsid.data.detrend_linear`)
-    from ``x``'s spectrum ``pxx`` already measured and the segments of ``x`` (``key``) and
-    ``y`` (``"y"``) and ``y``'s spectrum kept in ``spectra``: the same numbers without
-    measuring them again."""
-    if "pyy" not in spectra:
-        spectra["pyy"] = _welch(spectra, "y", y, fs, nper)[1]
-    n = min(nper, x.size)
-    pxy = dsp.density(_segments(spectra, key, x, nper), _segments(spectra, "y", y, nper), fs, n)
-    return np.asarray(np.abs(pxy) ** 2 / pxx / spectra["pyy"])
-
-
-def _injection_metrics(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions,
-                       band: tuple[float, float] | None,
-                       spectra: dict[str, np.ndarray]) -> dict[str, float]:
-    """Level, band and output coherence of SYSTEMID's logged injection in ``[i0, i1)``."""
-    assert ax.injection is not None and ax.y is not None
-    got = _referenced(ax.injection[i0:i1], ax.y[i0:i1], fd, opts, band, spectra, "injection")
-    return {f"injection_{k}": v for k, v in got.items()}
-
-
-def _referenced(v: np.ndarray, y: np.ndarray, fd: FlightData, opts: ScanOptions,
-                band: tuple[float, float] | None,
-                spectra: dict[str, np.ndarray], key: str) -> dict[str, float]:
-    """A reference ``v``'s (``key`` in ``spectra``) RMS, band (``lo_hz``, ``hi_hz``), and the
-    output ``y``'s ``coherence`` with it (weighted by its PSD) and ``coverage``
-    (log-frequency share of the band where that coherence reaches ``min_coherence``); {}
-    for a silent reference."""
-    rms = float(np.sqrt(np.mean(v**2)))
+def _referenced(st: Mapping[str, Any], key: str, n: int, fd: FlightData, opts: ScanOptions,
+                band: tuple[float, float] | None) -> dict[str, float]:
+    """A reference's (``key``: the injection or the command, a window of ``n`` samples)
+    RMS, band (``lo_hz``, ``hi_hz``), and the output's ``coherence`` with it (weighted by
+    its PSD) and ``coverage`` (log-frequency share of the band where that coherence
+    reaches ``min_coherence``); {} for a silent reference."""
+    rms = math.sqrt(st[f"{key}_ms"])
     if not rms > 0:
         return {}
     fs = 1.0 / fd.dt
     f_lo, f_hi = band if band is not None else opts.band_hz
-    f_lo, f_hi = max(f_lo, 2.0 / (v.size * fd.dt)), min(f_hi, 0.4 * fs)
+    f_lo, f_hi = max(f_lo, 2.0 / (n * fd.dt)), min(f_hi, 0.4 * fs)
     out = {"rms": rms, "lo_hz": f_lo, "hi_hz": f_hi}
-    nper = _nper(v.size, fs)
-    f, pvv = _welch(spectra, key, v, fs, nper)
-    coh = _coherence(v, key, pvv, y, fs, nper, spectra)
+    f, pvv = st["f"], st[f"psd:{key}"]
+    coh = _coherence(st, key)
     sel = (f >= f_lo) & (f <= f_hi)
     if sel.sum() < 2 or not pvv[sel].sum() > 0:
         out["coherence"] = 0.0
@@ -480,37 +544,32 @@ def _referenced(v: np.ndarray, y: np.ndarray, fd: FlightData, opts: ScanOptions,
 
 
 def _metrics_raw(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions,
-                 spectra: dict[str, np.ndarray] | None = None) -> dict[str, float]:
+                 st: Mapping[str, Any]) -> dict[str, float]:
     fs = 1.0 / fd.dt
     out: dict[str, float] = {"noise_floor": ax.floor}
-    if ax.u is None or ax.u_hp is None or ax.y is None or i1 - i0 < 8:
+    if ax.u is None or ax.u_hp is None or ax.y is None:
         return out
-    u, y = ax.u[i0:i1], ax.y[i0:i1]
-    rms = float(np.sqrt(np.mean(ax.u_hp[i0:i1] ** 2)))
+    rms = math.sqrt(st["u_ms"])
     out["input_rms"] = rms
     out["power_ratio"] = rms / ax.floor
     f_lo, f_hi = opts.band_hz[0], min(opts.band_hz[1], 0.4 * fs)
     out["band_lo_hz"], out["band_hi_hz"] = f_lo, f_hi
-    nper = _nper(u.size, fs)
     if f_hi > f_lo:
-        spectra = {} if spectra is None else spectra
-        f, puu = _welch(spectra, "u", u, fs, nper)
+        f, puu = st["f"], st["psd:u"]
         band = (f >= f_lo) & (f <= f_hi)
         if band.sum() >= 2:
             w = np.zeros_like(f)
             w[band] = 1.0 / f[band]  # log-frequency weighting
             white = ax.floor**2 / (fs / 2)
             out["coverage"] = float(np.sum(w * (puu > 10 * white)) / np.sum(w))
-            coh = _coherence(u, "u", puu, y, fs, nper, spectra)
+            coh = _coherence(st, "u")
             wp = puu * band
             out["coherence"] = float(np.sum(wp * np.nan_to_num(coh)) / np.sum(wp)) if wp.sum(
             ) > 0 else 0.0
     # Gram of the model's regressors [y, u], centred (the constant term); y scaled by its own
     # spread, u by the spread of all attitude inputs in the window (its share of the excitation)
-    att = [c for c in (_col(fd, f"u_{a}") for a in AXES) if c is not None]
-    ref = float(np.sqrt(np.mean([np.var(c[i0:i1]) for c in att])))
-    yc, uc = y - y.mean(), u - u.mean()
-    syy, suu, syu = (float(p @ q) / y.size for p, q in ((yc, yc), (uc, uc), (yc, uc)))
+    ref = math.sqrt(st["att_var"]) if "att_var" in st else math.nan
+    syy, suu, syu = float(st["syy"]), float(st["suu"]), float(st["syu"])
     if syy > 0 and ref > 0:
         # the Gram [[1, b], [b, d]] of [y / its spread, u / ref], its eigenvalues in closed
         # form (a window's 2x2 eigvalsh and corrcoef cost ~0.4 ms; a long flight has
@@ -555,56 +614,49 @@ def _fmt(x: float) -> str:
 
 
 def _gates(ax: _Axis, fd: FlightData, i0: int, i1: int, m: Mapping[str, float],
-           opts: ScanOptions, air: np.ndarray, check_mode: bool, check_excitation: bool = True
-           ) -> list[str]:
-    """Rejection reasons (empty: passes)."""
+           opts: ScanOptions, st: Mapping[str, Any], check_mode: bool,
+           check_excitation: bool = True) -> list[str]:
+    """Rejection reasons (empty: passes); ``st``: the window's :func:`_window_stats`."""
     out: list[str] = []
     if ax.u is None:
         return [f"rejected: the log has no {ax.u_name} input (preset {fd.preset})"]
     if ax.y is None:
         return [f"rejected: the log has no {ax.y_name} output (preset {fd.preset})"]
-    frac = float(air[i0:i1].mean())
+    frac = float(st["airborne"])
     if frac < opts.min_airborne:
         out.append(
             f"rejected: on the ground or disarmed for {100 * (1 - frac):.0f} % of the window "
             f"(must be airborne for {100 * opts.min_airborne:.0f} %)"
         )
     mode = fd.flags.get("mode")
-    if check_mode and mode is not None:
-        mw = np.asarray(mode[i0:i1])
-        ch = np.flatnonzero(np.diff(mw) != 0)
-        if ch.size:
-            names = fd.meta.get("mode_names", {})
-            assert isinstance(names, Mapping)
-            k = ch[0]
-            a, b = (names.get(int(v), str(int(v))) for v in (mw[k], mw[k + 1]))
-            out.append(
-                f"rejected: flight mode changes inside the window ({a}→{b} at "
-                f"{fd.time_s[i0 + k + 1]:.1f} s)"
-            )
+    k = int(st.get("mode_change", -1))
+    if check_mode and mode is not None and k >= 0:
+        names = fd.meta.get("mode_names", {})
+        assert isinstance(names, Mapping)
+        a, b = (names.get(int(v), str(int(v))) for v in (mode[i0 + k], mode[i0 + k + 1]))
+        out.append(
+            f"rejected: flight mode changes inside the window ({a}→{b} at "
+            f"{fd.time_s[i0 + k + 1]:.1f} s)"
+        )
     for ang in ("roll", "pitch"):
-        a = _col(fd, ang)
-        if a is not None:
-            peak = float(np.degrees(np.max(np.abs(a[i0:i1]))))
+        if f"peak_{ang}" in st:
+            peak = float(np.degrees(st[f"peak_{ang}"]))
             if peak > opts.max_angle_deg:
                 out.append(
                     f"rejected: |{ang}| reaches {peak:.0f}° (bound {opts.max_angle_deg:g}°)"
                 )
-    sat = np.abs(ax.u[i0:i1]) >= opts.saturation
-    if sat.mean() > opts.max_saturated:
+    sat = float(st["saturated"])
+    if sat > opts.max_saturated:
         out.append(
             f"rejected: {ax.u_name} saturated (|u| >= {opts.saturation:g}) for "
-            f"{100 * sat.mean():.0f} % of the window (limit {100 * opts.max_saturated:.0f} %)"
+            f"{100 * sat:.0f} % of the window (limit {100 * opts.max_saturated:.0f} %)"
         )
-    if ax.thrust is not None:
-        tw = ax.thrust[i0:i1][air[i0:i1]]
-        if tw.size:
-            ts = (tw >= opts.saturation) | (tw <= 0.02)
-            if ts.mean() > opts.max_saturated:
-                out.append(
-                    f"rejected: u_thrust at its limits for {100 * ts.mean():.0f} % of the "
-                    f"airborne window (limit {100 * opts.max_saturated:.0f} %)"
-                )
+    ts = float(st.get("thrust_limits", math.nan))  # (NaN: no thrust, or never airborne)
+    if ts > opts.max_saturated:
+        out.append(
+            f"rejected: u_thrust at its limits for {100 * ts:.0f} % of the "
+            f"airborne window (limit {100 * opts.max_saturated:.0f} %)"
+        )
     if not check_excitation:
         return out
     if "power_ratio" not in m:
@@ -703,13 +755,14 @@ def _kept_reason(ax: _Axis, m: Mapping[str, float]) -> str:
 
 def _report(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions, air: np.ndarray,
             source: str, meta: Mapping[str, Any],
-            segments: Mapping[str, np.ndarray] | None = None) -> WindowReport:
+            stats: Mapping[str, Any] | None = None) -> WindowReport:
     band = None
     sysid = meta.get("sysid") if source == "sysid" else None
     if isinstance(sysid, Mapping) and "f_start_hz" in sysid and "f_stop_hz" in sysid:
         band = (float(sysid["f_start_hz"]), float(sysid["f_stop_hz"]))
-    m = _metrics(ax, fd, i0, i1, opts, band, segments)
-    reasons = _gates(ax, fd, i0, i1, m, opts, air, source == "scan")
+    st = _window_stats(ax, fd, air, opts, [i0], i1 - i0)[0] if stats is None else stats
+    m = _metrics(ax, fd, i0, i1, opts, band, st)
+    reasons = _gates(ax, fd, i0, i1, m, opts, st, source == "scan")
     kept = not reasons
     if kept:
         reasons = [_kept_reason(ax, m)]
@@ -814,30 +867,8 @@ def _trim(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions) -> tup
     return (i0 + a, i0 + b) if b - a >= n else (i0, i1)
 
 
-#: windows whose segments are transformed in one call (bounds the transforms kept: ~4 MB)
+#: windows measured in one call of :func:`_window_stats` (bounds the transforms kept: ~4 MB)
 _BATCH = 64
-
-
-def _window_segments(ax: _Axis, fd: FlightData, starts: Sequence[int], win: int
-                     ) -> list[dict[str, np.ndarray]]:
-    """For windows of ``win`` samples at ``starts``: the transforms of the Welch segments
-    (:func:`mavsid.dsp.segment_ffts`, linear detrend) of the input, output, command and
-    injection, each window's as :func:`_segments` measures them alone, all made in one call
-    per signal (a long flight has thousands of windows; one call each cost ~0.3 ms)."""
-    fs = 1.0 / fd.dt
-    nper = _nper(win, fs)
-    hop = nper - nper // 2
-    count = (win - nper) // hop + 1
-    at = (np.asarray(starts, np.int64)[:, None] + hop * np.arange(count)).ravel()
-    out: list[dict[str, np.ndarray]] = [{} for _ in starts]
-    for key, x in (("u", ax.u), ("y", ax.y), ("command", ax.command),
-                   ("injection", ax.injection)):
-        if x is None:
-            continue
-        rows = dsp.segment_ffts(x, nper, detrend=detrend_linear, starts=at)
-        for k, one in enumerate(out):
-            one[key] = rows[k * count : (k + 1) * count]
-    return out
 
 
 def _scan_windows(fd: FlightData, ax: _Axis, opts: ScanOptions, air: np.ndarray,
@@ -855,12 +886,13 @@ def _scan_windows(fd: FlightData, ax: _Axis, opts: ScanOptions, air: np.ndarray,
                 starts.append(b - win)
         starts = [s for s in starts if not any(s < x1 and x0 < min(b, s + win)
                                                for x0, x1 in exclude)]
-        full = ax.u is not None and ax.y is not None and b - a >= win  # windows of win
+        if b - a < win:  # one window, shorter
+            reports += [_report(ax, fd, s, b, opts, air, "scan", {}) for s in starts]
+            continue
         for k in range(0, len(starts), _BATCH):
             batch = starts[k : k + _BATCH]
-            segments = _window_segments(ax, fd, batch, win) if full else [{} for _ in batch]
-            for s, seg in zip(batch, segments, strict=True):
-                reports.append(_report(ax, fd, s, min(b, s + win), opts, air, "scan", {}, seg))
+            for s, st in zip(batch, _window_stats(ax, fd, air, opts, batch, win), strict=True):
+                reports.append(_report(ax, fd, s, s + win, opts, air, "scan", {}, st))
     return _merge(fd, ax, reports, opts, air)
 
 
@@ -948,7 +980,7 @@ def find_segments(
             continue
         if cache[a].u is None or cache[a].y is None:
             n = flight.time_s.size
-            reason = _gates(cache[a], flight, 0, n, {}, opts, air, False, False)
+            reason = _gates(cache[a], flight, 0, n, {}, opts, {}, False, False)
             reports.append(WindowReport(a, float(flight.time_s[0]), float(flight.time_s[-1]),
                                         0.0, False, "scan", tuple(reason), 0, n))
             continue

@@ -275,15 +275,15 @@ def test_gram_condition_and_correlation_are_lapacks() -> None:
 @pytest.mark.parametrize("name", ["doublets.bin", "sysid_roll.bin", "px4_hexa_doublets.ulg"])
 def test_windows_measured_together_are_measured_as_alone(name: str,
                                                          monkeypatch: pytest.MonkeyPatch) -> None:
-    """The scan transforms its windows' Welch segments in one call per signal and batch of
-    windows: every window's metrics, verdict and reasons are those of the window measured
-    alone, number for number (input, output and the command's or injection's coherence)."""
+    """The scan measures its windows (Welch spectra, levels, Gram sums) in one call per
+    batch of windows: every window's metrics, verdict and reasons are those of the window
+    measured alone, number for number (input, output and the command's or injection's
+    coherence)."""
     from mavsid import excitation
 
     fd = load_flight(FIXTURES / name)
     together = find_segments(fd, scan=True)
-    monkeypatch.setattr(excitation, "_window_segments",
-                        lambda ax, fd, starts, win: [{} for _ in starts])
+    monkeypatch.setattr(excitation, "_BATCH", 1)
     alone = find_segments(fd, scan=True)
     assert len(together) > 5
     assert name != "px4_hexa_doublets.ulg" or any("command_coherence" in r.metrics
@@ -293,3 +293,20 @@ def test_windows_measured_together_are_measured_as_alone(name: str,
         assert a.metrics.keys() == b.metrics.keys()
         for key, value in a.metrics.items():
             assert value == b.metrics[key] or (math.isnan(value) and math.isnan(b.metrics[key]))
+
+
+def test_moving_average_by_slices_is_the_clipped_window_mean() -> None:
+    """The centred moving average (high-pass and envelopes of every axis, taken by slices of
+    the running sum) against its definition: each sample the mean of the ``n`` around it,
+    the window clipped at either end, on random lengths and widths."""
+    from mavsid.excitation import _moving
+
+    rng = np.random.default_rng(7)
+    for _ in range(3000):
+        size, n = int(rng.integers(0, 60)), int(rng.integers(0, 80))
+        x = rng.standard_normal(size) * 10 ** rng.uniform(-4, 4)
+        width = max(1, min(n, size))
+        want = np.array([x[max(i - width // 2, 0) : max(i - width // 2, 0) + width].mean()
+                         for i in range(size)])
+        assert np.allclose(_moving(x, n), want, rtol=1e-12, atol=1e-9 * np.abs(x).max(
+            initial=0)), (size, n)

@@ -408,6 +408,8 @@ def time_outliers(t: np.ndarray, half: int = _OUTLIER_HALF,
     if t.size < 3:
         return out
     d = np.diff(t)
+    if not (np.abs(d) > limit_s).any():  # no jump reaches even the smallest limit
+        return out
     pos = d[d > 0]
     step = float(np.median(pos)) if pos.size else 0.0
     limit = max(limit_s, 4 * half * step)
@@ -547,6 +549,8 @@ def _boot_records(t: np.ndarray, v: np.ndarray, k: int) -> tuple[np.ndarray, np.
     boots = _boots(t)
     sl = boots[min(k, len(boots) - 1)]
     t, v = t[sl], v[sl]
+    if t.size < 2 or (t[1:] > t[:-1]).all():  # (most channels: already so)
+        return t.copy(), v.copy()
     order = np.argsort(t, kind="stable")
     return _dedupe(t[order], v[order])
 

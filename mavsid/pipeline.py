@@ -854,6 +854,9 @@ def fit(
     step = progress or _noop
     signals: _Twins = {}
     flights = _read_flights(logs, cfg, step, signals)
+    from mavsid.estimators.model import hash_soon
+
+    hash_soon(f.source.path for f in flights)  # (for the model's provenance, meanwhile)
     fits: dict[str, AxisFit] = {}
     verdicts: dict[str, Verdict] = {}
     for axis in cfg.axes:

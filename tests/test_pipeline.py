@@ -4,6 +4,7 @@ free-run goals."""
 
 from __future__ import annotations
 
+import hashlib
 import itertools
 import json
 import math
@@ -313,6 +314,24 @@ def test_several_logs_pool_their_segments_at_one_rate() -> None:
     assert used == {str(p) for p in logs}
     d = roll.to_dict()
     assert sorted(set(d["train_segment_logs"])) == sorted(str(p) for p in logs)
+    # each log's sha256 in the model's provenance (hashed in threads while the fit ran)
+    hashed = {e["path"]: e["sha256"] for e in roll.model.provenance["logs"]}
+    assert hashed == {str(p): hashlib.sha256(p.read_bytes()).hexdigest() for p in logs}
+
+
+def test_provenance_hashes_each_file_once_and_a_missing_one_as_none(tmp_path: Path) -> None:
+    from mavsid.estimators import model
+
+    log = tmp_path / "a.bin"
+    log.write_bytes(b"x" * 3_000_000)
+    model.hash_soon([str(log), str(log)])
+    want = hashlib.sha256(b"x" * 3_000_000).hexdigest()
+    assert model._sha256(str(log)) == want
+    log.write_bytes(b"changed")  # (a later ask is answered by the first hash)
+    assert model._sha256(str(log)) == want
+    assert model._sha256(str(tmp_path / "missing.bin")) is None
+    (tmp_path / "dir.bin").mkdir()
+    assert model._sha256(str(tmp_path / "dir.bin")) is None
 
 
 def test_pooling_a_slower_log_on_a_faster_ones_grid_is_said() -> None:

@@ -34,7 +34,9 @@ import datetime as _dt
 import hashlib
 import json
 import math
-from collections.abc import Callable, Mapping, Sequence
+import threading
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from concurrent.futures import Future
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
@@ -99,19 +101,40 @@ def _ratio(num: str, den: str) -> str:
     return f"{num}/({den})" if "*" in den or "/" in den else f"{num}/{den}"
 
 
-def _sha256(path: str, cache: dict[str, str | None] = {}) -> str | None:  # noqa: B006
-    """sha256 of a file (memoised per path; None when it does not exist)."""
-    if path not in cache:
-        p = Path(path)
-        if not path or not p.is_file():
-            cache[path] = None
-        else:
-            h = hashlib.sha256()
-            with p.open("rb") as fh:
-                for chunk in iter(lambda: fh.read(1 << 20), b""):
-                    h.update(chunk)
-            cache[path] = h.hexdigest()
-    return cache[path]
+#: each log's sha256 (None: no such file), by path, made once per process in a thread
+_HASHES: dict[str, Future[str | None]] = {}
+_HASHES_LOCK = threading.Lock()
+
+
+def _hash_file(path: str) -> str | None:
+    if not path or not Path(path).is_file():
+        return None
+    with open(path, "rb") as fh:
+        return hashlib.file_digest(fh, "sha256").hexdigest()
+
+
+def hash_soon(paths: Iterable[str]) -> None:
+    """Start hashing the files ``paths`` in threads, for :func:`provenance` (hashlib lets
+    other threads run: a 100-MB log's ~0.1 s overlaps the fit)."""
+    for path in paths:
+        with _HASHES_LOCK:
+            if path in _HASHES:
+                continue
+            job = _HASHES[path] = Future()
+
+        def run(path: str = path, job: Future[str | None] = job) -> None:
+            try:
+                job.set_result(_hash_file(path))
+            except BaseException as exc:  # (raised by _sha256 in the caller's thread)
+                job.set_exception(exc)
+
+        threading.Thread(target=run, name="mavsid-sha256", daemon=True).start()
+
+
+def _sha256(path: str) -> str | None:
+    """sha256 of a file (once per path and process; None when it does not exist)."""
+    hash_soon([path])
+    return _HASHES[path].result()
 
 
 def provenance(segments: Sequence[Segment], **settings: object) -> dict[str, object]:

@@ -613,9 +613,8 @@ def _new_layout(key: _Key) -> _Layout:
     m = len(names)
     while m and names[m - 1].startswith("_padding"):
         m -= 1
-    # the format's size (the sum of its fields') less the padding dropped
-    size = _widths(formats, {})[name] - sum(k.itemsize for k in kinds[m:])
     names, kinds = names[:m], kinds[:m]
+    size = sum(k.itemsize for k in kinds)  # (the format's size less the padding dropped)
     if "" in names:
         names = [f or f"f{i}" for i, f in enumerate(names)]
     if len(set(names)) < m:

@@ -1019,6 +1019,64 @@ def _commanded(raw: RawLog, t: np.ndarray, boot: int = 0) -> dict[str, np.ndarra
         if np.ptp(v) > 0:
             # not published in a gap (PX4's rate-only modes such as ACRO): not a ramp across it
             out[axis] = _resampled(ts, v, t, np.nan)
+    for axis, (ts, v) in _sticks(raw).items():
+        if axis not in out:
+            ts, v = _boot_records(ts, v, boot)
+            if ts.size >= 2 and np.ptp(v) > 0:
+                out[axis] = _resampled(ts, v, t, np.nan)
+    return out
+
+
+#: per axis: the autopilot's parameter mapping an RC input channel to it (ArduPilot, PX4),
+#: and ArduPilot's default channel
+_STICK_MAP = {"roll": ("RCMAP_ROLL", "RC_MAP_ROLL", 1),
+              "pitch": ("RCMAP_PITCH", "RC_MAP_PITCH", 2),
+              "yaw": ("RCMAP_YAW", "RC_MAP_YAW", 4)}
+
+
+def _sticks(raw: RawLog) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """The pilot's roll, pitch and yaw sticks in a MAVLink log (``RC_CHANNELS``, the RC input
+    the autopilot reads): per axis the times (s) and the stick's departure from its trim (µs,
+    outside its dead zone), on the channel the autopilot maps to the axis (its ``RCMAP_*``,
+    or PX4's ``RC_MAP_*``; ArduPilot's defaults 1, 2, 4; none for a PX4 log without them).
+
+    The commanded attitude's stand-in where a log has none (a ``.tlog``): in the stabilised
+    modes a stick sets an angle (roll, pitch) or a yaw rate in proportion, through the input
+    shaping (a linear filter), which is all a coherence or an instrument needs (neither
+    depends on scale, sign or offset). Samples outside 800–2200 µs (no signal) are left out.
+
+    Examples
+    --------
+    >>> from mavsid.data import MessageTable, RawLog, SourceInfo
+    >>> rc = MessageTable("RC_CHANNELS", {"chan1_raw": np.array([1500, 1600, 1400, 0]),
+    ...                   "chan2_raw": np.full(4, 1500), "chan4_raw": np.full(4, 1490)},
+    ...                   np.arange(4.0))
+    >>> raw = RawLog(SourceInfo("x.tlog", "tlog", 0), {"RC_CHANNELS": rc},
+    ...              params={"RC1_DZ": 20.0}, autopilot="ardupilot")
+    >>> {k: v[1].tolist() for k, v in _sticks(raw).items()}
+    {'roll': [0.0, 80.0, -80.0], 'pitch': [0.0, 0.0, 0.0, 0.0], 'yaw': [-10.0, -10.0, -10.0, -10.0]}
+    """
+    table = raw.messages.get("RC_CHANNELS")
+    if table is None or not len(table):
+        return {}
+    px4 = raw.autopilot == "px4"
+    out: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    for axis, (ardupilot, px4_name, default) in _STICK_MAP.items():
+        got = raw.params.get(px4_name if px4 else ardupilot, None if px4 else default)
+        if got is None or not 1 <= got <= 18 or got != int(got):
+            continue
+        n = int(got)
+        column = table.columns.get(f"chan{n}_raw")
+        if column is None:
+            continue
+        pwm = np.asarray(column, dtype=float)
+        keep = (pwm >= 800) & (pwm <= 2200) & np.isfinite(np.asarray(table.time_s, float))
+        pwm = pwm[keep]
+        trim = raw.params.get(f"RC{n}_TRIM", 1500.0)
+        dead = raw.params.get(f"RC{n}_DZ", 0.0)  # (both autopilots name it so)
+        x = pwm - trim
+        out[axis] = (np.asarray(table.time_s, float)[keep],
+                     np.sign(x) * np.maximum(np.abs(x) - max(dead, 0.0), 0.0))
     return out
 
 
@@ -1073,7 +1131,7 @@ def _chirp_span(enter: float, leave: float, run: Mapping[str, Any]) -> tuple[flo
 #: messages alignment reads besides the presets' channels: flags, modes, params, SYSTEMID
 FLAG_MESSAGES: dict[str, tuple[str, ...]] = {
     "dataflash": ("EV", "ARM", "MODE", "MSG", "PARM", "SIDS", "SIDD", "ATT"),
-    "tlog": ("HEARTBEAT", "EXTENDED_SYS_STATE", "PARAM_VALUE", "STATUSTEXT"),
+    "tlog": ("HEARTBEAT", "EXTENDED_SYS_STATE", "PARAM_VALUE", "STATUSTEXT", "RC_CHANNELS"),
     "ulog": ("actuator_armed", "vehicle_land_detected", "vehicle_status",
              "vehicle_attitude_setpoint"),
 }

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -345,3 +346,52 @@ def test_sorted_unique_is_numpys_unique_on_overlapping_runs() -> None:
                 for lo in np.cumsum(rng.integers(-3, 30, rng.integers(0, 12)))]
         x = np.concatenate([np.zeros(0, np.int64), *runs]).astype(np.int64)
         assert np.array_equal(_sorted_unique(x), np.unique(x))
+
+
+def _rc_log(autopilot: str, params: dict[str, float]) -> RawLog:
+    """A MAVLink log of 20 s at 50 Hz: the roll stick (on channel 2) swings, the other
+    channels hold at their centre, with ATTITUDE and SERVO_OUTPUT_RAW beside it."""
+    t = np.arange(0, 20, 0.02)
+    swing = np.round(1500 + 200 * np.sin(2 * np.pi * 0.7 * t))
+    rc = MessageTable("RC_CHANNELS", {f"chan{i}_raw": swing if i == 2 else np.full(t.size, 1500.0)
+                                      for i in range(1, 9)}, time_s=t)
+    return RawLog(SourceInfo("x.tlog", "tlog", 0), {"RC_CHANNELS": rc}, params=params,
+                  autopilot=autopilot)
+
+
+def test_a_mavlink_logs_sticks_are_read_on_the_channels_the_autopilot_maps() -> None:
+    """A .tlog has no commanded attitude: the pilot's sticks stand in (coherence and
+    instruments need neither their scale nor their offset), on the RC channel the
+    autopilot's parameters map to each axis, without the dead zone; a PX4 log that does not
+    say its mapping gives none, as a channel out of range does."""
+    from mavsid.align import _sticks
+
+    remapped = _sticks(_rc_log("ardupilot", {"RCMAP_ROLL": 2.0, "RCMAP_PITCH": 1.0,
+                                             "RC2_DZ": 20.0}))
+    t, roll = remapped["roll"]
+    want = np.round(200 * np.sin(2 * np.pi * 0.7 * t))
+    np.testing.assert_allclose(roll, np.sign(want) * np.maximum(np.abs(want) - 20, 0))
+    assert not np.ptp(remapped["pitch"][1]) and set(remapped) == {"roll", "pitch", "yaw"}
+    assert not np.ptp(_sticks(_rc_log("ardupilot", {}))["roll"][1])  # (default: channel 1)
+    assert _sticks(_rc_log("px4", {})) == {}
+    px4 = _sticks(_rc_log("px4", {"RC_MAP_ROLL": 2.0, "RC_MAP_YAW": 0.0}))
+    assert set(px4) == {"roll"} and np.ptp(px4["roll"][1]) > 300
+    assert "roll" not in _sticks(_rc_log("ardupilot", {"RCMAP_ROLL": 19.0}))
+
+
+def test_a_tlogs_commanded_attitude_follows_the_simulated_pilots_sticks(tmp_path: Path) -> None:
+    """The same manual flight written as a .bin and as a .tlog: the .tlog's commanded roll
+    (the stick, on the grid) follows the simulator's desired roll, in shape and timing."""
+    from mavsid.synthetic.run import scenario_from_options, simulate
+
+    sc = scenario_from_options(manoeuvre="3211", axis="roll", seed=4, duration_s=30.0)
+    path = tmp_path / "stick.tlog"
+    flight = simulate(sc, [path]).flight
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fd = load_flight(str(path))
+    got = fd.meta["commanded"]["roll"]
+    want = np.interp(fd.time_s, flight.t_s, flight.desired[:, 0])
+    ok = np.isfinite(got)
+    assert ok.mean() > 0.9 and np.ptp(want) > 0.1
+    assert np.corrcoef(got[ok], want[ok])[0, 1] > 0.99

@@ -797,7 +797,8 @@ def test_a_heavy_lift_frames_slow_motors_are_searched_for(tmp_path) -> None:  # 
 _STIRRED = [(axis, layout, manoeuvre, rate)
             for layout in (None, "copter-3.3", "px4-1.14") for manoeuvre in ("random", "3211")
             for axis, rate in (("yaw", 400.0),)] + [
-    ("pitch", None, "random", 25.0), ("roll", "px4-1.11", "random", 25.0)]
+    ("pitch", None, "random", 25.0), ("roll", "px4-1.11", "random", 25.0),
+    ("roll", "tlog", "random", 50.0), ("yaw", "tlog", "3211", 50.0)]
 
 
 @pytest.mark.parametrize(("axis", "layout", "manoeuvre", "rate_hz"), _STIRRED)
@@ -811,14 +812,16 @@ def test_a_pilot_who_never_lets_go_of_the_stick_is_fitted(  # type: ignore[no-un
     its floor. The commanded heading's rate (ATT.DesYaw, PX4's attitude setpoint) is the
     pilot's yaw command; a response coherent with the command over the band is kept
     whatever those floors say, and the command is the instrument that checks the
-    feedback's bias."""
+    feedback's bias. A .tlog carries no command: its sticks stand in (RC_CHANNELS; its
+    windows were all refused below the floors before)."""
     from mavsid.synthetic.run import scenario_from_options, simulate
 
     sc = dataclasses.replace(scenario_from_options(manoeuvre=manoeuvre, axis=axis, seed=7,
                                                    duration_s=30.0, rate_hz=rate_hz),
                              hover_before_s=0.0, hover_after_s=0.0)
-    path = tmp_path / ("stir.ulg" if layout and layout.startswith("px4") else "stir.bin")
-    simulate(sc, [path], layout=layout)
+    path = tmp_path / ("stir.ulg" if layout and layout.startswith("px4")
+                       else "stir.tlog" if layout == "tlog" else "stir.bin")
+    simulate(sc, [path], layout=None if layout == "tlog" else layout)
     truth = json.loads(path.with_suffix(".truth.json").read_text())["axes"][axis]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

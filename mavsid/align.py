@@ -998,15 +998,19 @@ def sysid_runs(raw: RawLog) -> list[dict[str, Any]]:
     return runs
 
 
-def _commanded(raw: RawLog, t: np.ndarray, boot: int = 0) -> dict[str, np.ndarray]:
+def _commanded(raw: RawLog, t: np.ndarray, boot: int = 0
+               ) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     """The commanded attitude per axis on the grid ``t`` (interpolated; NaN outside its
     span), from the first of :data:`mavsid.channels.DESIRED_CHANNELS` the log has, its
     records of the boot the grid is laid on (``boot``, see :func:`_boot_records`): roll and
     pitch angles (rad), and for yaw the commanded heading's rate (rad/s: the pilot commands
     a yaw rate, which the body rate follows; the heading unwrapped, central differences).
     Excitation judges a stick manoeuvre's response by its coherence with it, the fit checks
-    the feedback's bias with it (:mod:`mavsid.estimators.instruments`)."""
+    the feedback's bias with it (:mod:`mavsid.estimators.instruments`). Where a log has
+    none (a ``.tlog``), the pilot's sticks (:func:`_sticks`). Second: each axis's source
+    (``MESSAGE.field``, the sticks' with ``, the pilot's stick``)."""
     out: dict[str, np.ndarray] = {}
+    source: dict[str, str] = {}
     for axis, chans in DESIRED_CHANNELS.items():
         got = first_of(raw, chans, f"commanded {axis}")
         if got is None:
@@ -1019,12 +1023,14 @@ def _commanded(raw: RawLog, t: np.ndarray, boot: int = 0) -> dict[str, np.ndarra
         if np.ptp(v) > 0:
             # not published in a gap (PX4's rate-only modes such as ACRO): not a ramp across it
             out[axis] = _resampled(ts, v, t, np.nan)
-    for axis, (ts, v) in _sticks(raw).items():
+            source[axis] = f"{got[0].message}.{got[0].field}"
+    for axis, (name, ts, v) in _sticks(raw).items():
         if axis not in out:
             ts, v = _boot_records(ts, v, boot)
             if ts.size >= 2 and np.ptp(v) > 0:
                 out[axis] = _resampled(ts, v, t, np.nan)
-    return out
+                source[axis] = f"RC_CHANNELS.{name}, the pilot's stick"
+    return out, source
 
 
 #: per axis: the autopilot's parameter mapping an RC input channel to it (ArduPilot, PX4),
@@ -1034,11 +1040,12 @@ _STICK_MAP = {"roll": ("RCMAP_ROLL", "RC_MAP_ROLL", 1),
               "yaw": ("RCMAP_YAW", "RC_MAP_YAW", 4)}
 
 
-def _sticks(raw: RawLog) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+def _sticks(raw: RawLog) -> dict[str, tuple[str, np.ndarray, np.ndarray]]:
     """The pilot's roll, pitch and yaw sticks in a MAVLink log (``RC_CHANNELS``, the RC input
-    the autopilot reads): per axis the times (s) and the stick's departure from its trim (µs,
-    outside its dead zone), on the channel the autopilot maps to the axis (its ``RCMAP_*``,
-    or PX4's ``RC_MAP_*``; ArduPilot's defaults 1, 2, 4; none for a PX4 log without them).
+    the autopilot reads): per axis the field, the times (s) and the stick's departure from
+    its trim (µs, outside its dead zone), on the channel the autopilot maps to the axis (its
+    ``RCMAP_*``, or PX4's ``RC_MAP_*``; ArduPilot's defaults 1, 2, 4; none for a PX4 log
+    without them).
 
     The commanded attitude's stand-in where a log has none (a ``.tlog``): in the stabilised
     modes a stick sets an angle (roll, pitch) or a yaw rate in proportion, through the input
@@ -1053,14 +1060,14 @@ def _sticks(raw: RawLog) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     ...                   np.arange(4.0))
     >>> raw = RawLog(SourceInfo("x.tlog", "tlog", 0), {"RC_CHANNELS": rc},
     ...              params={"RC1_DZ": 20.0}, autopilot="ardupilot")
-    >>> {k: v[1].tolist() for k, v in _sticks(raw).items()}
+    >>> {k: v[2].tolist() for k, v in _sticks(raw).items()}
     {'roll': [0.0, 80.0, -80.0], 'pitch': [0.0, 0.0, 0.0, 0.0], 'yaw': [-10.0, -10.0, -10.0, -10.0]}
     """
     table = raw.messages.get("RC_CHANNELS")
     if table is None or not len(table):
         return {}
     px4 = raw.autopilot == "px4"
-    out: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    out: dict[str, tuple[str, np.ndarray, np.ndarray]] = {}
     for axis, (ardupilot, px4_name, default) in _STICK_MAP.items():
         got = raw.params.get(px4_name if px4 else ardupilot, None if px4 else default)
         if got is None or not 1 <= got <= 18 or got != int(got):
@@ -1075,7 +1082,7 @@ def _sticks(raw: RawLog) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         trim = raw.params.get(f"RC{n}_TRIM", 1500.0)
         dead = raw.params.get(f"RC{n}_DZ", 0.0)  # (both autopilots name it so)
         x = pwm - trim
-        out[axis] = (np.asarray(table.time_s, float)[keep],
+        out[axis] = (f"chan{n}_raw", np.asarray(table.time_s, float)[keep],
                      np.sign(x) * np.maximum(np.abs(x) - max(dead, 0.0), 0.0))
     return out
 
@@ -1303,9 +1310,10 @@ def _align(raw: RawLog, preset: Preset | str | None, rate_hz: float | None,
     injection = _sysid_injection(raw, t, boot["used"] - 1)
     if injection is not None:
         meta["sysid_injection"] = injection
-    commanded = _commanded(raw, t, boot["used"] - 1)
+    commanded, commanded_from = _commanded(raw, t, boot["used"] - 1)
     if commanded:
         meta["commanded"] = commanded
+        meta["commanded_from"] = commanded_from
     return FlightData(
         time_s=t,
         states=x,

@@ -293,6 +293,7 @@ class _Axis:
     y_floor: float = math.nan  # output's 1-s RMS where the input has no power
     injection: np.ndarray | None = None  # SYSTEMID's logged waveform (SIDD.Targ), 0 outside
     command: np.ndarray | None = None  # commanded attitude (rad; yaw: rate), NaN if not logged
+    command_from: str = ""  # where the command came from (``ATT.DesRoll``, the sticks ...)
     # the collective thrust, where it was really logged (a constant column was not): judged
     # once per flight, not per window (a 27-min flight has ~600 windows an axis)
     thrust: np.ndarray | None = None
@@ -363,11 +364,12 @@ def _axis(fd: FlightData, name: str, opts: ScanOptions, air: np.ndarray) -> _Axi
     injection = np.asarray(inj, dtype=float) if isinstance(inj, np.ndarray) else None
     cmd = dict(fd.meta.get("commanded") or {}).get(name)  # type: ignore[call-overload]
     command = np.asarray(cmd, dtype=float) if isinstance(cmd, np.ndarray) else None
+    source = dict(fd.meta.get("commanded_from") or {}).get(name, "")  # type: ignore[call-overload]
     thrust = _col(fd, "u_thrust")
     if thrust is not None and not np.ptp(thrust) > 1e-6:
         thrust = None
     return _Axis(name, u, u_hp, y, y_name, u_name, floor, y_hp, y_floor, injection, command,
-                 thrust)
+                 str(source), thrust)
 
 
 def _highpass(fd: FlightData, x: np.ndarray, opts: ScanOptions) -> np.ndarray:
@@ -743,7 +745,8 @@ def _kept_reason(ax: _Axis, m: Mapping[str, float]) -> str:
         )
     if "command_coherence" in m:
         what = "yaw rate" if ax.name == "yaw" else "attitude"
-        level += (f", coherent with the commanded {what} over "
+        source = f" ({ax.command_from})" if ax.command_from else ""
+        level += (f", coherent with the commanded {what}{source} over "
                   f"{100 * m['command_coverage']:.0f} % of the band (mean "
                   f"{m['command_coherence']:.2f})")
     return (

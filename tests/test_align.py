@@ -368,14 +368,15 @@ def test_a_mavlink_logs_sticks_are_read_on_the_channels_the_autopilot_maps() -> 
 
     remapped = _sticks(_rc_log("ardupilot", {"RCMAP_ROLL": 2.0, "RCMAP_PITCH": 1.0,
                                              "RC2_DZ": 20.0}))
-    t, roll = remapped["roll"]
+    field, t, roll = remapped["roll"]
+    assert field == "chan2_raw"
     want = np.round(200 * np.sin(2 * np.pi * 0.7 * t))
     np.testing.assert_allclose(roll, np.sign(want) * np.maximum(np.abs(want) - 20, 0))
-    assert not np.ptp(remapped["pitch"][1]) and set(remapped) == {"roll", "pitch", "yaw"}
-    assert not np.ptp(_sticks(_rc_log("ardupilot", {}))["roll"][1])  # (default: channel 1)
+    assert not np.ptp(remapped["pitch"][2]) and set(remapped) == {"roll", "pitch", "yaw"}
+    assert not np.ptp(_sticks(_rc_log("ardupilot", {}))["roll"][2])  # (default: channel 1)
     assert _sticks(_rc_log("px4", {})) == {}
     px4 = _sticks(_rc_log("px4", {"RC_MAP_ROLL": 2.0, "RC_MAP_YAW": 0.0}))
-    assert set(px4) == {"roll"} and np.ptp(px4["roll"][1]) > 300
+    assert set(px4) == {"roll"} and np.ptp(px4["roll"][2]) > 300
     assert "roll" not in _sticks(_rc_log("ardupilot", {"RCMAP_ROLL": 19.0}))
 
 
@@ -391,6 +392,7 @@ def test_a_tlogs_commanded_attitude_follows_the_simulated_pilots_sticks(tmp_path
         warnings.simplefilter("ignore")
         fd = load_flight(str(path))
     got = fd.meta["commanded"]["roll"]
+    assert fd.meta["commanded_from"]["roll"] == "RC_CHANNELS.chan1_raw, the pilot's stick"
     want = np.interp(fd.time_s, flight.t_s, flight.desired[:, 0])
     ok = np.isfinite(got)
     assert ok.mean() > 0.9 and np.ptp(want) > 0.1

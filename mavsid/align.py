@@ -1029,7 +1029,7 @@ def _commanded(raw: RawLog, t: np.ndarray, boot: int = 0
             ts, v = _boot_records(ts, v, boot)
             if ts.size >= 2 and np.ptp(v) > 0:
                 out[axis] = _resampled(ts, v, t, np.nan)
-                source[axis] = f"RC_CHANNELS.{name}, the pilot's stick"
+                source[axis] = f"{name}, the pilot's stick"
     return out, source
 
 
@@ -1042,7 +1042,8 @@ _STICK_MAP = {"roll": ("RCMAP_ROLL", "RC_MAP_ROLL", 1),
 
 def _sticks(raw: RawLog) -> dict[str, tuple[str, np.ndarray, np.ndarray]]:
     """The pilot's roll, pitch and yaw sticks in a MAVLink log (``RC_CHANNELS``, the RC input
-    the autopilot reads): per axis the field, the times (s) and the stick's departure from
+    the autopilot reads, or MAVLink 1's ``RC_CHANNELS_RAW``): per axis the field
+    (``MESSAGE.field``), the times (s) and the stick's departure from
     its trim (µs, outside its dead zone), on the channel the autopilot maps to the axis (its
     ``RCMAP_*``, or PX4's ``RC_MAP_*``; ArduPilot's defaults 1, 2, 4; none for a PX4 log
     without them).
@@ -1064,8 +1065,14 @@ def _sticks(raw: RawLog) -> dict[str, tuple[str, np.ndarray, np.ndarray]]:
     {'roll': [0.0, 80.0, -80.0], 'pitch': [0.0, 0.0, 0.0, 0.0], 'yaw': [-10.0, -10.0, -10.0, -10.0]}
     """
     table = raw.messages.get("RC_CHANNELS")
-    if table is None or not len(table):
-        return {}
+    if table is None or not len(table):  # (MAVLink 1's, channels 1-8 on port 0)
+        table = raw.messages.get("RC_CHANNELS_RAW")
+        if table is None or not len(table):
+            return {}
+    times = np.asarray(table.time_s, float)
+    rows = np.isfinite(times)
+    if "port" in table.columns:  # (RC_CHANNELS_RAW: channels 9-16 on port 1)
+        rows &= np.asarray(table.columns["port"]) == 0
     px4 = raw.autopilot == "px4"
     out: dict[str, tuple[str, np.ndarray, np.ndarray]] = {}
     for axis, (ardupilot, px4_name, default) in _STICK_MAP.items():
@@ -1077,12 +1084,12 @@ def _sticks(raw: RawLog) -> dict[str, tuple[str, np.ndarray, np.ndarray]]:
         if column is None:
             continue
         pwm = np.asarray(column, dtype=float)
-        keep = (pwm >= 800) & (pwm <= 2200) & np.isfinite(np.asarray(table.time_s, float))
+        keep = (pwm >= 800) & (pwm <= 2200) & rows
         pwm = pwm[keep]
         trim = raw.params.get(f"RC{n}_TRIM", 1500.0)
         dead = raw.params.get(f"RC{n}_DZ", 0.0)  # (both autopilots name it so)
         x = pwm - trim
-        out[axis] = (f"chan{n}_raw", np.asarray(table.time_s, float)[keep],
+        out[axis] = (f"{table.name}.chan{n}_raw", times[keep],
                      np.sign(x) * np.maximum(np.abs(x) - max(dead, 0.0), 0.0))
     return out
 
@@ -1138,7 +1145,8 @@ def _chirp_span(enter: float, leave: float, run: Mapping[str, Any]) -> tuple[flo
 #: messages alignment reads besides the presets' channels: flags, modes, params, SYSTEMID
 FLAG_MESSAGES: dict[str, tuple[str, ...]] = {
     "dataflash": ("EV", "ARM", "MODE", "MSG", "PARM", "SIDS", "SIDD", "ATT"),
-    "tlog": ("HEARTBEAT", "EXTENDED_SYS_STATE", "PARAM_VALUE", "STATUSTEXT", "RC_CHANNELS"),
+    "tlog": ("HEARTBEAT", "EXTENDED_SYS_STATE", "PARAM_VALUE", "STATUSTEXT", "RC_CHANNELS",
+             "RC_CHANNELS_RAW"),
     "ulog": ("actuator_armed", "vehicle_land_detected", "vehicle_status",
              "vehicle_attitude_setpoint"),
 }

@@ -369,7 +369,7 @@ def test_a_mavlink_logs_sticks_are_read_on_the_channels_the_autopilot_maps() -> 
     remapped = _sticks(_rc_log("ardupilot", {"RCMAP_ROLL": 2.0, "RCMAP_PITCH": 1.0,
                                              "RC2_DZ": 20.0}))
     field, t, roll = remapped["roll"]
-    assert field == "chan2_raw"
+    assert field == "RC_CHANNELS.chan2_raw"
     want = np.round(200 * np.sin(2 * np.pi * 0.7 * t))
     np.testing.assert_allclose(roll, np.sign(want) * np.maximum(np.abs(want) - 20, 0))
     assert not np.ptp(remapped["pitch"][2]) and set(remapped) == {"roll", "pitch", "yaw"}
@@ -378,6 +378,15 @@ def test_a_mavlink_logs_sticks_are_read_on_the_channels_the_autopilot_maps() -> 
     px4 = _sticks(_rc_log("px4", {"RC_MAP_ROLL": 2.0, "RC_MAP_YAW": 0.0}))
     assert set(px4) == {"roll"} and np.ptp(px4["roll"][2]) > 300
     assert "roll" not in _sticks(_rc_log("ardupilot", {"RCMAP_ROLL": 19.0}))
+    # MAVLink 1's RC_CHANNELS_RAW: channels 1-8 on port 0 (port 1 carries 9-16)
+    old = _rc_log("ardupilot", {"RCMAP_ROLL": 2.0})
+    table = old.messages.pop("RC_CHANNELS")
+    port = np.arange(len(table)) % 2
+    old.messages["RC_CHANNELS_RAW"] = MessageTable(
+        "RC_CHANNELS_RAW", {**table.columns, "port": port}, time_s=table.time_s)
+    field, t_old, _ = _sticks(old)["roll"]
+    assert field == "RC_CHANNELS_RAW.chan2_raw"
+    np.testing.assert_array_equal(t_old, table.time_s[port == 0])
 
 
 def test_a_tlogs_commanded_attitude_follows_the_simulated_pilots_sticks(tmp_path: Path) -> None:

@@ -1042,11 +1042,10 @@ _STICK_MAP = {"roll": ("RCMAP_ROLL", "RC_MAP_ROLL", 1),
 
 def _sticks(raw: RawLog) -> dict[str, tuple[str, np.ndarray, np.ndarray]]:
     """The pilot's roll, pitch and yaw sticks in a MAVLink log (``RC_CHANNELS``, the RC input
-    the autopilot reads, or MAVLink 1's ``RC_CHANNELS_RAW``): per axis the field
-    (``MESSAGE.field``), the times (s) and the stick's departure from
-    its trim (µs, outside its dead zone), on the channel the autopilot maps to the axis (its
-    ``RCMAP_*``, or PX4's ``RC_MAP_*``; ArduPilot's defaults 1, 2, 4; none for a PX4 log
-    without them).
+    the autopilot reads, or MAVLink 1's ``RC_CHANNELS_RAW``; the vehicle's): per axis the
+    field (``MESSAGE.field``), the times (s) and the stick's departure from its trim (µs,
+    outside its dead zone), on the channel the autopilot maps to the axis (its ``RCMAP_*``,
+    or PX4's ``RC_MAP_*``; ArduPilot's defaults 1, 2, 4; none for a PX4 log without them).
 
     The commanded attitude's stand-in where a log has none (a ``.tlog``): in the stabilised
     modes a stick sets an angle (roll, pitch) or a yaw rate in proportion, through the input
@@ -1065,14 +1064,15 @@ def _sticks(raw: RawLog) -> dict[str, tuple[str, np.ndarray, np.ndarray]]:
     {'roll': [0.0, 80.0, -80.0], 'pitch': [0.0, 0.0, 0.0, 0.0], 'yaw': [-10.0, -10.0, -10.0, -10.0]}
     """
     table = raw.messages.get("RC_CHANNELS")
-    if table is None or not len(table):  # (MAVLink 1's, channels 1-8 on port 0)
+    if table is None or not len(table):
         table = raw.messages.get("RC_CHANNELS_RAW")
         if table is None or not len(table):
             return {}
     times = np.asarray(table.time_s, float)
     rows = np.isfinite(times)
-    if "port" in table.columns:  # (RC_CHANNELS_RAW: channels 9-16 on port 1)
-        rows &= np.asarray(table.columns["port"]) == 0
+    one = _rows(table)  # (the vehicle's, and RC_CHANNELS_RAW's port 0: channels 1-8)
+    if one is not None:
+        rows &= one
     px4 = raw.autopilot == "px4"
     out: dict[str, tuple[str, np.ndarray, np.ndarray]] = {}
     for axis, (ardupilot, px4_name, default) in _STICK_MAP.items():

@@ -383,10 +383,18 @@ def test_a_mavlink_logs_sticks_are_read_on_the_channels_the_autopilot_maps() -> 
     table = old.messages.pop("RC_CHANNELS")
     port = np.arange(len(table)) % 2
     old.messages["RC_CHANNELS_RAW"] = MessageTable(
-        "RC_CHANNELS_RAW", {**table.columns, "port": port}, time_s=table.time_s)
+        "RC_CHANNELS_RAW", {**table.columns, "port": port}, time_s=table.time_s,
+        units={"port": "instance"})
     field, t_old, _ = _sticks(old)["roll"]
     assert field == "RC_CHANNELS_RAW.chan2_raw"
     np.testing.assert_array_equal(t_old, table.time_s[port == 0])
+    # a second vehicle's sticks in the same telemetry are not the pilot's of the first
+    two = _rc_log("ardupilot", {"RCMAP_ROLL": 2.0})
+    table = two.messages["RC_CHANNELS"]
+    ids = np.where(np.arange(len(table)) % 3 == 0, 2, 1)
+    two.messages["RC_CHANNELS"] = MessageTable("RC_CHANNELS", {**table.columns, "_sysid": ids},
+                                               time_s=table.time_s)
+    np.testing.assert_array_equal(_sticks(two)["roll"][1], table.time_s[ids == 1])
 
 
 def test_a_tlogs_commanded_attitude_follows_the_simulated_pilots_sticks(tmp_path: Path) -> None:

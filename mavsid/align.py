@@ -1070,9 +1070,11 @@ def _sticks(raw: RawLog) -> dict[str, tuple[str, np.ndarray, np.ndarray]]:
             return {}
     times = np.asarray(table.time_s, float)
     rows = np.isfinite(times)
-    one = _rows(table)  # (the vehicle's, and RC_CHANNELS_RAW's port 0: channels 1-8)
+    one = _rows(table)  # (the vehicle's)
     if one is not None:
         rows &= one
+    if "port" in table.columns:  # (RC_CHANNELS_RAW's channels 9-16 come on port 1)
+        rows &= np.asarray(table.columns["port"]) == 0
     px4 = raw.autopilot == "px4"
     out: dict[str, tuple[str, np.ndarray, np.ndarray]] = {}
     for axis, (ardupilot, px4_name, default) in _STICK_MAP.items():

@@ -383,8 +383,7 @@ def test_a_mavlink_logs_sticks_are_read_on_the_channels_the_autopilot_maps() -> 
     table = old.messages.pop("RC_CHANNELS")
     port = np.arange(len(table)) % 2
     old.messages["RC_CHANNELS_RAW"] = MessageTable(
-        "RC_CHANNELS_RAW", {**table.columns, "port": port}, time_s=table.time_s,
-        units={"port": "instance"})
+        "RC_CHANNELS_RAW", {**table.columns, "port": port}, time_s=table.time_s)
     field, t_old, _ = _sticks(old)["roll"]
     assert field == "RC_CHANNELS_RAW.chan2_raw"
     np.testing.assert_array_equal(t_old, table.time_s[port == 0])

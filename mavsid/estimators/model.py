@@ -114,21 +114,25 @@ def _hash_file(path: str) -> str | None:
 
 
 def hash_soon(paths: Iterable[str]) -> None:
-    """Start hashing the files ``paths`` in threads, for :func:`provenance` (hashlib lets
-    other threads run: a 100-MB log's ~0.1 s overlaps the fit)."""
-    for path in paths:
-        with _HASHES_LOCK:
-            if path in _HASHES:
-                continue
-            job = _HASHES[path] = Future()
+    """Start hashing the files ``paths`` not asked for before, one after another in a
+    thread, for :func:`provenance` (hashlib lets other threads run: a 100-MB log's ~0.1 s
+    overlaps the fit)."""
+    jobs: list[tuple[str, Future[str | None]]] = []
+    with _HASHES_LOCK:
+        for path in paths:
+            if path not in _HASHES:
+                jobs.append((path, _HASHES.setdefault(path, Future())))
+    if not jobs:
+        return
 
-        def run(path: str = path, job: Future[str | None] = job) -> None:
+    def run() -> None:
+        for path, job in jobs:
             try:
                 job.set_result(_hash_file(path))
             except BaseException as exc:  # (raised by _sha256 in the caller's thread)
                 job.set_exception(exc)
 
-        threading.Thread(target=run, name="mavsid-sha256", daemon=True).start()
+    threading.Thread(target=run, name="mavsid-sha256", daemon=True).start()
 
 
 def _sha256(path: str) -> str | None:

@@ -1039,7 +1039,10 @@ class _Reader:
         kept for :meth:`dtype`."""
         key = self.keys.get(name)
         if key is None:
-            key = self.keys[name] = _closure(name, self.out.formats, self.out.definitions)
+            out = self.out
+            # (most formats hold basic types only: their own text is the whole key)
+            key = self.keys[name] = ((name, out.definitions[name]),) if (
+                name in out.basic_sizes) else _closure(name, out.formats, out.definitions)
         _, _, size, offset = _layout(key)
         return size, offset
 

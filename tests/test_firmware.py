@@ -64,6 +64,21 @@ def test_old_copter_logs_reach_a_verdict(name: str) -> None:
     assert "time grid" not in str(info.value)
 
 
+def test_a_log_without_the_controllers_output_says_which_and_what_to_log() -> None:
+    """An ArduCopter log with attitude but no rate controller output (no RATE, no RCOU
+    fast enough): each axis says the input it lacks, not "no window kept (1× missing
+    channel)", and the advice is what to log (this firmware has no RATE record), not a
+    manoeuvre to fly."""
+    path = shared_path("public", "ArduPilot__ardupilot", "robert_lefebvre_octo_PM.log")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(NoExcitationError, match="the log has no u_roll input") as info:
+            fit([str(path)])
+    assert "missing channel" not in str(info.value)
+    advice = " ".join(info.value.details)
+    assert "LOG_BITMASK" in advice and "fly a SYSTEMID" not in advice, advice
+
+
 def test_a_log_without_any_clock_says_so() -> None:
     path = shared_path("public", "ArduPilot__ardupilot", "underpowered.log")
     with warnings.catch_warnings():

@@ -780,8 +780,11 @@ class _InstrumentCheck:
     estimate_source = "the estimate with the commanded attitude as instrument"
 
     def __init__(self, segments: Sequence[Segment],
-                 references: Sequence[np.ndarray | None]) -> None:
+                 references: Sequence[np.ndarray | None], sticks: bool = False) -> None:
         self.segments, self.references = list(segments), list(references)
+        if sticks:  # (a .tlog's: the pilot's sticks stand for the commanded attitude)
+            self.estimate_source = ("the estimate with the commanded attitude (the pilot's "
+                                    "sticks) as instrument")
 
     def __call__(self, models: Any) -> None:
         return None
@@ -798,6 +801,7 @@ def _instrument_check(axis: str, flights: Sequence[FlightData],
     commanded attitude (``meta["commanded"]``, from alignment) on their samples; None where
     the logs have none for the axis."""
     refs: list[np.ndarray | None] = []
+    sticks = False
     for seg in segments:
         ref = None
         for fd in flights:
@@ -805,11 +809,13 @@ def _instrument_check(axis: str, flights: Sequence[FlightData],
             i = fd.index_of(seg) if desired is not None else None
             if i is not None:
                 ref = desired[i:i + len(seg)]
+                source = dict(fd.meta.get("commanded_from") or {}).get(axis, "")  # type: ignore[call-overload]
+                sticks |= "the pilot's stick" in str(source)
                 break
         refs.append(ref)
     if all(r is None for r in refs):
         return None
-    return _InstrumentCheck(segments, refs)
+    return _InstrumentCheck(segments, refs, sticks)
 
 
 #: Stages :func:`fit` reports per axis (reading is one more per log).

@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import dataclasses
 import datetime as _dt
+import errno
 import hashlib
 import json
 import math
@@ -112,8 +113,14 @@ def config_hash(config: PipelineConfig | None) -> str:
 
 
 def _sha256(path: str) -> str:
-    with open(path, "rb") as f:
-        return hashlib.file_digest(f, "sha256").hexdigest()
+    """The log's sha256 (:func:`mavsid.estimators.model.file_sha256`, which the fit's
+    provenance asks for again: hashed once); OSError when it cannot be read."""
+    from mavsid.estimators.model import file_sha256
+
+    got = file_sha256(path)
+    if got is None:
+        raise FileNotFoundError(errno.ENOENT, os.strerror(errno.ENOENT), path)
+    return got
 
 
 def _row_base(path: str, sha: str, chash: str, vehicle: str, date: str) -> dict[str, Any]:

@@ -319,19 +319,29 @@ def test_several_logs_pool_their_segments_at_one_rate() -> None:
     assert hashed == {str(p): hashlib.sha256(p.read_bytes()).hexdigest() for p in logs}
 
 
-def test_provenance_hashes_each_file_once_and_a_missing_one_as_none(tmp_path: Path) -> None:
+def test_provenance_hashes_each_version_of_a_file_once_and_a_missing_one_as_none(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The logs' sha256 (the model's provenance, `mavsid batch`'s rows) is hashed once per
+    process and version of the file: asked again, the first hash answers; a log written
+    again since (a persistent Dask worker, a notebook) is hashed again, never given the
+    old file's hash."""
     from mavsid.estimators import model
 
+    hashed: list[str] = []
+    original = model._hash_file
+    monkeypatch.setattr(model, "_hash_file", lambda p: hashed.append(p) or original(p))
     log = tmp_path / "a.bin"
     log.write_bytes(b"x" * 3_000_000)
     model.hash_soon([str(log), str(log)])
     want = hashlib.sha256(b"x" * 3_000_000).hexdigest()
-    assert model._sha256(str(log)) == want
-    log.write_bytes(b"changed")  # (a later ask is answered by the first hash)
-    assert model._sha256(str(log)) == want
-    assert model._sha256(str(tmp_path / "missing.bin")) is None
+    assert model.file_sha256(str(log)) == want
+    assert model.file_sha256(str(log)) == want and hashed == [str(log)]
+    log.write_bytes(b"changed")
+    assert model.file_sha256(str(log)) == hashlib.sha256(b"changed").hexdigest()
+    assert hashed == [str(log)] * 2
+    assert model.file_sha256(str(tmp_path / "missing.bin")) is None
     (tmp_path / "dir.bin").mkdir()
-    assert model._sha256(str(tmp_path / "dir.bin")) is None
+    assert model.file_sha256(str(tmp_path / "dir.bin")) is None
 
 
 def test_pooling_a_slower_log_on_a_faster_ones_grid_is_said() -> None:

@@ -34,6 +34,7 @@ import datetime as _dt
 import hashlib
 import json
 import math
+import os
 import threading
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import Future
@@ -101,9 +102,20 @@ def _ratio(num: str, den: str) -> str:
     return f"{num}/({den})" if "*" in den or "/" in den else f"{num}/{den}"
 
 
-#: each log's sha256 (None: no such file), by path, made once per process in a thread
-_HASHES: dict[str, Future[str | None]] = {}
+#: each file's sha256 (None: not a file), by its path and version (:func:`_version`),
+#: hashed once per process in a thread
+_HASHES: dict[tuple[Any, ...], Future[str | None]] = {}
 _HASHES_LOCK = threading.Lock()
+
+
+def _version(path: str) -> tuple[Any, ...]:
+    """What tells one version of a file from another: its path, inode, size and time of
+    last modification (just the path when it cannot be looked at)."""
+    try:
+        st = os.stat(path)
+    except (OSError, ValueError):
+        return (path,)
+    return path, st.st_ino, st.st_size, st.st_mtime_ns
 
 
 def _hash_file(path: str) -> str | None:
@@ -113,32 +125,42 @@ def _hash_file(path: str) -> str | None:
         return hashlib.file_digest(fh, "sha256").hexdigest()
 
 
-def hash_soon(paths: Iterable[str]) -> None:
-    """Start hashing the files ``paths`` not asked for before, one after another in a
-    thread, for :func:`provenance` (hashlib lets other threads run: a 100-MB log's ~0.1 s
-    overlaps the fit)."""
+def _hashes(paths: Iterable[str]) -> list[Future[str | None]]:
+    """Each file's hash to come (:func:`hash_soon`), the versions not asked for before
+    hashed one after another in a thread (hashlib lets other threads run)."""
+    out: list[Future[str | None]] = []
     jobs: list[tuple[str, Future[str | None]]] = []
     with _HASHES_LOCK:
         for path in paths:
-            if path not in _HASHES:
-                jobs.append((path, _HASHES.setdefault(path, Future())))
-    if not jobs:
-        return
+            key = _version(path)
+            got = _HASHES.get(key)
+            if got is None:
+                got = _HASHES[key] = Future()
+                jobs.append((path, got))
+            out.append(got)
+    if jobs:
+        def run() -> None:
+            for path, job in jobs:
+                try:
+                    job.set_result(_hash_file(path))
+                except BaseException as exc:  # (raised where the hash is asked for)
+                    job.set_exception(exc)
 
-    def run() -> None:
-        for path, job in jobs:
-            try:
-                job.set_result(_hash_file(path))
-            except BaseException as exc:  # (raised by _sha256 in the caller's thread)
-                job.set_exception(exc)
-
-    threading.Thread(target=run, name="mavsid-sha256", daemon=True).start()
+        threading.Thread(target=run, name="mavsid-sha256", daemon=True).start()
+    return out
 
 
-def _sha256(path: str) -> str | None:
-    """sha256 of a file (once per path and process; None when it does not exist)."""
-    hash_soon([path])
-    return _HASHES[path].result()
+def hash_soon(paths: Iterable[str]) -> None:
+    """Start hashing the files ``paths``, for :func:`provenance` and :func:`file_sha256`
+    (a 100-MB log's ~0.1 s then overlaps the fit)."""
+    _hashes(paths)
+
+
+def file_sha256(path: str) -> str | None:
+    """sha256 of the file ``path``, hashed once per process and version of the file (its
+    inode, size and modification time: a log written again is hashed again); None when
+    ``path`` is not a file. OSError when it cannot be read."""
+    return _hashes([path])[0].result()
 
 
 def provenance(segments: Sequence[Segment], **settings: object) -> dict[str, object]:
@@ -147,7 +169,7 @@ def provenance(segments: Sequence[Segment], **settings: object) -> dict[str, obj
 
     logs = sorted({s.log for s in segments if s.log})
     return {
-        "logs": [{"path": p, "sha256": _sha256(p)} for p in logs],
+        "logs": [{"path": p, "sha256": file_sha256(p)} for p in logs],
         "segments": [
             {"log": s.log, "start_s": s.start_s, "stop_s": s.stop_s, "axis": s.axis,
              "source": s.source}

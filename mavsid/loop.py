@@ -55,7 +55,6 @@ from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
-from scipy import linalg
 
 from mavsid import dsp
 from mavsid.errors import ConfigError, MavsidError
@@ -605,7 +604,7 @@ def _continuous_blocks(model: Model) -> tuple[np.ndarray, np.ndarray, list[int],
         pole = float(a[0, 0])
         gain = _log_ratio(pole)
         return (np.array([[math.log(pole)]]) / model.dt, b * gain / model.dt, states, exo)
-    log = np.real(linalg.logm(big)) / model.dt
+    log = dsp.logm(big) / model.dt
     return log[:n, :n], log[:n, n:], states, exo
 
 
@@ -631,7 +630,7 @@ def _at_step(model: Model, dt: float) -> Model:
         e[0, 0] = math.exp(x)
         e[0, 1:] = b[0] * dt * (math.expm1(x) / x if x != 0.0 else 1.0)
     else:
-        e = linalg.expm(big * dt)
+        e = dsp.expm(big * dt)
     coef = np.zeros_like(model.coef)
     for j in states:
         coef[j] = e[:n, :n][:, model.state_names.index(model.features[j])]

@@ -41,12 +41,13 @@ Examples
 from __future__ import annotations
 
 import functools
+import math
+import statistics
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
-from scipy import special
 
 from mavsid import dsp
 from mavsid.data import Segment, demean
@@ -232,6 +233,41 @@ class SegmentValidation:
     fit_free_run_own_trim: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
+def chi2_sf(q: np.ndarray, dof: int) -> np.ndarray:
+    """``scipy.stats.chi2.sf(q, dof)`` for a whole number of degrees of freedom, in closed
+    form: with ``x = q / 2``, ``exp(-x) Σₖ xᵏ / k!`` (``k < dof / 2``) for an even ``dof``;
+    ``erfc(√x) + exp(-x) Σₖ x^(k-½) / Γ(k+½)`` (``1 ≤ k ≤ (dof - 1) / 2``) for an odd one;
+    the terms summed as logarithms (no overflow for a large ``q``). NaN stays NaN.
+
+    Examples
+    --------
+    >>> [round(float(v), 6) for v in chi2_sf(np.array([3.84145882, 0.0, 1e4]), 1)]
+    [0.05, 1.0, 0.0]
+    >>> round(float(chi2_sf(np.array([31.41043284]), 20)[0]), 6)
+    0.05
+    """
+    if dof < 1:
+        raise ValueError(f"chi2_sf: {dof} degrees of freedom")
+    x = np.asarray(q, float) / 2.0
+    out = np.full(x.shape, np.nan)
+    ok = np.isfinite(x) & (x >= 0)
+    out[np.isposinf(x)] = 0.0
+    xs = x[ok]
+    with np.errstate(divide="ignore"):
+        logx = np.log(xs)
+    if dof % 2 == 0:
+        ks = np.arange(dof // 2, dtype=float)
+        first = np.zeros(xs.shape)
+    else:
+        ks = np.arange(1, (dof - 1) // 2 + 1, dtype=float) - 0.5
+        first = np.array([math.erfc(math.sqrt(v)) for v in xs.tolist()])
+    lgam = np.array([math.lgamma(k + 1.0) for k in ks.tolist()])
+    with np.errstate(invalid="ignore"):  # (0 * log 0: the k = 0 term is exp(-x))
+        terms = np.exp(-xs[:, None] + np.where(ks > 0, ks * logx[:, None], 0.0) - lgam)
+    out[ok] = np.minimum(first + terms.sum(axis=1), 1.0)
+    return out
+
+
 @dataclass(frozen=True)
 class ResidualTest:
     """Whiteness of the one-step residuals and their independence from the inputs.
@@ -296,7 +332,7 @@ class ResidualTest:
         k = self.lags[1 : h + 1].astype(float)
         r = np.nan_to_num(self.autocorr[1 : h + 1])
         q = n * (n + 2) * np.sum(r**2 / (n - k)[:, None], axis=0)
-        return q, special.chdtrc(h, q)  # scipy.stats.chi2.sf(q, h)
+        return q, chi2_sf(q, h)
 
 
 @dataclass(frozen=True)
@@ -695,7 +731,7 @@ def residual_test(
         autocorr = np.where(ee > 0, acc / ee, np.nan)
         scale = np.sqrt(np.outer(uu, ee))
         crosscorr = np.where(scale > 0, ccc / scale, np.nan)
-    z = float(special.ndtri(0.5 + confidence / 2.0))  # scipy.stats.norm.ppf
+    z = statistics.NormalDist().inv_cdf(0.5 + confidence / 2.0)
     band = z / np.sqrt(total) if total else np.nan
     return ResidualTest(lags, autocorr, cross_lags, crosscorr, float(band), confidence, total)
 

@@ -85,3 +85,70 @@ def test_detrend_linear_matches_scipy_on_stacked_windows() -> None:
     x = RNG.standard_normal((5, 300)) + np.linspace(-40.0, 90.0, 300)
     assert detrend_linear(x) == pytest.approx(signal.detrend(x, type="linear"), abs=1e-11)
     assert detrend_linear(x[0]) == pytest.approx(signal.detrend(x[0], type="linear"), abs=1e-11)
+
+
+@pytest.mark.parametrize("order", [1, 2, 3, 5])
+def test_the_compiled_recursion_is_lapacks_banded_solve_to_the_bit(order: int) -> None:
+    """mavsid._filter against the scipy path it replaces (a build without a C compiler):
+    the same numbers, bit for bit (the same order of operations), per column."""
+    if dsp._filter is None:
+        pytest.skip("built without a C compiler: the scipy path is the only one")
+    b, a = signal.butter(order, 0.03)
+    u = RNG.standard_normal((4000, 3))
+    got = dsp.lfilter(b, a, u, axis=0)
+    compiled, dsp._filter = dsp._filter, None
+    try:
+        want = dsp.lfilter(b, a, u, axis=0)
+    finally:
+        dsp._filter = compiled
+    np.testing.assert_array_equal(got, want)
+    with pytest.raises(ValueError, match="whole columns"):
+        dsp._filter.recurse(np.ones(2), np.zeros(7), 3)
+
+
+def _structured(rng: np.random.Generator, n: int, m: int) -> np.ndarray:
+    """[[A, B], [0, 0]] dt: what a continuous model's zero-order hold exponentiates (the
+    zero block makes it defective: no eigenvector basis)."""
+    big = np.zeros((n + m, n + m))
+    big[:n, :n] = rng.standard_normal((n, n)) * 5 - 3 * np.eye(n)
+    big[:n, n:] = rng.standard_normal((n, m)) * 100
+    return big * 0.0025
+
+
+def test_expm_matches_scipy() -> None:
+    from scipy import linalg
+
+    rng = np.random.default_rng(11)
+    cases = [rng.standard_normal((k, k)) * s for k in (1, 2, 3, 5) for s in (1e-3, 0.5, 4, 60)]
+    cases += [_structured(rng, n, m) for n in (1, 2, 3) for m in (1, 2)]
+    cases += [np.zeros((2, 2)), np.array([[0.0, 1.0], [-1.0, 0.0]]) * np.pi]
+    for a in cases:
+        want = linalg.expm(a)
+        np.testing.assert_allclose(dsp.expm(a), want, rtol=1e-11,
+                                   atol=1e-13 * max(1.0, float(np.abs(want).max())))
+    with pytest.raises(ValueError, match="square"):
+        dsp.expm(np.ones((2, 3)))
+
+
+def test_logm_matches_scipy_and_hands_defective_matrices_to_it() -> None:
+    """The discrete models mavsid takes to continuous time: real positive poles, the
+    [[A_d, B_d], [0, I]] of a zero-order hold; a repeated pole (a Jordan block) goes to
+    scipy's Schur method, whose answer it returns."""
+    from scipy import linalg
+
+    rng = np.random.default_rng(12)
+    cases = []
+    for n in (1, 2, 3, 4):
+        q = rng.standard_normal((n, n)) + 2 * np.eye(n)
+        cases.append(q @ np.diag(np.exp(rng.uniform(-2, 0.3, n))) @ np.linalg.inv(q))
+    for n in (1, 2, 3):
+        cases.append(dsp.expm(_structured(rng, n, 2)[: n + 2, : n + 2]))
+    cases.append(np.array([[0.99, 0.44, 0.1], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]))
+    jordan = np.array([[0.9, 1.0], [0.0, 0.9]])  # defective: scipy's answer
+    cases.append(jordan)
+    for a in cases:
+        with np.errstate(all="ignore"):
+            want = np.real(linalg.logm(a))
+        np.testing.assert_allclose(dsp.logm(a), want, rtol=1e-9, atol=1e-11)
+        np.testing.assert_allclose(dsp.expm(dsp.logm(a)), a, rtol=1e-9, atol=1e-12)
+    assert dsp.logm(jordan)[0, 1] == pytest.approx(1 / 0.9, rel=1e-12)

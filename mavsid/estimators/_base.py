@@ -30,7 +30,6 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-from scipy import linalg
 
 from mavsid.data import Segment
 from mavsid.errors import (
@@ -191,10 +190,11 @@ def solve(g: Gram, ridge: float = 0.0, penalize: np.ndarray | None = None,
     if ridge > 0:
         pen = np.ones(p, bool) if penalize is None else np.asarray(penalize, bool)
         a = a + ridge * g.n * np.diag(pen[act].astype(float))
-    try:
-        sol = linalg.cho_solve(linalg.cho_factor(a), b)
-    except linalg.LinAlgError:
-        sol, *_ = linalg.lstsq(a, b)
+    try:  # (Cholesky, then the two triangular systems; least squares if not definite)
+        low = np.linalg.cholesky(a)
+        sol = np.linalg.solve(low.T, np.linalg.solve(low, b))
+    except np.linalg.LinAlgError:
+        sol, *_ = np.linalg.lstsq(a, b, rcond=None)
     coef[act] = sol / s[:, None]
     return coef
 

@@ -44,7 +44,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import linalg
 
 from mavsid import dsp
 from mavsid.data import Segment
@@ -221,7 +220,8 @@ def _block_diagonal(one: _SS, n: int) -> _SS:
     """``n`` independent copies of a single-input single-output system, side by side."""
     if n == 1:
         return one
-    return tuple(linalg.block_diag(*([x] * n)) for x in one)
+    a, b, c, d = (np.kron(np.eye(n), x) for x in one)
+    return a, b, c, d
 
 
 #: what a stored model's sample step, input delay and input filters may be (a file is
@@ -453,7 +453,7 @@ class Model:
             ev = np.linalg.eigvals(ad)
             if np.any(np.abs(ev.imag) > 1e-12) or np.any(ev.real <= 0):
                 return None
-            ac = np.real(linalg.logm(ad)) / self.dt
+            ac = dsp.logm(ad) / self.dt
             m = ad - np.eye(n)
             bc = np.linalg.solve(m, ac @ bd) if np.linalg.cond(m) < 1e12 else bd / self.dt
             return np.concatenate([ac.T.ravel(), bc.T.ravel()])
@@ -568,8 +568,8 @@ class Model:
             raise ConfigError(f"the {1 / self.dt:.3g} Hz model has no continuous-time "
                               f"equivalent (eigenvalues {np.round(ev, 4).tolist()}); refit it at "
                               f"{1 / dt:.3g} Hz")
-        cont = np.real(linalg.logm(big)) / self.dt
-        again = linalg.expm(cont * dt)
+        cont = dsp.logm(big) / self.dt
+        again = dsp.expm(cont * dt)
         coef = np.zeros_like(self.coef)
         for j in states:
             coef[j] = again[:n, self.state_names.index(self.features[j])]
@@ -609,7 +609,7 @@ class Model:
         big = np.zeros((2 * m, 2 * m))
         big[:m, :m] = a
         big[:m, m:] = np.eye(m)
-        e = linalg.expm(big * self.dt)
+        e = dsp.expm(big * self.dt)
         return e[:m, :m], forcing @ e[:m, m:].T
 
     def _stepper(self, var: Mapping[str, np.ndarray]) -> Callable[[np.ndarray, np.ndarray],

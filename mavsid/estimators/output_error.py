@@ -31,11 +31,10 @@ Examples
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-from dataclasses import replace
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy import optimize
 
 from mavsid import dsp
 from mavsid.data import Segment
@@ -64,7 +63,8 @@ def refine_output_error(model: Model, segments: Sequence[Segment], max_nfev: int
     segments : sequence of Segment
         Training segments; each is simulated from its own first sample.
     max_nfev : int
-        Limit on residual evaluations of the trust-region solver.
+        Limit on residual evaluations of the solver (:func:`_least_squares`; those of its
+        finite-difference Jacobians not counted).
     hac : bool
         Newey–West correction of the covariance (when ``covariance`` is not given).
     covariance : {"newey-west", "cramer-rao"}, optional
@@ -119,9 +119,7 @@ def refine_output_error(model: Model, segments: Sequence[Segment], max_nfev: int
         theta0 = np.clip(theta0, lo, hi)
     x_scale = np.where(np.abs(theta0) > 0, np.abs(theta0), 1.0)
     try:
-        sol = optimize.least_squares(residuals, theta0, x_scale=x_scale, max_nfev=max_nfev,
-                                     method="trf",
-                                     bounds=(lo, hi) if bounds is not None else (-np.inf, np.inf))
+        sol = _least_squares(residuals, theta0, lo, hi, x_scale, max_nfev)
     except (ValueError, np.linalg.LinAlgError) as exc:
         raise SolverError(f"output-error refinement failed: {exc}") from None
     start_cost = 0.5 * float(np.sum(residuals(theta0) ** 2))
@@ -175,6 +173,106 @@ def refine_output_error(model: Model, segments: Sequence[Segment], max_nfev: int
                       "covariance": covariance,
                       "cost_start": start_cost, "cost": float(sol.cost)}
     return replace(refined, covariance=cov, coef_stderr=se, sigma=sigma, provenance=prov)
+
+
+@dataclass(frozen=True)
+class _Solution:
+    """What :func:`_least_squares` found: the point, its residuals, their Jacobian there, half
+    their sum of squares and the residual evaluations it took (Jacobians' not counted)."""
+
+    x: np.ndarray
+    fun: np.ndarray
+    jac: np.ndarray
+    cost: float
+    nfev: int
+
+
+def _jacobian(fun: Callable[[np.ndarray], np.ndarray], x: np.ndarray, f: np.ndarray,
+              lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Forward differences, step ``√ε · max(1, |x|)`` (away from a bound it would cross), as
+    ``scipy.optimize.least_squares``' default ``"2-point"`` Jacobian takes them."""
+    h = np.sqrt(np.finfo(float).eps) * np.maximum(1.0, np.abs(x)) * np.where(x < 0, -1.0, 1.0)
+    h = np.where((x + h > hi) | (x + h < lo), -h, h)
+    jac = np.empty((f.size, x.size))
+    for j in range(x.size):
+        step = x.copy()
+        step[j] += h[j]
+        jac[:, j] = (fun(step) - f) / (step[j] - x[j])
+    return jac
+
+
+def _least_squares(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray, lo: np.ndarray,
+                   hi: np.ndarray, x_scale: np.ndarray, max_nfev: int = 100,
+                   ftol: float = 1e-8, xtol: float = 1e-8, gtol: float = 1e-8) -> _Solution:
+    """Minimise ``½‖fun(x)‖²`` within the box ``lo <= x <= hi`` from ``x0``: Levenberg–Marquardt
+    on the variables scaled by ``x_scale`` (the damping updated by Nielsen's rule): each step
+    solved for the variables no bound holds (one at its bound with the gradient pushing out
+    stays), from the QR factors of their scaled Jacobian (forward differences,
+    :func:`_jacobian`), then projected onto the box. Stops, as
+    ``scipy.optimize.least_squares`` does with the same tolerances, when an accepted step
+    lowers the cost by less than ``ftol`` of it or moves the scaled point by less than
+    ``xtol`` of its norm, when the scaled projected gradient falls below ``gtol``, or after
+    ``max_nfev`` residual evaluations. What the
+    refinement used from scipy's solver (0.2 s of imports a fit does without); the same
+    optimum to its tolerances (tests compare, with and without bounds).
+
+    Examples
+    --------
+    >>> t = np.linspace(0.0, 1.0, 50)
+    >>> sol = _least_squares(lambda x: x[0] * np.exp(-x[1] * t) - 2.0 * np.exp(-3.0 * t),
+    ...                      np.array([1.0, 1.0]), np.full(2, -np.inf), np.full(2, np.inf),
+    ...                      np.ones(2))
+    >>> [round(float(v), 6) for v in sol.x], sol.cost < 1e-20
+    ([2.0, 3.0], True)
+    """
+    x = np.clip(np.asarray(x0, float), lo, hi)
+    f = fun(x)
+    nfev, cost = 1, 0.5 * float(f @ f)
+    jac = _jacobian(fun, x, f, lo, hi)
+    mu, nu = -1.0, 2.0
+    while nfev < max_nfev:
+        js = jac * x_scale  # the Jacobian of the scaled variables z = x / x_scale
+        g = js.T @ f
+        # the gradient's components a bound does not stop (it stops those pointing out)
+        free = ~(((x <= lo) & (g > 0)) | ((x >= hi) & (g < 0)))
+        if float(np.max(np.abs(g[free]), initial=0.0)) < gtol:
+            break
+        q, r = np.linalg.qr(js[:, free])  # (the variables a bound holds stay where they are)
+        qtf = q.T @ f
+        a = r.T @ r
+        if mu < 0:
+            mu = 1e-3 * float(np.max(np.diag(a), initial=0.0)) or 1e-3
+        accepted = False
+        while nfev < max_nfev:
+            n = int(free.sum())
+            lhs = np.vstack([r, np.sqrt(mu) * np.eye(n)])
+            dz = np.zeros(x.size)
+            dz[free] = np.linalg.lstsq(lhs, np.concatenate([-qtf, np.zeros(n)]), rcond=None)[0]
+            x_new = np.clip(x + dz * x_scale, lo, hi)
+            dz = (x_new - x) / x_scale  # the step the box allows
+            predicted = -float(g @ dz + 0.5 * np.sum((js @ dz) ** 2))
+            f_new = fun(x_new)
+            nfev += 1
+            cost_new = 0.5 * float(f_new @ f_new)
+            if predicted > 0 and np.isfinite(cost_new) and cost_new < cost:
+                rho = (cost - cost_new) / predicted
+                mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+                nu = 2.0
+                accepted = True
+                break
+            mu *= nu
+            nu *= 2.0
+            if not np.isfinite(mu) or mu > 1e300:
+                break
+        if not accepted:
+            break
+        drop = cost - cost_new
+        z_norm = float(np.linalg.norm(x / x_scale))
+        x, f, cost = x_new, f_new, cost_new
+        jac = _jacobian(fun, x, f, lo, hi)
+        if drop < ftol * (cost + drop) or float(np.linalg.norm(dz)) < xtol * (xtol + z_norm):
+            break
+    return _Solution(x, f, jac, cost, nfev)
 
 
 def output_error_coef(model: Model, segments: Sequence[Segment], max_nfev: int = 100,

@@ -1,0 +1,3 @@
+from typing import Any
+
+def recurse(a: Any, y: Any, n: int, /) -> None: ...

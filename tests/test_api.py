@@ -566,3 +566,22 @@ def test_the_output_error_solver_reaches_scipys_optimum(bounded: bool) -> None:
         exact = np.column_stack([decay * cos, -t * p[0] * decay * cos,
                                  -t * p[0] * decay * np.sin(p[2] * t), np.ones_like(t)])
         np.testing.assert_allclose(got.jac, exact, rtol=1e-5, atol=1e-6)
+
+
+def test_the_output_error_solver_at_its_edges() -> None:
+    """A start whose residuals are not finite is refused (refine_output_error turns that
+    into a SolverError); a box that holds every variable where the gradient pushes ends
+    the search at once, without spending the evaluations."""
+    with pytest.raises(ValueError, match="not finite"):
+        oe._least_squares(lambda x: np.array([np.nan, x[0]]), np.ones(1), np.full(1, -np.inf),
+                          np.full(1, np.inf), np.ones(1))
+    calls = []
+
+    def fun(x: np.ndarray) -> np.ndarray:
+        calls.append(x.copy())
+        return x - 5.0  # the optimum, 5, lies beyond the upper bound 1
+
+    got = oe._least_squares(fun, np.ones(2), np.zeros(2), np.ones(2), np.ones(2))
+    np.testing.assert_array_equal(got.x, np.ones(2))
+    assert got.nfev == 1 and got.cost == pytest.approx(16.0)
+    assert len(calls) == 3  # the start and its Jacobian's two columns

@@ -212,9 +212,9 @@ def _least_squares(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray, lo: 
     ``scipy.optimize.least_squares`` does with the same tolerances, when an accepted step
     lowers the cost by less than ``ftol`` of it or moves the scaled point by less than
     ``xtol`` of its norm, when the scaled projected gradient falls below ``gtol``, or after
-    ``max_nfev`` residual evaluations. What the
-    refinement used from scipy's solver (0.2 s of imports a fit does without); the same
-    optimum to its tolerances (tests compare, with and without bounds).
+    ``max_nfev`` residual evaluations. What the refinement used from scipy's solver (0.2 s
+    of imports a fit does without); the same optimum to its tolerances (tests compare, with
+    and without bounds). Raises ValueError when the residuals at ``x0`` are not finite.
 
     Examples
     --------
@@ -227,6 +227,8 @@ def _least_squares(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray, lo: 
     """
     x = np.clip(np.asarray(x0, float), lo, hi)
     f = fun(x)
+    if not np.all(np.isfinite(f)):
+        raise ValueError("the residuals are not finite at the starting point")
     nfev, cost = 1, 0.5 * float(f @ f)
     jac = _jacobian(fun, x, f, lo, hi)
     mu, nu = -1.0, 2.0
@@ -250,6 +252,8 @@ def _least_squares(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray, lo: 
             dz[free] = np.linalg.lstsq(lhs, np.concatenate([-qtf, np.zeros(n)]), rcond=None)[0]
             x_new = np.clip(x + dz * x_scale, lo, hi)
             dz = (x_new - x) / x_scale  # the step the box allows
+            if not np.any(dz):  # (the box stops every variable the step would move)
+                break
             predicted = -float(g @ dz + 0.5 * np.sum((js @ dz) ** 2))
             f_new = fun(x_new)
             nfev += 1

@@ -2414,17 +2414,9 @@ def _frd_margins(h: np.ndarray, w: np.ndarray) -> tuple[float, float, float]:
     them: a parametric interpolating spline through the real and imaginary parts (weights
     ``1/(|h| + 0.001)``), the −180° and unit-gain crossings between the points located by
     Brent's method on it; the smallest ``|log GM|`` and ``|PM|``."""
-    from scipy.interpolate import splev, splprep
-    from scipy.optimize import brentq
-
     order = np.argsort(w, kind="stable")
     w, h = np.asarray(w, dtype=float)[order], np.asarray(h, dtype=complex)[order]
-    tck, _ = splprep([h.real, h.imag], u=w, w=1.0 / (np.abs(h) + 0.001), s=0.0,
-                     k=3 if w.size > 3 else w.size - 1)
-
-    def at(x: Any) -> Any:
-        re, im = splev(x, tck, der=0)
-        return np.asarray(re) + 1j * np.asarray(im)
+    at = dsp.interpolating_spline(w, h)  # (FITPACK's s=0 curve: the weights do not enter)
 
     def arg(x: float) -> float:
         return float(np.angle(-at(x)))
@@ -2435,9 +2427,9 @@ def _frd_margins(h: np.ndarray, w: np.ndarray) -> tuple[float, float, float]:
     hw = at(w)
     idx = np.where(np.diff(np.sign(np.angle(-hw))))[0]
     idx = idx[np.real(hw[idx]) <= 0]
-    w180 = np.array([brentq(arg, w[i], w[i + 1]) for i in idx])
+    w180 = np.array([dsp.brent_root(arg, w[i], w[i + 1]) for i in idx])
     idx = np.where(np.diff(np.sign(np.abs(hw) - 1.0)))[0]
-    wc = np.array([brentq(mod, w[i], w[i + 1]) for i in idx])
+    wc = np.array([dsp.brent_root(mod, w[i], w[i + 1]) for i in idx])
     with np.errstate(all="ignore"):
         gms = 1.0 / np.abs(at(w180)) if w180.size else np.zeros(0)
         pms = (np.remainder(np.angle(at(wc), deg=True), 360.0) - 180.0 if wc.size

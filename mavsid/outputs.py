@@ -431,9 +431,7 @@ def _serve_report() -> None:
     that cannot be written is one line ``class<TAB>message`` on standard output, exit 1."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the command's Ctrl-C ends it, not this
     # while the logs are fitted: the report's modules and those of the result's classes
-    # (unpickling them here after the fit took 0.35 s: scipy.optimize, sparse, fft...)
-    from scipy import interpolate  # noqa: F401  (the loop's margins)
-
+    # (unpickling them here after the fit took 0.35 s)
     from mavsid import estimators, excitation, frequency, loop, pipeline, report  # noqa: F401
 
     report.warm_up()

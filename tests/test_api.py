@@ -430,13 +430,13 @@ def test_output_error_coef_reaches_the_trust_region_optimum():
     start = LeastSquares(with_lag(base, 0.01, 2.0), n_bootstrap=0).fit(segs).model_
     got = oe.output_error_coef(start, segs)
     assert got is not None
-    tight = functools.partial(oe._least_squares, ftol=1e-15, xtol=1e-15, gtol=1e-15)
-    saved = oe._least_squares
+    tight = functools.partial(oe.box_least_squares, ftol=1e-15, xtol=1e-15, gtol=1e-15)
+    saved = oe.box_least_squares
     try:
-        oe._least_squares = tight
+        oe.box_least_squares = tight
         ref = oe.refine_output_error(start, segs, covariance="plain")
     finally:
-        oe._least_squares = saved
+        oe.box_least_squares = saved
     np.testing.assert_allclose(got[0], ref.coef, rtol=1e-6)
     assert got[1] <= ref.provenance["refine"]["cost"] * (1 + 1e-12)
     # not its kind: two states, or a continuous-time model -> None (callers refine)
@@ -555,7 +555,7 @@ def test_the_output_error_solver_reaches_scipys_optimum(bounded: bool) -> None:
             lo[1], hi[:3] = 0.0, 0.95 * true[:3]
             x0 = np.clip(x0, lo, hi - 1e-9)
         scale = np.abs(x0)
-        got = oe._least_squares(fun, x0, lo, hi, scale, 100)
+        got = oe.box_least_squares(fun, x0, lo, hi, scale, 100)
         want = optimize.least_squares(fun, x0, x_scale=scale, max_nfev=100, bounds=(lo, hi))
         assert got.cost <= want.cost * (1 + 1e-9)
         assert got.cost >= want.cost * (1 - 1e-6)
@@ -573,7 +573,7 @@ def test_the_output_error_solver_at_its_edges() -> None:
     into a SolverError); a box that holds every variable where the gradient pushes ends
     the search at once, without spending the evaluations."""
     with pytest.raises(ValueError, match="not finite"):
-        oe._least_squares(lambda x: np.array([np.nan, x[0]]), np.ones(1), np.full(1, -np.inf),
+        oe.box_least_squares(lambda x: np.array([np.nan, x[0]]), np.ones(1), np.full(1, -np.inf),
                           np.full(1, np.inf), np.ones(1))
     calls = []
 
@@ -581,7 +581,7 @@ def test_the_output_error_solver_at_its_edges() -> None:
         calls.append(x.copy())
         return x - 5.0  # the optimum, 5, lies beyond the upper bound 1
 
-    got = oe._least_squares(fun, np.ones(2), np.zeros(2), np.ones(2), np.ones(2))
+    got = oe.box_least_squares(fun, np.ones(2), np.zeros(2), np.ones(2), np.ones(2))
     np.testing.assert_array_equal(got.x, np.ones(2))
     assert got.nfev == 1 and got.cost == pytest.approx(16.0)
     assert len(calls) == 3  # the start and its Jacobian's two columns

@@ -47,6 +47,15 @@ def test_a_plain_fit_loads_neither_the_viewer_nor_plots_nor_cvxpy_nor_scipy(name
     assert _loaded(code, (*HEAVY, "scipy", "mavsid.synthetic")) == set()
 
 
+def test_tune_loads_no_scipy() -> None:
+    """``mavsid tune``: the loop's FRD margins interpolate and find their crossings with
+    mavsid.dsp (FITPACK's curve, Brent's method), the plant's transfer function is fitted by
+    the output-error solver: no scipy (0.35 s of imports)."""
+    code = ("from mavsid import cli\nwith contextlib.redirect_stdout(io.StringIO()):\n"
+            f"    assert cli.main(['tune', {str(FIXTURES / 'sysid_roll.bin')!r}]) == 0")
+    assert _loaded(code, (*HEAVY, "scipy")) == set()
+
+
 @pytest.mark.parametrize("argv", [
     ["fit", "{missing}", "--rrd", "{out}.rrd", "--report", "{out}.html"],
     ["fit", "{folder}"],

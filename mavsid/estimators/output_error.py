@@ -44,7 +44,7 @@ from mavsid.estimators._base import hac_covariance
 from mavsid.estimators.model import Model
 from mavsid.estimators.regressors import Regression
 
-__all__ = ["output_error_coef", "refine_output_error"]
+__all__ = ["box_least_squares", "output_error_coef", "refine_output_error"]
 
 
 def _measured(model: Model, seg: Segment) -> np.ndarray:
@@ -63,7 +63,7 @@ def refine_output_error(model: Model, segments: Sequence[Segment], max_nfev: int
     segments : sequence of Segment
         Training segments; each is simulated from its own first sample.
     max_nfev : int
-        Limit on residual evaluations of the solver (:func:`_least_squares`; those of its
+        Limit on residual evaluations of the solver (:func:`box_least_squares`; those of its
         finite-difference Jacobians not counted).
     hac : bool
         Newey–West correction of the covariance (when ``covariance`` is not given).
@@ -119,7 +119,7 @@ def refine_output_error(model: Model, segments: Sequence[Segment], max_nfev: int
         theta0 = np.clip(theta0, lo, hi)
     x_scale = np.where(np.abs(theta0) > 0, np.abs(theta0), 1.0)
     try:
-        sol = _least_squares(residuals, theta0, lo, hi, x_scale, max_nfev)
+        sol = box_least_squares(residuals, theta0, lo, hi, x_scale, max_nfev)
     except (ValueError, np.linalg.LinAlgError) as exc:
         raise SolverError(f"output-error refinement failed: {exc}") from None
     start_cost = 0.5 * float(np.sum(residuals(theta0) ** 2))
@@ -177,8 +177,9 @@ def refine_output_error(model: Model, segments: Sequence[Segment], max_nfev: int
 
 @dataclass(frozen=True)
 class _Solution:
-    """What :func:`_least_squares` found: the point, its residuals, their Jacobian there, half
-    their sum of squares and the residual evaluations it took (Jacobians' not counted)."""
+    """What :func:`box_least_squares` found: the point, its residuals, their Jacobian there,
+    half their sum of squares and the residual evaluations it took (Jacobians' not
+    counted)."""
 
     x: np.ndarray
     fun: np.ndarray
@@ -201,9 +202,9 @@ def _jacobian(fun: Callable[[np.ndarray], np.ndarray], x: np.ndarray, f: np.ndar
     return jac
 
 
-def _least_squares(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray, lo: np.ndarray,
-                   hi: np.ndarray, x_scale: np.ndarray, max_nfev: int = 100,
-                   ftol: float = 1e-8, xtol: float = 1e-8, gtol: float = 1e-8) -> _Solution:
+def box_least_squares(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray,
+                      lo: np.ndarray, hi: np.ndarray, x_scale: np.ndarray, max_nfev: int = 100,
+                      ftol: float = 1e-8, xtol: float = 1e-8, gtol: float = 1e-8) -> _Solution:
     """Minimise ``½‖fun(x)‖²`` within the box ``lo <= x <= hi`` from ``x0``: Levenberg–Marquardt
     on the variables scaled by ``x_scale`` (the damping updated by Nielsen's rule): each step
     solved for the variables no bound holds (one at its bound with the gradient pushing out
@@ -212,16 +213,17 @@ def _least_squares(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray, lo: 
     ``scipy.optimize.least_squares`` does with the same tolerances, when an accepted step
     lowers the cost by less than ``ftol`` of it or moves the scaled point by less than
     ``xtol`` of its norm, when the scaled projected gradient falls below ``gtol``, or after
-    ``max_nfev`` residual evaluations. What the refinement used from scipy's solver (0.2 s
-    of imports a fit does without); the same optimum to its tolerances (tests compare, with
-    and without bounds). Raises ValueError when the residuals at ``x0`` are not finite.
+    ``max_nfev`` residual evaluations. What the refinement (and
+    :func:`mavsid.frequency.fit_tf`) used from scipy's solver (0.2 s of imports a fit does
+    without); the same optimum to its tolerances (tests compare, with and without bounds).
+    Raises ValueError when the residuals at ``x0`` are not finite.
 
     Examples
     --------
     >>> t = np.linspace(0.0, 1.0, 50)
-    >>> sol = _least_squares(lambda x: x[0] * np.exp(-x[1] * t) - 2.0 * np.exp(-3.0 * t),
-    ...                      np.array([1.0, 1.0]), np.full(2, -np.inf), np.full(2, np.inf),
-    ...                      np.ones(2))
+    >>> sol = box_least_squares(lambda x: x[0] * np.exp(-x[1] * t) - 2.0 * np.exp(-3.0 * t),
+    ...                         np.array([1.0, 1.0]), np.full(2, -np.inf), np.full(2, np.inf),
+    ...                         np.ones(2))
     >>> [round(float(v), 6) for v in sol.x], sol.cost < 1e-20
     ([2.0, 3.0], True)
     """

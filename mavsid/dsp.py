@@ -3,8 +3,8 @@ low-pass design, Welch spectra, the matrix exponential and logarithm, so that ``
 imports no scipy at all (``scipy.signal``, with it ``scipy.stats``, ``scipy.interpolate``:
 about 0.35 s of a 2 s command; ``scipy.linalg`` and ``scipy.optimize``: 0.3 to 0.4 s more).
 
-Each function gives the numbers of its ``scipy.signal`` namesake to rounding (tests/test_dsp.py
-compares them); none has that function's full set of options, only those mavsid uses.
+Each function gives the numbers of its scipy namesake to rounding (tests/test_dsp.py compares
+them); none has that function's full set of options, only those mavsid uses.
 
 - :func:`lfilter`: the difference equation ``Σ a_k y[n-k] = Σ b_k x[n-k]``: the numerator's
   sum by numpy, the recursion compiled (``mavsid._filter``; where the package was built
@@ -21,6 +21,9 @@ compares them); none has that function's full set of options, only those mavsid 
 - :func:`expm` and :func:`logm`: ``scipy.linalg``'s namesakes for the small real matrices of
   a model's discretisation (Padé scaling and squaring; the eigenvectors, or scipy where they
   are ill-conditioned).
+- :func:`interpolating_spline` and :func:`brent_root`: the not-a-knot cubic through a
+  measured frequency response (FITPACK's ``s=0`` curve, what python-control smooths an FRD
+  with) and ``scipy.optimize.brentq``'s root finding, for the loop's margins.
 
 Examples
 --------
@@ -47,9 +50,9 @@ try:
 except ImportError:  # pragma: no cover - built without a C compiler: scipy's banded solve
     _filter = None  # type: ignore[assignment]
 
-__all__ = ["Lowpass2p", "butter_lowpass", "csd", "density", "expm", "hann", "lfilter",
-           "lfilter_zi", "logm", "lowpass2p_coefficients", "segment_ffts", "tf2ss", "tukey",
-           "welch"]
+__all__ = ["Lowpass2p", "brent_root", "butter_lowpass", "csd", "density", "expm", "hann",
+           "interpolating_spline", "lfilter", "lfilter_zi", "logm", "lowpass2p_coefficients",
+           "segment_ffts", "tf2ss", "tukey", "welch"]
 
 
 def _recurse(a: np.ndarray, rhs: np.ndarray) -> None:

@@ -1704,15 +1704,12 @@ def frequency_response(system: Any, z: np.ndarray) -> np.ndarray:
     >>> bool(np.allclose(frequency_response(sys, z), np.ravel(sys(z))))
     True
     """
-    from scipy import signal as sp_signal
-
     if hasattr(system, "A"):
         a, b, c, d = (np.asarray(x, dtype=float) for x in
                       (system.A, system.B, system.C, system.D))
         if a.size == 0:
             return np.full(z.shape, float(d.ravel()[0]), dtype=complex)
-        num, den = sp_signal.ss2tf(a, b, c, d)
-        num = np.atleast_2d(num)[0]
+        num, den = _ss2tf(a, b, c, float(d.ravel()[0]))
     else:
         num = np.asarray(system.num[0][0], dtype=float)
         den = np.asarray(system.den[0][0], dtype=float)

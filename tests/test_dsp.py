@@ -200,3 +200,21 @@ def test_brent_root_is_brentq() -> None:
     assert dsp.brent_root(lambda x: x - 1.0, 1.0, 2.0) == 1.0
     with pytest.raises(ValueError, match="same sign"):
         dsp.brent_root(lambda x: x * x + 1.0, -1.0, 1.0)
+
+
+def test_a_fit_without_the_compiled_recursion_is_the_same_fit(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A build without a C compiler filters through scipy's banded solve: the same model,
+    coefficient for coefficient (the recursion's operations are LAPACK's, in its order)."""
+    if dsp._filter is None:
+        pytest.skip("built without a C compiler: the scipy path is the only one")
+    from helpers import FIXTURES
+
+    from mavsid import pipeline
+
+    cfg = pipeline.PipelineConfig(axes=("roll",))
+    compiled = pipeline.fit([FIXTURES / "sysid_roll.bin"], cfg).axes["roll"].model
+    monkeypatch.setattr(dsp, "_filter", None)
+    plain = pipeline.fit([FIXTURES / "sysid_roll.bin"], cfg).axes["roll"].model
+    np.testing.assert_array_equal(plain.coef, compiled.coef)
+    assert plain.params == compiled.params

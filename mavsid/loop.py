@@ -2408,9 +2408,10 @@ def frd_margins(measured: Any, freq_hz: np.ndarray | None = None,
 def _frd_margins(h: np.ndarray, w: np.ndarray) -> tuple[float, float, float]:
     """``(gain margin, phase margin (deg), gain crossover (rad/s))`` of a frequency response
     ``h`` at ``w`` (rad/s) as python-control's ``stability_margins`` of a smoothed FRD gives
-    them: a parametric interpolating spline through the real and imaginary parts (weights
-    ``1/(|h| + 0.001)``), the −180° and unit-gain crossings between the points located by
-    Brent's method on it; the smallest ``|log GM|`` and ``|PM|``."""
+    them: a parametric interpolating spline through the real and imaginary parts (its
+    weights ``1/(|h| + 0.001)`` do not enter an interpolating fit), the −180° and unit-gain
+    crossings between the points located by Brent's method on it; the smallest ``|log GM|``
+    and ``|PM|``."""
     order = np.argsort(w, kind="stable")
     w, h = np.asarray(w, dtype=float)[order], np.asarray(h, dtype=complex)[order]
     at = dsp.interpolating_spline(w, h)  # (FITPACK's s=0 curve: the weights do not enter)

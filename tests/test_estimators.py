@@ -601,3 +601,19 @@ def test_damaged_gyro_filter_parameters_do_not_crash_or_oversample(params) -> No
         got = filters_from_params(params, dt=0.0025)
     for f in got:
         assert f.substeps(0.0025) <= 20
+
+
+def test_the_gram_solve_refuses_non_finite_sums_and_matches_lstsq() -> None:
+    """The Gram solve (numpy's Cholesky now, scipy's before): the least-squares solution,
+    and a ValueError for a Gram holding NaN or inf (as scipy.linalg refused it: the callers
+    turn that into a refusal, never a model of NaN)."""
+    from mavsid.estimators._base import Gram, solve
+
+    rng = np.random.default_rng(4)
+    z = rng.standard_normal((500, 4))
+    y = z @ np.array([[0.5], [-1.0], [2.0], [0.1]]) + 0.01 * rng.standard_normal((500, 1))
+    want = np.linalg.lstsq(z, y, rcond=None)[0]
+    np.testing.assert_allclose(solve(Gram.of(z, y)), want, rtol=1e-10)
+    z[3, 1] = np.nan
+    with pytest.raises(ValueError, match="infs or NaNs"):
+        solve(Gram.of(z, y))

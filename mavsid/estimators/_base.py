@@ -190,6 +190,8 @@ def solve(g: Gram, ridge: float = 0.0, penalize: np.ndarray | None = None,
     if ridge > 0:
         pen = np.ones(p, bool) if penalize is None else np.asarray(penalize, bool)
         a = a + ridge * g.n * np.diag(pen[act].astype(float))
+    if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):  # (as scipy.linalg refused)
+        raise ValueError("array must not contain infs or NaNs")
     try:  # (Cholesky, then the two triangular systems; least squares if not definite)
         low = np.linalg.cholesky(a)
         sol = np.linalg.solve(low.T, np.linalg.solve(low, b))

@@ -128,6 +128,9 @@ def test_expm_matches_scipy() -> None:
                                    atol=1e-13 * max(1.0, float(np.abs(want).max())))
     with pytest.raises(ValueError, match="square"):
         dsp.expm(np.ones((2, 3)))
+    for func in (dsp.expm, dsp.logm):  # (scipy.linalg refused them too: never a NaN model)
+        with pytest.raises(ValueError, match="infinities or NaN"):
+            func(np.array([[1.0, np.nan], [0.0, 1.0]]))
 
 
 def test_logm_matches_scipy_and_hands_defective_matrices_to_it() -> None:

@@ -1007,8 +1007,8 @@ def _commanded(raw: RawLog, t: np.ndarray, boot: int = 0
     a yaw rate, which the body rate follows; the heading unwrapped, central differences).
     Excitation judges a stick manoeuvre's response by its coherence with it, the fit checks
     the feedback's bias with it (:mod:`mavsid.estimators.instruments`). Where a log has
-    none (a ``.tlog``), the pilot's sticks (:func:`_sticks`). Second: each axis's source
-    (``MESSAGE.field``, the sticks' with ``, the pilot's stick``)."""
+    none (a ``.tlog``), the pilot's sticks (:func:`_sticks`), asked for only then. Second:
+    each axis's source (``MESSAGE.field``, the sticks' followed by :data:`STICK_SOURCE`)."""
     out: dict[str, np.ndarray] = {}
     source: dict[str, str] = {}
     for axis, chans in DESIRED_CHANNELS.items():
@@ -1024,13 +1024,19 @@ def _commanded(raw: RawLog, t: np.ndarray, boot: int = 0
             # not published in a gap (PX4's rate-only modes such as ACRO): not a ramp across it
             out[axis] = _resampled(ts, v, t, np.nan)
             source[axis] = f"{got[0].message}.{got[0].field}"
-    for axis, (name, ts, v) in _sticks(raw).items():
+    sticks = _sticks(raw) if len(out) < len(DESIRED_CHANNELS) else {}
+    for axis, (name, ts, v) in sticks.items():
         if axis not in out:
             ts, v = _boot_records(ts, v, boot)
             if ts.size >= 2 and np.ptp(v) > 0:
                 out[axis] = _resampled(ts, v, t, np.nan)
-                source[axis] = f"{name}, the pilot's stick"
+                source[axis] = f"{name}, {STICK_SOURCE}"
     return out, source
+
+
+#: what ends a commanded attitude's source (``FlightData.meta["commanded_from"]``) when the
+#: pilot's sticks stand in for it
+STICK_SOURCE = "the pilot's stick"
 
 
 #: per axis: the autopilot's parameter mapping an RC input channel to it (ArduPilot, PX4),

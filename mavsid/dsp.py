@@ -163,11 +163,9 @@ class Lowpass2p:
 
     def __init__(self, cutoff_hz: float, sample_hz: float, width: int) -> None:
         self.enabled = cutoff_hz > 0
-        self.b, self.a = (
-            lowpass2p_coefficients(cutoff_hz, sample_hz) if self.enabled
-            else (np.array([1.0, 0, 0]), np.array([1.0, 0, 0]))
-        )
-        self._k = tuple(float(v) for v in (*self.b, self.a[1], self.a[2]))
+        b, a = (lowpass2p_coefficients(cutoff_hz, sample_hz) if self.enabled
+                else (np.array([1.0, 0, 0]), np.array([1.0, 0, 0])))
+        self._k = tuple(float(v) for v in (*b, a[1], a[2]))  # b0, b1, b2, a1, a2
         self.d1: Any = np.zeros(width)
         self.d2: Any = np.zeros(width)
         self.started = False

@@ -800,6 +800,8 @@ def _instrument_check(axis: str, flights: Sequence[FlightData],
     """An :class:`_InstrumentCheck` of ``segments`` (cut from ``flights``), with the flights'
     commanded attitude (``meta["commanded"]``, from alignment) on their samples; None where
     the logs have none for the axis."""
+    from mavsid.align import STICK_SOURCE
+
     refs: list[np.ndarray | None] = []
     sticks = False
     for seg in segments:
@@ -810,7 +812,7 @@ def _instrument_check(axis: str, flights: Sequence[FlightData],
             if i is not None:
                 ref = desired[i:i + len(seg)]
                 source = dict(fd.meta.get("commanded_from") or {}).get(axis, "")  # type: ignore[call-overload]
-                sticks |= "the pilot's stick" in str(source)
+                sticks |= str(source).endswith(STICK_SOURCE)
                 break
         refs.append(ref)
     if all(r is None for r in refs):

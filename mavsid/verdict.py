@@ -590,16 +590,16 @@ def unfitted(axis: str, why: str, windows: Sequence[Any] = (), flights: Sequence
     where = " ".join(logs) if logs else "LOG"
     if mine and not any(w.kept for w in mine):
         kinds: dict[str, int] = {}
-        firsts: list[str] = []
+        first = ""  # (the first window's reason)
         for w in mine:
             rejected = [r for r in w.reasons if r.startswith("rejected")] or list(w.reasons[:1])
             for r in rejected[:1]:
                 kinds[_reason_kind(r)] = kinds.get(_reason_kind(r), 0) + 1
-                firsts.append(r)
+                first = first or r
         top = ", ".join(f"{n}× {k}" for k, n in sorted(kinds.items(), key=lambda kv: -kv[1]))
         numbers["windows_rejected"] = float(len(mine))
         if set(kinds) == {"missing channel"}:  # (no data to judge: say which, and what to log)
-            reasons.append(firsts[0].removeprefix("rejected: "))
+            reasons.append(first.removeprefix("rejected: "))
             advice.append(logging_advice(_autopilot(flights), _telemetry(flights)))
         else:
             reasons.append(f"no window kept ({len(mine)} rejected: {top}; see `mavsid "

@@ -246,9 +246,8 @@ def box_least_squares(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray,
         a = r.T @ r
         if mu < 0:
             mu = 1e-3 * float(np.max(np.diag(a), initial=0.0)) or 1e-3
-        accepted = False
+        accepted, n = False, int(free.sum())
         while nfev < max_nfev:
-            n = int(free.sum())
             lhs = np.vstack([r, np.sqrt(mu) * np.eye(n)])
             dz = np.zeros(x.size)
             dz[free] = np.linalg.lstsq(lhs, np.concatenate([-qtf, np.zeros(n)]), rcond=None)[0]

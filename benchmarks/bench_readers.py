@@ -517,7 +517,7 @@ def bench_ulog(min_mb: float = 100.0, repeat: int = 5, runs: int = 3) -> None:
 
     def forgetting(fn: Callable[[], Any]) -> Callable[[], Any]:
         def run() -> Any:  # a log of a firmware not met before: no format known
-            for kept in (ulog._format, ulog._layout, ulog._record_dtype):
+            for kept in (ulog._format, ulog._layout):
                 kept.clear()
             return fn()
         return run

@@ -1,6 +1,7 @@
 """PX4 ULog reader against pyulog: every shared .ulg field by field, selective loading,
-damaged files; each test both ways, with the compiled data walk and with the numpy
-candidates and runs a package built without a C compiler uses."""
+damaged files; each test three ways: the compiled pass for plain logs (the Python reader for
+the others), the Python reader with the compiled data walk, and with the numpy candidates
+and runs a package built without a C compiler uses."""
 
 from __future__ import annotations
 
@@ -32,13 +33,16 @@ FIXTURE_ULOGS = sorted(FIXTURES.glob("*.ulg"))
 PX4_ULOG_RS = ("public", "Auterion__px4-ulog-rs")
 
 
-@pytest.fixture(autouse=True, params=["compiled", "numpy"])
+@pytest.fixture(autouse=True, params=["plain", "compiled", "numpy"])
 def walk(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
-    """The data section walked by ``_scan.ulog_data`` (where the package was built with a C
-    compiler) or by the numpy candidates and runs (see ``ulog``'s *Framing*)."""
-    if request.param == "compiled":
+    """The log read by the compiled pass where it takes it (``_scan.ulog_plain``: "plain"),
+    by the Python reader with its data section walked by ``_scan.ulog_data`` ("compiled";
+    both where the package was built with a C compiler), or by the Python reader with the
+    numpy candidates and runs (see ``ulog``'s *Framing*)."""
+    if request.param != "numpy":
         if ulog._scan is None:
             pytest.skip("mavsid built without a C compiler: the numpy walk only")
+        monkeypatch.setattr(ulog, "_PLAIN", request.param == "plain")
     else:
         monkeypatch.setattr(ulog, "_scan", None)
     return str(request.param)
@@ -819,9 +823,10 @@ def test_formats_kept_for_the_process_never_mix_two_logs(tmp_path: Path) -> None
 
 
 def _content(table: Any) -> tuple[Any, bytes, bytes]:
-    """A table's layout and bytes: its records' dtype and bytes, and its times'."""
-    records = table.columns.records
-    return records.dtype.descr, records.tobytes(), table.time_s.tobytes()
+    """A table's layout and bytes: its fields' names and types, records' bytes, times."""
+    columns = table.columns
+    return ([(name, columns[name].dtype.str) for name in columns], bytes(columns.raw),
+            table.time_s.tobytes())
 
 
 def test_logs_read_in_threads_with_little_kept_are_each_their_own(
@@ -837,7 +842,7 @@ def test_logs_read_in_threads_with_little_kept_are_each_their_own(
     for p in paths:
         log, _ = read(p)
         alone[p] = {name: _content(table) for name, table in log.messages.items()}
-    for kept in (ulog._format, ulog._layout, ulog._record_dtype):
+    for kept in (ulog._format, ulog._layout):
         monkeypatch.setattr(kept, "budget", 400)
         kept.clear()
 
@@ -848,4 +853,110 @@ def test_logs_read_in_threads_with_little_kept_are_each_their_own(
     with warnings.catch_warnings(), ThreadPoolExecutor(6) as pool:  # (corruption warned)
         warnings.simplefilter("ignore", DataQualityWarning)
         assert all(pool.map(check, paths * 4))
-    assert all(k.total <= 400 for k in (ulog._format, ulog._layout, ulog._record_dtype))
+    assert all(k.total <= 400 for k in (ulog._format, ulog._layout))
+
+
+def _everything(path: Path, **kwargs: Any) -> Any:
+    """All a read returns, as values to compare (tables' fields, types, bytes and times;
+    parameters, texts, modes, span, notes, firmware) with its warnings; or its error."""
+    try:
+        log, quality = read(path, **kwargs)
+    except LogFormatError as exc:
+        return "error", str(exc)
+    tables = {name: (_content(t), dict(t.units)) for name, t in log.messages.items()}
+    return (tables, dict(log.params), log.texts, log.modes, log.span_s, log.source,
+            log.firmware, log.vehicle, quality)
+
+
+def _both_ways(path: Path, monkeypatch: pytest.MonkeyPatch, **kwargs: Any) -> tuple[Any, Any]:
+    """The read by the compiled pass (where it takes the log) and by the Python reader."""
+    with monkeypatch.context() as m:
+        m.setattr(ulog, "_PLAIN", True)
+        plain = _everything(path, **kwargs)
+        m.setattr(ulog, "_PLAIN", False)
+        return plain, _everything(path, **kwargs)
+
+
+@pytest.mark.parametrize("walk", ["plain"], indirect=True)
+def test_the_compiled_pass_takes_real_logs_and_reads_them_as_the_python_reader(
+        walk: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every shared ULog but the one with unsubscribed, garbage-filled data and the fixture are
+    read by the compiled pass (with the commonest damage: data without subscription,
+    resynchronisation at a sync magic), and it gives what the Python reader gives: all
+    topics, some topics and instances, a time window."""
+    scan = pytest.importorskip("mavsid.readers._scan")
+    require_shared()
+    for path in [*ULOGS, *FIXTURE_ULOGS]:
+        taken = scan.ulog_plain(path.read_bytes(), None) is not None
+        assert taken == (path.name != "corrupt_actuator_armed_wrong_size.ulg"), path.name
+        for kwargs in ({}, {"messages": ["vehicle_attitude", "actuator_outputs[1]"]},
+                       {"start": 30.0, "stop": 60.0}):
+            plain, python = _both_ways(path, monkeypatch, **kwargs)
+            assert plain == python, (path.name, kwargs)
+
+
+@pytest.mark.parametrize("walk", ["plain"], indirect=True)
+@pytest.mark.parametrize("seed", range(4))
+def test_damaged_logs_read_by_the_compiled_pass_as_by_the_python_reader(
+        walk: str, monkeypatch: pytest.MonkeyPatch, tmp_path: Path, seed: int) -> None:
+    """Logs damaged at random (bytes overwritten, a block of garbage or of sync magics put
+    in, headers rewritten, a cut, a block repeated): whether the compiled pass takes one or
+    sends it to the Python reader, the read is the Python reader's, value for value, warning
+    for warning, or the same error. Some of them must be taken (else this tests nothing)."""
+    pytest.importorskip("mavsid.readers._scan")
+    sources = [p for p in FIXTURE_ULOGS]
+    if shared_logs(".ulg"):
+        sources.append(shared_path("public", "roboto-ai__robologs-px4-actions", "test.ulg"))
+    rng = np.random.default_rng(seed)
+    taken = 0
+    for k in range(24):
+        base = sources[k % len(sources)].read_bytes()
+        out = bytearray(base)
+        start = int(rng.integers(16, len(out) - 64))
+        how = k % 6
+        if how == 0:  # bytes overwritten
+            at = rng.integers(start, len(out), 1 + int(rng.integers(0, 4)))
+            out[at[0]] ^= 0xFF
+            for a in at[1:]:
+                out[int(a)] = int(rng.integers(0, 256))
+        elif how == 1:  # garbage put in
+            out[start:start] = rng.integers(0, 256, int(rng.integers(1, 300)), np.uint8).tobytes()
+        elif how == 2:  # sync magics and garbage
+            out[start:start] = (ulog._SYNC + bytes(int(rng.integers(0, 7)))) * 3
+        elif how == 3:  # a message header rewritten: another size or type
+            out[start] = int(rng.integers(0, 256))
+            out[start + 2] = int(rng.choice(list(b"DAOLCIMPQSFB\x00")))
+        elif how == 4:  # cut
+            out = out[:start]
+        else:  # a block repeated
+            out[start:start] = out[start : start + int(rng.integers(3, 2000))]
+        path = tmp_path / f"damaged{k}.ulg"
+        path.write_bytes(bytes(out))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", DataQualityWarning)
+            taken += ulog._plain(bytes(out), None) is not None
+        plain, python = _both_ways(path, monkeypatch)
+        assert plain == python, (k, how)
+        if k % 4 == 0:
+            plain, python = _both_ways(path, monkeypatch, messages=["vehicle_attitude"])
+            assert plain == python, (k, how, "selective")
+    assert taken >= 4
+
+
+@pytest.mark.parametrize("walk", ["plain"], indirect=True)
+@pytest.mark.parametrize("layout", ["px4-1.14", "px4-1.11", "px4-1.8"])
+def test_simulated_layouts_read_by_the_compiled_pass_as_by_the_python_reader(
+        walk: str, monkeypatch: pytest.MonkeyPatch, tmp_path: Path, layout: str) -> None:
+    """PX4's three topic sets as the simulator writes them, with records dropped and the
+    last one cut: taken by the compiled pass, read as the Python reader reads them."""
+    from mavsid.synthetic.faults import Faults
+    from mavsid.synthetic.run import scenario_from_options, simulate
+
+    scan = pytest.importorskip("mavsid.readers._scan")
+    path = tmp_path / f"{layout}.ulg"
+    simulate(scenario_from_options(manoeuvre="doublet", seed=3, duration_s=20), [path],
+             faults=Faults.parse("drop=0.02,truncate=77", seed=2), layout=layout)
+    assert scan.ulog_plain(path.read_bytes(), None) is not None
+    plain, python = _both_ways(path, monkeypatch)
+    assert plain == python
+    assert "last message truncated" in python[-1][0]

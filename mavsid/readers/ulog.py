@@ -120,6 +120,7 @@ mavsid.errors.LogFormatError: ...: not a readable ULog (Invalid file format (Hea
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 import mmap
 import os
@@ -149,6 +150,7 @@ except ImportError:  # pragma: no cover - depends on the build
 __all__ = ["NAV_STATES", "read", "table_name"]
 
 _MODE_TOPIC = "vehicle_status"
+_STAMPS = ("timestamp", "timestamp_sample")  # (fields in µs)
 _INSTANCE = re.compile(r"^(.*)\[(\d+)\]$")
 
 _MAGIC = b"ULog\x01\x12\x35"
@@ -167,9 +169,13 @@ _FLOAT, _INT32 = np.frombuffer(b"float ", np.uint8), np.frombuffer(b"int32_t ", 
 _FLOAT_AT, _INT32_AT = np.arange(4, 10), np.arange(4, 12)
 #: bytes of each basic type
 _SIZE = {kind: size for kind, (_, size, _) in _BASIC.items()}
-#: message types read in the definitions section / in the data section
-#: little-endian numpy dtypes of the basic types
+#: little-endian numpy dtypes of the basic types; each type's code (its place in _BASIC,
+#: the code ``_scan.ulog_plain`` gives) and the dtype of each code
 _DTYPE = {kind: np.dtype(t).newbyteorder("<") for kind, (t, _, _) in _BASIC.items()}
+_CODE = {kind: code for code, kind in enumerate(_BASIC)}
+_BY_CODE = tuple(_DTYPE.values())
+_WIDTH = tuple(size for _, size, _ in _BASIC.values())
+#: message types read in the definitions section / in the data section
 _DEF_TYPES = frozenset(b"FIMPQBALC")
 _DATA_TYPES = frozenset(b"IMPQALCDOS")
 _HEAD = struct.Struct("<HB").unpack_from
@@ -196,6 +202,11 @@ _PLAIN_WINDOW = 1 << 16
 _MAX_CHUNKS = 4096
 #: data messages the compiled walk writes out per call (its output arrays' length)
 _WALK_ROOM = 1 << 16
+#: read the logs with nothing unusual in one compiled pass (see _plain); off: _Reader only
+_PLAIN = True
+_LOST = "no subscription found for message id {}"
+#: files up to this size are read into memory (faster than mapping them), larger ones mapped
+_READ_WHOLE = 2 << 20
 
 
 def table_name(topic: str, multi_id: int) -> str:
@@ -555,48 +566,52 @@ def _closure(name: str, formats: Mapping[str, Sequence[Field]],
     return tuple(key)
 
 
-_Layout = tuple[tuple[str, ...], tuple[np.dtype[Any], ...], int, int]
+#: a record layout: field names, their types' codes (see _CODE), offsets, the record's
+#: size, and name -> index (``_scan.ulog_plain`` makes the same)
+_Layout = tuple[tuple[str, ...], bytes, tuple[int, ...], int, dict[str, int]]
 
 
 def _new_layout(key: _Key) -> _Layout:
     """A topic's record layout from its :func:`_closure`: field names (nested types and
-    arrays expanded; an empty one named ``f<index>``, as pyulog's dtype has it), basic
-    types, size and timestamp offset (the size if none), trailing padding dropped; kept
-    for the process as :func:`_layout`. Raises KeyError (a nested type not defined),
-    ValueError (repeated field names, which numpy refuses) or :class:`_Bad` (more fields
-    than a message can hold bytes).
+    arrays expanded; an empty one named ``f<index>``, as pyulog's dtype has it), their
+    basic types' codes and offsets, the record's size and the names' index, trailing
+    padding dropped; kept for the process as :func:`_layout`. Raises KeyError (a nested
+    type not defined), ValueError (repeated field names, which numpy refuses) or
+    :class:`_Bad` (more fields than a message can hold bytes).
 
     Examples
     --------
-    >>> names, kinds, size, offset = _new_layout((
+    >>> names, codes, offsets, size, index = _new_layout((
     ...     ("a", b"a:uint64_t timestamp;b[2] r;uint8_t[2] _padding0;"),
     ...     ("b", b"b:float y;uint8_t _padding0;")))
-    >>> names, size, offset
-    (('timestamp', 'r[0].y', 'r[0]._padding0', 'r[1].y', 'r[1]._padding0'), 18, 0)
+    >>> names
+    ('timestamp', 'r[0].y', 'r[0]._padding0', 'r[1].y', 'r[1]._padding0')
+    >>> list(codes), offsets, size
+    ([7, 8, 1, 8, 1], (0, 8, 12, 13, 17), 18)
     """
     formats = {}
     for node, text in key:
         if text is not None:
             formats[node] = _format(text)[1]
-    flat: dict[str, tuple[list[str], list[np.dtype[Any]]]] = {}
+    flat: dict[str, tuple[list[str], list[int]]] = {}
 
-    def flatten(name: str) -> tuple[list[str], list[np.dtype[Any]]]:
+    def flatten(name: str) -> tuple[list[str], list[int]]:
         got = flat.get(name)
         if got is not None:
             return got
         names: list[str] = []
-        kinds: list[np.dtype[Any]] = []
+        kinds: list[int] = []
         for kind, count, fname in formats[name]:  # KeyError: an unknown type
-            dtype = _DTYPE.get(kind)
-            if dtype is not None:
+            code = _CODE.get(kind)
+            if code is not None:
                 if not count:
                     names.append(fname)
-                    kinds.append(dtype)
+                    kinds.append(code)
                     continue
                 if len(names) + count > _MAX_FIELDS:
                     raise _Bad
                 names += map(fname.__add__, _indices(count))
-                kinds += [dtype] * count
+                kinds += [code] * count
                 continue
             inner, inner_kinds = flatten(kind)
             prefixes = [fname + index + "." for index in _indices(count)] if count else [
@@ -614,27 +629,23 @@ def _new_layout(key: _Key) -> _Layout:
     while m and names[m - 1].startswith("_padding"):
         m -= 1
     names, kinds = names[:m], kinds[:m]
-    size = sum(k.itemsize for k in kinds)  # (the format's size less the padding dropped)
     if "" in names:
         names = [f or f"f{i}" for i, f in enumerate(names)]
-    if len(set(names)) < m:
+    index = {f: i for i, f in enumerate(names)}
+    if len(index) < m:
         raise ValueError(name)
-    try:
-        offset = sum(k.itemsize for k in kinds[: names.index("timestamp")])
-    except ValueError:
-        offset = size
-    return tuple(names), tuple(kinds), size, offset
-
-
-def _new_record_dtype(key: _Key) -> np.dtype[Any]:
-    """The dtype of :func:`_layout`'s records (instances of a topic, and logs of one
-    firmware, share it): :func:`_record_dtype`."""
-    names, kinds, _, _ = _layout(key)
-    return np.dtype({"names": list(names), "formats": list(kinds)})
+    ends = np.cumsum([_WIDTH[k] for k in kinds]).tolist()
+    size = ends[-1] if ends else 0  # (the format's size less the padding dropped)
+    return tuple(names), bytes(kinds), (0, *ends[:-1]) if ends else (), size, index
 
 
 _layout = _Kept(_new_layout, weight=lambda layout: len(layout[0]) + 1)
-_record_dtype = _Kept(_new_record_dtype, weight=lambda dtype: len(dtype.names or ()) + 1)
+
+
+def _stamp_offset(layout: _Layout) -> int:
+    """Bytes before a record's ``timestamp`` (its size if it has none)."""
+    at = layout[4].get("timestamp")
+    return layout[3] if at is None else layout[2][at]
 
 
 @dataclass
@@ -675,57 +686,106 @@ class _Parsed:
     problems: list[str] = field(default_factory=list)
     skipped: int = 0
     truncated: int = 0
-    data: list[tuple[str, int, _Columns]] = field(default_factory=list)
+    data: list[tuple[str, int, _Fields]] = field(default_factory=list)
+    times: list[NDArray[np.float64]] | None = None  # each table's, where already made
+    floats: bool = False  # the initial parameters are all floats already
 
 
-class _Columns(Mapping[str, NDArray[Any]]):
-    """A topic's columns: field name -> the records' field (a view), made when first asked
-    for (most of a log's hundred topics and thousands of fields are never looked at).
+class _Fields(Mapping[str, NDArray[Any]]):
+    """A topic's columns over its records' bytes (``count`` records of the layout's size,
+    one after the other, in any buffer: an array, a bytearray): field name -> that field of
+    every record (a strided view), made
+    when first asked for (most of a log's hundred topics and thousands of fields are never
+    looked at); no structured dtype is built.
 
     Examples
     --------
-    >>> cols = _Columns(np.zeros(2, [("timestamp", "<u8"), ("x", "<f4")]))
-    >>> list(cols), cols["x"].dtype, len(cols)
-    (['timestamp', 'x'], dtype('float32'), 2)
+    >>> layout = _new_layout((("a", b"a:uint64_t timestamp;float x;"),))
+    >>> raw = np.frombuffer(np.array([(1, 0.5), (2, 1.5)], "<u8,<f4").tobytes(), np.uint8)
+    >>> cols = _Fields(raw, 2, layout)
+    >>> list(cols), cols["x"].tolist(), len(cols), cols.rows(np.array([False, True]))["timestamp"]
+    (['timestamp', 'x'], [0.5, 1.5], 2, array([2], dtype=uint64))
     """
 
-    __slots__ = ("_fields", "_views", "records")
+    __slots__ = ("_views", "count", "layout", "raw")
 
-    def __init__(self, records: NDArray[Any]) -> None:
-        self.records = records
-        self._fields: Mapping[str, Any] = records.dtype.fields or {}
+    def __init__(self, raw: NDArray[np.uint8] | bytearray, count: int, layout: _Layout) -> None:
+        self.raw, self.count, self.layout = raw, count, layout
         self._views: dict[str, NDArray[Any]] = {}
 
     def __getitem__(self, name: str) -> NDArray[Any]:
         try:
             return self._views[name]
         except KeyError:
-            if not isinstance(name, str) or name not in self._fields:
+            at = self.layout[4].get(name) if isinstance(name, str) else None
+            if at is None:
                 raise KeyError(name) from None
-            view = self._views[name] = self.records[name]
+            _, codes, offsets, size, _ = self.layout
+            dtype = _BY_CODE[codes[at]]
+            view = self._views[name] = np.ndarray(
+                (self.count,), dtype, buffer=self.raw, offset=offsets[at], strides=(size,)
+            ) if self.count else np.zeros(0, dtype)
             return view
 
     def __contains__(self, name: object) -> bool:
-        return isinstance(name, str) and name in self._fields
+        return isinstance(name, str) and name in self.layout[4]
 
     def __iter__(self) -> Iterator[str]:
-        return iter(self.records.dtype.names or ())
+        return iter(self.layout[0])
 
     def __len__(self) -> int:
-        return len(self.records.dtype.names or ())
+        return len(self.layout[0])
 
     def __repr__(self) -> str:
-        return f"_Columns({list(self)!r})"
+        return f"_Fields({list(self)!r})"
 
     def __reduce__(self) -> tuple[Any, ...]:
-        return (_Columns, (self.records,))
+        return (_Fields, (self.raw, self.count, self.layout))
+
+    def rows(self, keep: NDArray[np.bool_]) -> _Fields:
+        """The records where ``keep`` holds."""
+        if not self.count:
+            return self
+        raw = np.frombuffer(self.raw, np.uint8).reshape(self.count, -1)[keep]
+        return _Fields(raw.reshape(-1), len(raw), self.layout)
+
+
+def _other(out: _Parsed, kind: int, data: bytes, mark: int) -> None:
+    """A message that is neither data nor a subscription (nor a format or a parameter of
+    the definitions), into ``out``: texts, info; dropouts and parameter changes marked
+    with ``mark`` (the data messages before them, or the time); sync: nothing to keep.
+    Raises :class:`_Stop` or :class:`_Bad` as pyulog would fail on the payload."""
+    if kind == 0x4C:  # L
+        if len(data) < 9:
+            raise _Stop
+        level, stamp = struct.unpack_from("<BQ", data)
+        out.logged.append(_Text(stamp, _text(data[9:]), level))
+    elif kind == 0x43:  # C
+        if len(data) < 11:
+            raise _Stop
+        level, tag, stamp = struct.unpack_from("<BHQ", data)
+        out.tagged.setdefault(tag, []).append(_Text(stamp, _text(data[11:]), level))
+    elif kind == 0x4F:  # O
+        out.dropouts.append((mark, _unpack("H", data)))
+    elif kind == 0x49:  # I
+        _, key, value = _info(data)
+        out.info[key] = value
+    elif kind == 0x4D:  # M
+        _info(data, multiple=True)
+    elif kind == 0x50:  # P
+        _, key, value = _info(data)
+        out.changed_params.append((mark, key, value))
+    elif kind == 0x51:  # Q
+        if not data:
+            raise _Stop
+        _info(data[1:])
 
 
 class _Reader:
     """One pass over a mapped ULog (see the module's *Framing*)."""
 
     def __init__(self, buf: Any, path: str | os.PathLike[str], topics: set[str] | None) -> None:
-        self.buf = buf  # the mmap (bytes-like, with .find)
+        self.buf = buf  # the file's bytes, or its map (bytes-like, with .find)
         self.u8 = np.frombuffer(buf, np.uint8)
         self.n = self.u8.size
         self.path = path
@@ -1043,12 +1103,8 @@ class _Reader:
             # (most formats hold basic types only: their own text is the whole key)
             key = self.keys[name] = ((name, out.definitions[name]),) if (
                 name in out.basic_sizes) else _closure(name, out.formats, out.definitions)
-        _, _, size, offset = _layout(key)
-        return size, offset
-
-    def dtype(self, name: str) -> np.dtype[Any]:
-        """A topic's dtype (built only for topics with data)."""
-        return _record_dtype(self.keys[name])
+        layout = _layout(key)
+        return layout[3], _stamp_offset(layout)
 
     def subscribe(self, data: bytes) -> None:
         if len(data) < 3:
@@ -1231,7 +1287,6 @@ class _Reader:
 
     def message(self, kind: int, pos: int, size: int, data: bytes) -> None:
         """One message of the data section other than a run of data messages."""
-        out = self.out
         if kind == 0x44:  # D that is no candidate
             if size < 2:
                 raise _Stop
@@ -1240,31 +1295,8 @@ class _Reader:
                 raise _Stop
         elif kind == 0x41:  # A
             self.subscribe(data)
-        elif kind == 0x4C:  # L
-            if len(data) < 9:
-                raise _Stop
-            level, stamp = struct.unpack_from("<BQ", data)
-            out.logged.append(_Text(stamp, _text(data[9:]), level))
-        elif kind == 0x43:  # C
-            if len(data) < 11:
-                raise _Stop
-            level, tag, stamp = struct.unpack_from("<BHQ", data)
-            out.tagged.setdefault(tag, []).append(_Text(stamp, _text(data[11:]), level))
-        elif kind == 0x4F:  # O: its time (the last timestamp so far) is set in resolve()
-            out.dropouts.append((self.count, _unpack("H", data)))
-        elif kind == 0x49:  # I
-            _, key, value = _info(data)
-            out.info[key] = value
-        elif kind == 0x4D:  # M
-            _info(data, multiple=True)
-        elif kind == 0x50:  # P: as O
-            _, key, value = _info(data)
-            out.changed_params.append((self.count, key, value))
-        elif kind == 0x51:  # Q
-            if not data:
-                raise _Stop
-            _info(data[1:])
-        # S (sync): nothing to keep
+        else:  # (O and P: their time, the last timestamp so far, is set in resolve())
+            _other(self.out, kind, data, self.count)
 
     # ------------------------------------------------------------------ all
     def run(self) -> _Parsed:
@@ -1312,7 +1344,7 @@ class _Reader:
                 out.corrupt = True
                 out.skipped += int((size[wrong | lost].astype(np.int64) + 3).sum())
             for m in sorted(set(ids[lost].tolist())):
-                self.problem(f"no subscription found for message id {m}")
+                self.problem(_LOST.format(m))
             pos, sub = pos[valid], sub[valid]
             counts = np.cumsum(valid)  # data messages before -> decodable ones before
             events = [int(counts[c - 1]) if c else 0 for c, *_ in out.dropouts] + \
@@ -1346,7 +1378,7 @@ class _Reader:
 
     def decode(self, pos: NDArray[np.int64], sub: NDArray[np.int64]) -> None:
         """Gather each kept subscription's records: one fancy index per topic into a view
-        of the file as raw records of its size at every byte, then seen as its dtype."""
+        of the file as raw records of its size at every byte (as ``void``: fast)."""
         at = pos[np.argsort(sub, kind="stable")]  # grouped by subscription, in file order
         at += 5
         counts = np.bincount(sub, minlength=len(self.subs)).tolist()
@@ -1357,19 +1389,23 @@ class _Reader:
             width = s.size
             if not counts[k] or not width:
                 continue
-            # (raw records gathered as void: much faster than as the structured dtype)
             raw = np.ndarray((self.n - width + 1,), f"V{width}", buffer=self.buf, strides=(1,))
-            records = np.frombuffer(raw[at[first[k] : first[k + 1]]], self.dtype(s.name))
-            items.append((s.name, s.multi_id, _Columns(records)))
+            records = raw[at[first[k] : first[k + 1]]].view(np.uint8)
+            items.append((s.name, s.multi_id,
+                          _Fields(records, counts[k], _layout(self.keys[s.name]))))
         items.sort(key=lambda d: (d[0], d[1]))
         self.out.data = items
 
+
 def _parse(path: str | os.PathLike[str], topics: set[str] | None) -> _Parsed:
-    """Map the file and read it (see the module's *Framing*); any failure is one
-    :class:`~mavsid.errors.LogFormatError` naming the file."""
+    """Read the file (a small one) or map it, and parse it (see the module's *Framing*);
+    any failure is one :class:`~mavsid.errors.LogFormatError` naming the file."""
+    buf: Any
     try:
         with open(path, "rb") as f:
-            if hasattr(mmap, "MAP_POPULATE"):  # read ahead at once (faults page by page are slow)
+            if os.fstat(f.fileno()).st_size <= _READ_WHOLE:
+                buf = f.read()
+            elif hasattr(mmap, "MAP_POPULATE"):  # read ahead at once (faults one by one: slow)
                 buf = mmap.mmap(f.fileno(), 0, flags=mmap.MAP_SHARED | mmap.MAP_POPULATE,
                                 prot=mmap.PROT_READ)
             else:
@@ -1378,7 +1414,7 @@ def _parse(path: str | os.PathLike[str], topics: set[str] | None) -> _Parsed:
         raise LogFormatError(f"cannot read: {getattr(exc, 'strerror', None) or exc}",
                              path=path) from None
     try:
-        return _Reader(buf, path, topics).run()
+        return _plain(buf, topics) or _Reader(buf, path, topics).run()
     except RecursionError:
         raise LogFormatError("not a readable ULog (definitions nested without end)",
                              path=path) from None
@@ -1386,31 +1422,68 @@ def _parse(path: str | os.PathLike[str], topics: set[str] | None) -> _Parsed:
         raise LogFormatError("not a readable ULog (out of memory)", path=path) from None
     finally:
         try:
-            buf.close()
+            if isinstance(buf, mmap.mmap):
+                buf.close()
         except BufferError:  # a view still refers to it: closed when collected
             pass
 
 
-def _times(tables: list[_Columns]) -> list[NDArray[np.float64]]:
+def _plain(buf: Any, topics: set[str] | None) -> _Parsed | None:
+    """A log with nothing unusual in it read in one compiled pass (``_scan.ulog_plain``);
+    None for any other (read by :class:`_Reader`, pyulog's rules on damaged files), or
+    where the package was built without a C compiler. "Unusual" is all but the commonest
+    damage, which the compiled pass accounts for as :class:`_Reader` does: data messages
+    without subscription or of a wrong size (skipped), an implausible header followed by
+    a sync magic, a sync magic inside a message of an unknown type (read on after it). It
+    leaves the few info, text, dropout and parameter-change messages to :func:`_other`;
+    one it would fail on sends the log to :class:`_Reader` too."""
+    if _scan is None or not _PLAIN:
+        return None
+    got = _scan.ulog_plain(buf, topics)
+    if got is None:
+        return None
+    start_us, last_us, appended, truncated, params, rare, tables, times, skipped, corrupt, \
+        lost = got
+    out = _Parsed(start_us=start_us, last_us=last_us, appended=bool(appended),
+                  truncated=truncated, initial_params=params, skipped=skipped,
+                  corrupt=bool(corrupt), problems=[_LOST.format(m) for m in lost])
+    try:
+        for kind, pos, size, stamp in rare:
+            _other(out, kind, buf[pos + 3 : pos + 3 + size], stamp)
+    except (_Stop, _Bad):
+        return None
+    whole = np.frombuffer(times, np.float64)
+    ends = itertools.accumulate(count for *_, count in tables)
+    out.data = [(name, multi_id, _Fields(raw, count, layout))
+                for name, multi_id, layout, raw, count in tables]  # (sorted as decode sorts)
+    out.times = [whole[end - count : end]
+                 for (*_, count), end in zip(tables, ends, strict=True)]
+    out.floats = True
+    return out
+
+
+def _times(tables: list[_Fields]) -> list[NDArray[np.float64]]:
     """Per table, ``timestamp_sample`` if present, else ``timestamp``, in seconds (NaN if
     neither): the ``uint64`` ones (all in a real log) converted in one go, each table's
     a slice of the whole.
 
     Examples
     --------
-    >>> a = _Columns(np.array([(1_000_000,), (2_500_000,)], [("timestamp", "<u8")]))
-    >>> b = _Columns(np.array([(7,)], [("x", "<f4")]))
+    >>> ts, x = (_new_layout(((n, f"{n}:{t};".encode()),)) for n, t in
+    ...          (("a", "uint64_t timestamp"), ("b", "float x")))
+    >>> a = _Fields(np.array([1_000_000, 2_500_000], "<u8").view(np.uint8), 2, ts)
+    >>> b = _Fields(np.array([7], "<f4").view(np.uint8), 1, x)
     >>> [t.tolist() for t in _times([a, b, a])]
     [[1.0, 2.5], [nan], [1.0, 2.5]]
     """
     out: list[NDArray[np.float64] | None] = []
     batch: list[NDArray[Any]] = []
     for data in tables:
-        fields = data._fields  # (looked up directly: a hundred tables)
+        fields = data.layout[4]  # (looked up directly: a hundred tables)
         key = "timestamp_sample" if "timestamp_sample" in fields else "timestamp"
         column = data[key] if key in fields else None
         if column is None:
-            out.append(np.full(len(data.records), np.nan))
+            out.append(np.full(data.count, np.nan))
         elif column.dtype == np.uint64:
             out.append(None)
             batch.append(column)
@@ -1465,7 +1538,10 @@ def _params(parsed: _Parsed) -> tuple[dict[str, float], int, int]:
     """Initial parameters with later changes applied; the number of changes; and how many
     values were not numbers (skipped)."""
     initial = parsed.initial_params
-    if set(map(type, initial.values())) <= {float, int}:  # the common case: at once
+    if parsed.floats:  # (the compiled pass's)
+        params = initial.copy()
+        entries = [(name, value) for _, name, value in parsed.changed_params]
+    elif set(map(type, initial.values())) <= {float, int}:  # the common case: at once
         params = dict(zip(initial, map(float, initial.values()), strict=True))
         entries = [(name, value) for _, name, value in parsed.changed_params]
     else:
@@ -1513,8 +1589,8 @@ def _window(table: MessageTable, lo: float, hi: float) -> MessageTable:
     """Rows of ``table`` with ``lo <= time_s <= hi``."""
     keep = (table.time_s >= lo) & (table.time_s <= hi)
     columns: Mapping[str, NDArray[Any]]
-    if isinstance(table.columns, _Columns):
-        columns = _Columns(table.columns.records[keep])
+    if isinstance(table.columns, _Fields):
+        columns = table.columns.rows(keep)
     else:
         columns = {n: c[keep] for n, c in table.columns.items()}
     return MessageTable(table.name, columns, table.time_s[keep], table.units)
@@ -1578,11 +1654,13 @@ def read(
         raise LogFormatError("no ULog data (no topic samples, no parameters)", path=path)
 
     tables: dict[str, MessageTable] = {}
-    times = _times([data for _, _, data in parsed.data])
+    times = parsed.times
+    if times is None:
+        times = _times([data for _, _, data in parsed.data])
     for (topic, multi_id, data), time_s in zip(parsed.data, times, strict=True):
         name = table_name(topic, multi_id)
-        units: dict[str, str] = {k: "us" for k in ("timestamp", "timestamp_sample")
-                                 if k in data._fields}
+        index = data.layout[4]
+        units: dict[str, str] = {k: "us" for k in _STAMPS if k in index}
         tables[name] = MessageTable(name, data, time_s, units)
     params, n_changes, bad_params = _params(parsed)
     texts = _texts(parsed)
@@ -1655,10 +1733,10 @@ def _backwards(tables: dict[str, MessageTable]) -> list[str]:
     >>> _backwards({"a": table([1, 2]), "b": table([0, 1, 0.5]), "c": table([1])})
     ['b']
     """
-    timed = [(name, t.time_s) for name, t in tables.items() if len(t) > 1]
+    timed = [(name, t.time_s) for name, t in tables.items() if t.time_s.size > 1]
     if not timed:
         return []
-    lengths = np.array([len(t) for _, t in timed])
+    lengths = np.array([t.size for _, t in timed])
     starts = np.cumsum(lengths) - lengths
     whole = np.concatenate([t for _, t in timed])
     back = np.flatnonzero(whole[1:] < whole[:-1])  # whole[i + 1] < whole[i]

@@ -899,22 +899,25 @@ def test_the_compiled_pass_takes_real_logs_and_reads_them_as_the_python_reader(
 @pytest.mark.parametrize("seed", range(4))
 def test_damaged_logs_read_by_the_compiled_pass_as_by_the_python_reader(
         walk: str, monkeypatch: pytest.MonkeyPatch, tmp_path: Path, seed: int) -> None:
-    """Logs damaged at random (bytes overwritten, a block of garbage or of sync magics put
-    in, headers rewritten, a cut, a block repeated): whether the compiled pass takes one or
-    sends it to the Python reader, the read is the Python reader's, value for value, warning
-    for warning, or the same error. Some of them must be taken (else this tests nothing)."""
+    """Logs damaged at random (bytes overwritten, in the definitions too, a block of garbage
+    or of sync magics put in, headers rewritten, a cut, a block repeated): whether the
+    compiled pass takes one or sends it to the Python reader, the read is the Python
+    reader's, value for value, warning for warning, or the same error. Some of them must be
+    taken (else this tests nothing)."""
     pytest.importorskip("mavsid.readers._scan")
     sources = [p for p in FIXTURE_ULOGS]
     if shared_logs(".ulg"):
         sources.append(shared_path("public", "roboto-ai__robologs-px4-actions", "test.ulg"))
     rng = np.random.default_rng(seed)
     taken = 0
-    for k in range(24):
+    for k in range(28):
         base = sources[k % len(sources)].read_bytes()
         out = bytearray(base)
         start = int(rng.integers(16, len(out) - 64))
-        how = k % 6
-        if how == 0:  # bytes overwritten
+        how = k % 7
+        if how == 6:  # a byte of the header or the definitions overwritten
+            out[int(rng.integers(16, 4000))] = int(rng.integers(0, 256))
+        elif how == 0:  # bytes overwritten
             at = rng.integers(start, len(out), 1 + int(rng.integers(0, 4)))
             out[at[0]] ^= 0xFF
             for a in at[1:]:
@@ -960,3 +963,43 @@ def test_simulated_layouts_read_by_the_compiled_pass_as_by_the_python_reader(
     plain, python = _both_ways(path, monkeypatch)
     assert plain == python
     assert "last message truncated" in python[-1][0]
+
+
+@pytest.mark.parametrize("walk", ["plain"], indirect=True)
+def test_the_compiled_pass_is_bounded_on_hostile_nesting(
+        walk: str, monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """Formats nesting an empty one 65535 × 65535 × 65535 times (no field: the pass must not
+    walk the repetitions), and twenty topics of 60 000 fields each (more fields than the
+    pass keeps for one read: it leaves the log to the Python reader, which keeps layouts
+    within a budget): read as the Python reader reads them."""
+    from fuzz.hostile import ATT_FORMAT, ulog_file
+
+    scan = pytest.importorskip("mavsid.readers._scan")
+    nested = ulog_file([ATT_FORMAT, "x:uint64_t timestamp;uint64_t v;y[65535] a;",
+                        "y:z[65535] b;", "z:e[65535] c;", "e:"], also=("x",))
+    wide = ulog_file([ATT_FORMAT] + [f"w{i}:uint64_t timestamp;uint8_t[60000] a;"
+                                     for i in range(20)],
+                     also=tuple(f"w{i}" for i in range(20)))
+    for name, data, taken in (("nested", nested, True), ("wide", wide, False)):
+        path = tmp_path / f"{name}.ulg"
+        path.write_bytes(data)
+        assert (scan.ulog_plain(data, None) is not None) == taken, name
+        plain, python = _both_ways(path, monkeypatch)
+        assert plain == python, name
+    assert list(read(tmp_path / "nested.ulg")[0]["x"].columns) == ["timestamp", "v"]
+
+
+def test_appended_data_claimed_past_any_file_is_pyulogs(tmp_path: Path) -> None:
+    """Flag bits claiming appended data at an offset past 2**63 (a damaged header; the
+    compiled walk took it as its end of section and failed to convert it): read as pyulog
+    reads it, corruption flagged."""
+    from fuzz.hostile import ATT_FORMAT, ulog_file
+
+    data = bytearray(ulog_file([ATT_FORMAT]))
+    data[19 + 8] = 1  # the flag bits' payload: incompatible flags at 8, offsets at 16
+    data[19 + 16 : 19 + 24] = struct.pack("<Q", (1 << 63) + 5)
+    path = tmp_path / "offset.ulg"
+    path.write_bytes(bytes(data))
+    got = _same_as_pyulog_or_typed_error(path)
+    assert got is not None and len(got[0]["att"]) == 50
+    assert "file corruption found" in read(path)[1][0]

@@ -430,6 +430,7 @@ done:
 #define UL_MAX_FIELDS 0xFFFF
 #define UL_MAX_DEPTH 64
 #define UL_MAX_UNKNOWN 10000
+#define UL_MAX_LEAVES (1 << 20) /* fields of all the layouts of a read */
 
 static const char *const ul_basic[12] = {"int8_t", "uint8_t", "int16_t", "uint16_t",
                                          "int32_t", "uint32_t", "int64_t", "uint64_t",
@@ -452,6 +453,7 @@ typedef struct {
     UField *fields;
     Py_ssize_t nfields;
     int state; /* cycle search: 0 new, 1 on the path, 2 done */
+    Py_ssize_t leaves; /* fields flattened (saturated); -1 not plain; -2 not counted yet */
 } UFormat;
 
 typedef struct {
@@ -502,6 +504,7 @@ typedef struct {
     Py_ssize_t nleaf, capleaf;
     char *prefix;
     Py_ssize_t plen, pcap;
+    Py_ssize_t total_leaves;
 } UPlain;
 
 static int ul_grow(void **p, Py_ssize_t *cap, Py_ssize_t need, size_t item)
@@ -648,6 +651,7 @@ static int ul_format(UPlain *u, const uint8_t *s, Py_ssize_t n)
     g->fields = fields;
     g->nfields = nf;
     g->state = 0;
+    g->leaves = -2;
     return ul_index(u, u->nfmts - 1) < 0 ? -1 : 1;
 not_plain:
     PyMem_Free(fields);
@@ -711,6 +715,31 @@ static int ul_leaf(UPlain *u, const uint8_t *s, Py_ssize_t n, const char *index,
     return 1;
 }
 
+/* The fields format k flattens to (more than UL_MAX_FIELDS: UL_MAX_FIELDS + 1); -1 where
+ * it nests an undefined type or nests too deeply (the formats are free of cycles). */
+static Py_ssize_t ul_leaves(UPlain *u, Py_ssize_t k, int depth)
+{
+    UFormat *f = &u->fmts[k];
+    if (f->leaves != -2)
+        return f->leaves;
+    if (depth > UL_MAX_DEPTH)
+        return -1;
+    Py_ssize_t total = 0;
+    for (Py_ssize_t i = 0; i < f->nfields && total >= 0; i++) {
+        UField *x = &f->fields[i];
+        Py_ssize_t reps = x->count ? x->count : 1, each = 1;
+        if (x->basic < 0) {
+            Py_ssize_t inner = ul_find(u, x->type.s, x->type.n);
+            each = inner < 0 ? -1 : ul_leaves(u, inner, depth + 1);
+        }
+        if (each < 0)
+            total = -1;
+        else if ((total += reps * each) > UL_MAX_FIELDS)
+            total = UL_MAX_FIELDS + 1;
+    }
+    return f->leaves = total;
+}
+
 /* "[r]" (r < 65536) into out. */
 static void ul_index_text(char *out, Py_ssize_t r)
 {
@@ -737,8 +766,14 @@ static int ul_flatten(UPlain *u, Py_ssize_t k, int depth, Py_ssize_t *off)
     for (Py_ssize_t i = 0; i < f->nfields; i++) {
         UField *x = &f->fields[i];
         Py_ssize_t reps = x->count ? x->count : 1, inner = -1;
-        if (x->basic < 0 && (inner = ul_find(u, x->type.s, x->type.n)) < 0)
-            return 0;
+        if (x->basic < 0) {
+            inner = ul_find(u, x->type.s, x->type.n);
+            Py_ssize_t each = inner < 0 ? -1 : ul_leaves(u, inner, depth + 1);
+            if (each < 0)
+                return 0;
+            if (each == 0)
+                continue; /* (adds no field, however often repeated) */
+        }
         for (Py_ssize_t r = 0; r < reps; r++) {
             char index[16];
             if (x->count)
@@ -775,6 +810,10 @@ static Py_ssize_t ul_layout(UPlain *u, PyObject *name, const uint8_t *s, Py_ssiz
     Py_ssize_t k = ul_find(u, s, n);
     if (k < 0)
         return -1;
+    Py_ssize_t leaves = ul_leaves(u, k, 0);
+    if (leaves < 0 || leaves > UL_MAX_FIELDS || u->total_leaves + leaves > UL_MAX_LEAVES)
+        return -1; /* (the Python reader keeps layouts within a budget) */
+    u->total_leaves += leaves;
     u->alen = u->nleaf = u->plen = 0;
     Py_ssize_t off = 0;
     int ok = ul_flatten(u, k, 0, &off);

@@ -1,19 +1,42 @@
-"""Read PX4 ULog files (``.ulg``) into a :class:`~mavsid.data.RawLog`, vectorised with numpy.
+"""Read PX4 ULog files (``.ulg``) into a :class:`~mavsid.data.RawLog`.
 
 The reader gives the values pyulog gives (the reference the tests compare against field by
-field), several times faster (ten and more on large logs, where data messages dominate):
-definitions and every message that is not topic data are parsed once in Python; the data
-messages (``D``, nearly all of a log) are framed, checked and decoded with numpy over a
-memory map of the file. pyulog is not used at run time.
+field), ten to seventy times faster. pyulog is not used at run time. Two readers share the
+work:
 
-On a small log (a few MB) the fixed costs weigh most: a thousand or two definition
-messages and a hundred topics. They are kept down so: the plain parameters (``float`` or
-``int32_t`` key, 4-byte value: nearly all) are found in runs, as data messages are (see
-*Framing*), and decoded in one batch, names at once and values as arrays; ``M`` and ``Q``
-messages, which are only checked, are seen without decoding when plainly valid; a
-format's size is summed as its fields are parsed; a topic's layout and dtype are built
-once per read; a table's columns are views made when first asked for; the times of all
-tables are converted, and checked for running backwards, in one go.
+- *The compiled pass* (``_scan.ulog_plain``, where the package was built with a C
+  compiler: see :func:`_plain`) reads a log with nothing unusual in it in one go:
+  definitions, formats flattened to record layouts, subscriptions, every data message
+  gathered into its topic's records, each table's times; it accounts for the commonest
+  damage as the Python reader does (data messages without subscription or of a wrong
+  size skipped, an implausible header followed by a sync magic, a sync magic inside a
+  message of an unknown type). The few info, text, dropout and parameter-change messages
+  are read by the Python reader's code. Anything else (a message cut inside the
+  definitions, a format or parameter that does not parse plainly, garbage without a sync
+  magic after it, a repeated subscription, a payload too short for its fields, odd
+  appended-data offsets, more fields than a read keeps) and it returns nothing and:
+- *the Python reader* (:class:`_Reader`), pyulog's rules on damaged files one by one, reads
+  the log: definitions and every message that is not topic data are parsed in Python; the
+  data messages (``D``, nearly all of a log) are framed by a compiled loop (or numpy) and
+  decoded with numpy.
+
+Where the first returns, the second returns the same (tests: every shared and simulated
+log, and logs damaged at random, read both ways; every ULog test runs three ways: the
+compiled pass, the Python reader with the compiled walk, and with numpy's).
+
+A table's columns are strided views over its records' bytes (:class:`_Fields`: no
+structured dtype is built), made when first asked for: most of a log's hundred topics and
+thousands of fields are never looked at. A file up to 2 MB is read into memory, a larger one
+mapped.
+
+For the Python reader on a small log the fixed costs weigh most: a thousand or two
+definition messages and a hundred topics. They are kept down so: the plain parameters
+(``float`` or ``int32_t`` key, 4-byte value: nearly all) are found in runs, as data
+messages are (see *Framing*), and decoded in one batch, names at once and values as arrays;
+``M`` and ``Q`` messages, which are only checked, are seen without decoding when plainly
+valid; a format's size is summed as its fields are parsed; a topic's layout is built once
+per read; the times of all tables are converted, and checked for running backwards, in one
+go.
 
 What the returned log holds:
 
@@ -81,9 +104,8 @@ step per message, like pyulog: linear, never endless (every step moves forward).
 implausible headers (garbage) are skipped in vectorised windows.
 
 Data messages are then grouped by subscription and gathered with one fancy index into a
-view of the map as raw records of the topic's size at every byte (``np.ndarray(...,
-strides=(1,))``), then seen as the topic's dtype, so each topic is one copy of its records
-(gathered as ``void`` records: much faster than as the structured dtype). A data message
+view of the file as raw records of the topic's size at every byte (``np.ndarray(...,
+strides=(1,))``, as ``void`` records), so each topic is one copy of its records. A data message
 counts if its id is subscribed at that point and its size is exactly the format's; the
 others are skipped and flagged as corruption, as pyulog does. pyulog's quirks on damaged
 files are kept so that its values stay the reference there too: the data of each section
@@ -95,7 +117,7 @@ moves the read one byte forward, where pyulog may read the same bytes again; a f
 flattens to more fields than a data message can hold bytes (nested arrays) is an unreadable
 subscription instead of minutes of expansion.
 
-Formats parsed, record layouts and their dtypes are kept for the process (within a budget
+The Python reader keeps formats parsed and record layouts for the process (within a budget
 of fields, :class:`_Kept`), keyed by the texts of a topic's format and of every format it
 nests: the logs of one firmware repeat them, so a batch parses each once; two logs that
 define a type differently never share a layout.
@@ -694,9 +716,8 @@ class _Parsed:
 class _Fields(Mapping[str, NDArray[Any]]):
     """A topic's columns over its records' bytes (``count`` records of the layout's size,
     one after the other, in any buffer: an array, a bytearray): field name -> that field of
-    every record (a strided view), made
-    when first asked for (most of a log's hundred topics and thousands of fields are never
-    looked at); no structured dtype is built.
+    every record (a strided view, of the field's dtype), made when first asked for; no
+    structured dtype is built.
 
     Examples
     --------
@@ -1096,7 +1117,7 @@ class _Reader:
     # ------------------------------------------------------------------ subscriptions
     def record(self, name: str) -> tuple[int, int]:
         """A topic's record size and timestamp offset (:func:`_layout`), its layout's key
-        kept for :meth:`dtype`."""
+        kept for :meth:`decode`."""
         key = self.keys.get(name)
         if key is None:
             out = self.out
@@ -1206,7 +1227,7 @@ class _Reader:
             room = self.room = (np.empty(size, np.int64), np.empty(size, np.uint16),
                                 np.empty(size, np.uint16))
         while True:
-            k, nxt = _scan.ulog_data(self.buf, pos, until, *room)
+            k, nxt = _scan.ulog_data(self.buf, pos, min(until, self.n), *room)
             if k == 1 and not self.untimed:  # one between others: no run's bookkeeping
                 self.single(int(room[0][0]), int(room[1][0]), int(room[2][0]))
             elif k:

@@ -734,6 +734,8 @@ static Py_ssize_t ul_leaves(UPlain *u, Py_ssize_t k, int depth)
         }
         if (each < 0)
             total = -1;
+        else if (each && reps > (UL_MAX_FIELDS + 1) / each) /* (no product overflows) */
+            total = UL_MAX_FIELDS + 1;
         else if ((total += reps * each) > UL_MAX_FIELDS)
             total = UL_MAX_FIELDS + 1;
     }
@@ -1301,6 +1303,11 @@ static PyObject *ul_tables(UPlain *u, PyObject **times_out)
             if (records[u->final[f]] == NULL)
                 continue;
             order[m].name = PyUnicode_AsUTF8AndSize(s->name, &order[m].len);
+            if (order[m].name == NULL) {
+                PyMem_Free(sorted);
+                PyMem_Free(order);
+                goto fail;
+            }
             order[m].order = f;
             order[m++].multi_id = s->multi_id;
         }

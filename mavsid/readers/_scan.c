@@ -1099,6 +1099,7 @@ static Py_ssize_t ul_definitions(UPlain *u, PyObject *params, int *appended,
 {
     const uint8_t *a = u->a;
     Py_ssize_t n = u->n, pos = 16;
+    int plain;
     while (pos < n) {
         if (n - pos < 3)
             return 0;
@@ -1142,12 +1143,10 @@ static Py_ssize_t ul_definitions(UPlain *u, PyObject *params, int *appended,
                 return -1;
             break;
         }
-        case 'F': {
-            int got = ul_format(u, d, size);
-            if (got <= 0)
-                return got;
+        case 'F': /* (0: not plain, -1: an error) */
+            if ((plain = ul_format(u, d, size)) <= 0)
+                return plain;
             break;
-        }
         case 'I':
         case 'M':
         case 'Q':
@@ -1391,28 +1390,23 @@ static PyObject *ulog_plain(PyObject *self, PyObject *args)
     for (Py_ssize_t k = 0; k < u->nfmts; k++)
         if (ul_cyclic(u, k, 0))
             goto plain_no;
-    if (appended && noffsets) {
-        for (int i = 0; i < noffsets; i++) {
-            /* sections at increasing offsets inside the file only */
+    /* the sections: up to each appended-data offset (increasing, inside the file only),
+     * then to the end */
+    int sections = appended ? noffsets : 0;
+    for (int i = 0; i <= sections; i++) {
+        Py_ssize_t until = PY_SSIZE_T_MAX;
+        if (i < sections) {
             if (offsets[i] < (uint64_t)pos || offsets[i] > (uint64_t)u->n)
                 goto plain_no;
-            int got = ul_section(u, pos, (Py_ssize_t)offsets[i], 0);
-            if (got < 0)
-                goto done;
-            if (got == 0)
-                goto plain_no;
-            if (ul_end_section(u) < 0)
-                goto done;
-            pos = (Py_ssize_t)offsets[i];
+            until = (Py_ssize_t)offsets[i];
         }
+        int got = ul_section(u, pos, until, i == sections);
+        if (got < 0 || (got > 0 && ul_end_section(u) < 0))
+            goto done;
+        if (got == 0)
+            goto plain_no;
+        pos = until;
     }
-    int got = ul_section(u, pos, PY_SSIZE_T_MAX, 1);
-    if (got < 0)
-        goto done;
-    if (got == 0)
-        goto plain_no;
-    if (ul_end_section(u) < 0)
-        goto done;
     tables = ul_tables(u, &times);
     if (tables == NULL)
         goto done;

@@ -915,11 +915,8 @@ class _Reader:
                 continue
             data = self.buf[pos + 3 : min(end, n)]
             try:
-                if kind == 0x49:  # I
-                    _, key, value = _info(data)
-                    out.info[key] = value
-                elif kind == 0x4D:  # M
-                    _info(data, multiple=True)
+                if kind == 0x49 or kind == 0x4D or kind == 0x51:  # I, M, Q
+                    _other(out, kind, data, 0)
                 elif kind == 0x46:  # F
                     name, fields, size = _format(data)
                     out.formats[name] = fields
@@ -931,10 +928,6 @@ class _Reader:
                 elif kind == 0x50:  # P
                     _, key, value = _info(data)
                     out.initial_params[key] = value
-                elif kind == 0x51:  # Q
-                    if not data:
-                        raise _Stop
-                    _info(data[1:])
                 elif kind == 0x42:  # B
                     self.flag_bits(pos, size, data)
                 elif kind == 0 or size == 0 or size > _MAX_UNKNOWN_SIZE:

@@ -26,8 +26,7 @@ compiled pass, the Python reader with the compiled walk, and with numpy's).
 
 A table's columns are strided views over its records' bytes (:class:`_Fields`: no
 structured dtype is built), made when first asked for: most of a log's hundred topics and
-thousands of fields are never looked at. A file up to 2 MB is read into memory, a larger one
-mapped.
+thousands of fields are never looked at. The file is mapped.
 
 For the Python reader on a small log the fixed costs weigh most: a thousand or two
 definition messages and a hundred topics. They are kept down so: the plain parameters
@@ -227,8 +226,6 @@ _WALK_ROOM = 1 << 16
 #: read the logs with nothing unusual in one compiled pass (see _plain); off: _Reader only
 _PLAIN = True
 _LOST = "no subscription found for message id {}"
-#: files up to this size are read into memory (faster than mapping them), larger ones mapped
-_READ_WHOLE = 2 << 20
 
 
 def table_name(topic: str, multi_id: int) -> str:
@@ -806,7 +803,7 @@ class _Reader:
     """One pass over a mapped ULog (see the module's *Framing*)."""
 
     def __init__(self, buf: Any, path: str | os.PathLike[str], topics: set[str] | None) -> None:
-        self.buf = buf  # the file's bytes, or its map (bytes-like, with .find)
+        self.buf = buf  # the mmap (bytes-like, with .find)
         self.u8 = np.frombuffer(buf, np.uint8)
         self.n = self.u8.size
         self.path = path
@@ -1412,14 +1409,13 @@ class _Reader:
 
 
 def _parse(path: str | os.PathLike[str], topics: set[str] | None) -> _Parsed:
-    """Read the file (a small one) or map it, and parse it (see the module's *Framing*);
-    any failure is one :class:`~mavsid.errors.LogFormatError` naming the file."""
-    buf: Any
+    """Map the file and read it (see the module's *Framing*); any failure is one
+    :class:`~mavsid.errors.LogFormatError` naming the file. (Mapped, not read into memory,
+    even when small: a first read in a process maps the cached pages faster than it copies
+    them into fresh ones.)"""
     try:
         with open(path, "rb") as f:
-            if os.fstat(f.fileno()).st_size <= _READ_WHOLE:
-                buf = f.read()
-            elif hasattr(mmap, "MAP_POPULATE"):  # read ahead at once (faults one by one: slow)
+            if hasattr(mmap, "MAP_POPULATE"):  # read ahead at once (faults one by one: slow)
                 buf = mmap.mmap(f.fileno(), 0, flags=mmap.MAP_SHARED | mmap.MAP_POPULATE,
                                 prot=mmap.PROT_READ)
             else:
@@ -1436,8 +1432,7 @@ def _parse(path: str | os.PathLike[str], topics: set[str] | None) -> _Parsed:
         raise LogFormatError("not a readable ULog (out of memory)", path=path) from None
     finally:
         try:
-            if isinstance(buf, mmap.mmap):
-                buf.close()
+            buf.close()
         except BufferError:  # a view still refers to it: closed when collected
             pass
 

@@ -421,8 +421,9 @@ done:
  *             caller reads their payloads (few) with the Python reader's code
  *   tables    per subscription with data, sorted by topic and instance (pyulog's order,
  *             each section's subscriptions in reverse, where they tie): (topic, multi_id,
- *             layout, records, count); layout is (field
- *             names, type codes (bytes: _BASIC's order), offsets, record size, name -> index)
+ *             layout, records, count); layout is (field names, type codes (bytes:
+ *             _BASIC's order), offsets, record size, name -> index (empty: filled when
+ *             first needed), the time fields it has of "timestamp" and "timestamp_sample"),
  *             shared by a topic's instances; records a bytearray of count records
  *   times     a bytearray of float64: each table's timestamp_sample (else timestamp) in
  *             seconds, NaN where it has neither, the tables one after the other */
@@ -800,8 +801,38 @@ static int ul_flatten(UPlain *u, Py_ssize_t k, int depth, Py_ssize_t *off)
     return 1;
 }
 
+/* Whether two of the first m leaves have the same name: 1, 0, -1 an error set. */
+static int ul_repeated(UPlain *u, Py_ssize_t m)
+{
+    Py_ssize_t size = 16;
+    while (size < 2 * m)
+        size *= 2;
+    Py_ssize_t *slot = PyMem_Calloc((size_t)size, sizeof(Py_ssize_t));
+    if (slot == NULL) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    int found = 0;
+    for (Py_ssize_t i = 0; i < m && !found; i++) {
+        const uint8_t *s = (const uint8_t *)u->arena + u->leaf[i].at;
+        Py_ssize_t n = u->leaf[i].len;
+        uint64_t h = ul_hash(s, n) & (uint64_t)(size - 1);
+        for (; slot[h]; h = (h + 1) & (uint64_t)(size - 1)) {
+            const ULeaf *o = &u->leaf[slot[h] - 1];
+            if (o->len == n && memcmp(u->arena + o->at, s, (size_t)n) == 0) {
+                found = 1;
+                break;
+            }
+        }
+        slot[h] = i + 1;
+    }
+    PyMem_Free(slot);
+    return found;
+}
+
 /* The layout of topic `name` (its format's fields flattened, trailing padding dropped,
- * empty names f<i>): its index, -1 not plain (no format, repeated names...), -2 an error. */
+ * empty names f<i>): its index, -1 not plain (no format, repeated names...), -2 an error.
+ * Its name -> index dict is left empty, for the reader to fill when first needed. */
 static Py_ssize_t ul_layout(UPlain *u, PyObject *name, const uint8_t *s, Py_ssize_t n)
 {
     PyObject *got = PyDict_GetItemWithError(u->layout_of, name);
@@ -825,44 +856,50 @@ static Py_ssize_t ul_layout(UPlain *u, PyObject *name, const uint8_t *s, Py_ssiz
     while (m && u->leaf[m - 1].len >= 8 &&
            memcmp(u->arena + u->leaf[m - 1].at, "_padding", 8) == 0)
         m--;
+    for (Py_ssize_t i = 0; i < m; i++) { /* an empty name is f<i>, as pyulog's dtype has it */
+        if (u->leaf[i].len)
+            continue;
+        char text[24];
+        int tl = snprintf(text, sizeof text, "f%zd", i);
+        if (ul_grow((void **)&u->arena, &u->acap, u->alen + tl, 1) < 0)
+            return -2;
+        memcpy(u->arena + u->alen, text, (size_t)tl);
+        u->leaf[i].at = u->alen;
+        u->leaf[i].len = tl;
+        u->alen += tl;
+    }
+    int repeated = ul_repeated(u, m);
+    if (repeated)
+        return repeated < 0 ? -2 : -1; /* repeated names: numpy refuses them */
     PyObject *names = PyTuple_New(m), *offsets = PyTuple_New(m), *index = PyDict_New();
-    PyObject *codes = PyBytes_FromStringAndSize(NULL, m);
+    PyObject *codes = PyBytes_FromStringAndSize(NULL, m), *stamps = NULL;
     ULayout lay = {NULL, 0, -1, 0, -1};
     Py_ssize_t ts_sample = -1, ts = -1;
     if (names == NULL || offsets == NULL || index == NULL || codes == NULL)
         goto fail;
     for (Py_ssize_t i = 0; i < m; i++) {
-        PyObject *nm;
         const ULeaf *l = &u->leaf[i];
         const char *t = u->arena + l->at;
         Py_ssize_t tl = l->len;
         PyBytes_AS_STRING(codes)[i] = (char)l->code;
-        if (tl == 0)
-            nm = PyUnicode_FromFormat("f%zd", i);
-        else
-            nm = PyUnicode_DecodeASCII(t, tl, NULL);
-        PyObject *at = PyLong_FromSsize_t(i), *o = PyLong_FromSsize_t(l->off);
-        if (nm == NULL || at == NULL || o == NULL || PyDict_SetItem(index, nm, at) < 0) {
+        PyObject *nm = PyUnicode_DecodeASCII(t, tl, NULL), *o = PyLong_FromSsize_t(l->off);
+        if (nm == NULL || o == NULL) {
             Py_XDECREF(nm);
-            Py_XDECREF(at);
             Py_XDECREF(o);
             goto fail;
         }
-        Py_DECREF(at);
         PyTuple_SET_ITEM(names, i, nm);
         PyTuple_SET_ITEM(offsets, i, o);
-        if (tl == 9 && memcmp(t, "timestamp", 9) == 0 && ts < 0)
+        if (tl == 9 && memcmp(t, "timestamp", 9) == 0)
             ts = i;
-        if (tl == 16 && memcmp(t, "timestamp_sample", 16) == 0 && ts_sample < 0)
+        if (tl == 16 && memcmp(t, "timestamp_sample", 16) == 0)
             ts_sample = i;
     }
-    if (PyDict_GET_SIZE(index) < m) { /* repeated names: numpy refuses them */
-        Py_DECREF(names);
-        Py_DECREF(offsets);
-        Py_DECREF(index);
-        Py_DECREF(codes);
-        return -1;
-    }
+    stamps = ts >= 0 && ts_sample >= 0 ? Py_BuildValue("(ss)", "timestamp", "timestamp_sample")
+             : ts >= 0 ? Py_BuildValue("(s)", "timestamp")
+             : ts_sample >= 0 ? Py_BuildValue("(s)", "timestamp_sample") : PyTuple_New(0);
+    if (stamps == NULL)
+        goto fail;
     lay.size = m ? u->leaf[m - 1].off + ul_width[u->leaf[m - 1].code] : 0;
     lay.ts_off = ts >= 0 ? u->leaf[ts].off : lay.size;
     Py_ssize_t t = ts_sample >= 0 ? ts_sample : ts;
@@ -870,7 +907,7 @@ static Py_ssize_t ul_layout(UPlain *u, PyObject *name, const uint8_t *s, Py_ssiz
         lay.time_off = u->leaf[t].off;
         lay.time_code = u->leaf[t].code;
     }
-    lay.py = Py_BuildValue("(NNNnN)", names, codes, offsets, lay.size, index);
+    lay.py = Py_BuildValue("(NNNnNN)", names, codes, offsets, lay.size, index, stamps);
     if (lay.py == NULL)
         return -2;
     if (ul_grow((void **)&u->layouts, &u->caplayouts, u->nlayouts + 1, sizeof(ULayout)) < 0) {
@@ -891,6 +928,7 @@ fail:
     Py_XDECREF(offsets);
     Py_XDECREF(index);
     Py_XDECREF(codes);
+    Py_XDECREF(stamps);
     return -2;
 }
 

@@ -10,6 +10,7 @@ def ulog_format(data: bytes, sizes: dict[str, int], /
 def ulog_infos(data: Any, start: int, until: int, /) -> int: ...
 def ulog_plain(data: Any, topics: set[str] | None, /) -> tuple[
     int, int, int, int, dict[str, float], list[tuple[int, int, int, int]],
-    list[tuple[str, int, tuple[tuple[str, ...], bytes, tuple[int, ...], int, dict[str, int]],
+    list[tuple[str, int, tuple[tuple[str, ...], bytes, tuple[int, ...], int, dict[str, int],
+                               tuple[str, ...]],
                bytearray, int]],
     bytearray, int, int, list[int]] | None: ...

@@ -586,8 +586,9 @@ def _closure(name: str, formats: Mapping[str, Sequence[Field]],
 
 
 #: a record layout: field names, their types' codes (see _CODE), offsets, the record's
-#: size, and name -> index (``_scan.ulog_plain`` makes the same)
-_Layout = tuple[tuple[str, ...], bytes, tuple[int, ...], int, dict[str, int]]
+#: size, name -> index (see :func:`_index`), and the time fields it has (of _STAMPS);
+#: ``_scan.ulog_plain`` makes the same
+_Layout = tuple[tuple[str, ...], bytes, tuple[int, ...], int, dict[str, int], tuple[str, ...]]
 
 
 def _new_layout(key: _Key) -> _Layout:
@@ -600,7 +601,7 @@ def _new_layout(key: _Key) -> _Layout:
 
     Examples
     --------
-    >>> names, codes, offsets, size, index = _new_layout((
+    >>> names, codes, offsets, size, index, stamps = _new_layout((
     ...     ("a", b"a:uint64_t timestamp;b[2] r;uint8_t[2] _padding0;"),
     ...     ("b", b"b:float y;uint8_t _padding0;")))
     >>> names
@@ -655,7 +656,25 @@ def _new_layout(key: _Key) -> _Layout:
         raise ValueError(name)
     ends = np.cumsum([_WIDTH[k] for k in kinds]).tolist()
     size = ends[-1] if ends else 0  # (the format's size less the padding dropped)
-    return tuple(names), bytes(kinds), (0, *ends[:-1]) if ends else (), size, index
+    stamps = tuple(k for k in _STAMPS if k in index)
+    return tuple(names), bytes(kinds), (0, *ends[:-1]) if ends else (), size, index, stamps
+
+
+def _index(layout: _Layout) -> dict[str, int]:
+    """A layout's field name -> index, made on first use where the compiled pass left it
+    empty (most of a log's topics are never looked at by name); shared by the topic's
+    tables.
+
+    Examples
+    --------
+    >>> layout = (("a", "b"), b"\x08\x08", (0, 4), 8, {}, ())
+    >>> _index(layout), layout[4]
+    ({'a': 0, 'b': 1}, {'a': 0, 'b': 1})
+    """
+    index = layout[4]
+    if len(index) < len(layout[0]):
+        index.update({name: at for at, name in enumerate(layout[0])})
+    return index
 
 
 _layout = _Kept(_new_layout, weight=lambda layout: len(layout[0]) + 1)
@@ -663,7 +682,7 @@ _layout = _Kept(_new_layout, weight=lambda layout: len(layout[0]) + 1)
 
 def _stamp_offset(layout: _Layout) -> int:
     """Bytes before a record's ``timestamp`` (its size if it has none)."""
-    at = layout[4].get("timestamp")
+    at = _index(layout).get("timestamp")
     return layout[3] if at is None else layout[2][at]
 
 
@@ -735,10 +754,10 @@ class _Fields(Mapping[str, NDArray[Any]]):
         try:
             return self._views[name]
         except KeyError:
-            at = self.layout[4].get(name) if isinstance(name, str) else None
+            at = _index(self.layout).get(name) if isinstance(name, str) else None
             if at is None:
                 raise KeyError(name) from None
-            _, codes, offsets, size, _ = self.layout
+            _, codes, offsets, size, _, _ = self.layout
             dtype = _BY_CODE[codes[at]]
             view = self._views[name] = np.ndarray(
                 (self.count,), dtype, buffer=self.raw, offset=offsets[at], strides=(size,)
@@ -746,7 +765,7 @@ class _Fields(Mapping[str, NDArray[Any]]):
             return view
 
     def __contains__(self, name: object) -> bool:
-        return isinstance(name, str) and name in self.layout[4]
+        return isinstance(name, str) and name in _index(self.layout)
 
     def __iter__(self) -> Iterator[str]:
         return iter(self.layout[0])
@@ -1488,7 +1507,7 @@ def _times(tables: list[_Fields]) -> list[NDArray[np.float64]]:
     out: list[NDArray[np.float64] | None] = []
     batch: list[NDArray[Any]] = []
     for data in tables:
-        fields = data.layout[4]  # (looked up directly: a hundred tables)
+        fields = _index(data.layout)  # (looked up directly: a hundred tables)
         key = "timestamp_sample" if "timestamp_sample" in fields else "timestamp"
         column = data[key] if key in fields else None
         if column is None:
@@ -1668,8 +1687,7 @@ def read(
         times = _times([data for _, _, data in parsed.data])
     for (topic, multi_id, data), time_s in zip(parsed.data, times, strict=True):
         name = table_name(topic, multi_id)
-        index = data.layout[4]
-        units: dict[str, str] = {k: "us" for k in _STAMPS if k in index}
+        units: dict[str, str] = dict.fromkeys(data.layout[5], "us")
         tables[name] = MessageTable(name, data, time_s, units)
     params, n_changes, bad_params = _params(parsed)
     texts = _texts(parsed)

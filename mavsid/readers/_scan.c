@@ -1284,97 +1284,70 @@ static int ul_order(const void *x, const void *y)
 /* Each subscription's records gathered (and its times), sorted as ul_order sorts. */
 static PyObject *ul_tables(UPlain *u, PyObject **times_out)
 {
-    Py_ssize_t total = 0;
-    for (Py_ssize_t k = 0; k < u->nsubs; k++) {
-        u->subs[k].first = total;
-        total += u->subs[k].count;
-    }
-    PyObject *times = PyByteArray_FromStringAndSize(NULL, total * (Py_ssize_t)sizeof(double));
-    PyObject *out = PyList_New(0);
+    PyObject *times = NULL, *out = PyList_New(0);
     PyObject **records = PyMem_Calloc((size_t)(u->nsubs ? u->nsubs : 1), sizeof(PyObject *));
     Py_ssize_t *fill = PyMem_Calloc((size_t)(u->nsubs ? u->nsubs : 1), sizeof(Py_ssize_t));
-    if (times == NULL || out == NULL || records == NULL || fill == NULL) {
-        if (records == NULL || fill == NULL)
+    UOrder *order = PyMem_Malloc((size_t)(u->nfinal ? u->nfinal : 1) * sizeof(UOrder));
+    Py_ssize_t m = 0, total = 0;
+    if (out == NULL || records == NULL || fill == NULL || order == NULL) {
+        if (out != NULL)
             PyErr_NoMemory();
         goto fail;
     }
-    for (Py_ssize_t k = 0; k < u->nsubs; k++) {
+    /* the tables (subscriptions with records) in order; each's times at its place in it */
+    for (Py_ssize_t f = 0; f < u->nfinal; f++) {
+        USub *s = &u->subs[u->final[f]];
+        if (!s->count || !u->layouts[s->layout].size)
+            continue;
+        order[m].name = PyUnicode_AsUTF8AndSize(s->name, &order[m].len);
+        if (order[m].name == NULL)
+            goto fail;
+        order[m].order = f;
+        order[m++].multi_id = s->multi_id;
+    }
+    qsort(order, (size_t)m, sizeof(UOrder), ul_order);
+    for (Py_ssize_t i = 0; i < m; i++) {
+        Py_ssize_t k = u->final[order[i].order];
         USub *s = &u->subs[k];
-        Py_ssize_t width = u->layouts[s->layout].size;
-        if (s->count && width) {
-            records[k] = PyByteArray_FromStringAndSize(NULL, s->count * width);
-            if (records[k] == NULL)
-                goto fail;
-        }
+        s->first = total;
+        total += s->count;
+        records[k] = PyByteArray_FromStringAndSize(NULL, s->count * u->layouts[s->layout].size);
+        if (records[k] == NULL)
+            goto fail;
     }
-    {
-        const uint8_t *a = u->a;
-        double *t = (double *)PyByteArray_AS_STRING(times);
-        for (Py_ssize_t i = 0; i < u->nmsg; i++) {
-            Py_ssize_t k = u->msg_sub[i];
-            USub *s = &u->subs[k];
-            const ULayout *l = &u->layouts[s->layout];
-            if (records[k] == NULL)
-                continue;
-            const uint8_t *rec = a + u->msg_pos[i] + 5;
-            memcpy(PyByteArray_AS_STRING(records[k]) + fill[k] * l->size, rec, (size_t)l->size);
-            t[s->first + fill[k]] = l->time_code < 0 ? Py_NAN
-                                    : ul_value(rec + l->time_off, l->time_code) / 1e6;
-            fill[k]++;
-        }
+    times = PyByteArray_FromStringAndSize(NULL, total * (Py_ssize_t)sizeof(double));
+    if (times == NULL)
+        goto fail;
+    const uint8_t *a = u->a;
+    double *t = (double *)PyByteArray_AS_STRING(times);
+    for (Py_ssize_t i = 0; i < u->nmsg; i++) {
+        Py_ssize_t k = u->msg_sub[i];
+        USub *s = &u->subs[k];
+        const ULayout *l = &u->layouts[s->layout];
+        if (records[k] == NULL)
+            continue;
+        const uint8_t *rec = a + u->msg_pos[i] + 5;
+        memcpy(PyByteArray_AS_STRING(records[k]) + fill[k] * l->size, rec, (size_t)l->size);
+        t[s->first + fill[k]] = l->time_code < 0 ? Py_NAN
+                                : ul_value(rec + l->time_off, l->time_code) / 1e6;
+        fill[k]++;
     }
-    /* the tables in order, each's times a slice of the whole in that order */
-    {
-        Py_ssize_t at = 0, m = 0;
-        double *t = (double *)PyByteArray_AS_STRING(times);
-        double *sorted = PyMem_Malloc((size_t)(total ? total : 1) * sizeof(double));
-        UOrder *order = PyMem_Malloc((size_t)(u->nfinal ? u->nfinal : 1) * sizeof(UOrder));
-        if (sorted == NULL || order == NULL) {
-            PyMem_Free(sorted);
-            PyMem_Free(order);
-            PyErr_NoMemory();
+    for (Py_ssize_t i = 0; i < m; i++) {
+        Py_ssize_t k = u->final[order[i].order];
+        USub *s = &u->subs[k];
+        PyObject *row = Py_BuildValue("(OiOOn)", s->name, s->multi_id,
+                                      u->layouts[s->layout].py, records[k], s->count);
+        if (row == NULL || PyList_Append(out, row) < 0) {
+            Py_XDECREF(row);
             goto fail;
         }
-        for (Py_ssize_t f = 0; f < u->nfinal; f++) {
-            USub *s = &u->subs[u->final[f]];
-            if (records[u->final[f]] == NULL)
-                continue;
-            order[m].name = PyUnicode_AsUTF8AndSize(s->name, &order[m].len);
-            if (order[m].name == NULL) {
-                PyMem_Free(sorted);
-                PyMem_Free(order);
-                goto fail;
-            }
-            order[m].order = f;
-            order[m++].multi_id = s->multi_id;
-        }
-        qsort(order, (size_t)m, sizeof(UOrder), ul_order);
-        for (Py_ssize_t i = 0; i < m; i++) {
-            Py_ssize_t f = order[i].order;
-            USub *s = &u->subs[u->final[f]];
-            memcpy(sorted + at, t + s->first, (size_t)s->count * sizeof(double));
-            at += s->count;
-            PyObject *row = Py_BuildValue("(OiOOn)", s->name, s->multi_id,
-                                          u->layouts[s->layout].py, records[u->final[f]],
-                                          s->count);
-            if (row == NULL || PyList_Append(out, row) < 0) {
-                Py_XDECREF(row);
-                PyMem_Free(sorted);
-                PyMem_Free(order);
-                goto fail;
-            }
-            Py_DECREF(row);
-        }
-        memcpy(t, sorted, (size_t)at * sizeof(double));
-        PyMem_Free(sorted);
-        PyMem_Free(order);
-        if (PyByteArray_Resize(times, at * (Py_ssize_t)sizeof(double)) < 0)
-            goto fail;
+        Py_DECREF(row);
     }
     for (Py_ssize_t k = 0; k < u->nsubs; k++)
         Py_XDECREF(records[k]);
     PyMem_Free(records);
     PyMem_Free(fill);
+    PyMem_Free(order);
     *times_out = times;
     return out;
 fail:
@@ -1383,6 +1356,7 @@ fail:
             Py_XDECREF(records[k]);
     PyMem_Free(records);
     PyMem_Free(fill);
+    PyMem_Free(order);
     Py_XDECREF(times);
     Py_XDECREF(out);
     return NULL;

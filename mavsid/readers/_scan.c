@@ -1286,10 +1286,10 @@ static PyObject *ul_tables(UPlain *u, PyObject **times_out)
 {
     PyObject *times = NULL, *out = PyList_New(0);
     PyObject **records = PyMem_Calloc((size_t)(u->nsubs ? u->nsubs : 1), sizeof(PyObject *));
-    Py_ssize_t *fill = PyMem_Calloc((size_t)(u->nsubs ? u->nsubs : 1), sizeof(Py_ssize_t));
+    char **dest = PyMem_Calloc((size_t)(u->nsubs ? u->nsubs : 1), sizeof(char *));
     UOrder *order = PyMem_Malloc((size_t)(u->nfinal ? u->nfinal : 1) * sizeof(UOrder));
     Py_ssize_t m = 0, total = 0;
-    if (out == NULL || records == NULL || fill == NULL || order == NULL) {
+    if (out == NULL || records == NULL || dest == NULL || order == NULL) {
         if (out != NULL)
             PyErr_NoMemory();
         goto fail;
@@ -1320,18 +1320,22 @@ static PyObject *ul_tables(UPlain *u, PyObject **times_out)
         goto fail;
     const uint8_t *a = u->a;
     double *t = (double *)PyByteArray_AS_STRING(times);
+    for (Py_ssize_t k = 0; k < u->nsubs; k++) /* each table's next record */
+        dest[k] = records[k] == NULL ? NULL : PyByteArray_AS_STRING(records[k]);
+    Py_BEGIN_ALLOW_THREADS /* (plain copies: other threads' reads go on meanwhile) */
     for (Py_ssize_t i = 0; i < u->nmsg; i++) {
         Py_ssize_t k = u->msg_sub[i];
         USub *s = &u->subs[k];
         const ULayout *l = &u->layouts[s->layout];
-        if (records[k] == NULL)
+        if (dest[k] == NULL)
             continue;
         const uint8_t *rec = a + u->msg_pos[i] + 5;
-        memcpy(PyByteArray_AS_STRING(records[k]) + fill[k] * l->size, rec, (size_t)l->size);
-        t[s->first + fill[k]] = l->time_code < 0 ? Py_NAN
-                                : ul_value(rec + l->time_off, l->time_code) / 1e6;
-        fill[k]++;
+        memcpy(dest[k], rec, (size_t)l->size);
+        dest[k] += l->size;
+        t[s->first++] = l->time_code < 0 ? Py_NAN /* (first: the next time's place) */
+                        : ul_value(rec + l->time_off, l->time_code) / 1e6;
     }
+    Py_END_ALLOW_THREADS
     for (Py_ssize_t i = 0; i < m; i++) {
         Py_ssize_t k = u->final[order[i].order];
         USub *s = &u->subs[k];
@@ -1346,7 +1350,7 @@ static PyObject *ul_tables(UPlain *u, PyObject **times_out)
     for (Py_ssize_t k = 0; k < u->nsubs; k++)
         Py_XDECREF(records[k]);
     PyMem_Free(records);
-    PyMem_Free(fill);
+    PyMem_Free(dest);
     PyMem_Free(order);
     *times_out = times;
     return out;
@@ -1355,7 +1359,7 @@ fail:
         for (Py_ssize_t k = 0; k < u->nsubs; k++)
             Py_XDECREF(records[k]);
     PyMem_Free(records);
-    PyMem_Free(fill);
+    PyMem_Free(dest);
     PyMem_Free(order);
     Py_XDECREF(times);
     Py_XDECREF(out);

@@ -23,10 +23,17 @@ import time
 import traceback
 import warnings
 from collections.abc import Callable, Iterator, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from mavsid import __version__
-from mavsid.errors import ConfigError, MavsidError, MavsidWarning, escape, escape_lines
+from mavsid.errors import (
+    ConfigError,
+    MavsidError,
+    MavsidWarning,
+    NoExcitationError,
+    escape,
+    escape_lines,
+)
 from mavsid.outputs import ReportWorker, atomic_path, check_outputs
 
 if TYPE_CHECKING:
@@ -409,15 +416,21 @@ def _report_worker(args: argparse.Namespace) -> contextlib.AbstractContextManage
     return contextlib.nullcontext()
 
 
-def _print_result(args: argparse.Namespace, result: FitResult) -> None:
+def _print_result(args: argparse.Namespace, result: FitResult, validating: bool = False,
+                  error: MavsidError | None = None) -> None:
+    """The result on stdout: its JSON (with ``error``, when the command fails on it, as
+    :func:`_error_document` has it) or its table and the files written."""
     import json
 
     from mavsid.pipeline import format_result
 
     if args.json:
-        print(json.dumps(result.to_dict(), indent=1, ensure_ascii=True, allow_nan=False))
+        doc = result.to_dict()
+        if error is not None:
+            doc["error"] = {"type": type(error).__name__, "message": str(error)}
+        print(json.dumps(doc, indent=1, ensure_ascii=True, allow_nan=False))
     else:
-        print(escape_lines(format_result(result)))
+        print(escape_lines(format_result(result, validating=validating)))
         for flag, path in (("rrd", args.rrd), ("report", args.report)):
             if path:
                 print(f"wrote {path}" + (f" (open it with: rerun --bind 127.0.0.1 {path})"
@@ -519,15 +532,35 @@ def _validate(args: argparse.Namespace) -> int:
     check_outputs([args.rrd, args.report], [args.model, *args.logs])
     _check_inputs(args.logs, [args.model])
     with _report_worker(args) as worker:  # (first: it imports while this one does too)
-        from mavsid.pipeline import VALIDATE_STAGES, load_models, validate_logs
+        from mavsid.pipeline import (
+            VALIDATE_STAGES,
+            load_models,
+            validate_line,
+            validate_logs,
+            validation_figures,
+        )
 
         models = load_models(args.model)
         cfg = _pipeline_config(args)
         axes = len([a for a in models if a in cfg.axes])
         with _progress(args, _stages(args, axes, len(VALIDATE_STAGES))) as step:
-            result = validate_logs(models, args.logs, cfg, progress=step)
+            try:
+                result = validate_logs(models, args.logs, cfg, progress=step)
+            except NoExcitationError as exc:  # (no axis had a segment: said as validate does)
+                verdicts = getattr(exc, "verdicts", {})
+                exc.details = tuple(validate_line(v) for v in verdicts.values())
+                raise
             _write_outputs(args, result, step, worker)
-    _print_result(args, result)
+    error = None
+    if not any(v.identified for v in result.verdicts.values()):  # none predicts the flight
+        error = NoExcitationError(
+            f"{', '.join(args.logs)}: the model does not predict this flight ("
+            + "; ".join(f"{a}: {validation_figures(v) or 'nothing to validate on'}"
+                        for a, v in result.verdicts.items()) + ")")
+    _print_result(args, result, validating=True, error=error)
+    if error is not None:
+        print(f"mavsid: error: {escape(error)}", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -754,9 +787,33 @@ def _batch(args: argparse.Namespace) -> int:
 SUBCOMMANDS.append(_add_batch)
 
 
+class UsageError(Exception):
+    """A command line argparse refuses (exit 2): raised by :class:`_Parser` instead of
+    exiting, so that :func:`main` can answer ``--json`` with a JSON document."""
+
+    def __init__(self, message: str, text: str) -> None:
+        super().__init__(message)
+        self.text = text
+
+
+class _Parser(argparse.ArgumentParser):
+    """An argument parser that raises :class:`UsageError` (its subcommands' parsers too)."""
+
+    def error(self, message: str) -> NoReturn:
+        raise UsageError(message, f"{self.format_usage()}{self.prog}: error: {message}")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    """The argument parser with every subcommand."""
-    parser = argparse.ArgumentParser(
+    """The argument parser with every subcommand.
+
+    ``--debug`` is taken before or after the subcommand:
+
+    >>> build_parser().parse_args(["fit", "a.bin", "--debug"]).debug
+    True
+    >>> build_parser().parse_args(["--debug", "fit", "a.bin"]).debug
+    True
+    """
+    parser = _Parser(
         prog="mavsid",
         description="Attitude-dynamics models from ArduPilot and PX4 flight logs.",
     )
@@ -765,7 +822,31 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for add in SUBCOMMANDS:
         add(sub)
+    for command in sub.choices.values():  # (SUPPRESS: absent, it keeps the top level's)
+        command.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                             help="show tracebacks on errors")
     return parser
+
+
+def _error_document(exc: BaseException, kind: str | None = None) -> str:
+    """The one JSON document a ``--json`` command prints on stdout when it fails: the error
+    (its type and line) and, when the run judged axes, their verdicts and reasons.
+
+    Examples
+    --------
+    >>> print(_error_document(ConfigError("--axis spin: unknown")))
+    {"error": {"type": "ConfigError", "message": "--axis spin: unknown"}}
+    """
+    import json
+
+    doc: dict[str, Any] = {"error": {"type": kind or type(exc).__name__, "message": str(exc)}}
+    verdicts = getattr(exc, "verdicts", None)
+    if verdicts:
+        doc["axes"] = {}
+        doc["verdicts"] = {a: v.to_dict() for a, v in verdicts.items()}
+    if getattr(exc, "details", ()):
+        doc["details"] = list(getattr(exc, "details", ()))
+    return json.dumps(doc, ensure_ascii=True, allow_nan=False)
 
 
 #: The cyclic collector's thresholds for one command run from the command line: Python's
@@ -819,7 +900,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             with contextlib.suppress(ValueError, OSError):
                 reconfigure(errors="backslashreplace")
     parser = build_parser()
-    args = parser.parse_args(argv)
+    words = sys.argv[1:] if argv is None else list(argv)
+    try:
+        args = parser.parse_args(words)
+    except UsageError as exc:
+        print(exc.text, file=sys.stderr)
+        if "--json" in words:
+            print(_error_document(exc, "UsageError"))
+        raise SystemExit(2) from None  # (as argparse exits on a usage error)
     if args.version:
         print(f"mavsid {__version__} ({_readers_build()})")
         return 0
@@ -834,18 +922,23 @@ def main(argv: Sequence[str] | None = None) -> int:
     if once:
         gc.set_threshold(*_GC_THRESHOLDS)
         _one_blas_thread()
+    as_json = bool(getattr(args, "json", False))  # (stdout: one JSON document, always)
     try:
         return handler(args)
     except MavsidError as exc:
         if args.debug:
             traceback.print_exc()
-        if exc.details:  # the why, as a successful run shows its verdicts: on stdout
+        if as_json:
+            print(_error_document(exc))
+        elif exc.details:  # the why, as a successful run shows its verdicts: on stdout
             print("verdict:")
             for line in exc.details:
                 print(f"  {escape(line)}")
         print(f"mavsid: error: {escape(exc)}", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
+        if as_json:
+            print(_error_document(exc, "Interrupted"))
         print("mavsid: interrupted", file=sys.stderr)
         return 130
     finally:

@@ -89,7 +89,9 @@ __all__ = [
     "load_config",
     "load_models",
     "split_segments",
+    "validate_line",
     "validate_logs",
+    "validation_figures",
 ]
 
 AXES = ("roll", "pitch", "yaw")
@@ -1118,10 +1120,8 @@ def _pm(value: float, sigma: float | None) -> str:
 
 
 def _structure(d: Mapping[str, Any]) -> str:
-    """The modelled input lag and filters, as the text table shows them."""
+    """The modelled filters (beside the input lag), as the text table's head shows them."""
     parts = []
-    if d.get("input_lag_s"):
-        parts.append(f"input lag {d['input_lag_s'] * 1e3:.1f} ms")
     for flt in d.get("filters") or ():
         if not str(flt.get("source", "")).startswith("input lag"):
             parts.append(f"{flt.get('source') or 'filter'} {flt.get('cutoff_hz', 0):.3g} Hz")
@@ -1156,9 +1156,106 @@ def _si_unit(fd: FlightData, name: str) -> str:
     return "?"
 
 
-def format_result(result: FitResult) -> str:
-    """The compact per-axis table ``mavsid fit`` prints: parameters ± σ, fit % on held-out
-    data at one step, 0.5 s and free run.
+def _physical_lines(axis: str, output: str, d: Mapping[str, Any]) -> list[str]:
+    """What a tuner reads first: the rate response's time constant (and its corner, the
+    open-loop bandwidth), the control effectiveness B, the delay and the input lag.
+
+    Examples
+    --------
+    >>> d = {"params": {"A[p,p]": -3.98, "B[p,u_roll]": 177.76},
+    ...      "stderr": {"A[p,p]": 0.12, "B[p,u_roll]": 3.7},
+    ...      "units": {"B[p,u_roll]": "rad/s^2"}, "delay_s": 0.0056, "input_lag_s": 0.015}
+    >>> print("\\n".join(_physical_lines("roll", "p", d)))
+      time constant  0.251 ± 0.0076 s (bandwidth 0.63 Hz)
+      effectiveness  B[p,u_roll] 177.8 ± 3.7 rad/s^2
+      delay          5.6 ms, input lag 15.0 ms
+    """
+    params, stderr = d["params"], d["stderr"]
+    lines = []
+    a = params.get(f"A[{output},{output}]")
+    if a is not None and math.isfinite(a) and a < 0:
+        sa = stderr.get(f"A[{output},{output}]")
+        sigma = "" if sa is None or not math.isfinite(sa) else f" ± {sa / a**2:.2g}"
+        lines.append(f"  time constant  {-1 / a:.3g}{sigma} s (bandwidth "
+                     f"{-a / (2 * math.pi):.2g} Hz)")
+    elif a is not None and math.isfinite(a):
+        lines.append(f"  time constant  none: A[{output},{output}] {a:.3g} 1/s >= 0 (an "
+                     "integrator or unstable)")
+    name = f"B[{output},u_{axis}]"
+    b = params.get(name)
+    if b is not None and math.isfinite(b):
+        sb = stderr.get(name)
+        sigma = "" if sb is None or not math.isfinite(sb) else f" ± {sb:.2g}"
+        lines.append(f"  effectiveness  {name} {b:.4g}{sigma} {d['units'].get(name, '')}"
+                     .rstrip())
+    lag = d.get("input_lag_s")
+    lines.append(f"  delay          {d['delay_s'] * 1e3:.1f} ms"
+                 + (f", input lag {lag * 1e3:.1f} ms" if lag else ""))
+    return lines
+
+
+def validation_figures(v: Verdict) -> str:
+    """An axis's fit % on a validation flight, for people (empty when it had no segment).
+
+    Examples
+    --------
+    >>> validation_figures(Verdict("roll", "good", numbers={
+    ...     "fit_one_step_pct": 99.1, "fit_0.5s_pct": 93.0, "fit_free_run_pct": 92.8}))
+    'one step 99.1 %, 0.5 s 93.0 %, free run 92.8 %'
+    """
+    n = v.numbers
+    if "fit_free_run_pct" not in n:
+        return ""
+    text = ", ".join(f"{what} {_pct_text(n.get(key))}" for what, key in (
+        ("one step", "fit_one_step_pct"), ("0.5 s", "fit_0.5s_pct"),
+        ("free run", "fit_free_run_pct")))
+    if n.get("fit_closed_loop_pct") is not None:
+        text += (f", closed-loop twin {_pct_text(n['fit_closed_loop_pct'])} (baseline "
+                 f"{_pct_text(n.get('baseline_closed_loop_pct'))})")
+    return text
+
+
+def validate_line(v: Verdict) -> str:
+    """A verdict as ``mavsid validate`` says it: the model against this flight, with the
+    numbers (no advice: that is for the flight a model is fitted from).
+
+    Examples
+    --------
+    >>> v = Verdict("roll", "not identified", ("free run diverges",), (),
+    ...             {"fit_one_step_pct": 84.9, "fit_0.5s_pct": -3e5, "fit_free_run_pct": -3e5},
+    ...             ("fly a chirp",))
+    >>> validate_line(v)
+    'roll: does not predict this flight: one step 84.9 %, 0.5 s diverges (< -100 %), free \
+run diverges (< -100 %); free run diverges'
+    """
+    figures = validation_figures(v)
+    said = "; ".join(v.reasons)
+    if not figures and ("windows_rejected" in v.numbers
+                        or any(w in said for w in ("no window", "no segment", "no body rate"))):
+        return f"{v.axis}: nothing to validate on: {said}"
+    if not figures:  # (validation ran and failed: the model's prediction is no number)
+        return f"{v.axis}: does not predict this flight: {said}"
+    if v.identified:
+        head = f"{v.axis}: {v.level}" + (f" (for {', '.join(v.usable_for)})"
+                                         if v.usable_for else "")
+    else:
+        head = f"{v.axis}: does not predict this flight"
+    return f"{head}: {figures}" + "".join(f"; {r}" for r in v.reasons)
+
+
+def _pct_text(value: float | None) -> str:
+    """``93.4 %``, ``diverges (< -100 %)`` or ``n/a``."""
+    text = format_fit(value)
+    return text.replace(")", " %)") if text.startswith("diverges") else (
+        text if text == "n/a" else f"{text} %")
+
+
+def format_result(result: FitResult, validating: bool = False) -> str:
+    """The compact per-axis table ``mavsid fit`` prints: the physical parameters a tuner
+    reads (time constant, bandwidth, effectiveness, delay, lag), then every parameter ± σ
+    (continuous-time, then the discrete-time coefficients), fit % on held-out data at one
+    step, 0.5 s and free run, and the verdicts. ``validating``: as ``mavsid validate`` says
+    them (the model against another flight: :func:`_validation_line`).
 
     Examples
     --------
@@ -1192,12 +1289,14 @@ def format_result(result: FitResult) -> str:
         val_s = sum(s.stop_s - s.start_s for s in f.held_out)
         stable = {True: "stable", False: "UNSTABLE", None: "stability n/a"}[f.validation.stable]
         lines.append(
-            f"{axis} ({f.output}; {f.estimator or 'model'}; {1 / f.validation.dt:.0f} Hz, "
-            f"delay {d['delay_s'] * 1e3:.1f} ms{_structure(d)}; train {len(f.train)} seg "
+            f"{axis} ({f.output}; {f.estimator or 'model'}; {1 / f.validation.dt:.0f} Hz"
+            f"{_structure(d)}; train {len(f.train)} seg "
             f"{train_s:.1f} s, validation {len(f.held_out)} seg {val_s:.1f} s; {stable})"
         )
+        lines += _physical_lines(axis, f.output, d)
         width = max((len(k) for k in d["params"]), default=0)
-        for name, value in d["params"].items():
+        # continuous-time parameters first, the discrete-time coefficients after them
+        for name, value in sorted(d["params"].items(), key=lambda kv: "_d[" in kv[0]):
             sigma = d["stderr"].get(name)
             unit = d["units"].get(name, "")
             lines.append(
@@ -1208,7 +1307,8 @@ def format_result(result: FitResult) -> str:
         cells = "  ".join(f"{k.replace('_', '-')} {format_fit(fp[k])}" for k in fp)
         lines.append(f"  fit %  {cells}")
         lines.append(f"  {_closed_loop_line(f)}")
-    verdicts = [v.line() for v in result.verdicts.values()]
+    verdicts = [validate_line(v) if validating else v.line()
+                for v in result.verdicts.values()]
     if verdicts:
         lines.append("verdict:")
         lines += [f"  {v}" for v in verdicts]

@@ -382,8 +382,8 @@ def test_validating_a_diverging_or_foreign_model_says_so_in_one_line(tmp_path: P
                            str(FIXTURES / "sysid_roll.bin"), "-q"],
                           capture_output=True, text=True, timeout=300, check=False)
     assert proc.returncode == 1
-    assert "roll: not identified: the model's prediction is not a finite number on the " \
-           "held-out data (it diverges)" in proc.stdout
+    assert "roll: does not predict this flight: the model's prediction is not a finite " \
+           "number on the held-out data (it diverges)" in proc.stdout
     assert proc.stderr.count("\n") == 1 and proc.stderr.startswith("mavsid: error: "), \
         proc.stderr
     data["axes"] = {"spin": roll}
@@ -391,3 +391,49 @@ def test_validating_a_diverging_or_foreign_model_says_so_in_one_line(tmp_path: P
     bad = run("validate", str(model), str(FIXTURES / "sysid_roll.bin"), "-q")
     assert bad.returncode == 1
     assert bad.stderr == f"mavsid: error: {model}: axis 'spin' is not one of roll, pitch, yaw\n"
+
+
+def test_validate_fails_when_the_model_does_not_predict_the_flight(tmp_path: Path) -> None:
+    """A pitch model of the small quad against a flight of the heavier X quad (another plant,
+    fixtures/heavy_sysid.truth.json): no axis validates, exit 1, said as validation (not as
+    a fit: no "not identified", no advice for the next flight), with the numbers; against a
+    flight of the same plant it validates (exit 0)."""
+    model = tmp_path / "pitch.json"
+    assert run("fit", str(FIXTURES / "sysid_pitch.bin"), "--axis", "pitch", "-q",
+               "-o", str(model)).returncode == 0
+    other = run("validate", str(model), str(FIXTURES / "heavy_sysid.bin"), "-q")
+    assert other.returncode == 1
+    (line,) = [x for x in other.stdout.splitlines() if x.strip().startswith("pitch:")]
+    assert line.strip().startswith("pitch: does not predict this flight: one step ")
+    assert "free run" in line and "%" in line
+    assert "not identified" not in other.stdout and "next time" not in other.stdout
+    (err,) = other.stderr.splitlines()
+    assert err.startswith(f"mavsid: error: {FIXTURES / 'heavy_sysid.bin'}: the model does not "
+                          "predict this flight (pitch: one step ")
+    same = run("validate", str(model), str(FIXTURES / "noisy_sysid.bin"), "-q", "--json")
+    assert same.returncode == 0, same.stderr
+    assert json.loads(same.stdout)["verdicts"]["pitch"]["level"] == "good"
+    as_json = json.loads(run("validate", str(model), str(FIXTURES / "heavy_sysid.bin"),
+                             "--json").stdout)
+    assert "does not predict this flight" in as_json["error"]["message"]
+    assert as_json["verdicts"]["pitch"]["numbers"]["fit_free_run_pct"] < 0
+
+
+def test_fit_table_leads_with_the_physical_parameters() -> None:
+    """Time constant (and its corner), effectiveness, delay and lag come before the
+    regression's coefficients, the discrete-time ones last; the time constant is -1/A of
+    the truth's plant within its σ (fixtures/sysid_roll.truth.json)."""
+    proc = run("fit", str(FIXTURES / "sysid_roll.bin"), "--axis", "roll", "-q")
+    lines = [x.strip() for x in proc.stdout.splitlines()]
+    head = lines.index(next(x for x in lines if x.startswith("roll (p;")))
+    first = [x.split()[0] for x in lines[head + 1:head + 4]]
+    assert first == ["time", "effectiveness", "delay"]
+    order = [x.split()[0] for x in lines[head + 4:] if "[" in x.split()[0]]
+    assert order.index("A[p,p]") < order.index("A_d[p,p]")
+    assert all("_d[" in n for n in order[order.index("A_d[p,p]"):])
+    assert "input lag" in lines[head + 3] and " ms" in lines[head + 3]
+    truth = json.loads((FIXTURES / "sysid_roll.truth.json").read_text())["axes"]["roll"]
+    tau, _, sigma = lines[head + 1].split()[2:5]
+    assert abs(float(tau) - 1 / truth["damping"]) < 3 * float(sigma)
+    b, _, sb = lines[head + 2].split()[2:5]
+    assert abs(float(b) - truth["effectiveness"]) < 3 * float(sb)

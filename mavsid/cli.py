@@ -389,7 +389,7 @@ def _write_outputs(args: argparse.Namespace, result: FitResult,
             handed = worker is not None and worker.start(result, report_tmp, args.report)
             if handed:  # (worked out here while the worker draws the first figures)
                 assert worker is not None
-                from mavsid.loop import tune_analysis
+                from mavsid.loop.tune import tune_analysis
 
                 worker.send_analysis(tune_analysis(result))
         if args.rrd:
@@ -703,7 +703,8 @@ def _tune(args: argparse.Namespace) -> int:
     if not 0 < args.target_pm < 90:
         raise ConfigError(f"--target-pm {args.target_pm:g}: must lie in (0, 90) degrees")
     _check_inputs([args.log])
-    from mavsid.loop import format_tune, tune
+    from mavsid.cli_format import format_tune
+    from mavsid.loop.tune import tune
     from mavsid.pipeline import FIT_STAGES, _json_safe, fit
 
     cfg = _pipeline_config(args)

@@ -28,16 +28,26 @@ True
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import Any
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from mavsid import dsp
-from mavsid.errors import NoExcitationError
+from mavsid.errors import MavsidError, NoExcitationError
+from mavsid.loop.controllers import AXES, AXIS_RATE
+from mavsid.loop.plant import plant_from_model, plant_response
+from mavsid.loop.twin import lagged, twin_signals
 
-__all__ = ["FRF", "MIN_COHERENCE", "TFFit", "fit_tf", "frf"]
+if TYPE_CHECKING:
+    from mavsid.data import FlightData
+    from mavsid.estimators.model import Model
+    from mavsid.loop.twin import TwinSignals
+
+__all__ = ["FRF", "FRF_STRUCTURE_FLOOR", "FRF_STRUCTURE_MIN_POINTS", "FRF_STRUCTURE_SHIFT",
+           "MIN_COHERENCE", "FrfStructure", "TFFit", "fit_tf", "frf", "measured_responses",
+           "sysid_spans"]
 
 #: coherence (γ²) below which a frequency is not identified
 MIN_COHERENCE = 0.6
@@ -309,3 +319,224 @@ def fit_tf(r: FRF, max_delay_s: float = 0.1) -> TFFit:
     cost = float(2 * best.cost / m.sum())
     return TFFit(float(best.x[0]), float(best.x[1]), float(best.x[2]), cost,
                  (float(f.min()), float(f.max())))
+
+
+# --------------------------------------------------------------------------- from flights
+# The frequency responses of a fitted axis measured on its flights' SYSTEMID runs, and the
+# model-structure choice an injection's response gives the estimators.
+
+
+def sysid_spans(flight: FlightData, axis: str) -> list[tuple[int, int, int]]:
+    """Grid index ranges ``[i0, i1)`` of the flight's SYSTEMID runs on ``axis`` (cut at the
+    first gap), with their ``SID_AXIS``: 1-3 angle, 4-6 recovery, 7-9 rate, 10-12 mixer."""
+    out = []
+    t = flight.time_s
+    for run in flight.meta.get("sysid_runs", ()) or ():  # type: ignore[attr-defined]
+        sid = int(run.get("axis", 0) or 0)
+        if not 1 <= sid <= 12 or AXES[(sid - 1) % 3] != axis:
+            continue
+        i0 = int(np.searchsorted(t, float(run["start_s"])))
+        i1 = int(np.searchsorted(t, float(run["stop_s"]), side="right"))
+        for a, b in flight.blocks:
+            if a <= i0 < b:
+                i1 = min(i1, int(b))
+                break
+        if i1 - i0 > 8:
+            out.append((i0, i1, sid))
+    return out
+
+
+def measured_responses(fit: Any, flights: Sequence[FlightData],
+                       signals: Sequence[TwinSignals] | None = None, lag: int = 0,
+                       which: Sequence[str] = ("plant", "loop", "closed_loop")
+                       ) -> dict[str, Any]:
+    """Frequency responses measured on the axis's SYSTEMID runs (whole runs, not the
+    train/validation blocks: a chirp's low frequencies need the long windows):
+
+    - ``"plant"``: controller output (mixer input) -> rate; with the injection as reference
+      on mixer runs (:func:`mavsid.frequency.frf`), H1 otherwise;
+    - ``"loop"``: the broken loop ``L = −c/u`` (``c`` the controller's part of the mixer
+      input ``u``) where the injection is at the mixer (``SID_AXIS`` 10-12);
+    - ``"closed_loop"``: rate target -> rate where the injection is in the target
+      (``SID_AXIS`` 1-9; with the injection as reference on rate axes 7-9).
+
+    Each is a :class:`mavsid.frequency.FRF` on the runs' chirp band; absent without runs.
+    ``fit`` is the axis's :class:`mavsid.pipeline.AxisFit` or the axis's name; ``which``
+    the responses wanted.
+    """
+    axis = fit if isinstance(fit, str) else fit.axis
+    rate, u_name = AXIS_RATE[axis], f"u_{axis}"
+    sigs = list(signals) if signals is not None else [twin_signals(fd) for fd in flights]
+    mixer: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    other: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]] = []
+    bands, dt = [], 0.0
+    for fd, sg in zip(flights, sigs, strict=True):
+        if rate not in fd.state_names or u_name not in fd.input_names:
+            continue
+        for i0, i1, sid in sysid_spans(fd, axis):
+            runs: list[Any] = list(fd.meta.get("sysid_runs") or ())  # type: ignore[call-overload]
+            run = next(r for r in runs if int(r.get("axis", 0) or 0) == sid)
+            lo, hi = run.get("f_start_hz"), run.get("f_stop_hz")
+            if lo and hi:
+                bands.append((float(lo), float(hi)))
+            dt = fd.dt
+            y = fd.states[i0:i1, fd.state_names.index(rate)]
+            u = fd.inputs[i0:i1, fd.input_names.index(u_name)]
+            if sid >= 10 and axis in sg.injection:
+                mixer.append((u, y, lagged(sg.injection[axis], lag)[i0:i1]))
+            elif axis in sg.target and np.all(np.isfinite(sg.target[axis][i0:i1])):
+                ref = sg.rate_injection.get(axis)
+                other.append((u, y, sg.target[axis][i0:i1],
+                              ref[i0:i1] if ref is not None and 7 <= sid <= 9 else None))
+    out: dict[str, Any] = {}
+    if not dt:
+        return out
+    grid: dict[str, Any] = {}
+    if bands:  # only the injected band: a noise-free log is coherent beyond it too
+        grid = {"f_min_hz": min(b[0] for b in bands),
+                "f_max_hz": min(max(b[1] for b in bands), 0.4 / dt)}
+    refs = [r[3] for r in other]
+    use_ref = bool(other) and all(r is not None for r in refs)
+    try:
+        if "plant" not in which:
+            pass
+        elif mixer:
+            out["plant"] = frf([r[0] for r in mixer], [r[1] for r in mixer], dt,
+                               reference=[r[2] for r in mixer], names=(u_name, rate), **grid)
+        elif other:
+            out["plant"] = frf([r[0] for r in other], [r[1] for r in other], dt,
+                               reference=refs if use_ref else None,  # type: ignore[arg-type]
+                               names=(u_name, rate), **grid)
+    except MavsidError:
+        pass
+    if mixer and "loop" in which:
+        try:
+            out["loop"] = frf([r[0] for r in mixer], [-(r[0] - r[2]) for r in mixer], dt,
+                              reference=[r[2] for r in mixer], names=(u_name, f"-c_{axis}"),
+                              **grid)
+        except MavsidError:
+            pass
+    if other and "closed_loop" in which:
+        try:
+            out["closed_loop"] = frf([r[2] for r in other], [r[1] for r in other], dt,
+                                     reference=refs if use_ref else None,  # type: ignore[arg-type]
+                                     names=(f"target_{axis}", rate), **grid)
+        except MavsidError:
+            pass
+    return out
+
+
+#: Least coherent frequencies an injection's FRF needs to choose the model structure.
+FRF_STRUCTURE_MIN_POINTS = 20
+#: Delay shifts (samples, each way) :class:`FrfStructure` tries around each candidate.
+FRF_STRUCTURE_SHIFT = 2.0
+#: FRF error floor (fraction): the composite's bias on a noise-free chirp (leakage where
+#: the sweep is fast: 1 % median, 5 % in gain and 4 deg in phase at worst below 12 Hz)
+FRF_STRUCTURE_FLOOR = 0.03
+
+
+class FrfStructure:
+    """A ``choose_structure`` for :func:`mavsid.estimators.fit_axis`: the candidate lag and
+    delay whose first-order model best matches an FRF measured against an injection, and
+    that FRF's own estimate of the coefficients (:meth:`estimate`).
+
+    On closed-loop data the one-step (and free-run) scores are biased by the noise the
+    feedback puts into the input: with 1 deg/s of gyro noise fed back they chose a 10 ms
+    motor lag and 7-8 ms of delay for a 15 ms lag and 5 ms delay, the closed-loop bandwidth
+    then 10-12 % high. An FRF against the injection (``S_ry / S_ru``) is not biased by the
+    feedback. Each candidate lag (its filters, its best one-step delay shifted by up to
+    :data:`FRF_STRUCTURE_SHIFT` samples in ``delay_step`` steps) is fitted to the FRF in the
+    frequency domain, ``H ≈ b z R(z) / (z − a)`` (``R`` the candidate's filters and delay;
+    ``b`` solved exactly for each pole ``a`` on a grid), weighted by the FRF's random error
+    ``ε`` (with a floor, :data:`FRF_STRUCTURE_FLOOR`); the lowest
+    ``mean(|H − G|² / (|H| ε)²)`` wins. Calling it returns None (keep the one-step choice)
+    for an FRF that is not referenced to an injection, with under
+    :data:`FRF_STRUCTURE_MIN_POINTS` coherent frequencies, or for models that are not one
+    rate from one input.
+    """
+
+    def __init__(self, measured: Any, axis: str, delay_step: float = 0.125) -> None:
+        ok = (measured.coherent & np.isfinite(measured.response)
+              & np.isfinite(measured.error) & (measured.error > 0))
+        self.axis, self.delay_step = axis, delay_step
+        self.f, self.h = measured.freq_hz[ok], measured.response[ok]
+        self.usable = (bool(getattr(measured, "referenced", False))
+                       and self.f.size >= FRF_STRUCTURE_MIN_POINTS)
+        self.w = 1.0 / (np.abs(self.h) ** 2 * (measured.error[ok] ** 2 + FRF_STRUCTURE_FLOOR**2))
+
+    def _fit(self, model: Model, shifts: np.ndarray, damping: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """Cost and gain ``b`` (shift x pole) of ``model``'s structure with its delay
+        shifted by ``shifts`` (samples), for the poles ``exp(-damping dt)``; and the poles."""
+        rate, u_name = AXIS_RATE[self.axis], f"u_{self.axis}"
+        if (not self.usable or model.state_names != (rate,) or model.continuous
+                or set(model.features) - {rate, u_name, "1"} or u_name not in model.features):
+            return None
+        unit = np.zeros_like(model.coef)
+        unit[model.features.index(u_name), 0] = 1.0  # a = 0, b = 1: R(z) / z
+        try:
+            r = plant_response(plant_from_model(replace(model, coef=unit), self.axis), self.f)
+        except (MavsidError, ValueError, np.linalg.LinAlgError):
+            return None
+        f, h, w, dt = self.f, self.h, self.w, float(model.dt)
+        z = np.exp(2j * np.pi * f * dt)
+        poles = np.exp(-damping * dt)
+        # with q = z R e^{-jωs dt} / (z - a) and the best b for each (s, a), the cost is
+        # (Σ w|h|² − (Σ w Re(q̄ h))² / Σ w|q|²) / m: Σ w|q|² does not depend on the shift
+        # and Σ w q̄ h over the frequencies is one product of (shift x f) and (f x pole)
+        zr = z * r
+        gram = (w * np.abs(zr) ** 2) @ (1.0 / np.abs(z[:, None] - poles[None, :]) ** 2)
+        rot = np.exp(2j * np.pi * np.outer(shifts, f) * dt)
+        cross = (rot @ ((w * np.conj(zr) * h)[:, None] / np.conj(z[:, None] - poles[None, :]))
+                 ).real
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cost = (np.sum(w * np.abs(h) ** 2) - cross**2 / gram[None, :]) / f.size
+            gain = cross / gram[None, :]
+        if not np.any(np.isfinite(cost)):
+            return None
+        return cost, gain, poles
+
+    def _score(self, model: Model) -> tuple[float, float] | None:
+        """(lowest cost, delay in samples) of one candidate over its delay shifts and poles."""
+        d0 = float(model.delay + model.delay_frac)
+        shifts = np.arange(-min(d0, FRF_STRUCTURE_SHIFT), FRF_STRUCTURE_SHIFT + 1e-9,
+                           self.delay_step)
+        got = self._fit(model, shifts, _FRF_DAMPING)
+        if got is None:
+            return None
+        cost = got[0]
+        i = np.unravel_index(int(np.nanargmin(cost)), cost.shape)[0]
+        return float(np.nanmin(cost)), round(d0 + float(shifts[i]), 9)
+
+    def __call__(self, models: Mapping[float, Model]) -> tuple[float, float] | None:
+        """The best candidate's (lag s, delay samples) among ``models`` (per lag, its
+        least-squares model at its best one-step delay)."""
+        best: tuple[float, float, float] | None = None
+        for lag, model in models.items():
+            got = self._score(model)
+            if got is not None and (best is None or got[0] < best[0]):
+                best = (got[0], lag, got[1])
+        return None if best is None else (best[1], best[2])
+
+    def estimate(self, model: Model) -> Model | None:
+        """``model`` with its pole and gain fitted to the FRF instead (its structure and
+        trim kept): the estimate the feedback does not bias, for comparison; None where
+        the FRF cannot give one."""
+        got = self._fit(model, np.zeros(1), _FRF_DAMPING)
+        if got is None:
+            return None
+        k = int(np.nanargmin(got[0][0]))
+        lo, hi = _FRF_DAMPING[max(k - 1, 0)], _FRF_DAMPING[min(k + 1, _FRF_DAMPING.size - 1)]
+        got = self._fit(model, np.zeros(1), np.linspace(lo, hi, 81))  # finer about the best
+        if got is None:
+            return None
+        cost, gain, poles = got
+        k = int(np.nanargmin(cost[0]))
+        coef = np.array(model.coef, dtype=float, copy=True)
+        coef[model.features.index(AXIS_RATE[self.axis]), 0] = poles[k]
+        coef[model.features.index(f"u_{self.axis}"), 0] = gain[0, k]
+        return replace(model, coef=coef)
+
+
+#: Damping values (1/s) of the poles :class:`FrfStructure` tries.
+_FRF_DAMPING = np.linspace(-2.0, 80.0, 165)

@@ -231,7 +231,7 @@ class ReportWorker:
         return True
 
     def send_analysis(self, analysis: Any) -> None:
-        """Hand the worker the loop analysis of the result (:func:`mavsid.loop.
+        """Hand the worker the loop analysis of the result (:func:`mavsid.loop.tune.
         tune_analysis`), which its report first needs for the Bode figures, drawn after the
         others; one that cannot be handed over the worker works out itself."""
         self._analysis = self._pickled(analysis)
@@ -311,7 +311,8 @@ class _Forked:
     ``returncode``, :meth:`poll`, :meth:`wait` and :meth:`kill`."""
 
     def __init__(self) -> None:
-        from mavsid import estimators, excitation, frequency, loop, pipeline  # noqa: F401
+        from mavsid import estimators, excitation, frequency, pipeline  # noqa: F401
+        from mavsid.loop import analysis, tune, twin  # noqa: F401
 
         down, to_child = os.pipe()
         from_child, up = os.pipe()
@@ -432,7 +433,8 @@ def _serve_report() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the command's Ctrl-C ends it, not this
     # while the logs are fitted: the report's modules and those of the result's classes
     # (unpickling them here after the fit took 0.35 s)
-    from mavsid import estimators, excitation, frequency, loop, pipeline, report  # noqa: F401
+    from mavsid import estimators, excitation, frequency, pipeline, report  # noqa: F401
+    from mavsid.loop.tune import tune_analysis  # (and the loop's other modules)
 
     report.warm_up()
     handoff = sys.stdin.readline().rstrip("\n")
@@ -446,7 +448,7 @@ def _serve_report() -> None:
         if name:
             with contextlib.suppress(OSError, EOFError, pickle.UnpicklingError):
                 return _unpickled(name)
-        return loop.tune_analysis(result)
+        return tune_analysis(result)
 
     try:
         report.write_report(result, path, analysis=analysis)

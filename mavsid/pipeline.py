@@ -74,7 +74,7 @@ from mavsid.verdict import Verdict, format_fit, judge, unfitted
 
 if TYPE_CHECKING:
     from mavsid.excitation import WindowReport
-    from mavsid.loop import ClosedLoopFit, TwinSignals
+    from mavsid.loop.twin import ClosedLoopFit, TwinSignals
 
 __all__ = [
     "AXES",
@@ -512,7 +512,7 @@ class FitResult:
     #: A verdict for every axis asked for, fitted or not (fitted ones: ``axes[a].verdict``).
     verdicts: Mapping[str, Verdict] = field(default_factory=dict)
     #: The twin's signals of each flight (in ``flights`` order) when the fit had them, for
-    #: later analyses (:func:`mavsid.loop.tune`) not to read the logs again.
+    #: later analyses (:func:`mavsid.loop.tune.tune`) not to read the logs again.
     twins: tuple[TwinSignals, ...] | None = field(default=None, repr=False, compare=False)
 
     def to_dict(self) -> dict[str, Any]:
@@ -568,7 +568,7 @@ def _read_flight(path: str | os.PathLike[str], cfg: PipelineConfig,
 
     also: Sequence[str] = ()
     if twins is not None:
-        from mavsid.loop import twin_messages
+        from mavsid.loop.twin import twin_messages
 
         also = sorted(twin_messages())
     flight, raw = read_flight(
@@ -580,7 +580,7 @@ def _read_flight(path: str | os.PathLike[str], cfg: PipelineConfig,
         also=also,
     )
     if twins is not None:
-        from mavsid.loop import twin_signals
+        from mavsid.loop.twin import twin_signals
 
         try:
             twins[id(flight)] = twin_signals(flight, raw)
@@ -667,7 +667,7 @@ def _closed_loop(
     fitted: AxisFit, flights: Sequence[FlightData], signals: _Twins
 ) -> AxisFit:
     """``fitted`` with its closed-loop twin run on the held-out blocks (or the reason not)."""
-    from mavsid.loop import closed_loop_fit, twin_signals
+    from mavsid.loop.twin import closed_loop_fit, twin_signals
 
     planes = [fd for fd in flights
               if str(fd.meta.get("vehicle") or "").lower().split()[:1] == ["plane"]
@@ -753,11 +753,12 @@ def _fit_model(train: Sequence[Segment], axis: str, cfg: PipelineConfig,
 def _frf_chooser(axis: str, flights: Sequence[FlightData], signals: _Twins,
                  cfg: PipelineConfig) -> Any:
     """The structure chooser from the axis's SYSTEMID injection (its FRF against the
-    injection, :class:`mavsid.loop.FrfStructure`), None where there is none or the
+    injection, :class:`mavsid.frequency.FrfStructure`), None where there is none or the
     configuration fixes the delay or lags."""
     if {"delay", "delays", "lags_s"} & set(cfg.model_options):
         return None
-    from mavsid.loop import FrfStructure, TwinSignals, measured_responses
+    from mavsid.frequency import FrfStructure, measured_responses
+    from mavsid.loop.twin import TwinSignals
 
     sigs = [sg for fd in flights if isinstance(sg := signals.get(id(fd)), TwinSignals)]
     if len(sigs) < len(flights):
@@ -923,7 +924,7 @@ def fit(
             fits[axis] = dataclasses.replace(fitted, verdict=verdict)
     if not fits:
         raise _nothing(logs, verdicts, "nothing identifiable")
-    from mavsid.loop import TwinSignals
+    from mavsid.loop.twin import TwinSignals
 
     twins = [signals.get(id(fd)) for fd in flights]
     return FitResult(fits, flights, tuple(os.fspath(p) for p in logs), cfg, verdicts,

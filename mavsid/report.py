@@ -41,7 +41,7 @@ from mavsid.data import decimate
 from mavsid.validation import Validation, horizon_label
 
 if TYPE_CHECKING:
-    from mavsid.loop import TuneAnalysis
+    from mavsid.loop.tune import TuneAnalysis
     from mavsid.pipeline import AxisFit, FitResult
 
     #: The loop analysis a report draws, or a function that returns it when first needed.
@@ -312,8 +312,8 @@ def _bode_columns(fit: AxisFit, lp: TuneAnalysis | None) -> list[dict[str, Any]]
     against the model), the loop analysis's curves added to the plant's (the SYSTEMID runs
     measured with the injection as reference, the TF fit; the model's own response when the
     validation has none), and the broken loop at the mixer, measured against predicted."""
-    from mavsid import loop
     from mavsid.errors import MavsidError
+    from mavsid.loop.plant import plant_from_model, plant_response
 
     v = fit.validation
     measured = lp.measured.get(fit.axis, {}) if lp is not None else {}
@@ -334,8 +334,7 @@ def _bode_columns(fit: AxisFit, lp: TuneAnalysis | None) -> list[dict[str, Any]]
         if col is None:  # no validation response: the loop's plant column on its own
             curves = []
             with contextlib.suppress(MavsidError, ValueError):
-                model = loop.plant_response(loop.plant_from_model(fit.model, fit.axis),
-                                            plant.freq_hz)
+                model = plant_response(plant_from_model(fit.model, fit.axis), plant.freq_hz)
                 curves.append(("time-domain model", plant.freq_hz, model, _COLOURS["free_run"]))
             col = {"title": f"plant u_{fit.axis} → {fit.output}", "f": plant.freq_hz,
                    "measured": ("measured (SYSTEMID runs)", plant.response),
@@ -553,8 +552,8 @@ def render_html_page(title: str, sections: Sequence[str]) -> str:
 
 def render_html(result: FitResult, lp: _Analysis = None) -> str:
     """The report of a :class:`~mavsid.pipeline.FitResult` as one HTML string (with ``lp``,
-    :func:`mavsid.loop.tune_analysis` or a function that returns it, called when the first
-    Bode figure is drawn, after every axis's other figures: each axis's Bode figure
+    :func:`mavsid.loop.tune.tune_analysis` or a function that returns it, called when the
+    first Bode figure is drawn, after every axis's other figures: each axis's Bode figure
     carries the loop's curves too)."""
     logs = ", ".join(html.escape(os.path.basename(p)) for p in result.logs)
     presets = ", ".join(sorted({html.escape(fd.preset) for fd in result.flights}))
@@ -599,11 +598,11 @@ def render_html(result: FitResult, lp: _Analysis = None) -> str:
 def write_report(result: FitResult, path: str | os.PathLike[str],
                  analysis: Callable[[], TuneAnalysis] | None = None) -> None:
     """Write :func:`render_html` of ``result`` to ``path``, with :func:`loop_section`: the
-    loop analysed once for both (one Bode figure per axis), by :func:`mavsid.loop.
+    loop analysed once for both (one Bode figure per axis), by :func:`mavsid.loop.tune.
     tune_analysis` or by ``analysis`` — a function called when the first Bode figure is
     drawn, after every axis's other figures: :class:`~mavsid.outputs.ReportWorker` draws
     those while the command works the analysis out."""
-    from mavsid.loop import tune_analysis
+    from mavsid.loop.tune import tune_analysis
 
     lp = functools.cache(analysis or (lambda: tune_analysis(result)))
     text = render_html(result, lp)
@@ -641,13 +640,14 @@ def loop_section(result: FitResult, target_pm_deg: float = 50.0, *,
                  analysis: TuneAnalysis | None = None) -> str:
     """The report's "loop" section: per axis the closed-loop twin against the measured rate
     and the baseline, the margins and bandwidth with the logged gains (± σ), suggested gains
-    and next-flight advice. Given ``analysis`` (:func:`mavsid.loop.tune_analysis`, as
+    and next-flight advice. Given ``analysis`` (:func:`mavsid.loop.tune.tune_analysis`, as
     :func:`write_report` does) the Bode overlay of measured FRF, time-domain model and TF fit
     and the measured against the predicted broken loop are in each axis's section above (one
     figure); without it they are drawn here."""
-    from mavsid import loop
+    from mavsid.cli_format import format_tune
+    from mavsid.loop.tune import tune_analysis
 
-    lp = loop.tune_analysis(result, target_pm_deg) if analysis is None else analysis
+    lp = tune_analysis(result, target_pm_deg) if analysis is None else analysis
     if lp.error is not None:
         return f"<h2>loop</h2><p>loop analysis failed: {html.escape(lp.error)}</p>"
     report, responses = lp.report, lp.measured
@@ -674,7 +674,7 @@ def loop_section(result: FitResult, target_pm_deg: float = 50.0, *,
         if "error" in entry:
             parts.append(f"<p>loop not analysed: {html.escape(str(entry['error']))}</p>")
             continue
-        text = loop.format_tune({axis: entry})
+        text = format_tune({axis: entry})
         parts.append(f"<pre>{html.escape(text)}</pre>")
         if "plant" not in responses.get(axis, {}):
             continue

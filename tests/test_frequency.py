@@ -11,11 +11,15 @@ import control
 import numpy as np
 import pytest
 from helpers import shared_path
-from test_loop import true_plant
+from loop_plants import true_plant
 
-from mavsid import loop, pipeline
+from mavsid import pipeline
 from mavsid.cli import main
-from mavsid.frequency import fit_tf, frf
+from mavsid.frequency import fit_tf, frf, measured_responses
+from mavsid.loop.analysis import analyse_loop, analyse_model, frd_margins, margins_on_frf
+from mavsid.loop.controllers import controller_from_params, scale_of, scaled
+from mavsid.loop.plant import LinearPlant, plant_statespace
+from mavsid.loop.tune import SUGGESTION_CHECK_DEG, suggest_gains, tune
 from mavsid.synthetic.plant import PlantParams
 
 FIXTURE = Path(__file__).resolve().parents[1] / "fixtures" / "sysid_roll.bin"
@@ -35,7 +39,7 @@ def roll_fit_400(tmp_path_factory):
     return pipeline.fit([str(log)], pipeline.PipelineConfig(axes=("roll",)))
 
 
-def exact_response(plant: loop.LinearPlant, freq_hz: np.ndarray) -> np.ndarray:
+def exact_response(plant: LinearPlant, freq_hz: np.ndarray) -> np.ndarray:
     """``C (zI - A)^-1 B`` of a discrete plant."""
     z = np.exp(2j * np.pi * freq_hz * plant.dt)
     eye = np.eye(len(plant.b))
@@ -50,7 +54,7 @@ def test_frf_matches_the_true_plant_within_its_error(tmp_path, seed: int) -> Non
     log = tmp_path / "chirp.bin"
     assert main(["simulate", "-o", str(log), "--sid-axis", "10", "--seed", str(seed)]) == 0
     res = pipeline.fit([str(log)], pipeline.PipelineConfig(axes=("roll",)))
-    r = loop.measured_responses(res.axes["roll"], res.flights)["plant"]
+    r = measured_responses(res.axes["roll"], res.flights)["plant"]
     truth = exact_response(true_plant(PlantParams(), 0, 0.0025), r.freq_hz)
     m = r.coherent
     band = r.band()
@@ -77,7 +81,7 @@ def test_frf_windows_reach_the_end_of_the_chirp(tmp_path) -> None:
         assert main(["simulate", "-o", str(log), "--sid-axis", "10", "--seed", "7",
                      "--noise", "0", "--rate-hz", rate_hz]) == 0
         res = pipeline.fit([str(log)], pipeline.PipelineConfig(axes=("roll",)))
-        got[rate_hz] = loop.measured_responses(res.axes["roll"], res.flights)["plant"]
+        got[rate_hz] = measured_responses(res.axes["roll"], res.flights)["plant"]
     lo, hi = got["200"], got["400"]
     m = lo.coherent & hi.coherent
     assert m.sum() > 150
@@ -103,15 +107,15 @@ def flown_loop_margins(gains: dict[str, float] | None, seed: int) -> dict[str, f
     rows = fl.run_index == 0
     u, c = fl.u[rows, 0], fl.pid_out[rows, 0]
     measured = frf([u], [-c], fl.dt, reference=[u - c], f_min_hz=1.0, f_max_hz=30.0)
-    return loop.frd_margins(measured)
+    return frd_margins(measured)
 
 
 def test_margins_and_bandwidth_flown(roll_fit) -> None:
     # the loop analysis of the true plant predicts the margins a flown chirp measures
-    ctrl = replace(loop.controller_from_params(roll_fit.flights[0].params, "roll"), angle_p=0.0)
+    ctrl = replace(controller_from_params(roll_fit.flights[0].params, "roll"), angle_p=0.0)
     tp = true_plant(PlantParams(), 0, 1.0 / ctrl.loop_hz)
     ss = control.ss(tp.a, tp.b.reshape(-1, 1), tp.c.reshape(1, -1), 0.0, tp.dt)
-    truth = loop.analyse_loop(ss, ctrl)
+    truth = analyse_loop(ss, ctrl)
     flown = flown_loop_margins(None, seed=21)
     assert flown["phase_deg"] == pytest.approx(truth.phase_margin_deg, abs=2.0)
     assert flown["crossover_hz"] == pytest.approx(truth.crossover_hz, rel=0.05)
@@ -128,11 +132,11 @@ def test_identified_margins_within_the_issue_tolerance_without_noise(tmp_path,
     assert main(["simulate", "-o", str(log), "--sid-axis", "10", "--seed", "7", "--noise", "0",
                  "--rate-hz", rate_hz]) == 0
     res = pipeline.fit([str(log)], pipeline.PipelineConfig(axes=("roll",)))
-    ctrl = loop.controller_from_params(res.flights[0].params, "roll")
+    ctrl = controller_from_params(res.flights[0].params, "roll")
     tp = true_plant(PlantParams(), 0, 1.0 / ctrl.loop_hz)
     ss = control.ss(tp.a, tp.b.reshape(-1, 1), tp.c.reshape(1, -1), 0.0, tp.dt)
-    truth = loop.analyse_loop(ss, ctrl)
-    got = loop.analyse_model(res.axes["roll"].model, "roll", ctrl, samples=0)
+    truth = analyse_loop(ss, ctrl)
+    got = analyse_model(res.axes["roll"].model, "roll", ctrl, samples=0)
     assert got.phase_margin_deg == pytest.approx(truth.phase_margin_deg, abs=2.0)
     assert got.bandwidth_hz == pytest.approx(truth.bandwidth_hz, rel=0.05)
 
@@ -144,12 +148,12 @@ def test_identified_margins_within_the_issue_tolerance(roll_fit, roll_fit_400) -
     the FRF measured from the injection (the feedback does not bias it), measured: 72.7 and
     72.5 deg, 12.25 and 12.36 Hz; over seeds 1-8 at 200 and 400 Hz -0.7..+1.5 deg and
     within 1.4 %."""
-    ctrl = loop.controller_from_params(roll_fit.flights[0].params, "roll")
+    ctrl = controller_from_params(roll_fit.flights[0].params, "roll")
     tp = true_plant(PlantParams(), 0, 1.0 / ctrl.loop_hz)
     ss = control.ss(tp.a, tp.b.reshape(-1, 1), tp.c.reshape(1, -1), 0.0, tp.dt)
-    truth = loop.analyse_loop(ss, ctrl)
+    truth = analyse_loop(ss, ctrl)
     for res in (roll_fit, roll_fit_400):
-        got = loop.analyse_model(res.axes["roll"].model, "roll", ctrl, samples=0)
+        got = analyse_model(res.axes["roll"].model, "roll", ctrl, samples=0)
         assert got.phase_margin_deg == pytest.approx(truth.phase_margin_deg, abs=2.0)
         assert got.bandwidth_hz == pytest.approx(truth.bandwidth_hz, rel=0.05)
 
@@ -163,18 +167,18 @@ def test_suggested_gains_flown_in_the_simulator(roll_fit_400, target: float) -> 
     # windows reached the sweep's end and the structure was chosen against it: 46.3 (flagged),
     # 58.3, 67.0)
     fit = roll_fit_400
-    ctrl = replace(loop.controller_from_params(fit.flights[0].params, "roll"), angle_p=0.0)
-    plant = loop.plant_statespace(fit.axes["roll"].model, "roll", 1.0 / ctrl.loop_hz)
-    got = loop.suggest_gains(plant, ctrl, target)
+    ctrl = replace(controller_from_params(fit.flights[0].params, "roll"), angle_p=0.0)
+    plant = plant_statespace(fit.axes["roll"].model, "roll", 1.0 / ctrl.loop_hz)
+    got = suggest_gains(plant, ctrl, target)
     assert got is not None
     gains, predicted = got
     assert predicted.phase_margin_deg == pytest.approx(target, abs=0.5)
     assert set(gains) == {"ATC_RAT_RLL_P", "ATC_RAT_RLL_I", "ATC_RAT_RLL_D"}
     assert all(np.isfinite(v) and v > 0 for v in gains.values())
     flown = flown_loop_margins(gains, seed=22)["phase_deg"]
-    measured = loop.measured_responses(fit.axes["roll"], fit.flights)["plant"]
-    check = loop.margins_on_frf(measured, loop._scaled(ctrl, loop._scale_of(gains, ctrl)))
-    flagged = abs(check["phase_deg"] - target) > loop.SUGGESTION_CHECK_DEG
+    measured = measured_responses(fit.axes["roll"], fit.flights)["plant"]
+    check = margins_on_frf(measured, scaled(ctrl, scale_of(gains, ctrl)))
+    flagged = abs(check["phase_deg"] - target) > SUGGESTION_CHECK_DEG
     assert abs(flown - target) <= 5.0 or flagged
     assert not flagged or abs(flown - target) > 3.0  # a flag is not a false alarm
 
@@ -187,7 +191,7 @@ def test_sitl_predicted_loop_matches_the_measured_one() -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         res = pipeline.fit([str(path)])
-    report = loop.tune(res, 50.0, samples=0)
+    report = tune(res, 50.0, samples=0)
     for axis in ("roll", "pitch", "yaw"):
         cmp_ = report[axis]["loop_frf_vs_predicted"]
         # measured: median 0.4 dB and 0.9-1.6 deg over 0.5-20 Hz
@@ -227,7 +231,7 @@ def test_predicted_closed_loop_matches_a_rate_chirp(tmp_path) -> None:
     log = tmp_path / "rate.bin"
     assert main(["simulate", "-o", str(log), "--sid-axis", "7", "--seed", "5"]) == 0
     res = pipeline.fit([str(log)], pipeline.PipelineConfig(axes=("roll",)))
-    entry = loop.tune(res, 50.0, samples=0)["roll"]
+    entry = tune(res, 50.0, samples=0)["roll"]
     cmp_ = entry["closed_loop_frf_vs_predicted"]
     assert cmp_["band_hz"][0] <= 0.51 and cmp_["band_hz"][1] > 12.0
     assert cmp_["median_db"] < 0.5 and cmp_["median_deg"] < 3.0

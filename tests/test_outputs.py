@@ -197,7 +197,7 @@ def test_the_worker_draws_the_loop_analysis_handed_to_it(fitted, tmp_path: Path)
     import dataclasses
 
     from mavsid import report
-    from mavsid.loop import tune_analysis
+    from mavsid.loop.tune import tune_analysis
     from mavsid.outputs import ReportWorker
 
     here, there, other = (tmp_path / f"{n}.html" for n in ("here", "there", "other"))

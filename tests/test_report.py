@@ -176,7 +176,7 @@ def test_one_bode_figure_serves_the_validation_and_the_loop(tmp_path) -> None:  
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         result = fit([str(FIXTURES / "sysid_roll.bin")])
-    from mavsid.loop import tune_analysis
+    from mavsid.loop.tune import tune_analysis
 
     lp = tune_analysis(result)
     assert lp.error is None and "plant" in lp.measured["roll"] and "roll" in lp.analyses
@@ -234,7 +234,7 @@ def test_the_loop_analysis_is_asked_for_after_every_axis_s_other_figures(page) -
     """Every axis's figures but the Bode ones are drawn before the loop analysis is first
     asked for (the report worker draws them while the command works it out), and the
     page is the same as one drawn with the analysis at hand."""
-    from mavsid.loop import tune_analysis
+    from mavsid.loop.tune import tune_analysis
 
     _, result, _ = page
     analysis = tune_analysis(result)

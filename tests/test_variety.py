@@ -336,7 +336,7 @@ def test_an_undetermined_effectiveness_is_not_identified() -> None:
 
 
 def test_the_baseline_survives_blocks_shorter_than_its_delay() -> None:
-    from mavsid.loop import baseline_fit
+    from mavsid.loop.twin import baseline_fit
 
     t = np.sin(np.arange(400) * 0.05)
     short = np.sin(np.arange(5) * 0.05)
@@ -646,7 +646,7 @@ def test_a_quadplanes_vtol_flight_is_fitted_with_its_vtol_controller(tmp_path) -
     log: every axis `not identified`. Now the VTOL preset is chosen (said), the model is
     near the truth and the closed-loop twin runs the Q_A_RAT_* controller. Measured: B -1.2 %,
     damping -2.3 %, twin 96 %."""
-    from mavsid.loop import controller_from_params, gain_params
+    from mavsid.loop.controllers import controller_from_params, gain_params
 
     with pytest.warns(Warning, match="a QuadPlane, its VTOL controllers flying 100 %.*"
                       "preset ardupilot-quadplane fitted; --preset ardupilot-plane-pid"):

@@ -205,7 +205,7 @@ def identify_segments(
     structure is searched, receives per candidate lag (s) its least-squares model at its
     best one-step delay and returns the ``(lag_s, delay_samples)`` to fit instead, or None
     to keep the one-step choice (the pipeline passes one that scores the candidates against
-    a frequency response measured from an injection, :class:`mavsid.loop.FrfStructure`).
+    a frequency response measured from an injection, :class:`mavsid.frequency.FrfStructure`).
     A chooser with an ``estimate(model)`` method (the model's coefficients estimated another
     way, or None) has that estimate's spread join the covariance.
     :func:`fit_axis` calls this with an axis's names and the log's filters.

@@ -32,7 +32,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from mavsid.errors import ConfigError
-from mavsid.loop import RateGains, RatePID
+from mavsid.loop.controllers import RateGains, RatePID
 
 __all__ = [
     "FRAMES",

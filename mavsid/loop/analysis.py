@@ -1,0 +1,670 @@
+"""What the rate loop does with given gains: margins, bandwidths, the closed loop's step,
+on a modelled plant (:func:`analyse_plant`, :func:`analyse_model` with one-σ from the
+model's covariance) and on measured responses (:func:`frd_margins`, :func:`margins_on_frf`,
+:func:`compare_response`).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from mavsid import dsp
+from mavsid.errors import MavsidError
+from mavsid.loop.controllers import (
+    AXIS_RATE,
+    AxisController,
+    PX4RateGains,
+    RateGains,
+    lowpass_alpha,
+    measurement_filter,
+)
+from mavsid.loop.plant import LinearPlant, Poly, plant_from_model, ss2tf
+
+__all__ = [
+    "LoopAnalysis",
+    "analyse_loop",
+    "analyse_model",
+    "analyse_plant",
+    "closed_figures",
+    "compare_response",
+    "controller_polys",
+    "controller_tf",
+    "frd_margins",
+    "frd_margins_at",
+    "frequency_response",
+    "loop_figures",
+    "loop_margins",
+    "margin_db",
+    "margin_grid",
+    "margins_of",
+    "margins_on_frf",
+    "tf_at",
+    "tf_mul",
+]
+
+def _first_order_z(cutoff_hz: float, dt: float) -> tuple[list[float], list[float]]:
+    """The ``lowpass_alpha`` low pass as ``(num, den)`` in z⁻¹ (unity when off)."""
+    a = lowpass_alpha(cutoff_hz, dt)
+    return ([a, 0.0], [1.0, -(1.0 - a)]) if a < 1.0 else ([1.0], [1.0])
+
+
+def controller_tf(ctrl: AxisController, dt: float | None = None) -> tuple[Any, Any]:
+    """Discrete transfer functions of the rate controller at its loop step: ``(C_fb, C_t)``,
+    output per measured rate (negated: ``u = C_t·target − C_fb·rate``) and per target.
+
+    They are exactly :class:`RatePID` / :class:`PX4RatePID` without limits (integrator
+    ``I·dt/(1 − z⁻¹)``, derivative ``(1 − z⁻¹)/dt``, first-order filters ``α/(1 − (1−α)z⁻¹)``,
+    PX4's biquad on the derivative).
+
+    Examples
+    --------
+    >>> from mavsid.loop.controllers import controller_from_params
+    >>> cfb, ct = controller_tf(controller_from_params({}, "roll"))
+    >>> round(float(abs(cfb(np.exp(1j * 2 * np.pi * 1.0 * 0.0025)))), 3)   # |C| at 1 Hz
+    0.136
+    """
+    step = 1.0 / ctrl.loop_hz if dt is None else dt
+    return _controller_tf(ctrl.gains, float(step))
+
+
+@functools.lru_cache(maxsize=64)
+def _controller_tf(g: RateGains | PX4RateGains, step: float) -> tuple[Any, Any]:
+    """:func:`controller_tf` by gains and step, cached: the report's σ draws and the loop
+    section ask for the same controller dozens of times (python-control's polynomial
+    arithmetic, ~5 ms a call). The systems are never modified in place."""
+    import control
+
+    one = control.tf([1.0], [1.0], step)
+    integ = control.tf([step, 0.0], [1.0, -1.0], step)  # dt / (1 - z^-1)
+    deriv = control.tf([1.0, -1.0], [step, 0.0], step)  # (1 - z^-1) / dt
+    if isinstance(g, PX4RateGains):
+        fd = one
+        if 0 < g.dgyro_hz < 0.5 / step:
+            b, a = dsp.lowpass2p_coefficients(g.dgyro_hz, 1.0 / step)
+            fd = control.tf(list(b), list(a), step)
+        pi = g.k * g.p * one + g.k * g.i * integ
+        return pi + g.k * g.d * fd * deriv, pi + g.ff * one
+    ft = control.tf(*_first_order_z(g.fltt, step), step)
+    fe = control.tf(*_first_order_z(g.flte, step), step)
+    fd = control.tf(*_first_order_z(g.fltd, step), step)
+    pid = fe * (g.p * one + g.i * integ + g.d * fd * deriv)
+    return pid, pid * ft + g.ff * ft
+
+
+
+
+def _tf_add(p: Poly, q: Poly) -> Poly:
+    """``p + q`` of two SISO transfer functions ``(num, den)`` (python-control's sum)."""
+    return _trim((np.polyadd(np.polymul(p[0], q[1]), np.polymul(q[0], p[1])),
+                  np.polymul(p[1], q[1])))
+
+
+def tf_mul(p: Poly, q: Poly) -> Poly:
+    """``p · q`` of two SISO transfer functions ``(num, den)``."""
+    return _trim((np.polymul(p[0], q[0]), np.polymul(p[1], q[1])))
+
+
+def _tf_gain(k: float, p: Poly) -> Poly:
+    """``k · p``."""
+    return _trim((k * np.asarray(p[0], dtype=float), np.asarray(p[1], dtype=float)))
+
+
+def tf_at(p: Poly, z: np.ndarray) -> np.ndarray:
+    """The transfer function ``(num, den)`` at the points ``z``."""
+    return np.polyval(p[0], z) / np.polyval(p[1], z)
+
+
+def _trim(p: Poly) -> Poly:
+    """``p`` as python-control's transfer functions keep one: no leading zero coefficients,
+    and ``0 / 1`` for a zero numerator (so that adding it does not raise the order)."""
+    num, den = (np.trim_zeros(np.asarray(x, dtype=float), "f") for x in p)
+    return (num, den) if num.size else (np.zeros(1), np.ones(1))
+
+
+def controller_polys(ctrl: AxisController, dt: float | None = None) -> tuple[Poly, Poly]:
+    """:func:`controller_tf` as numpy polynomials, ``((num, den) of C_fb, (num, den) of
+    C_t)`` in descending powers of z: the same sums and products of the same parts, without
+    python-control (``tests/test_loop_analysis.py`` checks the coefficients against it).
+
+    Examples
+    --------
+    >>> from mavsid.loop.controllers import controller_from_params
+    >>> (bf, af), _ = controller_polys(controller_from_params({}, "roll"))
+    >>> z = np.exp(2j * np.pi * 1.0 * 0.0025)
+    >>> round(float(abs(np.polyval(bf, z) / np.polyval(af, z))), 3)   # |C| at 1 Hz
+    0.136
+    """
+    step = 1.0 / ctrl.loop_hz if dt is None else dt
+    return _controller_polys(ctrl.gains, float(step))
+
+
+@functools.lru_cache(maxsize=64)
+def _controller_polys(g: RateGains | PX4RateGains, step: float) -> tuple[Poly, Poly]:
+    """:func:`controller_polys` by gains and step, cached (callers never modify them)."""
+    one: Poly = (np.array([1.0]), np.array([1.0]))
+    integ: Poly = (np.array([step, 0.0]), np.array([1.0, -1.0]))
+    deriv: Poly = (np.array([1.0, -1.0]), np.array([step, 0.0]))
+    if isinstance(g, PX4RateGains):
+        fd = one
+        if 0 < g.dgyro_hz < 0.5 / step:
+            b, a = dsp.lowpass2p_coefficients(g.dgyro_hz, 1.0 / step)
+            fd = (np.asarray(b, dtype=float), np.asarray(a, dtype=float))
+        pi = _tf_add(_tf_gain(g.k * g.p, one), _tf_gain(g.k * g.i, integ))
+        fb = _tf_add(pi, _tf_gain(g.k * g.d, tf_mul(fd, deriv)))
+        return fb, _tf_add(pi, _tf_gain(g.ff, one))
+    ft, fe, fd = ((np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+                  for x, y in (_first_order_z(c, step) for c in (g.fltt, g.flte, g.fltd)))
+    inner = _tf_add(_tf_add(_tf_gain(g.p, one), _tf_gain(g.i, integ)),
+                    _tf_gain(g.d, tf_mul(fd, deriv)))
+    pid = tf_mul(fe, inner)
+    return pid, _tf_add(tf_mul(pid, ft), _tf_gain(g.ff, ft))
+
+
+@dataclass(frozen=True)
+class LoopAnalysis:
+    """The rate loop of one axis with given gains.
+
+    Attributes
+    ----------
+    gain_margin_db, phase_margin_deg, crossover_hz : float
+        Of the loop transfer ``L = C_fb·P`` (crossover: where ``|L| = 1``).
+    bandwidth_hz : float
+        −3 dB bandwidth of the closed loop from rate target to rate.
+    peak_db : float
+        Largest closed-loop gain.
+    disturbance_bandwidth_hz : float
+        Where the sensitivity ``1/(1+L)`` reaches −3 dB.
+    phase_delay_s : float
+        Phase delay of the closed loop at twice the −180° frequency (``-phase/ω``, at the
+        bandwidth when that is not reached).
+    rise_time_s, overshoot_percent : float
+        Of the closed-loop step response.
+    freq_hz, magnitude_db, phase_deg : numpy.ndarray
+        The closed-loop response from rate target to rate.
+    stderr : Mapping[str, float]
+        One-σ of each figure from the plant's parameter covariance.
+    loop_response, closed_response : numpy.ndarray
+        Complex ``L`` and ``T`` at ``freq_hz``.
+    mixer_loop_response : numpy.ndarray
+        The broken loop a mixer injection measures: the rate loop and the attitude loop
+        around it (``angle_p``), ``(C_fb + C_t·angle_p·dt/(1−z⁻¹))·P``.
+    mixer_margins : Mapping[str, float]
+        ``gain_db``, ``phase_deg``, ``crossover_hz`` of that loop.
+    """
+
+    gain_margin_db: float
+    phase_margin_deg: float
+    crossover_hz: float
+    bandwidth_hz: float
+    peak_db: float
+    disturbance_bandwidth_hz: float
+    phase_delay_s: float
+    rise_time_s: float
+    overshoot_percent: float
+    freq_hz: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+    magnitude_db: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+    phase_deg: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+    stderr: Mapping[str, float] = field(default_factory=dict)
+    loop_response: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0, complex))
+    closed_response: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0, complex))
+    mixer_loop_response: np.ndarray = field(repr=False,
+                                            default_factory=lambda: np.zeros(0, complex))
+    mixer_margins: Mapping[str, float] = field(default_factory=dict)
+
+    def figures(self) -> dict[str, float]:
+        """The scalar figures by name."""
+        return {k: float(getattr(self, k)) for k in _FIGURES}
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON form ``mavsid tune --json`` gives per axis (margins, closed loop)."""
+        return {
+            "margins": {"gain_db": self.gain_margin_db, "phase_deg": self.phase_margin_deg,
+                        "crossover_hz": self.crossover_hz},
+            "closed_loop": {
+                "bandwidth_hz": self.bandwidth_hz, "peak_db": self.peak_db,
+                "disturbance_bandwidth_hz": self.disturbance_bandwidth_hz,
+                "phase_delay_s": self.phase_delay_s, "rise_time_s": self.rise_time_s,
+                "overshoot_percent": self.overshoot_percent,
+                "frequency_hz": self.freq_hz.tolist(),
+                "magnitude_db": self.magnitude_db.tolist(),
+                "phase_deg": self.phase_deg.tolist(),
+            },
+            "mixer_margins": dict(self.mixer_margins),
+            "loop": {
+                "frequency_hz": self.freq_hz.tolist(),
+                "magnitude_db": (20 * np.log10(np.abs(self.loop_response))).tolist(),
+                "phase_deg": np.degrees(np.unwrap(np.angle(self.loop_response))).tolist(),
+            },
+            "stderr": dict(self.stderr),
+        }
+
+
+_FIGURES = ("gain_margin_db", "phase_margin_deg", "crossover_hz", "bandwidth_hz", "peak_db",
+            "disturbance_bandwidth_hz", "phase_delay_s", "rise_time_s", "overshoot_percent")
+
+
+def _crossing(f: np.ndarray, mag_db: np.ndarray, level: float, rising: bool) -> float:
+    """First frequency where ``mag_db`` crosses ``level`` (log-interpolated), NaN if never."""
+    above = mag_db >= level
+    now, before = (above[1:], above[:-1]) if rising else (~above[1:], ~above[:-1])
+    idx = np.flatnonzero(now & ~before)
+    if not idx.size:
+        return float("nan")
+    i = int(idx[0])
+    x0, x1 = np.log(f[i]), np.log(f[i + 1])
+    y0, y1 = mag_db[i], mag_db[i + 1]
+    return float(np.exp(x0 + (level - y0) * (x1 - x0) / (y1 - y0))) if y1 != y0 else float(f[i])
+
+
+def frequency_response(system: Any, z: np.ndarray) -> np.ndarray:
+    """A single-input single-output python-control system's response at the points ``z``,
+    through its transfer-function polynomials (python-control evaluates a state space with
+    one linear solve per point, far slower for thousands of points).
+
+    Examples
+    --------
+    >>> import control
+    >>> sys = control.ss(control.tf([0.5], [1.0, -0.9], 0.01))
+    >>> z = np.exp(2j * np.pi * np.array([0.1, 10.0]) * 0.01)
+    >>> bool(np.allclose(frequency_response(sys, z), np.ravel(sys(z))))
+    True
+    """
+    if hasattr(system, "A"):
+        a, b, c, d = (np.asarray(x, dtype=float) for x in
+                      (system.A, system.B, system.C, system.D))
+        if a.size == 0:
+            return np.full(z.shape, float(d.ravel()[0]), dtype=complex)
+        num, den = ss2tf(a, b, c, float(d.ravel()[0]))
+    else:
+        num = np.asarray(system.num[0][0], dtype=float)
+        den = np.asarray(system.den[0][0], dtype=float)
+    return np.polyval(num, z) / np.polyval(den, z)
+
+
+def loop_margins(loop: Any, dt: float, n: int = 4000) -> tuple[float, float, float]:
+    """``(gain margin (ratio), phase margin (deg), gain-crossover (rad/s))`` of a discrete
+    open loop, read off its frequency response on a dense log grid up to Nyquist (crossings
+    interpolated between grid points; the smallest margins when there are several), as
+    ``control.stability_margins`` gives them but without its per-call spline fits (about
+    100× faster: the report samples the loop dozens of times per axis).
+
+    Examples
+    --------
+    >>> import control
+    >>> dt = 0.0025
+    >>> loop = control.tf([0.0, 0.02], [1.0, -1.0], dt) * control.tf([1.0], [1.0, 0.0, 0.0], dt)
+    >>> gm, pm, wc = loop_margins(loop, dt)
+    >>> ref = control.stability_margins(loop)
+    >>> bool(abs(pm - ref[1]) < 0.05 and abs(wc - ref[4]) / ref[4] < 1e-3
+    ...      and abs(gm - ref[0]) / ref[0] < 1e-3)
+    True
+    """
+    f = margin_grid(dt, n)
+    return margins_of(f, frequency_response(loop, np.exp(2j * np.pi * f * dt)))
+
+
+def margin_grid(dt: float, n: int = 4000) -> np.ndarray:
+    """The frequencies (Hz) :func:`loop_margins` reads a loop on."""
+    return np.geomspace(1e-3 / dt, 0.4999 / dt, n)
+
+
+def margins_of(f: np.ndarray, resp: np.ndarray) -> tuple[float, float, float]:
+    """:func:`loop_margins` from the loop's response ``resp`` at ``f`` (Hz)."""
+    mag = np.abs(resp)
+    logf = np.log(f)
+    pm, wc = float("inf"), float("nan")
+    for i in np.flatnonzero((mag[:-1] >= 1.0) & (mag[1:] < 1.0) | (mag[:-1] < 1.0)
+                            & (mag[1:] >= 1.0)):
+        x = (0.0 - np.log(mag[i])) / (np.log(mag[i + 1]) - np.log(mag[i]))
+        ang = np.angle(resp[i]) + x * np.angle(resp[i + 1] / resp[i])
+        deg = float(np.degrees(ang)) % 360.0 - 360.0  # in (-360, 0]
+        margin = 180.0 + deg
+        if margin < pm:
+            pm, wc = margin, float(np.exp(logf[i] + x * (logf[i + 1] - logf[i])) * 2 * np.pi)
+    gm = float("inf")
+    im = resp.imag
+    for i in np.flatnonzero(np.sign(im[:-1]) * np.sign(im[1:]) < 0):
+        x = im[i] / (im[i] - im[i + 1])
+        re = resp.real[i] + x * (resp.real[i + 1] - resp.real[i])
+        if re < 0:
+            gm = min(gm, 1.0 / abs(re))
+    return gm, (pm if np.isfinite(pm) else float("inf")), wc
+
+
+def margin_db(gain_margin: float) -> float:
+    """A gain margin in dB (inf when the phase never crosses -180°)."""
+    ok = np.isfinite(gain_margin) and gain_margin > 0
+    return float(20 * np.log10(gain_margin)) if ok else float("inf")
+
+
+def analyse_loop(plant_ss: Any, ctrl: AxisController, lag: int = 0,
+                 freq_hz: np.ndarray | None = None, meas_delay: float = 0.0) -> LoopAnalysis:
+    """Margins, bandwidths and step metrics of ``ctrl`` around ``plant_ss`` (a discrete
+    python-control system at the controller's loop step, rate per controller output).
+
+    ``lag`` loops of delay on the target path (see :func:`replay_controller`);
+    ``meas_delay`` (0-1 loop) on the measured rate the controller reads (``(1 − τ) + τz⁻¹``,
+    :attr:`ClosedLoopFit.measurement_delay_loops`).
+    """
+    import control
+
+    dt = float(plant_ss.dt)
+    cfb, ct = controller_tf(ctrl, dt)
+    if lag:
+        ct = ct * control.tf([1.0], [1.0] + [0.0] * lag, dt)
+    tau, num, den = measurement_filter(meas_delay)
+    if tau:
+        cfb = cfb * control.tf(num, den, dt)
+    p = control.ss(plant_ss)
+    cfb_ss, ct_ss = control.ss(cfb), control.ss(ct)
+    loop_tf = cfb_ss * p
+    # at the mixer the attitude loop closes too: rate target = angle_p * -(integral of rate)
+    integ = control.tf([dt, 0.0], [1.0, -1.0], dt)
+    mixer_loop = (cfb + ct * ctrl.angle_p * integ) * control.tf(plant_ss)
+    closed = control.feedback(p, cfb_ss) * ct_ss
+    sens = control.feedback(control.ss([], [], [], [[1.0]], dt), loop_tf)
+    f = np.geomspace(0.1, 0.45 / dt, 400) if freq_hz is None else np.asarray(freq_hz)
+    w = 2 * np.pi * f
+    import warnings
+
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # python-control's method fall-backs
+        gm, pm, wcp = loop_margins(loop_tf, dt)
+        zs = np.exp(1j * w * dt)
+        t_resp = frequency_response(closed, zs)
+        s_resp = frequency_response(sens, zs)
+        l_resp = frequency_response(loop_tf, zs)
+        m_resp = frequency_response(mixer_loop, zs)
+        mgm, mpm, mwc = loop_margins(mixer_loop, dt)
+    mag, ph, bw, dbw, phase_delay = closed_figures(f, t_resp, s_resp)
+    rise, over = _step_metrics(closed, dt)
+    return LoopAnalysis(
+        gain_margin_db=margin_db(gm),
+        phase_margin_deg=float(pm), crossover_hz=float(wcp / (2 * np.pi)),
+        bandwidth_hz=bw, peak_db=float(np.max(mag)), disturbance_bandwidth_hz=dbw,
+        phase_delay_s=phase_delay, rise_time_s=rise, overshoot_percent=over,
+        freq_hz=f, magnitude_db=mag, phase_deg=ph,
+        loop_response=np.asarray(l_resp).ravel(), closed_response=np.asarray(t_resp).ravel(),
+        mixer_loop_response=np.asarray(m_resp).ravel(),
+        mixer_margins={"gain_db": margin_db(mgm), "phase_deg": float(mpm),
+                       "crossover_hz": float(mwc / (2 * np.pi))},
+    )
+
+
+def closed_figures(f: np.ndarray, t_resp: np.ndarray, s_resp: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, float, float, float]:
+    """``(magnitude dB, phase deg, bandwidth, disturbance bandwidth, phase delay)`` of a
+    closed loop from its responses ``T`` and ``S`` at ``f`` (see :class:`LoopAnalysis`)."""
+    mag = 20 * np.log10(np.abs(t_resp))
+    ph = np.degrees(np.unwrap(np.angle(t_resp)))
+    bw = _crossing(f, mag - mag[0], -3.0, rising=False)
+    dbw = _crossing(f, 20 * np.log10(np.abs(s_resp)), -3.0, rising=True)
+    i180 = np.flatnonzero(ph <= -180.0)
+    if i180.size:
+        f2 = 2 * f[i180[0]] if 2 * f[i180[0]] <= f[-1] else f[i180[0]]
+        phase_delay = float(-np.interp(f2, f, ph) / (360 * f2))
+    elif np.isfinite(bw):
+        phase_delay = float(-np.interp(bw, f, ph) / (360 * bw))
+    else:
+        phase_delay = float("nan")
+    return mag, ph, bw, dbw, phase_delay
+
+
+def loop_figures(plant: LinearPlant, ctrl: AxisController, lag: int = 0,
+                 freq_hz: np.ndarray | None = None, meas_delay: float = 0.0
+                 ) -> dict[str, float]:
+    """:meth:`LoopAnalysis.figures` of :func:`analyse_loop` for a :class:`LinearPlant` at
+    the controller's step, with numpy polynomials instead of python-control systems (no
+    state-space products, feedback or simulation objects): the same figures to rounding
+    (``tests/test_loop_analysis.py`` checks 1e-6), about 10× faster, for :func:`analyse_model`'s
+    draws of the coefficients."""
+    return analyse_plant(plant, ctrl, lag, freq_hz, meas_delay, responses=False).figures()
+
+
+def analyse_plant(plant: LinearPlant, ctrl: AxisController, lag: int = 0,
+                  freq_hz: np.ndarray | None = None, meas_delay: float = 0.0,
+                  responses: bool = True) -> LoopAnalysis:
+    """:func:`analyse_loop` of a :class:`LinearPlant` at the controller's step in numpy (the
+    controller from :func:`controller_polys`, each response the product of its parts'):
+    what ``fit --report`` and ``tune`` use, without importing python-control. Margins,
+    crossovers and the step's figures equal :func:`analyse_loop`'s to rounding; bandwidth,
+    peak and the responses equal python-control's point-by-point evaluation (``analyse_loop``
+    goes through one polynomial ratio of the whole closed loop, off by up to 0.5 %).
+    ``responses=False`` leaves out the broken loop at the mixer and its margins."""
+    dt = 1.0 / ctrl.loop_hz
+    (bf, af), (bt, at) = controller_polys(ctrl, dt)
+    if lag:
+        at = np.polymul(at, [1.0] + [0.0] * lag)
+    tau, num, den = measurement_filter(meas_delay)
+    if tau:
+        bf, af = np.polymul(bf, num), np.polymul(af, den)
+    bp, ap = ss2tf(plant.a, plant.b, plant.c)
+    f = np.geomspace(0.1, 0.45 / dt, 400) if freq_hz is None else np.asarray(freq_hz)
+    fm = margin_grid(dt)
+
+    def loop_at(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        p = np.polyval(bp, z) / np.polyval(ap, z)
+        return p, p * np.polyval(bf, z) / np.polyval(af, z)
+
+    mixer: dict[str, float] = {}
+    m_resp = np.zeros(0, complex)
+    with np.errstate(all="ignore"):
+        zm = np.exp(2j * np.pi * fm * dt)
+        gm, pm, wcp = margins_of(fm, loop_at(zm)[1])
+        zs = np.exp(2j * np.pi * f * dt)
+        p, lz = loop_at(zs)
+        ctz = np.polyval(bt, zs) / np.polyval(at, zs)
+        t_resp = p * ctz / (1.0 + lz)
+        mag, ph, bw, dbw, phase_delay = closed_figures(f, t_resp, 1.0 / (1.0 + lz))
+        t = np.arange(0.0, 2.0, dt)
+        y = _closed_step(plant, (bf, af), (bt, at), t.size)
+        if responses:
+            # at the mixer the attitude loop closes too: target = angle_p · −∫rate
+            def mixer_at(z: np.ndarray, p: np.ndarray, lz: np.ndarray,
+                         ctz: np.ndarray) -> np.ndarray:
+                return lz + ctz * ctrl.angle_p * (dt * z / (z - 1.0)) * p
+
+            m_resp = mixer_at(zs, p, lz, ctz)
+            pmz, lmz = loop_at(zm)
+            mgm, mpm, mwc = margins_of(
+                fm, mixer_at(zm, pmz, lmz, np.polyval(bt, zm) / np.polyval(at, zm)))
+            mixer = {"gain_db": margin_db(mgm), "phase_deg": float(mpm),
+                     "crossover_hz": float(mwc / (2 * np.pi))}
+    rise, over = _step_figures(t, y)
+    return LoopAnalysis(
+        gain_margin_db=margin_db(gm), phase_margin_deg=float(pm),
+        crossover_hz=float(wcp / (2 * np.pi)), bandwidth_hz=bw, peak_db=float(np.max(mag)),
+        disturbance_bandwidth_hz=dbw, phase_delay_s=phase_delay, rise_time_s=rise,
+        overshoot_percent=over, freq_hz=f, magnitude_db=mag, phase_deg=ph,
+        loop_response=lz if responses else np.zeros(0, complex),
+        closed_response=t_resp if responses else np.zeros(0, complex),
+        mixer_loop_response=m_resp, mixer_margins=mixer)
+
+
+def _closed_step(plant: LinearPlant, fb: tuple[np.ndarray, np.ndarray],
+                 tg: tuple[np.ndarray, np.ndarray], n: int) -> np.ndarray:
+    """``n`` samples of the unit-step response of ``P·C_t / (1 + C_fb·P)`` (``fb``, ``tg``:
+    ``C_fb``, ``C_t`` as ``(num, den)`` in z), simulated in state space: plant, feedback and
+    target filter states side by side (a single polynomial of the closed loop would carry
+    the integrators' cancelling pole-zero pair at z = 1 and drift)."""
+    ap, bp, cp = plant.a, plant.b.reshape(-1, 1), plant.c.reshape(1, -1)
+    af, bf, cf, df = dsp.tf2ss(*fb)
+    at, bt, ct, dt_ = dsp.tf2ss(*tg)
+    npl, nf, nt = ap.shape[0], af.shape[0], at.shape[0]
+    a = np.zeros((npl + nf + nt,) * 2)
+    a[:npl, :npl] = ap - bp @ (df @ cp)
+    a[:npl, npl:npl + nf] = -bp @ cf
+    a[:npl, npl + nf:] = bp @ ct
+    a[npl:npl + nf, :npl] = bf @ cp
+    a[npl:npl + nf, npl:npl + nf] = af
+    a[npl + nf:, npl + nf:] = at
+    b = np.concatenate([bp @ dt_, np.zeros((nf, 1)), bt]).ravel()
+    c = np.concatenate([cp.ravel(), np.zeros(nf + nt)])
+    # blocks of m steps: y[jm + i] = c·Aⁱ·x[jm] + c·(I + … + Aⁱ⁻¹)·b, x[(j+1)m] = Aᵐ·x[jm] + sₘ
+    m = 32
+    rows = np.empty((m, a.shape[0]))
+    sums = np.empty(m)
+    row, acc = c.copy(), 0.0
+    for i in range(m):
+        rows[i], sums[i] = row, acc
+        acc += float(row @ b)
+        row = row @ a
+    power, s = np.eye(a.shape[0]), np.zeros(a.shape[0])
+    for _ in range(m):
+        s = a @ s + b
+        power = a @ power
+    x = np.zeros(a.shape[0])
+    y = np.empty(-(-n // m) * m)
+    for j in range(0, y.size, m):
+        y[j:j + m] = rows @ x + sums
+        x = power @ x + s
+    return y[:n]
+
+
+def _step_metrics(closed: Any, dt: float, horizon_s: float = 2.0) -> tuple[float, float]:
+    """10-90 % rise time (s) and overshoot (%) of the closed loop's unit step."""
+    import control
+
+    t = np.arange(0.0, horizon_s, dt)
+    y = np.asarray(control.step_response(closed, T=t).outputs, dtype=float).ravel()
+    return _step_figures(t, y)
+
+
+def _step_figures(t: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """:func:`_step_metrics` of a step response ``y`` at times ``t``."""
+    final = float(np.mean(y[-max(1, len(y) // 10):]))
+    if not np.all(np.isfinite(y)) or abs(final) < 1e-9:
+        return float("nan"), float("nan")
+    r = y / final
+    i10, i90 = np.flatnonzero(r >= 0.1), np.flatnonzero(r >= 0.9)
+    rise = float(t[i90[0]] - t[i10[0]]) if i10.size and i90.size else float("nan")
+    return rise, float(max(0.0, 100.0 * (np.max(r) - 1.0)))
+
+
+def analyse_model(model: Any, axis: str, ctrl: AxisController, lag: int = 0,
+                  samples: int = 40, seed: int = 0, meas_delay: float = 0.0) -> LoopAnalysis:
+    """:func:`analyse_plant` of the identified plant, with one-σ uncertainties from
+    ``samples`` draws of the model's coefficients from their covariance."""
+    dt = 1.0 / ctrl.loop_hz
+    base = analyse_plant(plant_from_model(model, axis, dt), ctrl, lag, meas_delay=meas_delay)
+    cov = getattr(model, "covariance", None)
+    rate = AXIS_RATE[axis]
+    if cov is None or samples < 2 or rate not in model.state_names:
+        return base
+    j = model.state_names.index(rate)
+    c = np.nan_to_num(np.asarray(cov[j], dtype=float))
+    rng = np.random.default_rng(seed)
+    draws = []
+    for _ in range(samples):
+        coef = model.coef.copy()
+        coef[:, j] = rng.multivariate_normal(model.coef[:, j], c, check_valid="ignore")
+        try:
+            m = replace(model, coef=coef)
+            draws.append(loop_figures(plant_from_model(m, axis, dt), ctrl, lag, base.freq_hz,
+                                      meas_delay))
+        except (MavsidError, ValueError, np.linalg.LinAlgError):
+            continue
+    if len(draws) < 2:
+        return base
+    finite = {k: [d[k] for d in draws if np.isfinite(d[k])] for k in _FIGURES}
+    err = {k: float(np.std(v)) if v else math.nan for k, v in finite.items()}
+    return replace(base, stderr=err)
+
+
+def margins_on_frf(plant_frf: Any, ctrl: AxisController) -> dict[str, float]:
+    """Margins of ``ctrl`` around a measured plant FRF (controller output -> rate): the loop
+    ``C_fb(e^{jωT})·P̂(f)`` over the FRF's coherent band, a check on a model's promise that
+    does not go through the model (NaN where the band holds no crossover)."""
+    m = plant_frf.coherent & np.isfinite(plant_frf.response)
+    nan = {"gain_db": float("nan"), "phase_deg": float("nan"), "crossover_hz": float("nan")}
+    if m.sum() < 8:
+        return nan
+    f, p = plant_frf.freq_hz[m], plant_frf.response[m]
+    dt = 1.0 / ctrl.loop_hz
+    cfb, _ = controller_polys(ctrl, dt)
+    loop_resp = tf_at(cfb, np.exp(2j * np.pi * f * dt)) * p
+    band = replace(plant_frf, freq_hz=f, response=loop_resp, coherence=np.ones(f.size),
+                   error=plant_frf.error[m])
+    got = frd_margins(band)
+    return got if f[0] < got["crossover_hz"] < f[-1] else nan
+
+
+def compare_response(measured: Any, freq_hz: np.ndarray, response: np.ndarray
+                     ) -> dict[str, Any]:
+    """Median and largest |error| in dB and degrees of a predicted response against a
+    measured FRF over the measured one's coherent band (NaN when none)."""
+    m = measured.coherent & (measured.freq_hz >= freq_hz[0]) & (measured.freq_hz <= freq_hz[-1])
+    if not m.any():
+        return {"median_db": float("nan"), "max_db": float("nan"),
+                "median_deg": float("nan"), "max_deg": float("nan"), "band_hz": None}
+    f = measured.freq_hz[m]
+    pred = np.interp(f, freq_hz, response.real) + 1j * np.interp(f, freq_hz, response.imag)
+    ratio = measured.response[m] / pred
+    db = np.abs(20 * np.log10(np.abs(ratio)))
+    deg = np.abs(np.degrees(np.angle(ratio)))
+    return {"median_db": float(np.median(db)), "max_db": float(np.max(db)),
+            "median_deg": float(np.median(deg)), "max_deg": float(np.max(deg)),
+            "band_hz": [float(f.min()), float(f.max())]}
+
+
+def frd_margins(measured: Any, freq_hz: np.ndarray | None = None,
+                response: np.ndarray | None = None) -> dict[str, float]:
+    """Gain and phase margin of a measured broken-loop FRF over its coherent band; with
+    ``freq_hz`` and ``response``, those of that (predicted) response over the same band, for
+    a like-for-like comparison. The margins are ``control.stability_margins`` of
+    ``control.frd(h, ω)`` (:func:`frd_margins_at`: its interpolation and root finding, without
+    importing python-control; ``tests/test_frequency.py`` compares)."""
+    m = measured.coherent & np.isfinite(measured.response)
+    nan = {"gain_db": float("nan"), "phase_deg": float("nan"), "crossover_hz": float("nan")}
+    if m.sum() < 4:
+        return nan
+    f = measured.freq_hz[m]
+    h = measured.response[m]
+    if freq_hz is not None and response is not None:
+        h = np.interp(f, freq_hz, response.real) + 1j * np.interp(f, freq_hz, response.imag)
+    gm, pm, wc = frd_margins_at(h, 2 * np.pi * f)
+    return {"gain_db": margin_db(gm), "phase_deg": float(pm),
+            "crossover_hz": float(wc / (2 * np.pi))}
+
+
+def frd_margins_at(h: np.ndarray, w: np.ndarray) -> tuple[float, float, float]:
+    """``(gain margin, phase margin (deg), gain crossover (rad/s))`` of a frequency response
+    ``h`` at ``w`` (rad/s) as python-control's ``stability_margins`` of a smoothed FRD gives
+    them: a parametric interpolating spline through the real and imaginary parts (its
+    weights ``1/(|h| + 0.001)`` do not enter an interpolating fit), the −180° and unit-gain
+    crossings between the points located by Brent's method on it; the smallest ``|log GM|``
+    and ``|PM|``."""
+    order = np.argsort(w, kind="stable")
+    w, h = np.asarray(w, dtype=float)[order], np.asarray(h, dtype=complex)[order]
+    at = dsp.interpolating_spline(w, h)  # (FITPACK's s=0 curve: the weights do not enter)
+
+    def arg(x: float) -> float:
+        return float(np.angle(-at(x)))
+
+    def mod(x: float) -> float:
+        return float(np.abs(at(x))) - 1.0
+
+    hw = at(w)
+    idx = np.where(np.diff(np.sign(np.angle(-hw))))[0]
+    idx = idx[np.real(hw[idx]) <= 0]
+    w180 = np.array([dsp.brent_root(arg, w[i], w[i + 1]) for i in idx])
+    idx = np.where(np.diff(np.sign(np.abs(hw) - 1.0)))[0]
+    wc = np.array([dsp.brent_root(mod, w[i], w[i + 1]) for i in idx])
+    with np.errstate(all="ignore"):
+        gms = 1.0 / np.abs(at(w180)) if w180.size else np.zeros(0)
+        pms = (np.remainder(np.angle(at(wc), deg=True), 360.0) - 180.0 if wc.size
+               else np.zeros(0))
+        gm = float("inf")
+        if gms.size and not np.isinf(gms).all():
+            lg = np.abs(np.log(gms))
+            gm = float(gms[lg == np.min(lg)][0])
+    if not pms.size:
+        return gm, float("inf"), float("nan")
+    i = int(np.flatnonzero(np.abs(pms) == np.min(np.abs(pms)))[0])
+    return gm, float(pms[i]), float(wc[i])

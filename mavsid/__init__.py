@@ -4,7 +4,10 @@ The stages, each one module: :mod:`mavsid.readers` (log -> ``RawLog``),
 :mod:`mavsid.align` (-> ``FlightData``), :mod:`mavsid.excitation` (-> segments),
 :mod:`mavsid.estimators` (-> model), :mod:`mavsid.validation`, :mod:`mavsid.viz`.
 The estimators also stand alone on arrays: :func:`identify` (state-space models) and
-:func:`regress` (equation-error regression).
+:func:`regress` (equation-error regression). What mavsid knows about the firmware —
+message, topic and parameter names, SYSTEMID, flight modes, mixers, logging advice — is in
+:mod:`mavsid.autopilot` (adding a firmware touches only that package); the axis vocabulary
+(``roll``/``p``/``u_roll`` ...) in :mod:`mavsid.axes`.
 """
 
 from typing import TYPE_CHECKING, Any

@@ -1,6 +1,6 @@
 """RawLog -> FlightData: every state and input on one uniform time grid, in SI units.
 
-:func:`align` takes the channels a :class:`~mavsid.channels.Preset` names (chosen from the
+:func:`align` takes the channels a :class:`~mavsid.autopilot.presets.Preset` names (chosen from the
 log's content unless given) and
 
 - converts them to rad, rad/s and normalised inputs (motor PWMs through the frame's mixer);
@@ -62,33 +62,38 @@ from typing import Any
 
 import numpy as np
 
-from mavsid.channels import (
+from mavsid.autopilot.ardupilot import (
+    IMU_GYRO_FIELDS,
+    RC_MAP_AP,
+    SID_PARAMS,
+    SIDS_FIELDS,
+    SYSTEM_ID_DELAY_S,
+    SYSTEMID_MODE,
+)
+from mavsid.autopilot.mixers import MIXERS, Mixer, frame_name, frame_of, has_mixer
+from mavsid.autopilot.presets import (
     DESIRED_CHANNELS,
-    INPUT_NAMES,
-    MIXERS,
     PRESETS,
     QUADPLANE,
-    STATE_NAMES,
-    STATE_UNITS,
     Channel,
-    Mixer,
     Preset,
     choose_preset,
-    evaluate,
-    first_of,
-    frame_name,
-    frame_of,
     get_preset,
-    has_mixer,
     mixer_for,
-    motor_thrusts,
     preset_messages,
-    servo_inputs,
-    unit_origin,
     vehicle_kind,
 )
-from mavsid.channels import _resolve as _resolve
-from mavsid.channels import _rows as _rows
+from mavsid.autopilot.px4 import RC_MAP_PX4
+from mavsid.axes import INPUT_NAMES, STATE_NAMES, STATE_UNITS
+from mavsid.channels import (
+    evaluate,
+    first_of,
+    motor_thrusts,
+    resolve,
+    rows_of,
+    servo_inputs,
+    unit_origin,
+)
 from mavsid.data import FlightData, MessageTable, RawLog
 from mavsid.errors import (
     ConfigError,
@@ -253,8 +258,6 @@ def _collect(raw: RawLog, preset: Preset, mixers: Mapping[str, Mixer]
     return states, inputs, mixer_name
 
 
-#: IMU gyro field per body rate: the independent measurement a rate channel is checked by
-_GYRO = {"p": "GyrX", "q": "GyrY", "r": "GyrZ"}
 #: ArduCopter 3.4-dev logged RATE in centidegrees/s and its outputs on a ±4500 scale
 _CENTI = 0.01
 _OUT_SCALE = 4500.0
@@ -272,12 +275,12 @@ def _checked_scales(raw: RawLog, states: list[_Series], inputs: list[_Series]
     lands in the series' source (so ``fit`` shows it); nothing is rescaled silently.
     """
     notes: list[str] = []
-    rates = [s for s in states if s.source.startswith("RATE.") and s.name in _GYRO
+    rates = [s for s in states if s.source.startswith("RATE.") and s.name in IMU_GYRO_FIELDS
              and s.v.size >= 10]
     centi, why = False, ""
     checked = []
     for s in rates:  # by the IMU gyro, on the axis the gyro sees moving most
-        gyro = _col(raw, "IMU", _GYRO[s.name])
+        gyro = _col(raw, "IMU", IMU_GYRO_FIELDS[s.name])
         if gyro is None:
             continue
         ok = np.isfinite(gyro[0]) & np.isfinite(gyro[1])
@@ -295,8 +298,8 @@ def _checked_scales(raw: RawLog, states: list[_Series], inputs: list[_Series]
         if 30.0 < ratio < 300.0:
             centi = True
             why = (f"RATE body rates are {ratio:.0f}× the IMU gyro ({s.source} against "
-                   f"IMU.{_GYRO[s.name]}): logged in centidegrees/s (ArduCopter 3.4-dev), "
-                   "scaled by 0.01")
+                   f"IMU.{IMU_GYRO_FIELDS[s.name]}): logged in centidegrees/s (ArduCopter "
+                   "3.4-dev), scaled by 0.01")
     elif rates:
         top = max(float(np.percentile(np.abs(s.v), 99)) for s in rates)
         dev34 = bool(re.search(r"V3\.4[.\d]*-dev", raw.firmware or ""))
@@ -434,7 +437,7 @@ def _screen(raw: RawLog, ch: Channel, name: str, t: np.ndarray, v: np.ndarray
     settled: :func:`_possible`.)"""
     table = raw[ch.message]
     t_all = np.asarray(table.time_s, dtype=np.float64)
-    rows = _rows(table, ch.instance)
+    rows = rows_of(table, ch.instance)
     if rows is not None:
         t_all = t_all[rows]
     t_all = t_all[np.isfinite(t_all)]
@@ -792,10 +795,10 @@ def _more_motors(raw: RawLog, preset: Preset, n: int) -> list[int]:
     if ch is None or ch.message not in raw.messages:
         return []
     table = raw.messages[ch.message]
-    rows = _rows(table)
+    rows = rows_of(table)
     more = []
     for i in range(n + 1, 17):
-        got = _resolve(table, ch.field.replace("{i}", str(i)))
+        got = resolve(table, ch.field.replace("{i}", str(i)))
         if got is None:
             break
         v = np.asarray(got[0], dtype=np.float64)
@@ -894,17 +897,6 @@ def _flags(raw: RawLog, t: np.ndarray, inputs: np.ndarray, input_names: tuple[st
 
 # --------------------------------------------------------------------------- SYSTEMID
 
-_SIDS_FIELDS = {
-    "Ax": "axis", "Mag": "magnitude", "FSt": "f_start_hz", "FSp": "f_stop_hz",
-    "TFin": "t_fade_in_s", "TC": "t_const_freq_s", "TR": "t_record_s", "TFout": "t_fade_out_s",
-}
-_SID_PARAMS = {
-    "SID_AXIS": "axis", "SID_MAGNITUDE": "magnitude", "SID_F_START_HZ": "f_start_hz",
-    "SID_F_STOP_HZ": "f_stop_hz", "SID_T_FADE_IN": "t_fade_in_s", "SID_T_REC": "t_record_s",
-    "SID_T_FADE_OUT": "t_fade_out_s",
-}
-
-
 def _mode_spans(raw: RawLog, name: str) -> list[tuple[float, float]]:
     """[entry, exit) times of every stay in the mode called ``name``."""
     modes = sorted(raw.modes, key=lambda m: m.time_s)
@@ -942,7 +934,7 @@ def sysid_runs(raw: RawLog) -> list[dict[str, Any]]:
     [{'start_s': 6.0, 'stop_s': 8.0, 'settings_from': 'SIDS', 'axis': 10, 'magnitude': 0.05}]
     """
     runs: list[dict[str, Any]] = []
-    spans = _mode_spans(raw, "SYSTEMID")
+    spans = _mode_spans(raw, SYSTEMID_MODE)
     if "SIDS" in raw.messages and len(raw.messages["SIDS"]):
         sids = raw.messages["SIDS"]
         ts = np.asarray(sids.time_s, dtype=float)
@@ -965,7 +957,7 @@ def sysid_runs(raw: RawLog) -> list[dict[str, Any]]:
             else:
                 continue
             run: dict[str, Any] = {"start_s": start, "stop_s": stop, "settings_from": "SIDS"}
-            for f, key in _SIDS_FIELDS.items():
+            for f, key in SIDS_FIELDS.items():
                 if f in sids.columns:
                     val = float(np.asarray(sids.columns[f])[k])
                     run[key] = int(val) if key == "axis" else val
@@ -983,7 +975,7 @@ def sysid_runs(raw: RawLog) -> list[dict[str, Any]]:
         if not np.isfinite(b):
             continue
         run = {"start_s": float(a), "stop_s": float(b), "settings_from": "PARAM_VALUE"}
-        for pname, key in _SID_PARAMS.items():
+        for pname, key in SID_PARAMS.items():
             sel = np.flatnonzero((names == pname) & ~(times > a))
             if sel.size:
                 val = float(values[sel[np.argmax(times[sel])]])
@@ -1001,7 +993,7 @@ def sysid_runs(raw: RawLog) -> list[dict[str, Any]]:
 def _commanded(raw: RawLog, t: np.ndarray, boot: int = 0
                ) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     """The commanded attitude per axis on the grid ``t`` (interpolated; NaN outside its
-    span), from the first of :data:`mavsid.channels.DESIRED_CHANNELS` the log has, its
+    span), from the first of :data:`mavsid.autopilot.presets.DESIRED_CHANNELS` the log has, its
     records of the boot the grid is laid on (``boot``, see :func:`_boot_records`): roll and
     pitch angles (rad), and for yaw the commanded heading's rate (rad/s: the pilot commands
     a yaw rate, which the body rate follows; the heading unwrapped, central differences).
@@ -1039,13 +1031,6 @@ def _commanded(raw: RawLog, t: np.ndarray, boot: int = 0
 STICK_SOURCE = "the pilot's stick"
 
 
-#: per axis: the autopilot's parameter mapping an RC input channel to it (ArduPilot, PX4),
-#: and ArduPilot's default channel
-_STICK_MAP = {"roll": ("RCMAP_ROLL", "RC_MAP_ROLL", 1),
-              "pitch": ("RCMAP_PITCH", "RC_MAP_PITCH", 2),
-              "yaw": ("RCMAP_YAW", "RC_MAP_YAW", 4)}
-
-
 def _sticks(raw: RawLog) -> dict[str, tuple[str, np.ndarray, np.ndarray]]:
     """The pilot's roll, pitch and yaw sticks in a MAVLink log (``RC_CHANNELS``, the RC input
     the autopilot reads, or MAVLink 1's ``RC_CHANNELS_RAW``; the vehicle's): per axis the
@@ -1076,15 +1061,15 @@ def _sticks(raw: RawLog) -> dict[str, tuple[str, np.ndarray, np.ndarray]]:
             return {}
     times = np.asarray(table.time_s, float)
     rows = np.isfinite(times)
-    one = _rows(table)  # (the vehicle's)
+    one = rows_of(table)  # (the vehicle's)
     if one is not None:
         rows &= one
     if "port" in table.columns:  # (RC_CHANNELS_RAW's channels 9-16 come on port 1)
         rows &= np.asarray(table.columns["port"]) == 0
     px4 = raw.autopilot == "px4"
     out: dict[str, tuple[str, np.ndarray, np.ndarray]] = {}
-    for axis, (ardupilot, px4_name, default) in _STICK_MAP.items():
-        got = raw.params.get(px4_name if px4 else ardupilot, None if px4 else default)
+    for axis, (ardupilot, default) in RC_MAP_AP.items():
+        got = raw.params.get(RC_MAP_PX4[axis] if px4 else ardupilot, None if px4 else default)
         if got is None or not 1 <= got <= 18 or got != int(got):
             continue
         n = int(got)
@@ -1135,10 +1120,6 @@ def _sysid_injection(raw: RawLog, t: np.ndarray, boot: int = 0) -> np.ndarray | 
     return _resampled(ts, targ, t, 0.0)  # between runs SIDD is not logged: no injection there
 
 
-#: ArduCopter waits this long after entering SYSTEMID before injecting (SYSTEM_ID_DELAY)
-SYSTEM_ID_DELAY_S = 1.0
-
-
 def _chirp_span(enter: float, leave: float, run: Mapping[str, Any]) -> tuple[float, float]:
     """The injection inside a SYSTEMID mode stay: from SYSTEM_ID_DELAY after entry for
     SID_T_REC seconds, cut at the mode exit (the whole stay when SID_T_REC is unknown)."""
@@ -1184,7 +1165,7 @@ def align(
     rate_hz : float, optional
         Grid rate, Hz; default the body-rate (else attitude) channel's own rate.
     presets, mixers : Mapping, optional
-        User presets and mixers (:func:`mavsid.channels.load_presets`), tried first.
+        User presets and mixers (:func:`mavsid.autopilot.config.load_presets`), tried first.
     max_gap : float
         A pause longer than this many of a channel's median sample intervals splits blocks.
     min_input_rate_hz : float

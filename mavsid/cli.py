@@ -26,6 +26,7 @@ from collections.abc import Callable, Iterator, Sequence
 from typing import TYPE_CHECKING, Any, NoReturn
 
 from mavsid import __version__
+from mavsid.axes import AXES
 from mavsid.errors import (
     ConfigError,
     MavsidError,
@@ -182,7 +183,7 @@ def _add_segments(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         help="list the well-excited windows of a log, and why the others were rejected",
     )
     p.add_argument("log", help="flight log (.bin, .log, .tlog, .ulg)")
-    p.add_argument("--axis", choices=("roll", "pitch", "yaw"), help="one axis only")
+    p.add_argument("--axis", choices=AXES, help="one axis only")
     p.add_argument("--json", action="store_true", help="print a JSON list of windows")
     p.add_argument("--all", action="store_true", help="list every rejected scan window")
     p.add_argument("--scan", action="store_true",
@@ -237,7 +238,7 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--manoeuvre", default="sysid",
                    choices=("sysid", "doublet", "3211", "random", "hover"),
                    help="excitation (default sysid: an ArduPilot SYSTEMID chirp)")
-    p.add_argument("--axis", choices=("roll", "pitch", "yaw"), default="roll",
+    p.add_argument("--axis", choices=AXES, default="roll",
                    help="stick axis of a manoeuvre; mixer axis of the default chirp (roll)")
     p.add_argument("--sid-axis", type=int, action="append", metavar="N",
                    help="SID_AXIS 1-13 of a SYSTEMID run (repeat for several runs)")
@@ -441,7 +442,7 @@ def _preset_arg(preset: str | None) -> tuple[str | None, dict[str, Any] | None,
                                               dict[str, Any] | None]:
     """``--preset``: a preset's name, or a TOML file's presets and mixers (name None)."""
     if preset and preset.lower().endswith(".toml"):
-        from mavsid.channels import load_presets
+        from mavsid.autopilot.config import load_presets
 
         presets, mixers = load_presets(preset)
         return None, dict(presets), dict(mixers)
@@ -455,12 +456,12 @@ def _add_quiet_flag(p: argparse.ArgumentParser) -> None:
 
 def _add_preset_flag(p: argparse.ArgumentParser) -> None:
     p.add_argument("--preset", metavar="NAME",
-                   help="channel preset name (mavsid.channels), or a TOML file of presets and "
-                   "mixers to choose from (default: chosen from the log)")
+                   help="channel preset name (mavsid.autopilot.presets), or a TOML file of "
+                   "presets and mixers to choose from (default: chosen from the log)")
 
 
 def _add_output_flags(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--axis", action="append", choices=("roll", "pitch", "yaw"),
+    p.add_argument("--axis", action="append", choices=AXES,
                    help="axis to fit (repeat for several; default all with excitation)")
     p.add_argument("--config", metavar="FILE.toml", help="pipeline settings (see pipelines/)")
     _add_preset_flag(p)
@@ -576,7 +577,7 @@ def _add_view(sub: argparse._SubParsersAction) -> None:
     p.add_argument("log", metavar="LOG", help="flight log (.bin .log .tlog .ulg)")
     p.add_argument("--model", metavar="model.json", help="models written by mavsid fit -o")
     p.add_argument("--config", metavar="FILE.toml", help="pipeline settings (see pipelines/)")
-    p.add_argument("--axis", action="append", choices=("roll", "pitch", "yaw"),
+    p.add_argument("--axis", action="append", choices=AXES,
                    help="axis to show (repeat for several)")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--spawn", action="store_true",
@@ -688,7 +689,7 @@ def _add_tune(sub: argparse._SubParsersAction) -> None:
     p.add_argument("log", metavar="LOG", help="flight log (.bin .log .tlog .ulg)")
     p.add_argument("--target-pm", type=float, default=50.0, metavar="DEG",
                    help="phase margin the suggested gains aim at (default 50)")
-    p.add_argument("--axis", action="append", choices=("roll", "pitch", "yaw"),
+    p.add_argument("--axis", action="append", choices=AXES,
                    help="axis to analyse (repeat for several; default all)")
     p.add_argument("--config", metavar="FILE.toml", help="pipeline settings (see pipelines/)")
     _add_preset_flag(p)

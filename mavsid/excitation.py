@@ -102,6 +102,8 @@ from typing import Any
 import numpy as np
 
 from mavsid import dsp
+from mavsid.autopilot.ardupilot import sid_axis
+from mavsid.axes import AXES, RATE_OF
 from mavsid.data import FlightData, Segment, detrend_linear
 from mavsid.errors import ConfigError, finite_number
 
@@ -111,28 +113,7 @@ __all__ = [
     "WindowReport",
     "find_segments",
     "select_segments",
-    "sid_axis_name",
 ]
-
-AXES: tuple[str, ...] = ("roll", "pitch", "yaw")
-_RATE = {"roll": "p", "pitch": "q", "yaw": "r"}
-_INJECTION = {0: "input angle", 1: "recovery angle", 2: "rate", 3: "mixer"}
-
-
-def sid_axis_name(sid_axis: int) -> tuple[str, str]:
-    """ArduCopter ``SID_AXIS`` -> (axis, injection point).
-
-    Examples
-    --------
-    >>> sid_axis_name(10), sid_axis_name(13)
-    (('roll', 'mixer'), ('thrust', 'mixer'))
-    """
-    if 1 <= sid_axis <= 12:
-        return AXES[(sid_axis - 1) % 3], _INJECTION[(sid_axis - 1) // 3]
-    if sid_axis == 13:
-        return "thrust", "mixer"
-    return "other", f"SID_AXIS {sid_axis}"
-
 
 def _interval(lo: float, hi: float) -> str:
     """``[lo, hi]`` as text (``(0, hi]`` where 0 is excluded).
@@ -340,7 +321,7 @@ def _airborne(fd: FlightData) -> np.ndarray:
 def _axis(fd: FlightData, name: str, opts: ScanOptions, air: np.ndarray) -> _Axis:
     u_name = f"u_{name}"
     u = _col(fd, u_name)
-    y_name = _RATE[name] if _RATE[name] in fd.state_names else name
+    y_name = RATE_OF[name] if RATE_OF[name] in fd.state_names else name
     y = _col(fd, y_name)
     sel = air if air.any() else np.ones_like(air)
     floor = opts.min_floor
@@ -796,7 +777,7 @@ def _sysid_windows(fd: FlightData, axes: Sequence[str], axes_cache: Mapping[str,
     assert isinstance(runs, Iterable)
     for run in runs:
         sid = int(run.get("axis", 0))
-        name, injection = sid_axis_name(sid)
+        name, injection = sid_axis(sid)
         settings = {k: v for k, v in run.items() if k not in ("start_s", "stop_s")}
         meta: dict[str, Any] = {"sid_axis": sid, "injection": injection, "sysid": settings}
         notes: list[str] = []

@@ -152,7 +152,7 @@ def read_for_summary(path: str | os.PathLike[str], **options: Any) -> RawLog:
     (330, 15)
     """
     from mavsid.align import FLAG_MESSAGES
-    from mavsid.channels import preset_messages
+    from mavsid.autopilot.presets import preset_messages
     from mavsid.readers import read_log, sniff_format
 
     fmt = sniff_format(path)

@@ -13,7 +13,7 @@ TOML configuration (every key optional)::
 
     [pipeline]
     name = "ArduCopter SYSTEMID rate loop"
-    preset = "ardupilot-rate"    # channel preset (mavsid.channels); default from the log
+    preset = "ardupilot-rate"    # channel preset (mavsid.autopilot.presets); default from the log
     presets_file = "my.toml"     # extra presets/mixers (relative to this file)
     rate_hz = 400.0              # alignment grid; default the body-rate channel's rate
     axes = ["roll", "pitch", "yaw"]
@@ -57,7 +57,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from mavsid.channels import QUADPLANE, source_text
+from mavsid.autopilot.presets import QUADPLANE
+from mavsid.axes import AXES, INPUT_OF, RATE_OF, RATES
+from mavsid.channels import source_text
 from mavsid.data import FlightData, Segment
 from mavsid.errors import (
     ConfigError,
@@ -69,7 +71,7 @@ from mavsid.errors import (
     whole_number,
 )
 from mavsid.threads import one_blas_thread
-from mavsid.validation import AXIS_RATE, DEFAULT_HORIZONS_S, Model, Validation, validate
+from mavsid.validation import DEFAULT_HORIZONS_S, Model, Validation, validate
 from mavsid.verdict import Verdict, format_fit, judge, unfitted
 
 if TYPE_CHECKING:
@@ -94,7 +96,6 @@ __all__ = [
     "validation_figures",
 ]
 
-AXES = ("roll", "pitch", "yaw")
 ESTIMATORS = ("ls", "ridge", "l1")
 SEGMENT_SOURCES = ("auto", "sysid", "scan")
 #: The horizon (s) reported between one step and free run (``fit_percent["0.5s"]``).
@@ -325,7 +326,7 @@ def load_config(path: str | os.PathLike[str]) -> PipelineConfig:
     """Read a pipeline TOML file.
 
     ``pipeline.presets_file`` may name a TOML file of channel presets and mixers
-    (:func:`mavsid.channels.load_presets`; a relative path is taken from the config's
+    (:func:`mavsid.autopilot.config.load_presets`; a relative path is taken from the config's
     folder); they are tried before the built-in ones.
 
     Raises
@@ -333,9 +334,9 @@ def load_config(path: str | os.PathLike[str]) -> PipelineConfig:
     ConfigError
         The file cannot be read, is not TOML, or has unknown keys or bad values.
     """
-    from mavsid.channels import _read_toml, load_presets
+    from mavsid.autopilot.config import load_presets, read_toml
 
-    data = _read_toml(path)
+    data = read_toml(path)
     section = data.get("pipeline")
     extra = section.pop("presets_file", None) if isinstance(section, dict) else None
     cfg = config_from_dict(data, path=os.fspath(path))
@@ -440,7 +441,7 @@ class AxisFit:
     @property
     def output(self) -> str:
         """The output that represents the axis (its body rate when the model predicts it)."""
-        rate = AXIS_RATE.get(self.axis, "")
+        rate = RATE_OF.get(self.axis, "")
         return rate if rate in self.validation.state_names else self.validation.state_names[0]
 
     def to_dict(self) -> dict[str, Any]:
@@ -618,7 +619,7 @@ POOL_RATE_RATIO = 0.5
 
 
 def _slowest_rate(fd: FlightData,
-                  names: Sequence[str] = ("p", "q", "r", "u_roll", "u_pitch", "u_yaw")
+                  names: Sequence[str] = (*RATES, *INPUT_OF.values())
                   ) -> float | None:
     """The slowest native rate (Hz) of a flight's channels ``names`` (default: the body
     rates and attitude inputs the rate models are fitted on), if known."""
@@ -728,7 +729,7 @@ def _nothing(logs: Sequence[str | os.PathLike[str]], verdicts: Mapping[str, Verd
 
 def _missing_rate(axis: str, flights: Sequence[FlightData]) -> str:
     """Why ``axis`` cannot be modelled for want of its body rate (empty when it is logged)."""
-    rate = AXIS_RATE.get(axis, "")
+    rate = RATE_OF.get(axis, "")
     lacking = [fd for fd in flights if rate and rate not in fd.state_names]
     if not lacking:
         return ""

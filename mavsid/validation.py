@@ -50,6 +50,7 @@ from typing import Any, Protocol, TypeVar, runtime_checkable
 import numpy as np
 
 from mavsid import dsp
+from mavsid.axes import RATE_OF
 from mavsid.data import Segment, demean
 from mavsid.errors import ConfigError, NoExcitationError
 
@@ -72,9 +73,6 @@ __all__ = [
 
 #: Prediction horizons (seconds) at which fit % is reported besides one step and free run.
 DEFAULT_HORIZONS_S: tuple[float, ...] = (0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0)
-
-#: The body rate that each attitude axis drives.
-AXIS_RATE = {"roll": "p", "pitch": "q", "yaw": "r"}
 
 
 @runtime_checkable
@@ -842,7 +840,7 @@ def _chirp_responses(
     axes = {seg.axis for seg, _ in chirps}
     for axis in sorted(axes):
         u_name = f"u_{axis}" if f"u_{axis}" in model.input_names else model.input_names[0]
-        rate = AXIS_RATE.get(axis, "")
+        rate = RATE_OF.get(axis, "")
         y_name = rate if rate in model.state_names else model.state_names[0]
         if (u_name, y_name) not in pairs:
             pairs.append((u_name, y_name))

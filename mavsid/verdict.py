@@ -20,14 +20,16 @@ Examples
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-__all__ = ["FIT_FLOOR_PCT", "LEVELS", "Verdict", "format_fit", "judge", "logging_advice",
+from mavsid.autopilot import excitation_advice, logging_advice, longer_advice
+from mavsid.axes import INPUT_OF, RATE_OF
+
+__all__ = ["FIT_FLOOR_PCT", "LEVELS", "Verdict", "format_fit", "judge",
            "not_identified", "unfitted"]
 
 #: The verdict levels, best first.
@@ -151,96 +153,6 @@ def _pct(value: float | None) -> str:
     """``93.4 %`` or ``diverges (< -100 %)``."""
     text = format_fit(value)
     return text.replace(")", " %)") if text.startswith("diverges") else f"{text} %"
-
-
-def excitation_advice(axis: str, autopilot: str | None) -> str:
-    """What to fly next time to excite ``axis``, on this autopilot.
-
-    >>> excitation_advice("roll", "ardupilot")[:48]
-    'fly a SYSTEMID mixer chirp on roll (SID_AXIS 10)'
-    >>> excitation_advice("yaw", "px4")[:52]
-    'fly sharp stick doublets or a 3-2-1-1 on yaw in ACRO'
-    >>> excitation_advice("yaw", "ardupilot plane ArduPlane V4.5.7 quadplane")[:60]
-    'fly sharp stick doublets or a 3-2-1-1 on yaw in QACRO or QST'
-    """
-    if autopilot and "px4" in autopilot.lower():
-        return (f"fly sharp stick doublets or a 3-2-1-1 on {axis} in ACRO (PX4 has no SYSTEMID "
-                "chirp mode), with SDLOG_PROFILE logging the rate controller at full rate")
-    if autopilot and autopilot.endswith("quadplane"):
-        return (f"fly sharp stick doublets or a 3-2-1-1 on {axis} in QACRO or QSTABILIZE "
-                "(ArduPlane has no SYSTEMID mode)")
-    if _is_plane(autopilot):
-        return (f"fly sharp stick doublets or a 3-2-1-1 on {axis} in ACRO or MANUAL (ArduPlane "
-                "has no SYSTEMID mode)")
-    if _before_rate(autopilot):
-        return (f"fly sharp stick doublets on {axis} in a non-self-levelling mode (ACRO; "
-                "SYSTEMID came with ArduCopter 4.1)")
-    return (f"fly a SYSTEMID mixer chirp on {axis} (SID_AXIS {_SID_AXIS.get(axis, '?')}) or "
-            f"sharp stick doublets on {axis} in a non-self-levelling mode (ACRO)")
-
-
-def longer_advice(autopilot: str | None) -> str:
-    """What to fly when the excitation was too short, on this autopilot.
-
-    >>> longer_advice("px4")
-    'fly longer excitation (30 s of doublets or 3-2-1-1s in ACRO)'
-    """
-    if autopilot and "px4" in autopilot.lower():
-        return "fly longer excitation (30 s of doublets or 3-2-1-1s in ACRO)"
-    if _is_plane(autopilot) or _before_rate(autopilot):
-        return "fly longer excitation (30 s of doublets or 3-2-1-1s)"
-    return "fly longer excitation (a 20-s SYSTEMID chirp or 30 s of doublets)"
-
-
-def _is_plane(autopilot: str | None) -> bool:
-    """Whether the platform text (:func:`_autopilot`) names an ArduPlane log."""
-    return bool(autopilot) and bool(re.search(r"\bplane\b|ArduPlane", str(autopilot), re.I))
-
-
-def _before_rate(autopilot: str | None) -> bool:
-    """Whether the platform text names an ArduCopter older than 3.3 (no RATE record).
-
-    >>> _before_rate("ardupilot copter ArduCopter V3.2.1 (abc)"), _before_rate("ArduCopter V3.3")
-    (True, False)
-    """
-    return bool(autopilot) and bool(re.search(r"ArduCopter V3\.[0-2]\b", str(autopilot)))
-
-
-def logging_advice(autopilot: str | None, telemetry: bool = False) -> str:
-    """Which logging setting to change to log body rates and controller outputs fast.
-
-    ``telemetry``: the logs are a ground station's MAVLink telemetry (``.tlog``), whose
-    rates are the streams' (ArduPilot ``SRn_*``), not the on-board log's: the advice says
-    so and names the on-board log's setting for the log to fit instead.
-
-    Examples
-    --------
-    >>> logging_advice("PX4").startswith("PX4: set SDLOG_PROFILE")
-    True
-    >>> logging_advice("ArduPilot", telemetry=True).split(":")[0]
-    'a .tlog holds what the telemetry streams sent (ArduPilot SRn_EXTRA1'
-    """
-    if telemetry:
-        return ("a .tlog holds what the telemetry streams sent (ArduPilot SRn_EXTRA1: "
-                "ATTITUDE, SRn_RC_CHAN: SERVO_OUTPUT_RAW; at most 50 Hz): fit the flight "
-                "controller's own log from its SD card instead; "
-                + logging_advice(autopilot))
-    if autopilot and "px4" in autopilot.lower():
-        return ("PX4: set SDLOG_PROFILE to include 'high rate' (bit 1) or 'system identification'"
-                " (bit 4) so that vehicle_angular_velocity and the torque/actuator setpoints are "
-                "logged at 100 Hz or more")
-    if autopilot and autopilot.endswith("quadplane"):
-        return ("ArduPlane: set LOG_BITMASK's fast attitude logging so that PIQR/PIQP/PIQY (the "
-                "body rates and the VTOL rate controllers' outputs) are logged at 100 Hz or more")
-    if _is_plane(autopilot):
-        return ("ArduPlane: set LOG_BITMASK's fast attitude logging so that PIDR/PIDP/PIDY (the "
-                "body rates and the roll/pitch/yaw controllers' outputs) are logged at 100 Hz "
-                "or more")
-    if _before_rate(autopilot):
-        return ("ArduCopter before 3.3 logs no RATE record and RCOU at 10 Hz: fly 3.3 or later "
-                "with LOG_BITMASK bits ATTITUDE_FAST and ATTITUDE_MED (RATE at loop rate)")
-    return ("ArduPilot: set LOG_BITMASK bit ATTITUDE_FAST (with ATTITUDE_MED) so that RATE, "
-            "the body rates and the rate controller's outputs, is logged at loop rate")
 
 
 def _pole(z: complex, dt: float) -> float:
@@ -544,7 +456,7 @@ def _autopilot(flights: Sequence[Any]) -> str | None:
     for fd in flights:
         meta = getattr(fd, "meta", None)
         if meta and meta.get("autopilot"):
-            from mavsid.channels import QUADPLANE
+            from mavsid.autopilot.presets import QUADPLANE
 
             vtol = "quadplane" if getattr(fd, "preset", "") == QUADPLANE else ""
             words = (meta.get("autopilot"), meta.get("vehicle"), meta.get("firmware"), vtol)
@@ -552,8 +464,6 @@ def _autopilot(flights: Sequence[Any]) -> str | None:
     return None
 
 
-_SID_AXIS = {"roll": 10, "pitch": 11, "yaw": 12}
-_RATE_OF = {"roll": "p", "pitch": "q", "yaw": "r"}
 
 
 def unfitted(axis: str, why: str, windows: Sequence[Any] = (), flights: Sequence[Any] = (),
@@ -579,7 +489,7 @@ def unfitted(axis: str, why: str, windows: Sequence[Any] = (), flights: Sequence
     reasons: list[str] = []
     advice: list[str] = []
     numbers: dict[str, float | None] = {}
-    rate = _rates(flights, (_RATE_OF.get(axis, axis), f"u_{axis}"))
+    rate = _rates(flights, (RATE_OF.get(axis, axis), INPUT_OF.get(axis, f"u_{axis}")))
     if rate is not None:
         numbers["log_rate_hz"] = rate
         slow = _too_slow(rate, flights)

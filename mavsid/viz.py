@@ -53,10 +53,10 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from mavsid.channels import STATE_UNITS
+from mavsid.axes import AXES, INPUT_OF, RATE_OF, RATES, STATE_UNITS, THRUST_INPUT
 from mavsid.data import FlightData, Segment, decimate
 from mavsid.errors import ConfigError
-from mavsid.validation import AXIS_RATE, Validation, horizon_label
+from mavsid.validation import Validation, horizon_label
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -156,16 +156,14 @@ def _style(rec: rr.RecordingStream, path: str, colour: Sequence[int], name: str)
 KINDS: dict[str, tuple[str, ...]] = {
     "attitude": ("roll", "pitch"),
     "heading": ("yaw",),
-    "rates": ("p", "q", "r"),
-    "inputs": ("u_roll", "u_pitch", "u_yaw"),
-    "thrust": ("u_thrust",),
+    "rates": RATES,
+    "inputs": tuple(INPUT_OF.values()),
+    "thrust": (THRUST_INPUT,),
 }
 #: One colour per series: roll-like red, pitch-like green, yaw-like blue, thrust grey.
 SERIES_COLOURS: dict[str, tuple[int, int, int]] = {
-    "roll": AXIS_COLOURS["roll"], "p": AXIS_COLOURS["roll"], "u_roll": AXIS_COLOURS["roll"],
-    "pitch": AXIS_COLOURS["pitch"], "q": AXIS_COLOURS["pitch"], "u_pitch": AXIS_COLOURS["pitch"],
-    "yaw": AXIS_COLOURS["yaw"], "r": AXIS_COLOURS["yaw"], "u_yaw": AXIS_COLOURS["yaw"],
-    "u_thrust": MEASURED,
+    **{name: AXIS_COLOURS[a] for a in AXES for name in (a, RATE_OF[a], INPUT_OF[a])},
+    THRUST_INPUT: MEASURED,
 }
 
 
@@ -220,8 +218,8 @@ def log_flight(rec: rr.RecordingStream, flight: FlightData, prefix: str = "fligh
                 parts.append((t[i], data[i, j]))
             tt, vv = _joined(parts)
             _send_series(rec, path, tt, vv)
-    if all(n in flight.state_names for n in ("roll", "pitch", "yaw")):
-        idx = [flight.state_names.index(n) for n in ("roll", "pitch", "yaw")]
+    if all(n in flight.state_names for n in AXES):
+        idx = [flight.state_names.index(n) for n in AXES]
         log_attitude(rec, "world/data" + (f"/{tag}" if tag else ""), t, flight.states[:, idx],
                      colour=MEASURED)
 
@@ -298,7 +296,7 @@ def _model_attitude(segment: Segment, rate_name: str, rate_hat: np.ndarray) -> n
         np.isfinite(rate_hat), rate_hat, rates[:, "pqr".index(rate_name)]
     )
     phi, theta, psi = (float(v) for v in
-                       segment.states[0, [names.index(n) for n in ("roll", "pitch", "yaw")]])
+                       segment.states[0, [names.index(n) for n in AXES]])
     dt = float(segment.dt)
     # roll and pitch step by step (each step needs the last), in Python floats: a numpy
     # call per step costs 10×; yaw feeds back into neither, so its steps follow from them
@@ -730,7 +728,7 @@ def log_validation(
             path = f"axes/{axis}/inputs/{name}"
             _style(rec, path, INPUT, name)
             _send_series(rec, path, *_joined(parts))
-    rate = AXIS_RATE.get(axis, "")
+    rate = RATE_OF.get(axis, "")
     if rate in v.state_names and segments:
         j = v.state_names.index(rate)
         for i, (seg, sv) in enumerate(zip(segments, v.segments, strict=False)):
@@ -824,8 +822,8 @@ def blueprint(
     for axis in axes:
         per_axis.append(
             rrb.Vertical(
-                _time_view(f"axes/{axis}", f"{axis}: {AXIS_RATE.get(axis, axis)} "
-                           f"[{STATE_UNITS.get(AXIS_RATE.get(axis, ''), '?')}] measured / "
+                _time_view(f"axes/{axis}", f"{axis}: {RATE_OF.get(axis, axis)} "
+                           f"[{STATE_UNITS.get(RATE_OF.get(axis, ''), '?')}] measured / "
                            "one-step / free-run",
                            contents=["$origin/**", f"- axes/{axis}/inputs/**"]),
                 _time_view(f"axes/{axis}/inputs", f"{axis}: inputs [1]"),

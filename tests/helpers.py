@@ -5,8 +5,13 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
+import numpy as np
 import pytest
+
+if TYPE_CHECKING:
+    from mavsid.data import RawLog
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared"
@@ -69,3 +74,15 @@ def assert_info_matches_golden(raw: object, path: Path) -> None:
         golden.write_text(text)
         pytest.skip(f"rewrote {golden}")
     assert text == golden.read_text()
+
+
+def table_log(fmt: str, tables: dict[str, dict[str, np.ndarray]], **kw: dict) -> RawLog:
+    """A RawLog of format ``fmt`` from column tables, each sampled at 100 Hz (``kw``: a
+    table's extra MessageTable arguments, by name)."""
+    from mavsid.data import MessageTable, RawLog, SourceInfo
+
+    msgs = {}
+    for name, cols in tables.items():
+        n = len(next(iter(cols.values())))
+        msgs[name] = MessageTable(name, cols, time_s=np.arange(n) * 0.01, **kw.pop(name, {}))
+    return RawLog(SourceInfo(f"x.{fmt}", fmt, 0), msgs)

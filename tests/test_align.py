@@ -12,7 +12,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from mavsid.align import MAX_GAP_SAMPLES, align, load_flight, sysid_runs
-from mavsid.channels import Channel, Preset
+from mavsid.autopilot.presets import Channel, Preset
 from mavsid.data import MessageTable, ModeChange, RawLog, SourceInfo
 from mavsid.errors import DataQualityWarning, MavsidError
 

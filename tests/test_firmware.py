@@ -14,7 +14,7 @@ import pytest
 from helpers import shared_path
 
 from mavsid.align import _armed_events, align
-from mavsid.channels import pwm_to_thrust
+from mavsid.autopilot.ardupilot import pwm_to_thrust
 from mavsid.data import MessageTable, RawLog, SourceInfo
 from mavsid.errors import DataQualityWarning, MissingMessageError, NoExcitationError
 from mavsid.info import format_summary, summarize
@@ -217,7 +217,7 @@ def test_the_readme_preset_file_loads_and_fits(tmp_path) -> None:  # type: ignor
 
     from helpers import FIXTURES
 
-    from mavsid.channels import load_presets
+    from mavsid.autopilot.config import load_presets
 
     readme = (Path(__file__).parent.parent / "README.md").read_text()
     block = re.search(r"```toml\n(.*?)```", readme, re.S)
@@ -553,7 +553,8 @@ def test_plane_layout_fits_from_the_pid_sums_and_from_the_servos(tmp_path) -> No
 def test_servo_inputs_follow_the_servo_parameters() -> None:
     """A reversed servo flips its axis; an aileron on output 5 is found by its function; a
     log without servo functions names what is missing; a TRIM outside MIN..MAX is refused."""
-    from mavsid.channels import PRESETS, servo_inputs
+    from mavsid.autopilot.presets import PRESETS
+    from mavsid.channels import servo_inputs
     from mavsid.errors import ConfigError
 
     t = np.arange(4.0)
@@ -604,7 +605,9 @@ def test_a_real_plane_log_reaches_a_verdict() -> None:
 def test_a_toml_servo_preset_applies_to_its_vehicle_only(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """``servos`` and ``vehicles`` in a TOML preset: the plane preset reads the servos of a
     plane log and is never chosen for a copter."""
-    from mavsid.channels import choose_preset, load_presets, servo_inputs
+    from mavsid.autopilot.config import load_presets
+    from mavsid.autopilot.presets import choose_preset
+    from mavsid.channels import servo_inputs
 
     path = tmp_path / "p.toml"
     path.write_text('''[preset.my-plane]

@@ -17,7 +17,7 @@ from helpers import FIXTURES, ROOT, shared_path
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mavsid.channels import get_preset
+from mavsid.autopilot.presets import get_preset
 from mavsid.data import Segment
 from mavsid.errors import ConfigError, NoExcitationError
 from mavsid.pipeline import (

@@ -738,7 +738,7 @@ def test_a_toml_mixer_of_raw_factors_unmixes_a_frame_the_log_does_not_name(
     preset naming it: the inputs are the ones the frame's parameters give, and the model's
     B is near the truth."""
     from mavsid.align import align
-    from mavsid.channels import load_presets
+    from mavsid.autopilot.config import load_presets
 
     raw = _simulated_raw(tmp_path / "y6b.tlog", None, manoeuvre="sysid", axis="roll",
                          vehicle="hexa", frame="y6b", seed=3)

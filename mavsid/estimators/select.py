@@ -53,6 +53,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from mavsid.axes import AXES as ATTITUDE_AXES
+from mavsid.axes import INPUT_OF, RATE_OF, RATES
 from mavsid.data import Segment
 from mavsid.errors import ConfigError, NoExcitationError
 from mavsid.estimators import library
@@ -83,10 +85,8 @@ __all__ = [
 
 #: Axis -> (modelled states, inputs).
 AXES: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
-    "roll": (("p",), ("u_roll",)),
-    "pitch": (("q",), ("u_pitch",)),
-    "yaw": (("r",), ("u_yaw",)),
-    "all": (("p", "q", "r"), ("u_roll", "u_pitch", "u_yaw")),
+    **{a: ((RATE_OF[a],), (INPUT_OF[a],)) for a in ATTITUDE_AXES},
+    "all": (RATES, tuple(INPUT_OF.values())),
 }
 
 #: Default candidates for a first-order input (motor) lag, s.

@@ -70,9 +70,9 @@ from types import ModuleType
 
 import numpy as np
 
+from mavsid.autopilot.modes import ardupilot_modes
 from mavsid.data import MessageTable, ModeChange, RawLog, SourceInfo, TextMessage
 from mavsid.errors import ConfigError, DataQualityWarning, LogFormatError
-from mavsid.readers.modes import ardupilot_modes
 
 _scan: ModuleType | None
 try:  # the header scan compiled (setup.py); absent where the package was built without a C
@@ -1275,7 +1275,7 @@ def vehicle_and_firmware(
 
 
 def _mode_names(vehicle: str | None) -> dict[int, str]:
-    """Mode number -> name for the vehicle type (:mod:`mavsid.readers.modes`)."""
+    """Mode number -> name for the vehicle type (:mod:`mavsid.autopilot.modes`)."""
     return dict(ardupilot_modes(vehicle) or {})
 
 

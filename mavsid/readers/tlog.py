@@ -36,7 +36,7 @@ has unit ``"instance"``. ``MessageTable.time_s`` is the vehicle's clock:
 
 ``PARAM_VALUE`` gives ``params``, ``STATUSTEXT`` the text messages (chunks joined), the
 ``HEARTBEAT``'s ``custom_mode`` the mode changes (names from the ArduPilot and PX4 mode
-tables of :mod:`mavsid.readers.modes`, pymavlink's names) and ``autopilot`` — all of the
+tables of :mod:`mavsid.autopilot.modes`, pymavlink's names) and ``autopilot`` — all of the
 main vehicle: the first system whose heartbeat is neither a ground station, gimbal, ADS-B
 receiver, onboard computer nor ``MAV_AUTOPILOT_INVALID``, as pymavlink picks it.
 
@@ -84,9 +84,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from mavsid.autopilot.modes import ardupilot_modes, px4_mode_name
 from mavsid.data import MessageTable, ModeChange, RawLog, SourceInfo, TextMessage
 from mavsid.errors import ConfigError, DataQualityWarning, LogFormatError
-from mavsid.readers.modes import ardupilot_modes, px4_mode_name
 
 __all__ = ["MessageDef", "load_dialect", "read", "vehicle_class"]
 
@@ -772,7 +772,7 @@ def _modes(hb: MessageTable | None, vehicle: tuple[int, int, int, int]) -> tuple
 
 def _mode_names(autopilot: int, mav_type: int) -> Any:
     """mode number -> name (or None), from the ArduPilot and PX4 mode tables
-    (:mod:`mavsid.readers.modes`)."""
+    (:mod:`mavsid.autopilot.modes`)."""
     if autopilot == 12:
         return px4_mode_name
     table = ardupilot_modes(mav_type) if autopilot == 3 else None

@@ -157,9 +157,9 @@ from typing import Any, Generic, TypeVar
 import numpy as np
 from numpy.typing import NDArray
 
+from mavsid.autopilot.modes import NAV_STATES
 from mavsid.data import MessageTable, ModeChange, RawLog, SourceInfo, TextMessage
 from mavsid.errors import DataQualityWarning, LogFormatError, first_few
-from mavsid.readers.modes import NAV_STATES
 from mavsid.readers.tlog import vehicle_class
 
 _scan: ModuleType | None

@@ -37,6 +37,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 from scipy.signal import cont2discrete
 
+from mavsid.axes import AXES
 from mavsid.dsp import Lowpass2p, lowpass2p_coefficients
 from mavsid.errors import ConfigError
 
@@ -51,7 +52,6 @@ __all__ = [
     "lowpass2p_filter",
 ]
 
-AXES = ("roll", "pitch", "yaw")
 
 
 def _triple(x: tuple[float, float, float], name: str) -> tuple[float, float, float]:

@@ -4,7 +4,7 @@ importing pymavlink.
 The readers name the modes a log records (DataFlash ``MODE`` records, a ``.tlog``'s
 ``HEARTBEAT.custom_mode``). The numbers are the autopilots' own mode enumerations, as
 pymavlink presents them (``mavutil.mode_mapping_bynumber``, ``mavutil.interpret_px4_mode``;
-``tests/test_modes.py`` checks these tables against the installed pymavlink). Importing
+``tests/test_autopilot_modes.py`` checks these tables against the installed pymavlink). Importing
 ``pymavlink.mavutil`` only for these tables cost a cold read ~40 ms.
 
 Examples

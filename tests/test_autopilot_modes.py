@@ -7,8 +7,8 @@ import sys
 
 import pytest
 
+from mavsid.autopilot.modes import ARDUPILOT_MODES, MAV_TYPE_MODES, ardupilot_modes, px4_mode_name
 from mavsid.readers import dataflash, tlog
-from mavsid.readers.modes import ARDUPILOT_MODES, MAV_TYPE_MODES, ardupilot_modes, px4_mode_name
 
 mavutil = pytest.importorskip("pymavlink.mavutil")
 

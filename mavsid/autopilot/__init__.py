@@ -1,0 +1,76 @@
+"""Everything mavsid knows about the autopilots' firmware, in one package.
+
+Adding a firmware (or a firmware version's new names) touches only this package:
+
+=============================  ==========================================================
+module                         holds
+=============================  ==========================================================
+:mod:`~.ardupilot`             ArduPilot: SYSTEMID (``SID_AXIS`` numbering, SIDS fields,
+                               SID_* parameters), ``SERVOn_FUNCTION`` outputs, the motor
+                               thrust curve (``MOT_*``), logging and flying advice
+:mod:`~.px4`                   PX4: logger profile (``SDLOG_PROFILE``), flying advice
+:mod:`~.modes`                 flight-mode numbers and names (ArduPilot, PX4)
+:mod:`~.presets`               channel presets: which message field is which state and
+                               input, per autopilot, version and log format
+:mod:`~.mixers`                multirotor motor geometry (``FRAME_CLASS``/``FRAME_TYPE``)
+:mod:`~.config`                user presets and mixers from a TOML file
+=============================  ==========================================================
+
+The functions here choose the autopilot from a *platform text*: the flight's autopilot,
+vehicle and firmware banner, with ``quadplane`` after them for a QuadPlane's VTOL flight
+(``"ardupilot plane ArduPlane V4.3.8 (abc) quadplane"``, ``"PX4 v1.14.0"``).
+
+Examples
+--------
+>>> logging_advice("PX4").startswith("PX4: set SDLOG_PROFILE")
+True
+>>> excitation_advice("roll", "ardupilot")[:48]
+'fly a SYSTEMID mixer chirp on roll (SID_AXIS 10)'
+"""
+
+from __future__ import annotations
+
+from mavsid.autopilot import ardupilot, px4
+
+__all__ = ["excitation_advice", "logging_advice", "longer_advice"]
+
+
+def excitation_advice(axis: str, platform: str | None) -> str:
+    """What to fly next time to excite ``axis``, on this autopilot.
+
+    >>> excitation_advice("yaw", "px4")[:52]
+    'fly sharp stick doublets or a 3-2-1-1 on yaw in ACRO'
+    """
+    if px4.is_px4(platform):
+        return px4.excitation_advice(axis)
+    return ardupilot.excitation_advice(axis, platform)
+
+
+def longer_advice(platform: str | None) -> str:
+    """What to fly when the excitation was too short, on this autopilot.
+
+    >>> longer_advice("px4")
+    'fly longer excitation (30 s of doublets or 3-2-1-1s in ACRO)'
+    """
+    if px4.is_px4(platform):
+        return px4.longer_advice()
+    return ardupilot.longer_advice(platform)
+
+
+def logging_advice(platform: str | None, telemetry: bool = False) -> str:
+    """Which logging setting to change to log body rates and controller outputs fast.
+
+    ``telemetry``: the logs are a ground station's MAVLink telemetry (``.tlog``), whose
+    rates are the streams', not the on-board log's: the advice says so and names the
+    on-board log's setting for the log to fit instead.
+
+    Examples
+    --------
+    >>> logging_advice("ArduPilot", telemetry=True).split(":")[0]
+    'a .tlog holds what the telemetry streams sent (ArduPilot SRn_EXTRA1'
+    """
+    if telemetry:
+        return ardupilot.TELEMETRY_NOTE + "; " + logging_advice(platform)
+    if px4.is_px4(platform):
+        return px4.logging_advice()
+    return ardupilot.logging_advice(platform)

@@ -1,0 +1,353 @@
+"""ArduPilot's facts: SYSTEMID, servo and motor outputs, the thrust curve, logging advice.
+
+What ArduPilot's firmware defines and mavsid relies on, each with the source file it comes
+from (the facts carry over, never the code): SYSTEMID's axis numbering (``SID_AXIS``), its
+settings' parameter and log-field names, the ``SERVOn_FUNCTION`` numbers of control
+surfaces and motors, the motor output and thrust curve (``MOT_*``) and what to fly and log
+for identification. Message and field names per version are in the channel presets
+(:mod:`mavsid.autopilot.presets`), mode numbers in :mod:`mavsid.autopilot.modes`, motor
+geometry in :mod:`mavsid.autopilot.mixers`.
+
+Examples
+--------
+>>> sid_axis(1), sid_axis(10), sid_axis(13)
+(('roll', 'input angle'), ('roll', 'mixer'), ('thrust', 'mixer'))
+>>> SID_MIXER_AXIS["pitch"]
+11
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Mapping
+from types import MappingProxyType
+
+import numpy as np
+
+from mavsid.axes import AXES
+from mavsid.errors import ConfigError
+
+__all__ = [
+    "IMU_GYRO_FIELDS",
+    "PLANE_SURFACE_DEG",
+    "PWM_SPAN",
+    "RC_MAP_AP",
+    "SERVO_FUNCTIONS",
+    "SIDS_FIELDS",
+    "SID_MIXER_AXIS",
+    "SID_PARAMS",
+    "SYSTEMID_MODE",
+    "SYSTEM_ID_DELAY_S",
+    "TELEMETRY_NOTE",
+    "before_rate",
+    "excitation_advice",
+    "is_plane",
+    "is_quadplane",
+    "logging_advice",
+    "longer_advice",
+    "motor_channels",
+    "pwm_to_thrust",
+    "sid_axis",
+    "thrust_curve",
+    "whole_param",
+]
+
+# --------------------------------------------------------------------------- SYSTEMID
+
+#: the flight mode that injects the chirp (ArduCopter/mode.h, Mode::Number::SYSTEMID = 25)
+SYSTEMID_MODE = "SYSTEMID"
+#: ArduCopter waits this long after entering SYSTEMID before injecting
+#: (ArduCopter/mode_systemid.cpp, SYSTEM_ID_DELAY 1.0 s)
+SYSTEM_ID_DELAY_S = 1.0
+#: where SID_AXIS 1-12 inject, in groups of three (roll, pitch, yaw), and 13 (thrust):
+#: ArduCopter/mode_systemid.cpp, SID_AXIS @Values (1-3 Input, 4-6 Recovery, 7-9 Rate,
+#: 10-12 Mixer roll/pitch/yaw, 13 Mixer Thrust; 14-19 the position controller's axes)
+_INJECTION = ("input angle", "recovery angle", "rate", "mixer")
+#: axis -> the SID_AXIS that adds the chirp to the mixer input (10, 11, 12)
+SID_MIXER_AXIS: Mapping[str, int] = MappingProxyType({a: 10 + i for i, a in enumerate(AXES)})
+#: SIDS record field -> run setting (ArduCopter/Log.cpp, log_SysIdSetup: Ax Mag FSt FSp TFin
+#: TC TR TFout)
+SIDS_FIELDS: Mapping[str, str] = MappingProxyType({
+    "Ax": "axis", "Mag": "magnitude", "FSt": "f_start_hz", "FSp": "f_stop_hz",
+    "TFin": "t_fade_in_s", "TC": "t_const_freq_s", "TR": "t_record_s", "TFout": "t_fade_out_s",
+})
+#: SYSTEMID parameter -> run setting (ArduCopter/mode_systemid.cpp, var_info SID_*)
+SID_PARAMS: Mapping[str, str] = MappingProxyType({
+    "SID_AXIS": "axis", "SID_MAGNITUDE": "magnitude", "SID_F_START_HZ": "f_start_hz",
+    "SID_F_STOP_HZ": "f_stop_hz", "SID_T_FADE_IN": "t_fade_in_s", "SID_T_REC": "t_record_s",
+    "SID_T_FADE_OUT": "t_fade_out_s",
+})
+
+
+def sid_axis(number: int) -> tuple[str, str]:
+    """ArduCopter ``SID_AXIS`` -> (axis, injection point).
+
+    Examples
+    --------
+    >>> sid_axis(7), sid_axis(12), sid_axis(14)
+    (('roll', 'rate'), ('yaw', 'mixer'), ('other', 'SID_AXIS 14'))
+    """
+    if 1 <= number <= 12:
+        return AXES[(number - 1) % 3], _INJECTION[(number - 1) // 3]
+    if number == 13:
+        return "thrust", "mixer"
+    return "other", f"SID_AXIS {number}"
+
+
+# --------------------------------------------------------------------------- inputs
+
+#: IMU gyro field per body rate (libraries/AP_InertialSensor/LogStructure.h, IMU GyrX/Y/Z,
+#: rad/s): the independent measurement a rate channel is checked by
+IMU_GYRO_FIELDS: Mapping[str, str] = MappingProxyType({"p": "GyrX", "q": "GyrY", "r": "GyrZ"})
+#: per axis: the parameter mapping an RC input channel to it and its default channel
+#: (libraries/RC_Channel/RC_Channel.cpp, RCMAP_ROLL 1, RCMAP_PITCH 2, RCMAP_YAW 4)
+RC_MAP_AP: Mapping[str, tuple[str, int]] = MappingProxyType({
+    "roll": ("RCMAP_ROLL", 1), "pitch": ("RCMAP_PITCH", 2), "yaw": ("RCMAP_YAW", 4)})
+
+# --------------------------------------------------------------------------- outputs
+
+#: ArduPlane's surface demand (degrees) of a full deflection: its controllers' outputs are
+#: centidegrees limited to ±4500 (libraries/APM_Control/AP_RollController.cpp)
+PLANE_SURFACE_DEG = 45.0
+
+#: Canonical input -> ArduPilot servo function (``SERVOn_FUNCTION``,
+#: libraries/SRV_Channel/SRV_Channel.h Aux_servo_function_t), its name, and whether it is an
+#: angle output (-1..1 about ``SERVOn_TRIM``) rather than a range (0..1 from ``SERVOn_MIN``).
+SERVO_FUNCTIONS: Mapping[str, tuple[int, str, bool]] = MappingProxyType({
+    "u_roll": (4, "aileron", True),
+    "u_pitch": (19, "elevator", True),
+    "u_yaw": (21, "rudder", True),
+    "u_thrust": (70, "throttle", False),
+})
+#: ``SERVOn_FUNCTION`` of motors 1-8 and 9-12 (SRV_Channel.h: k_motor1..8 = 33..40,
+#: k_motor9..12 = 82..85)
+_MOTOR_FUNCTIONS = (*range(33, 41), *range(82, 86))
+
+#: ArduPilot's defaults for a multirotor's spin range and thrust-curve exponent
+#: (AP_Motors_Thrust_Linearization: MOT_SPIN_MIN 0.15, MOT_SPIN_MAX 0.95, MOT_THST_EXPO 0.65)
+_SPIN_DEFAULT = (0.15, 0.95)
+_EXPO_DEFAULT = 0.65
+#: the widest PWM range (µs) an output's end points can stand for
+PWM_SPAN = (1.0, 3000.0)
+
+
+def whole_param(params: Mapping[str, float], key: str) -> int | None:
+    """A parameter as a whole number; None when absent or not a finite number (a damaged
+    log's).
+
+    >>> whole_param({"A": 2.0}, "A"), whole_param({"A": float("nan")}, "A"), whole_param({}, "A")
+    (2, None, None)
+    """
+    value = params.get(key)
+    try:
+        return int(value) if value is not None and math.isfinite(value) else None
+    except (TypeError, OverflowError):
+        return None
+
+
+def motor_channels(params: Mapping[str, float], n_motors: int) -> list[int]:
+    """The output (servo channel, 1-based) of each motor: the lowest-numbered one whose
+    ``SERVOn_FUNCTION`` is that motor's (33-40: motors 1-8, 82-85: motors 9-12), when the log
+    has them for any motor; motor ``i`` on output ``i`` otherwise (ArduCopter's default, the
+    only layout before ``SERVOn_FUNCTION``, and what a .tlog whose ground station fetched
+    some parameters only can say).
+
+    Raises
+    ------
+    ConfigError
+        ``SERVOn_FUNCTION`` parameters that give no output to one of the motors.
+
+    Examples
+    --------
+    >>> motor_channels({}, 4)
+    [1, 2, 3, 4]
+    >>> motor_channels({"SERVO5_FUNCTION": 33, "SERVO6_FUNCTION": 34, "SERVO7_FUNCTION": 35,
+    ...                 "SERVO8_FUNCTION": 36, "SERVO1_FUNCTION": 0}, 4)
+    [5, 6, 7, 8]
+    """
+    outputs: dict[int, int] = {}
+    for key in params:
+        m = re.fullmatch(r"SERVO(\d+)_FUNCTION", key)
+        fn = whole_param(params, key) if m else None
+        if m and fn is not None:
+            n = int(m.group(1))
+            outputs[fn] = min(n, outputs.get(fn, n))
+    functions = [_MOTOR_FUNCTIONS[i] if i < 8 else 82 + i - 8 for i in range(n_motors)]
+    if not set(outputs) & set(_MOTOR_FUNCTIONS):  # (none, or not all downloaded)
+        return list(range(1, n_motors + 1))
+    got = [outputs.get(fn) for fn in functions]
+    missing = [i for i, o in enumerate(got) if o is None]
+    if missing:
+        raise ConfigError(
+            f"no output carries motor(s) {', '.join(str(i + 1) for i in missing)} of "
+            f"{n_motors} (SERVOn_FUNCTION {', '.join(str(functions[i]) for i in missing)}): "
+            "the frame (FRAME_CLASS/FRAME_TYPE) and the outputs disagree")
+    return [int(o) for o in got if o is not None]
+
+
+def thrust_curve(params: Mapping[str, float]) -> tuple[tuple[float, ...], list[str]]:
+    """The ``(pwm_min, pwm_max, spin_min, spin_max, expo)`` :func:`pwm_to_thrust` uses, and a
+    note for each value of the log it could not use (a damaged parameter: ArduPilot's own
+    default taken instead; the exponent clipped to [-1, 1], as ArduPilot clips it).
+
+    Examples
+    --------
+    >>> thrust_curve({"MOT_SPIN_MIN": 0.1, "MOT_SPIN_MAX": 0.9, "MOT_THST_EXPO": 0.5})
+    ((1000.0, 2000.0, 0.1, 0.9, 0.5), [])
+    >>> for note in thrust_curve({"MOT_SPIN_MIN": float("nan"), "MOT_THST_EXPO": 3.0})[1]:
+    ...     print(note)
+    MOT_SPIN_MIN nan, MOT_SPIN_MAX 0.95: not a spin range (0 <= min < max <= 1): 0.15, 0.95 assumed
+    MOT_THST_EXPO 3 clipped to 1, as ArduPilot does
+    """
+    notes: list[str] = []
+
+    def number(name: str, default: float) -> float:
+        try:
+            return float(params.get(name, default))
+        except (TypeError, ValueError):
+            return math.nan
+
+    lo, hi = number("MOT_PWM_MIN", 0.0), number("MOT_PWM_MAX", 0.0)
+    if not hi > lo > 0:  # ArduCopter < 3.5 (and MOT_PWM_* = 0): the throttle channel's range
+        lo, hi = number("RC3_MIN", 0.0), number("RC3_MAX", 0.0)
+    if not hi > lo > 0:
+        lo, hi = 1000.0, 2000.0
+    elif not PWM_SPAN[0] <= lo < hi <= PWM_SPAN[1]:
+        notes.append(f"PWM range {lo:g}..{hi:g} us is no output's: 1000..2000 assumed")
+        lo, hi = 1000.0, 2000.0
+    # ArduCopter < 3.4: THR_MIN (0-1000) is the lowest throttle in flight; <= 3.3 (THR_MIN,
+    # no MOT_SPIN_*/MOT_THST_EXPO): THR_MAX (0-1000) the top, and no thrust-curve exponent
+    # (outputs taken as linear in thrust)
+    old = "THR_MIN" in params and "MOT_SPIN_MIN" not in params
+    names = ("THR_MIN", "THR_MAX") if old else ("MOT_SPIN_MIN", "MOT_SPIN_MAX")
+    spin_min = (number("THR_MIN", 150.0) / 1000.0 if old
+                else number("MOT_SPIN_MIN", number("THR_MIN", 150.0) / 1000.0))
+    spin_max = (number("MOT_SPIN_MAX", number("THR_MAX", 950.0) / 1000.0) if old
+                else number("MOT_SPIN_MAX", _SPIN_DEFAULT[1]))
+    if not 0.0 <= spin_min < spin_max <= 1.0:
+        scale = 1000.0 if old else 1.0
+        notes.append(f"{names[0]} {spin_min * scale:g}, {names[1]} {spin_max * scale:g}: not a "
+                     f"spin range (0 <= min < max <= {scale:g}): {_SPIN_DEFAULT[0] * scale:g}, "
+                     f"{_SPIN_DEFAULT[1] * scale:g} assumed")
+        spin_min, spin_max = _SPIN_DEFAULT
+    expo = number("MOT_THST_EXPO", 0.0 if old else _EXPO_DEFAULT)
+    if not math.isfinite(expo):
+        notes.append(f"MOT_THST_EXPO {expo:g}: {_EXPO_DEFAULT:g} assumed")
+        expo = _EXPO_DEFAULT
+    elif not -1.0 <= expo <= 1.0:
+        clipped = min(max(expo, -1.0), 1.0)
+        notes.append(f"MOT_THST_EXPO {expo:g} clipped to {clipped:g}, as ArduPilot does")
+        expo = clipped
+    return (lo, hi, spin_min, spin_max, expo), notes
+
+
+def pwm_to_thrust(pwm: np.ndarray, params: Mapping[str, float]) -> np.ndarray:
+    """Motor PWM (µs) -> normalised thrust 0..1 through ArduPilot's output and thrust curve.
+
+    ``actuator = (pwm - MOT_PWM_MIN) / (MOT_PWM_MAX - MOT_PWM_MIN)``, then the spin range
+    ``r = (actuator - MOT_SPIN_MIN) / (MOT_SPIN_MAX - MOT_SPIN_MIN)`` and the thrust curve
+    ``thrust = (1 - MOT_THST_EXPO)·r + MOT_THST_EXPO·r²`` (battery scaling ignored). A PWM
+    range of 0 (ArduPilot's "use RC3 range"), or none (ArduCopter < 3.5), takes
+    ``RC3_MIN``/``RC3_MAX``, else 1000..2000 µs; ``MOT_SPIN_MIN`` absent (ArduCopter < 3.4)
+    takes ``THR_MIN``/1000. Such a log (``THR_MIN``, no ``MOT_SPIN_*``: ArduCopter 3.2's
+    parameter table has ``THR_MIN``/``THR_MAX`` and neither) takes ``THR_MAX``/1000 for the
+    top of the range and, without ``MOT_THST_EXPO``, outputs linear in thrust (exponent 0;
+    the old ``MOT_TCRV_*`` curve is not modelled). Damaged values: :func:`thrust_curve`.
+
+    Examples
+    --------
+    >>> pwm_to_thrust(np.array([1000.0, 2000.0]), {"MOT_SPIN_MIN": 0, "MOT_SPIN_MAX": 1}).tolist()
+    [0.0, 1.0]
+    """
+    (lo, hi, spin_min, spin_max, expo), _ = thrust_curve(params)
+    actuator = (np.asarray(pwm, dtype=float) - lo) / (hi - lo)
+    r = np.clip((actuator - spin_min) / (spin_max - spin_min), 0.0, 1.0)
+    return (1.0 - expo) * r + expo * r * r
+
+
+# --------------------------------------------------------------------------- advice
+
+
+def is_plane(platform: str | None) -> bool:
+    """Whether the platform text (``autopilot vehicle firmware [quadplane]``) names an
+    ArduPlane log.
+
+    >>> is_plane("ardupilot plane ArduPlane V4.3.8 (abc)"), is_plane("ArduCopter V4.5.7")
+    (True, False)
+    """
+    return bool(platform) and bool(re.search(r"\bplane\b|ArduPlane", str(platform), re.I))
+
+
+def is_quadplane(platform: str | None) -> bool:
+    """Whether the platform text names an ArduPlane QuadPlane's VTOL flight."""
+    return bool(platform) and str(platform).endswith("quadplane")
+
+
+def before_rate(platform: str | None) -> bool:
+    """Whether the platform text names an ArduCopter older than 3.3 (no RATE record).
+
+    >>> before_rate("ardupilot copter ArduCopter V3.2.1 (abc)"), before_rate("ArduCopter V3.3")
+    (True, False)
+    """
+    return bool(platform) and bool(re.search(r"ArduCopter V3\.[0-2]\b", str(platform)))
+
+
+def excitation_advice(axis: str, platform: str | None) -> str:
+    """What to fly next time to excite ``axis`` on this ArduPilot vehicle.
+
+    >>> excitation_advice("roll", "ardupilot")[:48]
+    'fly a SYSTEMID mixer chirp on roll (SID_AXIS 10)'
+    >>> excitation_advice("yaw", "ardupilot plane ArduPlane V4.5.7 quadplane")[:60]
+    'fly sharp stick doublets or a 3-2-1-1 on yaw in QACRO or QST'
+    """
+    if is_quadplane(platform):
+        return (f"fly sharp stick doublets or a 3-2-1-1 on {axis} in QACRO or QSTABILIZE "
+                "(ArduPlane has no SYSTEMID mode)")
+    if is_plane(platform):
+        return (f"fly sharp stick doublets or a 3-2-1-1 on {axis} in ACRO or MANUAL (ArduPlane "
+                "has no SYSTEMID mode)")
+    if before_rate(platform):
+        return (f"fly sharp stick doublets on {axis} in a non-self-levelling mode (ACRO; "
+                "SYSTEMID came with ArduCopter 4.1)")
+    return (f"fly a SYSTEMID mixer chirp on {axis} (SID_AXIS {SID_MIXER_AXIS.get(axis, '?')}) "
+            f"or sharp stick doublets on {axis} in a non-self-levelling mode (ACRO)")
+
+
+def longer_advice(platform: str | None) -> str:
+    """What to fly when the excitation was too short, on this ArduPilot vehicle.
+
+    >>> longer_advice("ardupilot")
+    'fly longer excitation (a 20-s SYSTEMID chirp or 30 s of doublets)'
+    """
+    if is_plane(platform) or before_rate(platform):
+        return "fly longer excitation (30 s of doublets or 3-2-1-1s)"
+    return "fly longer excitation (a 20-s SYSTEMID chirp or 30 s of doublets)"
+
+
+def logging_advice(platform: str | None) -> str:
+    """Which logging setting to change to log body rates and controller outputs fast.
+
+    >>> logging_advice("ardupilot").startswith("ArduPilot: set LOG_BITMASK")
+    True
+    """
+    if is_quadplane(platform):
+        return ("ArduPlane: set LOG_BITMASK's fast attitude logging so that PIQR/PIQP/PIQY (the "
+                "body rates and the VTOL rate controllers' outputs) are logged at 100 Hz or more")
+    if is_plane(platform):
+        return ("ArduPlane: set LOG_BITMASK's fast attitude logging so that PIDR/PIDP/PIDY (the "
+                "body rates and the roll/pitch/yaw controllers' outputs) are logged at 100 Hz "
+                "or more")
+    if before_rate(platform):
+        return ("ArduCopter before 3.3 logs no RATE record and RCOU at 10 Hz: fly 3.3 or later "
+                "with LOG_BITMASK bits ATTITUDE_FAST and ATTITUDE_MED (RATE at loop rate)")
+    return ("ArduPilot: set LOG_BITMASK bit ATTITUDE_FAST (with ATTITUDE_MED) so that RATE, "
+            "the body rates and the rate controller's outputs, is logged at loop rate")
+
+
+#: what a ground station's telemetry log holds (ArduPilot's stream-rate parameters,
+#: libraries/GCS_MAVLink/GCS_Common.cpp: SRn_EXTRA1 streams ATTITUDE, SRn_RC_CHAN
+#: SERVO_OUTPUT_RAW)
+TELEMETRY_NOTE = ("a .tlog holds what the telemetry streams sent (ArduPilot SRn_EXTRA1: "
+                  "ATTITUDE, SRn_RC_CHAN: SERVO_OUTPUT_RAW; at most 50 Hz): fit the flight "
+                  "controller's own log from its SD card instead")

@@ -35,8 +35,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from mavsid import dsp
+from mavsid.autopilot.ardupilot import sid_axis
+from mavsid.axes import RATE_OF
 from mavsid.errors import MavsidError, NoExcitationError
-from mavsid.loop.controllers import AXES, AXIS_RATE
 from mavsid.loop.plant import plant_from_model, plant_response
 from mavsid.loop.twin import lagged, twin_signals
 
@@ -333,7 +334,7 @@ def sysid_spans(flight: FlightData, axis: str) -> list[tuple[int, int, int]]:
     t = flight.time_s
     for run in flight.meta.get("sysid_runs", ()) or ():  # type: ignore[attr-defined]
         sid = int(run.get("axis", 0) or 0)
-        if not 1 <= sid <= 12 or AXES[(sid - 1) % 3] != axis:
+        if sid_axis(sid)[0] != axis:
             continue
         i0 = int(np.searchsorted(t, float(run["start_s"])))
         i1 = int(np.searchsorted(t, float(run["stop_s"]), side="right"))
@@ -365,7 +366,7 @@ def measured_responses(fit: Any, flights: Sequence[FlightData],
     the responses wanted.
     """
     axis = fit if isinstance(fit, str) else fit.axis
-    rate, u_name = AXIS_RATE[axis], f"u_{axis}"
+    rate, u_name = RATE_OF[axis], f"u_{axis}"
     sigs = list(signals) if signals is not None else [twin_signals(fd) for fd in flights]
     mixer: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     other: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]] = []
@@ -468,7 +469,7 @@ class FrfStructure:
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """Cost and gain ``b`` (shift x pole) of ``model``'s structure with its delay
         shifted by ``shifts`` (samples), for the poles ``exp(-damping dt)``; and the poles."""
-        rate, u_name = AXIS_RATE[self.axis], f"u_{self.axis}"
+        rate, u_name = RATE_OF[self.axis], f"u_{self.axis}"
         if (not self.usable or model.state_names != (rate,) or model.continuous
                 or set(model.features) - {rate, u_name, "1"} or u_name not in model.features):
             return None
@@ -533,7 +534,7 @@ class FrfStructure:
         cost, gain, poles = got
         k = int(np.nanargmin(cost[0]))
         coef = np.array(model.coef, dtype=float, copy=True)
-        coef[model.features.index(AXIS_RATE[self.axis]), 0] = poles[k]
+        coef[model.features.index(RATE_OF[self.axis]), 0] = poles[k]
         coef[model.features.index(f"u_{self.axis}"), 0] = gain[0, k]
         return replace(model, coef=coef)
 

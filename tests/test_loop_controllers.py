@@ -1,5 +1,5 @@
-"""The rate controllers: one implementation shared with the simulator, rebuilt from log
-parameters."""
+"""The rate controllers rebuilt from log parameters (the simulator's own are compared with
+them in test_synthetic_controller.py)."""
 
 from __future__ import annotations
 
@@ -16,13 +16,6 @@ from mavsid.loop.controllers import (
     RatePID,
     controller_from_params,
 )
-from mavsid.synthetic import controller as sim_controller
-
-
-def test_simulator_flies_the_loop_controller() -> None:
-    # one implementation: the simulator's rate PID is the loop stage's
-    assert sim_controller.RatePID is RatePID
-    assert sim_controller.RateGains is RateGains
 
 
 def test_controller_from_params_lists_the_defaults_it_used() -> None:

@@ -24,6 +24,7 @@ import numpy as np
 from mavsid.errors import ConfigError
 from mavsid.synthetic.controller import (
     FRAMES,
+    PID_LOG_FIELDS,
     AttitudeController,
     ControllerParams,
     motor_outputs,
@@ -187,6 +188,8 @@ class Flight:
     mode : (n,) flight mode number. sid_time, sid_targ, sid_freq : (n,) SYSTEMID waveform clock,
     signal and frequency (NaN outside SYSTEMID).
     run_index : (n,) index of the SYSTEMID run, -1 outside.
+    pid_terms : (n, 3, 11) float32, per axis the values of its PID record (PIDR, PIDP, PIDY:
+    :data:`~mavsid.synthetic.controller.PID_LOG_FIELDS`; rates in rad/s).
     """
 
     scenario: Scenario
@@ -212,6 +215,7 @@ class Flight:
     sid_targ: np.ndarray
     sid_freq: np.ndarray
     run_index: np.ndarray
+    pid_terms: np.ndarray
 
     def __len__(self) -> int:
         return int(self.t_s.shape[0])
@@ -432,14 +436,20 @@ def fly(sc: Scenario) -> Flight:
     rows = np.flatnonzero(inj_kind == "mixer")
     mixer_inj[rows, inj_axis[rows]] = sid_targ[rows]
     feedforward = inj_kind != "recovery_angle"
+    terms = np.zeros((n, 3, len(PID_LOG_FIELDS)), dtype=np.float32)
+    limit = np.zeros(3, dtype=bool)  # the motors saturated on an axis in the previous loop
     for k in range(n):
         rate = x[:3]
         g_raw = rate + bias + noise[k]
         g = gyro_filter(g_raw)
-        step = control.update(desired[k], att, g, rate_inj[k], bool(feedforward[k]))
+        step = control.update(desired[k], att, g, rate_inj[k], bool(feedforward[k]), limit,
+                              float(t[k]))
+        terms[k] = step.terms
         thr = pl.hover_throttle + mixer_inj[k, 3]
-        u = np.clip(step.pid_out + mixer_inj[k, :3], -1.0, 1.0)
+        demand = step.pid_out + mixer_inj[k, :3]
+        u = np.clip(demand, -1.0, 1.0)
         m, ue = motor_outputs(np.array([thr]), u[None, :], factors)
+        limit = (np.abs(ue[0] - demand) > 1e-9) | (np.abs(demand) >= 1.0)
         # plant: x[k+1] from x[k] and the delayed realised inputs
         u_hist[k % n_hist] = ue[0]
         u_prev, u_now = u_hist[(k + 1) % n_hist], u_hist[(k + 2) % n_hist]
@@ -466,5 +476,5 @@ def fly(sc: Scenario) -> Flight:
     return Flight(
         scenario=sc, dt=dt, t_s=t, throttle=throttle, motors=motors, pwm=ctl.motor_pwm(motors),
         accel=accel, sticks=sticks, mode=mode, sid_time=sid_time, sid_targ=sid_targ,
-        sid_freq=sid_freq, run_index=run_index, **out,
+        sid_freq=sid_freq, run_index=run_index, pid_terms=terms, **out,
     )

@@ -29,7 +29,9 @@ from mavsid.axes import AXES
 from mavsid.errors import ConfigError
 
 __all__ = [
+    "COPTER_LOG_BITS",
     "IMU_GYRO_FIELDS",
+    "PLANE_LOG_BITS",
     "PLANE_SURFACE_DEG",
     "PWM_SPAN",
     "RC_MAP_AP",
@@ -44,6 +46,7 @@ __all__ = [
     "excitation_advice",
     "is_plane",
     "is_quadplane",
+    "log_bit_text",
     "logging_advice",
     "longer_advice",
     "motor_channels",
@@ -266,6 +269,40 @@ def pwm_to_thrust(pwm: np.ndarray, params: Mapping[str, float]) -> np.ndarray:
     return (1.0 - expo) * r + expo * r * r
 
 
+# --------------------------------------------------------------------------- logging
+
+#: ArduCopter LOG_BITMASK: bit -> name (ArduCopter/defines.h, MASK_LOG_*; bit 14 INAV and
+#: 16 are unused). ATTITUDE_FAST logs ATT, RATE and the PIDs at loop rate
+#: (ArduCopter/Copter.cpp loop_rate_logging), ATTITUDE_MED at 10 Hz; in SYSTEMID both give
+#: every loop, FAST alone every 2nd, MED alone every 4th (ArduCopter/mode_systemid.cpp)
+COPTER_LOG_BITS: Mapping[int, str] = MappingProxyType({
+    0: "ATTITUDE_FAST", 1: "ATTITUDE_MED", 2: "GPS", 3: "PM", 4: "CTUN", 5: "NTUN",
+    6: "RCIN", 7: "IMU", 8: "CMD", 9: "CURRENT", 10: "RCOUT", 11: "OPTFLOW", 12: "PID",
+    13: "COMPASS", 15: "CAMERA", 17: "MOTBATT", 18: "IMU_FAST", 19: "IMU_RAW",
+    20: "VIDEO_STABILISATION", 21: "FTN_FAST",
+})
+#: ArduPlane LOG_BITMASK: bit -> name (ArduPlane/defines.h, MASK_LOG_*). The attitude and
+#: the PIDR/PIDP/PIDY (PIQR/PIQP/PIQY in VTOL flight) records: ATTITUDE_FULLRATE at loop
+#: rate, ATTITUDE_FAST at 25 Hz, ATTITUDE_MED at 10 Hz (ArduPlane/ArduPlane.cpp
+#: update_logging10/25, Log_Write_FullRate)
+PLANE_LOG_BITS: Mapping[int, str] = MappingProxyType({
+    0: "ATTITUDE_FAST", 1: "ATTITUDE_MED", 2: "GPS", 3: "PM", 4: "CTUN", 5: "NTUN",
+    7: "IMU", 8: "CMD", 9: "CURRENT", 10: "COMPASS", 11: "TECS", 12: "CAMERA", 13: "RC",
+    14: "SONAR", 19: "IMU_RAW", 20: "ATTITUDE_FULLRATE", 21: "VIDEO_STABILISATION",
+    22: "NOTCH_FULLRATE",
+})
+
+
+def log_bit_text(bits: Mapping[int, str], name: str) -> str:
+    """``bit 0 ATTITUDE_FAST (+1)``: a LOG_BITMASK bit as a user sets it.
+
+    >>> log_bit_text(PLANE_LOG_BITS, "ATTITUDE_FULLRATE")
+    'bit 20 ATTITUDE_FULLRATE (+1048576)'
+    """
+    bit = next(b for b, n in bits.items() if n == name)
+    return f"bit {bit} {name} (+{1 << bit})"
+
+
 # --------------------------------------------------------------------------- advice
 
 
@@ -309,7 +346,7 @@ def excitation_advice(axis: str, platform: str | None) -> str:
                 "has no SYSTEMID mode)")
     if before_rate(platform):
         return (f"fly sharp stick doublets on {axis} in a non-self-levelling mode (ACRO; "
-                "SYSTEMID came with ArduCopter 4.1)")
+                "ArduCopter 3.x has no SYSTEMID mode)")
     return (f"fly a SYSTEMID mixer chirp on {axis} (SID_AXIS {SID_MIXER_AXIS.get(axis, '?')}) "
             f"or sharp stick doublets on {axis} in a non-self-levelling mode (ACRO)")
 
@@ -328,21 +365,25 @@ def longer_advice(platform: str | None) -> str:
 def logging_advice(platform: str | None) -> str:
     """Which logging setting to change to log body rates and controller outputs fast.
 
-    >>> logging_advice("ardupilot").startswith("ArduPilot: set LOG_BITMASK")
-    True
+    >>> print(logging_advice("ardupilot"))  # doctest: +NORMALIZE_WHITESPACE
+    ArduPilot: set LOG_BITMASK bit 0 ATTITUDE_FAST (+1) with bit 1 ATTITUDE_MED (+2) so that
+    RATE, the body rates and the rate controller's outputs, is logged at loop rate
     """
+    full = log_bit_text(PLANE_LOG_BITS, "ATTITUDE_FULLRATE")
+    fast, med = (log_bit_text(COPTER_LOG_BITS, n) for n in ("ATTITUDE_FAST", "ATTITUDE_MED"))
     if is_quadplane(platform):
-        return ("ArduPlane: set LOG_BITMASK's fast attitude logging so that PIQR/PIQP/PIQY (the "
-                "body rates and the VTOL rate controllers' outputs) are logged at 100 Hz or more")
+        return (f"ArduPlane: set LOG_BITMASK {full} so that PIQR/PIQP/PIQY (the body rates "
+                "and the VTOL rate controllers' outputs) are logged at loop rate "
+                "(ATTITUDE_FAST logs them at 25 Hz)")
     if is_plane(platform):
-        return ("ArduPlane: set LOG_BITMASK's fast attitude logging so that PIDR/PIDP/PIDY (the "
-                "body rates and the roll/pitch/yaw controllers' outputs) are logged at 100 Hz "
-                "or more")
+        return (f"ArduPlane: set LOG_BITMASK {full} so that PIDR/PIDP/PIDY (the body rates "
+                "and the roll/pitch/yaw controllers' outputs) are logged at loop rate "
+                "(ATTITUDE_FAST logs them at 25 Hz)")
     if before_rate(platform):
         return ("ArduCopter before 3.3 logs no RATE record and RCOU at 10 Hz: fly 3.3 or later "
-                "with LOG_BITMASK bits ATTITUDE_FAST and ATTITUDE_MED (RATE at loop rate)")
-    return ("ArduPilot: set LOG_BITMASK bit ATTITUDE_FAST (with ATTITUDE_MED) so that RATE, "
-            "the body rates and the rate controller's outputs, is logged at loop rate")
+                f"with LOG_BITMASK {fast} and {med} (RATE at loop rate)")
+    return (f"ArduPilot: set LOG_BITMASK {fast} with {med} so that RATE, the body rates and "
+            "the rate controller's outputs, is logged at loop rate")
 
 
 #: what a ground station's telemetry log holds (ArduPilot's stream-rate parameters,

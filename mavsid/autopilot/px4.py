@@ -16,7 +16,25 @@ from __future__ import annotations
 from collections.abc import Mapping
 from types import MappingProxyType
 
-__all__ = ["RC_MAP_PX4", "excitation_advice", "is_px4", "logging_advice", "longer_advice"]
+__all__ = ["RATE_PROFILE_BITS", "RC_MAP_PX4", "SDLOG_PROFILE_BITS", "excitation_advice", "is_px4",
+           "logging_advice", "longer_advice", "profile_bit_text"]
+
+#: SDLOG_PROFILE, the logger's topic-set bitmask: bit -> the set it adds
+#: (src/modules/logger/module.yaml ``SDLOG_PROFILE`` ``bit:``, and src/modules/logger/params.c
+#: ``@bit`` before it; a bitmask since PX4 1.7, an enum 0-2 before)
+SDLOG_PROFILE_BITS: Mapping[int, str] = MappingProxyType({
+    0: "default set", 1: "estimator replay (EKF2)", 2: "thermal calibration",
+    3: "system identification", 4: "high rate", 5: "debug", 6: "sensor comparison",
+    7: "computer vision and avoidance", 8: "raw FIFO high-rate IMU (gyro)",
+    9: "raw FIFO high-rate IMU (accel)", 10: "mavlink tunnel message logging",
+    11: "high rate sensors",
+})
+#: the sets that log the rate controller at full rate, in the order advised: "high rate"
+#: (src/modules/logger/logged_topics.cpp add_high_rate_topics: vehicle_angular_velocity,
+#: vehicle_rates_setpoint, the torque setpoint or actuator_controls_0) and "system
+#: identification" (add_system_identification_topics: vehicle_angular_velocity and the
+#: torque setpoint or actuator_controls_0)
+RATE_PROFILE_BITS: tuple[int, ...] = (4, 3)
 
 #: per axis: the parameter mapping an RC input channel to it (src/modules/sensors/
 #: module.yaml RC_MAP_ROLL/PITCH/YAW; 0, the default, maps none)
@@ -48,12 +66,23 @@ def longer_advice() -> str:
     return "fly longer excitation (30 s of doublets or 3-2-1-1s in ACRO)"
 
 
+def profile_bit_text(bit: int) -> str:
+    """``'high rate' (bit 4, +16)``: an SDLOG_PROFILE bit as a user sets it.
+
+    >>> profile_bit_text(3)
+    "'system identification' (bit 3, +8)"
+    """
+    return f"'{SDLOG_PROFILE_BITS[bit]}' (bit {bit}, +{1 << bit})"
+
+
 def logging_advice() -> str:
     """Which logger setting to change to log body rates and controller outputs fast.
 
-    >>> logging_advice().startswith("PX4: set SDLOG_PROFILE")
-    True
+    >>> print(logging_advice())  # doctest: +NORMALIZE_WHITESPACE
+    PX4: set SDLOG_PROFILE to include 'high rate' (bit 4, +16) or 'system identification'
+    (bit 3, +8) so that vehicle_angular_velocity and the torque/actuator setpoints are
+    logged at full rate
     """
-    return ("PX4: set SDLOG_PROFILE to include 'high rate' (bit 1) or 'system identification'"
-            " (bit 4) so that vehicle_angular_velocity and the torque/actuator setpoints are "
-            "logged at 100 Hz or more")
+    first, second = (profile_bit_text(b) for b in RATE_PROFILE_BITS)
+    return (f"PX4: set SDLOG_PROFILE to include {first} or {second} so that "
+            "vehicle_angular_velocity and the torque/actuator setpoints are logged at full rate")

@@ -28,6 +28,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Mapping
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -37,7 +38,8 @@ from mavsid.data import MessageTable, RawLog
 from mavsid.errors import escape
 from mavsid.readers.dataflash import INSTANCE_COLUMNS
 
-__all__ = ["EVENT_TYPES", "format_summary", "median_rate_hz", "read_for_summary", "summarize"]
+__all__ = ["EVENT_TYPES", "declared_instance", "format_summary", "median_rate_hz",
+           "read_for_summary", "summarize"]
 
 
 
@@ -48,13 +50,42 @@ def _num(x: float | None, digits: int | None = None) -> float | None:
     return float(f"{x:.{digits}g}") if digits else float(x)
 
 
-def _instance_column(table: MessageTable) -> str | None:
-    """The column that tells instances apart: declared unit 'instance', else a usual name."""
-    for name in table.fields:
-        if table.unit(name) == "instance":
-            return name
-    return next((n for n in INSTANCE_COLUMNS if n in table and table[n].ndim == 1
-                 and table[n].dtype.kind in "iu"), None)
+def _column(table: MessageTable, name: str) -> np.ndarray | None:
+    """Field ``name``'s values, one per record; None when the table lacks them (a field
+    declared but not decoded, or not one value per record): a summary reads every field
+    it shows by this, so a message without one is summarised with what it has.
+
+    >>> tab = MessageTable("AUXF", {"pos": np.zeros(2)}, np.arange(2.0),
+    ...                    declared=("TimeUS", "function", "pos"))
+    >>> _column(tab, "function") is None, _column(tab, "pos").tolist()
+    (True, [0.0, 0.0])
+    """
+    col = table.columns.get(name)
+    if col is None or np.ndim(col) != 1 or len(col) != len(table):
+        return None
+    return np.asarray(col)
+
+
+def declared_instance(table: MessageTable) -> str | None:
+    """The field the log declares as the instance (unit ``instance``), if any.
+
+    >>> declared_instance(MessageTable("X", {"I": np.zeros(1)}, np.zeros(1), {"I": "instance"}))
+    'I'
+    """
+    return next((n for n in table.fields if table.unit(n) == "instance"), None)
+
+
+def _instance_column(table: MessageTable) -> np.ndarray | None:
+    """The values that tell instances apart: the field declared an instance, else one of
+    the usual names (an integer column); None when the table has neither."""
+    declared = declared_instance(table)
+    if declared is not None:
+        return _column(table, declared)
+    for name in INSTANCE_COLUMNS:
+        col = _column(table, name)
+        if col is not None and col.dtype.kind in "iu":
+            return col
+    return None
 
 
 #: Record types that are written on events, never sampled (counted, not given a rate).
@@ -87,7 +118,7 @@ def median_rate_hz(table: MessageTable, span_s: float | None = None) -> float:
         return float("nan")
     t = np.asarray(table.time_s, np.float64)
     inst = _instance_column(table)
-    groups = [t] if inst is None else [t[table[inst] == v] for v in np.unique(table[inst])]
+    groups = [t] if inst is None else [t[inst == v] for v in _distinct(inst)]
     rates = []
     for g in groups:
         g = g[np.isfinite(g)]
@@ -101,6 +132,13 @@ def median_rate_hz(table: MessageTable, span_s: float | None = None) -> float:
             continue
         rates.append(1.0 / step)
     return float(np.median(rates)) if rates else float("nan")
+
+
+def _distinct(values: np.ndarray) -> list[object]:
+    """The distinct values of a column (numbers or text; NaN once)."""
+    if values.dtype.kind in "biuf":
+        return list(np.unique(values[~np.isnan(values)] if values.dtype.kind == "f" else values))
+    return list(dict.fromkeys(values.tolist()))
 
 
 def _span(log: RawLog) -> tuple[float | None, float | None]:
@@ -134,8 +172,9 @@ def _sysid_runs(log: RawLog) -> list[dict[str, Any]]:
     for k in range(len(table)):
         run: dict[str, Any] = {"time_s": _num(float(table.time_s[k]))}
         for name in table.fields:
-            if name != "TimeUS" and table[name].ndim == 1:
-                run[name] = _value(table[name][k])
+            col = _column(table, name)
+            if name != "TimeUS" and col is not None:
+                run[name] = _value(col[k])
         runs.append(run)
     return runs
 
@@ -158,8 +197,17 @@ def read_for_summary(path: str | os.PathLike[str], **options: Any) -> RawLog:
     fmt = sniff_format(path)
     if fmt != "dataflash":
         return read_log(path, **options)
-    return read_log(path, messages=[*preset_messages(fmt), *FLAG_MESSAGES[fmt]],
-                    times_only=True, **options)
+    log = read_log(path, messages=[*preset_messages(fmt), *FLAG_MESSAGES[fmt]],
+                   times_only=True, **options)
+    # a declared instance the times-only read left out (not a one-byte integer: ArduPilot
+    # 4.5+'s AUXF.function, SCR.Name): those types whole, so that rates count per instance
+    whole = [name for name, table in log.messages.items()
+             if (inst := declared_instance(table)) is not None and inst not in table.columns]
+    if not whole:
+        return log
+    full = read_log(path, messages=whole, **options)
+    return replace(log, messages={**log.messages, **{n: full.messages[n] for n in whole
+                                                     if n in full.messages}})
 
 
 def summarize(log: RawLog) -> dict[str, Any]:

@@ -232,3 +232,71 @@ def test_a_log_given_as_a_pipe_is_refused_at_once(tmp_path):
                            input=(FIXTURES / "sysid_roll.bin").read_bytes(),
                            capture_output=True, timeout=120)
     assert piped.returncode == 1 and b"/dev/stdin: a pipe or a device" in piped.stderr
+
+
+def _with_instances(path: Path) -> Path:
+    """A small DataFlash log with messages whose declared instance (unit ``#``) is no
+    one-byte integer, as ArduCopter 4.5-4.7 writes them: AUXF.function (uint16), SCR.Name
+    (text, two scripts each logged at 1 Hz) and a RASI whose instance is a uint32 field."""
+    from mavsid.synthetic.dfwriter import MULTS, UNITS, DataFlashBuilder, MessageFormat
+
+    b = DataFlashBuilder()
+    for name in ("FMT", "FMTU", "UNIT", "MULT"):
+        b.define(b.formats[name])
+    b.add("UNIT", np.full(len(UNITS), -1), Id=[ord(k) for k in UNITS],
+          Label=list(UNITS.values()), TimeUS=0)
+    b.add("MULT", np.full(len(MULTS), -1), Id=[ord(k) for k in MULTS], Mult=list(MULTS.values()),
+          TimeUS=0)
+    extra = (MessageFormat(210, "AUXF", "QHBBB", ("TimeUS", "function", "pos", "source", "result"),
+                           "s#---", "F----"),
+             MessageFormat(211, "SCR", "QNIii", ("TimeUS", "Name", "Runtime", "Total", "Run"),
+                           "s#---", "F----"),
+             MessageFormat(212, "RASI", "QBfBI", ("TimeUS", "I", "H", "Use", "UpdateMS"),
+                           "s---#", "F----"))
+    for f in (b.formats["ATT"], *extra):
+        b.define(f)
+        b.add("FMTU", [-1], TimeUS=0, FmtType=f.type_id, UnitIds=f.units, MultIds=f.mults)
+    t = np.arange(0, 10_000_000, 100_000)  # 10 s at 10 Hz
+    b.add("ATT", t, Roll=np.zeros(t.size), Pitch=np.zeros(t.size), Yaw=np.zeros(t.size))
+    b.add("AUXF", [2_000_000, 6_000_000], function=[153, 153], pos=[2, 0])
+    s = np.arange(0, 10_000_000, 1_000_000)
+    b.add("SCR", np.r_[s, s + 500_000], Name=["a.lua"] * s.size + ["b.lua"] * s.size,
+          Runtime=np.ones(2 * s.size))
+    b.add("RASI", s, I=np.zeros(s.size), UpdateMS=np.arange(s.size) * 1000)
+    path.write_bytes(b.to_bytes())
+    return path
+
+
+def test_info_summarises_messages_whose_instance_is_no_byte(tmp_path, capsys):
+    """``mavsid info`` shows what a message has (never stops on a field the summary reads
+    but the read left out) and counts rates per instance: two scripts at 1 Hz each."""
+    from mavsid.info import read_for_summary
+
+    path = _with_instances(tmp_path / "auxf.bin")
+    assert main(["info", str(path)]) == 0
+    text = capsys.readouterr().out
+    assert {"AUXF", "SCR", "RASI"} <= {line.split()[0] for line in text.splitlines()[8:]}
+    assert main(["info", str(path), "--json"]) == 0
+    messages = json.loads(capsys.readouterr().out)["messages"]
+    assert messages["SCR"]["count"] == 20 and messages["SCR"]["rate_hz"] == 1.0
+    assert messages["AUXF"]["count"] == 2
+    assert "function" in messages["AUXF"]["fields"]
+    # the same summary as from the whole log, read as pymavlink would see every field
+    whole = summarize(read_log(str(path)))["messages"]
+    fast = summarize(read_for_summary(str(path)))["messages"]
+    assert {n: (m["count"], m["rate_hz"]) for n, m in whole.items()} == \
+        {n: (m["count"], m["rate_hz"]) for n, m in fast.items()}
+
+
+def test_summary_of_a_message_lacking_a_declared_field() -> None:
+    """A table that declares a field it does not hold (a times-only read) is summarised
+    with what it holds."""
+    t = np.arange(0.0, 2.0, 0.01)
+    tab = MessageTable("RASI", {"H": t, "I": np.zeros(t.size, np.uint8), "Use": t}, t,
+                       {"UpdateMS": "instance"}, declared=("TimeUS", "I", "H", "Use", "UpdateMS"))
+    sids = MessageTable("SIDS", {"Ax": np.array([1])}, np.array([1.0]),
+                        declared=("TimeUS", "Ax", "Mag"))
+    s = summarize(RawLog(SourceInfo("r.bin", "dataflash", 0), {"RASI": tab, "SIDS": sids}))
+    assert s["messages"]["RASI"]["rate_hz"] == 100.0
+    assert s["sysid_runs"] == [{"time_s": 1.0, "Ax": 1}]
+    format_summary(s)

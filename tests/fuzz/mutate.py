@@ -1,6 +1,7 @@
 """A mutation corpus built on the fly: seed logs (``fixtures/`` and ``../shared/logs``) and
 deterministic mutations of them (bit flips, truncation, garbage, splices, corrupted
-definitions, time jumps, NaN/inf values, repeated definitions, header floods).
+definitions, time jumps, NaN/inf values, repeated definitions, header floods, instance
+units over fields that are none).
 
 Every mutation is a pure function of ``(seed bytes, random.Random)``: a case is named by
 ``(seed name, mutator name, integer seed)`` and rebuilds byte for byte.
@@ -180,6 +181,26 @@ def repeat_definition(data: bytes, rng: random.Random) -> bytes:
     return data[:at] + rec * rng.choice([10, 1000]) + data[at:]
 
 
+def instance_units(data: bytes, rng: random.Random) -> bytes:
+    """DataFlash FMTU unit ids set to ``#`` (instance) over fields that are none: a
+    message whose declared instance is a wide integer, a float or text (ArduPilot 4.5+'s
+    AUXF.function and SCR.Name are such), which a summary reading for times only meets."""
+    out = bytearray(data)
+    fmtu = {data[k + 3] for k in _dataflash_fmts(data) if data[k + 5 : k + 9] == b"FMTU"}
+    hits: list[int] = []
+    for type_id in fmtu:
+        k = data.find(b"\xa3\x95" + bytes([type_id]))
+        while 0 <= k and len(hits) < 500:
+            hits.append(k)
+            k = data.find(b"\xa3\x95" + bytes([type_id]), k + 3)
+    for k in rng.sample(hits, min(len(hits), rng.choice([1, 5, 50]))):
+        units = k + 12  # header 3, TimeUS 8, FmtType 1: then 16 unit ids
+        used = [j for j in range(units, min(units + 16, len(out))) if out[j] not in b"\x00#"]
+        for j in rng.sample(used, min(len(used), rng.choice([1, 2]))):
+            out[j] = ord("#")
+    return bytes(out)
+
+
 def header_flood(data: bytes, rng: random.Random) -> bytes:
     pat = rng.choice([b"\xa3\x95\x80", b"\xa3\x95", b"\xfe", b"\xfd\x09", b"ULog", b"FMT,"])
     at = rng.randrange(len(data))
@@ -196,6 +217,7 @@ MUTATORS: dict[str, Mutator] = {
     "non_finite": non_finite,
     "repeat_definition": repeat_definition,
     "header_flood": header_flood,
+    "instance_units": instance_units,
 }
 
 

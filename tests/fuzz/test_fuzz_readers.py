@@ -1,5 +1,6 @@
 """Fuzzing in process (hypothesis over the mutation corpus and over raw bytes): every
-reader, ``info`` and alignment either succeed or raise one typed, one-line
+reader, ``info`` (on the whole log, and as ``mavsid info`` reads it) and alignment either
+succeed or raise one typed, one-line
 :class:`~mavsid.errors.MavsidError` naming the file; no numpy RuntimeWarning escapes.
 
 Time and memory are measured in ``test_fuzz_limits.py`` (subprocesses); here the cases are
@@ -21,7 +22,7 @@ from fuzz.budget import in_process_examples
 from fuzz.mutate import MUTATORS, SEEDS, available_seeds, mutate, suffix
 from mavsid.align import align
 from mavsid.errors import MavsidError
-from mavsid.info import format_summary, summarize
+from mavsid.info import format_summary, read_for_summary, summarize
 from mavsid.readers import read_log
 
 _SETTINGS = settings(max_examples=in_process_examples(), deadline=None, derandomize=True,
@@ -42,6 +43,7 @@ def check(data: bytes, suffix_: str) -> str:
             try:
                 raw = read_log(name)
                 format_summary(summarize(raw))
+                format_summary(summarize(read_for_summary(name)))  # as `mavsid info` reads
                 align(raw)
             except MavsidError as exc:
                 text = str(exc)

@@ -12,7 +12,7 @@ Columns (seconds, best of ``--repeat``):
 * ``l1 gram``     Lasso on the Gram's square root, 40 features (cvxpy + CLARABEL)
 * ``l1 rows``     the same lasso posed by cvxpy on the raw rows (CLARABEL)
 
-Then the structure search (issue 17): ``fit_axis`` with its delay/lag search against the
+Then the structure search: ``fit_axis`` with its delay/lag search against the
 fixed-structure fit (the same model with the chosen filters and delay given), at 12k, 48k and
 192k rows of a plant behind a 20 Hz gyro filter (1 kHz), a 15 ms motor lag and 3 samples of
 delay; the ratio is what the search adds. ``refit each`` times the incumbent way of scoring

@@ -1,4 +1,4 @@
-"""Hostile-input benchmark (issue 13): time and peak memory of mavsid on files built to hurt.
+"""Hostile-input benchmark: time and peak memory of mavsid on files built to hurt.
 
     python benchmarks/bench_hostile.py [--only NAME[,NAME]] [--boots 10] [--keep]
 
@@ -12,7 +12,7 @@ printed with the file size and the ratios s/MB and peak/size:
   times (about 1 GB for ten boots), read by ``mavsid info`` (the summary), peak memory also
   against the size of the arrays the reader returns (measured in the same child).
 
-Run it from a checkout before and after a change to compare (both in the same session:
+Run it from a checkout before and after a change to compare (both on the same day:
 timings on a shared machine drift).
 """
 

@@ -12,7 +12,7 @@ the bare interpreter (what importing mavsid costs), cold and warm (first run vs 
 With ``--log``: ``mavsid fit LOG`` and ``mavsid fit LOG --rrd --report`` (written to a
 temporary directory), min / median / max of ``--runs`` fresh processes, with the bare
 interpreter's time beside; with ``--baseline DIR`` (a checkout of the previous release, e.g.
-``git worktree add /tmp/mavsid-base main``) the same commands from that checkout, run
+``git clone -b main . /tmp/mavsid-base``) the same commands from that checkout, run
 alternately with this one's (a busy machine slows both alike), and the ratio of the medians
 of wall and of CPU time (user + system of the process; steadier than wall time when other
 work shares the machine).

@@ -72,9 +72,8 @@ img { max-width: 100%; height: auto; display: block; margin: .5em 0; }
 def figure_img(fig: Figure) -> str:
     """A figure as an ``<img>`` tag with an SVG inlined (base64): vector lines that stay
     sharp at any zoom, text kept as text (``svg.fonttype`` none: no glyph outlines), no
-    timestamp or random ids (the same result gives the same file). Drawing it costs a
-    quarter less than rasterising a 90-dpi PNG (the SITL flight's report 2.1 -> 1.45 s) and
-    the report a tenth smaller (1.55 -> 1.40 MB)."""
+    timestamp or random ids (the same result gives the same file). Drawing it costs less
+    than rasterising a 90-dpi PNG, and the report is smaller."""
     buf = io.StringIO()
     with mpl.rc_context({"svg.fonttype": "none", "svg.hashsalt": "mavsid"}):
         fig.savefig(buf, format="svg", metadata={"Date": None})
@@ -87,10 +86,9 @@ def figure_img(fig: Figure) -> str:
 def warm_up() -> None:
     """Build and draw each of the report's figure layouts once, empty: the first drawing in
     a process loads the fonts and the SVG backend, and a layout's first use builds its axes
-    and tick objects (together ~0.6 s of the SITL flight's report the first time, 1.9 s
-    against 1.3), which a process waiting for its result (:class:`~mavsid.outputs.
-    ReportWorker`) does beforehand: the report's figures then reuse them (see
-    :func:`_panels`)."""
+    and tick objects (a large part of a report's first drawing), which a process waiting
+    for its result (:class:`~mavsid.outputs.ReportWorker`) does beforehand: the report's
+    figures then reuse them (see :func:`_panels`)."""
     for name, (figsize, rows, cols, kw) in _LAYOUTS.items():
         fig, axes = _panels(figsize, rows, cols, **kw)
         for ax in axes.ravel():
@@ -598,10 +596,11 @@ def render_html(result: FitResult, lp: _Analysis = None) -> str:
 def write_report(result: FitResult, path: str | os.PathLike[str],
                  analysis: Callable[[], TuneAnalysis] | None = None) -> None:
     """Write :func:`render_html` of ``result`` to ``path``, with :func:`loop_section`: the
-    loop analysed once for both (one Bode figure per axis), by :func:`mavsid.loop.tune.
-    tune_analysis` or by ``analysis`` — a function called when the first Bode figure is
-    drawn, after every axis's other figures: :class:`~mavsid.outputs.ReportWorker` draws
-    those while the command works the analysis out."""
+    loop analysed once for both (one Bode figure per axis), by
+    :func:`mavsid.loop.tune.tune_analysis` or by ``analysis`` — a function called when the
+    first Bode figure is drawn, after every axis's other figures:
+    :class:`~mavsid.outputs.ReportWorker` draws those while the command works the analysis
+    out."""
     from mavsid.loop.tune import tune_analysis
 
     lp = functools.cache(analysis or (lambda: tune_analysis(result)))

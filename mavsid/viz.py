@@ -21,7 +21,7 @@ entity                                content
                                       of the measured one, on validation segment i
                                       (roll 1.5 m right of the data, pitch 3 m, yaw 4.5 m)
 ``fit/<axis>``                        2-D plot: fit % against prediction horizon
-``frequency/<axis>``                  2-D Bode plot: |H| (dB) and phase (deg), measured vs
+``frequency/<axis>``                  2-D Bode plot: magnitude (dB) and phase (deg), measured vs
                                       model, and coherence, with legends
 ``bands/...``                         flight modes, airborne time, each axis's training,
                                       validation and rejected windows as bands

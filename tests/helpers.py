@@ -26,7 +26,7 @@ def shared_path(*parts: str) -> Path:
     if not path.exists():
         if REQUIRE_SHARED:
             pytest.fail(f"{path} missing and MAVSID_REQUIRE_SHARED=1")
-        pytest.skip(f"{path} not present (clone the steering repo's shared/ beside this one)")
+        pytest.skip(f"{path} not present (the shared logs belong in ../shared/logs)")
     return path
 
 

@@ -1,4 +1,4 @@
-"""Alignment of hostile logs (issue 13, items 3, 4, 8): each test builds the file."""
+"""Alignment of hostile logs: each test builds the file."""
 
 from __future__ import annotations
 

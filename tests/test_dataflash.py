@@ -801,7 +801,7 @@ def test_redefined_layouts_give_every_written_value(tmp_path_factory, blocks, se
 
 
 # --------------------------------------------------------------------------- hostile files
-# (issue 13: each builds the file; time and memory are measured in tests/fuzz)
+# (each builds the file; time and memory are measured in tests/fuzz)
 
 
 def test_fmt_churn_keeps_one_layout_and_says_so(tmp_path: Path) -> None:
@@ -874,8 +874,8 @@ def test_metadata_with_another_layout_is_salvaged(tmp_path: Path) -> None:
 
 
 def test_signalling_nan_is_read_as_nan_without_warnings(tmp_path: Path) -> None:
-    """A flipped bit may make a float a signalling NaN: numpy warns on every later cast
-    (issue 13, item 11); the reader gives a quiet NaN as pymavlink does."""
+    """A flipped bit may make a float a signalling NaN: numpy warns on every later cast;
+    the reader gives a quiet NaN as pymavlink does."""
     snan = np.frombuffer(b"\x01\x00\x80\x7f", "<f4")[0]
     data = build_fmt(0x81, "TST", "Qf", "TimeUS,V") + build_record(0x81, "Qf", 1, 1.0)
     data += bytes((0xA3, 0x95, 0x81)) + (2).to_bytes(8, "little") + snan.tobytes()

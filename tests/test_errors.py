@@ -31,7 +31,7 @@ def test_missing_message_names_the_file() -> None:
 
 def test_log_text_reaching_the_terminal_is_escaped(tmp_path, capsys) -> None:
     """Column names, units, texts and the firmware from a log never reach the terminal raw:
-    no escape sequence, carriage return or extra line (issue 13, item 7)."""
+    no escape sequence, carriage return or extra line."""
     from mavsid.cli import main
     from mavsid.readers.dataflash import build_fmt, build_record
 

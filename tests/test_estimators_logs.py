@@ -88,8 +88,8 @@ SITL_EFFECTIVENESS = 305.0
 def test_sitl_systemid_free_run_on_the_other_half(sitl_segments, axis):
     """Train on the first half of the axis's SYSTEMID chirp, free-run on the second.
 
-    Thresholds: effectiveness within ±5 % of the truth (issue 4); free-run fit ≥ 95 % (the
-    issue's goal for roll and pitch; yaw reaches ~97.5 % here, short of the 99 % goal, so
+    Thresholds: effectiveness within ±5 % of the truth; free-run fit ≥ 95 % (the
+    goal for roll and pitch; yaw reaches ~97.5 % here, short of the 99 % goal, so
     95 % is what this test holds it to).
     """
     segs = [s for s in sitl_segments if s.axis == axis and s.source == "sysid"]

@@ -349,8 +349,8 @@ def test_the_baseline_survives_blocks_shorter_than_its_delay() -> None:
 def test_a_systemid_chirp_is_judged_by_its_injection_not_the_noise_floor(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """6 deg/s of gyro noise fed back: the pitch response is 4.7× its noise floor, under the
     5× that scanned windows need, but the logged injection (SIDD.Targ) is coherent with it
-    over 91 % of its band (mean 0.92). A SYSTEMID run is judged by that coherence (issue 11);
-    it was rejected by the floor and the axis went unfitted."""
+    over 91 % of its band (mean 0.92). A SYSTEMID run is judged by that coherence,
+    not rejected by the floor."""
     _, truth, result = _simulated(tmp_path, "n6.bin", axis="pitch", sid_axes=(11,),
                                   gyro_noise_dps=6.0, seed=633)
     f = result.axes["pitch"]

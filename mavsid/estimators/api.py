@@ -668,9 +668,9 @@ def fit_axis(
     **estimator_kwargs
         Passed to the estimator (``alpha``, ``n_bootstrap``, ...).
 
-    Bounded fits
-    ------------
-    ``estimator="l1"`` (or ``"elasticnet"``) takes ``bounds={name: (low, high)}`` and
+    Notes
+    -----
+    Bounded fits: ``estimator="l1"`` (or ``"elasticnet"``) takes ``bounds={name: (low, high)}`` and
     ``signs={name: ±1}`` on the fitted (discrete-time) parameters; ``alpha=0.0`` makes it
     bounded least squares. The output-error refinement keeps the same bounds. For a first-
     order discrete model, damping ``A[p,p] <= 0`` is ``A_d[p,p] <= 1`` and the control

@@ -597,7 +597,7 @@ def margins_on_frf(plant_frf: Any, ctrl: AxisController) -> dict[str, float]:
 
 def compare_response(measured: Any, freq_hz: np.ndarray, response: np.ndarray
                      ) -> dict[str, Any]:
-    """Median and largest |error| in dB and degrees of a predicted response against a
+    """Median and largest absolute error in dB and degrees of a predicted response against a
     measured FRF over the measured one's coherent band (NaN when none)."""
     m = measured.coherent & (measured.freq_hz >= freq_hz[0]) & (measured.freq_hz <= freq_hz[-1])
     if not m.any():

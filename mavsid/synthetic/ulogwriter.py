@@ -9,10 +9,13 @@ numpy structured arrays and merged into one buffer by a stable sort on time.
 
 Layouts (:data:`ULOG_LAYOUTS`) are the topic sets mavsid's presets meet in the field:
 
-``px4-1.14``  ``vehicle_angular_velocity``, ``vehicle_torque_setpoint``,
-              ``vehicle_thrust_setpoint``, ``actuator_motors`` (PX4 ≥ 1.14)
-``px4-1.11``  ``vehicle_angular_velocity``, ``actuator_controls_0``, ``actuator_outputs``
-``px4-1.8``   body rates in ``vehicle_attitude`` (``rollspeed``...), ``actuator_controls_0``
+``px4-1.14``
+    ``vehicle_angular_velocity``, ``vehicle_torque_setpoint``,
+    ``vehicle_thrust_setpoint``, ``actuator_motors`` (PX4 ≥ 1.14)
+``px4-1.11``
+    ``vehicle_angular_velocity``, ``actuator_controls_0``, ``actuator_outputs``
+``px4-1.8``
+    body rates in ``vehicle_attitude`` (``rollspeed``...), ``actuator_controls_0``
 
 plus, in each, ``vehicle_attitude.q``, ``vehicle_rates_setpoint``,
 ``vehicle_attitude_setpoint`` (``q_d``; also ``roll_body``... before 1.14; published only

@@ -1,4 +1,4 @@
-"""Builders of hostile logs (issue 13): each returns the bytes of one file that once made
+"""Builders of hostile logs: each returns the bytes of one file that once made
 mavsid crash, hang or exhaust memory. Used by the fuzz tests and ``benchmarks/bench_hostile.py``.
 """
 

@@ -3,7 +3,7 @@ within 10 s per MB (plus the interpreter's start and the pipeline's fixed cost) 
 file's size + 300 MB of peak memory (``ru_maxrss`` of that child, from ``os.wait4``).
 
 Covers every reader and the ``info``, ``segments`` and ``fit`` library calls on mutated
-logs, the hostile files of issue 13 (FMT churn, header and text floods, far-future times,
+logs, the hostile files of ``hostile.py`` (FMT churn, header and text floods, far-future times,
 metadata of another layout, -inf in a CRC-valid .tlog) and a few runs of the command line.
 The number of mutated cases follows ``MAVSID_FUZZ_BUDGET`` (seconds).
 """

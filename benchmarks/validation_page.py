@@ -357,8 +357,13 @@ def _readme_block(summary: dict, perf: dict) -> str:
                      f"{s['pm']:.1f} ± {s['pm_sigma']:.1f}° predicted{measured}",
                      "docs/validation.rst"))
     date = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d")
+    try:
+        load = f" at load {os.getloadavg()[0]:.1f}"
+    except OSError:
+        load = ""
     lines = ["<!-- figures:start (benchmarks/validation_page.py writes this table) -->",
-             f"Measured {date} by `python benchmarks/validation_page.py`:", "",
+             f"Measured {date} by `python benchmarks/validation_page.py` on {os.cpu_count()} "
+             f"cores{load}:", "",
              "| what | figure | details |", "|---|---|---|"]
     lines += [f"| {w} | {f} | [{d}]({d}) |" for w, f, d in rows]
     lines.append("<!-- figures:end -->")
@@ -381,7 +386,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     parts = [_header("Validation", command, machine)]
     parts += ["Simulated fixtures against their true plant\n",
               "-------------------------------------------\n\n",
-              "Control effectiveness *B* and damping (−*A*) identified by ``mavsid fit`` on "
+              "Control effectiveness *B* and damping (*−A*) identified by ``mavsid fit`` on "
               "each fixture, against the plant the simulator flew "
               "(``fixtures/*.truth.json``); σ is the standard error ``fit`` reports; free run "
               "on the held-out blocks.\n\n",

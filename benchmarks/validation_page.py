@@ -73,12 +73,29 @@ def _json(argv: list[str]) -> dict:
 
 def _wall(argv: Sequence[str], runs: int) -> list[float]:
     """Wall time of ``argv`` in ``runs`` fresh processes (output discarded)."""
-    times = []
+    return [t for t, _ in _timed(argv, runs)]
+
+
+def _timed(argv: Sequence[str], runs: int) -> list[tuple[float, float]]:
+    """Wall and CPU time (user + system) of ``argv`` in ``runs`` fresh processes."""
+    import resource
+
+    out = []
     for _ in range(runs):
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
         t0 = time.perf_counter()
         subprocess.run(list(argv), capture_output=True, env=_env(), cwd=ROOT, check=False)
-        times.append(time.perf_counter() - t0)
-    return times
+        wall = time.perf_counter() - t0
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        out.append((wall, after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime))
+    return out
+
+
+def _command_time(argv: Sequence[str], runs: int) -> str:
+    """Median wall time of fresh processes, with their median CPU time."""
+    times = _timed(argv, runs)
+    return (f"{statistics.median(t for t, _ in times):.2f} s "
+            f"(CPU {statistics.median(c for _, c in times):.2f} s)")
 
 
 def _child(code: str) -> float:
@@ -106,7 +123,7 @@ def _pm(value: float | None, sigma: float | None, fmt: str = ".1f") -> str:
 
 def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
     """An RST list-table."""
-    lines = [".. list-table::", "   :header-rows: 1", ""]
+    lines = [".. list-table::", "   :header-rows: 1", "   :widths: auto", ""]
     for row in [header, *rows]:
         lines.append(f"   * - {row[0]}")
         lines.extend(f"     - {cell}" for cell in row[1:])
@@ -157,7 +174,7 @@ def fixture_rows() -> list[list[str]]:
         doc = _json(_mavsid("fit", str(log.relative_to(ROOT)), "--json", "-q"))
         if not doc.get("axes"):
             rows.append([f"``{log.name}``", "every axis", "not identified (exit 1)",
-                         *["—"] * 6])
+                         *["—"] * 4])
         for axis, fitted in (doc.get("axes") or {}).items():
             true = (truth.get("axes") or {}).get(axis)
             params, stderr = fitted.get("params", {}), fitted.get("stderr", {})
@@ -169,12 +186,12 @@ def fixture_rows() -> list[list[str]]:
             damping = -params[a_key] if a_key else float("nan")
             d_true = true["damping"]
             fit = fitted.get("fit_percent", {})
+            error = f"{100 * (b / b_true - 1):+.1f} %"
             rows.append([
                 f"``{log.name}``", axis, _level(fitted.get("verdict", {})),
-                f"{b:.1f} ± {sb:.1f}", f"{b_true:g}",
-                f"{100 * (b / b_true - 1):+.1f} % ({abs(b - b_true) / sb:.1f} σ)" if sb
-                else f"{100 * (b / b_true - 1):+.1f} %",
-                f"{damping:.2f}", f"{d_true:g}",
+                f"{b:.1f} ± {sb:.1f} ({b_true:g})",
+                f"{error} ({abs(b - b_true) / sb:.1f} σ)" if sb else error,
+                f"{damping:.2f} ({d_true:g})",
                 f"{fit.get('free_run', float('nan')):.1f} %",
             ])
     return rows
@@ -261,25 +278,24 @@ def performance_rows(shared: Path | None, runs: int, tmp: Path) -> tuple[list, d
 
     fixture = "fixtures/sysid_roll.bin"
     size = (ROOT / fixture).stat().st_size / 1e3
-    t = med(_wall(_mavsid("fit", fixture, "-q"), runs))
-    rows.append([f"``mavsid fit {fixture}`` ({size:.0f} kB)", f"{t:.2f} s", "—",
-                 "fresh processes"])
-    summary["fit_fixture"] = f"{t:.2f} s"
+    t = _command_time(_mavsid("fit", fixture, "-q"), runs)
+    rows.append([f"``mavsid fit {fixture}`` ({size:.0f} kB)", t, "—", "fresh processes"])
+    summary["fit_fixture"] = t
 
     if shared is not None:
         log = shared / SITL
         mb = log.stat().st_size / 1e6
-        t = med(_wall(_mavsid("fit", str(log), "-q"), runs))
-        rows.append([f"``mavsid fit`` of the {mb:.0f}-MB SITL ``.bin``", f"{t:.2f} s", "—",
+        t = _command_time(_mavsid("fit", str(log), "-q"), runs)
+        rows.append([f"``mavsid fit`` of the {mb:.0f}-MB SITL ``.bin``", t, "—",
                      "fresh processes"])
-        summary["fit_sitl"] = f"{t:.2f} s"
+        summary["fit_sitl"] = t
         summary["sitl_mb"] = f"{mb:.0f}"
-        t = med(_wall(_mavsid("fit", str(log), "-q", "--rrd", str(tmp / "f.rrd"),
-                              "--report", str(tmp / "f.html")), runs))
-        rows.append(["the same with ``--rrd --report``", f"{t:.2f} s", "—", "fresh processes"])
-        summary["fit_sitl_outputs"] = f"{t:.2f} s"
-        t = med(_wall(_mavsid("tune", str(log), "-q"), runs))
-        rows.append([f"``mavsid tune`` of the {mb:.0f}-MB SITL ``.bin``", f"{t:.2f} s", "—",
+        t = _command_time(_mavsid("fit", str(log), "-q", "--rrd", str(tmp / "f.rrd"),
+                                  "--report", str(tmp / "f.html")), runs)
+        rows.append(["the same with ``--rrd --report``", t, "—", "fresh processes"])
+        summary["fit_sitl_outputs"] = t
+        t = _command_time(_mavsid("tune", str(log), "-q"), runs)
+        rows.append([f"``mavsid tune`` of the {mb:.0f}-MB SITL ``.bin``", t, "—",
                      "fresh processes"])
 
         fit_reads = ("ATT", "RATE", "IMU", "RCOU")
@@ -390,8 +406,8 @@ def main(argv: Sequence[str] | None = None) -> None:
               "each fixture, against the plant the simulator flew "
               "(``fixtures/*.truth.json``); σ is the standard error ``fit`` reports; free run "
               "on the held-out blocks.\n\n",
-              _table(["log", "axis", "verdict", "B", "true B", "error", "damping",
-                      "true damping", "free run"], fixture_rows()), "\n"]
+              _table(["log", "axis", "verdict", "B ± σ (true)", "error", "damping (true)",
+                      "free run"], fixture_rows()), "\n"]
     summary: dict = {}
     if shared_ok:
         fit_table, tune_table, summary = sitl_tables(shared)

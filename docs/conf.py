@@ -62,4 +62,6 @@ html_theme_options = {
     "footer_end": [],
 }
 html_static_path: list[str] = []
+# Pages without sub-pages need no left sidebar: their tables get the width.
+html_sidebars = {page: [] for page in ("index", "install", "validation", "performance")}
 html_show_sourcelink = False

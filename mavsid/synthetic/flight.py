@@ -188,8 +188,8 @@ class Flight:
     mode : (n,) flight mode number. sid_time, sid_targ, sid_freq : (n,) SYSTEMID waveform clock,
     signal and frequency (NaN outside SYSTEMID).
     run_index : (n,) index of the SYSTEMID run, -1 outside.
-    pid_terms : (n, 3, 11) float32, per axis the values of its PID record (PIDR, PIDP, PIDY:
-    :data:`~mavsid.synthetic.controller.PID_LOG_FIELDS`; rates in rad/s).
+    pid_terms : (n, 3, 11) float32, per axis the values of its PID record (PIDR, PIDP,
+    PIDY: :data:`~mavsid.synthetic.controller.PID_LOG_FIELDS`; rates in rad/s).
     """
 
     scenario: Scenario

@@ -721,10 +721,11 @@ def _events_to_flag(events: list[tuple[float, bool]], t: np.ndarray, default: bo
 
 
 def _col(raw: RawLog, msg: str, fld: str) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(time_s, values)`` of one numeric field; None when the log lacks it."""
     if msg not in raw.messages or fld not in raw.messages[msg].columns:
         return None
     tab = raw.messages[msg]
-    return np.asarray(tab.time_s, dtype=float), np.asarray(tab.columns[fld])
+    return np.asarray(tab.time_s, dtype=float), tab.numbers(fld, raw.source.path)
 
 
 def _main_sysid(raw: RawLog) -> int | None:
@@ -908,6 +909,15 @@ def _mode_spans(raw: RawLog, name: str) -> list[tuple[float, float]]:
     return spans
 
 
+def _sid_axis_number(value: float) -> int:
+    """A logged SID_AXIS as its whole number; 0 (no axis) when it is not a finite number.
+
+    >>> _sid_axis_number(10.0), _sid_axis_number(float("nan"))
+    (10, 0)
+    """
+    return int(value) if math.isfinite(value) else 0
+
+
 def sysid_runs(raw: RawLog) -> list[dict[str, Any]]:
     """ArduPilot SYSTEMID runs: settings and the span of the injected waveform.
 
@@ -934,15 +944,19 @@ def sysid_runs(raw: RawLog) -> list[dict[str, Any]]:
     [{'start_s': 6.0, 'stop_s': 8.0, 'settings_from': 'SIDS', 'axis': 10, 'magnitude': 0.05}]
     """
     runs: list[dict[str, Any]] = []
+    path = raw.source.path
     spans = _mode_spans(raw, SYSTEMID_MODE)
     if "SIDS" in raw.messages and len(raw.messages["SIDS"]):
         sids = raw.messages["SIDS"]
         ts = np.asarray(sids.time_s, dtype=float)
+        settings = {key: sids.numbers(f, path) for f, key in SIDS_FIELDS.items()
+                    if f in sids.columns}
         sidd_t, active = np.empty(0), np.empty(0, dtype=bool)
         if "SIDD" in raw.messages:
             sidd = raw.messages["SIDD"]
             sidd_t = np.asarray(sidd.time_s, dtype=float)
-            targ = np.asarray(sidd.columns.get("Targ", np.ones(sidd_t.size)), dtype=float)
+            targ = (sidd.numbers("Targ", path) if "Targ" in sidd.columns
+                    else np.ones(sidd_t.size))
             active = np.isfinite(targ) & (targ != 0)
         for k, t0 in enumerate(ts):
             t_next = ts[k + 1] if k + 1 < ts.size else np.inf
@@ -957,10 +971,9 @@ def sysid_runs(raw: RawLog) -> list[dict[str, Any]]:
             else:
                 continue
             run: dict[str, Any] = {"start_s": start, "stop_s": stop, "settings_from": "SIDS"}
-            for f, key in SIDS_FIELDS.items():
-                if f in sids.columns:
-                    val = float(np.asarray(sids.columns[f])[k])
-                    run[key] = int(val) if key == "axis" else val
+            for key, values in settings.items():
+                val = float(values[k])
+                run[key] = _sid_axis_number(val) if key == "axis" else val
             if inside.size < 2:
                 run["start_s"], run["stop_s"] = _chirp_span(start, stop, run)
             runs.append(run)
@@ -969,7 +982,8 @@ def sysid_runs(raw: RawLog) -> list[dict[str, Any]]:
         return runs
     pv = raw.messages["PARAM_VALUE"]
     names = np.asarray(pv.columns.get("param_id", []), dtype=object)
-    values = np.asarray(pv.columns.get("param_value", []), dtype=float)
+    values = (pv.numbers("param_value", path) if "param_value" in pv.columns
+              else np.empty(0))
     times = np.asarray(pv.time_s, dtype=float)
     for a, b in spans:
         if not np.isfinite(b):
@@ -983,7 +997,7 @@ def sysid_runs(raw: RawLog) -> list[dict[str, Any]]:
                 val = float(raw.params[pname])
             else:
                 continue
-            run[key] = int(val) if key == "axis" else val
+            run[key] = _sid_axis_number(val) if key == "axis" else val
         if "axis" in run:
             run["start_s"], run["stop_s"] = _chirp_span(a, b, run)
             runs.append(run)
@@ -1076,7 +1090,7 @@ def _sticks(raw: RawLog) -> dict[str, tuple[str, np.ndarray, np.ndarray]]:
         column = table.columns.get(f"chan{n}_raw")
         if column is None:
             continue
-        pwm = np.asarray(column, dtype=float)
+        pwm = table.numbers(f"chan{n}_raw", raw.source.path)
         keep = (pwm >= 800) & (pwm <= 2200) & rows
         pwm = pwm[keep]
         trim = raw.params.get(f"RC{n}_TRIM", 1500.0)
@@ -1116,7 +1130,7 @@ def _sysid_injection(raw: RawLog, t: np.ndarray, boot: int = 0) -> np.ndarray | 
     if sidd is None or "Targ" not in sidd.columns or len(sidd) < 2:
         return None
     ts, targ = _boot_records(np.asarray(sidd.time_s, dtype=float),
-                             np.nan_to_num(np.asarray(sidd.columns["Targ"], dtype=float)), boot)
+                             np.nan_to_num(sidd.numbers("Targ", raw.source.path)), boot)
     return _resampled(ts, targ, t, 0.0)  # between runs SIDD is not logged: no injection there
 
 

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mavsid.errors import MissingMessageError
+from mavsid.errors import LogFormatError, MissingMessageError
 
 __all__ = [
     "LOG_FORMATS",
@@ -91,6 +91,43 @@ class MessageTable:
     def unit(self, name: str) -> str | None:
         """The declared unit of field ``name``, or None when the log declares none."""
         return self.units.get(name)
+
+    def numbers(self, name: str, path: object = None) -> np.ndarray:
+        """Field ``name`` as float64 numbers: the one conversion every numeric value read
+        from a log goes through (the field as logged, no multiplier applied).
+
+        Raises
+        ------
+        LogFormatError
+            The field holds text or anything else that is not a number (the log's format
+            declares it so): one line naming the file (``path``), the message and the field.
+        MissingMessageError
+            The table has no such field.
+
+        Examples
+        --------
+        >>> t = MessageTable("SIDS", {"Ax": np.array([10], np.uint8),
+        ...                           "Mag": np.array(["abc"], object)}, np.zeros(1))
+        >>> t.numbers("Ax").tolist()
+        [10.0]
+        >>> t.numbers("Mag", "a.bin")  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        mavsid.errors.LogFormatError: a.bin: SIDS.Mag holds text, not numbers (its format ...
+        """
+        if name not in self.columns:
+            raise MissingMessageError(f"{self.name}.{name}", available=self.columns,
+                                      what="field", path=None if path is None else str(path))
+        col = np.asarray(self.columns[name])
+        if col.dtype.kind == "O" and not any(isinstance(v, (str, bytes)) for v in col.flat):
+            try:
+                col = col.astype(np.float64)
+            except (TypeError, ValueError):
+                pass
+        if col.dtype.kind not in "biuf":
+            what = "text" if col.dtype.kind in "OUS" else f"{col.dtype} values"
+            raise LogFormatError(f"{self.name}.{name} holds {what}, not numbers (its format "
+                                 "declares it so)", path=path)
+        return col.astype(np.float64, copy=False)
 
 
 @dataclass(frozen=True)

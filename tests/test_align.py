@@ -15,6 +15,7 @@ from mavsid.align import MAX_GAP_SAMPLES, align, load_flight, sysid_runs
 from mavsid.autopilot.presets import Channel, Preset
 from mavsid.data import MessageTable, ModeChange, RawLog, SourceInfo
 from mavsid.errors import DataQualityWarning, MavsidError
+from mavsid.readers import read_log
 
 # --------------------------------------------------------------------------- properties
 
@@ -413,3 +414,43 @@ def test_a_tlogs_commanded_attitude_follows_the_simulated_pilots_sticks(tmp_path
     ok = np.isfinite(got)
     assert ok.mean() > 0.9 and np.ptp(want) > 0.1
     assert np.corrcoef(got[ok], want[ok])[0, 1] > 0.99
+
+
+def _text_sids_log(path: Path) -> Path:
+    """A DataFlash log whose FMT declares SIDS.Mag as text (16 characters), with a SYSTEMID
+    run's SIDD and the ATT and RATE records a fit reads (written with the project's own
+    DataFlash writer)."""
+    from mavsid.synthetic.dfwriter import DataFlashBuilder, MessageFormat
+
+    b = DataFlashBuilder()
+    b.define(b.formats["FMT"])
+    sids = b.formats["SIDS"]
+    for f in (b.formats["ATT"], b.formats["RATE"], b.formats["SIDD"], b.formats["MODE"],
+              MessageFormat(sids.type_id, "SIDS", "QBNffffff", sids.columns)):
+        b.define(f)
+    t = np.arange(0, 20_000_000, 2_500)  # 20 s at 400 Hz
+    chirp = 0.1 * np.sin(2 * np.pi * (0.5 + t / 4e6) * t / 1e6)
+    b.add("ATT", t, Roll=np.zeros(t.size))
+    b.add("RATE", t, R=chirp, ROut=chirp)
+    b.add("MODE", [4_000_000], Mode=25, ModeNum=25)
+    b.add("SIDS", [4_000_000], Ax=10, Mag=["0.1 oops"], FSt=0.5, FSp=10.0, TR=10.0)
+    run = t[(t > 5_000_000) & (t < 15_000_000)]
+    b.add("SIDD", run, Targ=0.1 * np.sin(run / 1e5))
+    path.write_bytes(b.to_bytes())
+    return path
+
+
+def test_a_value_declared_as_text_is_refused_in_one_line(tmp_path, capsys) -> None:
+    """A SIDS field that the log's format declares as text: one line naming the file, the
+    message and the field, not a traceback."""
+    from mavsid.cli import main
+
+    path = _text_sids_log(tmp_path / "sids.bin")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataQualityWarning)
+        with pytest.raises(MavsidError, match=r"sids\.bin: SIDS\.Mag holds text, not numbers"):
+            sysid_runs(read_log(str(path)))
+        assert main(["segments", str(path)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len([line for line in err if "error" in line]) == 1, err
+    assert str(path) in err[-1] and "SIDS.Mag" in err[-1] and "not numbers" in err[-1]

@@ -504,7 +504,11 @@ def _fit(args: argparse.Namespace) -> int:
 
         cfg = _pipeline_config(args)
         with _progress(args, _stages(args, len(cfg.axes), len(FIT_STAGES))) as step:
-            result = fit(args.logs, cfg, progress=step)
+            try:
+                result = fit(args.logs, cfg, progress=step)
+            except NoExcitationError as exc:  # no plant: the outputs asked for still come
+                _write_unidentified(args, cfg, exc, step)
+                raise
             if args.output:
                 with atomic_path(args.output) as tmp, open(tmp, "w", encoding="utf-8") as f:
                     json.dump(result.models_dict(), f, indent=1)
@@ -513,6 +517,40 @@ def _fit(args: argparse.Namespace) -> int:
     if args.output and not args.json:
         print(f"wrote {args.output}")
     return 0
+
+
+def _write_unidentified(args: argparse.Namespace, cfg: PipelineConfig, exc: MavsidError,
+                        step: Callable[[str], None]) -> None:
+    """``fit``'s ``--report`` and ``--rrd`` when no plant was identified: the verdicts and
+    each log's closed-loop response (:mod:`mavsid.response`), said as such on stderr."""
+    if not (args.report or args.rrd):
+        return
+    from mavsid.response import read_response
+
+    notes = [f"no plant identified: {exc}", *exc.details]
+    found = []
+    for log in args.logs:
+        step(f"closed-loop response of {log}")
+        try:
+            found.append(read_response(log, cfg.axes, preset=cfg.preset, presets=cfg.presets,
+                                       mixers=cfg.mixers))
+        except MavsidError as why:
+            notes.append(f"no closed-loop response: {why}")
+    if args.report:
+        from mavsid.report import write_response_report
+
+        with atomic_path(args.report) as tmp:
+            write_response_report(found, tmp, title="mavsid fit: no plant identified",
+                                  notes=notes)
+    if args.rrd:
+        from mavsid.viz import save_response_rrd
+
+        with atomic_path(args.rrd) as tmp:
+            save_response_rrd(found, tmp, notes)
+    for path in (args.report, args.rrd):
+        if path:
+            print(f"mavsid: wrote {path} (no plant identified: the verdicts and the "
+                  "closed-loop response)", file=sys.stderr)
 
 
 def _add_validate(sub: argparse._SubParsersAction) -> None:
@@ -722,6 +760,100 @@ def _tune(args: argparse.Namespace) -> int:
 
 
 SUBCOMMANDS.append(_add_tune)
+
+
+def _add_response(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "response", help="how well the vehicle followed its commands: step, bandwidth, noise",
+        description="Per axis and controller loop (rate; attitude where logged): the step "
+        "response from target to actual by regularised deconvolution over overlapping "
+        "windows (mean and band), rise time, overshoot, settling, the closed-loop bandwidth "
+        "with coherence, tracking error and delay, gyro and controller-output spectra with "
+        "the configured filters, one response per rate-controller setting where parameters "
+        "change in flight. Needs only a rate target and the rate: works on ordinary "
+        "flights.",
+    )
+    p.add_argument("logs", nargs="+", metavar="LOG", help="flight log(s) (.bin .log .tlog .ulg)")
+    _add_output_flags(p)
+    p.set_defaults(handler=_response)
+
+
+def _response(args: argparse.Namespace) -> int:
+    import json
+
+    check_outputs([args.rrd, args.report], args.logs)
+    from mavsid.response import FlightResponse, read_response
+
+    cfg = _pipeline_config(args)
+    found: list[FlightResponse] = []
+    docs: list[dict[str, Any]] = []
+    errors: list[str] = []
+    with _progress(args, len(args.logs) + bool(args.rrd) + bool(args.report)) as step:
+        for log in args.logs:
+            step(f"reading {log}")
+            try:
+                _check_inputs([log])
+                got = read_response(log, cfg.axes, preset=cfg.preset, presets=cfg.presets,
+                                    mixers=cfg.mixers)
+            except MavsidError as exc:
+                if len(args.logs) == 1:
+                    raise
+                errors.append(str(exc))
+                docs.append({"log": log, "error": json.loads(_error_document(exc))["error"]})
+                continue
+            found.append(got)
+            docs.append(_json_ready(got.to_dict()))
+        written = _write_response_outputs(args, found, step) if found else []
+    code = 0 if found and not errors else 1
+    if args.json:
+        doc = docs[0] if len(docs) == 1 else {"logs": docs}
+        print(json.dumps(doc, ensure_ascii=True, allow_nan=False))
+        return code
+    from mavsid.cli_format import format_responses
+
+    print(escape_lines(format_responses(found)))
+    for line in errors:
+        print(f"mavsid: error: {escape(line)}", file=sys.stderr)
+    for path in written:
+        print(f"wrote {path}")
+    if not found:
+        print("mavsid: error: no log could be read", file=sys.stderr)
+    return code
+
+
+def _json_ready(doc: Any) -> Any:
+    """``doc`` with every non-finite float None (JSON has no NaN)."""
+    if isinstance(doc, dict):
+        return {k: _json_ready(v) for k, v in doc.items()}
+    if isinstance(doc, (list, tuple)):
+        return [_json_ready(v) for v in doc]
+    if isinstance(doc, float) and not math.isfinite(doc):
+        return None
+    return doc
+
+
+def _write_response_outputs(args: argparse.Namespace, found: Sequence[Any],
+                            step: Callable[[str], None]) -> list[str]:
+    """The ``.rrd`` and the report of ``mavsid response``; the paths written."""
+    written = []
+    if args.rrd:
+        from mavsid.viz import save_response_rrd
+
+        step(f"writing {args.rrd}")
+        with atomic_path(args.rrd) as tmp:
+            save_response_rrd(found, tmp)
+        written.append(args.rrd)
+    if args.report:
+        from mavsid.report import write_response_report
+
+        step(f"writing {args.report}")
+        with atomic_path(args.report) as tmp:
+            write_response_report(found, tmp)
+        written.append(args.report)
+    return written
+
+
+SUBCOMMANDS.append(_add_response)
 
 
 def _add_batch(sub: argparse._SubParsersAction) -> None:

@@ -1,13 +1,19 @@
 """The human-readable text of the loop commands (``mavsid tune``, the report's loop
-section): made from the data :func:`mavsid.loop.tune.tune` returns."""
+section, ``mavsid response``): made from the data :func:`mavsid.loop.tune.tune` and
+:func:`mavsid.response.read_response` return."""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
-from typing import Any
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING, Any
 
-__all__ = ["figure", "format_tune"]
+import numpy as np
+
+if TYPE_CHECKING:
+    from mavsid.response import FlightResponse, LoopResponse
+
+__all__ = ["figure", "format_loop", "format_responses", "format_tune"]
 
 def figure(v: float | None, fmt: str, unit: str, sd: float | None = None) -> str:
     """A loop figure as ``mavsid tune`` prints it, with its σ; ``none`` where it does not
@@ -65,4 +71,71 @@ def format_tune(report: Mapping[str, Any]) -> str:
         if e.get("suggested_note"):
             lines.append(f"  {e['suggested_note']}")
         lines += [f"  advice: {a}" for a in e.get("advice", [])]
+    return "\n".join(lines)
+
+
+def format_loop(r: LoopResponse) -> str:
+    """One loop's line: metrics in degrees, or the verdict alone."""
+    head = f"  {r.axis} {r.loop}"
+    if r.target:
+        head += f" ({r.target} -> {r.actual}, {r.rate_hz:.3g} Hz)"
+    if r.step is None:
+        extra = ""
+        if r.tracking_rms is not None:
+            unit = "deg/s" if r.loop == "rate" else "deg"
+            extra = f"; tracking RMS {math.degrees(r.tracking_rms):.3g} {unit}"
+        return f"{head}: {r.verdict}{extra}"
+
+    def num(v: float | None, fmt: str, unit: str, scale: float = 1.0) -> str:
+        return "-" if v is None else f"{v * scale:{fmt}} {unit}"
+
+    unit = "deg/s" if r.loop == "rate" else "deg"
+    lo, hi = r.step.lower, r.step.upper
+    parts = [
+        f"rise {num(r.rise_s, '.3g', 'ms', 1e3)}",
+        f"overshoot {num(r.overshoot_pct, '.3g', '%')}",
+        f"settling {num(r.settling_s, '.3g', 'ms', 1e3)}",
+        f"bandwidth {num(r.bandwidth_hz, '.3g', 'Hz')}"
+        + (f" (phase delay {r.phase_delay_s * 1e3:.3g} ms)" if r.phase_delay_s is not None
+           else ""),
+        f"tracking RMS {math.degrees(r.tracking_rms or 0.0):.3g} {unit}",
+        f"delay {num(r.delay_s, '.3g', 'ms', 1e3)}",
+        f"band ±{float((hi - lo).max() / 2):.2g}",
+    ]
+    return f"{head}: " + ", ".join(parts) + f"\n    {r.verdict}; {r.step.method}"
+
+
+def format_responses(found: Sequence[FlightResponse]) -> str:
+    """``mavsid response``'s text: per log its loops, spectra's filters and settings; with
+    several logs, the loops side by side."""
+    lines = []
+    for fr in found:
+        lines.append(f"{fr.log}: {fr.autopilot}, preset {fr.preset}")
+        lines += [format_loop(r) for r in fr.loops]
+        for axis, spectra in fr.spectra.items():
+            for sp in spectra:
+                if sp.freq_hz.size > 2:
+                    k = int(np.argmax(sp.psd[1:])) + 1
+                    cuts = ", ".join(f"{n} {v:g} Hz" for n, v in sp.cutoffs.items()) or "none"
+                    lines.append(f"  {axis} {sp.name} spectrum: peak at {sp.freq_hz[k]:.3g} Hz; "
+                                 f"filters {cuts}")
+                    break
+        for i, st in enumerate(fr.settings):
+            changed = ", ".join(f"{k}={v:g}" for k, v in st.changed.items()) or "as logged first"
+            lines.append(f"  setting {i + 1} ({st.start_s:.1f}-{st.stop_s:.1f} s, {changed}):")
+            lines += ["  " + format_loop(r) for r in st.loops]
+        lines += [f"  note: {n}" for n in fr.notes]
+    if len(found) > 1:
+        lines.append("compared (rise ms / overshoot % / bandwidth Hz per log):")
+        keys = dict.fromkeys((r.axis, r.loop) for fr in found for r in fr.loops)
+        for axis, loop in keys:
+            cells = []
+            for fr in found:
+                r = fr.loop(axis, loop)
+                if r is None or r.step is None:
+                    cells.append("-")
+                    continue
+                got = [(r.rise_s, 1e3), (r.overshoot_pct, 1.0), (r.bandwidth_hz, 1.0)]
+                cells.append(" / ".join("-" if v is None else f"{v * k:.3g}" for v, k in got))
+            lines.append(f"  {axis} {loop}: " + " | ".join(cells))
     return "\n".join(lines)

@@ -268,6 +268,23 @@ class FlightData:
     params: Mapping[str, float] = field(default_factory=dict)
     meta: Mapping[str, object] = field(default_factory=dict)
 
+    def series(self, name: str) -> np.ndarray | None:
+        """The state or input ``name`` on the grid; None when the flight has none.
+
+        Examples
+        --------
+        >>> fd = FlightData(np.arange(2) * 0.1, np.zeros((2, 1)), np.ones((2, 1)), ("p",),
+        ...                 ("u_roll",), ("rad/s",), ("1",), 0.1, np.array([[0, 2]]), {},
+        ...                 SourceInfo("a.bin", "dataflash", 0), "t")
+        >>> fd.series("u_roll").tolist(), fd.series("q")
+        ([1.0, 1.0], None)
+        """
+        if name in self.state_names:
+            return self.states[:, self.state_names.index(name)]
+        if name in self.input_names:
+            return self.inputs[:, self.input_names.index(name)]
+        return None
+
     def index_of(self, segment: Segment) -> int | None:
         """Index of ``segment``'s first sample on this flight's grid; None when the segment
         was not cut from it (another log, other times).

@@ -43,12 +43,13 @@ from mavsid.validation import Validation, horizon_label
 if TYPE_CHECKING:
     from mavsid.loop.tune import TuneAnalysis
     from mavsid.pipeline import AxisFit, FitResult
+    from mavsid.response import FlightResponse
 
     #: The loop analysis a report draws, or a function that returns it when first needed.
     _Analysis = TuneAnalysis | Callable[[], TuneAnalysis] | None
 
 __all__ = ["figure_img", "loop_section", "render_html", "render_html_page",
-           "write_report"]
+           "response_section", "write_report", "write_response_report"]
 
 #: the grids' opacity (major and, from :func:`_log_minor`, minor lines)
 _GRID_ALPHA = 0.3
@@ -686,3 +687,160 @@ def loop_section(result: FitResult, target_pm_deg: float = 50.0, *,
         if bode is not None:
             parts.append(figure_img(bode))
     return "\n".join(parts)
+
+
+# --------------------------------------------------------------------------- closed-loop response
+
+_LOG_COLOURS = ("#2f6fde", "#f08a12", "#2a9d46", "#b04fc0")
+
+
+def _response_time_figure(responses: Sequence[FlightResponse]) -> Figure | None:
+    """Target and actual of every loop, one row each, time axes shared (per log a colour;
+    several logs: each on its own clock)."""
+    keys = list(dict.fromkeys((r.axis, r.loop) for fr in responses for r in fr.loops
+                              if r.time_s.size))
+    if not keys:
+        return None
+    fig = Figure(figsize=(11, 1.9 * len(keys) + 0.6))
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(len(keys), 1, squeeze=False, sharex=len(responses) == 1)[:, 0]
+    for ax, (axis, loop) in zip(axes, keys, strict=True):
+        for i, fr in enumerate(responses):
+            r = fr.loop(axis, loop)
+            if r is None or not r.time_s.size:
+                continue
+            keep = decimate(np.nan_to_num(r.actual_series), 6000)
+            tag = f"{os.path.basename(fr.log)} " if len(responses) > 1 else ""
+            ax.plot(r.time_s[keep], r.target_series[keep], color="#999999", lw=0.7,
+                    label=f"{tag}target {r.target}")
+            ax.plot(r.time_s[keep], r.actual_series[keep], lw=0.7,
+                    color=_LOG_COLOURS[i % len(_LOG_COLOURS)], label=f"{tag}actual {r.actual}")
+        ax.set_ylabel(f"{axis} {loop}\n[{'rad/s' if loop == 'rate' else 'rad'}]")
+        ax.grid(alpha=_GRID_ALPHA)
+        ax.legend(fontsize=7, loc="upper right")
+    axes[-1].set_xlabel("log time (s)")
+    fig.tight_layout()
+    return fig
+
+
+def _response_step_figure(responses: Sequence[FlightResponse], axis: str, loop: str
+                          ) -> Figure | None:
+    """The step responses of one loop with their bands, one per log, overlaid."""
+    found = [(i, fr, r) for i, fr in enumerate(responses)
+             if (r := fr.loop(axis, loop)) is not None and r.step is not None]
+    if not found:
+        return None
+    fig = Figure(figsize=(5.4, 3.6))
+    FigureCanvasAgg(fig)
+    ax = fig.subplots()
+    for i, fr, r in found:
+        assert r.step is not None
+        s, colour = r.step, _LOG_COLOURS[i % len(_LOG_COLOURS)]
+        ax.fill_between(s.time_s, s.lower, s.upper, color=colour, alpha=0.25, lw=0)
+        ax.plot(s.time_s, s.response, color=colour,
+                label=f"{os.path.basename(fr.log)}: {s.windows} windows")
+    ax.axhline(1.0, color="#666666", lw=0.6, ls="--")
+    ax.set_xlabel("time after the step (s)")
+    ax.set_ylabel("response")
+    ax.set_title(f"{axis} {loop}: step response (band: ±2 SE and truncation)", fontsize=9)
+    ax.grid(alpha=_GRID_ALPHA)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
+def _response_spectrum_figure(responses: Sequence[FlightResponse], axis: str
+                              ) -> Figure | None:
+    """Gyro and controller-output spectra of one axis, the filters' cut-offs marked."""
+    found = [(i, sp) for i, fr in enumerate(responses) for sp in fr.spectra.get(axis, ())
+             if np.any(sp.psd > 0)]
+    if not found:
+        return None
+    fig = Figure(figsize=(5.4, 3.6))
+    FigureCanvasAgg(fig)
+    ax = fig.subplots()
+    marked: dict[str, float] = {}
+    for i, sp in found:
+        ok = (sp.freq_hz > 0) & (sp.psd > 0)
+        ls = "-" if sp.name.startswith("gyro") else ":"
+        ax.loglog(sp.freq_hz[ok], sp.psd[ok], ls, lw=0.9,
+                  color=_LOG_COLOURS[i % len(_LOG_COLOURS)],
+                  label=sp.name + (f" ({i + 1})" if len(responses) > 1 else ""))
+        marked.update(sp.cutoffs)
+    at: dict[float, list[str]] = {}
+    for name, hz in marked.items():
+        at.setdefault(hz, []).append(name)
+    for hz, names in at.items():
+        ax.axvline(hz, color="#b04fc0", lw=0.7, ls="--")
+        ax.text(hz, 1.0, f" {', '.join(names)} {hz:g} Hz", rotation=90, va="top", fontsize=6,
+                transform=ax.get_xaxis_transform())
+    ax.set_xlabel("frequency (Hz)")
+    ax.set_ylabel("PSD (unit²/Hz)")
+    ax.set_title(f"{axis}: gyro (solid) and controller output (dotted)", fontsize=9)
+    ax.grid(alpha=_GRID_ALPHA, which="both")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
+def response_section(responses: Sequence[FlightResponse], title: str = "Closed-loop response"
+                     ) -> str:
+    """The closed-loop responses as HTML: a table of every loop's figures and verdict, the
+    target and actual over time, per loop the step responses overlaid, per axis spectra."""
+    def cell(v: float | None, scale: float = 1.0) -> str:
+        return "–" if v is None else f"{v * scale:.3g}"
+
+    rows = "".join(
+        f'<tr><td class="name">{html.escape(os.path.basename(fr.log))}</td>'
+        f'<td class="name">{r.axis}</td><td class="name">{r.loop}</td>'
+        f"<td>{cell(r.rise_s, 1e3)}</td><td>{cell(r.overshoot_pct)}</td>"
+        f"<td>{cell(r.settling_s, 1e3)}</td><td>{cell(r.bandwidth_hz)}</td>"
+        f"<td>{cell(r.phase_delay_s, 1e3)}</td><td>{cell(r.delay_s, 1e3)}</td>"
+        f'<td class="name">{html.escape(r.verdict)}</td></tr>'
+        for fr in responses for r in fr.loops)
+    parts = [f"<h2>{html.escape(title)}</h2>",
+             '<p class="meta">Step responses by Tikhonov-regularised deconvolution of target '
+             "to actual over half-overlapping windows with target activity (mean of the "
+             "windows; band: two standard errors of the mean and the change when the "
+             "deconvolution is cut at half its length). Bandwidth: where the measured "
+             "closed-loop response first falls 3 dB, inside its coherent band.</p>",
+             '<table><tr><th class="name">log</th><th class="name">axis</th>'
+             '<th class="name">loop</th><th>rise ms</th><th>overshoot %</th>'
+             "<th>settling ms</th><th>bandwidth Hz</th><th>phase delay ms</th>"
+             f'<th>delay ms</th><th class="name">verdict</th></tr>{rows}</table>']
+    for fr in responses:
+        for st in fr.settings:
+            changed = ", ".join(f"{k}={v:g}" for k, v in st.changed.items()) or "first"
+            parts.append(f'<p class="meta">{html.escape(os.path.basename(fr.log))}: setting '
+                         f"{st.start_s:.1f}–{st.stop_s:.1f} s ({html.escape(changed)}): "
+                         + "; ".join(html.escape(f"{r.axis} {r.loop} rise "
+                                                 f"{cell(r.rise_s, 1e3)} ms, overshoot "
+                                                 f"{cell(r.overshoot_pct)} %")
+                                     for r in st.loops if r.step is not None) + "</p>")
+    time_fig = _response_time_figure(responses)
+    if time_fig is not None:
+        parts.append(figure_img(time_fig))
+    keys = list(dict.fromkeys((r.axis, r.loop) for fr in responses for r in fr.loops))
+    figs = [f for axis, loop in keys if (f := _response_step_figure(responses, axis, loop))]
+    figs += [f for axis in dict.fromkeys(a for a, _ in keys)
+             if (f := _response_spectrum_figure(responses, axis))]
+    parts.append('<div class="row">' + "".join(figure_img(f) for f in figs) + "</div>")
+    return "\n".join(parts)
+
+
+def write_response_report(responses: Sequence[FlightResponse], path: str | os.PathLike[str],
+                          *, title: str = "mavsid response", notes: Sequence[str] = ()
+                          ) -> None:
+    """Write the page of ``mavsid response``: :func:`response_section` of ``responses``,
+    under ``notes`` (lines shown first: why a fit identified nothing, its verdicts)."""
+    logs = ", ".join(os.path.basename(fr.log) for fr in responses)
+    header = (f"<h1>{html.escape(title)}: {html.escape(logs)}</h1>"
+              f'<p class="meta">mavsid {__version__}</p>')
+    said = ("<ul>" + "".join(f"<li>{html.escape(n)}</li>" for n in notes) + "</ul>"
+            if notes else "")
+    body = (response_section(responses) if responses else
+            "<p>No closed-loop response either: the logs have no rate target nor "
+            "commanded attitude.</p>")
+    text = render_html_page(f"{title}: {logs}", [header, said, body])
+    with open(path, "w", encoding="utf-8") as f:
+        f.write(text)

@@ -1,0 +1,234 @@
+"""The closed-loop response: simulated flights whose loop is known, two flights of one
+vehicle, real and public logs, the command line."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from helpers import shared_logs
+
+from mavsid import response
+from mavsid.synthetic.controller import ArduPilotPID, motor_outputs
+from mavsid.synthetic.plant import Lowpass2p, discretise
+from mavsid.synthetic.run import scenario_from_options, simulate
+
+CACHE = Path("/work/cache")
+
+
+def true_rate_step(scenario, axis: str, length_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """The simulator's own loop, noise-free, stepped: a unit rate-target step on ``axis``
+    through its rate PID (P + I + D + feed-forward), the mixer, the delayed plant and the
+    gyro filter; the filtered
+    gyro (what RATE.R logs) against time."""
+    ctl, pl = scenario.controller, scenario.plant
+    dt = 1.0 / ctl.loop_hz
+    j = ("roll", "pitch", "yaw").index(axis)
+    disc = discretise(pl, dt)
+    pid = ArduPilotPID(ctl.rate_gains(axis), dt)
+    pid.update(0.0, 0.0)  # (past its first call, which starts its filters at their input)
+    gyro = Lowpass2p(pl.gyro_filter_hz, ctl.loop_hz, 1)
+    n = round(length_s / dt) + 1
+    x = np.zeros(disc.n_state)
+    n_hist = disc.delay_steps + 2
+    u_hist = np.zeros((n_hist, 3))
+    out = np.zeros(n)
+    size = 0.2  # rad/s: small enough that nothing saturates
+    for k in range(n):
+        g = float(gyro(np.array([x[j]]))[0])
+        u = np.zeros(3)
+        u[j] = pid.update(size, g, now_s=(k + 1) * dt) + pid.feedforward
+        _, ue = motor_outputs(np.array([pl.hover_throttle]), u[None, :])
+        u_hist[k % n_hist] = ue[0]
+        x = (disc.phi @ x + disc.gamma_prev @ u_hist[(k + 1) % n_hist]
+             + disc.gamma_now @ u_hist[(k + 2) % n_hist])
+        out[k] = g / size
+    return np.arange(n) * dt, out
+
+
+@pytest.fixture(scope="module")
+def flights(tmp_path_factory) -> dict[int, tuple[Path, object]]:
+    """Two simulated flights of one vehicle (random roll sticks), different seeds."""
+    out = {}
+    folder = tmp_path_factory.mktemp("response")
+    for seed in (1, 2):
+        sc = scenario_from_options(manoeuvre="random", axis="roll", duration_s=60.0, seed=seed)
+        path = folder / f"roll{seed}.bin"
+        simulate(sc, [path])
+        out[seed] = (path, sc)
+    return out
+
+
+def test_simulated_step_lies_within_its_band(flights) -> None:
+    path, sc = flights[1]
+    got = response.read_response(path).loop("roll", "rate")
+    assert got is not None and got.step is not None, got
+    step = got.step
+    t, truth = true_rate_step(sc, "roll", float(step.time_s[-1]))
+    assert np.allclose(t, step.time_s)
+    inside = (truth >= step.lower) & (truth <= step.upper)
+    assert inside.mean() >= 0.9, (inside.mean(), np.abs(step.response - truth).max())
+    # the metrics of the truth, by python-control's step_info on the true samples
+    import control
+
+    info = control.step_info(truth, T=t, SettlingTimeThreshold=0.05, RiseTimeLimits=(0.1, 0.9))
+    assert got.rise_s == pytest.approx(info["RiseTime"], rel=0.2, abs=0.005)
+    assert got.overshoot_pct == pytest.approx(info["Overshoot"], abs=5.0)
+    assert step.windows >= 20 and got.bandwidth_hz is not None
+    assert got.band_hz is not None and got.band_hz[1] == 200.0  # (400 Hz RATE)
+    assert got.band_hz[0] == pytest.approx(1 / step.window_s, rel=0.01)
+    # the pitch and yaw sticks were not moved: said, no curve
+    for axis in ("pitch", "yaw"):
+        other = response.read_response(path).loop(axis, "rate")
+        assert other is not None and other.step is None and "no step response" in other.verdict
+
+
+def test_true_bandwidth_matches_the_measured_one(flights) -> None:
+    import control
+
+    path, sc = flights[1]
+    got = response.read_response(path).loop("roll", "rate")
+    assert got is not None and got.bandwidth_hz is not None
+    # the truth's -3 dB point: its impulse response (from the stepped loop) as an FIR
+    t, truth = true_rate_step(sc, "roll", 2.0)
+    dt = t[1]
+    fir = control.tf(np.diff(truth, prepend=0.0), [1.0] + [0.0] * (truth.size - 1), dt)
+    f = np.geomspace(1, 60, 2000)
+    mag = np.abs(fir(np.exp(2j * np.pi * f * dt)))
+    f3 = f[np.flatnonzero(mag < mag[0] * 10 ** (-3 / 20))[0]]
+    assert got.bandwidth_hz == pytest.approx(f3, rel=0.15)
+
+
+def test_two_flights_of_one_vehicle_agree_within_their_bands(flights) -> None:
+    a = response.read_response(flights[1][0]).loop("roll", "rate")
+    b = response.read_response(flights[2][0]).loop("roll", "rate")
+    assert a is not None and b is not None and a.step is not None and b.step is not None
+    half_a = (a.step.upper - a.step.lower) / 2
+    half_b = (b.step.upper - b.step.lower) / 2
+    agree = np.abs(a.step.response - b.step.response) <= np.hypot(half_a, half_b) * 1.0
+    assert agree.mean() >= 0.9
+
+
+def test_a_slow_log_says_what_it_resolves(tmp_path) -> None:
+    sc = scenario_from_options(manoeuvre="random", axis="roll", duration_s=60.0, seed=3,
+                               rate_hz=10.0)
+    path = tmp_path / "slow.bin"
+    simulate(sc, [path])
+    got = response.read_response(path).loop("roll", "rate")
+    assert got is not None and got.band_hz is not None and got.band_hz[1] == 5.0
+    assert "only the slow part" in got.verdict
+
+
+def test_nothing_is_said_below_the_least_rate() -> None:
+    t = np.arange(0, 60, 0.2)
+    got = response.loop_response("roll", "rate", t, np.sin(t), np.sin(t), rate_hz=5.0)
+    assert got.step is None and got.bandwidth_hz is None and "nothing can be said" in got.verdict
+
+
+def test_a_parameter_change_in_flight_splits_the_response(tmp_path) -> None:
+    from mavsid.align import read_flight
+    from mavsid.data import MessageTable, RawLog
+    from mavsid.loop import twin_messages
+
+    sc = scenario_from_options(manoeuvre="random", axis="roll", duration_s=60.0, seed=4)
+    path = tmp_path / "f.bin"
+    simulate(sc, [path])
+    flight, raw = read_flight(path, also=sorted(twin_messages() | {"PARM"}))
+    t0 = float(flight.time_s[0])
+    parm = raw.messages["PARM"]
+    names = np.concatenate([np.asarray(parm.columns["Name"], object),
+                            np.array(["ATC_RAT_RLL_P"], object)])
+    values = np.concatenate([np.asarray(parm.columns["Value"], float), [0.2]])
+    times = np.concatenate([np.asarray(parm.time_s, float), [t0 + 30.0]])
+    changed = RawLog(raw.source, {**raw.messages, "PARM": MessageTable(
+        "PARM", {"Name": names, "Value": values}, times)}, params=raw.params)
+    got = response.flight_response(flight, changed)
+    assert len(got.settings) == 2
+    assert got.settings[1].changed == {"ATC_RAT_RLL_P": 0.2}
+    assert all(s.loops[0].axis == "roll" for s in got.settings)
+
+
+def _mavsid(*args: str) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    return subprocess.run([sys.executable, "-m", "mavsid", *args], capture_output=True,
+                          text=True, env=env, timeout=600, check=False)
+
+
+def test_cli_json(flights) -> None:
+    path = str(flights[1][0])
+    run = _mavsid("response", path, "--json", "-q", "--axis", "roll")
+    assert run.returncode == 0, run.stderr
+    doc = json.loads(run.stdout)
+    rate = doc["axes"]["roll"]["rate"]
+    for key in ("rise_s", "overshoot_pct", "bandwidth_hz", "tracking_rms", "delay_s",
+                "windows", "band_hz", "verdict"):
+        assert key in rate
+    assert set(rate["step"]) >= {"time_s", "response", "lower", "upper"}
+    assert list(doc["axes"]) == ["roll"]
+
+
+def test_cli_text_and_error(flights, tmp_path) -> None:
+    run = _mavsid("response", str(flights[1][0]))
+    assert run.returncode == 0, run.stderr
+    assert "roll rate" in run.stdout and "pitch rate" in run.stdout
+    bad = tmp_path / "x.bin"
+    bad.write_bytes(b"nothing")
+    run = _mavsid("response", str(bad), "--json")
+    assert run.returncode == 1 and "Traceback" not in run.stderr
+    assert "error" in json.loads(run.stdout)
+
+
+def _real_logs() -> list[Path]:
+    found = sorted(shared_logs(".bin", ".log", ".tlog", ".ulg"))
+    for pattern in ("keita/*.BIN", "px4_ulog_tools/*.ulg", "impulse-response/**/*.ulg",
+                    "px4tools/**/*.px4log"):
+        found += sorted(CACHE.glob(pattern))
+    return [p for p in found if "00000068" not in p.name]
+
+
+def test_every_log_runs_without_a_traceback(capsys) -> None:
+    from mavsid.cli import main
+
+    logs = _real_logs()
+    if not logs:
+        pytest.skip("no shared or cached logs")
+    for log in logs:
+        code = main(["response", str(log), "--json", "-q"])
+        doc = json.loads(capsys.readouterr().out)
+        assert code in (0, 1), (log, code)
+        if code == 0:
+            for axis in doc["axes"].values():
+                assert all(loop["verdict"] for loop in axis.values())
+        else:
+            assert doc["error"], log
+
+
+def test_fit_writes_its_outputs_when_nothing_is_identified(flights, tmp_path) -> None:
+    html, rrd = tmp_path / "r.html", tmp_path / "r.rrd"
+    run = _mavsid("fit", str(flights[1][0]), "--axis", "pitch", "--report", str(html),
+                  "--rrd", str(rrd), "-q")
+    assert run.returncode == 1 and "Traceback" not in run.stderr
+    text = html.read_text(encoding="utf-8")
+    assert "no plant identified" in text and "not identified" in text
+    assert "step response" in text.lower() and rrd.stat().st_size > 1000
+    assert "wrote" in run.stderr and "no plant identified" in run.stderr
+
+
+def test_two_logs_overlaid_in_the_report_and_recording(flights, tmp_path) -> None:
+    from mavsid.report import write_response_report
+    from mavsid.viz import response_blueprint, save_response_rrd
+
+    found = [response.read_response(flights[s][0], ("roll",)) for s in (1, 2)]
+    page = tmp_path / "two.html"
+    write_response_report(found, page)
+    text = page.read_text(encoding="utf-8")
+    assert text.count("roll1.bin") >= 2 and text.count("roll2.bin") >= 2
+    assert text.count("<img") >= 3  # time, step, spectrum
+    bp = save_response_rrd(found, tmp_path / "two.rrd")
+    assert bp is not None and (tmp_path / "two.rrd").stat().st_size > 1000
+    assert response_blueprint(found) is not None

@@ -54,10 +54,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mavsid import dsp
+from mavsid.axes import AXES, RATE_OF
 from mavsid.data import FlightData, RawLog
 from mavsid.errors import MissingMessageError, NoExcitationError
 from mavsid.frequency import FRF, frf
-from mavsid.axes import AXES, RATE_OF
 
 __all__ = [
     "AXES",

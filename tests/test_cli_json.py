@@ -31,7 +31,7 @@ def _json_commands() -> list[str]:
 
 def test_the_json_commands_are_known() -> None:
     # a new --json command must be added to the runs below
-    assert _json_commands() == ["fit", "info", "segments", "tune", "validate"]
+    assert _json_commands() == ["fit", "info", "response", "segments", "tune", "validate"]
 
 
 @pytest.fixture(scope="module")
@@ -59,7 +59,8 @@ def _logs(tmp_path: Path) -> dict[str, Path]:
             "slow": FIXTURES / "slow_10hz.bin", "garbage": garbage}
 
 
-@pytest.mark.parametrize("command", ["fit", "info", "segments", "tune", "validate"])
+@pytest.mark.parametrize("command", ["fit", "info", "response", "segments", "tune",
+                                     "validate"])
 def test_json_is_one_document_on_success_and_on_failure(command: str, model: Path,
                                                         tmp_path: Path) -> None:
     codes = set()

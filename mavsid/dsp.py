@@ -21,9 +21,6 @@ them); none has that function's full set of options, only those mavsid uses.
 - :func:`expm` and :func:`logm`: ``scipy.linalg``'s namesakes for the small real matrices of
   a model's discretisation (Padé scaling and squaring; the eigenvectors, or scipy where they
   are ill-conditioned).
-- :func:`interpolating_spline` and :func:`brent_root`: the not-a-knot cubic through a
-  measured frequency response (FITPACK's ``s=0`` curve, what python-control smooths an FRD
-  with) and ``scipy.optimize.brentq``'s root finding, for the loop's margins.
 
 Examples
 --------
@@ -50,9 +47,9 @@ try:
 except ImportError:  # pragma: no cover - built without a C compiler: scipy's banded solve
     _filter = None  # type: ignore[assignment]
 
-__all__ = ["Lowpass2p", "brent_root", "butter_lowpass", "csd", "density", "expm", "hann",
-           "interpolating_spline", "lfilter", "lfilter_zi", "logm", "lowpass2p_coefficients",
-           "segment_ffts", "tf2ss", "tukey", "welch"]
+__all__ = ["Lowpass2p", "butter_lowpass", "csd", "density", "expm", "hann", "lfilter",
+           "lfilter_zi", "logm", "lowpass2p_coefficients", "segment_ffts", "tf2ss", "tukey",
+           "welch"]
 
 
 def _recurse(a: np.ndarray, rhs: np.ndarray) -> None:
@@ -384,106 +381,3 @@ def logm(a: np.ndarray) -> np.ndarray:
     from scipy import linalg  # (a defective or near-defective matrix: scipy's Schur method)
 
     return np.asarray(np.real(linalg.logm(a)))
-
-
-def interpolating_spline(x: np.ndarray, y: np.ndarray) -> Callable[[Any], np.ndarray]:
-    """The interpolating cubic spline through ``(x, y)`` (``x`` strictly increasing, ``y``
-    real or complex), with not-a-knot ends: what ``scipy.interpolate.splprep(..., u=x,
-    s=0)`` and ``splev`` give for a curve (FITPACK's interpolating knots are the data's
-    less the second and last but one: not-a-knot) and ``CubicSpline(x, y)`` gives, to
-    rounding (tests compare); with fewer than four points the polynomial through them. The
-    slopes at the points solve one linear system; returns the evaluator (beyond the ends,
-    the end pieces go on).
-
-    Examples
-    --------
-    >>> s = interpolating_spline(np.arange(5.0), np.arange(5.0) ** 3)
-    >>> [round(float(v), 9) for v in s(np.array([0.5, 2.5]))]
-    [0.125, 15.625]
-    """
-    x = np.asarray(x, float)
-    y = np.asarray(y)
-    n = x.size
-    if n < 2 or y.shape != x.shape or not np.all(np.diff(x) > 0):
-        raise ValueError("interpolating_spline: x strictly increasing, y alike, 2 points or more")
-    if n < 4:
-        coef = np.polyfit(x - x[0], y, n - 1)
-        return lambda t: np.polyval(coef, np.asarray(t, float) - x[0])
-    h = np.diff(x)
-    s = np.diff(y) / h
-    a = np.zeros((n, n))
-    b = np.zeros(n, dtype=np.result_type(y, float))
-    k = np.arange(1, n - 1)
-    a[k, k - 1], a[k, k], a[k, k + 1] = h[1:], 2.0 * (h[:-1] + h[1:]), h[:-1]
-    b[1:-1] = 3.0 * (h[1:] * s[:-1] + h[:-1] * s[1:])
-    d = h[0] + h[1]  # not-a-knot: the third derivative continuous at the second point...
-    a[0, :2] = h[1], d
-    b[0] = ((h[0] + 2.0 * d) * h[1] * s[0] + h[0] ** 2 * s[1]) / d
-    d = h[-1] + h[-2]  # ... and at the last but one
-    a[-1, -2:] = d, h[-2]
-    b[-1] = (h[-1] ** 2 * s[-2] + (2.0 * d + h[-1]) * h[-2] * s[-1]) / d
-    m = np.linalg.solve(a, b)
-    c2 = (3.0 * s - 2.0 * m[:-1] - m[1:]) / h
-    c3 = (m[:-1] + m[1:] - 2.0 * s) / h**2
-
-    def at(t: Any) -> np.ndarray:
-        t = np.asarray(t, float)
-        i = np.clip(np.searchsorted(x, t, side="right") - 1, 0, n - 2)
-        u = t - x[i]
-        return np.asarray(y[i] + u * (m[i] + u * (c2[i] + u * c3[i])))
-
-    return at
-
-
-def brent_root(f: Callable[[float], float], a: float, b: float, xtol: float = 2e-12,
-               rtol: float = 4 * np.finfo(float).eps, maxiter: int = 100) -> float:
-    """A root of ``f`` in ``[a, b]`` (``f(a)`` and ``f(b)`` of opposite signs, or one zero) by
-    Brent's method — inverse quadratic interpolation or the secant where it makes progress,
-    bisection where it does not — to ``xtol + rtol |x|``: ``scipy.optimize.brentq``'s
-    algorithm and defaults (tests compare). Raises ValueError without a sign change.
-
-    Examples
-    --------
-    >>> round(brent_root(lambda x: x * x - 2.0, 0.0, 2.0), 12)
-    1.414213562373
-    """
-    x_pre, x_cur = float(a), float(b)
-    f_pre, f_cur = f(x_pre), f(x_cur)
-    if f_pre == 0:
-        return x_pre
-    if f_cur == 0:
-        return x_cur
-    if np.signbit(f_pre) == np.signbit(f_cur):
-        raise ValueError("brent_root: f(a) and f(b) have the same sign")
-    x_blk = f_blk = s_pre = s_cur = 0.0
-    for _ in range(maxiter):
-        if f_pre != 0 and f_cur != 0 and np.signbit(f_pre) != np.signbit(f_cur):
-            x_blk, f_blk = x_pre, f_pre  # the bracket's other end
-            s_pre = s_cur = x_cur - x_pre
-        if abs(f_blk) < abs(f_cur):  # the better estimate is x_cur
-            x_pre, x_cur, x_blk = x_cur, x_blk, x_cur
-            f_pre, f_cur, f_blk = f_cur, f_blk, f_cur
-        delta = (xtol + rtol * abs(x_cur)) / 2
-        s_bis = (x_blk - x_cur) / 2
-        if f_cur == 0 or abs(s_bis) < delta:
-            return x_cur
-        step = s_bis
-        if abs(s_pre) > delta and abs(f_cur) < abs(f_pre):
-            if x_pre == x_blk:  # the secant
-                s_try = -f_cur * (x_cur - x_pre) / (f_cur - f_pre)
-            else:  # inverse quadratic interpolation
-                d_pre = (f_pre - f_cur) / (x_pre - x_cur)
-                d_blk = (f_blk - f_cur) / (x_blk - x_cur)
-                s_try = -f_cur * (f_blk * d_blk - f_pre * d_pre) / (d_blk * d_pre
-                                                                    * (f_blk - f_pre))
-            if 2 * abs(s_try) < min(abs(s_pre), 3 * abs(s_bis) - delta):
-                s_pre, step = s_cur, s_try
-            else:
-                s_pre = s_bis
-        else:
-            s_pre = s_bis
-        s_cur = step
-        x_pre, f_pre = x_cur, f_cur
-        x_cur += step if abs(step) > delta else (delta if s_bis > 0 else -delta)
-        f_cur = f(x_cur)
-    return x_cur

@@ -157,54 +157,6 @@ def test_logm_matches_scipy_and_hands_defective_matrices_to_it() -> None:
     assert dsp.logm(jordan)[0, 1] == pytest.approx(1 / 0.9, rel=1e-12)
 
 
-def test_interpolating_spline_is_fitpacks_curve_and_cubicspline() -> None:
-    """What the FRD margins interpolate with: FITPACK's interpolating parametric curve
-    (splprep with s=0, as python-control smooths an FRD; the weights do not enter), the
-    not-a-knot CubicSpline; beyond the ends too; the polynomial through 2 or 3 points."""
-    from scipy.interpolate import CubicSpline, splev, splprep
-
-    rng = np.random.default_rng(13)
-    for n in (2, 3, 4, 7, 150):
-        x = np.sort(rng.uniform(0.5, 60.0, n)) * 2 * np.pi
-        y = rng.standard_normal(n) + 1j * rng.standard_normal(n)
-        t = np.linspace(x[0] - 1.0, x[-1] + 1.0, 2000)
-        tck, _ = splprep([y.real, y.imag], u=x, w=1.0 / (np.abs(y) + 0.001), s=0.0,
-                         k=min(3, n - 1))
-        re, im = splev(t, tck)
-        got = dsp.interpolating_spline(x, y)(t)
-        scale = float(np.abs(y).max())
-        inside = (t >= x[0]) & (t <= x[-1])
-        np.testing.assert_allclose(got[inside], (re + 1j * im)[inside], rtol=0,
-                                   atol=1e-12 * scale)
-        if n >= 4:
-            np.testing.assert_allclose(got, CubicSpline(x, y)(t), rtol=0, atol=1e-10 * scale)
-    with pytest.raises(ValueError, match="strictly increasing"):
-        dsp.interpolating_spline(np.array([1.0, 1.0, 2.0]), np.zeros(3))
-
-
-def test_brent_root_is_brentq() -> None:
-    """The margins' crossings: scipy.optimize.brentq's iterates, so its roots to the bit."""
-    from scipy.optimize import brentq
-
-    rng = np.random.default_rng(14)
-    grid = np.linspace(-3.0, 3.0, 61)
-    roots = 0
-    for _ in range(200):
-        c = rng.standard_normal(5)
-
-        def f(x: float, c: np.ndarray = c) -> float:
-            return float(np.polyval(c, x) + np.sin(3.0 * x))
-
-        v = np.array([f(x) for x in grid])
-        for i in np.flatnonzero(np.diff(np.sign(v))):
-            assert dsp.brent_root(f, grid[i], grid[i + 1]) == brentq(f, grid[i], grid[i + 1])
-            roots += 1
-    assert roots > 300
-    assert dsp.brent_root(lambda x: x - 1.0, 1.0, 2.0) == 1.0
-    with pytest.raises(ValueError, match="same sign"):
-        dsp.brent_root(lambda x: x * x + 1.0, -1.0, 1.0)
-
-
 def test_a_fit_without_the_compiled_recursion_is_the_same_fit(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """A build without a C compiler filters through scipy's banded solve: the same model,

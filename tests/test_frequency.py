@@ -12,11 +12,12 @@ import numpy as np
 import pytest
 from helpers import shared_path
 from loop_plants import true_plant
+from loop_reference import analyse_loop
 
 from mavsid import pipeline
 from mavsid.cli import main
 from mavsid.frequency import fit_tf, frf, measured_responses
-from mavsid.loop.analysis import analyse_loop, analyse_model, frd_margins, margins_on_frf
+from mavsid.loop.analysis import analyse_model, frd_margins, margins_on_frf
 from mavsid.loop.controllers import controller_from_params, scale_of, scaled
 from mavsid.loop.plant import LinearPlant, plant_statespace
 from mavsid.loop.tune import SUGGESTION_CHECK_DEG, suggest_gains, tune

@@ -4,17 +4,17 @@ against python-control and scipy."""
 from __future__ import annotations
 
 import warnings
+from dataclasses import replace
 
 import numpy as np
 import pytest
 from loop_plants import AXES_INDEX, true_plant
+from loop_reference import analyse_loop, controller_tf
 
 from mavsid.loop.analysis import (
-    analyse_loop,
     analyse_plant,
     closed_figures,
     controller_polys,
-    controller_tf,
     frd_margins_at,
     loop_figures,
     margin_db,
@@ -75,16 +75,46 @@ _CONTROLLERS = [
 
 @pytest.mark.parametrize(("params", "axis"), _CONTROLLERS)
 def test_controller_polys_are_python_controls(params: dict[str, float], axis: str) -> None:
-    # the numpy controller is python-control's transfer functions, coefficient for
-    # coefficient (the same sums and products, zero terms dropped as python-control does)
+    # the controller over one denominator is python-control's sums and products of its
+    # parts: the same responses over the band the analysis reads (from 0.001 of the loop
+    # rate, where the margins' grid starts, to Nyquist; nearer z = 1 the integrator's pole
+    # costs both evaluations digits)
     ctrl = controller_from_params(params, axis)
     for dt in (1.0 / ctrl.loop_hz, 0.001):
+        z = np.exp(2j * np.pi * np.geomspace(1e-3 / dt, 0.5 / dt, 300) * dt)
         for tf, (num, den) in zip(controller_tf(ctrl, dt), controller_polys(ctrl, dt),
                                   strict=True):
-            assert num.shape == np.asarray(tf.num[0][0]).shape
-            assert den.shape == np.asarray(tf.den[0][0]).shape
-            np.testing.assert_allclose(num, tf.num[0][0], rtol=1e-15, atol=0)
-            np.testing.assert_allclose(den, tf.den[0][0], rtol=1e-15, atol=0)
+            np.testing.assert_allclose(np.polyval(num, z) / np.polyval(den, z), np.ravel(tf(z)),
+                                       rtol=1e-9)
+
+
+@pytest.mark.parametrize(("params", "axis"), _CONTROLLERS)
+def test_controller_polys_are_the_stepped_controllers(params: dict[str, float], axis: str
+                                                      ) -> None:
+    """The transfer functions are the controllers stepped (:class:`RatePID`,
+    :class:`PX4RatePID` from rest, inputs small enough for no limit to act): a random
+    target and measured rate through ``scipy.signal.lfilter`` of ``C_t`` and ``C_fb``. PX4's
+    integrator adds ``K·I·err·dt`` after the output it is part of (one step later than
+    ``I·dt/(1 − z⁻¹)``), so its integrator is left out of this comparison."""
+    from scipy.signal import lfilter
+
+    ctrl = controller_from_params(params, axis)
+    if ctrl.autopilot == "px4":
+        ctrl = replace(ctrl, gains=replace(ctrl.gains, i=0.0))
+    dt = 1.0 / ctrl.loop_hz
+    rng = np.random.default_rng(8)
+    n = 400
+    target, rate = (np.r_[0.0, 1e-3 * rng.standard_normal(n - 1)] for _ in range(2))
+    pid = ctrl.new_pid(dt)
+    stepped = np.array([pid.update(a, b) for a, b in zip(target, rate, strict=True)])
+    (bf, af), (bt, at) = controller_polys(ctrl, dt)
+
+    def through(num: np.ndarray, den: np.ndarray, x: np.ndarray) -> np.ndarray:
+        m = max(num.size, den.size)  # (descending powers of z, aligned at the highest)
+        return lfilter(np.pad(num, (m - num.size, 0)), np.pad(den, (m - den.size, 0)), x)
+
+    want = through(bt, at, target) - through(bf, af, rate)
+    np.testing.assert_allclose(stepped, want, rtol=0, atol=1e-12 * np.max(np.abs(want)))
 
 
 def test_numpy_ss2tf_is_scipys() -> None:

@@ -6,9 +6,9 @@ from dataclasses import replace
 
 import pytest
 from loop_plants import true_plant
+from loop_reference import analyse_loop
 
 from mavsid.cli_format import format_tune
-from mavsid.loop.analysis import analyse_loop
 from mavsid.loop.controllers import controller_from_params, scale_of, scaled
 from mavsid.loop.tune import LOOP_MISMATCH_DB, suggest_gains, tune
 from mavsid.synthetic.plant import PlantParams

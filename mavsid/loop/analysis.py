@@ -13,6 +13,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
+from numpy.polynomial import Polynomial
 
 from mavsid import dsp
 from mavsid.errors import MavsidError
@@ -28,142 +29,80 @@ from mavsid.loop.plant import LinearPlant, Poly, plant_from_model, ss2tf
 
 __all__ = [
     "LoopAnalysis",
-    "analyse_loop",
     "analyse_model",
     "analyse_plant",
     "closed_figures",
     "compare_response",
     "controller_polys",
-    "controller_tf",
     "frd_margins",
     "frd_margins_at",
-    "frequency_response",
     "loop_figures",
-    "loop_margins",
     "margin_db",
     "margin_grid",
     "margins_of",
     "margins_on_frf",
-    "tf_at",
-    "tf_mul",
+    "step_figures",
 ]
 
-def _first_order_z(cutoff_hz: float, dt: float) -> tuple[list[float], list[float]]:
-    """The ``lowpass_alpha`` low pass as ``(num, den)`` in z⁻¹ (unity when off)."""
-    a = lowpass_alpha(cutoff_hz, dt)
-    return ([a, 0.0], [1.0, -(1.0 - a)]) if a < 1.0 else ([1.0], [1.0])
-
-
-def controller_tf(ctrl: AxisController, dt: float | None = None) -> tuple[Any, Any]:
-    """Discrete transfer functions of the rate controller at its loop step: ``(C_fb, C_t)``,
-    output per measured rate (negated: ``u = C_t·target − C_fb·rate``) and per target.
-
-    They are exactly :class:`RatePID` / :class:`PX4RatePID` without limits (integrator
-    ``I·dt/(1 − z⁻¹)``, derivative ``(1 − z⁻¹)/dt``, first-order filters ``α/(1 − (1−α)z⁻¹)``,
-    PX4's biquad on the derivative).
-
-    Examples
-    --------
-    >>> from mavsid.loop.controllers import controller_from_params
-    >>> cfb, ct = controller_tf(controller_from_params({}, "roll"))
-    >>> round(float(abs(cfb(np.exp(1j * 2 * np.pi * 1.0 * 0.0025)))), 3)   # |C| at 1 Hz
-    0.136
-    """
-    step = 1.0 / ctrl.loop_hz if dt is None else dt
-    return _controller_tf(ctrl.gains, float(step))
-
-
-@functools.lru_cache(maxsize=64)
-def _controller_tf(g: RateGains | PX4RateGains, step: float) -> tuple[Any, Any]:
-    """:func:`controller_tf` by gains and step, cached: the report's σ draws and the loop
-    section ask for the same controller dozens of times (python-control's polynomial
-    arithmetic, ~5 ms a call). The systems are never modified in place."""
-    import control
-
-    one = control.tf([1.0], [1.0], step)
-    integ = control.tf([step, 0.0], [1.0, -1.0], step)  # dt / (1 - z^-1)
-    deriv = control.tf([1.0, -1.0], [step, 0.0], step)  # (1 - z^-1) / dt
-    if isinstance(g, PX4RateGains):
-        fd = one
-        if 0 < g.dgyro_hz < 0.5 / step:
-            b, a = dsp.lowpass2p_coefficients(g.dgyro_hz, 1.0 / step)
-            fd = control.tf(list(b), list(a), step)
-        pi = g.k * g.p * one + g.k * g.i * integ
-        return pi + g.k * g.d * fd * deriv, pi + g.ff * one
-    ft = control.tf(*_first_order_z(g.fltt, step), step)
-    fe = control.tf(*_first_order_z(g.flte, step), step)
-    fd = control.tf(*_first_order_z(g.fltd, step), step)
-    pid = fe * (g.p * one + g.i * integ + g.d * fd * deriv)
-    return pid, pid * ft + g.ff * ft
-
-
-
-
-def _tf_add(p: Poly, q: Poly) -> Poly:
-    """``p + q`` of two SISO transfer functions ``(num, den)`` (python-control's sum)."""
-    return _trim((np.polyadd(np.polymul(p[0], q[1]), np.polymul(q[0], p[1])),
-                  np.polymul(p[1], q[1])))
-
-
-def tf_mul(p: Poly, q: Poly) -> Poly:
-    """``p · q`` of two SISO transfer functions ``(num, den)``."""
-    return _trim((np.polymul(p[0], q[0]), np.polymul(p[1], q[1])))
-
-
-def _tf_gain(k: float, p: Poly) -> Poly:
-    """``k · p``."""
-    return _trim((k * np.asarray(p[0], dtype=float), np.asarray(p[1], dtype=float)))
-
-
-def tf_at(p: Poly, z: np.ndarray) -> np.ndarray:
-    """The transfer function ``(num, den)`` at the points ``z``."""
-    return np.polyval(p[0], z) / np.polyval(p[1], z)
-
-
-def _trim(p: Poly) -> Poly:
-    """``p`` as python-control's transfer functions keep one: no leading zero coefficients,
-    and ``0 / 1`` for a zero numerator (so that adding it does not raise the order)."""
-    num, den = (np.trim_zeros(np.asarray(x, dtype=float), "f") for x in p)
-    return (num, den) if num.size else (np.zeros(1), np.ones(1))
-
-
 def controller_polys(ctrl: AxisController, dt: float | None = None) -> tuple[Poly, Poly]:
-    """:func:`controller_tf` as numpy polynomials, ``((num, den) of C_fb, (num, den) of
-    C_t)`` in descending powers of z: the same sums and products of the same parts, without
-    python-control (``tests/test_loop_analysis.py`` checks the coefficients against it).
+    """Discrete transfer functions of the rate controller at its loop step, ``(C_fb, C_t)``:
+    output per measured rate (negated: ``u = C_t·target − C_fb·rate``) and per target, each
+    ``(num, den)`` in descending powers of z.
+
+    :class:`RatePID` without limits: error filter ``F_E``, target filter ``F_T``, derivative
+    filter ``F_D`` (first order, ``α/(1 − (1−α)z⁻¹)``), integrator ``I·dt/(1 − z⁻¹)``,
+    derivative ``(1 − z⁻¹)/dt``: ``C_fb = F_E·(P + I·dt/(1 − z⁻¹) + D·F_D·(1 − z⁻¹)/dt)``,
+    ``C_t = F_T·(C_fb + FF)``. :class:`PX4RatePID`: ``C_fb = K·(P + I·dt/(1 − z⁻¹) +
+    D·F_D·(1 − z⁻¹)/dt)`` (``F_D`` its biquad), ``C_t = K·(P + I·dt/(1 − z⁻¹)) + FF``.
+    Written over one denominator with :class:`numpy.polynomial.Polynomial` in ``z⁻¹``
+    (``tests/test_loop_analysis.py`` compares them with the controllers stepped and with
+    python-control's sums and products of the parts).
 
     Examples
     --------
     >>> from mavsid.loop.controllers import controller_from_params
     >>> (bf, af), _ = controller_polys(controller_from_params({}, "roll"))
     >>> z = np.exp(2j * np.pi * 1.0 * 0.0025)
-    >>> round(float(abs(np.polyval(bf, z) / np.polyval(af, z))), 3)   # |C| at 1 Hz
+    >>> round(float(abs(np.polyval(bf, z) / np.polyval(af, z))), 3)   # |C_fb| at 1 Hz
     0.136
     """
     step = 1.0 / ctrl.loop_hz if dt is None else dt
     return _controller_polys(ctrl.gains, float(step))
 
 
+def _in_z(num: Polynomial, den: Polynomial) -> Poly:
+    """``num(z⁻¹) / den(z⁻¹)`` as ``(num, den)`` in descending powers of z (both times
+    ``zᵐ``, ``m`` the higher degree: the ascending coefficients in z⁻¹, padded)."""
+    if not np.any(num.coef):
+        return np.zeros(1), np.ones(1)
+    m = max(num.degree(), den.degree()) + 1
+    return (np.pad(num.coef, (0, m - num.coef.size)), np.pad(den.coef, (0, m - den.coef.size)))
+
+
+def _first_order(cutoff_hz: float, dt: float) -> tuple[Polynomial, Polynomial]:
+    """The controllers' first-order low pass ``α / (1 − (1−α)z⁻¹)`` in z⁻¹ (1 when off)."""
+    a = lowpass_alpha(cutoff_hz, dt)
+    if a >= 1.0:
+        return Polynomial([1.0]), Polynomial([1.0])
+    return Polynomial([a]), Polynomial([1.0, a - 1.0])
+
+
 @functools.lru_cache(maxsize=64)
 def _controller_polys(g: RateGains | PX4RateGains, step: float) -> tuple[Poly, Poly]:
     """:func:`controller_polys` by gains and step, cached (callers never modify them)."""
-    one: Poly = (np.array([1.0]), np.array([1.0]))
-    integ: Poly = (np.array([step, 0.0]), np.array([1.0, -1.0]))
-    deriv: Poly = (np.array([1.0, -1.0]), np.array([step, 0.0]))
+    back = Polynomial([1.0, -1.0])  # 1 − z⁻¹
     if isinstance(g, PX4RateGains):
-        fd = one
+        nd, dd = Polynomial([1.0]), Polynomial([1.0])
         if 0 < g.dgyro_hz < 0.5 / step:
             b, a = dsp.lowpass2p_coefficients(g.dgyro_hz, 1.0 / step)
-            fd = (np.asarray(b, dtype=float), np.asarray(a, dtype=float))
-        pi = _tf_add(_tf_gain(g.k * g.p, one), _tf_gain(g.k * g.i, integ))
-        fb = _tf_add(pi, _tf_gain(g.k * g.d, tf_mul(fd, deriv)))
-        return fb, _tf_add(pi, _tf_gain(g.ff, one))
-    ft, fe, fd = ((np.asarray(x, dtype=float), np.asarray(y, dtype=float))
-                  for x, y in (_first_order_z(c, step) for c in (g.fltt, g.flte, g.fltd)))
-    inner = _tf_add(_tf_add(_tf_gain(g.p, one), _tf_gain(g.i, integ)),
-                    _tf_gain(g.d, tf_mul(fd, deriv)))
-    pid = tf_mul(fe, inner)
-    return pid, _tf_add(tf_mul(pid, ft), _tf_gain(g.ff, ft))
+            nd, dd = Polynomial(b), Polynomial(a)
+        pi = g.k * g.p * back + g.k * g.i * step  # K·(P + I·dt/(1 − z⁻¹)), times 1 − z⁻¹
+        fb = _in_z(pi * dd + (g.k * g.d / step) * nd * back**2, back * dd)
+        return fb, _in_z(pi + g.ff * back, back)
+    (nt, dt_), (ne, de), (nd, dd) = (_first_order(c, step) for c in (g.fltt, g.flte, g.fltd))
+    inner = (g.p * back + g.i * step) * dd + (g.d / step) * nd * back**2  # over (1 − z⁻¹)·F_D's
+    num, den = ne * inner, de * back * dd
+    return _in_z(num, den), _in_z(nt * (num + g.ff * den), dt_ * den)
 
 
 @dataclass(frozen=True)
@@ -262,60 +201,18 @@ def _crossing(f: np.ndarray, mag_db: np.ndarray, level: float, rising: bool) -> 
     return float(np.exp(x0 + (level - y0) * (x1 - x0) / (y1 - y0))) if y1 != y0 else float(f[i])
 
 
-def frequency_response(system: Any, z: np.ndarray) -> np.ndarray:
-    """A single-input single-output python-control system's response at the points ``z``,
-    through its transfer-function polynomials (python-control evaluates a state space with
-    one linear solve per point, far slower for thousands of points).
-
-    Examples
-    --------
-    >>> import control
-    >>> sys = control.ss(control.tf([0.5], [1.0, -0.9], 0.01))
-    >>> z = np.exp(2j * np.pi * np.array([0.1, 10.0]) * 0.01)
-    >>> bool(np.allclose(frequency_response(sys, z), np.ravel(sys(z))))
-    True
-    """
-    if hasattr(system, "A"):
-        a, b, c, d = (np.asarray(x, dtype=float) for x in
-                      (system.A, system.B, system.C, system.D))
-        if a.size == 0:
-            return np.full(z.shape, float(d.ravel()[0]), dtype=complex)
-        num, den = ss2tf(a, b, c, float(d.ravel()[0]))
-    else:
-        num = np.asarray(system.num[0][0], dtype=float)
-        den = np.asarray(system.den[0][0], dtype=float)
-    return np.polyval(num, z) / np.polyval(den, z)
-
-
-def loop_margins(loop: Any, dt: float, n: int = 4000) -> tuple[float, float, float]:
-    """``(gain margin (ratio), phase margin (deg), gain-crossover (rad/s))`` of a discrete
-    open loop, read off its frequency response on a dense log grid up to Nyquist (crossings
-    interpolated between grid points; the smallest margins when there are several), as
-    ``control.stability_margins`` gives them but without its per-call spline fits (about
-    100× faster: the report samples the loop dozens of times per axis).
-
-    Examples
-    --------
-    >>> import control
-    >>> dt = 0.0025
-    >>> loop = control.tf([0.0, 0.02], [1.0, -1.0], dt) * control.tf([1.0], [1.0, 0.0, 0.0], dt)
-    >>> gm, pm, wc = loop_margins(loop, dt)
-    >>> ref = control.stability_margins(loop)
-    >>> bool(abs(pm - ref[1]) < 0.05 and abs(wc - ref[4]) / ref[4] < 1e-3
-    ...      and abs(gm - ref[0]) / ref[0] < 1e-3)
-    True
-    """
-    f = margin_grid(dt, n)
-    return margins_of(f, frequency_response(loop, np.exp(2j * np.pi * f * dt)))
-
-
 def margin_grid(dt: float, n: int = 4000) -> np.ndarray:
-    """The frequencies (Hz) :func:`loop_margins` reads a loop on."""
+    """The frequencies (Hz) :func:`margins_of` reads a discrete loop at step ``dt`` on: a
+    dense log grid up to Nyquist."""
     return np.geomspace(1e-3 / dt, 0.4999 / dt, n)
 
 
 def margins_of(f: np.ndarray, resp: np.ndarray) -> tuple[float, float, float]:
-    """:func:`loop_margins` from the loop's response ``resp`` at ``f`` (Hz)."""
+    """``(gain margin (ratio), phase margin (deg), gain crossover (rad/s))`` of an open loop
+    from its response ``resp`` at ``f`` (Hz, :func:`margin_grid`): crossings interpolated
+    between the points, the smallest margins when there are several (what
+    ``control.stability_margins`` gives, ``tests/test_loop_analysis.py`` compares, without
+    its spline fit per call: the report analyses the loop dozens of times per axis)."""
     mag = np.abs(resp)
     logf = np.log(f)
     pm, wc = float("inf"), float("nan")
@@ -343,62 +240,8 @@ def margin_db(gain_margin: float) -> float:
     return float(20 * np.log10(gain_margin)) if ok else float("inf")
 
 
-def analyse_loop(plant_ss: Any, ctrl: AxisController, lag: int = 0,
-                 freq_hz: np.ndarray | None = None, meas_delay: float = 0.0) -> LoopAnalysis:
-    """Margins, bandwidths and step metrics of ``ctrl`` around ``plant_ss`` (a discrete
-    python-control system at the controller's loop step, rate per controller output).
-
-    ``lag`` loops of delay on the target path (see :func:`replay_controller`);
-    ``meas_delay`` (0-1 loop) on the measured rate the controller reads (``(1 − τ) + τz⁻¹``,
-    :attr:`ClosedLoopFit.measurement_delay_loops`).
-    """
-    import control
-
-    dt = float(plant_ss.dt)
-    cfb, ct = controller_tf(ctrl, dt)
-    if lag:
-        ct = ct * control.tf([1.0], [1.0] + [0.0] * lag, dt)
-    tau, num, den = measurement_filter(meas_delay)
-    if tau:
-        cfb = cfb * control.tf(num, den, dt)
-    p = control.ss(plant_ss)
-    cfb_ss, ct_ss = control.ss(cfb), control.ss(ct)
-    loop_tf = cfb_ss * p
-    # at the mixer the attitude loop closes too: rate target = angle_p * -(integral of rate)
-    integ = control.tf([dt, 0.0], [1.0, -1.0], dt)
-    mixer_loop = (cfb + ct * ctrl.angle_p * integ) * control.tf(plant_ss)
-    closed = control.feedback(p, cfb_ss) * ct_ss
-    sens = control.feedback(control.ss([], [], [], [[1.0]], dt), loop_tf)
-    f = np.geomspace(0.1, 0.45 / dt, 400) if freq_hz is None else np.asarray(freq_hz)
-    w = 2 * np.pi * f
-    import warnings
-
-    with np.errstate(all="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # python-control's method fall-backs
-        gm, pm, wcp = loop_margins(loop_tf, dt)
-        zs = np.exp(1j * w * dt)
-        t_resp = frequency_response(closed, zs)
-        s_resp = frequency_response(sens, zs)
-        l_resp = frequency_response(loop_tf, zs)
-        m_resp = frequency_response(mixer_loop, zs)
-        mgm, mpm, mwc = loop_margins(mixer_loop, dt)
-    mag, ph, bw, dbw, phase_delay = closed_figures(f, t_resp, s_resp)
-    rise, over = _step_metrics(closed, dt)
-    return LoopAnalysis(
-        gain_margin_db=margin_db(gm),
-        phase_margin_deg=float(pm), crossover_hz=float(wcp / (2 * np.pi)),
-        bandwidth_hz=bw, peak_db=float(np.max(mag)), disturbance_bandwidth_hz=dbw,
-        phase_delay_s=phase_delay, rise_time_s=rise, overshoot_percent=over,
-        freq_hz=f, magnitude_db=mag, phase_deg=ph,
-        loop_response=np.asarray(l_resp).ravel(), closed_response=np.asarray(t_resp).ravel(),
-        mixer_loop_response=np.asarray(m_resp).ravel(),
-        mixer_margins={"gain_db": margin_db(mgm), "phase_deg": float(mpm),
-                       "crossover_hz": float(mwc / (2 * np.pi))},
-    )
-
-
 def closed_figures(f: np.ndarray, t_resp: np.ndarray, s_resp: np.ndarray
-                    ) -> tuple[np.ndarray, np.ndarray, float, float, float]:
+                   ) -> tuple[np.ndarray, np.ndarray, float, float, float]:
     """``(magnitude dB, phase deg, bandwidth, disturbance bandwidth, phase delay)`` of a
     closed loop from its responses ``T`` and ``S`` at ``f`` (see :class:`LoopAnalysis`)."""
     mag = 20 * np.log10(np.abs(t_resp))
@@ -419,24 +262,23 @@ def closed_figures(f: np.ndarray, t_resp: np.ndarray, s_resp: np.ndarray
 def loop_figures(plant: LinearPlant, ctrl: AxisController, lag: int = 0,
                  freq_hz: np.ndarray | None = None, meas_delay: float = 0.0
                  ) -> dict[str, float]:
-    """:meth:`LoopAnalysis.figures` of :func:`analyse_loop` for a :class:`LinearPlant` at
-    the controller's step, with numpy polynomials instead of python-control systems (no
-    state-space products, feedback or simulation objects): the same figures to rounding
-    (``tests/test_loop_analysis.py`` checks 1e-6), about 10× faster, for :func:`analyse_model`'s
-    draws of the coefficients."""
+    """:meth:`LoopAnalysis.figures` of :func:`analyse_plant` without the responses, for
+    :func:`analyse_model`'s draws of the coefficients."""
     return analyse_plant(plant, ctrl, lag, freq_hz, meas_delay, responses=False).figures()
 
 
 def analyse_plant(plant: LinearPlant, ctrl: AxisController, lag: int = 0,
                   freq_hz: np.ndarray | None = None, meas_delay: float = 0.0,
                   responses: bool = True) -> LoopAnalysis:
-    """:func:`analyse_loop` of a :class:`LinearPlant` at the controller's step in numpy (the
-    controller from :func:`controller_polys`, each response the product of its parts'):
-    what ``fit --report`` and ``tune`` use, without importing python-control. Margins,
-    crossovers and the step's figures equal :func:`analyse_loop`'s to rounding; bandwidth,
-    peak and the responses equal python-control's point-by-point evaluation (``analyse_loop``
-    goes through one polynomial ratio of the whole closed loop, off by up to 0.5 %).
-    ``responses=False`` leaves out the broken loop at the mixer and its margins."""
+    """Margins, bandwidths and step figures of ``ctrl`` around ``plant`` (at the controller's
+    step): each response the product of its parts' (the controller from
+    :func:`controller_polys`), the step simulated in state space. ``lag`` loops of delay on
+    the target path (see :func:`~mavsid.loop.twin.replay_controller`); ``meas_delay`` (0-1
+    loop) on the measured rate the controller reads (``(1 − τ) + τz⁻¹``,
+    :attr:`~mavsid.loop.twin.ClosedLoopFit.measurement_delay_loops`). ``tests/
+    test_loop_analysis.py`` compares every figure and response with python-control's.
+    ``responses=False`` leaves out the responses, the broken loop at the mixer and its
+    margins."""
     dt = 1.0 / ctrl.loop_hz
     (bf, af), (bt, at) = controller_polys(ctrl, dt)
     if lag:
@@ -476,7 +318,7 @@ def analyse_plant(plant: LinearPlant, ctrl: AxisController, lag: int = 0,
                 fm, mixer_at(zm, pmz, lmz, np.polyval(bt, zm) / np.polyval(at, zm)))
             mixer = {"gain_db": margin_db(mgm), "phase_deg": float(mpm),
                      "crossover_hz": float(mwc / (2 * np.pi))}
-    rise, over = _step_figures(t, y)
+    rise, over = step_figures(t, y)
     return LoopAnalysis(
         gain_margin_db=margin_db(gm), phase_margin_deg=float(pm),
         crossover_hz=float(wcp / (2 * np.pi)), bandwidth_hz=bw, peak_db=float(np.max(mag)),
@@ -527,17 +369,8 @@ def _closed_step(plant: LinearPlant, fb: tuple[np.ndarray, np.ndarray],
     return y[:n]
 
 
-def _step_metrics(closed: Any, dt: float, horizon_s: float = 2.0) -> tuple[float, float]:
-    """10-90 % rise time (s) and overshoot (%) of the closed loop's unit step."""
-    import control
-
-    t = np.arange(0.0, horizon_s, dt)
-    y = np.asarray(control.step_response(closed, T=t).outputs, dtype=float).ravel()
-    return _step_figures(t, y)
-
-
-def _step_figures(t: np.ndarray, y: np.ndarray) -> tuple[float, float]:
-    """:func:`_step_metrics` of a step response ``y`` at times ``t``."""
+def step_figures(t: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """10-90 % rise time (s) and overshoot (%) of a step response ``y`` at times ``t``."""
     final = float(np.mean(y[-max(1, len(y) // 10):]))
     if not np.all(np.isfinite(y)) or abs(final) < 1e-9:
         return float("nan"), float("nan")
@@ -588,7 +421,8 @@ def margins_on_frf(plant_frf: Any, ctrl: AxisController) -> dict[str, float]:
     f, p = plant_frf.freq_hz[m], plant_frf.response[m]
     dt = 1.0 / ctrl.loop_hz
     cfb, _ = controller_polys(ctrl, dt)
-    loop_resp = tf_at(cfb, np.exp(2j * np.pi * f * dt)) * p
+    z = np.exp(2j * np.pi * f * dt)
+    loop_resp = np.polyval(cfb[0], z) / np.polyval(cfb[1], z) * p
     band = replace(plant_frf, freq_hz=f, response=loop_resp, coherence=np.ones(f.size),
                    error=plant_frf.error[m])
     got = frd_margins(band)
@@ -636,13 +470,21 @@ def frd_margins(measured: Any, freq_hz: np.ndarray | None = None,
 def frd_margins_at(h: np.ndarray, w: np.ndarray) -> tuple[float, float, float]:
     """``(gain margin, phase margin (deg), gain crossover (rad/s))`` of a frequency response
     ``h`` at ``w`` (rad/s) as python-control's ``stability_margins`` of a smoothed FRD gives
-    them: a parametric interpolating spline through the real and imaginary parts (its
-    weights ``1/(|h| + 0.001)`` do not enter an interpolating fit), the −180° and unit-gain
-    crossings between the points located by Brent's method on it; the smallest ``|log GM|``
-    and ``|PM|``."""
+    them: a parametric interpolating spline through the real and imaginary parts
+    (``scipy.interpolate.splprep``, ``s=0``), the −180° and unit-gain crossings between the
+    points located on it by ``scipy.optimize.brentq``; the smallest ``|log GM|`` and
+    ``|PM|``."""
+    from scipy.interpolate import splev, splprep
+    from scipy.optimize import brentq
+
     order = np.argsort(w, kind="stable")
     w, h = np.asarray(w, dtype=float)[order], np.asarray(h, dtype=complex)[order]
-    at = dsp.interpolating_spline(w, h)  # (FITPACK's s=0 curve: the weights do not enter)
+    tck, _ = splprep([h.real, h.imag], u=w, w=1.0 / (np.abs(h) + 0.001), s=0.0,
+                     k=min(3, w.size - 1))
+
+    def at(x: Any) -> np.ndarray:
+        re, im = splev(x, tck)
+        return np.asarray(re) + 1j * np.asarray(im)
 
     def arg(x: float) -> float:
         return float(np.angle(-at(x)))
@@ -653,9 +495,9 @@ def frd_margins_at(h: np.ndarray, w: np.ndarray) -> tuple[float, float, float]:
     hw = at(w)
     idx = np.where(np.diff(np.sign(np.angle(-hw))))[0]
     idx = idx[np.real(hw[idx]) <= 0]
-    w180 = np.array([dsp.brent_root(arg, w[i], w[i + 1]) for i in idx])
+    w180 = np.array([brentq(arg, w[i], w[i + 1]) for i in idx])
     idx = np.where(np.diff(np.sign(np.abs(hw) - 1.0)))[0]
-    wc = np.array([dsp.brent_root(mod, w[i], w[i + 1]) for i in idx])
+    wc = np.array([brentq(mod, w[i], w[i + 1]) for i in idx])
     with np.errstate(all="ignore"):
         gms = 1.0 / np.abs(at(w180)) if w180.size else np.zeros(0)
         pms = (np.remainder(np.angle(at(wc), deg=True), 360.0) - 180.0 if wc.size

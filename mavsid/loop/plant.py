@@ -74,54 +74,29 @@ class LinearPlant:
         return x + (np.linalg.pinv(cc) @ np.array([y0 - float((cc @ x)[0])])).ravel()
 
 
-def _continuous_blocks(model: Model) -> tuple[np.ndarray, np.ndarray, list[int], list[int]]:
-    """Continuous-time ``(A, B_exo)`` of a linear model, with the feature indices of states
-    and of exogenous terms (inputs and bias)."""
+def _at_step(model: Model, dt: float) -> Model:
+    """The linear model at step ``dt``, delay kept in seconds: a discrete one re-discretised
+    (:meth:`mavsid.estimators.model.Model.resampled`: zero-order hold inverted, then applied
+    at ``dt``), a continuous one discretised (zero-order hold)."""
+    if not model.continuous:
+        if math.isclose(model.dt, dt, rel_tol=1e-9):
+            return model
+        return model.resampled(dt)
     states, exo, other = model._split
     if other:
         raise ConfigError("the closed-loop twin needs a linear model (no library terms)")
-    n = len(model.state_names)
     a = model.A
+    n = a.shape[0]
     b = model.coef[exo].T if exo else np.zeros((n, 0))
-    if model.continuous:
-        return a, b, states, exo
     m = b.shape[1]
-    big = np.zeros((n + m, n + m))
-    big[:n, :n], big[:n, n:], big[n:, n:] = a, b, np.eye(m)
-    ev = np.linalg.eigvals(a)
-    if np.any(np.abs(ev.imag) > 1e-12) or np.any(ev.real <= 0):
-        raise ConfigError("the model's discrete poles have no continuous-time equivalent "
-                          "(negative or complex); the twin runs at the model's own step")
-    if n == 1:  # the logarithm of [[a, b], [0, I]] in closed form: [[ln a, b ln a/(a-1)], 0]
-        pole = float(a[0, 0])
-        gain = _log_ratio(pole)
-        return (np.array([[math.log(pole)]]) / model.dt, b * gain / model.dt, states, exo)
-    log = dsp.logm(big) / model.dt
-    return log[:n, :n], log[:n, n:], states, exo
-
-
-def _log_ratio(a: float) -> float:
-    """``ln(a) / (a - 1)`` (1 at ``a = 1``), accurate near 1."""
-    x = a - 1.0
-    if abs(x) < 1e-5:
-        return 1.0 - x / 2.0 + x * x / 3.0
-    return math.log(a) / x
-
-
-def _at_step(model: Model, dt: float) -> Model:
-    """The linear model re-discretised (zero-order hold) at step ``dt``, delay kept in s."""
-    if not model.continuous and math.isclose(model.dt, dt, rel_tol=1e-9):
-        return model
-    a, b, states, exo = _continuous_blocks(model)
-    n, m = a.shape[0], b.shape[1]
-    big = np.zeros((n + m, n + m))
-    big[:n, :n], big[:n, n:] = a, b
     if n == 1:  # the exponential of [[A, B], [0, 0]] dt in closed form
         x = float(a[0, 0]) * dt
         e = np.eye(n + m)
         e[0, 0] = math.exp(x)
         e[0, 1:] = b[0] * dt * (math.expm1(x) / x if x != 0.0 else 1.0)
     else:
+        big = np.zeros((n + m, n + m))
+        big[:n, :n], big[:n, n:] = a, b
         e = dsp.expm(big * dt)
     coef = np.zeros_like(model.coef)
     for j in states:

@@ -25,8 +25,6 @@ from mavsid.loop.analysis import (
     margin_grid,
     margins_of,
     margins_on_frf,
-    tf_at,
-    tf_mul,
 )
 from mavsid.loop.controllers import (
     AXES,
@@ -58,7 +56,7 @@ def suggest_gains(plant_ss: Any, ctrl: AxisController, target_pm_deg: float = 50
     is ``target_pm_deg``; the vehicle's parameter names and units, and the predicted loop
     (:func:`analyse_plant`). None when no scale in [0.05, 20] reaches it with a stable loop.
     ``plant_ss``: a :class:`LinearPlant` or a discrete python-control state space at the
-    controller's step. (``lag``, ``meas_delay``: :func:`analyse_loop`.)"""
+    controller's step (``lag``, ``meas_delay``: see :func:`analyse_plant`)."""
     plant = as_plant(plant_ss)
     dt = 1.0 / ctrl.loop_hz
     tau, num, den = measurement_filter(meas_delay)
@@ -67,7 +65,7 @@ def suggest_gains(plant_ss: Any, ctrl: AxisController, target_pm_deg: float = 50
     # A − k·B·C / (1 + k·D)); the same margins as building each scaled loop, to rounding
     cfb, _ = controller_polys(ctrl, dt)
     if tau:
-        cfb = tf_mul(cfb, (np.asarray(num), np.asarray(den)))
+        cfb = (np.polymul(cfb[0], num), np.polymul(cfb[1], den))
     # the plant, then the controller (python-control's ``C_fb * P``)
     ac, bc, cc, dc = dsp.tf2ss(*cfb)
     ap, bp, cp = plant.a, plant.b.reshape(-1, 1), plant.c.reshape(1, -1)
@@ -81,7 +79,7 @@ def suggest_gains(plant_ss: Any, ctrl: AxisController, target_pm_deg: float = 50
     fm = margin_grid(dt)
     with np.errstate(all="ignore"):
         zm = np.exp(2j * np.pi * fm * dt)
-        unit_resp = plant_response(plant, fm) * tf_at(cfb, zm)
+        unit_resp = plant_response(plant, fm) * np.polyval(cfb[0], zm) / np.polyval(cfb[1], zm)
 
     def pm(k: float) -> float:
         closed = a - k * (b @ c)

@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 
 from mavsid import dsp
+from mavsid.axes import AXES, RATE_OF
 from mavsid.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -62,8 +63,8 @@ __all__ = [
     "scaled",
 ]
 
-AXES = ("roll", "pitch", "yaw")
-AXIS_RATE = {"roll": "p", "pitch": "q", "yaw": "r"}
+#: the axes and each one's body rate (:mod:`mavsid.axes`)
+AXIS_RATE = RATE_OF
 _AP = {"roll": "RLL", "pitch": "PIT", "yaw": "YAW"}
 _PX4 = {"roll": "ROLL", "pitch": "PITCH", "yaw": "YAW"}
 _PX4_LIM = {"roll": "RR", "pitch": "PR", "yaw": "YR"}

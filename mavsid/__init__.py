@@ -3,11 +3,12 @@
 The stages, each one module: :mod:`mavsid.readers` (log -> ``RawLog``),
 :mod:`mavsid.align` (-> ``FlightData``), :mod:`mavsid.excitation` (-> segments),
 :mod:`mavsid.estimators` (-> model), :mod:`mavsid.validation`, :mod:`mavsid.viz`.
-The estimators also stand alone on arrays: :func:`identify` (state-space models) and
-:func:`regress` (equation-error regression). What mavsid knows about the firmware —
-message, topic and parameter names, SYSTEMID, flight modes, mixers, logging advice — is in
-:mod:`mavsid.autopilot` (adding a firmware touches only that package); the axis vocabulary
-(``roll``/``p``/``u_roll`` ...) in :mod:`mavsid.axes`.
+The estimators also stand alone on arrays: :func:`identify` (state-space models),
+:func:`regress` (equation-error regression) and :func:`identify_frequency` (a rate plant's
+transfer function fitted to its measured frequency response, :mod:`mavsid.frequency_fit`).
+What mavsid knows about the firmware — message, topic and parameter names, SYSTEMID, flight
+modes, mixers, logging advice — is in :mod:`mavsid.autopilot` (adding a firmware touches only
+that package); the axis vocabulary (``roll``/``p``/``u_roll`` ...) in :mod:`mavsid.axes`.
 """
 
 from typing import TYPE_CHECKING, Any
@@ -27,6 +28,7 @@ if TYPE_CHECKING:  # (served lazily below; the type checker sees them here)
     from mavsid.data import FlightData, MessageTable, ModeChange, RawLog, Segment, SourceInfo
     from mavsid.estimators.api import RegressionResult, identify, regress
     from mavsid.estimators.model import Model, load_model
+    from mavsid.frequency_fit import PlantTF, identify_frequency
     from mavsid.readers import read_log
 
 __version__ = "0.1.0"
@@ -36,6 +38,7 @@ __version__ = "0.1.0"
 _LAZY = {"Model": "estimators.model", "load_model": "estimators.model",
          "RegressionResult": "estimators.api", "identify": "estimators.api",
          "regress": "estimators.api", "read_log": "readers",
+         "identify_frequency": "frequency_fit", "PlantTF": "frequency_fit",
          **dict.fromkeys(("FlightData", "MessageTable", "ModeChange", "RawLog", "Segment",
                           "SourceInfo"), "data")}
 
@@ -64,6 +67,7 @@ __all__ = [
     "ModeChange",
     "Model",
     "NoExcitationError",
+    "PlantTF",
     "RawLog",
     "RegressionResult",
     "Segment",
@@ -71,6 +75,7 @@ __all__ = [
     "SourceInfo",
     "__version__",
     "identify",
+    "identify_frequency",
     "load_model",
     "read_log",
     "regress",

@@ -72,6 +72,8 @@ class FRF:
     input, output : names of the signals.
     referenced : estimated against an injected reference (``S_ry / S_ru``: unbiased by
         the feedback on closed-loop data), not as H1.
+    coherence_parts : for a referenced response, the composite γ² of the input and of the
+        output with the reference (``coherence`` is their product); None otherwise.
     """
 
     freq_hz: np.ndarray
@@ -82,6 +84,16 @@ class FRF:
     input: str = "u"
     output: str = "y"
     referenced: bool = False
+    coherence_parts: tuple[np.ndarray, np.ndarray] | None = None
+
+    @property
+    def trust(self) -> np.ndarray:
+        """The coherence a frequency is trusted by: for a referenced response the lower of
+        the input's and the output's with the reference (each must hold: the reference must
+        reach the plant's input and its output), otherwise ``coherence``."""
+        if self.coherence_parts is None:
+            return self.coherence
+        return np.minimum(*self.coherence_parts)
 
     @property
     def coherent(self) -> np.ndarray:
@@ -137,9 +149,11 @@ def _starts(n: int, nper: int) -> np.ndarray:
 
 def _welch(us: Sequence[np.ndarray], ys: Sequence[np.ndarray], rs: Sequence[np.ndarray] | None,
            nper: int, fs: float
-           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                      np.ndarray] | None:
     """Pooled Welch estimate of one window length: frequencies, ``H``, ``γ²`` and the
-    effective number of averages per frequency (windows weighted by their input power).
+    effective number of averages per frequency (windows weighted by their input power);
+    then ``γ²_ru`` and ``γ²_ry`` (both ``γ²`` without a reference).
 
     Hann windows of ``nper`` samples, demeaned, at least half-overlapped and spanning each
     segment to its last sample (:func:`_starts`). Without a reference ``H = S_uy / S_uu``
@@ -175,8 +189,11 @@ def _welch(us: Sequence[np.ndarray], ys: Sequence[np.ndarray], rs: Sequence[np.n
         coh_ry = np.abs(acc["ry"]) ** 2 / (acc["rr"] * acc["yy"])
         coh_ru = np.abs(acc["ru"]) ** 2 / (acc["rr"] * acc["uu"])
     coh = np.clip(coh_ry if rs is None else coh_ry * coh_ru, 0.0, 1.0)
-    return freq, np.asarray(h), np.nan_to_num(coh), np.clip(np.nan_to_num(n_eff, nan=1.0), 1.0,
-                                                              None)
+    if rs is None:
+        coh_ru = coh_ry = coh
+    parts = (np.nan_to_num(np.clip(c, 0.0, 1.0)) for c in (coh_ru, coh_ry))
+    return (freq, np.asarray(h), np.nan_to_num(coh),
+            np.clip(np.nan_to_num(n_eff, nan=1.0), 1.0, None), *parts)
 
 
 def frf(
@@ -229,7 +246,8 @@ def frf(
     wsum = np.zeros(n_freq)
     wmax = np.zeros(n_freq)
     cnum = np.zeros(n_freq)
-    for win, freq, h, coh, n_avg in estimates:
+    pnum = np.zeros((2, n_freq))
+    for win, freq, h, coh, n_avg, c_ru, c_ry in estimates:
         with np.errstate(divide="ignore", invalid="ignore"):
             err = np.sqrt(1 - coh) / (np.sqrt(coh) * np.sqrt(2 * n_avg))
         ok = np.isfinite(h) & np.isfinite(err) & (freq > 0)
@@ -243,16 +261,19 @@ def frf(
         w8 = np.where(inside, 1.0 / np.maximum(ei, 1e-6) ** 2, 0.0)
         num += w8 * hi_i
         cnum += w8 * ci
+        pnum += w8 * np.array([np.interp(grid, freq[ok], c[ok]) for c in (c_ru, c_ry)])
         wsum += w8
         wmax = np.maximum(wmax, w8)
     with np.errstate(divide="ignore", invalid="ignore"):
         response = num / wsum
         coherence = np.where(wsum > 0, cnum / wsum, 0.0)
+        parts = np.nan_to_num(np.where(wsum > 0, pnum / wsum, 0.0))
         # the window lengths see the same data: their errors are correlated, so the
         # composite is credited with the best single window's error, not their combination
         error = 1.0 / np.sqrt(wmax)
     return FRF(grid, response, np.nan_to_num(coherence), error,
-               tuple(w for w, *_ in estimates), *names, referenced=reference is not None)
+               tuple(w for w, *_ in estimates), *names, referenced=reference is not None,
+               coherence_parts=(parts[0], parts[1]) if reference is not None else None)
 
 
 @dataclass(frozen=True)

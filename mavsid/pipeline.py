@@ -76,6 +76,7 @@ from mavsid.verdict import Verdict, format_fit, judge, unfitted
 
 if TYPE_CHECKING:
     from mavsid.excitation import WindowReport
+    from mavsid.frequency_fit import PlantTF
     from mavsid.loop.twin import ClosedLoopFit, TwinSignals
 
 __all__ = [
@@ -363,6 +364,10 @@ def _slice(seg: Segment, a: int, b: int, block: int) -> Segment:
 
 #: the shortest training or validation block a configuration may ask for, s
 MIN_BLOCK_S = 0.5
+#: Fewest blocks a SYSTEMID chirp is cut into, alternately training and validation: a
+#: chirp's frequency rises with time, so two blocks would hold different bands (the slow
+#: half against the fast one); from four on, each set holds a slow and a fast part.
+CHIRP_BLOCKS = 4
 
 
 def split_segments(
@@ -370,8 +375,11 @@ def split_segments(
 ) -> tuple[tuple[Segment, ...], tuple[Segment, ...]]:
     """Split segments into training and validation blocks that share no sample.
 
-    Each segment is cut into ``max(1, round(duration / block_s))`` equal blocks; all blocks,
-    in time order, alternate train / validation (train first). A single block is halved.
+    Each segment is cut into ``max(1, round(duration / block_s))`` equal blocks — a SYSTEMID
+    run (``source == "sysid"``) into :data:`CHIRP_BLOCKS` at least (blocks of
+    :data:`MIN_BLOCK_S` at least), so that training and validation both span its sweep; all
+    blocks, in time order,
+    alternate train / validation (train first). A single block is halved.
 
     Parameters
     ----------
@@ -393,10 +401,14 @@ def split_segments(
     >>> import numpy as np
     >>> from mavsid.data import Segment
     >>> t = np.arange(0, 30, 0.01)
-    >>> seg = Segment(t, t[:, None], t[:, None], ("p",), ("u_roll",), 0.01, "roll", "sysid")
+    >>> seg = Segment(t, t[:, None], t[:, None], ("p",), ("u_roll",), 0.01, "roll", "scan")
     >>> train, val = split_segments([seg], block_s=10.0)
     >>> [(round(s.start_s, 2), round(s.stop_s, 2)) for s in (*train, *val)]
     [(0.0, 9.99), (20.0, 29.99), (10.0, 19.99)]
+    >>> run = dataclasses.replace(seg, source="sysid")
+    >>> train, val = split_segments([run], block_s=10.0)
+    >>> len(train), len(val), round(val[0].start_s, 2)
+    (2, 2, 7.5)
     """
     if not segments:
         raise NoExcitationError("no segments to fit")
@@ -404,6 +416,8 @@ def split_segments(
     for seg in sorted(segments, key=lambda s: s.start_s):
         n = len(seg)
         k = max(1, min(round(n * seg.dt / block_s), n // 2))  # (blocks of 2 samples or more)
+        if seg.source == "sysid":
+            k = max(k, min(CHIRP_BLOCKS, int(n * seg.dt / MIN_BLOCK_S)))
         edges = np.linspace(0, n, k + 1).round().astype(int)
         pieces += [(seg, int(a), int(b)) for a, b in itertools.pairwise(edges)]
     if len(pieces) == 1:
@@ -437,6 +451,11 @@ class AxisFit:
     #: not run, ``closed_loop_note`` saying why
     closed_loop: ClosedLoopFit | None = None
     closed_loop_note: str = ""
+    #: the plant's transfer function fitted to its response measured against the SYSTEMID
+    #: injection (:func:`mavsid.frequency.fit_plant`); None when there is none, ``frequency_note``
+    #: saying why
+    frequency: PlantTF | None = None
+    frequency_note: str = ""
 
     @property
     def output(self) -> str:
@@ -477,6 +496,8 @@ class AxisFit:
                 "verdict": None if self.verdict is None else self.verdict.to_dict(),
                 "closed_loop": None if self.closed_loop is None else self.closed_loop.to_dict(),
                 "closed_loop_note": self.closed_loop_note,
+                "frequency_response": _frequency_dict(self),
+                "frequency_response_note": self.frequency_note,
                 "stable": v.stable,
                 "eigenvalues": (
                     None
@@ -500,6 +521,47 @@ class AxisFit:
                 "validation_segment_logs": [s.log for s in self.held_out],
             }
         )
+
+
+def _frequency_dict(fitted: AxisFit) -> dict[str, Any] | None:
+    """The ``frequency_response`` of ``fit --json``: the measured response, the fitted
+    transfer function, and the axis model's response at the same frequencies."""
+    tf = fitted.frequency
+    if tf is None:
+        return None
+    out = dict(tf.to_dict())
+    check = model_response_check(fitted.model, fitted.axis, tf)
+    if check is not None:
+        out.update({"tf_magnitude_db": out.pop("model_magnitude_db", None),
+                    "tf_phase_deg": out.pop("model_phase_deg", None),
+                    "model_magnitude_db": check.pop("magnitude_db"),
+                    "model_phase_deg": check.pop("phase_deg")})
+        out["model_check"] = check
+    return out
+
+
+def model_response_check(model: Model, axis: str, tf: PlantTF) -> dict[str, Any] | None:
+    """The axis model's plant response (input to rate) against the measured one
+    (``tf.measured``): at the measured frequencies its magnitude (dB) and phase (degrees),
+    and over the trusted band the coherence-weighted RMS errors (dB, degrees); None when the
+    model is not a rate plant the loop can rebuild."""
+    from mavsid.frequency import MIN_COHERENCE
+    from mavsid.frequency_fit import rms_errors
+    from mavsid.loop.plant import plant_from_model, plant_response
+
+    m = tf.measured
+    if m is None:
+        return None
+    try:
+        h = plant_response(plant_from_model(model, axis), m.freq_hz)
+    except (MavsidError, ValueError, np.linalg.LinAlgError):
+        return None
+    band = (m.freq_hz >= tf.band_hz[0]) & (m.freq_hz <= tf.band_hz[1]) & (m.trust >= MIN_COHERENCE)
+    db, deg = rms_errors(m.response[band], h[band], m.trust[band])
+    with np.errstate(divide="ignore"):
+        mag = 20 * np.log10(np.abs(h))
+    return {"magnitude_db": mag.tolist(), "phase_deg": np.degrees(np.unwrap(np.angle(h))).tolist(),
+            "rms_db": db, "rms_deg": deg, "band_hz": list(tf.band_hz)}
 
 
 @dataclass(frozen=True)
@@ -580,6 +642,11 @@ def _read_flight(path: str | os.PathLike[str], cfg: PipelineConfig,
         mixers=cfg.mixers or None,
         also=also,
     )
+    injection = _injection(flight, raw)
+    if injection is not None:  # (the reference of the plant's measured response)
+        flight = dataclasses.replace(flight, meta={
+            **dict(flight.meta), "sysid_injection": injection,
+            "inputs_at_state_times": _inputs_interpolated(flight, raw)})
     if twins is not None:
         from mavsid.loop.twin import twin_signals
 
@@ -588,6 +655,52 @@ def _read_flight(path: str | os.PathLike[str], cfg: PipelineConfig,
         except (MavsidError, ValueError, np.linalg.LinAlgError) as exc:
             twins[id(flight)] = exc  # (raised where the twin runs, as a second read would)
     return flight
+
+
+def _inputs_interpolated(flight: FlightData, raw: Any) -> dict[str, np.ndarray]:
+    """The inputs interpolated between their native samples like the states, not held: a
+    held input lags an interpolated state by up to a sample (its share depending on where
+    the grid falls between the records), a delay the frequency response would take for the
+    plant's. Per input whose source is one message's field (``meta["sources"]``): the held
+    grid values mapped back to the native sample each holds, then interpolated."""
+    out: dict[str, np.ndarray] = {}
+    sources = flight.meta.get("sources")
+    t = flight.time_s
+    for j, name in enumerate(flight.input_names):
+        src = str(dict(sources).get(name, "")) if isinstance(sources, Mapping) else ""
+        msg = src.split(".")[0]
+        if "." not in src or msg not in raw.messages or len(raw.messages[msg]) < 2:
+            continue
+        tn = np.sort(np.asarray(raw.messages[msg].time_s, dtype=float))
+        i = np.searchsorted(tn, t + 1e-6 * flight.dt, side="right") - 1
+        first = np.concatenate([[True], i[1:] != i[:-1]]) & (i >= 0)
+        if first.sum() < 2:
+            continue
+        out[name] = np.interp(t, tn[i[first]], flight.inputs[first, j])
+    return out
+
+
+def _injection(flight: FlightData, raw: Any) -> np.ndarray | None:
+    """SYSTEMID's injected waveform held on ``flight``'s grid (NaN where no record lies
+    within two of its steps), whatever the injection point: the reference its plant response
+    is measured against."""
+    from mavsid.channels import INJECTION_CHANNEL, evaluate
+
+    if not flight.meta.get("sysid_runs") or INJECTION_CHANNEL.message not in raw.messages:
+        return None
+    try:
+        t, v = evaluate(raw, INJECTION_CHANNEL, "SYSTEMID injection")
+    except MavsidError:
+        return None
+    order = np.argsort(t, kind="stable")
+    t, v = t[order], v[order]
+    if t.size < 2:
+        return None
+    i = np.clip(np.searchsorted(t, flight.time_s + 1e-9, side="right") - 1, 0, None)
+    out = v[i].astype(float)
+    step = float(np.median(np.diff(t)))
+    out[(flight.time_s < t[0]) | (flight.time_s - t[i] > 2 * max(step, flight.dt))] = np.nan
+    return out
 
 
 def _read_flights(logs: Sequence[str | os.PathLike[str]], cfg: PipelineConfig,
@@ -774,6 +887,115 @@ def _frf_chooser(axis: str, flights: Sequence[FlightData], signals: _Twins,
     return FrfStructure(plant, axis, **({"delay_step": float(step)} if step else {}))
 
 
+def _logged_around(fd: FlightData, ref: np.ndarray, i0: int, i1: int) -> tuple[int, int]:
+    """``[i0, i1)`` widened to all the injection's records around it (its fades and the
+    quiet records after the sweep, within the flight's block): the spectra then see the
+    noise where the sweep is not, and a frequency the sweep passes in one window is not
+    coherent by the window's count alone."""
+    block = next(((int(a), int(b)) for a, b in fd.blocks if a <= i0 < b), (i0, i1))
+    ok = np.isfinite(ref)
+    a, b = i0, i1
+    while a > block[0] and ok[a - 1]:
+        a -= 1
+    while b < block[1] and ok[b]:
+        b += 1
+    return a, b
+
+
+def plant_fit(axis: str, flights: Sequence[FlightData]) -> tuple[PlantTF | None, str]:
+    """The plant's response on the axis's SYSTEMID runs measured against the injection
+    (``H = S_ry / S_ru``, ``r`` the waveform ``SIDD.Targ``, ``u`` the mixer input, ``y`` the
+    rate: the feedback does not bias it, whatever the injection point) and the transfer
+    function fitted on its trusted band (:func:`mavsid.frequency.fit_plant`); or None and
+    why not."""
+    from mavsid.frequency import frf
+    from mavsid.frequency_fit import fit_plant
+    from mavsid.frequency import sysid_spans
+
+    rate, u_name = AXIS_RATE[axis], f"u_{axis}"
+    us: list[np.ndarray] = []
+    ys: list[np.ndarray] = []
+    rs: list[np.ndarray] = []
+    bands: list[tuple[float, float]] = []
+    dt = 0.0
+    for fd in flights:
+        ref = fd.meta.get("sysid_injection")
+        if (not isinstance(ref, np.ndarray) or rate not in fd.state_names
+                or u_name not in fd.input_names):
+            continue
+        runs = {int(r.get("axis", 0) or 0): r
+                for r in fd.meta.get("sysid_runs") or ()}  # type: ignore[attr-defined]
+        for i0, i1, sid in sysid_spans(fd, axis):
+            lo, hi = runs[sid].get("f_start_hz"), runs[sid].get("f_stop_hz")
+            if lo and hi:
+                bands.append((float(lo), float(hi)))
+            i0, i1 = _logged_around(fd, ref, i0, i1)
+            interpolated = dict(fd.meta.get("inputs_at_state_times") or {})  # type: ignore[call-overload]
+            u = interpolated.get(u_name, fd.inputs[:, fd.input_names.index(u_name)])
+            us.append(u[i0:i1])
+            ys.append(fd.states[i0:i1, fd.state_names.index(rate)])
+            rs.append(ref[i0:i1])
+            dt = fd.dt
+    if not us:
+        return None, "no SYSTEMID run on this axis with its injection logged"
+    excited = (min(b[0] for b in bands), min(max(b[1] for b in bands), 0.4 / dt)) if bands \
+        else None
+    grid = {} if excited is None else {"f_min_hz": excited[0], "f_max_hz": excited[1]}
+    try:
+        measured = frf(us, ys, dt, reference=rs, names=(u_name, rate), **grid)
+        return fit_plant(measured, excited_hz=excited), ""
+    except (MavsidError, ValueError, np.linalg.LinAlgError) as exc:
+        return None, str(exc)
+
+
+def _tf_chooser(axis: str, tf: PlantTF | None, cfg: PipelineConfig) -> Any:
+    """The structure chooser from the injection-referenced response :func:`plant_fit`
+    measured (:class:`mavsid.frequency.FrfStructure`), None without one or where the
+    configuration fixes the delay or lags."""
+    if tf is None or tf.measured is None or {"delay", "delays", "lags_s"} & set(cfg.model_options):
+        return None
+    from mavsid.frequency import FrfStructure
+
+    step = cfg.model_options.get("delay_step")
+    chooser = FrfStructure(tf.measured, axis, **({"delay_step": float(step)} if step else {}))
+    return chooser.__call__  # (the structure only: the coefficients stay the data's)
+
+
+def frequency_estimate(model: Model, axis: str, tf: PlantTF) -> Model:
+    """``model`` (its structure: filters, lag, delay, trim) with its pole and effectiveness
+    estimated from the response measured against the injection instead
+    (:meth:`mavsid.frequency.FrfStructure.estimate`): on closed-loop data a time-domain fit is
+    biased by the noise the feedback puts into its input, the response against the injection
+    is not. Their σ are the transfer function's (relative σ of B; the pole's of a first-order
+    fit), the time-domain estimate is kept in ``provenance["time_domain_estimate"]``.
+    ``model`` itself where the response cannot give one."""
+    from mavsid.frequency import FrfStructure
+
+    if tf.measured is None:
+        return model
+    est = FrfStructure(tf.measured, axis).estimate(model)
+    if est is None:
+        return model
+    rate, u_name = AXIS_RATE[axis], f"u_{axis}"
+    i_a, i_b = model.features.index(rate), model.features.index(u_name)
+    se = (np.array(model.coef_stderr, dtype=float, copy=True) if model.coef_stderr is not None
+          else np.full_like(model.coef, np.nan))
+    b = float(est.coef[i_b, 0])
+    se[i_b, 0] = abs(b) * tf.stderr.get("gain", math.nan) / tf.gain
+    se[i_a, 0] = float(model.dt) * max(tf.stderr.get("pole", 0.0), 0.0)
+    cov = None
+    if model.covariance is not None:
+        cov = np.array(model.covariance, dtype=float, copy=True)
+        for i in (i_a, i_b):  # (uncorrelated with the trim: estimated apart)
+            cov[0, i, :] = cov[0, :, i] = 0.0
+            cov[0, i, i] = se[i, 0] ** 2
+    prov = {**dict(model.provenance or {}),
+            "estimated_from": "the frequency response against the SYSTEMID injection",
+            "time_domain_estimate": {"params": dict(model.params),
+                                     "stderr": dict(model.stderr)}}
+    return dataclasses.replace(est, coef_stderr=se, covariance=cov, provenance=prov)
+
+
 class _InstrumentCheck:
     """``choose_structure`` for :func:`mavsid.estimators.fit_axis` where there is no
     injection: keeps the search's structure, and estimates the chosen model again with the
@@ -890,11 +1112,15 @@ def fit(
             verdicts[axis] = unfitted(axis, missing, windows, flights,
                                       [os.fspath(p) for p in logs])
             continue
+        tf, tf_note = plant_fit(axis, flights)
         try:
             train, held_out = split_segments(segs, cfg.block_s)
             next_stage()
             model = _fit_model(train, axis, cfg, _frf_chooser(axis, flights, signals, cfg)
+                               or _tf_chooser(axis, tf, cfg)
                                or _instrument_check(axis, flights, train))
+            if tf is not None and tf.accepted:
+                model = frequency_estimate(model, axis, tf)
             next_stage()
             val = _validate(model, held_out, cfg)
         except NoExcitationError as exc:
@@ -902,7 +1128,8 @@ def fit(
             verdicts[axis] = unfitted(axis, str(exc), windows, flights,
                                       [os.fspath(p) for p in logs])
             continue
-        fitted = AxisFit(axis, model, val, train, held_out, cfg.estimator, windows)
+        fitted = AxisFit(axis, model, val, train, held_out, cfg.estimator, windows,
+                         frequency=tf, frequency_note=tf_note)
         next_stage()
         fitted = _closed_loop(fitted, flights, signals)
         verdict = _judge(fitted, flights)
@@ -937,7 +1164,24 @@ def _judge(fitted: AxisFit, flights: Sequence[FlightData]) -> Verdict:
     """The verdict on one fitted axis (the closed-loop twin's fit when it ran)."""
     return judge(fitted.axis, fitted.validation, fitted.output, model=fitted.model,
                  train=fitted.train, windows=fitted.windows, flights=flights,
-                 closed_loop=getattr(fitted, "closed_loop", None))
+                 closed_loop=getattr(fitted, "closed_loop", None),
+                 frequency=_frequency_evidence(fitted))
+
+
+def _frequency_evidence(fitted: AxisFit) -> dict[str, Any] | None:
+    """What the verdict's frequency-domain checks need (:func:`mavsid.verdict.
+    frequency_checks`): the transfer function, the model against the measured response, and
+    the time-domain estimate of the effectiveness when the model's comes from the response."""
+    got = _frequency_dict(fitted)
+    if got is None or "model_check" not in got:
+        return None
+    prov = dict(getattr(fitted.model, "provenance", {}) or {})
+    td = prov.get("time_domain_estimate")
+    name = f"B[{AXIS_RATE[fitted.axis]},u_{fitted.axis}]"
+    if isinstance(td, Mapping) and name in dict(td.get("params") or {}):
+        got["time_domain"] = {"B": td["params"][name],
+                              "sigma": dict(td.get("stderr") or {}).get(name)}
+    return got
 
 
 def _worst_eig(val: Validation) -> str:

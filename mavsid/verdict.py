@@ -29,7 +29,7 @@ import numpy as np
 from mavsid.autopilot import excitation_advice, logging_advice, longer_advice
 from mavsid.axes import INPUT_OF, RATE_OF
 
-__all__ = ["FIT_FLOOR_PCT", "LEVELS", "Verdict", "format_fit", "judge",
+__all__ = ["FIT_FLOOR_PCT", "LEVELS", "Verdict", "format_fit", "frequency_checks", "judge",
            "not_identified", "unfitted"]
 
 #: The verdict levels, best first.
@@ -58,6 +58,14 @@ REFUSE_SAMPLES_PER_PARAM = 10
 #: A control effectiveness whose standard error exceeds this fraction of its value is not
 #: identified: the data do not say how strongly the axis responds.
 MAX_EFFECTIVENESS_REL_SE = 0.25
+#: The model's response against the one measured from a chirp's injection, RMS over the
+#: trusted band: CIFER's J ≤ 100 guideline (:data:`mavsid.frequency_fit.MAX_COST`) split into
+#: magnitude and phase, 20 (1.5² + 0.01745 · 10²) = 80 (a model off by both everywhere
+#: still passes J; one off by more in either does not).
+MAX_RESPONSE_RMS_DB = 1.5
+MAX_RESPONSE_RMS_DEG = 10.0
+#: σ apart beyond which the time-domain and the frequency-domain effectiveness disagree
+AGREE_SIGMAS = 2.0
 #: A second estimate of the effectiveness (the frequency response against an injection, the
 #: commanded attitude as instrument) differing by this share or more is said in the notes
 OTHER_ESTIMATE_NOTE = 0.05
@@ -188,9 +196,69 @@ def _excitation(windows: Sequence[Any]) -> dict[str, float | None]:
     }
 
 
+def frequency_checks(frequency: Mapping[str, Any]) -> dict[str, Any]:
+    """The frequency-domain checks of a chirp, as structured values: ``numbers`` (J, band,
+    the model's RMS error against the measured response, both effectiveness estimates),
+    ``passed`` (J within the cost bound and the model within :data:`MAX_RESPONSE_RMS_DB` and
+    :data:`MAX_RESPONSE_RMS_DEG`), and the clauses ``good``, ``caps`` and ``notes``.
+
+    ``frequency`` holds ``J``, ``J_max``, ``band_hz``, ``B``, ``sigma`` (of the transfer
+    function, :meth:`mavsid.frequency_fit.PlantTF.to_dict`), ``model_check`` (``rms_db``,
+    ``rms_deg``) and optionally ``time_domain`` (``B``, ``sigma``).
+
+    Examples
+    --------
+    >>> c = frequency_checks({"J": 6.7, "J_max": 100, "band_hz": [1, 19], "B": 540,
+    ...                       "sigma": {"B": 5}, "model_check": {"rms_db": 1.0, "rms_deg": 2.5},
+    ...                       "time_domain": {"B": 325, "sigma": 60}})
+    >>> c["passed"], c["notes"][0][:40]
+    (True, 'time-domain B 325 ± 60 against the frequ')
+    """
+    nums: dict[str, float | None] = {}
+    good: list[str] = []
+    caps: list[str] = []
+    notes: list[str] = []
+    cost = float(frequency.get("J", math.nan))
+    j_max = float(frequency.get("J_max", 100.0))
+    lo, hi = (frequency.get("band_hz") or (math.nan, math.nan))[:2]
+    check = dict(frequency.get("model_check") or {})
+    db, deg = float(check.get("rms_db", math.nan)), float(check.get("rms_deg", math.nan))
+    nums.update({"frequency_J": cost, "frequency_band_lo_hz": float(lo),
+                 "frequency_band_hi_hz": float(hi), "frequency_rms_db": db,
+                 "frequency_rms_deg": deg})
+    passed = True
+    if not cost <= j_max:
+        passed = False
+        caps.append(f"transfer function fits the measured response with J {cost:.3g} "
+                    f"(CIFER's guideline J <= {j_max:g})")
+    if not (db <= MAX_RESPONSE_RMS_DB and deg <= MAX_RESPONSE_RMS_DEG):
+        passed = False
+        caps.append(f"model's response off the measured one by {db:.2g} dB / {deg:.2g}° RMS "
+                    f"over {lo:.2g}–{hi:.3g} Hz (at most {MAX_RESPONSE_RMS_DB:g} dB / "
+                    f"{MAX_RESPONSE_RMS_DEG:g}°)")
+    if passed:
+        good.append(f"model's response within {db:.2g} dB / {deg:.2g}° RMS of the one measured "
+                    f"against the injection over {lo:.2g}–{hi:.3g} Hz (transfer function J "
+                    f"{cost:.3g})")
+    td = frequency.get("time_domain")
+    b_fd = float(frequency.get("B", math.nan))
+    s_fd = float(dict(frequency.get("sigma") or {}).get("B") or math.nan)
+    if isinstance(td, Mapping):
+        b_td, s_td = float(td.get("B", math.nan)), float(td.get("sigma", math.nan))
+        z = abs(b_td - b_fd) / math.hypot(s_td, s_fd) if math.isfinite(s_td + s_fd) else math.nan
+        nums.update({"time_domain_B": b_td, "frequency_B": b_fd, "B_disagreement_sigmas": z})
+        if math.isfinite(z) and z > AGREE_SIGMAS:
+            notes.append(f"time-domain B {b_td:.4g} ± {s_td:.2g} against the frequency "
+                         f"response's {b_fd:.4g} ± {s_fd:.2g} ({100 * (b_td / b_fd - 1):+.0f} %, "
+                         f"{z:.1f} σ): the frequency response is trusted (measured against the "
+                         "injection; a time-domain fit on closed-loop data is biased by the "
+                         "fed-back noise)")
+    return {"numbers": nums, "passed": passed, "good": good, "caps": caps, "notes": notes}
+
+
 def judge(axis: str, validation: Any, output: str, *, model: Any = None,
           train: Sequence[Any] = (), windows: Sequence[Any] = (), flights: Sequence[Any] = (),
-          closed_loop: Any = None) -> Verdict:
+          closed_loop: Any = None, frequency: Mapping[str, Any] | None = None) -> Verdict:
     """The verdict on one fitted axis from everything known about it.
 
     Checks, each adding its numbers (``Verdict.numbers``) and, when it fails, a reason:
@@ -220,7 +288,13 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
     - **closed-loop fit**, when the closed-loop twin ran: ``closed_loop.fit_percent`` (the
       twin's fit % of the measured rate) against ``closed_loop.baseline_percent`` (the rate
       following its target after the best delay). Beating the baseline makes a drifting
-      model ``usable`` for closed-loop simulation; not beating it is a reason.
+      model ``usable`` for closed-loop simulation; not beating it is a reason;
+    - **frequency response**, for a chirp (``frequency``, :func:`frequency_checks`): the
+      model's response against the one measured from the injection (within
+      :data:`MAX_RESPONSE_RMS_DB` and :data:`MAX_RESPONSE_RMS_DEG`) and the transfer
+      function's J. When they pass, the open-loop free run is reported but decides nothing
+      (an integrating plant with unmeasured disturbances drifts whatever the model); when
+      they fail, at best ``usable``. A time-domain effectiveness that disagrees is said.
 
     Parameters
     ----------
@@ -236,6 +310,8 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
         Their ``meta["native_rate_hz"]`` and ``meta["autopilot"]``.
     closed_loop : object, optional
         With ``fit_percent`` and ``baseline_percent`` (``AxisFit.closed_loop``).
+    frequency : Mapping, optional
+        The chirp's frequency-domain results (see :func:`frequency_checks`).
 
     Examples
     --------
@@ -359,8 +435,20 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
             notes.append(f"free run {_pct(own_free)} with the training windows' trim: the "
                          "held-out windows hold another (the constant term moves between "
                          "windows; each is re-estimated, as its initial state is taken)")
+    fchk = frequency_checks(frequency) if frequency is not None else None
+    if fchk is not None:
+        numbers.update(fchk["numbers"])
+        good += fchk["good"]
+        caps += fchk["caps"]
+        notes += fchk["notes"]
+    by_frequency = fchk is not None and fchk["passed"]
     drift = False
-    if not math.isfinite(free) or free < 0:
+    if by_frequency:  # (the chirp is validated in the frequency domain)
+        notes.append(f"free run on held-out data {_pct(free)}, 0.5 s ahead {_pct(short)} "
+                     "(reported only: an integrating plant with unmeasured disturbances "
+                     "drifts whatever the model)")
+        drift = not math.isfinite(free) or free < GOOD_FREE_RUN_PCT
+    elif not math.isfinite(free) or free < 0:
         drift = True
         if math.isfinite(short) and short >= USABLE_SHORT_PCT and validation.stable is not False:
             caps.append(f"free run drifts on held-out data ({_pct(free)}) while 0.5 s "
@@ -401,6 +489,8 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
         usable.append("short-horizon prediction")
     if closed_ok:
         usable.append("closed-loop simulation")
+    if by_frequency:
+        usable.append("frequency-domain analysis (margins, tuning)")
     if caps and not usable and not bad:  # nothing it could be used for: no model
         bad.append(f"on held-out data one step {_pct(one)}, 0.5 s ahead {_pct(short)}, free "
                    f"run {_pct(free)}: too poor for any use")

@@ -908,9 +908,8 @@ def plant_fit(axis: str, flights: Sequence[FlightData]) -> tuple[PlantTF | None,
     rate: the feedback does not bias it, whatever the injection point) and the transfer
     function fitted on its trusted band (:func:`mavsid.frequency.fit_plant`); or None and
     why not."""
-    from mavsid.frequency import frf
+    from mavsid.frequency import frf, sysid_spans
     from mavsid.frequency_fit import fit_plant
-    from mavsid.frequency import sysid_spans
 
     rate, u_name = AXIS_RATE[axis], f"u_{axis}"
     us: list[np.ndarray] = []
@@ -938,9 +937,16 @@ def plant_fit(axis: str, flights: Sequence[FlightData]) -> tuple[PlantTF | None,
             dt = fd.dt
     if not us:
         return None, "no SYSTEMID run on this axis with its injection logged"
-    excited = (min(b[0] for b in bands), min(max(b[1] for b in bands), 0.4 / dt)) if bands \
-        else None
-    grid = {} if excited is None else {"f_min_hz": excited[0], "f_max_hz": excited[1]}
+    # a channel logged slower than the grid holds nothing above its own Nyquist frequency
+    native = [float(r) for fd in flights
+              for n in (rate, u_name) if (r := dict(fd.meta.get("native_rate_hz") or {}).get(n))]  # type: ignore[call-overload]
+    top = 0.4 * min([1.0 / dt, *native])
+    excited = (min(b[0] for b in bands), min(max(b[1] for b in bands), top)) if bands \
+        else (0.0, top)
+    if excited[1] <= excited[0]:
+        return None, (f"{u_name} and {rate} logged at {min(native):.3g} Hz: nothing of the "
+                      f"sweep above {excited[0]:.3g} Hz is resolved")
+    grid = {"f_min_hz": excited[0] or None, "f_max_hz": excited[1]}
     try:
         measured = frf(us, ys, dt, reference=rs, names=(u_name, rate), **grid)
         return fit_plant(measured, excited_hz=excited), ""
@@ -968,10 +974,16 @@ def frequency_estimate(model: Model, axis: str, tf: PlantTF) -> Model:
     biased by the noise the feedback puts into its input, the response against the injection
     is not. Their σ are the transfer function's (relative σ of B; the pole's of a first-order
     fit), the time-domain estimate is kept in ``provenance["time_domain_estimate"]``.
-    ``model`` itself where the response cannot give one."""
+    ``model`` itself where the two effectiveness estimates agree within
+    :data:`mavsid.verdict.AGREE_SIGMAS` σ (the time-domain fit is then not shown biased, and
+    it holds the trim) or where the response cannot give one."""
     from mavsid.frequency import FrfStructure
+    from mavsid.verdict import AGREE_SIGMAS
 
-    if tf.measured is None:
+    name = f"B[{AXIS_RATE[axis]},u_{axis}]"
+    b_td, s_td = model.params.get(name, math.nan), model.stderr.get(name, math.nan)
+    if (tf.measured is None or math.hypot(s_td, tf.stderr["gain"]) * AGREE_SIGMAS
+            >= abs(b_td - tf.gain)):
         return model
     est = FrfStructure(tf.measured, axis).estimate(model)
     if est is None:
@@ -1120,7 +1132,7 @@ def fit(
                                or _tf_chooser(axis, tf, cfg)
                                or _instrument_check(axis, flights, train))
             if tf is not None and tf.accepted:
-                model = frequency_estimate(model, axis, tf)
+                model = frequency_estimate(model, axis, tf)  # (where the two disagree)
             next_stage()
             val = _validate(model, held_out, cfg)
         except NoExcitationError as exc:
@@ -1144,9 +1156,11 @@ def fit(
             bounded = dataclasses.replace(bounded, closed_loop=None, closed_loop_note="")
             fitted = _closed_loop(bounded, flights, signals)
             verdict = _judge(fitted, flights)
+            note = (f"the unconstrained fit was unstable ({_worst_eig(val)}): refused, "
+                    "replaced by the bounded fit")
+            lead = () if verdict.identified else verdict.reasons[:1]  # (why it is not, first)
             verdict = dataclasses.replace(verdict, reasons=(
-                f"the unconstrained fit was unstable ({_worst_eig(val)}): refused, "
-                "replaced by the bounded fit", *verdict.reasons))
+                *lead, note, *verdict.reasons[len(lead):]))
         verdicts[axis] = verdict
         if verdict.identified or cfg.allow_unstable:  # a model judged useless is no result
             fits[axis] = dataclasses.replace(fitted, verdict=verdict)
@@ -1374,6 +1388,24 @@ def _structure(d: Mapping[str, Any]) -> str:
     return "".join(f", {p}" for p in parts)
 
 
+def _frequency_line(f: AxisFit) -> str:
+    """The transfer function fitted to the response measured against the injection, and the
+    model's error against that response."""
+    tf = f.frequency
+    assert tf is not None
+    sd = tf.stderr
+    pole = ("" if tf.structure == "integrator"
+            else f", pole {tf.pole:.3g} ± {sd.get('pole', math.nan):.2g} 1/s")
+    text = (f"frequency response (against the injection): {tf.structure.replace('_', ' ')} "
+            f"B {tf.gain:.4g} ± {sd['gain']:.2g}{pole}, lag {tf.lag_s * 1e3:.3g} ± "
+            f"{sd['lag_s'] * 1e3:.2g} ms, delay {tf.delay_s * 1e3:.3g} ± {sd['delay_s'] * 1e3:.2g}"
+            f" ms, J {tf.cost:.3g}, band {tf.band_hz[0]:.2g}–{tf.band_hz[1]:.3g} Hz")
+    check = model_response_check(f.model, f.axis, tf)
+    if check is not None:
+        text += f"; model {check['rms_db']:.2g} dB / {check['rms_deg']:.2g}° RMS"
+    return text
+
+
 def _closed_loop_line(f: AxisFit) -> str:
     """The closed-loop twin's figures (or why there are none), one line."""
     cl = f.closed_loop
@@ -1553,6 +1585,8 @@ def format_result(result: FitResult, validating: bool = False) -> str:
         cells = "  ".join(f"{k.replace('_', '-')} {format_fit(fp[k])}" for k in fp)
         lines.append(f"  fit %  {cells}")
         lines.append(f"  {_closed_loop_line(f)}")
+        if f.frequency is not None:
+            lines.append(f"  {_frequency_line(f)}")
     verdicts = [validate_line(v) if validating else v.line()
                 for v in result.verdicts.values()]
     if verdicts:

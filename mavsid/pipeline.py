@@ -946,9 +946,9 @@ def plant_fit(axis: str, flights: Sequence[FlightData]) -> tuple[PlantTF | None,
     if excited[1] <= excited[0]:
         return None, (f"{u_name} and {rate} logged at {min(native):.3g} Hz: nothing of the "
                       f"sweep above {excited[0]:.3g} Hz is resolved")
-    grid = {"f_min_hz": excited[0] or None, "f_max_hz": excited[1]}
     try:
-        measured = frf(us, ys, dt, reference=rs, names=(u_name, rate), **grid)
+        measured = frf(us, ys, dt, reference=rs, names=(u_name, rate),
+                       f_min_hz=excited[0] or None, f_max_hz=excited[1])
         return fit_plant(measured, excited_hz=excited), ""
     except (MavsidError, ValueError, np.linalg.LinAlgError) as exc:
         return None, str(exc)
@@ -956,7 +956,8 @@ def plant_fit(axis: str, flights: Sequence[FlightData]) -> tuple[PlantTF | None,
 
 def _tf_chooser(axis: str, tf: PlantTF | None, cfg: PipelineConfig) -> Any:
     """The structure chooser from the injection-referenced response :func:`plant_fit`
-    measured (:class:`mavsid.frequency.FrfStructure`), None without one or where the
+    measured (:class:`mavsid.frequency.FrfStructure`: the lag and delay candidates scored
+    against it; the coefficients stay the data's), None without one or where the
     configuration fixes the delay or lags."""
     if tf is None or tf.measured is None or {"delay", "delays", "lags_s"} & set(cfg.model_options):
         return None
@@ -964,7 +965,56 @@ def _tf_chooser(axis: str, tf: PlantTF | None, cfg: PipelineConfig) -> Any:
 
     step = cfg.model_options.get("delay_step")
     chooser = FrfStructure(tf.measured, axis, **({"delay_step": float(step)} if step else {}))
-    return chooser.__call__  # (the structure only: the coefficients stay the data's)
+    return chooser.__call__
+
+
+def disagrees(model: Model, axis: str, tf: PlantTF) -> bool:
+    """Whether a time-domain ``model`` disagrees with the accepted transfer function ``tf``
+    fitted to the response measured against the injection: an unstable pole, an
+    effectiveness more than :data:`mavsid.verdict.AGREE_SIGMAS` σ away, or a response off the
+    measured one by more than :data:`mavsid.verdict.MAX_RESPONSE_RMS_DB` /
+    :data:`~mavsid.verdict.MAX_RESPONSE_RMS_DEG` RMS over its trusted band."""
+    from mavsid.verdict import AGREE_SIGMAS, MAX_RESPONSE_RMS_DB, MAX_RESPONSE_RMS_DEG
+
+    if not tf.accepted:
+        return False
+    rate = AXIS_RATE[axis]
+    params, stderr = dict(getattr(model, "params", {})), dict(getattr(model, "stderr", {}))
+    name = f"B[{rate},u_{axis}]"
+    b_td, s_td = params.get(name, math.nan), stderr.get(name, math.nan)
+    if params.get(f"A_d[{rate},{rate}]", 0.0) > 1.0:
+        return True
+    if math.isfinite(b_td) and abs(b_td - tf.gain) > AGREE_SIGMAS * math.hypot(
+            s_td if math.isfinite(s_td) else 0.0, tf.stderr["gain"]):
+        return True
+    check = model_response_check(model, axis, tf)
+    return check is not None and not (check["rms_db"] <= MAX_RESPONSE_RMS_DB
+                                      and check["rms_deg"] <= MAX_RESPONSE_RMS_DEG)
+
+
+def _take_lag(lag_s: float, delay: float) -> Callable[[Mapping[float, Any]], tuple[float, float]]:
+    """A ``choose_structure`` that takes the candidate lag nearest ``lag_s`` at ``delay``
+    samples (the search always tries no lag too, and prefers it unless it scores worse)."""
+    def choose(models: Mapping[float, Any]) -> tuple[float, float]:
+        return min(models, key=lambda lag: abs(lag - lag_s)), delay
+
+    return choose
+
+
+def _tf_structure(tf: PlantTF | None, cfg: PipelineConfig, train: Sequence[Segment]
+                  ) -> dict[str, Any] | None:
+    """The time-domain structure of the transfer function :func:`plant_fit` fitted to the
+    response measured against the injection: its lag and its delay, no further filter (the
+    measured response holds the gyro filter's, which the lag and delay took); None without
+    an accepted one or where the configuration fixes the delay, lags or filters."""
+    if (tf is None or not tf.accepted or not train
+            or {"delay", "delays", "lags_s", "filters"} & set(cfg.model_options)):
+        return None
+    # a held input adds half a step to a discrete model's delay (its response is the
+    # continuous one times e^{-jω dt/2}): the model's delay is the rest
+    dt = float(train[0].dt)
+    return {"filters": (), "lags_s": (round(tf.lag_s, 6),),
+            "delay": round(max(tf.delay_s / dt - 0.5, 0.0), 6)}
 
 
 def frequency_estimate(model: Model, axis: str, tf: PlantTF) -> Model:
@@ -974,30 +1024,40 @@ def frequency_estimate(model: Model, axis: str, tf: PlantTF) -> Model:
     biased by the noise the feedback puts into its input, the response against the injection
     is not. Their σ are the transfer function's (relative σ of B; the pole's of a first-order
     fit), the time-domain estimate is kept in ``provenance["time_domain_estimate"]``.
-    ``model`` itself where the two effectiveness estimates agree within
-    :data:`mavsid.verdict.AGREE_SIGMAS` σ (the time-domain fit is then not shown biased, and
-    it holds the trim) or where the response cannot give one."""
+    ``model`` itself where the response cannot give one. (The pipeline takes it where the
+    time-domain fit :func:`disagrees` with the response.)"""
+    from mavsid.estimators.model import Model as Fitted
     from mavsid.frequency import FrfStructure
-    from mavsid.verdict import AGREE_SIGMAS
 
-    name = f"B[{AXIS_RATE[axis]},u_{axis}]"
-    b_td, s_td = model.params.get(name, math.nan), model.stderr.get(name, math.nan)
-    if (tf.measured is None or math.hypot(s_td, tf.stderr["gain"]) * AGREE_SIGMAS
-            >= abs(b_td - tf.gain)):
-        return model
-    est = FrfStructure(tf.measured, axis).estimate(model)
-    if est is None:
+    if not isinstance(model, Fitted) or tf.measured is None:
         return model
     rate, u_name = AXIS_RATE[axis], f"u_{axis}"
     i_a, i_b = model.features.index(rate), model.features.index(u_name)
-    se = (np.array(model.coef_stderr, dtype=float, copy=True) if model.coef_stderr is not None
-          else np.full_like(model.coef, np.nan))
+    prov0 = dict(model.provenance or {})
+    dt = float(model.dt)
+    known = [f for f in prov0.get("filters") or () if not str(
+        dict(f).get("source", "")).startswith("input lag")]
+    if (not known and abs(float(prov0.get("lag_s") or 0.0) - tf.lag_s) < 1e-5
+            and abs((model.delay + model.delay_frac + 0.5) * dt - tf.delay_s) < 1e-5):
+        # the model holds the transfer function's own lag and delay: its pole and gain are
+        # the transfer function's, discretised for the held input
+        coef = np.asarray(model.coef).astype(float)
+        a_d = math.exp(-tf.pole * dt)
+        coef[i_a, 0] = a_d
+        coef[i_b, 0] = tf.gain * dt if tf.pole == 0 else tf.gain * (1 - a_d) / tf.pole
+        est: Fitted | None = dataclasses.replace(model, coef=coef)
+    else:
+        est = FrfStructure(tf.measured, axis).estimate(model)
+    if est is None:
+        return model
+    se = (np.asarray(model.coef_stderr).astype(float) if model.coef_stderr is not None
+          else np.full(model.coef.shape, np.nan))
     b = float(est.coef[i_b, 0])
     se[i_b, 0] = abs(b) * tf.stderr.get("gain", math.nan) / tf.gain
     se[i_a, 0] = float(model.dt) * max(tf.stderr.get("pole", 0.0), 0.0)
     cov = None
     if model.covariance is not None:
-        cov = np.array(model.covariance, dtype=float, copy=True)
+        cov = np.asarray(model.covariance).astype(float)
         for i in (i_a, i_b):  # (uncorrelated with the trim: estimated apart)
             cov[0, i, :] = cov[0, :, i] = 0.0
             cov[0, i, i] = se[i, 0] ** 2
@@ -1128,11 +1188,20 @@ def fit(
         try:
             train, held_out = split_segments(segs, cfg.block_s)
             next_stage()
+            fit_cfg = cfg
             model = _fit_model(train, axis, cfg, _frf_chooser(axis, flights, signals, cfg)
                                or _tf_chooser(axis, tf, cfg)
                                or _instrument_check(axis, flights, train))
-            if tf is not None and tf.accepted:
-                model = frequency_estimate(model, axis, tf)  # (where the two disagree)
+            structure = (_tf_structure(tf, cfg, train)
+                         if tf is not None and disagrees(model, axis, tf) else None)
+            if tf is not None and structure is not None:
+                # refitted with the structure the measured response supports, then its pole
+                # and effectiveness taken from the response (the time-domain fit is biased)
+                fit_cfg = dataclasses.replace(cfg, model_options={**dict(cfg.model_options),
+                                                                  **structure})
+                model = frequency_estimate(
+                    _fit_model(train, axis, fit_cfg, _take_lag(structure["lags_s"][0],
+                                                               structure["delay"])), axis, tf)
             next_stage()
             val = _validate(model, held_out, cfg)
         except NoExcitationError as exc:
@@ -1146,7 +1215,7 @@ def fit(
         fitted = _closed_loop(fitted, flights, signals)
         verdict = _judge(fitted, flights)
         if val.stable is False and not cfg.allow_unstable:
-            bounded = _bounded_fit(fitted, cfg)
+            bounded = _bounded_fit(fitted, fit_cfg)
             if bounded is None or bounded.validation.stable is False:
                 verdicts[axis] = dataclasses.replace(
                     verdict, reasons=(*verdict.reasons, "refused (--allow-unstable keeps it); "

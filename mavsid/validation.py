@@ -172,9 +172,11 @@ def eigenvalues(model: object) -> tuple[np.ndarray | None, bool | None]:
     """Eigenvalues of the identified dynamics and whether they are stable.
 
     Uses ``model.eigenvalues`` (an array or a method) or else the state matrix ``model.A``.
-    Discrete-time models are stable when every ``|lambda| < 1``; models with a true
-    ``continuous`` attribute when every ``Re(lambda) < 0``. ``(None, None)`` when the model
-    exposes neither.
+    Discrete-time models are stable when every ``|lambda| <= 1``; models with a true
+    ``continuous`` attribute when every ``Re(lambda) <= 0`` (marginally stable counts: a rate
+    plant is close to an integrator, and an integrator's model — from its measured frequency
+    response, or a bounded fit at its bound — is not an unstable one). ``(None, None)`` when
+    the model exposes neither.
     """
     value: Any = getattr(model, "eigenvalues", None)
     if callable(value):
@@ -189,8 +191,8 @@ def eigenvalues(model: object) -> tuple[np.ndarray | None, bool | None]:
     if not lam.size:
         return lam, None
     if getattr(model, "continuous", False):
-        return lam, bool(np.all(lam.real < 0))
-    return lam, bool(np.all(np.abs(lam) < 1.0))
+        return lam, bool(np.all(lam.real <= 0))
+    return lam, bool(np.all(np.abs(lam) <= 1.0))
 
 
 # --------------------------------------------------------------------------- results

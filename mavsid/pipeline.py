@@ -1033,7 +1033,7 @@ def frequency_estimate(model: Model, axis: str, tf: PlantTF) -> Model:
         return model
     rate, u_name = AXIS_RATE[axis], f"u_{axis}"
     i_a, i_b = model.features.index(rate), model.features.index(u_name)
-    prov0 = dict(model.provenance or {})
+    prov0: dict[str, Any] = dict(model.provenance or {})
     dt = float(model.dt)
     known = [f for f in prov0.get("filters") or () if not str(
         dict(f).get("source", "")).startswith("input lag")]

@@ -684,7 +684,8 @@ def _injection(flight: FlightData, raw: Any) -> np.ndarray | None:
     """SYSTEMID's injected waveform held on ``flight``'s grid (NaN where no record lies
     within two of its steps), whatever the injection point: the reference its plant response
     is measured against."""
-    from mavsid.channels import INJECTION_CHANNEL, evaluate
+    from mavsid.autopilot.presets import INJECTION_CHANNEL
+    from mavsid.channels import evaluate
 
     if not flight.meta.get("sysid_runs") or INJECTION_CHANNEL.message not in raw.messages:
         return None
@@ -911,7 +912,7 @@ def plant_fit(axis: str, flights: Sequence[FlightData]) -> tuple[PlantTF | None,
     from mavsid.frequency import frf, sysid_spans
     from mavsid.frequency_fit import fit_plant
 
-    rate, u_name = AXIS_RATE[axis], f"u_{axis}"
+    rate, u_name = RATE_OF[axis], f"u_{axis}"
     us: list[np.ndarray] = []
     ys: list[np.ndarray] = []
     rs: list[np.ndarray] = []
@@ -978,7 +979,7 @@ def disagrees(model: Model, axis: str, tf: PlantTF) -> bool:
 
     if not tf.accepted:
         return False
-    rate = AXIS_RATE[axis]
+    rate = RATE_OF[axis]
     params, stderr = dict(getattr(model, "params", {})), dict(getattr(model, "stderr", {}))
     name = f"B[{rate},u_{axis}]"
     b_td, s_td = params.get(name, math.nan), stderr.get(name, math.nan)
@@ -1031,7 +1032,7 @@ def frequency_estimate(model: Model, axis: str, tf: PlantTF) -> Model:
 
     if not isinstance(model, Fitted) or tf.measured is None:
         return model
-    rate, u_name = AXIS_RATE[axis], f"u_{axis}"
+    rate, u_name = RATE_OF[axis], f"u_{axis}"
     i_a, i_b = model.features.index(rate), model.features.index(u_name)
     prov0: dict[str, Any] = dict(model.provenance or {})
     dt = float(model.dt)
@@ -1260,7 +1261,7 @@ def _frequency_evidence(fitted: AxisFit) -> dict[str, Any] | None:
         return None
     prov = dict(getattr(fitted.model, "provenance", {}) or {})
     td = prov.get("time_domain_estimate")
-    name = f"B[{AXIS_RATE[fitted.axis]},u_{fitted.axis}]"
+    name = f"B[{RATE_OF[fitted.axis]},u_{fitted.axis}]"
     if isinstance(td, Mapping) and name in dict(td.get("params") or {}):
         got["time_domain"] = {"B": td["params"][name],
                               "sigma": dict(td.get("stderr") or {}).get(name)}

@@ -72,7 +72,7 @@ from mavsid.errors import (
 )
 from mavsid.threads import one_blas_thread
 from mavsid.validation import DEFAULT_HORIZONS_S, Model, Validation, validate
-from mavsid.verdict import Verdict, format_fit, judge, unfitted
+from mavsid.verdict import Verdict, format_fit, judge, not_identified, unfitted
 
 if TYPE_CHECKING:
     from mavsid.excitation import WindowReport
@@ -810,10 +810,11 @@ def _closed_loop(
 
 
 def _nothing(logs: Sequence[str | os.PathLike[str]], verdicts: Mapping[str, Verdict],
-             what: str) -> NoExcitationError:
+             what: str, refused: Sequence[str] = ()) -> NoExcitationError:
     """The error for a run with no model: one line naming the logs and each axis's first
-    reason; each axis's verdict and the advice (once, not per axis) as ``details`` lines
-    (the command line prints them on stdout, as it prints a fit's verdicts).
+    reason (the ``refused`` axes' alone when there are: a SYSTEMID run that ended in a
+    roll-over or excited nothing); each axis's verdict and the advice (once, not per axis) as
+    ``details`` lines (the command line prints them on stdout, as it prints a fit's verdicts).
 
     Examples
     --------
@@ -832,6 +833,9 @@ def _nothing(logs: Sequence[str | os.PathLike[str]], verdicts: Mapping[str, Verd
                       for a, v in verdicts.items())
     first = os.fspath(logs[0]) if logs else "LOG"
     exc = NoExcitationError(f"{names}: {what} ({short}); see `mavsid segments {first} --all`")
+    if refused:  # (a refused SYSTEMID run is the one line: the rest only repeats it)
+        exc = NoExcitationError(f"{names}: " + "; ".join(
+            f"{a}: {verdicts[a].reasons[0]}" for a in refused))
     lines = [f"{a}: {v.level}: " + "; ".join(v.reasons) for a, v in verdicts.items()]
     advice = list(dict.fromkeys(x for v in verdicts.values() for x in v.advice))
     if advice:
@@ -903,13 +907,44 @@ def _logged_around(fd: FlightData, ref: np.ndarray, i0: int, i1: int) -> tuple[i
     return a, b
 
 
-def plant_fit(axis: str, flights: Sequence[FlightData]) -> tuple[PlantTF | None, str]:
+#: A SYSTEMID run whose |roll| or |pitch| passes this within :data:`ROLLOVER_AFTER_S` of its
+#: end ended in a roll-over: no multicopter controller leans that far on purpose (ArduCopter's
+#: ANGLE_MAX is 30° by default and 80° at most; a SYSTEMID chirp adds tens of degrees), and a
+#: quad past it has lost the lift that holds it: what follows is a crash, not a response.
+ROLLOVER_DEG = 75.0
+#: How long after a run's end its roll-over is still the run's (the vehicle falls over in
+#: about a second, and the mode's end is logged first)
+ROLLOVER_AFTER_S = 3.0
+
+
+def _rollover(fd: FlightData, i0: int, i1: int, sid: int) -> str:
+    """Why the SYSTEMID run ``[i0, i1)`` (``SID_AXIS`` ``sid``) is refused for ending in a
+    roll-over (:data:`ROLLOVER_DEG`), or ``""``."""
+    end = int(np.searchsorted(fd.time_s, fd.time_s[i1 - 1] + ROLLOVER_AFTER_S, side="right"))
+    worst: tuple[float, str, float] | None = None
+    for name in ("roll", "pitch"):
+        if name not in fd.state_names:
+            continue
+        v = np.degrees(np.abs(fd.states[i0:end, fd.state_names.index(name)]))
+        k = int(np.argmax(v > ROLLOVER_DEG)) if np.any(v > ROLLOVER_DEG) else -1
+        if k >= 0 and (worst is None or fd.time_s[i0 + k] < worst[2]):
+            worst = (float(np.nanmax(v)), name, float(fd.time_s[i0 + k]))
+    if worst is None:
+        return ""
+    return (f"SYSTEMID run (SID_AXIS {sid}, {fd.time_s[i0]:.1f}–{fd.time_s[i1 - 1]:.1f} s) ends "
+            f"in a roll-over: |{worst[1]}| passes {ROLLOVER_DEG:g}° at t={worst[2]:.1f} s "
+            f"(reaching {worst[0]:.0f}°): the vehicle was lost")
+
+
+def plant_fit(axis: str, flights: Sequence[FlightData]) -> tuple[PlantTF | None, str, bool]:
     """The plant's response on the axis's SYSTEMID runs measured against the injection
     (``H = S_ry / S_ru``, ``r`` the waveform ``SIDD.Targ``, ``u`` the mixer input, ``y`` the
     rate: the feedback does not bias it, whatever the injection point) and the transfer
     function fitted on its trusted band (:func:`mavsid.frequency.fit_plant`); or None and
-    why not."""
-    from mavsid.frequency import frf, sysid_spans
+    why not. The flag says the runs are refused (the reason then the one line to give): one
+    ends in a roll-over (:data:`ROLLOVER_DEG`), or the injection excites nothing above the
+    noise (no frequency of the sweep where the input and the rate are coherent with it)."""
+    from mavsid.frequency import MIN_COHERENCE, frf, sysid_spans
     from mavsid.frequency_fit import fit_plant
 
     rate, u_name = RATE_OF[axis], f"u_{axis}"
@@ -917,6 +952,7 @@ def plant_fit(axis: str, flights: Sequence[FlightData]) -> tuple[PlantTF | None,
     ys: list[np.ndarray] = []
     rs: list[np.ndarray] = []
     bands: list[tuple[float, float]] = []
+    settings: list[Mapping[str, Any]] = []
     dt = 0.0
     for fd in flights:
         ref = fd.meta.get("sysid_injection")
@@ -926,6 +962,10 @@ def plant_fit(axis: str, flights: Sequence[FlightData]) -> tuple[PlantTF | None,
         runs = {int(r.get("axis", 0) or 0): r
                 for r in fd.meta.get("sysid_runs") or ()}  # type: ignore[attr-defined]
         for i0, i1, sid in sysid_spans(fd, axis):
+            lost = _rollover(fd, i0, i1, sid)
+            if lost:
+                return None, lost, True
+            settings.append(runs[sid])
             lo, hi = runs[sid].get("f_start_hz"), runs[sid].get("f_stop_hz")
             if lo and hi:
                 bands.append((float(lo), float(hi)))
@@ -937,7 +977,7 @@ def plant_fit(axis: str, flights: Sequence[FlightData]) -> tuple[PlantTF | None,
             rs.append(ref[i0:i1])
             dt = fd.dt
     if not us:
-        return None, "no SYSTEMID run on this axis with its injection logged"
+        return None, "no SYSTEMID run on this axis with its injection logged", False
     # a channel logged slower than the grid holds nothing above its own Nyquist frequency
     native = [float(r) for fd in flights
               for n in (rate, u_name) if (r := dict(fd.meta.get("native_rate_hz") or {}).get(n))]  # type: ignore[call-overload]
@@ -946,13 +986,32 @@ def plant_fit(axis: str, flights: Sequence[FlightData]) -> tuple[PlantTF | None,
         else (0.0, top)
     if excited[1] <= excited[0]:
         return None, (f"{u_name} and {rate} logged at {min(native):.3g} Hz: nothing of the "
-                      f"sweep above {excited[0]:.3g} Hz is resolved")
+                      f"sweep above {excited[0]:.3g} Hz is resolved"), False
     try:
         measured = frf(us, ys, dt, reference=rs, names=(u_name, rate),
                        f_min_hz=excited[0] or None, f_max_hz=excited[1])
-        return fit_plant(measured, excited_hz=excited), ""
     except (MavsidError, ValueError, np.linalg.LinAlgError) as exc:
-        return None, str(exc)
+        return None, str(exc), False
+    inside = (measured.freq_hz >= excited[0]) & (measured.freq_hz <= excited[1])
+    trust = np.where(inside, measured.trust, 0.0)
+    if not np.any(trust >= MIN_COHERENCE):
+        k = int(np.argmax(trust))
+        from mavsid.autopilot.ardupilot import sid_axis
+
+        mags = sorted({float(r["magnitude"]) for r in settings if r.get("magnitude")})
+        sids = sorted({int(r.get("axis", 0) or 0) for r in settings})
+        unit = {"input angle": "°", "recovery angle": "°", "rate": "°/s"}.get(
+            sid_axis(sids[0])[1], "") if len(sids) == 1 else ""
+        mag = f", magnitude {'/'.join(f'{m:g}{unit}' for m in mags)}" if mags else ""
+        return None, (
+            f"SYSTEMID run (SID_AXIS {'/'.join(map(str, sids))}{mag}, {excited[0]:g}–"
+            f"{excited[1]:g} Hz) excites nothing above the noise: the input and the rate are "
+            f"coherent with the injection at no frequency of the sweep (at best γ² "
+            f"{trust[k]:.2f} at {measured.freq_hz[k]:.2g} Hz, {MIN_COHERENCE:g} needed)"), True
+    try:
+        return fit_plant(measured, excited_hz=excited), "", False
+    except (MavsidError, ValueError, np.linalg.LinAlgError) as exc:
+        return None, str(exc), False
 
 
 def _tf_chooser(axis: str, tf: PlantTF | None, cfg: PipelineConfig) -> Any:
@@ -1166,6 +1225,7 @@ def fit(
     hash_soon(f.source.path for f in flights)  # (for the model's provenance, meanwhile)
     fits: dict[str, AxisFit] = {}
     verdicts: dict[str, Verdict] = {}
+    refused_runs: list[str] = []
     for axis in cfg.axes:
         stages = iter(FIT_STAGES)
 
@@ -1185,7 +1245,12 @@ def fit(
             verdicts[axis] = unfitted(axis, missing, windows, flights,
                                       [os.fspath(p) for p in logs])
             continue
-        tf, tf_note = plant_fit(axis, flights)
+        tf, tf_note, refused = plant_fit(axis, flights)
+        if refused:  # (one line: every other gate would only repeat it)
+            next_stage(rest=True)
+            verdicts[axis] = not_identified(axis, tf_note)
+            refused_runs.append(axis)
+            continue
         try:
             train, held_out = split_segments(segs, cfg.block_s)
             next_stage()
@@ -1235,7 +1300,7 @@ def fit(
         if verdict.identified or cfg.allow_unstable:  # a model judged useless is no result
             fits[axis] = dataclasses.replace(fitted, verdict=verdict)
     if not fits:
-        raise _nothing(logs, verdicts, "nothing identifiable")
+        raise _nothing(logs, verdicts, "nothing identifiable", refused_runs)
     from mavsid.loop.twin import TwinSignals
 
     twins = [signals.get(id(fd)) for fd in flights]

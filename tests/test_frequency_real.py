@@ -116,3 +116,27 @@ def test_roll_model_response_within_the_goal_of_the_measured_one(chirp71) -> Non
     assert db <= 1.5 and deg <= 10.0, (db, deg)
     verdict = out["axes"]["roll"]["verdict"]
     assert verdict["level"] in ("good", "usable"), verdict
+
+
+def fit_error(name: str) -> str:
+    path = real_log(name)
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.run([sys.executable, "-m", "mavsid", "fit", str(path), "-q"],
+                          capture_output=True, text=True, env=env, check=False)
+    assert proc.returncode == 1, proc.stdout
+    return next(line for line in proc.stderr.splitlines() if line.startswith("mavsid: error:"))
+
+
+@pytest.mark.parametrize("name", ["00000064.BIN", "00000067.BIN"])
+def test_a_run_that_excites_nothing_is_refused_in_one_line(name: str) -> None:
+    """SID_MAGNITUDE 0.15° on a 20-deg-capable quad: the injection is lost in the noise."""
+    line = fit_error(name)
+    assert "excites nothing above the noise" in line and "magnitude 0.15°" in line, line
+    assert "0.05–5 Hz" in line and "γ²" in line
+    assert "on the ground" not in line and "ill-conditioned" not in line
+
+
+def test_a_run_that_ends_in_a_roll_over_is_refused_in_one_line() -> None:
+    line = fit_error("00000060.BIN")
+    assert "ends in a roll-over" in line and "at t=" in line, line
+    assert "on the ground" not in line and "attitude beyond bound" not in line

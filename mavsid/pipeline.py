@@ -993,7 +993,10 @@ def plant_fit(axis: str, flights: Sequence[FlightData]) -> tuple[PlantTF | None,
     except (MavsidError, ValueError, np.linalg.LinAlgError) as exc:
         return None, str(exc), False
     inside = (measured.freq_hz >= excited[0]) & (measured.freq_hz <= excited[1])
-    trust = np.where(inside, measured.trust, 0.0)
+    # excitation judged by the response: the rate's coherence with the injection (a slowly
+    # logged input is incoherent for want of samples, not of excitation)
+    parts = measured.coherence_parts
+    trust = np.where(inside, parts[1] if parts is not None else measured.coherence, 0.0)
     if not np.any(trust >= MIN_COHERENCE):
         k = int(np.argmax(trust))
         from mavsid.autopilot.ardupilot import sid_axis
@@ -1005,8 +1008,8 @@ def plant_fit(axis: str, flights: Sequence[FlightData]) -> tuple[PlantTF | None,
         mag = f", magnitude {'/'.join(f'{m:g}{unit}' for m in mags)}" if mags else ""
         return None, (
             f"SYSTEMID run (SID_AXIS {'/'.join(map(str, sids))}{mag}, {excited[0]:g}–"
-            f"{excited[1]:g} Hz) excites nothing above the noise: the input and the rate are "
-            f"coherent with the injection at no frequency of the sweep (at best γ² "
+            f"{excited[1]:g} Hz) excites nothing above the noise: the rate is coherent with "
+            f"the injection at no frequency of the sweep (at best γ² "
             f"{trust[k]:.2f} at {measured.freq_hz[k]:.2g} Hz, {MIN_COHERENCE:g} needed)"), True
     try:
         return fit_plant(measured, excited_hz=excited), "", False

@@ -92,10 +92,10 @@ def _timed(argv: Sequence[str], runs: int) -> list[tuple[float, float]]:
 
 
 def _command_time(argv: Sequence[str], runs: int) -> str:
-    """Median wall time of fresh processes, with their median CPU time."""
+    """Median CPU time (user + system) of fresh processes, with their median wall time."""
     times = _timed(argv, runs)
-    return (f"{statistics.median(t for t, _ in times):.2f} s "
-            f"(CPU {statistics.median(c for _, c in times):.2f} s)")
+    return (f"{statistics.median(c for _, c in times):.2f} s CPU, "
+            f"{statistics.median(t for t, _ in times):.2f} s wall")
 
 
 def _child(code: str) -> float:
@@ -352,11 +352,13 @@ def _readme_block(summary: dict, perf: dict) -> str:
         rows.append(("`mavsid fit fixtures/sysid_roll.bin`", perf["fit_fixture"],
                      "docs/performance.rst"))
     if "fit_sitl" in perf:
-        rows.append(("`mavsid fit` of the 104-MB SITL `.bin` (with `--rrd --report`)",
-                     f"{perf['fit_sitl']} ({perf['fit_sitl_outputs']})",
+        rows.append((f"`mavsid fit` of the {perf['sitl_mb']}-MB SITL `.bin`", perf["fit_sitl"],
                      "docs/performance.rst"))
-    for key, what in (("dataflash_ratio", "reading a `.bin`, against pymavlink"),
-                      ("tlog_ratio", "reading a `.tlog`, against pymavlink"),
+        rows.append(("the same with `--rrd --report`", perf["fit_sitl_outputs"],
+                     "docs/performance.rst"))
+    for key, what in (("dataflash_ratio",
+                       "reading 20 MB of a `.bin` (what `fit` reads), against pymavlink"),
+                      ("tlog_ratio", "reading 4 MB of a `.tlog`, against pymavlink"),
                       ("ulog_ratio", "reading the shared ULogs, against pyulog")):
         if key in perf:
             rows.append((what, f"{perf[key]} faster", "docs/performance.rst"))

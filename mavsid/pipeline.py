@@ -1466,7 +1466,11 @@ def validate_logs(
                                       [os.fspath(p) for p in logs])
             continue
         estimator = str(dict(getattr(model, "provenance", {}) or {}).get("estimator", ""))
-        fitted = AxisFit(axis, model, val, (), segs, estimator, windows)
+        # a chirp of the other flight validates the model in the frequency domain: the
+        # model's response against the one measured there against its injection
+        tf, tf_note, _ = plant_fit(axis, flights)
+        fitted = AxisFit(axis, model, val, (), segs, estimator, windows, frequency=tf,
+                         frequency_note=tf_note)
         step(f"{axis}: {VALIDATE_STAGES[2]}")
         fitted = _closed_loop(fitted, flights, signals)
         verdict = _judge(fitted, flights)

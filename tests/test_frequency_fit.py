@@ -118,3 +118,24 @@ def test_aliased_gyro_refused_with_the_reason_when_nothing_is_coherent() -> None
     run = aliased_gyro(5, vibration=300.0)
     with pytest.raises(NoExcitationError, match="coheren"):
         mavsid.identify_frequency(run["u"], run["y"], LOG_DT, excited_hz=(1.0, 30.0))
+
+
+FIXTURES = __import__("pathlib").Path(__file__).resolve().parents[1] / "fixtures"
+
+
+def test_validate_on_another_flight_in_the_frequency_domain(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """A model fitted on one simulated chirp, validated on another flight's chirp (another
+    seed, noisier): the model's response against the one measured there against its
+    injection, and the simulator's truth (roll damping 4 1/s, effectiveness 180)."""
+    from mavsid import pipeline
+
+    cfg = pipeline.PipelineConfig(axes=("roll",))
+    fitted = pipeline.fit([FIXTURES / "sysid_roll.bin"], cfg)
+    models = {"roll": fitted.axes["roll"].model}
+    other = pipeline.validate_logs(models, [FIXTURES / "noisy_sysid.bin"], cfg)
+    fr = other.axes["roll"].to_dict()["frequency_response"]
+    check = fr["model_check"]
+    assert check["rms_db"] < 1.5 and check["rms_deg"] < 10, check
+    # the other flight's own transfer function: its truth within 3 % (the composite's bias)
+    assert fr["structure"] == "first_order" and abs(fr["B"] / 180 - 1) < 0.03, fr["B"]
+    assert other.verdicts["roll"].numbers["frequency_rms_db"] == pytest.approx(check["rms_db"])

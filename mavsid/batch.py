@@ -13,7 +13,9 @@ line error, never the end of the batch.
 Tables (``SCHEMA_VERSION`` 1, in each table's ``schema_version`` column), for ``-o OUT.parquet``:
 
 * ``OUT.parquet``, one row per log × axis: ``log, sha256, config_hash, vehicle,
-  flight_date, axis, level`` (the verdict), ``reasons, usable_for, estimator, dt_s,
+  flight_date, axis, verdict`` (``good``, ``usable`` or ``not identified``; tables written
+  before it was named so call it ``level``, read as ``verdict``), ``reasons, usable_for,
+  estimator, dt_s,
   delay_s, input_lag_s``, every parameter as ``p:NAME`` and its σ as ``sigma:NAME``,
   ``fit_one_step, fit_0_5s, fit_free_run`` (%), ``closed_loop_fit, closed_loop_baseline``
   (%), ``schema_version``;
@@ -63,7 +65,8 @@ if TYPE_CHECKING:
     from mavsid.pipeline import FitResult, PipelineConfig
 
 __all__ = ["CHANGE_REL", "CHANGE_Z", "LOG_SUFFIXES", "SCHEMA_VERSION", "config_hash",
-           "find_logs", "log_task", "read_tables", "run_batch", "trends", "write_trends_html"]
+           "find_logs", "log_task", "read_tables", "run_batch", "summary_lines", "trends",
+           "write_trends_html"]
 
 SCHEMA_VERSION = 1
 LOG_SUFFIXES = (".bin", ".log", ".tlog", ".ulg")
@@ -132,7 +135,7 @@ def _axis_rows(base: Mapping[str, Any], result: FitResult | None,
                verdicts: Mapping[str, Any]) -> list[dict[str, Any]]:
     rows = []
     for axis, verdict in verdicts.items():
-        row: dict[str, Any] = {**base, "axis": axis, "level": verdict.level,
+        row: dict[str, Any] = {**base, "axis": axis, "verdict": verdict.level,
                                "reasons": "; ".join(verdict.reasons),
                                "usable_for": ", ".join(verdict.usable_for)}
         fitted = result.axes.get(axis) if result is not None else None
@@ -248,6 +251,8 @@ def read_tables(out: str | os.PathLike[str]) -> dict[str, pd.DataFrame]:
         except (OSError, ValueError) as exc:
             raise ConfigError(f"{path}: not a mavsid batch table ({exc})") from None
         frame = tables[kind]
+        if "level" in frame and "verdict" not in frame:  # (the column's former name)
+            frame = tables[kind] = frame.rename(columns={"level": "verdict"})
         if len(frame) and int(frame["schema_version"].max()) > SCHEMA_VERSION:
             raise ConfigError(f"{path}: written by a newer mavsid (schema "
                               f"{int(frame['schema_version'].max())})")
@@ -427,9 +432,9 @@ def trends(axes: pd.DataFrame, params: Sequence[str] = ("B", "A")) -> pd.DataFra
     import pandas as pd
 
     rows: list[dict[str, Any]] = []
-    if not len(axes) or "level" not in axes:
+    if not len(axes) or "verdict" not in axes:
         return pd.DataFrame(rows)
-    ok = axes[axes["level"] != "not identified"]
+    ok = axes[axes["verdict"] != "not identified"]
     for (vehicle, axis), group in ok.groupby(["vehicle", "axis"]):
         group = group.sort_values("flight_date")
         for col in [c for c in group.columns if c.startswith("p:")
@@ -453,18 +458,28 @@ def trends(axes: pd.DataFrame, params: Sequence[str] = ("B", "A")) -> pd.DataFra
 
 def write_trends_html(tables: Mapping[str, pd.DataFrame], path: str | os.PathLike[str]) -> None:
     """A page with each vehicle's parameters against flight date (± σ) and the change
-    points found (:func:`trends`)."""
+    points found (:func:`trends`), under a title; logs named relative to the page's folder,
+    an empty cell where a log has no error."""
+    import html
+
     import matplotlib.pyplot as plt
 
     from mavsid.report import figure_img, render_html_page
 
     axes = tables["axes"]
+    logs = tables["logs"]
     found = trends(axes)
-    sections = []
+    vehicles = sorted({str(v) for v in logs.get("vehicle", ())}) if len(logs) else []
+    counts = logs["status"].value_counts().to_dict() if len(logs) else {}
+    sections = [
+        f"<h1>mavsid batch: {len(logs)} log(s) of {len(vehicles)} vehicle(s)</h1>"
+        f'<p class="meta">{html.escape(_counts_text(counts))}; parameters of the axes judged '
+        "good or usable, against flight date (± σ); change points over "
+        f"{CHANGE_Z:g} standard errors and {100 * CHANGE_REL:g} % of the mean.</p>"]
     if len(found):
         sections.append("<h2>Change points</h2>" + found.to_html(index=False, float_format="%.3g"))
     if len(axes):
-        ok = axes[axes["level"] != "not identified"]
+        ok = axes[axes["verdict"] != "not identified"]
         for (vehicle, axis), group in ok.groupby(["vehicle", "axis"]):
             group = group.sort_values("flight_date")
             cols = [c for c in group.columns if c.startswith("p:B[") or c.startswith("p:A[")]
@@ -483,9 +498,64 @@ def write_trends_html(tables: Mapping[str, pd.DataFrame], path: str | os.PathLik
             fig.tight_layout()
             sections.append(figure_img(fig))
             plt.close(fig)
-    logs = tables["logs"]
     if len(logs):
-        sections.append("<h2>Logs</h2>" + logs[["log", "status", "vehicle", "axes_identified",
-                                                "error"]].to_html(index=False))
+        here = os.path.dirname(os.path.abspath(path))
+        shown = logs[["log", "status", "vehicle", "axes_identified", "error"]].copy()
+        shown["error"] = [e.replace(str(p), _relative(str(p), here)) if isinstance(e, str)
+                          else "" for p, e in zip(shown["log"], shown["error"], strict=True)]
+        shown["log"] = [_relative(str(p), here) for p in shown["log"]]
+        sections.append("<h2>Logs</h2>" + shown.to_html(index=False))
     with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as f:
         f.write(render_html_page("mavsid batch: trends", sections))
+
+
+def _relative(log: str, folder: str) -> str:
+    """``log`` relative to ``folder`` (as given when it lies on another drive).
+
+    >>> _relative("/data/fleet/a.bin", "/data/out")
+    '../fleet/a.bin'
+    """
+    try:
+        return os.path.relpath(os.path.abspath(log), folder)
+    except ValueError:
+        return log
+
+
+def _counts_text(counts: Mapping[str, int]) -> str:
+    """``2 ok, 1 failed`` from the logs table's status counts.
+
+    >>> _counts_text({"ok": 2, "failed": 1})
+    '1 failed, 2 ok'
+    """
+    return ", ".join(f"{v} {k}" for k, v in sorted(counts.items())) or "no log"
+
+
+def summary_lines(logs: pd.DataFrame, new: int, out: str) -> list[str]:
+    """What ``mavsid batch`` says at the end: the counts, each log that failed or gave
+    nothing with its one-line reason, or that nothing was new (``new`` logs fitted by
+    this run).
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> logs = pd.DataFrame({"log": ["a.bin", "b.bin"], "status": ["ok", "failed"],
+    ...                      "error": [None, "b.bin: empty file"]})
+    >>> print("\\n".join(summary_lines(logs, 2, "r.parquet")))
+    2 log(s): 1 failed, 1 ok; wrote r.parquet
+      failed: b.bin: empty file
+    >>> summary_lines(logs, 0, "r.parquet")
+    ['nothing new: all 2 log(s) are in r.parquet with these settings (1 failed, 1 ok)']
+    """
+    counts = logs["status"].value_counts().to_dict() if len(logs) else {}
+    if not new:
+        return [f"nothing new: all {len(logs)} log(s) are in {out} with these settings "
+                f"({_counts_text(counts)})"]
+    lines = [f"{len(logs)} log(s): {_counts_text(counts)}; wrote {out}"]
+    for row in logs.to_dict("records"):
+        if row["status"] != "ok":
+            error = row.get("error")
+            reason = error if isinstance(error, str) and error else "no reason recorded"
+            if reason.startswith(f"{row['log']}: "):  # (the error names the log already)
+                reason = reason[len(row["log"]) + 2:]
+            lines.append(f"  {row['status']}: {row['log']}: {reason}")
+    return lines

@@ -47,7 +47,7 @@ import time
 import urllib.parse
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
 import rerun as rr
@@ -146,8 +146,15 @@ def _joined(parts: Iterable[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray,
     return np.concatenate(ts), np.concatenate(vs)
 
 
+#: How a time series is drawn where several samples share a pixel (zoomed out): the
+#: band between their min and max. rerun's default averages them, and a chirp's fast part
+#: (an 18-Hz sine of ±0.2 over a few pixels) drew as a flat line.
+AGGREGATION: Final = "MinMax"
+
+
 def _style(rec: rr.RecordingStream, path: str, colour: Sequence[int], name: str) -> None:
-    rec.log(path, rr.SeriesLines(colors=[colour], names=[name]), static=True)
+    rec.log(path, rr.SeriesLines(colors=[colour], names=[name], aggregation_policy=AGGREGATION),
+            static=True)
 
 
 # --------------------------------------------------------------------------- flight data
@@ -792,16 +799,24 @@ def _fit_keys() -> tuple[str, ...]:
 # --------------------------------------------------------------------------- layout
 
 
-def _time_view(origin: str, name: str, **kw: object) -> rrb.TimeSeriesView:
-    """A time plot whose time axis moves with every other one (zoom one, all follow)."""
+def _time_view(origin: str, name: str, focus: tuple[float, float] | None = None,
+               **kw: object) -> rrb.TimeSeriesView:
+    """A time plot whose time axis moves with every other one (zoom one, all follow),
+    showing ``focus`` (seconds) when given, else the whole flight."""
+    from rerun.encodings import TimeRange, TimeRangeBoundary
+
+    shown = None if focus is None else TimeRange(
+        start=TimeRangeBoundary.absolute(seconds=focus[0]),
+        end=TimeRangeBoundary.absolute(seconds=focus[1]))
     return rrb.TimeSeriesView(origin=origin, name=name,
-                              axis_x=rrb.TimeAxis(link="LinkToGlobal"), **kw)  # type: ignore[arg-type]
+                              axis_x=rrb.TimeAxis(link="LinkToGlobal", view_range=shown),
+                              **kw)  # type: ignore[arg-type]
 
 
-def _bands_view() -> rrb.TimeSeriesView:
+def _bands_view(focus: tuple[float, float] | None = None) -> rrb.TimeSeriesView:
     top = max(BAND_LEVELS.values()) + 0.7
     return _time_view("bands", "modes & segments (training dim, validation bright, "
-                      "rejected grey)",
+                      "rejected grey)", focus,
                       axis_y=rrb.ScalarAxis(range=(min(BAND_LEVELS.values()) - 0.7, top),
                                             zoom_lock=True),
                       plot_legend=rrb.PlotLegend(corner="RightTop"))
@@ -817,28 +832,29 @@ def blueprint(
     bands; the flight by kind; attitude, fit % vs horizon, Bode plots, summary.
 
     ``focus`` (seconds on the log clock, e.g. from :func:`focus_span`) is selected on the
-    time panel, paused, so that the viewer opens on a segment rather than the end of the log.
+    time panel, paused, and is the span every time plot shows, so that the viewer opens on
+    a segment rather than on the whole log (or the minute before any segment).
     """
     columns: list[rrb.Container | rrb.View] = []
-    per_axis: list[rrb.Container | rrb.View] = [_bands_view()] if axes else []
+    per_axis: list[rrb.Container | rrb.View] = [_bands_view(focus)] if axes else []
     for axis in axes:
         per_axis.append(
             rrb.Vertical(
                 _time_view(f"axes/{axis}", f"{axis}: {RATE_OF.get(axis, axis)} "
                            f"[{STATE_UNITS.get(RATE_OF.get(axis, ''), '?')}] measured / "
-                           "one-step / free-run",
+                           "one-step / free-run", focus,
                            contents=["$origin/**", f"- axes/{axis}/inputs/**"]),
-                _time_view(f"axes/{axis}/inputs", f"{axis}: inputs [1]"),
+                _time_view(f"axes/{axis}/inputs", f"{axis}: inputs [1]", focus),
                 row_shares=[2, 1],
             )
         )
     flight = rrb.Vertical(
-        _bands_view(),
-        _time_view("flight/attitude", "flight: roll, pitch [rad]"),
-        _time_view("flight/heading", "flight: yaw [rad]"),
-        _time_view("flight/rates", "flight: body rates p, q, r [rad/s]"),
-        _time_view("flight/inputs", "flight: controller outputs [1]"),
-        _time_view("flight/thrust", "flight: thrust [1]"),
+        _bands_view(focus),
+        _time_view("flight/attitude", "flight: roll, pitch [rad]", focus),
+        _time_view("flight/heading", "flight: yaw [rad]", focus),
+        _time_view("flight/rates", "flight: body rates p, q, r [rad/s]", focus),
+        _time_view("flight/inputs", "flight: controller outputs [1]", focus),
+        _time_view("flight/thrust", "flight: thrust [1]", focus),
         row_shares=[1, 2, 1, 2, 2, 1],
         name="flight",
     )
@@ -946,7 +962,7 @@ def save_trends_rrd(axes: pd.DataFrame, path: str | os.PathLike[str]) -> rrb.Blu
 
     views: list[rrb.View] = []
     sends: list[tuple[str, str, tuple[int, int, int], float, list[rr.TimeColumn], np.ndarray]] = []
-    ok = axes[axes["level"] != "not identified"] if len(axes) and "level" in axes else axes[:0]
+    ok = axes[axes["verdict"] != "not identified"] if len(axes) and "verdict" in axes else axes[:0]
     for (vehicle, axis), group in ok.groupby(["vehicle", "axis"]):
         group = group.sort_values("flight_date")
         when = pd.to_datetime(group["flight_date"], errors="coerce")
@@ -1067,14 +1083,50 @@ class Served:
     def close(self) -> None:
         """Stop the server and every process it started (``python -m rerun_cli`` runs the
         viewer binary as a child: the whole process group goes), freeing its ports."""
-        for sig in (signal.SIGTERM, signal.SIGKILL):
+        stop_group(self.process)
+
+
+def stop_group(process: subprocess.Popen[Any]) -> None:
+    """Stop ``process`` and every process of its group (it was started with
+    ``start_new_session=True``): SIGTERM, then SIGKILL to what is left after 10 s. The
+    ``rerun`` command is a Python wrapper that runs the viewer binary as its child: killing
+    the wrapper alone leaves the viewer running, listening on its port."""
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        with contextlib.suppress(ProcessLookupError, PermissionError):
+            os.killpg(process.pid, sig)
+        try:
+            process.wait(timeout=10)
+        except subprocess.TimeoutExpired:  # pragma: no cover
+            continue
+        if sig == signal.SIGTERM:  # (the wrapper is gone; its children may linger)
+            time.sleep(0.2)
             with contextlib.suppress(ProcessLookupError, PermissionError):
-                os.killpg(self.process.pid, sig)
-            try:
-                self.process.wait(timeout=10)
-                break
-            except subprocess.TimeoutExpired:  # pragma: no cover
-                continue
+                os.killpg(process.pid, signal.SIGKILL)
+        break
+
+
+def run_viewer(argv: Sequence[str], *, timeout_s: float, stdin: Any = None,
+               env: Mapping[str, str] | None = None) -> subprocess.CompletedProcess[str]:
+    """Run a rerun command to its end (``rerun --headless --screenshot-to PNG -``) in a
+    process group of its own; on timeout (``subprocess.TimeoutExpired``), Ctrl-C or any
+    error the whole group is stopped (:func:`stop_group`), the viewer with its wrapper.
+
+    Examples
+    --------
+    >>> run_viewer([sys.executable, "-c", "print('ok')"], timeout_s=60).stdout
+    'ok\\n'
+    """
+    process = subprocess.Popen(list(argv), stdin=stdin, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True, env=env,
+                               start_new_session=True)
+    try:
+        out, err = process.communicate(timeout=timeout_s)
+    except BaseException:
+        stop_group(process)
+        process.communicate()
+        raise
+    stop_group(process)  # (whatever it left behind)
+    return subprocess.CompletedProcess(list(argv), process.returncode, out, err)
 
 
 def free_port(bind: str = "127.0.0.1") -> int:
@@ -1135,8 +1187,7 @@ def wait_listening(process: subprocess.Popen[bytes], host: str, port: int,
                 return
         except OSError:
             time.sleep(0.1)
-    with contextlib.suppress(ProcessLookupError, PermissionError):
-        os.killpg(process.pid, signal.SIGTERM)
+    stop_group(process)
     raise ConfigError(f"the rerun server did not listen on {host}:{port} within "
                       f"{timeout_s:.0f} s")
 

@@ -56,7 +56,7 @@ def test_batch_equals_single_fits_records_failures_and_resumes(fleet: Path,
             single = fit([str(fleet / name)])
         for axis, f in single.axes.items():
             row = axes[(axes["log"] == str(fleet / name)) & (axes["axis"] == axis)].iloc[0]
-            assert row["level"] == single.verdicts[axis].level
+            assert row["verdict"] == single.verdicts[axis].level
             for p, value in f.model.params.items():
                 assert row[f"p:{p}"] == pytest.approx(value, rel=1e-9, abs=1e-12)
     assert set(tables["segments"]["role"]) == {"train", "validation"}
@@ -200,3 +200,47 @@ def test_entries_named_like_logs_that_are_no_files_are_said(tmp_path: Path) -> N
     with pytest.warns(MavsidWarning, match=r"2 entries named like logs skipped: .*broken\.bin "
                                            r"\(a broken link\), .*pipe\.tlog \(not a file\)"):
         assert find_logs([tmp_path]) == [str(tmp_path / "a.bin")]
+
+
+def test_the_summary_names_each_failed_log_and_a_rerun_says_nothing_new(tmp_path: Path) -> None:
+    """What a fleet operator reads: each log that failed or gave nothing, with its one-line
+    reason; "nothing new" on a rerun with nothing to do; the verdict column called so
+    (tables written when it was ``level`` still read); a trends page with a title, logs
+    named relative to it and no ``NaN`` where a log has no error."""
+    import pandas as pd
+
+    logs = tmp_path / "flights"
+    logs.mkdir()
+    shutil.copy(FIXTURES / "sysid_roll.bin", logs / "sysid_roll.bin")
+    shutil.copy(FIXTURES / "hover.bin", logs / "hover.bin")
+    (logs / "broken.bin").write_bytes((FIXTURES / "sysid_roll.bin").read_bytes()[:3000])
+    out, page = tmp_path / "out" / "res.parquet", tmp_path / "out" / "trends.html"
+    out.parent.mkdir()
+
+    def batch() -> list[str]:
+        printed, err = io.StringIO(), io.StringIO()
+        with contextlib.redirect_stdout(printed), contextlib.redirect_stderr(err):
+            code = cli.main(["batch", str(logs), "-o", str(out), "--workers", "2",
+                             "--report", str(page), "-q"])
+        assert code == 0, err.getvalue()
+        return printed.getvalue().splitlines()
+
+    first = batch()
+    assert first[0] == f"3 log(s): 1 failed, 1 nothing identified, 1 ok; wrote {out}"
+    failed = [x for x in first if x.startswith("  failed: ")]
+    assert len(failed) == 1 and failed[0].startswith(f"  failed: {logs / 'broken.bin'}: ")
+    assert len(failed[0]) > len(f"  failed: {logs / 'broken.bin'}: ") + 5  # (a reason)
+    (nothing,) = [x for x in first if x.startswith("  nothing identified: ")]
+    assert f"{logs / 'hover.bin'}: nothing identifiable (roll: " in nothing
+    assert not any("sysid_roll.bin" in x for x in first[1:] if x.startswith("  "))
+    again = batch()
+    assert again[0].startswith(f"nothing new: all 3 log(s) are in {out} with these settings")
+    axes = pd.read_parquet(out)
+    assert "verdict" in axes and "level" not in axes
+    assert set(axes["verdict"]) <= {"good", "usable", "not identified"}
+    axes.rename(columns={"verdict": "level"}).to_parquet(out)  # (a table of before)
+    assert list(read_tables(out)["axes"]["verdict"]) == list(axes["verdict"])
+    html = page.read_text()
+    assert "<h1>mavsid batch: 3 log(s)" in html
+    assert "NaN" not in html and str(tmp_path) not in html
+    assert "../flights/broken.bin" in html

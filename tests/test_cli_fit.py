@@ -151,6 +151,42 @@ def test_view_with_model(fitted, tmp_path: Path) -> None:  # type: ignore[no-unt
     assert {"/axes/roll/p/one_step", "/axes/roll/p/free_run"} <= entities
 
 
+def _blueprint_ranges(rrd: Path) -> tuple[list[tuple[float, float]], list[tuple[float, float]]]:
+    """The time plots' shown spans and the time panel's selection (s) in a saved .rrd."""
+    reader = RrdReader(rrd)
+    shown, selected = [], []
+    for chunk in reader.stream(store=reader.blueprints()[0]).to_chunks():
+        batch = chunk.to_record_batch()
+        if "TimeAxis:view_range" in batch.schema.names:
+            shown += [(r[0]["start"] / 1e9, r[0]["end"] / 1e9)
+                      for r in batch.column("TimeAxis:view_range").to_pylist() if r]
+        if "TimePanelBlueprint:time_selection" in batch.schema.names:
+            selected += [(r[0]["min"] / 1e9, r[0]["max"] / 1e9) for r in
+                         batch.column("TimePanelBlueprint:time_selection").to_pylist() if r]
+    return shown, selected
+
+
+def test_view_with_a_model_opens_on_the_first_validation_segment(fitted, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """Every time plot shows the first segment the model is validated on (as ``fit --rrd``
+    does for its first validation segment), not the minute of the flight before it."""
+    out_dir, _ = fitted
+    model = str(out_dir / "model.json")
+    log = str(FIXTURES / "sysid_roll.bin")
+    held_out = json.loads(run("validate", model, log, "--json").stdout)["axes"]["roll"][
+        "validation_segments"]
+    first = tuple(min(held_out))
+    assert first[0] > 20  # (the flight before it is long: opening on it shows no segment)
+    out = tmp_path / "view.rrd"
+    assert run("view", log, "--model", model, "--save", str(out)).returncode == 0
+    shown, selected = _blueprint_ranges(out)
+    assert len(shown) >= 3 and all(span == pytest.approx(first) for span in shown)
+    assert selected == [pytest.approx(first)]
+    fit_shown, _ = _blueprint_ranges(out_dir / "fit.rrd")
+    fit_first = tuple(min(json.loads(run("fit", log, "--json", "-q").stdout)["axes"]["roll"][
+        "validation_segments"]))
+    assert fit_shown and all(span == pytest.approx(fit_first) for span in fit_shown)
+
+
 def test_view_flags_are_mavsids_own(capsys) -> None:  # type: ignore[no-untyped-def]
     args = cli.build_parser().parse_args(["view", "x.bin", "--serve"])
     assert args.serve and args.bind == "127.0.0.1"
@@ -302,14 +338,34 @@ def test_progress_bar_on_a_terminal_only(quiet: bool, tmp_path: Path) -> None:
         assert text == ""
         assert run(*argv[:-1]).stderr == ""  # not a terminal: no bar either
         return
-    total = 1 + 3 * len(FIT_STAGES) + 1
     frames = text.split("\r")
     for stage in ("reading", "roll: segments", "roll: fit", "roll: validation",
                   "roll: closed-loop twin", "pitch: segments", "yaw: closed-loop twin",
                   "f.rrd"):
         assert any(stage in f for f in frames), stage
-    assert f"{total - 1}/{total} stages" in text
+    # the .rrd weighs as much as the fit before it (about as long): half the bar is left,
+    # and so is an ETA, when it starts
+    (writing,) = [f for f in frames if "f.rrd" in f]
+    fitting = 1 + 3 * len(FIT_STAGES)
+    assert f" {round(100 * fitting / (2 * fitting))}%|" in writing, writing
+    assert "<00:00]" not in writing
     assert frames[-1].strip() == ""  # the bar is cleared: the result stays readable
+
+
+def test_a_warning_is_written_above_the_progress_bar() -> None:
+    """A warning printed into the bar's line left a stale "0 %" bar on screen: it is
+    written on a cleared line, the bar drawn again below it."""
+    err = _Terminal()
+    argv = ["fit", str(FIXTURES / "sysid_roll.bin"), "--preset", "ardupilot-rcou",
+            "--axis", "roll"]
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        cli.main(argv)
+    text = err.getvalue()
+    at = text.index("warning: ")
+    before = text[:at].split("\r")
+    assert before[-1] == "" and before[-2].strip() == ""  # the bar's line cleared first
+    after = text[at:].split("\n", 1)[1]
+    assert after.startswith("\r") and "%|" in after.split("\r")[1]  # the bar again, below
 
 
 def test_pipeline_reports_every_stage_even_skipped_ones() -> None:

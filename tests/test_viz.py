@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import shutil
 import subprocess
+import sys
 from collections import defaultdict
 from pathlib import Path
 
@@ -166,10 +167,10 @@ def _screenshot(rrd: Path, out: Path) -> None:
                     "(apt-get install mesa-vulkan-drivers)")
     env = {**os.environ, "XDG_RUNTIME_DIR": str(out.parent)}
     with open(rrd, "rb") as stdin:
-        proc = subprocess.run(
+        proc = viz.run_viewer(
             [exe, "--headless", "--screenshot-to", str(out), "--window-size", "1400x900",
              "--port", "auto", "--bind", "127.0.0.1", "--hide-welcome-screen", "-"],
-            stdin=stdin, capture_output=True, text=True, timeout=180, env=env, check=False,
+            stdin=stdin, timeout_s=180, env=env,
         )
     if proc.returncode != 0 or not out.exists():
         tail = (proc.stderr or proc.stdout)[-800:]
@@ -351,3 +352,54 @@ def test_several_flights_keep_their_own_series(tmp_path) -> None:  # type: ignor
         assert set(np.round(t[ok], 6)) <= set(np.round(fd.time_s, 6))
         assert f"/bands/roll/validation/{stem}" in data or f"/bands/roll/train/{stem}" in data
     assert "/flight/rates/p" not in data
+
+
+def test_a_timed_out_viewer_goes_with_its_wrapper(tmp_path: Path) -> None:
+    """``rerun`` on PATH is a Python wrapper that runs the viewer binary as its child:
+    killing the wrapper on a timeout left the viewer running (listening on its port). A
+    fake wrapper of the same shape: on the timeout its child is gone too."""
+    import time
+
+    pid_file = tmp_path / "child.pid"
+    wrapper = tmp_path / "rerun"
+    wrapper.write_text(
+        f"#!{sys.executable}\n"
+        "import subprocess, sys\n"
+        "child = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(300)'])\n"
+        f"open({str(pid_file)!r}, 'w').write(str(child.pid))\n"
+        "child.wait()\n")
+    wrapper.chmod(0o755)
+    with pytest.raises(subprocess.TimeoutExpired):
+        viz.run_viewer([str(wrapper), "--headless"], timeout_s=3)
+    child = int(pid_file.read_text())
+
+    def alive(pid: int) -> bool:
+        try:
+            with open(f"/proc/{pid}/stat") as f:
+                return f.read().split(")")[-1].split()[0] != "Z"  # (a zombie is dead)
+        except OSError:
+            return False
+
+    deadline = time.monotonic() + 5
+    while alive(child) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not alive(child), "the wrapper's child outlived the timeout"
+
+
+def test_time_series_keep_a_fast_chirp_when_zoomed_out(rrd) -> None:  # type: ignore[no-untyped-def]
+    """Every measured, predicted and input series is drawn MinMax where samples share a
+    pixel (rerun's default averages them: an 18-Hz chirp of ±0.2 drew flat)."""
+    from rerun.components import AggregationPolicy
+
+    policies: dict[str, list[int]] = {}
+    for chunk in RrdReader(rrd).stream().to_chunks():
+        batch = chunk.to_record_batch()
+        if "SeriesLines:names" in batch.schema.names and not chunk.entity_path.startswith(
+                "/bands"):
+            column = ("SeriesLines:aggregation_policy"
+                      if "SeriesLines:aggregation_policy" in batch.schema.names else None)
+            policies[chunk.entity_path] = ([] if column is None else
+                                           [x for r in batch.column(column).to_pylist()
+                                            for x in r or []])
+    assert {"/axes/roll/p/measured", "/axes/roll/p/one_step", "/flight/rates/p"} <= set(policies)
+    assert all(p == [AggregationPolicy.MinMax.value] for p in policies.values()), policies

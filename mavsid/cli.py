@@ -691,9 +691,11 @@ def _view(args: argparse.Namespace) -> int:
                                                   "the rerun viewer mavsid started"))
         if args.model:
             result = validate_logs(load_models(args.model), [args.log], cfg)
+            targets = viz.rate_targets(result)
             served = viz.open_sink(
-                rec, viz.blueprint(list(result.axes), focus=viz.result_focus(result)), **sink)
-            viz.log_fit_result(rec, result)
+                rec, viz.blueprint(list(result.axes), focus=viz.result_focus(result),
+                                   targets=viz.target_axes(targets)), **sink)
+            viz.log_fit_result(rec, result, targets=targets)
         else:
             flight, windows = find_windows(args.log, cfg)
             served = viz.open_sink(

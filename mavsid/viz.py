@@ -78,16 +78,21 @@ __all__ = [
     "log_fit_result",
     "log_flight",
     "log_flight_windows",
+    "log_rate_targets",
     "log_segments",
     "log_summary",
     "log_validation",
     "new_recording",
     "open_sink",
+    "rate_targets",
     "result_focus",
+    "run_viewer",
     "save_response_rrd",
     "save_rrd",
     "save_trends_rrd",
     "serve_command",
+    "stop_group",
+    "target_axes",
     "viewer_command",
     "viewer_errors",
     "wait_listening",
@@ -99,6 +104,7 @@ TIMELINE = "flight_time"
 
 MEASURED = (200, 200, 200)
 ONE_STEP = (70, 140, 255)
+TARGET = (255, 220, 60)
 FREE_RUN = (255, 150, 40)
 INPUT = (90, 200, 110)
 COHERENCE = (180, 120, 255)
@@ -497,6 +503,14 @@ def focus_span(
 # --------------------------------------------------------------------------- 2-D plots
 
 
+#: A 2-D plot's label layout, in plot units (a plot is 200 wide): tick labels below the
+#: x axis and left of the y axis, far enough that the lowest y label and the first x label
+#: do not overlap; legend entries one text line apart; the Bode panels (magnitude, phase,
+#: coherence) apart by their x labels and a margin (at 6 and 12 units they overlapped at
+#: the viewer's default zoom).
+X_LABEL_GAP, Y_LABEL_GAP, LEGEND_STEP, PANEL_GAP = 9.0, 22.0, 11.0, 32.0
+
+
 def _plot2d(
     rec: rr.RecordingStream,
     path: str,
@@ -542,13 +556,13 @@ def _plot2d(
     for xt in x_ticks:
         x = float(px(np.array([xt]))[0])
         grid.append(np.array([[x, origin_y], [x, origin_y + height]]))
-        labels_at.append((x, origin_y + height + 6))
+        labels_at.append((x, origin_y + height + X_LABEL_GAP))
         labels.append(f"{xt:g}{x_unit}")
     for yt in y_ticks:
         if y_lo <= yt <= y_hi:
             y = float(py(np.array([yt]))[0])
             grid.append(np.array([[0.0, y], [200.0, y]]))
-            labels_at.append((-12.0, y))
+            labels_at.append((-Y_LABEL_GAP, y))
             labels.append(f"{yt:g}{y_unit}")
     rec.log(f"{path}/grid", rr.LineStrips2D(grid, colors=[GRID], radii=0.15), static=True)
     rec.log(
@@ -571,7 +585,8 @@ def _plot2d(
             rec.log(f"{entity}/points", rr.Points2D(pts, colors=[colour], radii=1.2),
                     static=True)
     if legend:
-        at = [(208.0, origin_y + 4.0 + 7.0 * i) for i in range(len(series))]
+        at = [(200.0 + Y_LABEL_GAP, origin_y + 4.0 + LEGEND_STEP * i)
+              for i in range(len(series))]
         rec.log(
             f"{path}/legend",
             rr.Points2D(at, labels=[name for name, *_ in series], radii=1.5,
@@ -668,7 +683,7 @@ def _log_frequency_plot(rec: rr.RecordingStream, axis: str, v: Validation) -> No
             y_ticks=np.arange(p_lo, p_hi + 1, step),
             x_unit=" Hz",
             y_unit=" deg",
-            origin_y=125.0,
+            origin_y=100.0 + PANEL_GAP,
             height=60.0,
             y_range=(p_lo, p_hi),
             legend=True,
@@ -682,7 +697,7 @@ def _log_frequency_plot(rec: rr.RecordingStream, axis: str, v: Validation) -> No
             y_ticks=(0.0, 0.5, 1.0),
             x_unit=" Hz",
             y_unit="",
-            origin_y=210.0,
+            origin_y=160.0 + 2 * PANEL_GAP,
             height=40.0,
             y_range=(0.0, 1.0),
             legend=True,
@@ -827,9 +842,13 @@ def blueprint(
     *,
     with_flight: bool = True,
     focus: tuple[float, float] | None = None,
+    targets: Sequence[str] = (),
 ) -> rrb.Blueprint:
     """The layout: per axis predicted vs measured and inputs under the modes-and-segments
     bands; the flight by kind; attitude, fit % vs horizon, Bode plots, summary.
+
+    ``targets``: the axes that have a logged rate target, each given a plot of the target
+    against the measured rate (:func:`log_rate_targets`).
 
     ``focus`` (seconds on the log clock, e.g. from :func:`focus_span`) is selected on the
     time panel, paused, and is the span every time plot shows, so that the viewer opens on
@@ -845,7 +864,10 @@ def blueprint(
                            "one-step / free-run", focus,
                            contents=["$origin/**", f"- axes/{axis}/inputs/**"]),
                 _time_view(f"axes/{axis}/inputs", f"{axis}: inputs [1]", focus),
-                row_shares=[2, 1],
+                *([_time_view(f"targets/{axis}", f"{axis}: rate target vs measured "
+                              f"{RATE_OF.get(axis, axis)} [rad/s]", focus)]
+                  if axis in targets else []),
+                row_shares=[2, 1, 1] if axis in targets else [2, 1],
             )
         )
     flight = rrb.Vertical(
@@ -920,8 +942,10 @@ def _flight_tag(fd: FlightData, flights: Sequence[FlightData]) -> str:
     return stem if stems.count(stems[i]) == 1 else f"{stem}_{i}"
 
 
-def log_fit_result(rec: rr.RecordingStream, result: FitResult, *, flight: bool = True) -> None:
-    """Everything of a pipeline result into ``rec``."""
+def log_fit_result(rec: rr.RecordingStream, result: FitResult, *, flight: bool = True,
+                   targets: Targets | None = None) -> None:
+    """Everything of a pipeline result into ``rec`` (``targets``: :func:`rate_targets` of
+    it, when already read)."""
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_DOWN, static=True)
     fits = list(result.axes.values())
     if flight:
@@ -945,7 +969,78 @@ def log_fit_result(rec: rr.RecordingStream, result: FitResult, *, flight: bool =
     for fit in fits:
         log_segments(rec, fit.axis, fit.train, fit.held_out, fit.windows)
         log_validation(rec, fit.axis, fit.validation, fit.held_out)
+    log_rate_targets(rec, result, targets)
     log_summary(rec, fits)
+
+
+#: Each flight with its rate target per axis (:func:`rate_targets`).
+Targets = list[tuple[FlightData, Mapping[str, np.ndarray]]]
+
+
+def rate_targets(result: FitResult) -> Targets:
+    """Each flight's logged rate target per fitted axis (rad/s on the flight's grid): the
+    fit's twin signals, else read from the log (:func:`mavsid.loop.twin_signals`); a flight
+    whose targets cannot be read has none."""
+    from mavsid.errors import MavsidError
+    from mavsid.loop import twin_signals
+
+    out: Targets = []
+    for k, fd in enumerate(result.flights):
+        try:
+            sig = result.twins[k] if result.twins is not None else twin_signals(fd)
+        except (MavsidError, ValueError, OSError):
+            continue
+        found = {a: np.asarray(v, dtype=float) for a, v in sig.target.items()
+                 if a in result.axes and len(v) == len(fd.time_s)}
+        out.append((fd, found))
+    return out
+
+
+def target_axes(targets: Targets) -> list[str]:
+    """The axes some flight has a rate target for, in axis order."""
+    return [a for a in AXES if any(a in found for _, found in targets)]
+
+
+def log_rate_targets(rec: rr.RecordingStream, result: FitResult,
+                     targets: Targets | None = None) -> None:
+    """Per fitted axis, the rate target the controller was given against the measured rate
+    (``targets/AXIS/target``, ``targets/AXIS/measured``): how well the loop followed it, the
+    closed-loop twin's reference. Decimated outside the axis's segments as
+    :func:`log_flight` does."""
+    for fd, found in rate_targets(result) if targets is None else targets:
+        tag = _flight_tag(fd, result.flights)
+        for axis, target in found.items():
+            rate = RATE_OF.get(axis, axis)
+            if rate not in fd.state_names:
+                continue
+            fit = result.axes[axis]
+            spans = [(s.start_s, s.stop_s) for s in (*fit.train, *fit.held_out)
+                     if len(result.flights) == 1 or s.log == fd.source.path]
+            suffix, label = (f"/{tag}", f" {tag}") if tag else ("", "")
+            measured = fd.states[:, fd.state_names.index(rate)]
+            for kind, colour, values in (("target", TARGET, target),
+                                         ("measured", MEASURED, measured)):
+                path = f"targets/{axis}/{kind}{suffix}"
+                _style(rec, path, colour, f"{rate} {kind} [rad/s]{label}")
+                _send_series(rec, path, *_decimated(fd, values, spans))
+
+
+def _decimated(fd: FlightData, values: np.ndarray,
+               spans: Iterable[tuple[float, float]]) -> tuple[np.ndarray, np.ndarray]:
+    """``(time, values)`` of one flight series decimated per block to about
+    :data:`MAX_FLIGHT_POINTS` samples, every sample inside ``spans`` kept, a gap between
+    blocks."""
+    t = fd.time_s
+    blocks = fd.blocks if len(fd.blocks) else np.array([[0, len(t)]])
+    keep = np.zeros(len(t), bool)
+    for a, b in spans:
+        keep[np.searchsorted(t, a):np.searchsorted(t, b, side="right")] = True
+    budget = MAX_FLIGHT_POINTS / max(len(t), 1)
+    parts = []
+    for a, b in blocks:
+        i = a + decimate(values[a:b], max(100, int(budget * (b - a))), keep[a:b])
+        parts.append((t[i], values[i]))
+    return _joined(parts)
 
 
 def save_trends_rrd(axes: pd.DataFrame, path: str | os.PathLike[str]) -> rrb.Blueprint:
@@ -1065,9 +1160,11 @@ def save_rrd(
     result: FitResult, path: str | os.PathLike[str], *, flight: bool = True
 ) -> rrb.Blueprint:
     """Write ``result`` with its blueprint to an ``.rrd`` file; returns the blueprint."""
-    bp = blueprint(list(result.axes), with_flight=flight, focus=result_focus(result))
+    targets = rate_targets(result)
+    bp = blueprint(list(result.axes), with_flight=flight, focus=result_focus(result),
+                   targets=target_axes(targets))
     with _rrd_file(path, bp) as rec:
-        log_fit_result(rec, result, flight=flight)
+        log_fit_result(rec, result, flight=flight, targets=targets)
     return bp
 
 

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import rerun as rr
+from helpers import FIXTURES
 from rerun.chunk import RrdReader
 from toy_plants import toy_flight
 
@@ -335,8 +336,6 @@ def test_several_flights_keep_their_own_series(tmp_path) -> None:  # type: ignor
     (named after the log), not one series interleaving two clocks."""
     import warnings
 
-    from helpers import FIXTURES
-
     from mavsid.pipeline import PipelineConfig, fit
 
     with warnings.catch_warnings():
@@ -403,3 +402,34 @@ def test_time_series_keep_a_fast_chirp_when_zoomed_out(rrd) -> None:  # type: ig
                                             for x in r or []])
     assert {"/axes/roll/p/measured", "/axes/roll/p/one_step", "/flight/rates/p"} <= set(policies)
     assert all(p == [AggregationPolicy.MinMax.value] for p in policies.values()), policies
+
+
+def test_each_axis_has_its_rate_target_against_the_measured_rate(tmp_path: Path) -> None:
+    """The rate target the controller was given (the log's RATE.RDes ...) against the
+    measured rate, per fitted axis, with a plot of its own: the values are the log's."""
+    import rerun.blueprint as rrb
+
+    from mavsid.pipeline import fit
+    from mavsid.readers import read_log
+
+    log = FIXTURES / "sysid_roll.bin"
+    result = fit([str(log)], None)
+    path = tmp_path / "t.rrd"
+    bp = viz.save_rrd(result, path)
+    series, _ = _read(path)
+    target = np.concatenate(series["/targets/roll/target"]["Scalars:scalars"]).ravel()
+    rate = read_log(log, messages=["RATE"])["RATE"]
+    # (RATE.RDes in deg/s; the flight's grid holds it between samples)
+    logged = np.deg2rad(np.asarray(rate["RDes"], dtype=float))
+    finite = target[np.isfinite(target)]
+    assert finite.size > 100
+    assert np.isin(np.round(finite, 9), np.round(logged, 9)).mean() > 0.99
+    assert "/targets/roll/measured" in series
+
+    def origins(node: object) -> list[str]:
+        if isinstance(node, rrb.View):
+            return [str(node.origin)]
+        return [o for child in getattr(node, "contents", []) for o in origins(child)]
+
+    assert "/targets/roll" in origins(bp.root_container) or "targets/roll" in origins(
+        bp.root_container)

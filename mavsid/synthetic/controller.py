@@ -519,15 +519,15 @@ class ControllerParams:
         """Roll, pitch, yaw rate limits (rad/s, 0 = none)."""
         return np.radians([self.rate_r_max, self.rate_p_max, self.rate_y_max])
 
-    def params(self) -> dict[str, float]:
+    def params(self, full: bool = False) -> dict[str, float]:
         """ArduPilot parameter names and values.
 
         The rate PIDs' ``SMAX``, ``D_FF`` and ``PDMX``, the acceleration and rate limits and
-        ``PILOT_Y_RATE_TC`` are listed when any of them is set (a vehicle configured with
-        them; the default vehicle's parameters stay those it always had).
+        ``PILOT_Y_RATE_TC`` are listed when ``full`` (ArduCopter 4.5+ lists them all) or any
+        of them is set (the default vehicle's parameters stay those it always had).
         """
         out: dict[str, float] = {}
-        extended = any(getattr(self, f"{k}_{f}") for k in ("rll", "pit", "yaw")
+        extended = full or any(getattr(self, f"{k}_{f}") for k in ("rll", "pit", "yaw")
                        for f in ("smax", "d_ff", "pdmx")) or any(
             getattr(self, n) for n in ("accel_r_max", "accel_p_max", "accel_y_max",
                                        "rate_r_max", "rate_p_max", "rate_y_max"))
@@ -700,8 +700,8 @@ class ControlStep:
     terms: np.ndarray
 
 
-def motor_outputs(throttle: np.ndarray, u: np.ndarray, factors: np.ndarray = QUAD_X
-                  ) -> tuple[np.ndarray, np.ndarray]:
+def motor_outputs(throttle: np.ndarray, u: np.ndarray, factors: np.ndarray = QUAD_X,
+                  failed: tuple[int, ...] = ()) -> tuple[np.ndarray, np.ndarray]:
     """Motor mixing: motor thrust demands (0-1) and the axis inputs they really realise.
 
     Parameters
@@ -712,6 +712,8 @@ def motor_outputs(throttle: np.ndarray, u: np.ndarray, factors: np.ndarray = QUA
         Roll, pitch, yaw mixer inputs.
     factors : numpy.ndarray, shape (motors, 3)
         The frame's roll, pitch and yaw factor of each motor (:data:`FRAMES`); quad-X.
+    failed : tuple of int
+        Motors (0-based) that give no thrust whatever their demand.
 
     Returns
     -------
@@ -732,6 +734,8 @@ def motor_outputs(throttle: np.ndarray, u: np.ndarray, factors: np.ndarray = QUA
     mix = np.hstack([np.ones((factors.shape[0], 1)), factors])  # motors = mix @ (thr, r, p, y)
     cmd = np.column_stack([throttle, u])
     motors = np.clip(cmd @ mix.T, 0.0, 1.0)
+    if failed:
+        motors[:, list(failed)] = 0.0
     inverse = np.linalg.inv(mix) if mix.shape[0] == 4 else np.linalg.pinv(mix)
     realised = motors @ inverse.T
     return motors, realised[:, 1:]

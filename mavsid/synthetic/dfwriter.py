@@ -7,7 +7,11 @@ Message layouts (type ids, format characters, field names, units and multipliers
 of ArduCopter 4.7 as found in a real SITL log, so that readers see what they will meet in
 the field: ATT, RATE, IMU, RCOU, RCIN, MODE, SIDS, SIDD, PARM, MSG.
 
-Other layouts (``layout=``, :data:`LAYOUTS`): older ArduCopter generations (3.2 without
+Other layouts (``layout=``, :data:`LAYOUTS`): ArduCopter 4.5-4.7 (``copter-4.6``, from a
+real 4.6.2 log's FMT/FMTU records: the unit tables and MODE renumbered, AUXF with
+pos/source/result, PIDR/PIDP/PIDY with DFF and Flags and ANG written with RATE, ARM, EV,
+VER, two IMUs, FMTU for every type, every ``SERVOn_FUNCTION``), older ArduCopter
+generations (3.2 without
 RATE, 3.3 with TimeMS, 3.4-dev in centidegrees, 3.6 without unit records), a traditional
 helicopter (``heli``: the 4.x records, FRAME_CLASS 6, swashplate servo PWMs on RCOU) and
 ArduPlane 4.x (``plane``: no RATE nor SYSTEMID records; PIDR/PIDP/PIDY and the aileron,
@@ -40,8 +44,9 @@ from typing import Any
 import numpy as np
 
 from mavsid.errors import ConfigError
+from mavsid.synthetic.controller import PID_LOG_FIELDS
 from mavsid.synthetic.faults import Faults
-from mavsid.synthetic.flight import GRAVITY, MODE_SYSTEMID, Flight
+from mavsid.synthetic.flight import ESC_TYPES, GRAVITY, MODE_SYSTEMID, RCOU_CHANNELS, Flight
 
 __all__ = ["FORMATS", "LAYOUTS", "MULTS", "UNITS", "DataFlashBuilder", "MessageFormat",
            "write_dataflash"]
@@ -128,6 +133,37 @@ FORMATS: dict[str, MessageFormat] = {
              "F---------"),
     )
 }
+
+#: ArduCopter 4.5-4.7 (from a real 4.6.2 log's own FMT/FMTU records): the unit tables and
+#: MODE renumbered, the PID records with DFF and Flags, the attitude controller's ANG,
+#: the auxiliary-function record AUXF with its position, source and result, arming (ARM,
+#: EV) and the firmware's VER; the other types as :data:`FORMATS`.
+FORMATS_46: dict[str, MessageFormat] = {
+    **FORMATS,
+    **{f.name: f for f in (
+        _fmt(128, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns", "-b---", "-----"),
+        _fmt(118, "FMTU", "QBNN", "TimeUS,FmtType,UnitIds,MultIds", "s---", "F---"),
+        _fmt(119, "UNIT", "QbZ", "TimeUS,Id,Label", "s--", "F--"),
+        _fmt(120, "MULT", "Qbd", "TimeUS,Id,Mult", "s--", "F--"),
+        _fmt(122, "MODE", "QMBB", "TimeUS,Mode,ModeNum,Rsn", "s---", "F---"),
+        _fmt(195, "ANG", "Qfffffff", "TimeUS,DesRoll,Roll,DesPitch,Pitch,DesYaw,Yaw,Dt",
+             "sddddhhs", "F0000000"),
+        *(_fmt(n, name, "QffffffffffB", "TimeUS,Tar,Act,Err,P,I,D,FF,DFF,Dmod,SRate,Flags",
+               "s-----------", "F-----------")
+          for n, name in ((105, "PIDR"), (106, "PIDP"), (107, "PIDY"))),
+        _fmt(248, "AUXF", "QHBBB", "TimeUS,function,pos,source,result", "s#---", "F----"),
+        _fmt(181, "EV", "QB", "TimeUS,Id", "s-", "F-"),
+        _fmt(186, "ARM", "QBIBB", "TimeUS,ArmState,ArmChecks,Forced,Method", "s----",
+             "F----"),
+        _fmt(206, "VER", "QBHBBBBIZHBB", "TimeUS,BT,BST,Maj,Min,Pat,FWT,GH,FWS,APJ,BU,FV",
+             "s-----------", "F-----------"),
+    )},
+}
+#: the 4.6 layout's data types, in the order their FMT records are written
+_DATA_TYPES_46 = ("PARM", "MSG", "VER", "MODE", "EV", "ARM", "AUXF", "ATT", "ANG", "RATE",
+                  "PIDR", "PIDP", "PIDY", "IMU", "RCOU", "RCIN", "SIDS", "SIDD")
+#: the arm/disarm auxiliary function (RC option 153) and EV ids of arming and disarming
+_AUX_ARMDISARM, _EV_ARMED, _EV_DISARMED = 153, 10, 11
 
 #: UNIT table (id -> label) as ArduPilot 4.x writes it
 UNITS: dict[str, str] = {
@@ -234,8 +270,8 @@ def _header(b: DataFlashBuilder, time_us: int,
                   Label=list(UNITS.values()), TimeUS=time_us)
             b.add("MULT", np.full(len(MULTS), -1), Id=[ord(k) for k in MULTS],
                   Mult=list(MULTS.values()), TimeUS=time_us)
-    for name in data_types:
-        f = b.formats[name]
+    for name in (_HEADER_TYPES + data_types) if b.formats["FMT"].units else data_types:
+        f = b.formats[name]  # (4.5+: every type's units, the header types' too)
         b.add("FMTU", [-1], TimeUS=time_us, FmtType=f.type_id, UnitIds=f.units,
               MultIds=f.mults)
 
@@ -247,28 +283,54 @@ def _every(flight: Flight, name: str, lo: int, hi: int) -> np.ndarray:
     return np.arange(first, hi, step)
 
 
+def rate_indices(flight: Flight, lo: int, hi: int) -> np.ndarray:
+    """Loop indices in [lo, hi) at which RATE (and the 4.6 layout's PID and ANG records) are
+    logged: every ``rates.rate`` step in SYSTEMID, every ``rates.rate_idle`` step outside
+    (the same step throughout when ``rate_idle`` is not set)."""
+    inside = _every(flight, "rate", lo, hi)
+    if flight.scenario.rates.rate_idle is None:
+        return inside
+    outside = _every(flight, "rate_idle", lo, hi)
+    sysid = flight.mode == MODE_SYSTEMID
+    return np.union1d(inside[sysid[inside]], outside[~sysid[outside]])
+
+
 def _build(flight: Flight, lo: int, hi: int, shift_s: float, faults: Faults,
            layout: str = "copter-4") -> bytes:
-    """Records for loop samples [lo, hi) with TimeUS = (t - shift_s) * 1e6."""
+    """Records for loop samples [lo, hi) with TimeUS = (t - shift_s) * 1e6, later by the
+    logging gap's length from the gap on."""
     sc = flight.scenario
     loop_hz = sc.controller.loop_hz
     tus = np.round((flight.t_s - shift_s) * 1e6).astype(np.int64)
+    gap_k = None
+    if faults.gap is not None:
+        gap_k = round(faults.gap[0] / flight.dt)
+        if not 0 < gap_k < len(flight):
+            raise ConfigError(f"logging gap at {faults.gap[0]} s is outside the flight")
+        tus[gap_k:] += round(faults.gap[1] * 1e6)
     t0 = int(tus[lo])
-    plane, vtol = layout == "plane", layout == "quadplane"
+    plane, vtol, v46 = layout == "plane", layout == "quadplane", layout == "copter-4.6"
     b = DataFlashBuilder()
     b.formats.update(_PLANE_PID)
-    _header(b, t0, _PLANE_TYPES if plane else _QUADPLANE_TYPES if vtol else _DATA_TYPES)
+    if v46:
+        b.formats.update(FORMATS_46)
+    _header(b, t0, _PLANE_TYPES if plane else _QUADPLANE_TYPES if vtol
+            else _DATA_TYPES_46 if v46 else _DATA_TYPES)
     params = layout_params(flight, layout)
     b.add("PARM", np.full(len(params), -1), TimeUS=t0, Name=list(params),
           Value=list(params.values()), Default=list(params.values()))
     texts = [
         _BANNER.get(layout, "ArduCopter V4.5.7 (mavsid00)"),
+        *_output_texts(flight, layout),
         *_FRAME_TEXT.get(layout, ("Frame: QUAD/X",)),
         f"mavsid synthetic flight: manoeuvre={sc.manoeuvre} axis={sc.axis} seed={sc.seed}",
     ]
     b.add("MSG", np.full(len(texts), -1), TimeUS=t0, Message=texts)
     data = DataFlashBuilder()
     data.formats.update(_PLANE_PID)
+    if v46:
+        data.formats.update(FORMATS_46)
+        _arming_records(data, flight, tus, lo, hi, gap_k)
 
     def add(name: str, idx: np.ndarray, **cols: Any) -> None:
         keep = faults.keep_mask(len(idx), salt=name) if faults.drop_fraction else slice(None)
@@ -294,12 +356,16 @@ def _build(flight: Flight, lo: int, hi: int, shift_s: float, faults: Faults,
                  TFout=s.t_fade_out)
         data.add("MSG", tus[[k]], Message=[f"SystemID Starting: axis={s.axis}"])
     ends = np.flatnonzero((run >= 0) & np.r_[run[1:] != run[:-1], True])
-    ends = ends[(ends >= lo) & (ends < hi)]
+    stopped = {int(run[k]) for k, _ in flight.texts if run[k] >= 0}
+    ends = ends[(ends >= lo) & (ends < hi) & ~np.isin(run[ends], list(stopped))]
     if not plane and not vtol:
         data.add("MSG", tus[ends], Message=["SystemID Finished"] * len(ends))
+    events = [(k, text) for k, text in flight.texts if lo <= k < hi]
+    if events:
+        data.add("MSG", tus[[k for k, _ in events]], Message=[t for _, t in events])
 
     deg = np.degrees
-    i = _every(flight, "rate", lo, hi)
+    i = rate_indices(flight, lo, hi)
     g, rt, u = deg(flight.gyro[i]), deg(flight.rate_target[i]), flight.u[i]
     if plane:  # ArduPlane: no RATE; the roll/pitch/yaw controllers' PID records instead
         for a, pid in enumerate(("PIDR", "PIDP", "PIDY")):
@@ -322,6 +388,13 @@ def _build(flight: Flight, lo: int, hi: int, shift_s: float, faults: Faults,
         add("RATE", i, RDes=rt[:, 0], R=g[:, 0], ROut=u[:, 0], PDes=rt[:, 1], P=g[:, 1],
             POut=u[:, 1], YDes=rt[:, 2], Y=g[:, 2], YOut=u[:, 2], ADes=0.0, A=acc_up,
             AOut=flight.throttle[i], AOutSlew=0.0)
+        if v46:  # the attitude controller's targets and each rate PID's terms, with RATE
+            a, at = deg(flight.attitude[i]), deg(flight.attitude_target[i])
+            add("ANG", i, DesRoll=at[:, 0], Roll=a[:, 0], DesPitch=at[:, 1], Pitch=a[:, 1],
+                DesYaw=np.mod(at[:, 2], 360.0), Yaw=np.mod(a[:, 2], 360.0), Dt=flight.dt)
+            for ax, pid in enumerate(("PIDR", "PIDP", "PIDY")):
+                terms = flight.pid_terms[i, ax].astype(np.float64)
+                add(pid, i, **{f: terms[:, c] for c, f in enumerate(PID_LOG_FIELDS)})
         j = i[flight.mode[i] == MODE_SYSTEMID]
         graw = deg(flight.gyro_raw[j])
         add("SIDD", j, Time=flight.sid_time[j], Targ=flight.sid_targ[j], F=flight.sid_freq[j],
@@ -332,24 +405,27 @@ def _build(flight: Flight, lo: int, hi: int, shift_s: float, faults: Faults,
     add("ATT", i, DesRoll=at[:, 0], Roll=a[:, 0], DesPitch=at[:, 1], Pitch=a[:, 1],
         DesYaw=np.mod(at[:, 2], 360.0), Yaw=np.mod(a[:, 2], 360.0), AEKF=3)
     i = _every(flight, "imu", lo, hi)
-    add("IMU", i, I=0, GyrX=flight.gyro[i, 0], GyrY=flight.gyro[i, 1], GyrZ=flight.gyro[i, 2],
-        AccX=flight.accel[i, 0], AccY=flight.accel[i, 1], AccZ=flight.accel[i, 2], EG=0, EA=0,
-        T=45.0, GH=1, AH=1, GHz=int(loop_hz), AHz=int(loop_hz))
+    for imu in (0, 1) if v46 else (0,):  # (4.6: a flight controller's two IMUs)
+        add("IMU", i, I=imu, GyrX=flight.gyro[i, 0], GyrY=flight.gyro[i, 1],
+            GyrZ=flight.gyro[i, 2], AccX=flight.accel[i, 0], AccY=flight.accel[i, 1],
+            AccZ=flight.accel[i, 2], EG=0, EA=0, T=45.0, GH=1, AH=1, GHz=int(loop_hz),
+            AHz=int(loop_hz))
     i = _every(flight, "rcou", lo, hi)
     out = servo_outputs(flight, layout)[i]
     add("RCOU", i, **{f"C{c + 1}": out[:, c] for c in range(out.shape[1])})
     i = _every(flight, "rcin", lo, hi)
     rc = flight.rc_in()[i]
     add("RCIN", i, **{f"C{c + 1}": rc[:, c] for c in range(rc.shape[1])})
-    if layout not in ("copter-4", "heli", "plane", "quadplane"):
+    if layout not in ("copter-4", "copter-4.6", "heli", "plane", "quadplane"):
         return _as_layout(data, b, layout)
     return b.to_bytes() + data.to_bytes()
 
 
-#: Layouts the writer can produce (``mavsid simulate --layout``): ArduCopter generations,
-#: a traditional helicopter (ArduCopter 4.x heli) and ArduPlane 4.x.
-LAYOUTS = ("copter-4", "copter-3.6", "copter-3.3", "copter-3.4-dev", "copter-3.2", "heli",
-           "plane", "quadplane")
+#: Layouts the writer can produce (``mavsid simulate --layout``): ArduCopter generations
+#: (``copter-4.6``: the 4.5-4.7 records, :data:`FORMATS_46`), a traditional helicopter
+#: (ArduCopter 4.x heli) and ArduPlane 4.x.
+LAYOUTS = ("copter-4", "copter-4.6", "copter-3.6", "copter-3.3", "copter-3.4-dev",
+           "copter-3.2", "heli", "plane", "quadplane")
 
 #: ArduPlane's roll/pitch/yaw controllers log PIDR/PIDP/PIDY (``log_PID`` of
 #: libraries/AP_Logger/LogStructure.h: TimeUS,Tar,Act,Err,P,I,D,FF,Dmod,SRate,Limit, no
@@ -374,6 +450,7 @@ _PLANE_SURFACE_DEG = 45.0
 #: ArduPlane mode number of FBWA (fly-by-wire: sticks set bank and pitch angles)
 _PLANE_FBWA = 5
 _BANNER = {"copter-3.2": "ArduCopter V3.2.1 (mavsid00)",
+           "copter-4.6": "ArduCopter V4.6.2 (mavsid00)",
            "plane": "ArduPlane V4.3.8 (mavsid00)", "quadplane": "ArduPlane V4.5.7 (mavsid00)"}
 #: the frame texts each firmware writes after its banner (ArduPlane writes none)
 _FRAME_TEXT: dict[str, tuple[str, ...]] = {"copter-3.2": ("Frame: QUAD",),
@@ -385,6 +462,43 @@ _HELI_SERVOS = {1: 33, 2: 34, 3: 35, 4: 36, 8: 31}  # swash 1-3 (motor1-3), tail
 _SERVO_MIN, _SERVO_TRIM, _SERVO_MAX = 1100.0, 1500.0, 1900.0
 #: AP_MotorsHeli_Swash H3_120 (H_SW_TYPE 3): roll and pitch factor of swash servos 1-3
 _H3_120 = ((0.866025, 0.5), (-0.866025, 0.5), (0.0, -1.0))
+
+
+def _output_texts(flight: Flight, layout: str) -> tuple[str, ...]:
+    """The 4.6 banner's line naming each output group's protocol (``RCOut: PWM:1-8
+    DS150:9-12 PWM:13-16``) when the motors run DShot; nothing otherwise."""
+    sc = flight.scenario
+    if layout != "copter-4.6" or sc.esc == "pwm":
+        return ()
+    first, last = sc.motor_output, sc.motor_output + flight.motors.shape[1] - 1
+    groups = [(1, first - 1, "PWM"), (first, last, "DS150"), (last + 1, 16, "PWM")]
+    return ("RCOut: " + " ".join(f"{kind}:{a}-{b}" for a, b, kind in groups if a <= b),)
+
+
+def _arming_records(data: DataFlashBuilder, flight: Flight, tus: np.ndarray, lo: int,
+                    hi: int, gap_k: int | None = None) -> None:
+    """The 4.6 layout's firmware version (VER) and the arming by the arm/disarm switch at
+    the first sample (AUXF, ARM, EV), the disarming at the last (or after a crash); around
+    a logging gap, a disarm before it and an arm after."""
+    major, minor, patch = 4, 6, 2
+    data.add("VER", tus[[lo]], BT=10, BST=0, Maj=major, Min=minor, Pat=patch, FWT=255, GH=0,
+             FWS=[_BANNER["copter-4.6"]], APJ=0, BU=0, FV=2)
+    off = hi - 1 if flight.disarm_index is None else flight.disarm_index
+    switches = [(lo, 1, _EV_ARMED), (off, 0, _EV_DISARMED)]
+    if gap_k is not None:
+        switches += [(gap_k - 1, 0, _EV_DISARMED), (gap_k, 1, _EV_ARMED)]
+    for k, state, ev in switches:
+        if not lo <= k < hi:
+            continue
+        data.add("AUXF", tus[[k]], function=_AUX_ARMDISARM, pos=2 * state, source=1, result=1)
+        data.add("ARM", tus[[k]], ArmState=state, ArmChecks=0, Forced=0, Method=2)
+        data.add("EV", tus[[k]], Id=ev)
+
+
+#: ArduCopter 4.6's LOG_BITMASK of a SYSTEMID flight (ATTITUDE_MED, GPS, PM, CTUN, NTUN,
+#: RCIN, IMU, CMD, CURRENT, RCOU, OPTFLOW, PID, COMPASS, CAMERA, MOTBATT), the ATTITUDE
+#: bits (0, 1) set by the logging rate
+_LOG_BITMASK_46 = 180222
 
 
 def layout_params(flight: Flight, layout: str = "copter-4") -> dict[str, float]:
@@ -410,6 +524,15 @@ def layout_params(flight: Flight, layout: str = "copter-4") -> dict[str, float]:
     (19.0, 6.0)
     """
     p = flight.params()
+    if layout == "copter-4.6":  # every ATC_ parameter of 4.6, every output's function
+        q = {**p, **flight.scenario.controller.params(full=True)}
+        q["LOG_BITMASK"] = float((_LOG_BITMASK_46 & ~3) | (int(p["LOG_BITMASK"]) & 3))
+        sc = flight.scenario
+        for out in range(1, RCOU_CHANNELS + 1):
+            m = out - sc.motor_output
+            q[f"SERVO{out}_FUNCTION"] = float(33 + m if 0 <= m < flight.motors.shape[1] else 0)
+        q["MOT_PWM_TYPE"] = float(ESC_TYPES[sc.esc])
+        return dict(sorted(q.items()))
     if layout == "copter-3.2":
         scale = (18000.0 / math.pi) / 4500.0
         old: dict[str, float] = {}
@@ -507,7 +630,12 @@ def servo_outputs(flight: Flight, layout: str = "copter-4") -> np.ndarray:
         out[:, 3] = _angle_pwm(u[:, 2])
         out[:, 7] = _SERVO_MAX  # rotor speed controller: governor at its set speed
         return out
-    return flight.pwm
+    first = flight.scenario.motor_output
+    if first == 1:
+        return flight.pwm
+    out = np.zeros((len(flight), RCOU_CHANNELS))  # outputs without a function log 0
+    out[:, first - 1:first - 1 + flight.pwm.shape[1]] = flight.pwm
+    return out
 
 #: ArduCopter 3.5/3.6: the 4.x types and TimeUS, but no unit records (FMTU/UNIT/MULT), a
 #: PARM without the Default column and no SYSTEMID messages (SIDS/SIDD came with 4.1).

@@ -32,7 +32,8 @@ from mavsid.synthetic.controller import (
 from mavsid.synthetic.plant import AXES, Lowpass2p, PlantParams, discretise
 from mavsid.synthetic.sysid import MANOEUVRES, SysIdSettings, chirp, pilot_sticks
 
-__all__ = ["GRAVITY", "MODE_STABILIZE", "MODE_SYSTEMID", "Flight", "LogRates", "Scenario", "fly"]
+__all__ = ["ESC_TYPES", "GRAVITY", "MODE_STABILIZE", "MODE_SYSTEMID", "RCOU_CHANNELS", "Flight",
+           "LogRates", "Scenario", "fly"]
 
 GRAVITY = 9.80665
 #: longest flight simulated (s)
@@ -40,15 +41,22 @@ MAX_DURATION_S = 3600.0
 MODE_STABILIZE = 0
 MODE_SYSTEMID = 25
 _SID_AXIS_OF = {"roll": 10, "pitch": 11, "yaw": 12, "thrust": 13}
+#: outputs an RCOU record holds (C1-C14)
+RCOU_CHANNELS = 14
+#: ESC protocols and their MOT_PWM_TYPE
+ESC_TYPES = {"pwm": 0, "dshot150": 4}
 
 
 @dataclass(frozen=True)
 class LogRates:
     """Logging rates (Hz) of each DataFlash message; each must divide the loop rate.
 
-    ``rate`` applies to RATE and (in SYSTEMID) SIDD — loop rate with fast attitude logging;
-    ``tlog`` to the streamed MAVLink messages (ATTITUDE, SCALED_IMU, SERVO_OUTPUT_RAW,
-    RC_CHANNELS).
+    ``rate`` applies to RATE (and the PID and ANG records of the ``copter-4.6`` layout) and,
+    in SYSTEMID, SIDD — loop rate with fast attitude logging; ``rate_idle``, when set, to
+    RATE, PID and ANG outside SYSTEMID (ArduCopter 4.x logs them at the mode's rate while
+    SYSTEMID runs — every 4th loop with ``LOG_BITMASK``'s ATTITUDE_MED bit only — and at
+    10 Hz otherwise); ``tlog`` to the streamed MAVLink messages (ATTITUDE, SCALED_IMU,
+    SERVO_OUTPUT_RAW, RC_CHANNELS).
     """
 
     rate: float = 400.0
@@ -57,9 +65,12 @@ class LogRates:
     rcou: float = 10.0
     rcin: float = 10.0
     tlog: float = 50.0
+    rate_idle: float | None = None
 
     def step(self, name: str, loop_hz: float) -> int:
         """Loop samples between two records of ``name``."""
+        if name == "rate_idle" and self.rate_idle is None:
+            name = "rate"
         hz = float(getattr(self, name))
         k = round(loop_hz / hz) if hz > 0 else 0
         if hz <= 0 or k < 1 or abs(loop_hz / k - hz) > 1e-6 * hz:
@@ -97,6 +108,21 @@ class Scenario:
     rates : LogRates
     boot_s : float
         Time since boot (s) at the first logged sample.
+    motor_output : int
+        The output (``SERVOn``, RCOU ``Cn``) of motor 1, the others following it
+        (``SERVOn_FUNCTION`` 33, 34, ...); the outputs before it carry nothing and log 0.
+        ArduCopter's default is 1; a flight controller whose first outputs cannot run
+        DShot has its ESCs on 9-12.
+    esc : str
+        ``"pwm"`` or ``"dshot150"`` (``MOT_PWM_TYPE`` 0 or 4; RCOU logs the same 1000-2000
+        range either way).
+    motor_failure_s : float, optional
+        Seconds after the first logged sample at which motor 1 stops (a propeller or ESC
+        lost): the vehicle rolls over. A SYSTEMID run then stops once the lean exceeds
+        ``ANGLE_MAX`` ("SystemID Stopped: lean=..."; the mode stays SYSTEMID and its
+        records go on, the waveform held); the vehicle disarms once on its back (or 2 s
+        later: the crash check) and lies still, motors at ``MOT_PWM_MIN``, while logging
+        continues.
     """
 
     manoeuvre: str = "sysid"
@@ -113,6 +139,9 @@ class Scenario:
     frame: str = "quad-x"
     rates: LogRates = field(default_factory=LogRates)
     boot_s: float = 30.0
+    motor_output: int = 1
+    esc: str = "pwm"
+    motor_failure_s: float | None = None
 
     def __post_init__(self) -> None:
         if self.manoeuvre not in ("sysid", *MANOEUVRES):
@@ -129,11 +158,20 @@ class Scenario:
             )
         if self.seed < 0:
             raise ConfigError(f"seed must be >= 0, got {self.seed}")
-        for name in ("rate", "att", "imu", "rcou", "rcin", "tlog"):
+        n_motors = FRAMES[self.frame][1].shape[0]
+        if not 1 <= self.motor_output <= RCOU_CHANNELS - n_motors + 1:
+            raise ConfigError(f"motor_output must be 1-{RCOU_CHANNELS - n_motors + 1} for "
+                              f"{n_motors} motors, got {self.motor_output}")
+        if self.motor_failure_s is not None and not 0 < self.motor_failure_s < self.length_s:
+            raise ConfigError(f"motor failure at {self.motor_failure_s} s is outside the "
+                              f"flight (0-{self.length_s:g} s)")
+        if self.esc not in ESC_TYPES:
+            raise ConfigError(f"esc must be one of {', '.join(ESC_TYPES)}, got {self.esc!r}")
+        for name in ("rate", "att", "imu", "rcou", "rcin", "tlog", "rate_idle"):
             self.rates.step(name, self.controller.loop_hz)  # each must divide the loop rate
         if self.sysid and self.manoeuvre != "sysid":
             raise ConfigError("SYSTEMID settings given for a pilot manoeuvre")
-        if self.runs and self.duration_s is not None:
+        if self.runs and self.duration_s is not None and self.motor_failure_s is None:
             need = self.run_starts()[-1] + self.runs[-1].duration
             if self.duration_s < need:
                 raise ConfigError(
@@ -188,8 +226,11 @@ class Flight:
     mode : (n,) flight mode number. sid_time, sid_targ, sid_freq : (n,) SYSTEMID waveform clock,
     signal and frequency (NaN outside SYSTEMID).
     run_index : (n,) index of the SYSTEMID run, -1 outside.
-    pid_terms : (n, 3, 11) float32, per axis the values of its PID record (PIDR, PIDP,
-    PIDY: :data:`~mavsid.synthetic.controller.PID_LOG_FIELDS`; rates in rad/s).
+    pid_terms : (n, 3, 11) float32, per axis the values of its PID record (PIDR, PIDP, PIDY:
+    :data:`~mavsid.synthetic.controller.PID_LOG_FIELDS`; rates in rad/s).
+    texts : ((loop index, text), ...) the firmware's messages on events (a SYSTEMID run
+    stopped by its lean limit). disarm_index : the loop at which the vehicle disarmed after a
+    crash (None: armed throughout).
     """
 
     scenario: Scenario
@@ -216,6 +257,8 @@ class Flight:
     sid_freq: np.ndarray
     run_index: np.ndarray
     pid_terms: np.ndarray
+    texts: tuple[tuple[int, str], ...] = ()
+    disarm_index: int | None = None
 
     def __len__(self) -> int:
         return int(self.t_s.shape[0])
@@ -242,6 +285,12 @@ class Flight:
         p["INS_ACCEL_FILTER"] = 20.0
         p["MOT_THST_HOVER"] = sc.plant.hover_throttle
         p["FRAME_CLASS"], p["FRAME_TYPE"] = map(float, FRAMES[sc.frame][0])
+        if sc.motor_output != 1 or sc.esc != "pwm":  # (the default vehicle lists neither)
+            n_motors = FRAMES[sc.frame][1].shape[0]
+            for out in range(1, RCOU_CHANNELS + 1):
+                m = out - sc.motor_output
+                p[f"SERVO{out}_FUNCTION"] = float(33 + m if 0 <= m < n_motors else 0)
+            p["MOT_PWM_TYPE"] = float(ESC_TYPES[sc.esc])
         # RCIN, IMU, RCOU bits plus ATTITUDE_FAST/MED as SYSTEMID's logging rate implies:
         # both -> every loop, FAST -> every 2nd, MED -> every 4th, neither -> every 8th
         every_k = sc.rates.step("rate", sc.controller.loop_hz)
@@ -372,6 +421,66 @@ def _desired(sc: Scenario, n: int, dt: float, rng: np.random.Generator) -> np.nd
     return sticks
 
 
+#: the kinematics stop pitch this short of ±90° (the Euler angles' pole) in a roll-over
+_PITCH_POLE = np.radians(89.0)
+#: the vehicle disarms when it lies on its back (lean beyond this, degrees) or, at the latest,
+#: when ArduCopter's crash check fires (this long after the lean limit was passed)
+_ON_ITS_BACK_DEG = 100.0
+_CRASH_CHECK_S = 2.0
+
+
+class _Crash:
+    """A motor failure and what follows: the SYSTEMID run stopped by its lean limit, the
+    disarm, the vehicle lying still."""
+
+    def __init__(self, sc: Scenario, n: int, dt: float) -> None:
+        assert sc.motor_failure_s is not None
+        self.fail_k = round(sc.motor_failure_s / dt)
+        self.angle_max = sc.controller.angle_max_deg
+        self.dt = dt
+        self.n = n
+        self.stopped = False
+        self.stop_k = n
+        self.disarm_k: int | None = None
+        self.texts: list[tuple[int, str]] = []
+
+    def failed(self, k: int) -> tuple[int, ...]:
+        """The motors (0-based) without thrust at loop ``k``."""
+        return (0,) if k >= self.fail_k else ()
+
+    def disarmed(self, k: int) -> bool:
+        return self.disarm_k is not None and k >= self.disarm_k
+
+    def stops_run(self, k: int, att: np.ndarray, run_index: np.ndarray, inj_kind: np.ndarray,
+                  sid_targ: np.ndarray) -> bool:
+        """True once, at the loop where the lean first exceeds ANGLE_MAX after the failure
+        (during a SYSTEMID run: the mode stops it); sets the disarm once on its back."""
+        if k < self.fail_k or self.disarm_k is not None:
+            return False
+        lean = float(np.degrees(np.arccos(np.clip(np.cos(att[0]) * np.cos(att[1]), -1, 1))))
+        if self.stopped:
+            if lean > _ON_ITS_BACK_DEG or k >= self.stop_k + round(_CRASH_CHECK_S / self.dt):
+                self.disarm_k = k
+            return False
+        if lean <= self.angle_max:
+            return False
+        self.stopped, self.stop_k = True, k
+        if run_index[k] < 0:
+            return False
+        self.texts.append((k, f"SystemID Stopped: lean={lean:.5f} "
+                              f"max={self.angle_max * 100.0:.3f}"))
+        inj_kind[k:] = ""
+        return True
+
+    def hold_mode(self, k: int, mode: np.ndarray, run_index: np.ndarray, sid_time: np.ndarray,
+                  sid_targ: np.ndarray, sid_freq: np.ndarray) -> None:
+        """The stopped run's mode stays on to the end of the log: its clock runs on, its
+        waveform and frequency hold their last values."""
+        mode[k:], run_index[k:] = MODE_SYSTEMID, run_index[k]
+        sid_time[k:] = sid_time[k] + np.arange(self.n - k) * self.dt
+        sid_targ[k:], sid_freq[k:] = sid_targ[k - 1], sid_freq[k - 1]
+
+
 def fly(sc: Scenario) -> Flight:
     """Simulate the closed loop of ``sc`` at the controller's loop rate."""
     ctl, pl = sc.controller, sc.plant
@@ -438,23 +547,35 @@ def fly(sc: Scenario) -> Flight:
     feedforward = inj_kind != "recovery_angle"
     terms = np.zeros((n, 3, len(PID_LOG_FIELDS)), dtype=np.float32)
     limit = np.zeros(3, dtype=bool)  # the motors saturated on an axis in the previous loop
+    crash = _Crash(sc, n, dt) if sc.motor_failure_s is not None else None
     for k in range(n):
         rate = x[:3]
         g_raw = rate + bias + noise[k]
         g = gyro_filter(g_raw)
+        if crash is not None and crash.stops_run(k, att, run_index, inj_kind, sid_targ):
+            desired[k:] = sticks[k:][:, [0, 1, 3]] * np.radians(
+                [ctl.angle_max_deg, ctl.angle_max_deg, ctl.pilot_yaw_rate_degs])
+            rate_inj[k:], mixer_inj[k:], feedforward[k:] = 0.0, 0.0, True
+            crash.hold_mode(k, mode, run_index, sid_time, sid_targ, sid_freq)
         step = control.update(desired[k], att, g, rate_inj[k], bool(feedforward[k]), limit,
                               float(t[k]))
         terms[k] = step.terms
         thr = pl.hover_throttle + mixer_inj[k, 3]
         demand = step.pid_out + mixer_inj[k, :3]
         u = np.clip(demand, -1.0, 1.0)
-        m, ue = motor_outputs(np.array([thr]), u[None, :], factors)
+        m, ue = motor_outputs(np.array([thr]), u[None, :], factors,
+                              crash.failed(k) if crash is not None else ())
         limit = (np.abs(ue[0] - demand) > 1e-9) | (np.abs(demand) >= 1.0)
+        if crash is not None and crash.disarmed(k):  # on its back, motors stopped
+            m, ue, x = np.zeros_like(m), np.zeros_like(ue), np.zeros_like(x)
+            rate = x[:3]
         # plant: x[k+1] from x[k] and the delayed realised inputs
         u_hist[k % n_hist] = ue[0]
         u_prev, u_now = u_hist[(k + 1) % n_hist], u_hist[(k + 2) % n_hist]
         x_next = (disc.phi @ x + disc.gamma_prev @ u_prev + disc.gamma_now @ u_now
                   + disc.gamma_w @ dist[k])
+        if crash is not None and crash.disarmed(k):
+            x_next = np.zeros_like(x)
         out["rate_true"][k], out["gyro_raw"][k], out["gyro"][k] = rate, g_raw, g
         out["attitude"][k], out["attitude_target"][k] = att, step.att_target
         out["rate_target"][k], out["pid_out"][k] = step.rate_target, step.pid_out
@@ -469,12 +590,20 @@ def fly(sc: Scenario) -> Flight:
             (qm * np.sin(phi) + rm * np.cos(phi)) / np.cos(theta),
         ])
         att[2] = att[2] % (2 * np.pi)
+        if crash is not None:  # (rolled over: roll wraps, pitch stays short of the pole)
+            att[0] = (att[0] + np.pi) % (2 * np.pi) - np.pi
+            att[1] = min(max(att[1], -_PITCH_POLE), _PITCH_POLE)
         x = x_next
     out["desired"][:] = desired
     accel = acc_noise.copy()
     accel[:, 2] += -GRAVITY * motors.mean(axis=1) / pl.hover_throttle
+    pwm = ctl.motor_pwm(motors)
+    if crash is not None and crash.disarm_k is not None:
+        pwm[crash.disarm_k:] = ctl.pwm_min  # (disarmed outputs: MOT_PWM_MIN)
     return Flight(
-        scenario=sc, dt=dt, t_s=t, throttle=throttle, motors=motors, pwm=ctl.motor_pwm(motors),
+        scenario=sc, dt=dt, t_s=t, throttle=throttle, motors=motors, pwm=pwm,
         accel=accel, sticks=sticks, mode=mode, sid_time=sid_time, sid_targ=sid_targ,
-        sid_freq=sid_freq, run_index=run_index, pid_terms=terms, **out,
+        sid_freq=sid_freq, run_index=run_index, pid_terms=terms,
+        texts=tuple(crash.texts) if crash is not None else (),
+        disarm_index=crash.disarm_k if crash is not None else None, **out,
     )

@@ -156,7 +156,8 @@ def simulate(
                 doc["axes"][ax][f"input_unit_{name}"] = _INPUT_UNIT[name]
         doc["faults"] = {"drop_fraction": faults.drop_fraction,
                          "reboot_at_s": faults.reboot_at_s,
-                         "truncate_bytes": faults.truncate_bytes}
+                         "truncate_bytes": faults.truncate_bytes,
+                         **({"gap": list(faults.gap)} if faults.gap is not None else {})}
         tp.write_text(json.dumps(doc, indent=1) + "\n")
     return SimulationResult(flight, tuple(map(str, paths)), tuple(map(str, truths)),
                             tuple(sizes))

@@ -278,10 +278,12 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--vibration", type=float, default=0.0, metavar="DEG_S",
                    help="frame vibration amplitude on the gyro, deg/s (0)")
     p.add_argument("--layout",
-                   choices=("copter-4", "copter-3.6", "copter-3.3", "copter-3.4-dev",
+                   choices=("copter-4", "copter-4.6", "copter-3.6", "copter-3.3", "copter-3.4-dev",
                             "copter-3.2", "heli", "plane", "quadplane", "px4-1.14", "px4-1.11",
                             "px4-1.8"),
-                   help="log layout. A .bin's ArduCopter generation: 4.x (default); 3.6 "
+                   help="log layout. A .bin's ArduCopter generation: 4.x (default); 4.6 (the "
+                   "4.5-4.7 records: AUXF with pos/source/result, PIDR/PIDP/PIDY with DFF and "
+                   "Flags, ANG, ARM, VER, two IMUs, every SERVOn_FUNCTION); 3.6 "
                    "(no unit records, PARM without Default, no SYSTEMID messages); 3.3 "
                    "(TimeMS, RCOU Ch1-8, no unit records, untimed PARM/MODE, ARM event first); "
                    "3.4-dev (RATE in centideg/s, outputs on +-4500); 3.2 (as 3.3 but no RATE: "
@@ -297,7 +299,8 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
                    "1.14 (default; vehicle_torque_setpoint), 1.11 (actuator_controls_0), 1.8 "
                    "(rates in vehicle_attitude)")
     p.add_argument("--faults", default="", metavar="SPEC",
-                   help="damage: drop=FRACTION,reboot=SECONDS,truncate=BYTES")
+                   help="damage: drop=FRACTION,reboot=SECONDS,truncate=BYTES,gap=AT:SECONDS "
+                   "(logging stops AT s after the first sample for SECONDS; .bin only)")
     p.set_defaults(handler=_simulate)
 
 

@@ -652,7 +652,7 @@ def flight_response(flight: FlightData, raw: RawLog, axes: Sequence[str] = AXES
     MissingMessageError
         The log has neither a rate target nor a commanded attitude on any axis.
     """
-    from mavsid.loop import twin_signals
+    from mavsid.loop.twin import twin_signals
 
     signals = twin_signals(flight, raw)
     commanded = flight.meta.get("commanded")
@@ -734,7 +734,7 @@ def read_response(path: str | os.PathLike[str], axes: Sequence[str] = AXES, *,
         The log cannot be read or aligned, or has no rate target.
     """
     from mavsid.align import read_flight
-    from mavsid.loop import twin_messages
+    from mavsid.loop.twin import twin_messages
 
     flight, raw = read_flight(path, preset, None, presets=presets or None,  # type: ignore[arg-type]
                               mixers=mixers or None,  # type: ignore[arg-type]

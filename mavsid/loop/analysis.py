@@ -275,8 +275,8 @@ def analyse_plant(plant: LinearPlant, ctrl: AxisController, lag: int = 0,
     :func:`controller_polys`), the step simulated in state space. ``lag`` loops of delay on
     the target path (see :func:`~mavsid.loop.twin.replay_controller`); ``meas_delay`` (0-1
     loop) on the measured rate the controller reads (``(1 − τ) + τz⁻¹``,
-    :attr:`~mavsid.loop.twin.ClosedLoopFit.measurement_delay_loops`). ``tests/
-    test_loop_analysis.py`` compares every figure and response with python-control's.
+    :attr:`~mavsid.loop.twin.ClosedLoopFit.measurement_delay_loops`).
+    ``tests/test_loop_analysis.py`` compares every figure and response with python-control's.
     ``responses=False`` leaves out the responses, the broken loop at the mixer and its
     margins."""
     dt = 1.0 / ctrl.loop_hz

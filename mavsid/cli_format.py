@@ -100,7 +100,7 @@ def format_loop(r: LoopResponse) -> str:
            else ""),
         f"tracking RMS {math.degrees(r.tracking_rms or 0.0):.3g} {unit}",
         f"delay {num(r.delay_s, '.3g', 'ms', 1e3)}",
-        f"band ±{float((hi - lo).max() / 2):.2g}",
+        f"band ±{float(np.median(hi - lo) / 2):.2g} (median)",
     ]
     return f"{head}: " + ", ".join(parts) + f"\n    {r.verdict}; {r.step.method}"
 

@@ -88,6 +88,9 @@ RESPONSE_S = {"rate": 0.5, "attitude": 1.5}
 MIN_ACTIVITY = {"rate": 0.05, "attitude": 0.01}
 #: Tikhonov regularisation, relative to the mean diagonal of the window's Gram matrix
 REGULARISATION = 1e-4
+#: the step's median band half-width (of a unit step) above which its rise time, overshoot
+#: and settling time are not given
+MAX_BAND = 0.2
 #: fewest windows behind a step response
 MIN_WINDOWS = 3
 #: longest delay (s) searched when aligning actual with target
@@ -515,7 +518,8 @@ def loop_response(axis: str, loop: str, time_s: np.ndarray, target: np.ndarray,
                              min_activity=MIN_ACTIVITY[loop])
     except NoExcitationError as exc:
         return _with(base, verdict=f"{loop}: no step response: {exc}")
-    rise, over, settle = step_metrics(step)
+    spread = float(np.median(step.upper - step.lower) / 2)
+    rise, over, settle = step_metrics(step) if spread <= MAX_BAND else (None, None, None)
     fr: FRF | None = None
     fb = delay_fb = None
     try:
@@ -530,8 +534,10 @@ def loop_response(axis: str, loop: str, time_s: np.ndarray, target: np.ndarray,
     where = ("bandwidth " + (f"{fb:.3g} Hz" if fb is not None else
                              "not reached in the coherent band") if fr is not None else
              "no frequency response")
+    wide = (f"; band ±{spread:.2g} (median) too wide for rise time and overshoot"
+            if spread > MAX_BAND else "")
     verdict = (f"{loop}: {step.windows} windows of {step.window_s:.3g} s ({step.span_s:.0f} s); "
-               f"{where}; resolves {band[0]:g}-{band[1]:g} Hz{slow}")
+               f"{where}; resolves {band[0]:g}-{band[1]:g} Hz{slow}{wide}")
     return _with(base, verdict=verdict, step=step, rise_s=rise, overshoot_pct=over,
                  settling_s=settle, frequency=fr, bandwidth_hz=fb, phase_delay_s=delay_fb)
 
@@ -579,6 +585,33 @@ def _native_rate(raw: RawLog, source: str) -> float | None:
     d = np.diff(np.sort(np.asarray(tab.time_s, float)))
     d = d[d > 0]
     return float(1.0 / np.median(d)) if d.size else None
+
+
+def _dense(raw: RawLog, sources: Sequence[str], grid: np.ndarray, rate_hz: float
+           ) -> np.ndarray:
+    """Grid samples where every message of ``sources`` (``MSG.field``) is logged at about
+    ``rate_hz``: between two of its records at most two periods apart (ArduCopter logs RATE
+    at 100 Hz in SYSTEMID and 10 Hz otherwise: the slow stretches in between are no data at
+    the fast rate). A source whose message the log does not have leaves the mask alone.
+
+    Examples
+    --------
+    >>> from mavsid.data import MessageTable, SourceInfo
+    >>> t = np.r_[np.arange(0, 1, 0.01), np.arange(1, 3, 0.1)]
+    >>> raw = RawLog(SourceInfo("a", "dataflash", 0), {"RATE": MessageTable("RATE", {}, t)})
+    >>> m = _dense(raw, ["RATE.R"], np.arange(0, 3, 0.01), 100.0)
+    >>> bool(m[:99].all()), bool(m[110:].any())
+    (True, False)
+    """
+    ok = np.ones(grid.shape, bool)
+    for source in sources:
+        tab = raw.messages.get(source.split(".")[0])
+        if tab is None or len(tab.time_s) < 2:
+            continue
+        t = np.unique(np.asarray(tab.time_s, float)[np.isfinite(tab.time_s)])
+        i = np.clip(np.searchsorted(t, grid, side="right"), 1, t.size - 1)
+        ok &= (t[i] - t[i - 1]) <= 2.0 / rate_hz
+    return ok
 
 
 def _spectra(flight: FlightData, axis: str, usable: np.ndarray) -> tuple[Spectrum, ...]:
@@ -689,18 +722,20 @@ def flight_response(flight: FlightData, raw: RawLog, axes: Sequence[str] = AXES
                 if inj is not None:
                     target = target + inj
                 hz = min(_native_rate(raw, src) or grid, float(rates.get(rate) or grid), grid)
+                actual_src = str(state_src.get(rate, rate))
+                dense = _dense(raw, [src, actual_src], flight.time_s, hz)
                 loops.append(loop_response(axis, "rate", flight.time_s, target, actual, hz,
-                                           names=(src, str(state_src.get(rate, rate))),
-                                           usable=mask))
+                                           names=(src, actual_src), usable=mask & dense))
             if axis == "yaw":
                 continue  # (the commanded heading is a rate: the rate loop is its loop)
             att = flight.series(axis)
             if axis in cmd and att is not None:
                 hz = min(float(rates.get(axis) or grid), grid)
+                names = (str(cmd_src.get(axis, "commanded")), str(state_src.get(axis, axis)))
+                dense = _dense(raw, names, flight.time_s, hz)
                 loops.append(loop_response(
                     axis, "attitude", flight.time_s, np.asarray(cmd[axis], float), att, hz,
-                    names=(str(cmd_src.get(axis, "commanded")),
-                           str(state_src.get(axis, axis))), usable=mask))
+                    names=names, usable=mask & dense))
         return loops
 
     loops = one(usable)

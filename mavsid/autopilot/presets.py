@@ -21,6 +21,8 @@ Built-in presets (in the order they are tried):
 ============================  ==========  =================================================
 preset                        format      states / inputs
 ============================  ==========  =================================================
+``px4-sdlog2``                DataFlash   PX4 sdlog2 .px4log: ATT Roll/Pitch/Yaw (rad) and
+                                          RollRate/... (rad/s); ATTC Roll/Pitch/Yaw/Thrust
 ``ardupilot-quadplane``       DataFlash   ArduPlane QuadPlane, VTOL flight: ATT; PIQR/PIQP/
                                           PIQY Act (rad/s), P+I+D+FF (mixer input)
 ``ardupilot-plane-pid``       DataFlash   ArduPlane only: ATT; PIDR/PIDP/PIDY Act (deg/s),
@@ -43,6 +45,10 @@ preset                        format      states / inputs
 ``px4-legacy``                ULog        vehicle_attitude.q and .rollspeed/...;
                                           actuator_controls_0.control[0..3]
 ``px4-att``                   ULog        vehicle_attitude.q only
+``px4-control-state``         ULog        control_state.q and .roll_rate/... (2016-2017
+                                          logs without vehicle_attitude)
+``px4-gyro``                  ULog        sensor_gyro.x/y/z only (2016-2017 logs with no
+                                          attitude topic)
 ============================  ==========  =================================================
 
 Presets with ``vehicles`` apply only to logs of those vehicle kinds (from the firmware
@@ -274,6 +280,16 @@ PRESETS: dict[str, Preset] = {
     p.name: p
     for p in (
         Preset(
+            "px4-sdlog2", _DF,
+            states={"roll": _ch("ATT", "Roll", "rad"), "pitch": _ch("ATT", "Pitch", "rad"),
+                    "yaw": _ch("ATT", "Yaw", "rad"), "p": _ch("ATT", "RollRate", "rad/s"),
+                    "q": _ch("ATT", "PitchRate", "rad/s"), "r": _ch("ATT", "YawRate", "rad/s")},
+            inputs={"u_roll": _ch("ATTC", "Roll"), "u_pitch": _ch("ATTC", "Pitch"),
+                    "u_yaw": _ch("ATTC", "Yaw"), "u_thrust": _ch("ATTC", "Thrust", optional=True)},
+            description="PX4 sdlog2 .px4log (< 1.5): ATT attitude and rates (rad, rad/s), "
+                        "ATTC actuator controls; clock from TIME.StartTime",
+        ),
+        Preset(
             QUADPLANE, _DF,
             states={**_ATT, "p": _ch("PIQR", "Act", "rad/s"), "q": _ch("PIQP", "Act", "rad/s"),
                     "r": _ch("PIQY", "Act", "rad/s")},
@@ -388,6 +404,26 @@ PRESETS: dict[str, Preset] = {
             states={**_PX4_Q, **{k: replace(c, optional=True) for k, c in _PX4_AV.items()}},
             description="PX4 attitude only: no controller outputs logged",
         ),
+        Preset(
+            "px4-control-state", ("ulog",),
+            states={
+                "roll": _ch("control_state", "q", "1", transform="quat_roll"),
+                "pitch": _ch("control_state", "q", "1", transform="quat_pitch"),
+                "yaw": _ch("control_state", "q", "1", transform="quat_yaw"),
+                "p": _ch("control_state", "roll_rate", "rad/s"),
+                "q": _ch("control_state", "pitch_rate", "rad/s"),
+                "r": _ch("control_state", "yaw_rate", "rad/s"),
+            },
+            inputs={k: replace(c, optional=True) for k, c in _PX4_AC0.items()},
+            description="PX4 2016-2017 without vehicle_attitude: control_state's attitude and "
+            "rates",
+        ),
+        Preset(
+            "px4-gyro", ("ulog",),
+            states={k: _ch("sensor_gyro", ax, "rad/s") for k, ax in zip("pqr", "xyz", strict=True)},
+            description="PX4 2016-2017 logging no attitude: body rates from sensor_gyro "
+            "(rotated to the body frame by its driver) only",
+        ),
     )
 }
 
@@ -403,6 +439,7 @@ TARGET_CHANNELS: dict[str, tuple[Channel, ...]] = {
         _ch(pid, "Tar", "rad/s"),
         _ch("vehicle_rates_setpoint", px4, "rad/s"),
         _ch("ATTITUDE_TARGET", f"body_{px4}_rate", "rad/s"),
+        _ch("ARSP", f"{px4.capitalize()}RateSP", "rad/s"),  # (PX4 sdlog2)
     )
     for rate, des, pid, px4 in (("p", "R", "PIDR", "roll"), ("q", "P", "PIDP", "pitch"),
                                 ("r", "Y", "PIDY", "yaw"))
@@ -415,7 +452,8 @@ TARGET_CHANNELS: dict[str, tuple[Channel, ...]] = {
 #: of the pilot's yaw-rate stick: alignment takes its rate (:func:`mavsid.align.align`).
 DESIRED_CHANNELS: dict[str, tuple[Channel, ...]] = {
     axis: (_ch("ATT", f"Des{axis.capitalize()}", "deg"),
-           _ch("vehicle_attitude_setpoint", "q_d", "1", transform=f"quat_{axis}"))
+           _ch("vehicle_attitude_setpoint", "q_d", "1", transform=f"quat_{axis}"),
+           _ch("ATSP", f"{axis.capitalize()}SP", "rad"))  # (PX4 sdlog2)
     for axis in AXES
 }
 #: ArduPilot SYSTEMID's injected waveform (added to the mixer input on SID_AXIS 10-12)

@@ -34,11 +34,12 @@ give per-field units and multipliers as metadata; the multipliers are *not* appl
 is given for fields the format character already scales.
 
 Time: ``time_s`` is ``TimeUS * 1e-6`` (old logs: ``TimeMS * 1e-3``, except GPS messages, whose
-``TimeMS`` is GPS time of week). A message without such a field gets the time of the latest
-timestamped record before it in the file (NaN before the first one); the choice is a hold, not
-an interpolation, so that a parameter or text is never stamped with a time it was not yet
-written at. Times are kept as logged: after a reboot or in concatenated logs they go backwards;
-the reader notes where (``SourceInfo.notes``) and warns.
+``TimeMS`` is GPS time of week; a PX4 sdlog2 ``.px4log``: its ``TIME.StartTime``, µs since
+boot, written at the start of each logging cycle). A message without such a field gets the
+time of the latest timestamped record before it in the file (NaN before the first one); the
+choice is a hold, not an interpolation, so that a parameter or text is never stamped with a
+time it was not yet written at. Times are kept as logged: after a reboot or in concatenated
+logs they go backwards; the reader notes where (``SourceInfo.notes``) and warns.
 
 Examples
 --------
@@ -207,6 +208,8 @@ def _time_field(
         return "TimeUS", index["TimeUS"], 1e-6
     if "TimeMS" in index and not name.startswith("GPS") and fmt[index["TimeMS"]] in "QqIi":
         return "TimeMS", index["TimeMS"], 1e-3
+    if name == "TIME" and "StartTime" in index and fmt[index["StartTime"]] in "Qq":
+        return "StartTime", index["StartTime"], 1e-6  # (PX4 sdlog2: each cycle's records follow it)
     return None
 
 

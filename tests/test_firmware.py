@@ -1,4 +1,4 @@
-"""Logs of older firmware: their clocks, names and parameters (issue: every generation runs).
+"""Logs of older firmware: their clocks, names and parameters (every generation runs).
 
 Facts are checked against pymavlink where it reads the log, and on hand-built logs with one
 fact each where no shared log has it.

@@ -123,10 +123,10 @@ def test_margins_and_bandwidth_flown(roll_fit) -> None:
 
 
 @pytest.mark.parametrize("rate_hz", ["200", "400"])
-def test_identified_margins_within_the_issue_tolerance_without_noise(tmp_path,
-                                                                     rate_hz: str) -> None:
+def test_identified_margins_within_2_deg_and_5_percent_without_noise(tmp_path,
+                                                                      rate_hz: str) -> None:
     """Sensor noise, gyro bias and disturbance off: the identified plant's margin and
-    bandwidth are the true plant's to within the issue's ±2° / ±5 % (measured: 73.1-73.2
+    bandwidth are the true plant's to within ±2° / ±5 % (measured: 73.1-73.2
     against 72.0°, 12.36-12.37 against 12.37 Hz; the structure chosen against the
     injection's FRF: lag 15 ms, delay 5.0 ms, the truth)."""
     log = tmp_path / "clean.bin"
@@ -142,13 +142,12 @@ def test_identified_margins_within_the_issue_tolerance_without_noise(tmp_path,
     assert got.bandwidth_hz == pytest.approx(truth.bandwidth_hz, rel=0.05)
 
 
-def test_identified_margins_within_the_issue_tolerance(roll_fit, roll_fit_400) -> None:
+def test_identified_margins_within_2_deg_and_5_percent(roll_fit, roll_fit_400) -> None:
     """The simulator's default noise (1 deg/s of gyro noise fed back, gyro bias,
-    disturbances): the one-step score chose a 10 ms lag and 7-8 ms of delay (truth 15 and
-    5), phase margin 75.1 against 72.0 deg, bandwidth 13.8 against 12.4 Hz. Chosen against
-    the FRF measured from the injection (the feedback does not bias it), measured: 72.7 and
-    72.5 deg, 12.25 and 12.36 Hz; over seeds 1-8 at 200 and 400 Hz -0.7..+1.5 deg and
-    within 1.4 %."""
+    disturbances): the structure is chosen against the FRF measured from the injection
+    (the feedback does not bias it); the margin 72.7 and 72.5 deg against the true 72.0,
+    the bandwidth 12.25 and 12.36 Hz against 12.37 (over seeds 1-8 at 200 and 400 Hz:
+    -0.7..+1.5 deg and within 1.4 %)."""
     ctrl = controller_from_params(roll_fit.flights[0].params, "roll")
     tp = true_plant(PlantParams(), 0, 1.0 / ctrl.loop_hz)
     ss = control.ss(tp.a, tp.b.reshape(-1, 1), tp.c.reshape(1, -1), 0.0, tp.dt)

@@ -156,7 +156,9 @@ def test_analyse_plant_is_python_controls(params: dict[str, float], axis: str,
     for k in ("gain_margin_db", "phase_margin_deg", "crossover_hz"):
         assert getattr(got, k) == pytest.approx(getattr(want, k), rel=1e-7), k
     assert got.rise_time_s == pytest.approx(want.rise_time_s, abs=1e-9)
-    assert got.overshoot_percent == pytest.approx(want.overshoot_percent, rel=1e-7, abs=1e-6)
+    # (the numpy step runs in blocks through A³² of companion-form filters: its last digits
+    # follow the BLAS kernel, 4e-7 of the figure between OpenBLAS's SSE and AVX2 ones)
+    assert got.overshoot_percent == pytest.approx(want.overshoot_percent, rel=1e-5, abs=1e-6)
     assert got.figures() == loop_figures(tp, ctrl, lag, meas_delay=tau)
     cfb, ct = controller_tf(ctrl, dt)
     if lag:

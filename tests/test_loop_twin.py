@@ -196,10 +196,9 @@ def test_sitl_twin_predicts_held_out_blocks(sitl_fit) -> None:
     assert res.axes["yaw"].closed_loop.fit_percent > 98.0
 
 
-def test_sitl_twin_reaches_the_issue_goal(sitl_fit) -> None:
-    # the controller read the gyro about 0.2 of a loop after the logged sample (the replay on
-    # the training blocks: roll 96.2 -> 97.7 %); without that, the twin stopped at roll 96.9,
-    # pitch 96.8 % (measured 98.4 / 98.35 / 99.5 % with it)
+def test_sitl_twin_follows_the_flight_to_97_percent(sitl_fit) -> None:
+    # the controller reads the gyro about 0.2 of a loop after the logged sample; with that
+    # delay the twin follows roll, pitch and yaw to 98.4 / 98.35 / 99.5 %
     assert all(sitl_fit.axes[a].closed_loop.fit_percent >= 97.0 for a in sitl_fit.axes)
     delays = {a: sitl_fit.axes[a].closed_loop.measurement_delay_loops for a in sitl_fit.axes}
     assert 0.1 <= delays["roll"] <= 0.3 and 0.1 <= delays["pitch"] <= 0.3

@@ -1,5 +1,5 @@
 """The pipeline: configuration, the train/validation split, every bundled pipeline on the
-fixtures, truth recovery on simulated logs, and the SITL SYSTEMID flight against the issue's
+fixtures, truth recovery on simulated logs, and the SITL SYSTEMID flight against its
 free-run goals."""
 
 from __future__ import annotations
@@ -377,8 +377,8 @@ def sitl():  # type: ignore[no-untyped-def]
     return fit([log], cfg)
 
 
-# The issue's goal for the SITL SYSTEMID flight: free-run fit on validation segments of at
-# least 95 % for roll and pitch and 99 % for yaw.
+# What the SITL SYSTEMID flight's models must reach: free-run fit on validation segments of
+# at least 95 % for roll and pitch and 99 % for yaw.
 SITL_GOALS = [("roll", 95.0), ("pitch", 95.0), ("yaw", 99.0)]
 
 

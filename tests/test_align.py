@@ -226,6 +226,7 @@ def sitl_pair():
                 load_flight(shared_path("sitl", "flightA_mixer.tlog")))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("name", "lo", "hi"),
                          [("u_roll", 88, 118), ("u_pitch", 174, 204), ("u_yaw", 260, 290)])
 def test_tlog_mixer_inputs_match_dataflash_rate_outputs(sitl_pair, name, lo, hi):
@@ -241,6 +242,7 @@ def test_tlog_mixer_inputs_match_dataflash_rate_outputs(sitl_pair, name, lo, hi)
     assert 0.9 < slope < 1.2
 
 
+@pytest.mark.slow
 def test_sitl_sysid_runs_from_sids(sitl_pair):
     # README: SID_AXIS 10, 11, 12, 13 entered at about 87, 173, 258 and 344 s; SID_T_REC 60 s,
     # injection 1 s (ArduCopter's SYSTEM_ID_DELAY) after entering the mode
@@ -262,6 +264,7 @@ def test_sysid_runs_absent_without_systemid():
 _LOGS = shared_logs(".bin", ".log", ".tlog", ".ulg")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", _LOGS, ids=ids(_LOGS))
 def test_every_shared_log_aligns_or_gives_a_typed_error(path):
     require_shared()
@@ -397,6 +400,7 @@ def test_a_mavlink_logs_sticks_are_read_on_the_channels_the_autopilot_maps() -> 
     np.testing.assert_array_equal(_sticks(two)["roll"][1], table.time_s[ids == 1])
 
 
+@pytest.mark.slow
 def test_a_tlogs_commanded_attitude_follows_the_simulated_pilots_sticks(tmp_path: Path) -> None:
     """The same manual flight written as a .bin and as a .tlog: the .tlog's commanded roll
     (the stick, on the grid) follows the simulator's desired roll, in shape and timing."""

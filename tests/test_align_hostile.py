@@ -116,6 +116,7 @@ def test_boot_choice_is_reported() -> None:
     assert "longest" in fd.meta["boot"]["reason"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("value", [float("nan"), float("inf"), -float("inf"), 1e300, -1e300,
                                    -1.0, 0.0, 1e9])
 def test_every_parameter_damaged_at_once_fits_or_says_why(monkeypatch, value: float) -> None:  # type: ignore[no-untyped-def]

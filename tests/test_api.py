@@ -276,12 +276,14 @@ def _coverage(rho_v: float, method: str = "all-lags", reps: int = 200, n: int = 
     return hit_c / reps, hit_w / reps
 
 
+@pytest.mark.slow
 def test_two_sigma_coverage_white_noise():
     corrected, conventional = _coverage(0.0)
     assert np.all((corrected >= 0.91) & (corrected <= 0.99)), corrected
     assert np.all((conventional >= 0.91) & (conventional <= 0.99)), conventional
 
 
+@pytest.mark.slow
 def test_two_sigma_coverage_coloured_noise_needs_the_correction():
     corrected, conventional = _coverage(0.8)
     assert np.all((corrected >= 0.90) & (corrected <= 0.99)), corrected
@@ -305,6 +307,7 @@ def test_stepwise_finds_the_true_regressors():
 # ----------------------------------------------------------------------- output error, CR bound
 
 
+@pytest.mark.slow
 def test_output_error_cramer_rao_bounds_cover_the_truth():
     """x[k+1] = a x[k] + b u[k] measured with white noise: the output-error estimate with its
     Cramér–Rao bound holds the truth within ±2σ in ~95 % of 100 repetitions."""

@@ -37,6 +37,7 @@ def fleet(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return d
 
 
+@pytest.mark.slow
 def test_batch_equals_single_fits_records_failures_and_resumes(fleet: Path,
                                                                tmp_path: Path) -> None:
     out = tmp_path / "res.parquet"
@@ -76,6 +77,7 @@ def _simulate(path: Path, vehicle: str, seed: int) -> None:
                          "--t-rec", "10", "--rate-hz", "200", "--seed", str(seed)]) == 0
 
 
+@pytest.mark.slow
 def test_a_step_in_one_aircrafts_effectiveness_is_flagged(tmp_path: Path) -> None:
     logs = tmp_path / "logs"
     logs.mkdir()
@@ -172,6 +174,7 @@ def test_a_vehicles_file_that_cannot_be_meant_is_refused(tmp_path: Path, text, s
         _mapping(csv)
 
 
+@pytest.mark.slow
 def test_a_vehicles_file_naming_logs_not_in_the_batch_warns(tmp_path: Path) -> None:
     """Names that match no log (a typo, another folder) were dropped silently: the run goes
     on, and a warning lists them."""

@@ -49,6 +49,7 @@ def fitted(tmp_path_factory):  # type: ignore[no-untyped-def]
     return out, json.loads(proc.stdout)
 
 
+@pytest.mark.slow
 def test_fit_json_shape(fitted) -> None:  # type: ignore[no-untyped-def]
     _, doc = fitted
     assert list(doc["axes"]) == ["roll"]
@@ -85,6 +86,7 @@ def test_fit_text_table() -> None:
                for line in lines)
 
 
+@pytest.mark.slow
 def test_model_from_one_flight_predicts_the_next(fitted, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     out, doc = fitted
     # a second flight of the same simulated vehicle, different seed: every segment held out
@@ -241,6 +243,7 @@ def _listening(port: int) -> list[str]:
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not Path("/proc/net/tcp").exists(), reason="needs Linux /proc/net/tcp")
 def test_served_viewer_listens_on_localhost_only_and_stops_on_sigterm() -> None:
     """`view --serve`: the rerun server listens on 127.0.0.1 only, on free ports (not the
@@ -279,6 +282,7 @@ def test_served_viewer_listens_on_localhost_only_and_stops_on_sigterm() -> None:
             proc.kill()
 
 
+@pytest.mark.slow
 def test_a_non_utf8_terminal_gets_escapes_not_a_traceback() -> None:
     """LANG=C / an ASCII stdout: "→" and "×" in the output must not crash the command."""
     import os
@@ -322,6 +326,7 @@ class _Terminal(io.StringIO):
         return True
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("quiet", [False, True])
 def test_progress_bar_on_a_terminal_only(quiet: bool, tmp_path: Path) -> None:
     """On a terminal, fit shows a bar over its stages (each named as it starts), gone at the

@@ -59,6 +59,7 @@ def _logs(tmp_path: Path) -> dict[str, Path]:
             "slow": FIXTURES / "slow_10hz.bin", "garbage": garbage}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("command", ["fit", "info", "response", "segments", "tune",
                                      "validate"])
 def test_json_is_one_document_on_success_and_on_failure(command: str, model: Path,

@@ -102,6 +102,7 @@ def test_shared_bin_logs_are_all_covered():
     assert {"test.BIN", "backend_log_80k.bin", "output.BIN", "minimal.bin"} <= names
 
 
+@pytest.mark.slow
 def test_sitl_log_equals_pymavlink_on_attitude_rate_sysid_types(sitl_pair):
     log, ref = sitl_pair
     assert set(ref) <= set(SITL_TYPES) and {"ATT", "RATE", "SIDS", "PARM"} <= set(ref)
@@ -109,6 +110,7 @@ def test_sitl_log_equals_pymavlink_on_attitude_rate_sysid_types(sitl_pair):
     assert len(ref["RATE"]) > 100_000 and len(ref["SIDS"]) == 4
 
 
+@pytest.mark.slow
 def test_sitl_log_metadata(sitl_pair):
     log, ref = sitl_pair
     assert log.firmware == next(r["Message"] for r in ref["MSG"] if r["Message"].startswith(
@@ -126,6 +128,7 @@ def test_sitl_log_metadata(sitl_pair):
     assert log["RATE"].unit("R") == "deg/s" and log["ATT"].unit("Roll") == "deg"
 
 
+@pytest.mark.slow
 def test_selective_load_and_time_window_match_full_decode(sitl_pair):
     full, _ = sitl_pair
     path = shared_path(*SITL)
@@ -344,6 +347,7 @@ def small_log(tmp_path_factory):
     return _Small((data, full, offsets, tmp_path_factory.mktemp("cut")))
 
 
+@pytest.mark.slow
 def test_truncation_at_every_byte_of_the_first_and_last_kilobyte(small_log):
     data, full, _, tmp = small_log
     n = len(data)
@@ -359,6 +363,7 @@ def test_truncation_at_every_byte_of_the_first_and_last_kilobyte(small_log):
     assert salvaged > len(cuts) * 0.9
 
 
+@pytest.mark.slow
 @settings(max_examples=40, deadline=None, suppress_health_check=list(HealthCheck))
 @given(data=st.data())
 def test_garbage_between_records_loses_no_intact_record(small_log, data):
@@ -496,6 +501,7 @@ def _frame_reference(a, cand, types, table):
     return cand[keep], defid[keep]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mutator", ["bit_flips", "garbage", "splice", "corrupt_definitions",
                                      "repeat_definition", "header_flood", "truncate"])
 def test_framing_on_suspects_equals_the_full_length_rules(mutator):

@@ -28,6 +28,7 @@ def _read(path):
         return read_log(path)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", TEXT_LOGS, ids=ids(TEXT_LOGS))
 def test_every_value_equals_pymavlink(path, monkeypatch):
     require_shared()
@@ -101,6 +102,7 @@ def test_nothing_decodable_is_a_log_format_error(tmp_path, text):
         dftext.read(path)
 
 
+@pytest.mark.slow
 def test_text_flood_is_read_in_bounded_memory(tmp_path) -> None:
     """Floods of short lines (undefined types, too few values) are skipped; the defined
     records still read; Python's memory stays a small multiple of the file (it was ~25x:
@@ -124,6 +126,7 @@ def test_text_flood_is_read_in_bounded_memory(tmp_path) -> None:
     assert peak < 3 * 2_000_000 + 8_000_000  # (+ one slice of lines) it was ~25x the file
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", [p for p in TEXT_LOGS if p.name not in PYMAVLINK_FAILS],
                          ids=ids([p for p in TEXT_LOGS if p.name not in PYMAVLINK_FAILS]))
 def test_duration_is_pymavlinks_span(path):

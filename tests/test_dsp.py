@@ -63,6 +63,7 @@ def test_tf2ss_matches_scipy(num: list[float], den: list[float]) -> None:
         assert np.asarray(got) == pytest.approx(np.asarray(want), rel=1e-14, abs=1e-15)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("nper", [800, 801, 256, 37])
 @pytest.mark.parametrize("detrend", [demean, detrend_linear])
 def test_welch_csd_and_per_window_spectra_match_scipy(nper: int, detrend) -> None:  # type: ignore[no-untyped-def]
@@ -184,6 +185,7 @@ def test_logm_matches_scipy_and_hands_defective_matrices_to_it() -> None:
     assert dsp.logm(jordan)[0, 1] == pytest.approx(1 / 0.9, rel=1e-12)
 
 
+@pytest.mark.slow
 def test_a_fit_without_the_compiled_recursion_is_the_same_fit(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """A build without a C compiler filters through scipy: the same model within a

@@ -91,6 +91,7 @@ def test_noise_free_recovers_coupled_plant_within_1_percent():
     assert m.units[name] == "rad/s"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("est", ["ls", "ridge"])
 def test_truth_inside_three_sigma_in_95_percent_of_50_seeds(est):
     hits = total = 0
@@ -108,6 +109,7 @@ def test_truth_inside_three_sigma_in_95_percent_of_50_seeds(est):
     assert hits / total >= 0.95, f"{hits}/{total}"
 
 
+@pytest.mark.slow
 def test_output_error_truth_inside_three_sigma_with_sensor_noise():
     """Sensor (output) noise: equation-error LS is biased (the noisy p[k] is a regressor),
     the output-error refinement recovers the plant with calibrated error bars."""
@@ -520,6 +522,7 @@ def test_to_statespace_reproduces_simulate():
                                atol=1e-9 * np.abs(resp.outputs).max())
 
 
+@pytest.mark.slow
 def test_coupled_pqr_model_with_all_inputs():
     a = np.array([[0.995, 0.002, 0.0], [-0.003, 0.993, 0.001], [0.0, 0.0, 0.998]])
     b = np.array([[0.75, 0.02, 0.0], [0.0, 0.70, 0.01], [0.0, 0.0, 0.04]])

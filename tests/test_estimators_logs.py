@@ -84,6 +84,7 @@ def sitl_segments() -> list[Segment]:
 SITL_EFFECTIVENESS = 305.0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("axis", ["roll", "pitch", "yaw"])
 def test_sitl_systemid_free_run_on_the_other_half(sitl_segments, axis):
     """Train on the first half of the axis's SYSTEMID chirp, free-run on the second.

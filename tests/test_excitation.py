@@ -181,6 +181,7 @@ def sitl_reports():
                 for suffix in ("BIN", "tlog")}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("suffix", ["BIN", "tlog"])
 def test_sitl_systemid_flight_gives_the_chirps(sitl_reports, suffix):
     # README: SID_AXIS 10/11/12/13 entered at about 87, 173, 258, 344 s; SID_T_REC 60 s
@@ -196,6 +197,7 @@ def test_sitl_systemid_flight_gives_the_chirps(sitl_reports, suffix):
 _LOGS = shared_logs(".bin", ".log", ".tlog", ".ulg")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", _LOGS, ids=ids(_LOGS))
 def test_every_shared_log_gives_reasons(path):
     require_shared()
@@ -299,6 +301,7 @@ def test_windows_measured_together_are_measured_as_alone(name: str,
                 b.metrics[key], rel=1e-9, abs=1e-12), key
 
 
+@pytest.mark.slow
 def test_moving_average_by_slices_is_the_clipped_window_mean() -> None:
     """The centred moving average (high-pass and envelopes of every axis, taken by slices of
     the running sum) against its definition: each sample the mean of the ``n`` around it,

@@ -233,6 +233,7 @@ def test_the_readme_preset_file_loads_and_fits(tmp_path) -> None:  # type: ignor
     assert fd.preset == "my-quad" and fd.input_names == ("u_roll",)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("layout", ["copter-4", "copter-3.6", "copter-3.3", "copter-3.4-dev"])
 def test_firmware_matrix_gives_the_truth_back(layout: str, tmp_path) -> None:  # type: ignore[no-untyped-def]
     """The same simulated plant logged as each ArduCopter generation did (TimeMS, RCOU.Ch*,
@@ -288,6 +289,7 @@ def test_firmware_matrix_gives_the_truth_back(layout: str, tmp_path) -> None:  #
     assert ("u_roll [1] <- RATE.ROut (/4500, inferred)" in line) == (layout == "copter-3.4-dev")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("layout, preset, rate_field, release", [
     ("px4-1.14", "px4-torque", "vehicle_angular_velocity", "v1.14.0"),
     ("px4-1.11", "px4-actuator-controls", "vehicle_angular_velocity", "v1.11.3"),
@@ -400,6 +402,7 @@ def _roll_fit(path, **cfg):  # type: ignore[no-untyped-def]
     return result, f.model.params["B[p,u_roll]"], -f.model.params["A[p,p]"]
 
 
+@pytest.mark.slow
 def test_copter_32_layout_has_no_rate_and_fits_through_the_motor_mix(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """ArduCopter 3.2 (ArduCopter/Log.pde and DataFlash/LogStructure.h of the 3.2 release):
     TimeMS, ATT in centidegrees with ErrRP/ErrYaw, RCOU Chan1-Chan8, FRAME/RC3_*/THR_*/RATE_*
@@ -448,6 +451,7 @@ def test_copter_32_layout_has_no_rate_and_fits_through_the_motor_mix(tmp_path) -
     assert damping == pytest.approx(want["damping"], rel=0.35)
 
 
+@pytest.mark.slow
 def test_heli_layout_takes_the_rate_outputs_not_the_swashplate(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """A traditional helicopter (ArduCopter 4.x, FRAME_CLASS 6): swashplate servos 1-3 (H3-120
     mix of AP_MotorsHeli_Swash), tail on 4, rotor speed controller on 8; no mixer to invert,
@@ -491,6 +495,7 @@ def test_heli_layout_takes_the_rate_outputs_not_the_swashplate(tmp_path) -> None
     assert damping == pytest.approx(want["damping"], rel=0.35)
 
 
+@pytest.mark.slow
 def test_plane_layout_fits_from_the_pid_sums_and_from_the_servos(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """ArduPlane 4.x: no RATE nor SYSTEMID; PIDR/PIDP/PIDY (Tar/Act in deg/s, P+I+D+FF the
     surface demand in degrees, ±45 full deflection) and the aileron/elevator/throttle/rudder
@@ -631,6 +636,7 @@ roll = { message = "ATT", field = "Roll", unit = "deg" }
     assert choose_preset(copter, presets).name != "my-plane"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("layout", "centi"), [("copter-4", False), ("copter-3.4-dev", True)])
 def test_the_rate_scale_is_judged_right_across_a_reboot(tmp_path, layout: str,  # type: ignore[no-untyped-def]
                                                         centi: bool) -> None:

@@ -47,6 +47,7 @@ def exact_response(plant: LinearPlant, freq_hz: np.ndarray) -> np.ndarray:
     return np.array([plant.c @ np.linalg.solve(zk * eye - plant.a, plant.b) for zk in z])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [3, 7])
 def test_frf_matches_the_true_plant_within_its_error(tmp_path, seed: int) -> None:
     # a SYSTEMID mixer-roll chirp logged at the 400 Hz loop rate, with gyro noise and
@@ -69,6 +70,7 @@ def test_frf_matches_the_true_plant_within_its_error(tmp_path, seed: int) -> Non
     assert 0 <= tf.delay_s <= 0.1 and tf.gain > 0
 
 
+@pytest.mark.slow
 def test_frf_windows_reach_the_end_of_the_chirp(tmp_path) -> None:
     """One noise-free flight logged at 200 and at 400 Hz holds the same samples: its FRF
     must not depend on the logging rate, and must be the true plant's. Welch's fixed
@@ -111,6 +113,7 @@ def flown_loop_margins(gains: dict[str, float] | None, seed: int) -> dict[str, f
     return frd_margins(measured)
 
 
+@pytest.mark.slow
 def test_margins_and_bandwidth_flown(roll_fit) -> None:
     # the loop analysis of the true plant predicts the margins a flown chirp measures
     ctrl = replace(controller_from_params(roll_fit.flights[0].params, "roll"), angle_p=0.0)
@@ -122,6 +125,7 @@ def test_margins_and_bandwidth_flown(roll_fit) -> None:
     assert flown["crossover_hz"] == pytest.approx(truth.crossover_hz, rel=0.05)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("rate_hz", ["200", "400"])
 def test_identified_margins_within_2_deg_and_5_percent_without_noise(tmp_path,
                                                                       rate_hz: str) -> None:
@@ -142,6 +146,7 @@ def test_identified_margins_within_2_deg_and_5_percent_without_noise(tmp_path,
     assert got.bandwidth_hz == pytest.approx(truth.bandwidth_hz, rel=0.05)
 
 
+@pytest.mark.slow
 def test_identified_margins_within_2_deg_and_5_percent(roll_fit, roll_fit_400) -> None:
     """The simulator's default noise (1 deg/s of gyro noise fed back, gyro bias,
     disturbances): the structure is chosen against the FRF measured from the injection
@@ -158,6 +163,7 @@ def test_identified_margins_within_2_deg_and_5_percent(roll_fit, roll_fit_400) -
         assert got.bandwidth_hz == pytest.approx(truth.bandwidth_hz, rel=0.05)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("target", [40.0, 55.0, 65.0])
 def test_suggested_gains_flown_in_the_simulator(roll_fit_400, target: float) -> None:
     # gains suggested from the model identified on a 400 Hz SYSTEMID log, flown in the
@@ -183,6 +189,7 @@ def test_suggested_gains_flown_in_the_simulator(roll_fit_400, target: float) -> 
     assert not flagged or abs(flown - target) > 3.0  # a flag is not a false alarm
 
 
+@pytest.mark.slow
 def test_sitl_predicted_loop_matches_the_measured_one() -> None:
     # the SITL flight injects at the mixer only (no rate-axis run): what it measures is the
     # broken loop at the mixer, rate and attitude loops together; the prediction from the
@@ -214,6 +221,7 @@ def test_tune_json(capsys) -> None:
     assert main(["tune", str(FIXTURE), "--target-pm", "95"]) == 1
 
 
+@pytest.mark.slow
 def test_report_has_a_loop_section(roll_fit) -> None:
     from mavsid.report import loop_section
 
@@ -223,6 +231,7 @@ def test_report_has_a_loop_section(roll_fit) -> None:
     assert text.count("<img") == 2  # twin against measured; Bode overlay with coherence
 
 
+@pytest.mark.slow
 def test_predicted_closed_loop_matches_a_rate_chirp(tmp_path) -> None:
     # a SYSTEMID rate-roll chirp (SID_AXIS 7: the waveform added to the rate target): the
     # closed-loop response rate target -> rate predicted from the identified plant and the

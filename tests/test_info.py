@@ -72,6 +72,7 @@ def test_info_json_agrees_with_pymavlink(small_ref, capsys):
     assert err.startswith("warning: ") and err.count("\n") == 1
 
 
+@pytest.mark.slow
 def test_info_lists_the_sysid_runs_pymavlink_sees():
     from pymavlink import mavutil
 

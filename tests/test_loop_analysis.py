@@ -129,6 +129,7 @@ def test_numpy_ss2tf_is_scipys() -> None:
         np.testing.assert_allclose(got[1], den, rtol=1e-13, atol=1e-15)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("params", "axis", "plant", "lag", "tau"), [
     ({}, "roll", PlantParams(), 0, 0.0),
     ({}, "roll", PlantParams(), 1, 0.2),

@@ -50,6 +50,7 @@ def test_a_damaged_gain_stops_only_its_axis_in_tune() -> None:
     assert "error" not in tune(res)["roll"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("p_gain", [1e30, 0.135 * 8])
 def test_logged_gains_that_are_not_the_flights_are_said_and_not_scaled(p_gain: float) -> None:
     """The SYSTEMID fixture (flown on P 0.135) analysed with a logged ATC_RAT_RLL_P that is

@@ -134,6 +134,7 @@ def test_baseline_fit_chooses_the_exhaustive_delay(case: str) -> None:
         assert len(cands) <= 3
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("manoeuvre", ["sysid", "doublet"])
 def test_twin_with_the_true_plant_reproduces_a_simulated_flight(manoeuvre: str) -> None:
     # noise-free vehicle: the twin, given the true plant, the logged rate target and the
@@ -164,6 +165,7 @@ def sitl_fit():
         return pipeline.fit([str(path)])
 
 
+@pytest.mark.slow
 def test_sitl_controller_replay_matches_the_logged_pid(sitl_fit) -> None:
     # the rebuilt controller fed the logged rate reproduces the logged output on the
     # training blocks (the controller alone, parameters and timing)
@@ -181,6 +183,7 @@ def test_sitl_controller_replay_matches_the_logged_pid(sitl_fit) -> None:
             assert fit_percent(measured[b.warm:], out[b.warm:]) > 99.0
 
 
+@pytest.mark.slow
 def test_sitl_twin_predicts_held_out_blocks(sitl_fit) -> None:
     res = sitl_fit
     for axis in ("roll", "pitch", "yaw"):
@@ -196,6 +199,7 @@ def test_sitl_twin_predicts_held_out_blocks(sitl_fit) -> None:
     assert res.axes["yaw"].closed_loop.fit_percent > 98.0
 
 
+@pytest.mark.slow
 def test_sitl_twin_follows_the_flight_to_97_percent(sitl_fit) -> None:
     # the controller reads the gyro about 0.2 of a loop after the logged sample; with that
     # delay the twin follows roll, pitch and yaw to 98.4 / 98.35 / 99.5 %
@@ -204,6 +208,7 @@ def test_sitl_twin_follows_the_flight_to_97_percent(sitl_fit) -> None:
     assert 0.1 <= delays["roll"] <= 0.3 and 0.1 <= delays["pitch"] <= 0.3
 
 
+@pytest.mark.slow
 def test_a_simulated_loop_rate_log_has_no_measurement_delay(tmp_path) -> None:
     """The simulator's controller reads the very gyro sample it logs: the replay must find no
     measurement delay there (a 400 Hz log, one sample per loop)."""

@@ -166,6 +166,7 @@ def own_tmp(tmp_path: Path, monkeypatch):  # type: ignore[no-untyped-def]
     return folder
 
 
+@pytest.mark.slow
 @pytest.mark.usefixtures("own_tmp")
 @pytest.mark.parametrize("fork", [True, False])
 def test_the_report_worker_writes_the_report_drawn_here(fitted, tmp_path: Path, monkeypatch,  # type: ignore[no-untyped-def]
@@ -189,6 +190,7 @@ def test_the_report_worker_writes_the_report_drawn_here(fitted, tmp_path: Path, 
     assert not list(Path(tempfile.gettempdir()).glob("mavsid-report-*"))  # (handed over)
 
 
+@pytest.mark.slow
 @pytest.mark.usefixtures("own_tmp")
 def test_the_worker_draws_the_loop_analysis_handed_to_it(fitted, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     """The command works the loop analysis out while the worker draws the first figures:
@@ -216,6 +218,7 @@ def test_the_worker_draws_the_loop_analysis_handed_to_it(fitted, tmp_path: Path)
     assert not list(Path(tempfile.gettempdir()).glob("mavsid-report-*"))
 
 
+@pytest.mark.slow
 def test_a_result_that_cannot_be_handed_over_is_drawn_here(log: Path, tmp_path: Path,
                                                            monkeypatch) -> None:  # type: ignore[no-untyped-def]
     """A temporary folder the result cannot be written to (full): the worker is not used,
@@ -238,6 +241,7 @@ def test_a_result_that_cannot_be_handed_over_is_drawn_here(log: Path, tmp_path: 
         (tmp_path / "f.html").read_text().split("base64,")[1].split('"')[0]).decode()
 
 
+@pytest.mark.slow
 def test_a_report_the_worker_cannot_write_is_one_line(fitted, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     from mavsid.errors import ConfigError
     from mavsid.outputs import ReportWorker
@@ -248,6 +252,7 @@ def test_a_report_the_worker_cannot_write_is_one_line(fitted, tmp_path: Path) ->
             worker.wait()
 
 
+@pytest.mark.slow
 def test_a_defect_in_the_worker_is_an_error_naming_the_report(capfd) -> None:  # type: ignore[no-untyped-def]
     """Not a result (a defect of the caller's): the worker prints its traceback, the
     command gets one MavsidError naming the output."""

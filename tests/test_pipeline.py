@@ -207,6 +207,7 @@ def _shape_ok(result_dict: dict) -> None:
     json.dumps(result_dict, allow_nan=False)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("pipeline", "log", "preset", "axes"),
     [
@@ -244,6 +245,7 @@ def test_defaults_from_a_low_rate_telemetry_log() -> None:
     assert -f.model.params["A[p,p]"] == pytest.approx(truth["damping"], rel=0.10)
 
 
+@pytest.mark.slow
 def test_px4_pipeline_runs_on_a_real_ulog() -> None:
     # a real ULog (the simulator's PX4 layouts are tested in test_firmware.py)
     # A hover with little excitation: its best model (roll) predicts one step at 49.7 %,
@@ -382,6 +384,7 @@ def sitl():  # type: ignore[no-untyped-def]
 SITL_GOALS = [("roll", 95.0), ("pitch", 95.0), ("yaw", 99.0)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("axis", "goal"), SITL_GOALS)
 def test_sitl_free_run_fit_reaches_the_goal(sitl, axis: str, goal: float) -> None:  # type: ignore[no-untyped-def]
     fitted = sitl.axes[axis]
@@ -392,6 +395,7 @@ def test_sitl_free_run_fit_reaches_the_goal(sitl, axis: str, goal: float) -> Non
     assert got >= goal
 
 
+@pytest.mark.slow
 def test_sitl_chirp_frequency_response(sitl) -> None:  # type: ignore[no-untyped-def]
     """Where the held-out chirp data is coherent, the model's gain matches the measured."""
     for axis in ("roll", "pitch", "yaw"):

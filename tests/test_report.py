@@ -60,6 +60,7 @@ def page(tmp_path_factory):  # type: ignore[no-untyped-def]
     return path.read_text(encoding="utf-8"), result, plants
 
 
+@pytest.mark.slow
 def test_report_is_self_contained_with_real_figures(page) -> None:  # type: ignore[no-untyped-def]
     text, result, _ = page
     parsed = _Collect()
@@ -162,6 +163,7 @@ def test_log_axes_keep_their_minor_grid_and_ticks_without_tick_objects() -> None
     assert box.y0 <= inside.y0 and inside.y1 <= box.y1
 
 
+@pytest.mark.slow
 def test_one_bode_figure_serves_the_validation_and_the_loop(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """The axis section's Bode figure carries the loop analysis's curves (the SYSTEMID runs
     measured with the injection as reference, the TF fit, the broken loop at the mixer
@@ -197,6 +199,7 @@ def test_one_bode_figure_serves_the_validation_and_the_loop(tmp_path) -> None:  
     assert sections.count("<img") == 4 * len(result.axes)
 
 
+@pytest.mark.slow
 def test_the_warm_up_builds_the_figures_a_report_draws(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """:func:`report.warm_up` (done by the report worker while the logs are fitted) builds
     and draws every figure layout of a SYSTEMID flight's report beforehand: the report then
@@ -230,6 +233,7 @@ def test_the_warm_up_builds_the_figures_a_report_draws(tmp_path) -> None:  # typ
     assert (tmp_path / "warm.html").read_bytes() == (tmp_path / "cold.html").read_bytes()
 
 
+@pytest.mark.slow
 def test_the_loop_analysis_is_asked_for_after_every_axis_s_other_figures(page) -> None:  # type: ignore[no-untyped-def]
     """Every axis's figures but the Bode ones are drawn before the loop analysis is first
     asked for (the report worker draws them while the command works it out), and the

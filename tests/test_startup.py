@@ -34,6 +34,7 @@ def test_help_and_version_load_no_heavy_library(argv: list[str]) -> None:
     assert _loaded(code) == set()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["sysid_roll.bin", "sysid_roll.tlog", "px4_hexa_doublets.ulg",
                                   "hexa_doublets.bin", "heavy_sysid.bin", "noisy_sysid.bin"])
 def test_a_plain_fit_loads_neither_the_viewer_nor_plots_nor_cvxpy_nor_scipy(name: str) -> None:
@@ -47,6 +48,7 @@ def test_a_plain_fit_loads_neither_the_viewer_nor_plots_nor_cvxpy_nor_scipy(name
     assert _loaded(code, (*HEAVY, "scipy", "mavsid.synthetic")) == set()
 
 
+@pytest.mark.slow
 def test_tune_loads_only_the_scipy_its_margins_use() -> None:
     """``mavsid tune``: the margins of the loop measured at the mixer interpolate it with
     ``scipy.interpolate`` and find their crossings with ``scipy.optimize.brentq``; no
@@ -57,6 +59,7 @@ def test_tune_loads_only_the_scipy_its_margins_use() -> None:
     assert loaded == {"scipy.interpolate", "scipy.optimize"}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("argv", [
     ["fit", "{missing}", "--rrd", "{out}.rrd", "--report", "{out}.html"],
     ["fit", "{folder}"],
@@ -112,6 +115,7 @@ print(json.dumps([i["num_threads"] for i in threadpool_info() if i["user_api"] =
 """
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("user", [None, "2"])
 def test_the_command_line_runs_one_blas_thread_unless_the_user_says(user: str | None) -> None:
     import os
@@ -143,6 +147,7 @@ def _blas_threads() -> dict[str, int]:
     return {i["filepath"]: i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("user", [None, "2"])
 def test_the_library_fits_on_one_blas_thread_and_gives_the_callers_back(
         user: str | None, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -132,6 +132,7 @@ def sitl_sid():
     return out
 
 
+@pytest.mark.slow
 def test_chirp_reproduces_real_sitl_sidd(sitl_sid):
     """Our waveform, given the SIDS settings and SIDD.Time, equals ArduCopter's SIDD.Targ and
     SIDD.F in all four real runs (within ArduPilot's float32 arithmetic)."""
@@ -152,6 +153,7 @@ def test_chirp_reproduces_real_sitl_sidd(sitl_sid):
         assert np.abs(sidd["Targ"][m]).max() == pytest.approx(s.magnitude, rel=1e-3)
 
 
+@pytest.mark.slow
 def test_sidd_frequency_matches_specification(short, short_bin):
     """SIDD.F follows the chirp specification, and the waveform's own zero crossings have
     that instantaneous frequency."""
@@ -362,6 +364,7 @@ def _compare_tables(ours, ref: dict[str, dict[str, np.ndarray]], skip=()) -> int
     return compared
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", FIXTURE_LOGS)
 def test_fixtures_read_alike_by_pymavlink_and_mavsid(name):
     """Every committed fixture: pymavlink decodes it, mavsid's reader agrees on every value,
@@ -408,6 +411,7 @@ def resimulate(u: np.ndarray, p: PlantParams, axis: int, dt: float, sub: int = 1
     return signal.lfilter(fb, fa, rate)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("delay_s", [0.005, 0.00375])
 def test_logged_rates_obey_the_plant(tmp_path, delay_s):
     """Noiseless: re-simulating the plant from the logged RATE.*Out reproduces RATE.R/P/Y
@@ -426,6 +430,7 @@ def test_logged_rates_obey_the_plant(tmp_path, delay_s):
     assert np.abs(rate["R"]).max() > 5.0  # the roll chirp moved the vehicle
 
 
+@pytest.mark.slow
 @settings(max_examples=6, deadline=None, derandomize=True)
 @given(
     damping=st.tuples(*[st.floats(0.5, 10.0)] * 3),
@@ -453,6 +458,7 @@ def test_any_plant_is_what_the_log_obeys(damping, effectiveness, motor_tau_s, de
         assert np.abs(got - want).max() < 1e-4 * max(np.abs(got).max(), 1e-3) + 1e-5, ax
 
 
+@pytest.mark.slow
 def test_noisy_rates_obey_the_plant_within_noise(short, short_bin):
     """With sensor noise: the residual to the noiseless re-simulation is the filtered noise
     plus the gyro bias, of the size the truth declares."""
@@ -477,6 +483,7 @@ def _corr(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.corrcoef(a, b)[0, 1])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sid_axis", [1, 2, 3, 4, 7, 8, 9, 10, 11, 12, 13])
 def test_injection_points(sid_axis):
     """SID_AXIS puts the waveform where ArduPilot does: angle target (deg), rate target
@@ -565,6 +572,7 @@ def test_same_seed_same_bytes(tmp_path):
     assert a.sizes == b.sizes
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("truth_file", sorted(p.name for p in FIXTURES.glob("*.truth.json")))
 def test_fixture_regenerates_from_its_truth_command(tmp_path, monkeypatch, truth_file):
     """The command recorded in each truth file rewrites its logs byte for byte."""
@@ -610,6 +618,7 @@ def test_cli_writes_tlog_and_bin(tmp_path, capsys):
     assert np.ptp(log["RC_CHANNELS"]["chan1_raw"]) == 0
 
 
+@pytest.mark.slow
 def test_multi_run_log(tmp_path):
     """Three SYSTEMID runs in one log: one SIDS and one STABILIZE -> SYSTEMID -> STABILIZE
     cycle each, every SIDD record inside its run's mode window."""
@@ -650,6 +659,7 @@ def test_noise_that_is_not_a_finite_amount_is_refused(option, value):
 # --------------------------------------------------------------------------- faults
 
 
+@pytest.mark.slow
 def test_faults(tmp_path):
     sc = Scenario(manoeuvre="doublet", duration_s=4.0, seed=3, rates=LogRates(rate=100))
     clean = simulate(sc, [tmp_path / "c.bin", tmp_path / "c.tlog"])

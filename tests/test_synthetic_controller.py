@@ -213,6 +213,7 @@ def test_twin_models_px4_saturation():
     assert np.max(np.abs(ys - yt)) < 1e-3
 
 
+@pytest.mark.slow
 def test_simulator_does_not_import_the_twin():
     """The simulator's package never imports mavsid.loop (or what it becomes)."""
     pkg = Path(__file__).resolve().parents[1] / "mavsid" / "synthetic"

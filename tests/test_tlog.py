@@ -144,6 +144,7 @@ def reference_with_missed(path: Path, log: RawLog) -> tuple[dict[str, list[Any]]
 # ----------------------------------------------------------------------------- shared logs
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", TLOGS, ids=ids(TLOGS))
 def test_shared_tlog_matches_pymavlink(path: Path) -> None:
     require_shared()
@@ -402,6 +403,7 @@ def test_receive_time_running_backwards_warns(tmp_path: Path, vtol: Any) -> None
     assert "runs backwards 3 times and jumps forward by more than 3600 s 2 times" in quality[0]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", range(4))
 def test_random_byte_flips_lose_at_most_the_hit_frames(
     tmp_path: Path, vtol: Any, seed: int
@@ -568,6 +570,7 @@ def test_info_duration_is_pymavlinks_where_the_receive_clock_holds(path: Path) -
         assert got == pytest.approx(own_span) and own_span > 2 * want
 
 
+@pytest.mark.slow
 def test_block_boundaries_lose_nothing(monkeypatch: pytest.MonkeyPatch, vtol: Any) -> None:
     """The scan works in blocks (16 MiB); with tiny blocks every kind of record straddles
     one, and the result is still pymavlink's."""

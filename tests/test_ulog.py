@@ -126,6 +126,7 @@ def test_compiled_walk_steps_over_the_info_messages_python_checks() -> None:
     assert 400 < taken < 3600, taken  # both outcomes met
 
 
+@pytest.mark.slow
 def test_compiled_info_runs_end_where_python_checks_stop() -> None:
     """``_scan.ulog_infos`` (the definitions' runs of ``M`` / ``Q`` messages) ends a run
     where stepping message by message with ``ulog._checked`` does: 3 000 random runs of 0 to
@@ -158,6 +159,7 @@ def _formats_of(path: Path) -> list[bytes]:
     return out
 
 
+@pytest.mark.slow
 def test_the_compiled_format_parser_is_the_python_one() -> None:
     """``_scan.ulog_format`` gives ``_parse_format``'s objects, or fails where it does: on
     every format of the shared and fixture ULogs, and on 20 000 of them damaged (bytes
@@ -225,6 +227,7 @@ def assert_tables_match(log: RawLog, ref: ULog) -> None:
         assert np.array_equal(table.time_s, np.asarray(clock, dtype=float) / 1e6), name_of(d)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", ULOGS, ids=ids(ULOGS))
 def test_shared_ulog_matches_pyulog(path: Path) -> None:
     require_shared()
@@ -405,6 +408,7 @@ def test_info_json_agrees_with_pyulog() -> None:
         f"{sum(d.duration for d in ref.dropouts)} ms in all"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", ULOGS, ids=ids(ULOGS))
 def test_info_duration_is_pyulogs(path: Path) -> None:
     """The log's span as pyulog has it (header start to the last data timestamp), not the
@@ -579,6 +583,7 @@ def message_ends(raw: bytes) -> list[int]:
     return ends
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("source", ["px4_hexa_doublets.ulg", "sample_log_small.ulg"])
 @pytest.mark.parametrize("cut", [0.2, 0.55, 0.9, 1.0])
 def test_truncated_last_message_is_counted(tmp_path: Path, source: str, cut: float) -> None:
@@ -656,6 +661,7 @@ def test_false_candidates_inside_records_keep_pyulogs_framing(tmp_path: Path) ->
     assert [t.text for t in log.texts] == [m.message for m in ref.logged_messages]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", range(6))
 def test_garbage_between_messages_resynchronises_as_pyulog(tmp_path: Path, seed: int) -> None:
     """Random bytes inserted between two messages (no sync message after them): pyulog
@@ -673,6 +679,7 @@ def test_garbage_between_messages_resynchronises_as_pyulog(tmp_path: Path, seed:
         assert log.source.skipped_bytes >= (0 if not ref.file_corruption else 1)
 
 
+@pytest.mark.slow
 def test_huge_claimed_sizes_and_garbage_are_bounded(tmp_path: Path) -> None:
     """A megabyte of garbage and of maximal sizes after valid definitions: a result or one
     typed error, in linear time (no hang: each step moves forward)."""
@@ -689,6 +696,7 @@ def test_huge_claimed_sizes_and_garbage_are_bounded(tmp_path: Path) -> None:
         assert len(log["att"]) >= 10
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("between", ["sync", "text"])
 def test_data_messages_each_before_another_match_pyulog(tmp_path: Path, between: str) -> None:
     """Data messages each followed by a sync message (one-message runs for the numpy walk,
@@ -712,6 +720,7 @@ def test_data_messages_each_before_another_match_pyulog(tmp_path: Path, between:
     assert len(log.texts) == len(ref.logged_messages) == (10_000 if between == "text" else 0)
 
 
+@pytest.mark.slow
 def test_a_file_of_data_header_look_alikes_matches_pyulog(tmp_path: Path) -> None:
     """Every byte after the subscription is ``D``: every position is a framing candidate
     (size 0x4444 = the subscribed format's + 2, id 0x4444 subscribed); the candidates are
@@ -829,6 +838,7 @@ def _content(table: Any) -> tuple[Any, bytes, bytes]:
             table.time_s.tobytes())
 
 
+@pytest.mark.slow
 def test_logs_read_in_threads_with_little_kept_are_each_their_own(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """Logs read at once in threads (a threaded Dask worker), with a budget so small that
@@ -877,6 +887,7 @@ def _both_ways(path: Path, monkeypatch: pytest.MonkeyPatch, **kwargs: Any) -> tu
         return plain, _everything(path, **kwargs)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("walk", ["plain"], indirect=True)
 def test_the_compiled_pass_takes_real_logs_and_reads_them_as_the_python_reader(
         walk: str, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -895,6 +906,7 @@ def test_the_compiled_pass_takes_real_logs_and_reads_them_as_the_python_reader(
             assert plain == python, (path.name, kwargs)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("walk", ["plain"], indirect=True)
 @pytest.mark.parametrize("seed", range(4))
 def test_damaged_logs_read_by_the_compiled_pass_as_by_the_python_reader(
@@ -946,6 +958,7 @@ def test_damaged_logs_read_by_the_compiled_pass_as_by_the_python_reader(
     assert taken >= 4
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("walk", ["plain"], indirect=True)
 @pytest.mark.parametrize("layout", ["px4-1.14", "px4-1.11", "px4-1.8"])
 def test_simulated_layouts_read_by_the_compiled_pass_as_by_the_python_reader(
@@ -965,6 +978,7 @@ def test_simulated_layouts_read_by_the_compiled_pass_as_by_the_python_reader(
     assert "last message truncated" in python[-1][0]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("walk", ["plain"], indirect=True)
 def test_the_compiled_pass_is_bounded_on_hostile_nesting(
         walk: str, monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:

@@ -58,6 +58,7 @@ def _truth(name: str) -> dict:
     return json.loads((FIXTURES / f"{name.rsplit('.', 1)[0]}.truth.json").read_text())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("name", "axis"), IDENTIFIABLE, ids=[f"{n}-{a}" for n, a in IDENTIFIABLE])
 def test_every_vehicle_is_identified_near_its_truth(name: str, axis: str) -> None:
     result = _fit(name)
@@ -237,6 +238,7 @@ def test_noisy_gyros_get_their_motor_lag_and_a_good_verdict(name: str, axis: str
     assert f.validation.fit_summary(f.output)["free_run"] > 86.0
 
 
+@pytest.mark.slow
 def test_a_25_hz_log_gives_a_usable_model_and_says_what_it_misses(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """25 Hz (4+ samples per period of a 5 Hz loop): the slow dynamics are there to fit, so
     a model with the cap said, not a refusal; 10 Hz stays refused (the test above)."""
@@ -269,6 +271,7 @@ def _simulated(tmp_path, name: str, layout: str | None = None, **options):  # ty
     return path, truth, result
 
 
+@pytest.mark.slow
 def test_an_old_log_whose_metadata_has_no_time_is_armed_from_its_first_record(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """ArduCopter 3.3 writes EV, MODE and PARM without a time field, the ARM event first.
     With no SYSTEMID run (a stick doublet) no metadata record has a time at all: the ARM
@@ -289,6 +292,7 @@ def test_an_old_log_whose_metadata_has_no_time_is_armed_from_its_first_record(tm
     assert abs(b - truth["effectiveness"]) < 2.5 * se  # (50 Hz: -6.8 %, 1.6 σ)
 
 
+@pytest.mark.slow
 def test_a_centidegree_rate_log_is_screened_in_si_units(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """ArduCopter 3.4-dev logs RATE in centidegrees/s: the physical range (4000 deg/s) is
     judged once the scale is settled. Screened before, every sample above 40 deg/s was
@@ -346,6 +350,7 @@ def test_the_baseline_survives_blocks_shorter_than_its_delay() -> None:
     assert [p.shape for p in preds] == [(5,), (400,)]
 
 
+@pytest.mark.slow
 def test_a_systemid_chirp_is_judged_by_its_injection_not_the_noise_floor(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """6 deg/s of gyro noise fed back: the pitch response is 4.7× its noise floor, under the
     5× that scanned windows need, but the logged injection (SIDD.Targ) is coherent with it
@@ -359,6 +364,7 @@ def test_a_systemid_chirp_is_judged_by_its_injection_not_the_noise_floor(tmp_pat
                                                           rel=B_TOLERANCE)
 
 
+@pytest.mark.slow
 def test_random_flights_give_no_wrong_model_and_no_crash(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """A dozen flights drawn by ``benchmarks/bench_variety.py`` (manoeuvre, vehicle, noise,
     vibration, 25-400 Hz, ten layouts; fixed seed): no model off the truth by more than 10 %
@@ -384,6 +390,7 @@ def test_random_flights_give_no_wrong_model_and_no_crash(tmp_path) -> None:  # t
     assert sum(o[0] == "ok" for o in outcomes) >= 8, outcomes
 
 
+@pytest.mark.slow
 def test_lags_the_data_cannot_tell_apart_widen_the_sigma(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """A heavy quad's chirp in a 3.3-layout log (no SYSTEMID records: scanned windows, the
     chirp's slow part): lags 0-20 ms score within 0.5 % of each other and the shortest is
@@ -398,6 +405,7 @@ def test_lags_the_data_cannot_tell_apart_widen_the_sigma(tmp_path) -> None:  # t
     assert abs(b - truth["effectiveness"]) < 5 * se
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("vehicle", "gyro", "vibration", "rate", "seed"),
                          [("quad", 1.0, 2.0, 200.0, 61), ("heavy-x", 3.0, 0.0, 400.0, 774)],
                          ids=["quad-1dps", "heavy-x-3dps"])
@@ -441,6 +449,7 @@ def test_a_slow_telemetry_log_is_told_about_its_streams_not_only_the_sd_card_log
     assert "flight controller's own log" in advice and "LOG_BITMASK" in advice
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("manoeuvre", ["doublet", "3211"])
 def test_a_light_racer_flown_with_its_own_tuning_is_identified_near_its_truth(
         tmp_path, manoeuvre: str) -> None:  # type: ignore[no-untyped-def]
@@ -459,6 +468,7 @@ def test_a_light_racer_flown_with_its_own_tuning_is_identified_near_its_truth(
     assert f.closed_loop is not None and f.closed_loop.fit_percent > 90.0
 
 
+@pytest.mark.slow
 def test_a_feedback_biased_effectiveness_is_not_called_certain(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """A chirp that stops at 3 Hz with 3 deg/s of gyro noise fed back (and 3x the default
     bias and gusts): the time-domain fit's effectiveness comes back 12 % low (the feedback's
@@ -474,6 +484,7 @@ def test_a_feedback_biased_effectiveness_is_not_called_certain(tmp_path) -> None
     assert abs(b - truth["effectiveness"]) < 2.5 * se
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [7, 8, 288])
 def test_a_noisy_manual_flight_is_judged_by_the_pilots_command(tmp_path, seed: int) -> None:  # type: ignore[no-untyped-def]
     """A light racer flown by stick (3-2-1-1 in pitch) with 6 deg/s of gyro noise and 5 deg/s
@@ -495,6 +506,7 @@ def test_a_noisy_manual_flight_is_judged_by_the_pilots_command(tmp_path, seed: i
     assert abs(b - truth["effectiveness"]) < 2.5 * se
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("layout", "seed"), [("px4-1.14", 288), ("px4-1.14", 7),
                                            ("px4-1.8", 8)])
 def test_a_noisy_manual_px4_flight_is_judged_by_its_attitude_setpoint(
@@ -569,6 +581,7 @@ def test_a_second_estimate_that_differs_is_said_in_the_verdict() -> None:
                        "the difference"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("manoeuvre", "vehicle", "axis", "seed"),
                          [("doublet", "quad", "roll", 2), ("random", "hexa", "pitch", 3),
                           ("3211", "heavy-x", "roll", 4)])
@@ -620,6 +633,7 @@ def test_a_yaw_chirp_whose_trim_moves_is_not_refused(tmp_path) -> None:  # type:
     assert any("with the training windows' trim" in r for r in f.verdict.reasons)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("frame", "axis"), [("hexa-x", "pitch"), ("y6b", "roll"),
                                              ("octaquad-x", "yaw")])
 def test_telemetry_of_other_frames_is_unmixed_as_ardupilot_mixes_them(
@@ -639,6 +653,7 @@ def test_telemetry_of_other_frames_is_unmixed_as_ardupilot_mixes_them(
     assert abs(b - truth["effectiveness"]) < 2.5 * se
 
 
+@pytest.mark.slow
 def test_a_quadplanes_vtol_flight_is_fitted_with_its_vtol_controller(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """An ArduPlane QuadPlane hovering (QSTABILIZE, a pilot's 3-2-1-1 on roll): its VTOL
     rate controller logs PIQR/PIQP/PIQY (rad/s; P+I+D+FF is the motor mixer's input), the
@@ -710,6 +725,7 @@ def _simulated_raw(path, layout: str | None, **options):  # type: ignore[no-unty
         return read_log(path)
 
 
+@pytest.mark.slow
 def test_a_tlog_without_frame_parameters_is_not_unmixed_as_a_quad_when_it_is_not_one(
         tmp_path) -> None:  # type: ignore[no-untyped-def]
     """A .tlog whose ground station fetched no parameters holds no FRAME_CLASS: a quad-X was
@@ -730,6 +746,7 @@ def test_a_tlog_without_frame_parameters_is_not_unmixed_as_a_quad_when_it_is_not
         assert bool(said) is not unmixed and (unmixed or "output(s) 5, 6" in said[0])
 
 
+@pytest.mark.slow
 def test_a_toml_mixer_of_raw_factors_unmixes_a_frame_the_log_does_not_name(
         tmp_path) -> None:  # type: ignore[no-untyped-def]
     """A Y6B's .tlog whose ground station fetched no parameters: no inputs (its outputs 5-6
@@ -801,6 +818,7 @@ _STIRRED = [(axis, layout, manoeuvre, rate)
     ("roll", "tlog", "random", 50.0), ("yaw", "tlog", "3211", 50.0)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("axis", "layout", "manoeuvre", "rate_hz"), _STIRRED)
 def test_a_pilot_who_never_lets_go_of_the_stick_is_fitted(  # type: ignore[no-untyped-def]
         tmp_path, axis: str, layout: str | None, manoeuvre: str, rate_hz: float) -> None:
@@ -840,6 +858,7 @@ def test_a_pilot_who_never_lets_go_of_the_stick_is_fitted(  # type: ignore[no-un
     assert any(f"coherent with the commanded {what}" in r for r in kept), kept
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("layout", "name"), [(None, "yaw.bin"), ("px4-1.14", "yaw.ulg")])
 def test_the_commanded_yaw_is_the_rate_of_the_commanded_heading(tmp_path, layout: str | None,  # type: ignore[no-untyped-def]
                                                                 name: str) -> None:

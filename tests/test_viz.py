@@ -178,6 +178,7 @@ def _screenshot(rrd: Path, out: Path) -> None:
         pytest.fail(f"rerun --headless failed ({proc.returncode}): {tail}")
 
 
+@pytest.mark.slow
 def test_headless_viewer_renders_plots(rrd, tmp_path) -> None:  # type: ignore[no-untyped-def]
     import matplotlib.image as mpimg
 

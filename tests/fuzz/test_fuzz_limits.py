@@ -55,6 +55,7 @@ def _check(op: str, path: Path) -> None:
         assert str(path) in out.detail, f"error does not name the file: {out.detail}"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("op", "seed", "mutator", "n"), _mutated_cases(),
                          ids=lambda v: str(v))
 def test_mutated_case_within_limits(op: str, seed: str, mutator: str, n: int,
@@ -96,6 +97,7 @@ HOSTILE: dict[str, tuple[str, str, Callable[[], bytes]]] = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(HOSTILE))
 def test_hostile_file_within_limits(name: str, tmp_path: Path) -> None:
     op, ext, build = HOSTILE[name]
@@ -104,6 +106,7 @@ def test_hostile_file_within_limits(name: str, tmp_path: Path) -> None:
     _check(op, path)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", ["info-garbage", "segments-truncated", "fit-bitflips"])
 def test_cli_prints_one_line(case: str, tmp_path: Path) -> None:
     """The command line itself: exit 0, or exit 1 with one ``mavsid: error:`` line and no

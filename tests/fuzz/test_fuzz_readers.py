@@ -55,6 +55,7 @@ def check(data: bytes, suffix_: str) -> str:
         os.unlink(name)
 
 
+@pytest.mark.slow
 @_SETTINGS
 @given(seed=st.sampled_from(sorted(SEEDS)), mutator=st.sampled_from(sorted(MUTATORS)),
        n=st.integers(0, 2**16))
@@ -71,6 +72,7 @@ def test_random_bytes_behind_a_magic(kind: str, body: bytes) -> None:
     check(_MAGIC[kind] + body, kind)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mutator", sorted(MUTATORS))
 def test_every_mutator_on_a_fixture(mutator: str) -> None:
     """Each mutation kind at least once on the simulated flight, whatever the budget."""

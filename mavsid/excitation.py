@@ -102,7 +102,7 @@ from typing import Any
 import numpy as np
 
 from mavsid import dsp
-from mavsid.autopilot.ardupilot import sid_axis
+from mavsid.autopilot.ardupilot import SID_IDENTIFIES, sid_axis
 from mavsid.axes import AXES, RATE_OF
 from mavsid.data import FlightData, Segment, detrend_linear
 from mavsid.errors import ConfigError, finite_number
@@ -807,6 +807,8 @@ def _sysid_windows(fd: FlightData, axes: Sequence[str], axes_cache: Mapping[str,
             note = (f"SYSTEMID {injection} {name} chirp, SID_AXIS {sid}, magnitude {mag:g}, "
                     f"{run.get('f_start_hz', float('nan')):g}–"
                     f"{run.get('f_stop_hz', float('nan')):g} Hz")
+            if injection in SID_IDENTIFIES:
+                note += f": identifies {SID_IDENTIFIES[injection]}"
             out.append(replace(rep, reasons=(*rep.reasons, note, *notes)))
     return out
 

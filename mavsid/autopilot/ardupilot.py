@@ -37,6 +37,7 @@ __all__ = [
     "RC_MAP_AP",
     "SERVO_FUNCTIONS",
     "SIDS_FIELDS",
+    "SID_IDENTIFIES",
     "SID_MIXER_AXIS",
     "SID_PARAMS",
     "SYSTEMID_MODE",
@@ -67,6 +68,17 @@ SYSTEM_ID_DELAY_S = 1.0
 #: ArduCopter/mode_systemid.cpp, SID_AXIS @Values (1-3 Input, 4-6 Recovery, 7-9 Rate,
 #: 10-12 Mixer roll/pitch/yaw, 13 Mixer Thrust; 14-19 the position controller's axes)
 _INJECTION = ("input angle", "recovery angle", "rate", "mixer")
+#: what a chirp at each injection point identifies: the mixer input is the plant's input;
+#: upstream of it the plant is still measured, against the waveform (SIDD.Targ) as
+#: reference, through the controllers that carry the chirp to the mixer input
+SID_IDENTIFIES: Mapping[str, str] = MappingProxyType({
+    "mixer": "the plant (injected at its input)",
+    "rate": "the plant through the rate controller (against SIDD.Targ), and the rate loop",
+    "recovery angle": "the plant through the attitude and rate controllers (against "
+                      "SIDD.Targ), and the attitude loop",
+    "input angle": "the plant through the attitude and rate controllers (against SIDD.Targ), "
+                   "and the attitude loop with its input shaping",
+})
 #: axis -> the SID_AXIS that adds the chirp to the mixer input (10, 11, 12)
 SID_MIXER_AXIS: Mapping[str, int] = MappingProxyType({a: 10 + i for i, a in enumerate(AXES)})
 #: SIDS record field -> run setting (ArduCopter/Log.cpp, log_SysIdSetup: Ax Mag FSt FSp TFin

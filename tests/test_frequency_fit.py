@@ -51,6 +51,7 @@ def closed_loop_chirp(seed: int, *, gyro_noise: float = 0.02, torque_noise: floa
 true_delay = DELAY + SIM_DT / 2
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [1, 2])
 def test_closed_loop_plant_recovered_within_sigma(seed: int) -> None:
     """Against the injection the feedback does not bias the plant: B, lag and delay each
@@ -123,6 +124,7 @@ def test_aliased_gyro_refused_with_the_reason_when_nothing_is_coherent() -> None
 FIXTURES = __import__("pathlib").Path(__file__).resolve().parents[1] / "fixtures"
 
 
+@pytest.mark.slow
 def test_validate_on_another_flight_in_the_frequency_domain(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """A model fitted on one simulated chirp, validated on another flight's chirp (another
     seed, noisier): the model's response against the one measured there against its

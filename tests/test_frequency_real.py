@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+pytestmark = pytest.mark.slow  # (whole real flights, read twice: by mavsid and by pymavlink)
 
 
 def real_log(name: str) -> Path:

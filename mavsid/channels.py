@@ -32,8 +32,6 @@ from mavsid.autopilot.ardupilot import (
     thrust_curve,
 )
 from mavsid.autopilot.mixers import Mixer
-from mavsid.autopilot.presets import INJECTION_CHANNEL as INJECTION_CHANNEL
-from mavsid.autopilot.presets import TARGET_CHANNELS as TARGET_CHANNELS
 from mavsid.autopilot.presets import TRANSFORMS, UNIT_TO_SI, Channel, Preset
 from mavsid.data import MessageTable, RawLog
 from mavsid.errors import ConfigError, DataQualityWarning, MavsidError, MissingMessageError

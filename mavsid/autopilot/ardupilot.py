@@ -1,4 +1,5 @@
-"""ArduPilot's facts: SYSTEMID, servo and motor outputs, the thrust curve, logging advice.
+"""ArduPilot's facts: SYSTEMID, servo and motor outputs, the thrust curve, logging advice,
+the rate controller's parameter names and the parameter file MAVProxy loads.
 
 What ArduPilot's firmware defines and mavsid relies on, each with the source file it comes
 from (the facts carry over, never the code): SYSTEMID's axis numbering (``SID_AXIS``), its
@@ -20,7 +21,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from types import MappingProxyType
 
 import numpy as np
@@ -34,6 +35,8 @@ __all__ = [
     "PLANE_LOG_BITS",
     "PLANE_SURFACE_DEG",
     "PWM_SPAN",
+    "RATE_AXIS",
+    "RATE_CDEG_SCALE",
     "RC_MAP_AP",
     "SERVO_FUNCTIONS",
     "SIDS_FIELDS",
@@ -43,6 +46,7 @@ __all__ = [
     "SYSTEMID_MODE",
     "SYSTEM_ID_DELAY_S",
     "TELEMETRY_NOTE",
+    "angle_p_param",
     "before_rate",
     "excitation_advice",
     "is_plane",
@@ -51,7 +55,10 @@ __all__ = [
     "logging_advice",
     "longer_advice",
     "motor_channels",
+    "param_file_text",
     "pwm_to_thrust",
+    "rate_naming",
+    "rate_prefix",
     "sid_axis",
     "thrust_curve",
     "whole_param",
@@ -404,3 +411,73 @@ def logging_advice(platform: str | None) -> str:
 TELEMETRY_NOTE = ("a .tlog holds what the telemetry streams sent (ArduPilot SRn_EXTRA1: "
                   "ATTITUDE, SRn_RC_CHAN: SERVO_OUTPUT_RAW; at most 50 Hz): fit the flight "
                   "controller's own log from its SD card instead")
+
+
+# --------------------------------------------------------------------------- rate controller
+
+#: the axis in the rate and attitude controllers' parameter names (ATC_RAT_RLL_P, STB_PIT_P)
+RATE_AXIS: Mapping[str, str] = MappingProxyType({"roll": "RLL", "pitch": "PIT", "yaw": "YAW"})
+#: ArduCopter <= 3.3's rate PIDs (``RATE_*``) act on centidegrees/s and output on the ±4500
+#: motor scale: their gains are this many times the ``ATC_RAT_*`` ones
+RATE_CDEG_SCALE = (18000.0 / math.pi) / 4500.0
+
+#: the rate-controller parameter families, by naming (AC_AttitudeControl's ``ATC_RAT_*``
+#: from Copter 3.4; an ArduPlane QuadPlane's VTOL controller ``Q_A_RAT_*``; Copter <= 3.3's
+#: ``RATE_*``; "ATC_RAT_FILT" is 3.5-4.0's ``ATC_RAT_*`` with a single ``FILT``)
+_RATE_FAMILY = MappingProxyType({"ATC_RAT": "ATC_RAT", "ATC_RAT_FILT": "ATC_RAT",
+                                 "Q_A_RAT": "Q_A_RAT", "RATE": "RATE"})
+_ANGLE_FAMILY = MappingProxyType({"ATC_RAT": "ATC_ANG", "ATC_RAT_FILT": "ATC_ANG",
+                                  "Q_A_RAT": "Q_A_ANG", "RATE": "STB"})
+
+
+def rate_prefix(axis: str, naming: str = "ATC_RAT") -> str:
+    """The prefix of one axis's rate-PID parameters in a naming family.
+
+    Examples
+    --------
+    >>> rate_prefix("roll"), rate_prefix("yaw", "Q_A_RAT"), rate_prefix("pitch", "RATE")
+    ('ATC_RAT_RLL_', 'Q_A_RAT_YAW_', 'RATE_PIT_')
+    """
+    return f"{_RATE_FAMILY[naming]}_{RATE_AXIS[axis]}_"
+
+
+def angle_p_param(axis: str, naming: str = "ATC_RAT") -> str:
+    """The attitude loop's P around one axis's rate loop, in the same family.
+
+    Examples
+    --------
+    >>> angle_p_param("roll"), angle_p_param("pitch", "RATE"), angle_p_param("yaw", "Q_A_RAT")
+    ('ATC_ANG_RLL_P', 'STB_PIT_P', 'Q_A_ANG_YAW_P')
+    """
+    return f"{_ANGLE_FAMILY[naming]}_{RATE_AXIS[axis]}_P"
+
+
+def rate_naming(params: Mapping[str, float], axis: str) -> str:
+    """Which rate-controller family a log's parameters use for ``axis``: ``ATC_RAT``
+    (also when none is present: the defaults), ``Q_A_RAT`` or ``RATE``.
+
+    Examples
+    --------
+    >>> rate_naming({"Q_A_RAT_RLL_P": 0.2}, "roll"), rate_naming({"RATE_YAW_P": 0.2}, "yaw")
+    ('Q_A_RAT', 'RATE')
+    """
+    for naming in ("ATC_RAT", "Q_A_RAT", "RATE"):
+        pre = rate_prefix(axis, naming)
+        if any(k.startswith(pre) for k in params):
+            return naming
+    return "ATC_RAT"
+
+
+def param_file_text(values: Mapping[str, float], header: Sequence[str]) -> str:
+    """A parameter file MAVProxy (``param load``) and Mission Planner load: ``#`` comment
+    lines, then one ``NAME VALUE`` line per parameter.
+
+    Examples
+    --------
+    >>> print(param_file_text({"ATC_RAT_RLL_P": 0.1235}, ["from flight.bin"]), end="")
+    # from flight.bin
+    ATC_RAT_RLL_P 0.1235
+    """
+    lines = [f"# {h}" for h in header]
+    lines += [f"{name} {value:.7g}" for name, value in values.items()]
+    return "\n".join(lines) + "\n"

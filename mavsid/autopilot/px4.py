@@ -1,4 +1,5 @@
-"""PX4's facts: what to fly and which logger profile to set for identification.
+"""PX4's facts: what to fly and which logger profile to set for identification, the rate
+controller's parameter names and QGroundControl's parameter file.
 
 The uORB topics mavsid reads per PX4 generation are in the channel presets
 (:mod:`mavsid.autopilot.presets`: ``vehicle_torque_setpoint`` from 1.14,
@@ -13,11 +14,13 @@ Examples
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from types import MappingProxyType
 
-__all__ = ["RATE_PROFILE_BITS", "RC_MAP_PX4", "SDLOG_PROFILE_BITS", "excitation_advice", "is_px4",
-           "logging_advice", "longer_advice", "profile_bit_text"]
+__all__ = ["INT_LIM_AXIS", "PARAM_TYPE_REAL32", "RATE_AXIS", "RATE_PROFILE_BITS", "RC_MAP_PX4",
+           "SDLOG_PROFILE_BITS", "angle_p_param", "excitation_advice", "has_rate_params",
+           "int_lim_param", "is_px4", "logging_advice", "longer_advice", "param_file_text",
+           "profile_bit_text", "rate_prefix"]
 
 #: SDLOG_PROFILE, the logger's topic-set bitmask: bit -> the set it adds
 #: (src/modules/logger/module.yaml ``SDLOG_PROFILE`` ``bit:``, and src/modules/logger/params.c
@@ -86,3 +89,65 @@ def logging_advice() -> str:
     first, second = (profile_bit_text(b) for b in RATE_PROFILE_BITS)
     return (f"PX4: set SDLOG_PROFILE to include {first} or {second} so that "
             "vehicle_angular_velocity and the torque/actuator setpoints are logged at full rate")
+
+
+# --------------------------------------------------------------------------- rate controller
+
+#: the axis in the multicopter rate controller's parameter names (MC_ROLLRATE_P ...)
+RATE_AXIS: Mapping[str, str] = MappingProxyType(
+    {"roll": "ROLL", "pitch": "PITCH", "yaw": "YAW"})
+#: the axis in the rate integrator limits' names (MC_RR_INT_LIM ...)
+INT_LIM_AXIS: Mapping[str, str] = MappingProxyType({"roll": "RR", "pitch": "PR", "yaw": "YR"})
+#: MAV_PARAM_TYPE_REAL32, the type column of a float in a QGroundControl parameter file
+PARAM_TYPE_REAL32 = 9
+
+
+def rate_prefix(axis: str) -> str:
+    """The prefix of one axis's rate-controller parameters.
+
+    Examples
+    --------
+    >>> rate_prefix("pitch"), int_lim_param("yaw"), angle_p_param("roll")
+    ('MC_PITCHRATE_', 'MC_YR_INT_LIM', 'MC_ROLL_P')
+    """
+    return f"MC_{RATE_AXIS[axis]}RATE_"
+
+
+def int_lim_param(axis: str) -> str:
+    """The rate integrator's limit for ``axis``."""
+    return f"MC_{INT_LIM_AXIS[axis]}_INT_LIM"
+
+
+def angle_p_param(axis: str) -> str:
+    """The attitude loop's P around ``axis``'s rate loop."""
+    return f"MC_{RATE_AXIS[axis]}_P"
+
+
+def has_rate_params(params: Mapping[str, float]) -> bool:
+    """Whether a log's parameters hold PX4's multicopter rate controller.
+
+    >>> has_rate_params({"MC_YAWRATE_P": 0.2}), has_rate_params({"ATC_RAT_YAW_P": 0.2})
+    (True, False)
+    """
+    prefixes = tuple(rate_prefix(a) for a in RATE_AXIS)
+    return any(k.startswith(prefixes) for k in params)
+
+
+def param_file_text(values: Mapping[str, float], header: Sequence[str],
+                    vehicle_id: int = 1, component_id: int = 1) -> str:
+    """A QGroundControl parameter file (``.params``): ``#`` comment lines ending in QGC's
+    column header, then one tab-separated ``vehicle component name value type`` line per
+    parameter (every value a float, ``MAV_PARAM_TYPE_REAL32``).
+
+    Examples
+    --------
+    >>> text = param_file_text({"MC_ROLLRATE_P": 0.15}, ["from flight.ulg"])
+    >>> text.splitlines()[:3], text.splitlines()[-2:]
+    (['# Onboard parameters for Vehicle 1', '#', '# from flight.ulg'], ['# Vehicle-Id Component-Id Name Value Type', '1\t1\tMC_ROLLRATE_P\t0.15\t9'])
+    """
+    lines = [f"# Onboard parameters for Vehicle {vehicle_id}", "#"]
+    lines += [f"# {h}" for h in header]
+    lines += ["#", "# Vehicle-Id Component-Id Name Value Type"]
+    lines += [f"{vehicle_id}\t{component_id}\t{name}\t{value:.7g}\t{PARAM_TYPE_REAL32}"
+              for name, value in values.items()]
+    return "\n".join(lines) + "\n"

@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 
 from mavsid import dsp
+from mavsid.autopilot import ardupilot, px4
 from mavsid.axes import AXES, RATE_OF
 from mavsid.errors import ConfigError
 
@@ -65,11 +66,7 @@ __all__ = [
 
 #: the axes and each one's body rate (:mod:`mavsid.axes`)
 AXIS_RATE = RATE_OF
-_AP = {"roll": "RLL", "pitch": "PIT", "yaw": "YAW"}
-_PX4 = {"roll": "ROLL", "pitch": "PITCH", "yaw": "YAW"}
-_PX4_LIM = {"roll": "RR", "pitch": "PR", "yaw": "YR"}
-#: ArduCopter 3.x rate PIDs act on centidegrees/s and output on the ±4500 motor scale
-_AP3_SCALE = (18000.0 / math.pi) / 4500.0
+_AP3_SCALE = ardupilot.RATE_CDEG_SCALE
 
 
 def lowpass_alpha(cutoff_hz: float, dt: float) -> float:
@@ -369,10 +366,6 @@ _PX4_LOOP_HZ = 400.0  # IMU_GYRO_RATEMAX default; pre-1.11 firmware ran the loop
 _PX4_OLD_LOOP_HZ = 250.0
 
 
-def _is_px4(params: Mapping[str, float]) -> bool:
-    return any(k.startswith(("MC_ROLLRATE_", "MC_PITCHRATE_", "MC_YAWRATE_")) for k in params)
-
-
 def _angle_p(params: Mapping[str, float], name: str, default: float,
              used: dict[str, float]) -> float:
     """The attitude P (recorded in ``used``; not a rate-controller default: the twin follows
@@ -413,7 +406,7 @@ def controller_from_params(
     """
     if axis not in AXES:
         raise ConfigError(f"axis must be one of {', '.join(AXES)}, got {axis!r}")
-    kind = autopilot or ("px4" if _is_px4(params) else "ardupilot")
+    kind = autopilot or ("px4" if px4.has_rate_params(params) else "ardupilot")
     if kind not in ("ardupilot", "px4"):
         raise ConfigError(f"no rate-controller model for autopilot {kind!r} (ardupilot, px4)")
     used: dict[str, float] = {}
@@ -440,29 +433,27 @@ def controller_from_params(
         return value
 
     if kind == "px4":
-        pre = f"MC_{_PX4[axis]}RATE_"
+        pre = px4.rate_prefix(axis)
         p, i, d, ff, k, lim = _PX4_DEFAULTS[axis]
         gains: RateGains | PX4RateGains = PX4RateGains(
             get(pre + "P", p), get(pre + "I", i), get(pre + "D", d), get(pre + "FF", ff),
-            get(pre + "K", k), get(f"MC_{_PX4_LIM[axis]}_INT_LIM", lim),
+            get(pre + "K", k), get(px4.int_lim_param(axis), lim),
             get("IMU_DGYRO_CUTOFF", _PX4_DGYRO_CUTOFF_HZ),
         )
         old = "IMU_GYRO_RATEMAX" not in params and "IMU_GYRO_CUTOFF" not in params
         loop = get_rate("IMU_GYRO_RATEMAX", _PX4_OLD_LOOP_HZ if old else _PX4_LOOP_HZ)
         gyro = get("IMU_GYRO_CUTOFF", _PX4_GYRO_CUTOFF_HZ)
         notch = float(params.get("IMU_GYRO_NF0_FRQ", params.get("IMU_GYRO_NF_FREQ", 0.0)) or 0)
-        ang = _angle_p(params, f"MC_{_PX4[axis]}_P", _PX4_ANGLE_P[axis], used)
+        ang = _angle_p(params, px4.angle_p_param(axis), _PX4_ANGLE_P[axis], used)
         return AxisController("px4", axis, gains, loop or _PX4_LOOP_HZ, gyro, notch, used,
                               tuple(defaults), "MC", ang)
-    ax = _AP[axis]
-    modern = any(k.startswith(f"ATC_RAT_{ax}_") for k in params)
-    # an ArduPlane QuadPlane's VTOL controller: the same AC_AttitudeControl, its parameters
-    # named Q_A_* (Q_A_RAT_RLL_P ...)
-    quadplane = not modern and any(k.startswith(f"Q_A_RAT_{ax}_") for k in params)
-    legacy = not modern and not quadplane and any(k.startswith(f"RATE_{ax}_") for k in params)
+    # an ArduPlane QuadPlane's VTOL controller is the same AC_AttitudeControl, its
+    # parameters named Q_A_* (Q_A_RAT_RLL_P ...)
+    family = ardupilot.rate_naming(params, axis)
+    quadplane, legacy = family == "Q_A_RAT", family == "RATE"
     if legacy:
         p, i, d, imax, filt = _AP3_DEFAULTS[axis]
-        pre = f"RATE_{ax}_"
+        pre = ardupilot.rate_prefix(axis, "RATE")
         filt_name = pre + "FILT_HZ" if pre + "FILT_HZ" in params else pre + "FILT"
         f = get(filt_name, filt)
         gains = RateGains(
@@ -472,7 +463,7 @@ def controller_from_params(
         )
         naming = "RATE"
     else:
-        pre = f"Q_A_RAT_{ax}_" if quadplane else f"ATC_RAT_{ax}_"
+        pre = ardupilot.rate_prefix(axis, family)
         vals = dict(zip(_AP_FIELDS, _AP_DEFAULTS[axis], strict=True))
         if pre + "FLTE" not in params and pre + "FILT" in params:
             # 3.5-4.0: one filter on the error, the derivative taken of the filtered error
@@ -494,9 +485,7 @@ def controller_from_params(
         notch = float(params.get("INS_HNTCH_FREQ", 0.0) or 0.0)
     elif params.get("INS_NOTCH_ENABLE", 0):
         notch = float(params.get("INS_NOTCH_FREQ", 0.0) or 0.0)
-    ang_name = (f"STB_{ax}_P" if legacy else f"Q_A_ANG_{ax}_P" if quadplane
-                else f"ATC_ANG_{ax}_P")
-    ang = _angle_p(params, ang_name, 4.5, used)
+    ang = _angle_p(params, ardupilot.angle_p_param(axis, family), 4.5, used)
     return AxisController("ardupilot", axis, gains, loop, gyro, notch, used, tuple(defaults),
                           naming, ang)
 
@@ -505,15 +494,12 @@ def gain_params(ctrl: AxisController) -> dict[str, float]:
     """The controller's P, I, D in the vehicle's own parameter names and units."""
     g = ctrl.gains
     if ctrl.autopilot == "px4":
-        pre = f"MC_{_PX4[ctrl.axis]}RATE_"
+        pre = px4.rate_prefix(ctrl.axis)
         k = g.k if isinstance(g, PX4RateGains) else 1.0
         return {pre + "P": g.p, pre + "I": g.i, pre + "D": g.d, pre + "K": k}
-    ax = _AP[ctrl.axis]
-    if ctrl.naming == "RATE":
-        return {f"RATE_{ax}_{n}": round(v / _AP3_SCALE, 6)
-                for n, v in (("P", g.p), ("I", g.i), ("D", g.d))}
-    pre = "Q_A_RAT" if ctrl.naming == "Q_A_RAT" else "ATC_RAT"
-    return {f"{pre}_{ax}_{n}": round(v, 6) for n, v in (("P", g.p), ("I", g.i), ("D", g.d))}
+    pre = ardupilot.rate_prefix(ctrl.axis, ctrl.naming)
+    scale = _AP3_SCALE if ctrl.naming == "RATE" else 1.0
+    return {pre + n: round(v / scale, 6) for n, v in (("P", g.p), ("I", g.i), ("D", g.d))}
 
 
 def scaled(ctrl: AxisController, k: float) -> AxisController:

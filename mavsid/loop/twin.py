@@ -394,7 +394,7 @@ def _on_grid(t: np.ndarray, v: np.ndarray, grid: np.ndarray, hold: bool) -> np.n
 def twin_messages() -> set[str]:
     """The messages :func:`twin_signals` reads (rate targets, SYSTEMID injection), of every
     format: a caller reading the log anyway reads them in the same pass."""
-    from mavsid.channels import INJECTION_CHANNEL, TARGET_CHANNELS
+    from mavsid.autopilot.presets import INJECTION_CHANNEL, TARGET_CHANNELS
 
     return {ch.message for chans in TARGET_CHANNELS.values() for ch in chans} | {
         INJECTION_CHANNEL.message}
@@ -404,10 +404,11 @@ def twin_signals(flight: FlightData, raw: Any = None) -> TwinSignals:
     """Rate targets and SYSTEMID mixer injections of ``flight``, from its log (re-read for
     the few messages needed unless ``raw`` is given).
 
-    Targets come from the first of :data:`mavsid.channels.TARGET_CHANNELS` the log has;
+    Targets come from the first of :data:`mavsid.autopilot.presets.TARGET_CHANNELS` the log has;
     mixer injections from ``SIDD.Targ`` during the SYSTEMID runs on ``SID_AXIS`` 10-12.
     """
-    from mavsid.channels import INJECTION_CHANNEL, TARGET_CHANNELS, evaluate, first_of
+    from mavsid.autopilot.presets import INJECTION_CHANNEL, TARGET_CHANNELS
+    from mavsid.channels import evaluate, first_of
 
     if raw is None:
         from mavsid.readers import read_log
@@ -699,7 +700,7 @@ def closed_loop_fit(
     tr = locate_blocks(train, axis, flights, sigs)
     val = locate_blocks(held_out, axis, flights, sigs)
     if not val:
-        from mavsid.channels import TARGET_CHANNELS
+        from mavsid.autopilot.presets import TARGET_CHANNELS
 
         names = [f"{c.message}.{c.field}" for c in TARGET_CHANNELS[AXIS_RATE[axis]]]
         raise ConfigError(f"{axis}: no rate target logged for the held-out blocks "

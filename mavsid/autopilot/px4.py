@@ -142,8 +142,9 @@ def param_file_text(values: Mapping[str, float], header: Sequence[str],
     Examples
     --------
     >>> text = param_file_text({"MC_ROLLRATE_P": 0.15}, ["from flight.ulg"])
-    >>> text.splitlines()[:3], text.splitlines()[-2:]
-    (['# Onboard parameters for Vehicle 1', '#', '# from flight.ulg'], ['# Vehicle-Id Component-Id Name Value Type', '1\t1\tMC_ROLLRATE_P\t0.15\t9'])
+    >>> text.splitlines()[:3], text.splitlines()[-1].split()
+    (['# Onboard parameters for Vehicle 1', '#', '# from flight.ulg'], \
+['1', '1', 'MC_ROLLRATE_P', '0.15', '9'])
     """
     lines = [f"# Onboard parameters for Vehicle {vehicle_id}", "#"]
     lines += [f"# {h}" for h in header]

@@ -765,7 +765,14 @@ def _add_tune(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("log", metavar="LOG", help="flight log (.bin .log .tlog .ulg)")
     p.add_argument("--target-pm", type=float, default=50.0, metavar="DEG",
-                   help="phase margin the suggested gains aim at (default 50)")
+                   help="phase margin the suggested gains aim at and must reach (default 50)")
+    p.add_argument("--max-step", type=float, default=2.0, metavar="X",
+                   help="one flight changes the gains by at most this factor either way "
+                   "(default 2: 0.5-2x); a larger step is capped and says so")
+    p.add_argument("--params-out", metavar="FILE.parm",
+                   help="write the suggested changes as a parameter file (ArduPilot: NAME "
+                   "VALUE lines MAVProxy and Mission Planner load; PX4: a QGroundControl "
+                   ".params file); refused when no gain is suggested")
     p.add_argument("--axis", action="append", choices=AXES,
                    help="axis to analyse (repeat for several; default all)")
     p.add_argument("--config", metavar="FILE.toml", help="pipeline settings (see pipelines/)")
@@ -780,19 +787,28 @@ def _tune(args: argparse.Namespace) -> int:
 
     if not 0 < args.target_pm < 90:
         raise ConfigError(f"--target-pm {args.target_pm:g}: must lie in (0, 90) degrees")
+    if not (math.isfinite(args.max_step) and args.max_step >= 1.0):
+        raise ConfigError(f"--max-step {args.max_step:g}: must be at least 1")
     _check_inputs([args.log])
+    check_outputs([args.params_out], [args.log])
     from mavsid.cli_format import format_tune
-    from mavsid.loop.tune import tune
+    from mavsid.loop.limits import Limits
+    from mavsid.loop.tune import param_file, tune
     from mavsid.pipeline import FIT_STAGES, _json_safe, fit
 
     cfg = _pipeline_config(args)
     with _progress(args, 1 + len(FIT_STAGES) * len(cfg.axes) + 1) as step:
         result = fit([args.log], cfg, progress=step)
         step("loop analysis")
-        report = tune(result, args.target_pm)
+        report = tune(result, args.target_pm, limits=Limits(max_step=args.max_step))
+    if args.params_out:
+        text = param_file(report, args.log)  # (refuses, naming why, when nothing is suggested)
+        with atomic_path(args.params_out) as tmp, open(tmp, "w", encoding="utf-8") as f:
+            f.write(text)
     if args.json:
         print(json.dumps({"axes": _json_safe(report), "log": args.log,
-                          "target_pm_deg": args.target_pm}))
+                          "target_pm_deg": args.target_pm, "max_step": args.max_step,
+                          "params_out": args.params_out}))
     else:
         print(format_tune(report))
     return 0

@@ -13,7 +13,8 @@ import numpy as np
 if TYPE_CHECKING:
     from mavsid.response import FlightResponse, LoopResponse
 
-__all__ = ["figure", "format_loop", "format_responses", "format_tune"]
+__all__ = ["figure", "format_loop", "format_responses", "format_tune", "gain_table",
+           "limit_table", "value_text"]
 
 def figure(v: float | None, fmt: str, unit: str, sd: float | None = None) -> str:
     """A loop figure as ``mavsid tune`` prints it, with its σ; ``none`` where it does not
@@ -31,13 +32,107 @@ def figure(v: float | None, fmt: str, unit: str, sd: float | None = None) -> str
                            else "") + f" {unit}"
 
 
+def value_text(v: float | bool | None, unit: str = "", digits: int = 3) -> str:
+    """A limit's or gain's value to ``digits`` significant digits; ``–`` where there is none.
+
+    Examples
+    --------
+    >>> value_text(45.8514, "deg"), value_text(None), value_text(True), value_text(0.04)
+    ('45.9 deg', '–', 'yes', '0.04')
+    """
+    if isinstance(v, bool):
+        return "yes" if v else "no"
+    if v is None:
+        return "–"
+    if not math.isfinite(v):
+        return "none"
+    return f"{v:.{digits}g}" + (f" {unit}" if unit else "")
+
+
+def gain_table(gains: Sequence[Mapping[str, Any]]) -> list[list[str]]:
+    """Rows ``parameter, current, suggested, ratio`` of a suggestion (header first).
+
+    >>> gain_table([{"name": "ATC_RAT_YAW_P", "current": 0.3, "suggested": 0.6,
+    ...              "ratio": 2.0, "capped": True}])[1]
+    ['ATC_RAT_YAW_P', '0.3', '0.6', '×2.00 (capped)']
+    """
+    rows = [["parameter", "current", "suggested", "ratio"]]
+    for g in gains:
+        rows.append([g["name"], f"{g['current']:.4g}", f"{g['suggested']:.4g}",
+                     f"×{g['ratio']:.2f}" + (" (capped)" if g.get("capped") else "")])
+    return rows
+
+
+def limit_table(limits: Sequence[Mapping[str, Any]]) -> list[list[str]]:
+    """Rows ``limit, required, current gains, suggested gains, met`` (header first)."""
+    rows = [["limit", "required", "current", "suggested", "met"]]
+    for r in limits:
+        unit = r.get("unit", "")
+        rows.append([r["name"], r["limit"], value_text(r["current"], unit),
+                     value_text(r["suggested"], unit),
+                     "yes" if r["ok"] else "no"])
+    return rows
+
+
+def _columns(rows: Sequence[Sequence[str]], indent: str = "  ") -> list[str]:
+    """Rows as left-aligned text columns."""
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    return [indent + "  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip()
+            for r in rows]
+
+
+def _answer(axis: str, e: Mapping[str, Any]) -> list[str]:
+    """The first lines of an axis: verdict, then the gains (or why none), the limits, the
+    margins the suggestion is about and the step response, the next flight."""
+    verdict = e.get("verdict", "not identified")
+    lines = []
+    if e.get("gains"):
+        capped = any(g.get("capped") for g in e["gains"])
+        lines.append(f"{axis}: verdict {verdict}; suggested gains"
+                     + (f" (capped: the loop wants ×{e['wanted_ratio']:.2g})" if capped else ""))
+        lines += _columns(gain_table(e["gains"]))
+        if e.get("suggested_note"):
+            lines.append(f"  {e['suggested_note']}")
+    else:
+        lines.append(f"{axis}: verdict {verdict}; no gains: "
+                     f"{e.get('no_gains_reason', 'none suggested')}")
+    if e.get("limits"):
+        lines += _columns(limit_table(e["limits"]))
+    agree = e.get("loop_agreement")
+    if agree:
+        meas = figure(agree["measured_deg"], ".0f", "deg", agree["measured_sigma_deg"])
+        pred = figure(agree["predicted_deg"], ".0f", "deg", agree["predicted_sigma_deg"])
+        lines.append(f"  the margins are those of {e.get('aim', 'the rate loop')}")
+        lines.append(f"  beside it, at the mixer (rate and attitude loops): phase margin "
+                     f"measured {meas}, predicted {pred}"
+                     + ("" if agree["agree"] else " (they disagree)"))
+    elif e.get("aim"):
+        lines.append(f"  the margins are those of {e['aim']}")
+    for key, label in (("current_loop", "current"), ("suggested_loop_check", "suggested")):
+        c = e.get(key)
+        if c:
+            lines.append(
+                f"  step ({label} gains): rise {figure(c['rise_time_s'] * 1e3, '.0f', 'ms')}, "
+                f"settling {figure(c['settling_time_s'] * 1e3, '.0f', 'ms')}, overshoot "
+                f"{figure(c['overshoot_percent'], '.0f', '%')}")
+    twin = e.get("twin_step")
+    if twin and e.get("gains"):
+        lines.append(f"  flown in the closed-loop twin: step within "
+                     f"{twin['max_difference']:.1%} of the predicted one")
+    if e.get("next_flight"):
+        lines.append(f"  next flight: {e['next_flight']}")
+    return lines
+
+
 def format_tune(report: Mapping[str, Any]) -> str:
-    """The text ``mavsid tune`` prints."""
+    """The text ``mavsid tune`` prints: per axis the answer first (:func:`_answer`), then
+    the loop with the logged gains, the measured loop and the advice."""
     lines = []
     for axis, e in report.items():
         if "error" in e:
             lines.append(f"{axis}: loop not analysed: {e['error']}")
             continue
+        lines += _answer(axis, e)
         m, c, sd = e["margins"], e["closed_loop"], e.get("stderr", {})
 
         def pm(v: float, key: str, fmt: str, unit: str,
@@ -45,7 +140,7 @@ def format_tune(report: Mapping[str, Any]) -> str:
             return figure(v, fmt, unit, sd.get(key))
 
         lines.append(
-            f"{axis}: phase margin {pm(m['phase_deg'], 'phase_margin_deg', '.1f', 'deg')}, "
+            f"  logged gains: phase margin {pm(m['phase_deg'], 'phase_margin_deg', '.1f', 'deg')}, "
             f"gain margin {pm(m['gain_db'], 'gain_margin_db', '.1f', 'dB')}, crossover "
             f"{pm(m['crossover_hz'], 'crossover_hz', '.2f', 'Hz')}; closed-loop bandwidth "
             f"{pm(c['bandwidth_hz'], 'bandwidth_hz', '.2f', 'Hz')}, peak "
@@ -65,11 +160,6 @@ def format_tune(report: Mapping[str, Any]) -> str:
                 f"{cmp_['band_hz'][0]:.2g}-{cmp_['band_hz'][1]:.2g} Hz")
         if e.get("gains_mismatch"):
             lines.append(f"  warning: {e['gains_mismatch']}")
-        if e.get("suggested"):
-            lines.append("  suggested: " + ", ".join(f"{k} {v:.4g}"
-                                                     for k, v in e["suggested"].items()))
-        if e.get("suggested_note"):
-            lines.append(f"  {e['suggested_note']}")
         lines += [f"  advice: {a}" for a in e.get("advice", [])]
     return "\n".join(lines)
 

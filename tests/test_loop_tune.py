@@ -80,3 +80,94 @@ def test_logged_gains_that_are_not_the_flights_are_said_and_not_scaled(p_gain: f
     assert "gains_mismatch" not in good
     assert good["loop_frf_vs_predicted"]["median_db"] < 1.0
     assert good["suggested"] and "warning" not in format_tune({"roll": good})
+
+
+_SITL: dict[str, dict] = {}
+
+
+def _sitl_report() -> dict:
+    import warnings
+
+    from helpers import shared_path
+
+    from mavsid import pipeline
+
+    if not _SITL:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            res = pipeline.fit([str(shared_path("sitl", "flightA_mixer.BIN"))])
+        _SITL.update(tune(res, 50.0, samples=10))
+    return _SITL
+
+
+def test_the_sitl_flights_yaw_is_capped_and_says_so() -> None:
+    """The SITL flight's yaw loop (logged P 0.3, I 0.02, phase margin 102 deg) wants ×4
+    for 50 deg: ``tune`` printed ``ATC_RAT_YAW_P 1.214`` with no current value, ratio nor
+    warning. Now the step is capped at ×2 and says so, with the current values, the ratio
+    and the next flight; the capped loop meets every limit printed beside it."""
+    yaw = _sitl_report()["yaw"]
+    rows = {g["name"]: g for g in yaw["gains"]}
+    assert set(rows) == {"ATC_RAT_YAW_P", "ATC_RAT_YAW_I"}  # D is 0: nothing to change
+    assert rows["ATC_RAT_YAW_P"]["current"] == pytest.approx(0.3)
+    assert rows["ATC_RAT_YAW_I"]["current"] == pytest.approx(0.02)
+    for g in rows.values():
+        assert g["capped"] and g["ratio"] == pytest.approx(2.0, rel=1e-3)
+        assert g["suggested"] == pytest.approx(2.0 * g["current"], rel=1e-3)
+    assert yaw["wanted_ratio"] > 2.0 and "tune again" in yaw["next_flight"]
+    assert all(r["ok"] for r in yaw["limits"])
+    assert yaw["suggested_loop_check"]["phase_margin_deg"] >= 50.0
+    assert yaw["twin_step"]["agree"] and yaw["twin_step"]["max_difference"] < 0.05
+    text = format_tune({"yaw": yaw})
+    assert text.startswith("yaw: verdict good; suggested gains (capped")
+    assert "ATC_RAT_YAW_P  0.3      0.6        ×2.00 (capped)" in text
+
+
+def test_the_sitl_flights_roll_is_refused_in_one_line_naming_the_limits() -> None:
+    # roll crosses over at 15 Hz, the chirp stopped at 20 Hz: above half the trusted band
+    rep = _sitl_report()
+    for axis in ("roll", "pitch"):
+        e = rep[axis]
+        assert e["gains"] == [] and e["suggested"] == {}
+        assert "crossover" in e["no_gains_reason"] and "\n" not in e["no_gains_reason"]
+        crossover = next(r for r in e["limits"] if r["name"] == "crossover")
+        assert not crossover["ok"] and crossover["suggested"] > 10.0
+        assert "SID_F_STOP_HZ" in e["next_flight"]
+
+
+def test_params_out_loads_with_pymavlink_and_holds_only_the_changes(tmp_path, capsys) -> None:
+    from helpers import shared_path
+    from pymavlink import mavparm
+
+    from mavsid.cli import main
+
+    log = shared_path("sitl", "flightA_mixer.BIN")
+    out = tmp_path / "yaw.parm"
+    assert main(["tune", str(log), "--axis", "yaw", "--params-out", str(out), "-q"]) == 0
+    loaded = mavparm.MAVParmDict()
+    assert loaded.load(str(out))
+    assert dict(loaded) == pytest.approx({"ATC_RAT_YAW_P": 0.6, "ATC_RAT_YAW_I": 0.04})
+    text = out.read_text()
+    assert text.startswith(f"# mavsid tune of {log}") and "yaw: phase margin 102" in text
+    capsys.readouterr()
+    # nothing suggested (roll): refused in one line, no file
+    refused = tmp_path / "roll.parm"
+    assert main(["tune", str(log), "--axis", "roll", "--params-out", str(refused), "-q"]) == 1
+    errors = [ln for ln in capsys.readouterr().err.splitlines() if "error" in ln]
+    assert len(errors) == 1 and "no gains suggested" in errors[0] and not refused.exists()
+
+
+def test_a_px4_parameter_file_is_qgroundcontrols() -> None:
+    from mavsid.loop.tune import param_file
+
+    check = {"phase_margin_deg": 40.0, "gain_margin_db": 8.0, "crossover_hz": 12.0}
+    entry = {"controller": {"autopilot": "px4"}, "current_loop": check,
+             "suggested_loop_check": check, "capped": False,
+             "gains": [{"name": "MC_ROLLRATE_P", "current": 0.15, "suggested": 0.135,
+                        "ratio": 0.9, "capped": False}]}
+    text = param_file({"roll": entry, "yaw": {"gains": [], "no_gains_reason": "x"}},
+                      "f.ulg", when="2026-01-01T00:00:00+00:00")
+    lines = text.splitlines()
+    assert lines[0] == "# Onboard parameters for Vehicle 1"
+    assert "# Vehicle-Id Component-Id Name Value Type" in lines
+    rows = [ln.split("\t") for ln in lines if not ln.startswith("#")]
+    assert rows == [["1", "1", "MC_ROLLRATE_P", "0.135", "9"]]

@@ -1,0 +1,67 @@
+"""The limits a suggested loop must meet (:mod:`mavsid.loop.limits`), against independent
+references: python-control's analysis of the same loop (:func:`analyse_loop`), the
+sensitivity evaluated point by point in numpy, and the closed-loop twin."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from loop_plants import true_plant
+
+from mavsid.loop.analysis import analyse_loop, controller_polys, tf_at
+from mavsid.loop.controllers import controller_from_params, scaled
+from mavsid.loop.limits import Limits, check_loop, limit_rows, twin_step
+from mavsid.synthetic.plant import PlantParams
+
+
+@pytest.fixture(scope="module")
+def loop():  # type: ignore[no-untyped-def]
+    ctrl = controller_from_params({}, "roll")
+    return true_plant(PlantParams(), 0, 1.0 / ctrl.loop_hz), ctrl
+
+
+@pytest.mark.parametrize("k", [0.5, 1.0, 2.0])
+def test_figures_match_python_control_and_numpy(loop, k: float) -> None:  # type: ignore[no-untyped-def]
+    import control
+
+    plant, ctrl = loop
+    c = scaled(ctrl, k)
+    got = check_loop(plant, c)
+    ss = control.ss(plant.a, plant.b.reshape(-1, 1), plant.c.reshape(1, -1), 0.0, plant.dt)
+    ref = analyse_loop(ss, c)
+    assert got.phase_margin_deg == pytest.approx(ref.phase_margin_deg, abs=0.05)
+    assert got.crossover_hz == pytest.approx(ref.crossover_hz, rel=1e-3)
+    assert got.gain_margin_db == pytest.approx(ref.gain_margin_db, abs=0.05)
+    # Ms and the closed-loop peak on a dense grid, without python-control
+    dt = plant.dt
+    f = np.geomspace(0.01, 0.499 / dt, 20000)
+    z = np.exp(2j * np.pi * f * dt)
+    (bf, af), ct = controller_polys(c, dt)
+    p = np.array([plant.c @ np.linalg.solve(zz * np.eye(plant.a.shape[0]) - plant.a, plant.b)
+                  for zz in z])
+    lz = p * tf_at((bf, af), z)
+    assert got.sensitivity_peak == pytest.approx(np.max(np.abs(1 / (1 + lz))), rel=2e-3)
+    peak = 20 * np.log10(np.max(np.abs(p * tf_at(ct, z) / (1 + lz))))
+    assert got.closed_peak_db == pytest.approx(peak, abs=0.1)  # (a 3000-point grid)
+    assert got.crossovers == 1 and got.stable
+
+
+def test_a_loop_past_its_limits_is_flagged(loop) -> None:  # type: ignore[no-untyped-def]
+    plant, ctrl = loop
+    hot = check_loop(plant, scaled(ctrl, 3.0))
+    rows = {r["name"]: r for r in limit_rows(check_loop(plant, ctrl), hot, Limits(), 20.0)}
+    assert hot.phase_margin_deg < 50 and not rows["phase margin"]["ok"]
+    assert hot.sensitivity_peak > 2.0 and not rows["sensitivity peak Ms"]["ok"]
+    # the crossover limit is half the trusted band's top
+    assert rows["crossover"]["ok"] == (hot.crossover_hz <= 10.0)
+    assert rows["phase margin"]["current"] > rows["phase margin"]["suggested"]
+
+
+def test_the_twin_flies_the_predicted_step(loop) -> None:  # type: ignore[no-untyped-def]
+    plant, ctrl = loop
+    for lag, tau in ((0, 0.0), (1, 0.3)):
+        c = check_loop(plant, ctrl, lag, tau)
+        twin = twin_step(plant, ctrl, lag, tau)
+        n = min(twin.size, c.step.size)
+        assert n > 300
+        assert np.max(np.abs(twin[:n] - c.step[:n])) < 0.01

@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from mavsid.loop.analysis import controller_polys, controller_tf, tf_at
+from mavsid.loop.analysis import controller_polys
 from mavsid.loop.controllers import AxisController, measurement_filter
 from mavsid.loop.plant import LinearPlant, plant_response
 
@@ -125,7 +125,8 @@ def _systems(plant: LinearPlant, ctrl: AxisController, lag: int, meas_delay: flo
     import control
 
     dt = 1.0 / ctrl.loop_hz
-    cfb, ct = controller_tf(ctrl, dt)
+    (bf, af), (bt, at) = controller_polys(ctrl, dt)
+    cfb, ct = control.tf(bf, af, dt), control.tf(bt, at, dt)
     if lag:
         ct = ct * control.tf([1.0], [1.0] + [0.0] * lag, dt)
     tau, num, den = measurement_filter(meas_delay)
@@ -140,8 +141,8 @@ def _systems(plant: LinearPlant, ctrl: AxisController, lag: int, meas_delay: flo
 def check_loop(plant: LinearPlant, ctrl: AxisController, lag: int = 0,
                meas_delay: float = 0.0, horizon_s: float = 1.0) -> LoopCheck:
     """:class:`LoopCheck` of ``ctrl`` around ``plant`` (a :class:`LinearPlant` at the
-    controller's step); ``lag`` and ``meas_delay`` as in :func:`mavsid.loop.analysis.
-    analyse_loop`."""
+    controller's step); ``lag`` loops of delay on the target path, ``meas_delay`` (0-1 loop)
+    on the measured rate, as in :func:`mavsid.loop.analysis.analyse_plant`."""
     import control
 
     dt = 1.0 / ctrl.loop_hz
@@ -157,9 +158,9 @@ def check_loop(plant: LinearPlant, ctrl: AxisController, lag: int = 0,
     with np.errstate(all="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore")  # python-control's fall-backs
         p = plant_response(plant, f)
-        lz = p * tf_at((np.polymul(bf, num), np.polymul(af, den)), z)
+        lz = p * np.polyval(np.polymul(bf, num), z) / np.polyval(np.polymul(af, den), z)
         mag = np.abs(lz)
-        t_mag = np.abs(p * tf_at((bt, at), z) / (1.0 + lz))
+        t_mag = np.abs(p * np.polyval(bt, z) / np.polyval(at, z) / (1.0 + lz))
         gms, pms, sms, _, wgcs, _ = (np.atleast_1d(np.asarray(v, dtype=float))
                                      for v in control.stability_margins(loop, returnall=True))
         # the gain margin upwards: a loop with an integrator in the plant and one in the

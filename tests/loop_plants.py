@@ -43,3 +43,43 @@ def true_plant(p: PlantParams, axis: int, dt: float) -> LinearPlant:
 
 
 AXES_INDEX = {"roll": 0, "pitch": 1, "yaw": 2}
+
+
+def fly_rate_loop(truth: dict, axis: str, gains: dict[str, float], seed: int = 31
+                  ) -> dict[str, float]:
+    """Fly, in the simulator (its own controller, not the twin's), a fixture's vehicle
+    (``*.truth.json``: plant, frame, loop rate and ``ATC_*`` parameters) with ``gains``
+    (ArduPilot names) and its attitude loop on ``axis`` off, through a mixer chirp on
+    ``axis``: the margins of the rate loop the flight measures (controller output per
+    mixer input, against the injection)."""
+    import dataclasses
+    import re
+
+    from mavsid.frequency import frf
+    from mavsid.loop.analysis import frd_margins
+    from mavsid.synthetic import ControllerParams, Scenario, SysIdSettings, fly
+
+    axes = ("roll", "pitch", "yaw")
+    short = {"RLL": "rll", "PIT": "pit", "YAW": "yaw"}
+    fields = {f.name for f in dataclasses.fields(ControllerParams)}
+    kw: dict[str, float] = {"loop_hz": float(truth["loop_hz"])}
+    for name, value in {**truth["controller"], **gains}.items():
+        m = re.fullmatch(r"ATC_(RAT|ANG)_(RLL|PIT|YAW)_(\w+)", name)
+        if m is None:
+            continue
+        key = (f"ang_{short[m[2]]}_p" if m[1] == "ANG"
+               else f"{short[m[2]]}_{m[3].lower()}")
+        if key in fields:
+            kw[key] = float(value)
+    kw[f"ang_{('rll', 'pit', 'yaw')[axes.index(axis)]}_p"] = 0.0
+    plant = {k: (tuple(tuple(r) for r in v) if k == "coupling" else
+                 tuple(v) if isinstance(v, list) else v) for k, v in truth["plant"].items()}
+    run = SysIdSettings(axis=10 + axes.index(axis), magnitude=0.05, f_start_hz=0.5,
+                        f_stop_hz=30.0, t_rec=30.0)
+    fl = fly(Scenario(sysid=(run,), seed=seed, controller=ControllerParams(**kw),
+                      plant=PlantParams(**plant), frame=truth["frame"], axis=axis))
+    rows = fl.run_index == 0
+    j = axes.index(axis)
+    u, c = fl.u[rows, j], fl.pid_out[rows, j]
+    measured = frf([u], [-c], fl.dt, reference=[u - c], f_min_hz=0.5, f_max_hz=30.0)
+    return frd_margins(measured)

@@ -891,3 +891,38 @@ def test_the_commanded_yaw_is_the_rate_of_the_commanded_heading(tmp_path, layout
     assert ok.mean() > 0.9
     assert np.corrcoef(got[ok], want[ok])[0, 1] > 0.999
     assert float(got[ok] @ want[ok] / (want[ok] @ want[ok])) == pytest.approx(1.0, abs=1e-3)
+
+
+#: (fixture, axis) of the simulated airframes whose plant passes its gates (verdict good)
+TUNED = [("noisy_sysid.bin", "roll"), ("noisy_sysid.bin", "pitch"), ("heavy_sysid.bin", "pitch"),
+         ("hexa_doublets.bin", "pitch"), ("sysid_roll.bin", "roll"),
+         ("sysid_pitch.bin", "pitch"), ("sysid_yaw.bin", "yaw"), ("doublets.bin", "roll")]
+
+
+@pytest.mark.parametrize(("name", "axis"), TUNED, ids=[f"{n}-{a}" for n, a in TUNED])
+def test_tune_suggestions_are_capped_meet_their_limits_and_fly_as_promised(
+        name: str, axis: str) -> None:
+    """Every simulated airframe: a suggestion within the per-flight cap (or saying it is
+    capped), meeting every limit it prints, flown in the twin as predicted, and flown in
+    the simulator — its own controller, the vehicle's true plant — at the phase margin
+    promised within ±3 deg (the target's, unless the cap or another limit holds it)."""
+    from loop_plants import fly_rate_loop
+
+    from mavsid.loop.tune import tune
+
+    e = tune(_fit(name), 50.0, samples=0)[axis]
+    assert e["verdict"] == "good"
+    if not e["gains"]:
+        assert e["no_gains_reason"] and "\n" not in e["no_gains_reason"]
+        return
+    for g in e["gains"]:
+        assert 0.5 - 1e-3 <= g["ratio"] <= 2.0 + 1e-3
+        assert g["capped"] == (not 0.5 <= e["wanted_ratio"] <= 2.0)
+    assert all(r["ok"] for r in e["limits"])
+    assert e["twin_step"]["agree"]
+    promised = e["suggested_loop_check"]["phase_margin_deg"]
+    if not e["capped"] and "limited_by" not in e:
+        assert promised == pytest.approx(50.0, abs=0.1)
+    gains = {g["name"]: g["suggested"] for g in e["gains"]}
+    flown = fly_rate_loop(_truth(name), axis, gains)["phase_deg"]
+    assert flown == pytest.approx(promised, abs=3.0)

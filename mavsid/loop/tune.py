@@ -530,11 +530,12 @@ def _suggestion(axis: str, fit: Any, ctrl: AxisController, an: LoopAnalysis,
     if plant_frf is not None:
         check = margins_on_frf(plant_frf, new)
         out["suggested_check"] = check
-        if not capped and abs(check["phase_deg"] - limits.target_pm_deg) > SUGGESTION_CHECK_DEG:
+        promised = suggested.phase_margin_deg
+        if abs(check["phase_deg"] - promised) > SUGGESTION_CHECK_DEG:
             out["suggested_note"] = (
                 f"on the measured frequency response these gains give "
-                f"{check['phase_deg']:.0f} deg, not {limits.target_pm_deg:g}: the model is "
-                "uncertain near the new crossover; step the gains up gradually")
+                f"{check['phase_deg']:.0f} deg, not {promised:.0f}: the model is uncertain "
+                "near the new crossover; step the gains up gradually")
     return out
 
 

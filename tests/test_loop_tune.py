@@ -100,6 +100,7 @@ def _sitl_report() -> dict:
     return _SITL
 
 
+@pytest.mark.slow
 def test_the_sitl_flights_yaw_is_capped_and_says_so() -> None:
     """The SITL flight's yaw loop (logged P 0.3, I 0.02, phase margin 102 deg) wants ×4
     for 50 deg: ``tune`` printed ``ATC_RAT_YAW_P 1.214`` with no current value, ratio nor
@@ -122,6 +123,7 @@ def test_the_sitl_flights_yaw_is_capped_and_says_so() -> None:
     assert "ATC_RAT_YAW_P  0.3      0.6        ×2.00 (capped)" in text
 
 
+@pytest.mark.slow
 def test_the_sitl_flights_roll_is_refused_in_one_line_naming_the_limits() -> None:
     # roll crosses over at 15 Hz, the chirp stopped at 20 Hz: above half the trusted band
     rep = _sitl_report()
@@ -134,6 +136,7 @@ def test_the_sitl_flights_roll_is_refused_in_one_line_naming_the_limits() -> Non
         assert "SID_F_STOP_HZ" in e["next_flight"]
 
 
+@pytest.mark.slow
 def test_params_out_loads_with_pymavlink_and_holds_only_the_changes(tmp_path, capsys) -> None:
     from helpers import shared_path
     from pymavlink import mavparm

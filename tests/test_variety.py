@@ -899,6 +899,7 @@ TUNED = [("noisy_sysid.bin", "roll"), ("noisy_sysid.bin", "pitch"), ("heavy_sysi
          ("sysid_pitch.bin", "pitch"), ("sysid_yaw.bin", "yaw"), ("doublets.bin", "roll")]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("name", "axis"), TUNED, ids=[f"{n}-{a}" for n, a in TUNED])
 def test_tune_suggestions_are_capped_meet_their_limits_and_fly_as_promised(
         name: str, axis: str) -> None:

@@ -106,6 +106,7 @@ from mavsid.autopilot.ardupilot import SID_IDENTIFIES, sid_axis
 from mavsid.axes import AXES, RATE_OF
 from mavsid.data import FlightData, Segment, detrend_linear
 from mavsid.errors import ConfigError, finite_number
+from mavsid.reasons import Reason, format_number, group
 
 __all__ = [
     "AXES",
@@ -222,7 +223,9 @@ class WindowReport:
     """One window on one axis: where, how good, kept or not and why.
 
     ``start_s``/``stop_s`` are the first and last sample times (log clock); ``i0``/``i1``
-    the ``[start, stop)`` sample indices into the FlightData.
+    the ``[start, stop)`` sample indices into the FlightData. ``checks`` are the gates a
+    rejected window failed, as values; ``reasons`` the sentences made from them (or why it
+    was kept), then notes (the SYSTEMID run's settings, a merge).
     """
 
     axis: str
@@ -236,9 +239,12 @@ class WindowReport:
     i1: int
     metrics: Mapping[str, float] = field(default_factory=dict)
     meta: Mapping[str, Any] = field(default_factory=dict)
+    checks: tuple[Reason, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-safe dict (``axis start_s stop_s score kept source reasons metrics meta``)."""
+        """JSON-safe dict (``axis start_s stop_s score kept source reasons reason_kinds
+        checks metrics meta``): ``reasons`` the sentences, ``checks`` the gates failed as
+        :meth:`Reason.to_dict <mavsid.reasons.Reason.to_dict>`."""
         return {
             "axis": self.axis,
             "start_s": round(self.start_s, 6),
@@ -247,6 +253,8 @@ class WindowReport:
             "kept": bool(self.kept),
             "source": self.source,
             "reasons": list(self.reasons),
+            "reason_kinds": [r.kind for r in self.checks],
+            "checks": [r.to_dict() for r in self.checks],
             "metrics": {k: _json_float(v) for k, v in self.metrics.items()},
             "meta": {k: v for k, v in self.meta.items() if k != "params"},
         }
@@ -592,116 +600,98 @@ def _score(m: Mapping[str, float]) -> float:
     return float(np.prod(terms) ** (1 / len(terms)))
 
 
-def _fmt(x: float) -> str:
-    return f"{x:.3g}" if abs(x) < 1e4 else f"{x:.2g}"
-
-
 def _gates(ax: _Axis, fd: FlightData, i0: int, i1: int, m: Mapping[str, float],
            opts: ScanOptions, st: Mapping[str, Any], check_mode: bool,
-           check_excitation: bool = True) -> list[str]:
+           check_excitation: bool = True) -> list[Reason]:
     """Rejection reasons (empty: passes); ``st``: the window's :func:`_window_stats`."""
-    out: list[str] = []
+    out: list[Reason] = []
     if ax.u is None:
-        return [f"rejected: the log has no {ax.u_name} input (preset {fd.preset})"]
+        return [Reason("missing_channel", {}, {"channel": ax.u_name, "role": "input",
+                                               "preset": fd.preset})]
     if ax.y is None:
-        return [f"rejected: the log has no {ax.y_name} output (preset {fd.preset})"]
+        return [Reason("missing_channel", {}, {"channel": ax.y_name, "role": "output",
+                                               "preset": fd.preset})]
     frac = float(st["airborne"])
     if frac < opts.min_airborne:
-        out.append(
-            f"rejected: on the ground or disarmed for {100 * (1 - frac):.0f} % of the window "
-            f"(must be airborne for {100 * opts.min_airborne:.0f} %)"
-        )
+        out.append(Reason("not_airborne", {"grounded_pct": 100 * (1 - frac),
+                                           "need_pct": 100 * opts.min_airborne}))
     mode = fd.flags.get("mode")
     k = int(st.get("mode_change", -1))
     if check_mode and mode is not None and k >= 0:
         names = fd.meta.get("mode_names", {})
         assert isinstance(names, Mapping)
         a, b = (names.get(int(v), str(int(v))) for v in (mode[i0 + k], mode[i0 + k + 1]))
-        out.append(
-            f"rejected: flight mode changes inside the window ({a}→{b} at "
-            f"{fd.time_s[i0 + k + 1]:.1f} s)"
-        )
+        out.append(Reason("mode_change", {"at_s": float(fd.time_s[i0 + k + 1])},
+                          {"from": str(a), "to": str(b)}))
     for ang in ("roll", "pitch"):
         if f"peak_{ang}" in st:
             peak = float(np.degrees(st[f"peak_{ang}"]))
             if peak > opts.max_angle_deg:
-                out.append(
-                    f"rejected: |{ang}| reaches {peak:.0f}° (bound {opts.max_angle_deg:g}°)"
-                )
+                out.append(Reason("attitude_bound", {"peak_deg": peak,
+                                                     "bound_deg": opts.max_angle_deg},
+                                  {"angle": ang}))
     sat = float(st["saturated"])
     if sat > opts.max_saturated:
-        out.append(
-            f"rejected: {ax.u_name} saturated (|u| >= {opts.saturation:g}) for "
-            f"{100 * sat:.0f} % of the window (limit {100 * opts.max_saturated:.0f} %)"
-        )
+        out.append(Reason("input_saturated", {"saturation": opts.saturation,
+                                              "saturated_pct": 100 * sat,
+                                              "limit_pct": 100 * opts.max_saturated},
+                          {"input": ax.u_name}))
     ts = float(st.get("thrust_limits", math.nan))  # (NaN: no thrust, or never airborne)
     if ts > opts.max_saturated:
-        out.append(
-            f"rejected: u_thrust at its limits for {100 * ts:.0f} % of the "
-            f"airborne window (limit {100 * opts.max_saturated:.0f} %)"
-        )
+        out.append(Reason("thrust_limits", {"saturated_pct": 100 * ts,
+                                            "limit_pct": 100 * opts.max_saturated}))
     if not check_excitation:
         return out
     if "power_ratio" not in m:
-        out.append(f"rejected: window too short ({i1 - i0} samples)")
+        out.append(Reason("too_short", {"samples": float(i1 - i0)}))
         return out
+    names_uy = {"input": ax.u_name, "output": ax.y_name}
     ratio = m.get("response_ratio", math.nan)
     # (a SYSTEMID run with its injection logged is judged by the output's coherence with
     # the injection, below, not by these levels)
     by_level = "injection_rms" not in m
     if by_level and not math.isfinite(ratio):  # no output to judge by: the input's own level
         if m["power_ratio"] < opts.power_ratio:
-            out.append(
-                f"rejected: input RMS {_fmt(m['input_rms'])} below {opts.power_ratio:g}× noise "
-                f"floor {_fmt(ax.floor)} ({ax.u_name})"
-            )
+            out.append(Reason("input_below_floor", {"rms": m["input_rms"],
+                                                    "need_ratio": opts.power_ratio,
+                                                    "floor": ax.floor}, names_uy))
     elif by_level and ratio < opts.power_ratio and not _commanded(m, opts):
-        out.append(
-            f"rejected: response RMS {_fmt(m['response_rms'])} below {opts.power_ratio:g}× its "
-            f"noise floor {_fmt(m['response_floor'])} ({ax.y_name} where {ax.u_name} is quiet;"
-            f" input RMS {m['power_ratio']:.1f}× its floor)"
-        )
+        out.append(Reason("response_below_floor", {
+            "rms": m["response_rms"], "need_ratio": opts.power_ratio,
+            "floor": m["response_floor"], "input_ratio": m["power_ratio"]}, names_uy))
     cond = m.get("condition", math.inf)
     if not cond <= opts.max_condition:
         rho, share = m.get("correlation", math.nan), m.get("input_share", math.nan)
-        if not math.isfinite(rho):
-            why = f"{ax.u_name} or {ax.y_name} does not vary"
-        elif share < 0.5:
-            why = (f"{ax.u_name} carries {100 * share:.0f} % of the window's input spread: "
-                   "another axis is being excited, not this one")
-        else:
-            why = (f"{ax.u_name} follows {ax.y_name}, correlation {rho:+.2f}: closed-loop "
-                   "feedback, no independent excitation")
-        out.append(
-            f"rejected: ill-conditioned regressors [{ax.y_name}, {ax.u_name}]: Gram condition "
-            f"number {_fmt(cond)} above {_fmt(opts.max_condition)} ({why})"
-        )
+        cause = ("constant" if not math.isfinite(rho) else
+                 "other_axis" if share < 0.5 else "feedback")
+        out.append(Reason("ill_conditioned", {
+            "condition": cond, "max_condition": opts.max_condition, "correlation": rho,
+            "input_share_pct": 100 * share}, {**names_uy, "cause": cause}))
     if "injection_rms" in m:  # SYSTEMID: the output against the logged injection
-        band = f"{m['injection_lo_hz']:.3g}–{m['injection_hi_hz']:.3g} Hz"
+        band = {"lo_hz": m["injection_lo_hz"], "hi_hz": m["injection_hi_hz"]}
         if m.get("injection_coverage", 0.0) < opts.min_coverage:
-            out.append(
-                f"rejected: {ax.y_name} is coherent with the injection (SIDD.Targ) over "
-                f"{100 * m.get('injection_coverage', 0.0):.0f} % of its {band} band "
-                f"(need {100 * opts.min_coverage:.0f} %)"
-            )
+            out.append(Reason("injection_coverage", {
+                "coverage_pct": 100 * m.get("injection_coverage", 0.0),
+                "need_pct": 100 * opts.min_coverage, **band}, names_uy))
         if m.get("injection_coherence", 0.0) < opts.min_coherence:
-            out.append(
-                f"rejected: injection (SIDD.Targ)→{ax.y_name} coherence "
-                f"{m.get('injection_coherence', 0.0):.2f} below {opts.min_coherence:g} in {band}"
-            )
+            out.append(Reason("injection_coherence", {
+                "coherence": m.get("injection_coherence", 0.0),
+                "min_coherence": opts.min_coherence, **band}, names_uy))
         return out
-    band = f"{m.get('band_lo_hz', 0):.3g}–{m.get('band_hi_hz', 0):.3g} Hz"
+    band = {"lo_hz": m.get("band_lo_hz", 0.0), "hi_hz": m.get("band_hi_hz", 0.0)}
     if m.get("coverage", 0.0) < opts.min_coverage and not _commanded(m, opts):
-        out.append(
-            f"rejected: input covers {100 * m.get('coverage', 0.0):.0f} % of the {band} band "
-            f"(need {100 * opts.min_coverage:.0f} %)"
-        )
+        out.append(Reason("coverage", {"coverage_pct": 100 * m.get("coverage", 0.0),
+                                       "need_pct": 100 * opts.min_coverage, **band}))
     if m.get("coherence", 0.0) < opts.min_coherence:
-        out.append(
-            f"rejected: {ax.u_name}→{ax.y_name} coherence {m.get('coherence', 0.0):.2f} below "
-            f"{opts.min_coherence:g} in {band}"
-        )
+        out.append(Reason("coherence", {"coherence": m.get("coherence", 0.0),
+                                        "min_coherence": opts.min_coherence, **band},
+                          names_uy))
     return out
+
+
+def _rejected(reasons: Sequence[Reason]) -> tuple[str, ...]:
+    """The reasons as the report's sentences (``rejected: ...``)."""
+    return tuple(f"rejected: {r.message}" for r in reasons)
 
 
 def _commanded(m: Mapping[str, float], opts: ScanOptions) -> bool:
@@ -712,17 +702,17 @@ def _commanded(m: Mapping[str, float], opts: ScanOptions) -> bool:
 
 def _kept_reason(ax: _Axis, m: Mapping[str, float]) -> str:
     if "response_ratio" in m and math.isfinite(m["response_ratio"]):
-        level = (f"{ax.y_name} response RMS {_fmt(m['response_rms'])} = "
+        level = (f"{ax.y_name} response RMS {format_number(m['response_rms'])} = "
                  f"{m['response_ratio']:.0f}× its noise floor")
     else:
-        level = f"input RMS {_fmt(m['input_rms'])} = {m['power_ratio']:.0f}× noise floor"
+        level = f"input RMS {format_number(m['input_rms'])} = {m['power_ratio']:.0f}× noise floor"
     if "injection_rms" in m:
         return (
-            f"kept: {level}; injection (SIDD.Targ) RMS {_fmt(m['injection_rms'])} over "
+            f"kept: {level}; injection (SIDD.Targ) RMS {format_number(m['injection_rms'])} over "
             f"{m['injection_lo_hz']:.3g}–{m['injection_hi_hz']:.3g} Hz, coherent with "
             f"{ax.y_name} over {100 * m.get('injection_coverage', 0):.0f} % of it (mean "
             f"{m.get('injection_coherence', 0):.2f}); Gram condition "
-            f"{_fmt(m.get('condition', math.inf))}"
+            f"{format_number(m.get('condition', math.inf))}"
         )
     if "command_coherence" in m:
         what = "yaw rate" if ax.name == "yaw" else "attitude"
@@ -733,7 +723,7 @@ def _kept_reason(ax: _Axis, m: Mapping[str, float]) -> str:
     return (
         f"kept: {level}; band coverage {100 * m.get('coverage', 0):.0f} %; "
         f"{ax.u_name}→{ax.y_name} coherence {m.get('coherence', 0):.2f}; Gram condition "
-        f"{_fmt(m.get('condition', math.inf))}"
+        f"{format_number(m.get('condition', math.inf))}"
     )
 
 
@@ -746,13 +736,11 @@ def _report(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions, air:
         band = (float(sysid["f_start_hz"]), float(sysid["f_stop_hz"]))
     st = _window_stats(ax, fd, air, opts, [i0], i1 - i0)[0] if stats is None else stats
     m = _metrics(ax, fd, i0, i1, opts, band, st)
-    reasons = _gates(ax, fd, i0, i1, m, opts, st, source == "scan")
-    kept = not reasons
-    if kept:
-        reasons = [_kept_reason(ax, m)]
+    checks = tuple(_gates(ax, fd, i0, i1, m, opts, st, source == "scan"))
+    kept = not checks
     return WindowReport(
         ax.name, float(fd.time_s[i0]), float(fd.time_s[i1 - 1]), _score(m), kept, source,
-        tuple(reasons), i0, i1, m, dict(meta),
+        (_kept_reason(ax, m),) if kept else _rejected(checks), i0, i1, m, dict(meta), checks,
     )
 
 
@@ -792,12 +780,12 @@ def _sysid_windows(fd: FlightData, axes: Sequence[str], axes_cache: Mapping[str,
                 meta["axis_from_data"] = found
         if name not in AXES:
             if axes == AXES:  # only when every axis was asked for
+                off = (Reason("not_attitude_axis", {"sid_axis": float(sid)},
+                              {"axis": name, "injection": injection}),)
                 for i0, i1 in _block_parts(fd, run["start_s"], run["stop_s"]):
                     out.append(WindowReport(
                         name, float(fd.time_s[i0]), float(fd.time_s[i1 - 1]), float("nan"),
-                        False, "sysid",
-                        (f"rejected: SYSTEMID run on {name} ({injection}, SID_AXIS {sid}) "
-                         "does not excite roll, pitch or yaw",), i0, i1, {}, meta))
+                        False, "sysid", _rejected(off), i0, i1, {}, meta, off))
             continue
         if name not in axes:
             continue
@@ -966,18 +954,21 @@ def find_segments(
             continue
         if cache[a].u is None or cache[a].y is None:
             n = flight.time_s.size
-            reason = _gates(cache[a], flight, 0, n, {}, opts, {}, False, False)
+            missing = tuple(_gates(cache[a], flight, 0, n, {}, opts, {}, False, False))
             reports.append(WindowReport(a, float(flight.time_s[0]), float(flight.time_s[-1]),
-                                        0.0, False, "scan", tuple(reason), 0, n))
+                                        0.0, False, "scan", _rejected(missing), 0, n, {}, {},
+                                        missing))
             continue
         found = _scan_windows(flight, cache[a], opts, air, mine)
         if not found and not mine:
             n = flight.time_s.size
             longest = int(np.max(flight.blocks[:, 1] - flight.blocks[:, 0]))
+            little = (Reason("too_little_data", {"samples": float(longest),
+                                                 "seconds": longest * flight.dt,
+                                                 "need_samples": 8.0}),)
             found = [WindowReport(
                 a, float(flight.time_s[0]), float(flight.time_s[-1]), 0.0, False, "scan",
-                (f"rejected: too little data: the longest contiguous block has {longest} "
-                 f"samples ({longest * flight.dt:.2f} s), a window needs 8",), 0, n)]
+                _rejected(little), 0, n, {}, {}, little)]
         reports += found
     order = {a: i for i, a in enumerate(AXES)}
     reports.sort(key=lambda r: (order.get(r.axis, len(AXES)), r.start_s))
@@ -1027,20 +1018,22 @@ def select_segments(
 
 def format_reports(reports: Sequence[WindowReport], show_all: bool = False) -> str:
     """Human-readable table: SYSTEMID and kept windows in full, rejected scan windows
-    counted by their first reason (every window with ``show_all``).
+    grouped by the kind of their first failed gate (every window with ``show_all``).
 
     Examples
     --------
-    >>> r = WindowReport("roll", 1.0, 6.0, 0.1, False, "scan",
-    ...                  ("rejected: input RMS 0.0002 below 5× noise floor 0.001 (u_roll)",), 0, 9)
+    >>> gate = Reason("input_below_floor", {"rms": 2e-4, "need_ratio": 5.0, "floor": 1e-3},
+    ...               {"input": "u_roll"})
+    >>> r = WindowReport("roll", 1.0, 6.0, 0.1, False, "scan", ("rejected: " + gate.message,),
+    ...                  0, 9, checks=(gate,))
     >>> print(format_reports([r]))
     axis    start_s   stop_s  score  kept  source  reasons
     roll: 1 scan window(s) rejected: 1× input RMS below noise floor
     """
     lines = [f"{'axis':6s} {'start_s':>8s} {'stop_s':>8s} {'score':>6s}  kept  source  reasons"]
-    hidden: dict[str, dict[str, int]] = {}
+    hidden: dict[str, list[WindowReport]] = {}
     for r in reports:
-        if r.kept or r.source == "sysid" or show_all:
+        if r.kept or r.source == "sysid" or show_all or not r.checks:
             score = f"{r.score:6.2f}" if math.isfinite(r.score) else "     -"
             lines.append(
                 f"{r.axis:6s} {r.start_s:8.2f} {r.stop_s:8.2f} {score}  "
@@ -1048,32 +1041,8 @@ def format_reports(reports: Sequence[WindowReport], show_all: bool = False) -> s
             )
             lines += [f"{'':47s}{x}" for x in r.reasons[1:]]
         else:
-            key = _reason_kind(r.reasons[0])
-            hidden.setdefault(r.axis, {})
-            hidden[r.axis][key] = hidden[r.axis].get(key, 0) + 1
-    for axis, kinds in hidden.items():
-        total = sum(kinds.values())
-        detail = ", ".join(f"{n}× {k}" for k, n in sorted(kinds.items(), key=lambda kv: -kv[1]))
-        lines.append(f"{axis}: {total} scan window(s) rejected: {detail}")
+            hidden.setdefault(r.axis, []).append(r)
+    for axis, rejected in hidden.items():
+        detail = ", ".join(group([r.checks[0] for r in rejected]))
+        lines.append(f"{axis}: {len(rejected)} scan window(s) rejected: {detail}")
     return "\n".join(lines)
-
-
-_KINDS = (
-    ("on the ground", "on the ground or disarmed"),
-    ("flight mode changes", "mode change inside"),
-    ("reaches", "attitude beyond bound"),
-    ("saturated", "input saturated"),
-    ("u_thrust at its limits", "thrust at its limits"),
-    ("response RMS", "response below its noise floor"),
-    ("input RMS", "input RMS below noise floor"),
-    ("ill-conditioned", "ill-conditioned regressors"),
-    ("covers", "narrow band coverage"),
-    ("coherence", "low coherence"),
-    ("too short", "too short"),
-    ("too little data", "too little data"),
-    ("has no", "missing channel"),
-)
-
-
-def _reason_kind(reason: str) -> str:
-    return next((kind for key, kind in _KINDS if key in reason), reason)

@@ -22,12 +22,15 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from mavsid.autopilot import excitation_advice, logging_advice, longer_advice
 from mavsid.axes import INPUT_OF, RATE_OF
+
+if TYPE_CHECKING:
+    from mavsid.excitation import WindowReport
 
 __all__ = ["FIT_FLOOR_PCT", "LEVELS", "Verdict", "format_fit", "frequency_checks", "judge",
            "not_identified", "unfitted"]
@@ -177,7 +180,7 @@ def _rates(flights: Sequence[Any], names: Sequence[str]) -> float | None:
     return min(found) if found else None
 
 
-def _excitation(windows: Sequence[Any]) -> dict[str, float | None]:
+def _excitation(windows: Sequence[WindowReport]) -> dict[str, float | None]:
     """Band (Hz) and coherence of the kept windows (injection's when there is one)."""
     kept = [w for w in windows if getattr(w, "kept", False)]
     if not kept:
@@ -556,7 +559,7 @@ def _autopilot(flights: Sequence[Any]) -> str | None:
 
 
 
-def unfitted(axis: str, why: str, windows: Sequence[Any] = (), flights: Sequence[Any] = (),
+def unfitted(axis: str, why: str, windows: Sequence[WindowReport] = (), flights: Sequence[Any] = (),
              logs: Sequence[str] = ()) -> Verdict:
     """The ``not identified`` verdict of an axis that got no model, in one honest line.
 
@@ -574,7 +577,7 @@ def unfitted(axis: str, why: str, windows: Sequence[Any] = (), flights: Sequence
     >>> v.advice[0].startswith("ArduPilot: set LOG_BITMASK")
     True
     """
-    from mavsid.excitation import _reason_kind
+    from mavsid.reasons import group
 
     reasons: list[str] = []
     advice: list[str] = []
@@ -589,17 +592,12 @@ def unfitted(axis: str, why: str, windows: Sequence[Any] = (), flights: Sequence
     mine = [w for w in windows if getattr(w, "axis", axis) == axis]
     where = " ".join(logs) if logs else "LOG"
     if mine and not any(w.kept for w in mine):
-        kinds: dict[str, int] = {}
-        first = ""  # (the first window's reason)
-        for w in mine:
-            rejected = [r for r in w.reasons if r.startswith("rejected")] or list(w.reasons[:1])
-            for r in rejected[:1]:
-                kinds[_reason_kind(r)] = kinds.get(_reason_kind(r), 0) + 1
-                first = first or r
-        top = ", ".join(f"{n}× {k}" for k, n in sorted(kinds.items(), key=lambda kv: -kv[1]))
+        first = [w.checks[0] for w in mine if w.checks]  # (each window's first failed gate)
+        top = ", ".join(group(first))
         numbers["windows_rejected"] = float(len(mine))
-        if set(kinds) == {"missing channel"}:  # (no data to judge: say which, and what to log)
-            reasons.append(first.removeprefix("rejected: "))
+        if first and {r.kind for r in first} == {"missing_channel"}:
+            # (no data to judge: say which, and what to log)
+            reasons.append(first[0].message)
             advice.append(logging_advice(_autopilot(flights), _telemetry(flights)))
         else:
             reasons.append(f"no window kept ({len(mine)} rejected: {top}; see `mavsid "

@@ -16,6 +16,7 @@ from mavsid.cli import main
 from mavsid.data import FlightData, SourceInfo
 from mavsid.errors import ConfigError, DataQualityWarning, MavsidError
 from mavsid.excitation import AXES, ScanOptions, find_segments, select_segments
+from mavsid.reasons import KINDS, Reason, group
 
 
 def _fixture(name: str):
@@ -232,6 +233,48 @@ def test_cli_segments_json(capsys, doublets):
     assert [r["axis"] for r in out if r["kept"]] == ["roll"]
     assert main(["segments", str(path), "--json", "--axis", "pitch"]) == 0
     assert {r["axis"] for r in json.loads(capsys.readouterr().out)} == {"pitch"}
+
+
+def test_rejections_are_values_whose_numbers_are_the_metrics(capsys):
+    """Each rejected window's gates carry the metric they judged (the same number as the
+    window's ``metrics``) and the bound from the options; the sentence in ``reasons`` is the
+    message made from them; ``--json`` holds both. Two of the SYSTEMID roll flight's yaw
+    windows (over the roll chirp's injection) are rejected for too little coherence with it:
+    one group, with their range."""
+    path, _ = _fixture("sysid_roll.bin")
+    opts = ScanOptions()
+    reports = find_segments(load_flight(path), options=opts)
+    rejected = [r for r in reports if not r.kept]
+    assert rejected and all(r.checks for r in rejected)
+    assert all(not r.checks for r in reports if r.kept)
+    for r in rejected:
+        assert r.reasons[: len(r.checks)] == tuple(f"rejected: {c.message}" for c in r.checks)
+        for c in r.checks:
+            if c.kind == "injection_coverage":
+                assert c.numbers["coverage_pct"] == pytest.approx(
+                    100 * r.metrics["injection_coverage"])
+                assert c.numbers["need_pct"] == pytest.approx(100 * opts.min_coverage)
+            if c.kind == "ill_conditioned":
+                assert c.numbers["condition"] == r.metrics.get("condition", math.inf)
+                assert c.numbers["condition"] > opts.max_condition
+    yaw = [r for r in rejected if r.axis == "yaw"]
+    low = sorted(round(r.checks[0].numbers["coverage_pct"]) for r in yaw
+                 if r.checks[0].kind == "injection_coverage")
+    assert len(low) == 2, [r.reasons for r in yaw]
+    assert (f"2× coherence with the injection too low ({low[0]}–{low[1]} % of the band, "
+            "need 30 %)") in group([r.checks[0] for r in yaw])
+    assert main(["segments", str(path), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert [d["reason_kinds"] for d in out] == [[c.kind for c in r.checks] for r in reports]
+    assert [[c["message"] for c in d["checks"]] for d in out] == [
+        [c.message for c in r.checks] for r in reports]
+
+
+def test_reason_kinds_are_known():
+    """A kind outside the vocabulary is refused; each known kind has a group label."""
+    with pytest.raises(ValueError, match="unknown reason kind"):
+        Reason("too_windy")  # type: ignore[arg-type]
+    assert len({Reason(k).label for k in KINDS}) == len(KINDS)
 
 
 def test_cli_segments_text_and_errors(capsys, tmp_path):

@@ -1,7 +1,7 @@
-/* The recursion of an IIR filter, compiled: what mavsid.dsp.lfilter otherwise asks of LAPACK's
- * banded triangular solve (scipy.linalg's ?tbtrs), so that a fit need not import scipy.linalg
- * (~0.2 s of every `mavsid fit`). Optional: where the package is built without a C compiler,
- * mavsid.dsp.lfilter solves with scipy as before (same numbers to rounding; tests compare).
+/* The recursion of an IIR filter, compiled: mavsid.dsp.lfilter's loop over the samples (the
+ * numerator's sum is numpy's). Optional: where the package is built without a C compiler,
+ * mavsid.dsp.lfilter runs the recursion through scipy.signal.lfilter (the same numbers to
+ * rounding; tests/test_dsp.py compares both with scipy).
  *
  * recurse(a, y, n) -> None
  *   a  a readable buffer of p + 1 doubles, the denominator with a[0] = 1 (a[0] not read)
@@ -32,7 +32,7 @@ static PyObject *recurse(PyObject *self, PyObject *args)
     Py_BEGIN_ALLOW_THREADS
     for (Py_ssize_t col = 0; col < total; col += n) {
         double *x = v + col;
-        /* (the oldest term first, a[1] last: LAPACK's column sweep, the same roundings) */
+        /* (the oldest term first, a[1] last) */
         if (p == 1) {
             const double a1 = c[1];
             for (Py_ssize_t k = 1; k < n; k++)

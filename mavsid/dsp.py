@@ -1,26 +1,25 @@
-"""Signal-processing and matrix-function primitives on numpy: linear filtering, Butterworth
-low-pass design, Welch spectra, the matrix exponential and logarithm, so that ``mavsid fit``
-imports no scipy at all (``scipy.signal``, with it ``scipy.stats``, ``scipy.interpolate``:
-about 0.35 s of a 2 s command; ``scipy.linalg`` and ``scipy.optimize``: 0.3 to 0.4 s more).
+"""Signal-processing primitives on numpy: linear filtering, Butterworth low-pass design,
+Welch spectra; and the matrix exponential and logarithm of a model's discretisation, by
+``scipy.linalg`` (imported when first asked for).
 
-Each function gives the numbers of its scipy namesake to rounding (tests/test_dsp.py compares
-them); none has that function's full set of options, only those mavsid uses.
+The filters and spectra give the numbers of their scipy namesakes to rounding
+(tests/test_dsp.py compares them); none has that function's full set of options, only those
+mavsid uses.
 
 - :func:`lfilter`: the difference equation ``Σ a_k y[n-k] = Σ b_k x[n-k]``: the numerator's
   sum by numpy, the recursion compiled (``mavsid._filter``; where the package was built
-  without a C compiler, or for complex numbers, as one banded lower-triangular system by
-  LAPACK's ``?tbtrs`` through scipy), with ``scipy.signal.lfilter``'s initial conditions
-  ``zi`` (its transposed direct form II: ``zi`` adds to the right-hand side of the first
-  samples).
+  without a C compiler, or for complex numbers, ``scipy.signal.lfilter``), with
+  ``scipy.signal.lfilter``'s initial conditions ``zi`` (its transposed direct form II:
+  ``zi`` adds to the right-hand side of the first samples).
 - :func:`butter_lowpass` and :func:`lfilter_zi`: a digital Butterworth low-pass by the
   bilinear transform of the prewarped analog prototype, and its steady-state state;
   :class:`Lowpass2p`, the autopilots' streaming second-order one (gyro, rate derivative).
 - :func:`segment_ffts`, :func:`density`, :func:`welch` and :func:`csd`: Welch's averaged,
   periodic-Hann-windowed, density-scaled one-sided spectra; the transforms of a signal's
   windows taken once serve every spectrum that signal is part of.
-- :func:`expm` and :func:`logm`: ``scipy.linalg``'s namesakes for the small real matrices of
-  a model's discretisation (Padé scaling and squaring; the eigenvectors, or scipy where they
-  are ill-conditioned).
+- :func:`expm` and :func:`logm`: ``scipy.linalg.expm`` and the real ``scipy.linalg.logm`` of
+  a real square matrix, refusing infinities and NaN; the logarithm of a 1×1 matrix in
+  closed form (scipy's takes about a millisecond, and a fit asks for dozens).
 
 Examples
 --------
@@ -33,7 +32,6 @@ Examples
 from __future__ import annotations
 
 import functools
-import math
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -54,22 +52,14 @@ __all__ = ["Lowpass2p", "butter_lowpass", "csd", "density", "expm", "hann", "lfi
 
 def _recurse(a: np.ndarray, rhs: np.ndarray) -> None:
     """The recursion ``y[k] = rhs[k] - Σ_{j≥1} a[j] y[k-j]`` (``a[0] = 1``) down each column of
-    the Fortran-ordered ``rhs`` (n, m), in place: compiled for real numbers, else LAPACK's
-    banded triangular solve (``?tbtrs``: the same forward substitution) through scipy."""
-    n = rhs.shape[0]
+    the Fortran-ordered ``rhs`` (n, m), in place: compiled for real numbers, else
+    ``scipy.signal.lfilter([1], a, rhs)``."""
     if _filter is not None and rhs.dtype == np.float64 and rhs.flags.f_contiguous:
-        _filter.recurse(np.ascontiguousarray(a, np.float64), rhs.T.reshape(-1), n)
+        _filter.recurse(np.ascontiguousarray(a, np.float64), rhs.T.reshape(-1), rhs.shape[0])
         return
-    from scipy import linalg  # (a build without a C compiler, or complex numbers)
+    from scipy import signal  # (a build without a C compiler, or complex numbers)
 
-    band = np.empty((a.size, n), dtype=rhs.dtype, order="F")
-    band[:] = a[:, None]
-    (tbtrs,) = linalg.get_lapack_funcs(("tbtrs",), (band, rhs))
-    out, info = tbtrs(band, rhs, uplo="L", diag="U", overwrite_b=True)
-    if info:  # pragma: no cover - a unit diagonal is never singular
-        raise np.linalg.LinAlgError(f"lfilter: LAPACK tbtrs info {info}")
-    if out is not rhs:  # pragma: no cover - overwrite_b on a Fortran array: in place
-        rhs[...] = out
+    rhs[...] = signal.lfilter([1.0], a, rhs, axis=0)
 
 
 def lfilter(b: Sequence[complex] | np.ndarray, a: Sequence[complex] | np.ndarray,
@@ -302,18 +292,18 @@ def csd(x: np.ndarray, y: np.ndarray, fs: float, nperseg: int, noverlap: int | N
                                                  segment_ffts(y, n, noverlap, detrend), fs, n)
 
 
-#: Padé (13, 13) coefficients of exp and the largest 1-norm it takes unscaled (Higham 2005)
-_PADE13 = (64764752532480000.0, 32382376266240000.0, 7771770303897600.0, 1187353796428800.0,
-           129060195264000.0, 10559470521600.0, 670442572800.0, 33522128640.0, 1323241920.0,
-           40840800.0, 960960.0, 16380.0, 182.0, 1.0)
-_THETA13 = 5.371920351148152
+def _real_square(a: np.ndarray, name: str) -> np.ndarray:
+    """``a`` as a float array, refused unless square and finite (never a NaN model)."""
+    a = np.asarray(a, float)
+    if a.ndim != 2 or a.shape[0] != a.shape[1]:
+        raise ValueError(f"{name}: a square matrix, got shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name}: the matrix holds infinities or NaN")
+    return a
 
 
 def expm(a: np.ndarray) -> np.ndarray:
-    """``scipy.linalg.expm(a)`` of a real square matrix: the (13, 13) Padé approximant
-    after scaling ``a`` by a power of two into its range, then squared back (Higham's
-    scaling and squaring, 2005); the same numbers to rounding for the small matrices of a
-    model's discretisation (tests compare).
+    """``scipy.linalg.expm(a)`` of a real square matrix.
 
     Examples
     --------
@@ -322,42 +312,17 @@ def expm(a: np.ndarray) -> np.ndarray:
     >>> round(float(expm(np.array([[1.0]]))[0, 0]), 12)
     2.718281828459
     """
-    a = np.asarray(a, float)
-    if a.ndim != 2 or a.shape[0] != a.shape[1]:
-        raise ValueError(f"expm: a square matrix, got shape {a.shape}")
-    if not np.all(np.isfinite(a)):
-        raise ValueError("expm: the matrix holds infinities or NaN")
-    n = a.shape[0]
-    if n == 0:
-        return a.copy()
-    norm = float(np.abs(a).sum(axis=0).max())
-    s = max(0, math.ceil(math.log2(norm / _THETA13))) if norm > _THETA13 else 0
-    a = a / 2.0**s
-    b, eye = _PADE13, np.eye(n)
-    a2 = a @ a
-    a4 = a2 @ a2
-    a6 = a4 @ a2
-    u = a @ (a6 @ (b[13] * a6 + b[11] * a4 + b[9] * a2) + b[7] * a6 + b[5] * a4 + b[3] * a2
-             + b[1] * eye)
-    v = a6 @ (b[12] * a6 + b[10] * a4 + b[8] * a2) + b[6] * a6 + b[4] * a4 + b[2] * a2 \
-        + b[0] * eye
-    r = np.linalg.solve(v - u, v + u)
-    for _ in range(s):
-        r = r @ r
-    return np.asarray(r)
+    a = _real_square(a, "expm")
+    from scipy import linalg
 
-
-#: the eigenvectors' condition number above which :func:`logm` leaves the logarithm to scipy
-_LOGM_COND = 1e6
+    return np.asarray(linalg.expm(a))
 
 
 def logm(a: np.ndarray) -> np.ndarray:
-    """``scipy.linalg.logm(a)``, the principal matrix logarithm, of a real square matrix
-    whose eigenvalues are real and positive (a stable, non-oscillating discrete model's: the
-    only ones mavsid takes to continuous time), as a real matrix: ``V diag(ln λ) V⁻¹`` from
-    its eigenvectors ``V``; where these are ill-conditioned (a repeated pole, a Jordan
-    block: condition number above 1e6) or an eigenvalue is not real and positive,
-    ``scipy.linalg.logm`` (imported then), its real part.
+    """The real part of ``scipy.linalg.logm(a)``, the principal matrix logarithm, of a real
+    square matrix (real itself when no eigenvalue is negative or zero: the stable,
+    non-oscillating discrete models mavsid takes to continuous time); a 1×1 matrix's in
+    closed form.
 
     Examples
     --------
@@ -366,18 +331,9 @@ def logm(a: np.ndarray) -> np.ndarray:
     >>> [round(float(v), 12) + 0.0 for v in logm(np.array([[0.5, 0.25], [0.0, 1.0]])).ravel()]
     [-0.69314718056, 0.34657359028, 0.0, 0.0]
     """
-    a = np.asarray(a, float)
-    if a.ndim != 2 or a.shape[0] != a.shape[1]:
-        raise ValueError(f"logm: a square matrix, got shape {a.shape}")
-    if not np.all(np.isfinite(a)):
-        raise ValueError("logm: the matrix holds infinities or NaN")
-    if a.shape[0] == 0:
-        return a.copy()
-    lam, vec = np.linalg.eig(a)
-    real = np.all(np.abs(lam.imag) <= 1e-12 * np.maximum(1.0, np.abs(lam.real)))
-    if real and np.all(lam.real > 0) and np.linalg.cond(vec) < _LOGM_COND:
-        v = vec.real
-        return np.asarray(np.linalg.solve(v.T, (v * np.log(lam.real)).T).T)
-    from scipy import linalg  # (a defective or near-defective matrix: scipy's Schur method)
+    a = _real_square(a, "logm")
+    if a.shape == (1, 1) and a[0, 0] > 0:
+        return np.log(a)
+    from scipy import linalg
 
     return np.asarray(np.real(linalg.logm(a)))

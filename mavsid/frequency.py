@@ -314,7 +314,7 @@ def fit_tf(r: FRF, max_delay_s: float = 0.1) -> TFFit:
     NoExcitationError
         Fewer than 4 coherent frequencies.
     """
-    from mavsid.estimators.output_error import box_least_squares
+    from scipy import optimize
 
     m = r.coherent & np.isfinite(r.response)
     if m.sum() < 4:
@@ -331,10 +331,8 @@ def fit_tf(r: FRF, max_delay_s: float = 0.1) -> TFFit:
     k0 = float(np.median(np.abs(h) * w0))
     best = None
     for tau0 in (0.0, 0.01, 0.03):
-        sol = box_least_squares(resid, np.array([k0, 1.0, tau0]),
-                                np.array([0.0, -50.0, 0.0]),
-                                np.array([np.inf, 500.0, max_delay_s]), np.ones(3),
-                                max_nfev=300)  # (scipy's default for three)
+        sol = optimize.least_squares(resid, np.array([k0, 1.0, tau0]), method="trf",
+                                     bounds=([0.0, -50.0, 0.0], [np.inf, 500.0, max_delay_s]))
         if best is None or sol.cost < best.cost:
             best = sol
     assert best is not None

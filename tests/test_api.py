@@ -10,7 +10,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from scipy import linalg, signal
+from scipy import linalg, optimize, signal
 
 import mavsid
 from mavsid import NoExcitationError, identify, regress
@@ -433,13 +433,10 @@ def test_output_error_coef_reaches_the_trust_region_optimum():
     start = LeastSquares(with_lag(base, 0.01, 2.0), n_bootstrap=0).fit(segs).model_
     got = oe.output_error_coef(start, segs)
     assert got is not None
-    tight = functools.partial(oe.box_least_squares, ftol=1e-15, xtol=1e-15, gtol=1e-15)
-    saved = oe.box_least_squares
-    try:
-        oe.box_least_squares = tight
+    tight = functools.partial(optimize.least_squares, ftol=1e-15, xtol=1e-15, gtol=1e-15)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(optimize, "least_squares", tight)
         ref = oe.refine_output_error(start, segs, covariance="plain")
-    finally:
-        oe.box_least_squares = saved
     np.testing.assert_allclose(got[0], ref.coef, rtol=1e-6)
     assert got[1] <= ref.provenance["refine"]["cost"] * (1 + 1e-12)
     # not its kind: two states, or a continuous-time model -> None (callers refine)
@@ -533,58 +530,20 @@ def test_predictions_from_one_run_equal_stepping_every_start():
         np.testing.assert_array_equal(np.isnan(got), np.isnan(m.predict(seg, h)))
 
 
-@pytest.mark.parametrize("bounded", [False, True])
-def test_the_output_error_solver_reaches_scipys_optimum(bounded: bool) -> None:
-    """output_error._least_squares (Levenberg–Marquardt in a box, no scipy on the fit path)
-    against scipy.optimize.least_squares (trust-region reflective) from the same starts,
-    with bounds that hold the optimum on its edge in half the problems: the same cost to
-    its tolerances, never a worse one."""
-    from scipy import optimize
-
-    rng = np.random.default_rng(5)
-    t = np.linspace(0.0, 4.0, 400)
-    for _ in range(40):
-        true = np.array([rng.uniform(0.5, 3), rng.uniform(0.1, 2), rng.uniform(0.5, 4),
-                         rng.uniform(-1, 1)])
-        y = true[0] * np.exp(-true[1] * t) * np.cos(true[2] * t) + true[3] \
-            + 0.05 * rng.standard_normal(t.size)
-
-        def fun(p: np.ndarray, y: np.ndarray = y) -> np.ndarray:
-            return p[0] * np.exp(-p[1] * t) * np.cos(p[2] * t) + p[3] - y
-
-        x0 = true * rng.uniform(0.7, 1.3, 4)
-        lo, hi = np.full(4, -np.inf), np.full(4, np.inf)
-        if bounded:
-            lo[1], hi[:3] = 0.0, 0.95 * true[:3]
-            x0 = np.clip(x0, lo, hi - 1e-9)
-        scale = np.abs(x0)
-        got = oe.box_least_squares(fun, x0, lo, hi, scale, 100)
-        want = optimize.least_squares(fun, x0, x_scale=scale, max_nfev=100, bounds=(lo, hi))
-        assert got.cost <= want.cost * (1 + 1e-9)
-        assert got.cost >= want.cost * (1 - 1e-6)
-        assert np.all((got.x >= lo) & (got.x <= hi))
-        np.testing.assert_allclose(got.fun, fun(got.x))
-        p = got.x  # the Jacobian there (what the covariance is made of): the analytic one
-        decay, cos = np.exp(-p[1] * t), np.cos(p[2] * t)
-        exact = np.column_stack([decay * cos, -t * p[0] * decay * cos,
-                                 -t * p[0] * decay * np.sin(p[2] * t), np.ones_like(t)])
-        np.testing.assert_allclose(got.jac, exact, rtol=1e-5, atol=1e-6)
-
-
-def test_the_output_error_solver_at_its_edges() -> None:
-    """A start whose residuals are not finite is refused (refine_output_error turns that
-    into a SolverError); a box that holds every variable where the gradient pushes ends
-    the search at once, without spending the evaluations."""
-    with pytest.raises(ValueError, match="not finite"):
-        oe.box_least_squares(lambda x: np.array([np.nan, x[0]]), np.ones(1), np.full(1, -np.inf),
-                          np.full(1, np.inf), np.ones(1))
-    calls = []
-
-    def fun(x: np.ndarray) -> np.ndarray:
-        calls.append(x.copy())
-        return x - 5.0  # the optimum, 5, lies beyond the upper bound 1
-
-    got = oe.box_least_squares(fun, np.ones(2), np.zeros(2), np.ones(2), np.ones(2))
-    np.testing.assert_array_equal(got.x, np.ones(2))
-    assert got.nfev == 1 and got.cost == pytest.approx(16.0)
-    assert len(calls) == 3  # the start and its Jacobian's two columns
+def test_output_error_holds_a_coefficient_its_bounds_fix() -> None:
+    """Bounds that meet hold their coefficient there (a zero σ: nothing is estimated of
+    it); a bound that binds holds another on its edge; the rest is refined: the free run
+    fits better than the equation-error start's."""
+    x, u = _plant(3000, 8, a=((0.985,),), b=((0.4,),), noise=0.01)
+    seg = Segment(np.arange(len(x)) * 0.0025, x, u, ("p",), ("u_roll",), 0.0025, "roll",
+                  "sysid")
+    start = LeastSquares(Structure(("p",), ("p", "u_roll", "1"), ("u_roll",)),
+                         n_bootstrap=0).fit([seg]).model_
+    lo = np.array([[0.98], [-np.inf], [-np.inf]])
+    hi = np.array([[0.98], [0.39], [np.inf]])
+    got = oe.refine_output_error(start, [seg], covariance="plain", bounds=(lo, hi))
+    assert got.coef[0, 0] == 0.98 and got.coef_stderr is not None
+    assert got.coef_stderr[0, 0] == 0.0 and got.coef_stderr[2, 0] > 0
+    assert got.coef[1, 0] <= 0.39 and got.coef[1, 0] == pytest.approx(0.39, abs=1e-6)
+    refine = got.provenance["refine"]
+    assert refine["cost"] < refine["cost_start"]  # type: ignore[index]

@@ -88,6 +88,22 @@ def test_detrend_linear_matches_scipy_on_stacked_windows() -> None:
     assert detrend_linear(x[0]) == pytest.approx(signal.detrend(x[0], type="linear"), abs=1e-11)
 
 
+@pytest.mark.parametrize(("cutoff", "fs"), [(20.0, 400.0), (80.0, 1000.0), (30.0, 8000.0)])
+def test_lowpass2p_steps_scipys_filter_from_its_steady_state(cutoff: float, fs: float) -> None:
+    """The autopilots' streaming biquad, one vector sample at a time, against
+    scipy.signal.lfilter of scipy.signal.butter's low-pass started in the steady state of
+    the first sample (lfilter_zi): to 1e-12 of the signal (a second-order section rounds
+    the last digit or two); a cut-off of 0 lets the samples through."""
+    u = RNG.standard_normal((3000, 3)) + 5.0
+    f = dsp.Lowpass2p(cutoff, fs, 3)
+    got = np.array([f(row) for row in u])
+    b, a = signal.butter(2, cutoff, fs=fs)
+    want = signal.lfilter(b, a, u, axis=0, zi=signal.lfilter_zi(b, a)[:, None] * u[:1])[0]
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * np.abs(want).max())
+    off = dsp.Lowpass2p(0.0, fs, 3)
+    np.testing.assert_array_equal(np.array([off(row) for row in u[:50]]), u[:50])
+
+
 def _rounding_scale(b: np.ndarray, a: np.ndarray, u: np.ndarray, want: np.ndarray
                     ) -> np.ndarray:
     """Per column, how far a float64 filter's output can sit from ``want`` by rounding alone:
@@ -143,46 +159,42 @@ def _structured(rng: np.random.Generator, n: int, m: int) -> np.ndarray:
     return big * 0.0025
 
 
-def test_expm_matches_scipy() -> None:
-    from scipy import linalg
-
-    rng = np.random.default_rng(11)
-    cases = [rng.standard_normal((k, k)) * s for k in (1, 2, 3, 5) for s in (1e-3, 0.5, 4, 60)]
-    cases += [_structured(rng, n, m) for n in (1, 2, 3) for m in (1, 2)]
-    cases += [np.zeros((2, 2)), np.array([[0.0, 1.0], [-1.0, 0.0]]) * np.pi]
-    for a in cases:
-        want = linalg.expm(a)
-        np.testing.assert_allclose(dsp.expm(a), want, rtol=1e-11,
-                                   atol=1e-13 * max(1.0, float(np.abs(want).max())))
+def test_expm_and_logm_refuse_what_scipy_would_turn_into_a_nan_model() -> None:
     with pytest.raises(ValueError, match="square"):
         dsp.expm(np.ones((2, 3)))
-    for func in (dsp.expm, dsp.logm):  # (scipy.linalg refused them too: never a NaN model)
+    with pytest.raises(ValueError, match="square"):
+        dsp.logm(np.ones(3))
+    for func in (dsp.expm, dsp.logm):
         with pytest.raises(ValueError, match="infinities or NaN"):
             func(np.array([[1.0, np.nan], [0.0, 1.0]]))
 
 
-def test_logm_matches_scipy_and_hands_defective_matrices_to_it() -> None:
+def test_logm_is_scipys_and_undoes_the_zero_order_hold() -> None:
     """The discrete models mavsid takes to continuous time: real positive poles, the
-    [[A_d, B_d], [0, I]] of a zero-order hold; a repeated pole (a Jordan block) goes to
-    scipy's Schur method, whose answer it returns."""
+    [[A_d, B_d], [0, I]] of a zero-order hold, a repeated pole (a Jordan block); the 1×1
+    case in closed form. Against scipy.linalg.logm to rounding (its real part, for a
+    negative pole), and the continuous matrix each hold came from back."""
     from scipy import linalg
 
     rng = np.random.default_rng(12)
-    cases = []
+    cases = [np.array([[v]]) for v in (1e-6, 0.37, 0.999999, 1.0, 3.5)]
     for n in (1, 2, 3, 4):
         q = rng.standard_normal((n, n)) + 2 * np.eye(n)
         cases.append(q @ np.diag(np.exp(rng.uniform(-2, 0.3, n))) @ np.linalg.inv(q))
-    for n in (1, 2, 3):
-        cases.append(dsp.expm(_structured(rng, n, 2)[: n + 2, : n + 2]))
-    cases.append(np.array([[0.99, 0.44, 0.1], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]))
-    jordan = np.array([[0.9, 1.0], [0.0, 0.9]])  # defective: scipy's answer
-    cases.append(jordan)
+    held = [_structured(rng, n, 2) for n in (1, 2, 3)]
+    for c in held:  # (the input block's zeros held: the identity below B_d)
+        cases.append(linalg.expm(c))
+    cases.append(np.array([[0.9, 1.0], [0.0, 0.9]]))
+    cases.append(np.array([[-0.5]]))
     for a in cases:
         with np.errstate(all="ignore"):
             want = np.real(linalg.logm(a))
-        np.testing.assert_allclose(dsp.logm(a), want, rtol=1e-9, atol=1e-11)
-        np.testing.assert_allclose(dsp.expm(dsp.logm(a)), a, rtol=1e-9, atol=1e-12)
-    assert dsp.logm(jordan)[0, 1] == pytest.approx(1 / 0.9, rel=1e-12)
+        np.testing.assert_allclose(dsp.logm(a), want, rtol=1e-12, atol=1e-14)
+    for c in held:
+        np.testing.assert_allclose(dsp.logm(dsp.expm(c)), c, rtol=1e-9,
+                                   atol=1e-12 * np.abs(c).max())
+    assert dsp.logm(np.array([[0.9, 1.0], [0.0, 0.9]]))[0, 1] == pytest.approx(1 / 0.9,
+                                                                             rel=1e-12)
 
 
 @pytest.mark.slow

@@ -32,7 +32,7 @@ Examples
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 
@@ -44,7 +44,7 @@ from mavsid.estimators._base import hac_covariance
 from mavsid.estimators.model import Model
 from mavsid.estimators.regressors import Regression
 
-__all__ = ["box_least_squares", "output_error_coef", "refine_output_error"]
+__all__ = ["output_error_coef", "refine_output_error"]
 
 
 def _measured(model: Model, seg: Segment) -> np.ndarray:
@@ -63,8 +63,8 @@ def refine_output_error(model: Model, segments: Sequence[Segment], max_nfev: int
     segments : sequence of Segment
         Training segments; each is simulated from its own first sample.
     max_nfev : int
-        Limit on residual evaluations of the solver (:func:`box_least_squares`; those of its
-        finite-difference Jacobians not counted).
+        Limit on residual evaluations of the solver (``scipy.optimize.least_squares``;
+        those of its finite-difference Jacobians not counted).
     hac : bool
         Newey–West correction of the covariance (when ``covariance`` is not given).
     covariance : {"newey-west", "cramer-rao"}, optional
@@ -117,34 +117,28 @@ def refine_output_error(model: Model, segments: Sequence[Segment], max_nfev: int
         lo = np.asarray(bounds[0], float).reshape(model.coef.shape).ravel()[idx]
         hi = np.asarray(bounds[1], float).reshape(model.coef.shape).ravel()[idx]
         theta0 = np.clip(theta0, lo, hi)
-    x_scale = np.where(np.abs(theta0) > 0, np.abs(theta0), 1.0)
-    try:
-        sol = box_least_squares(residuals, theta0, lo, hi, x_scale, max_nfev)
-    except (ValueError, np.linalg.LinAlgError) as exc:
-        raise SolverError(f"output-error refinement failed: {exc}") from None
+    x, e, jac, nfev, cost = _solve(residuals, theta0, lo, hi, max_nfev)
     start_cost = 0.5 * float(np.sum(residuals(theta0) ** 2))
-    if not np.all(np.isfinite(sol.x)) or sol.cost > start_cost:
+    if not np.all(np.isfinite(x)) or cost > start_cost:
         raise SolverError("output-error refinement diverged (the starting model's free run "
                           "is unstable or the data do not constrain it)")
-    refined = build(sol.x)
+    refined = build(x)
     # sandwich covariance from the Jacobian of the scaled free-run residuals (the scaling
     # cancels between bread and meat), then split into per-output blocks
     m_out = len(model.state_names)
-    jac = np.asarray(sol.jac)
-    e = sol.fun
     spans, start = [], 0
     for i, s in enumerate(segments):
         spans.append((start, start + len(s) * m_out, i, 0))
         start += len(s) * m_out
-    pseudo = Regression(z=jac, y=(e + jac @ sol.x)[:, None], structure=model.structure,
+    pseudo = Regression(z=jac, y=(e + jac @ x)[:, None], structure=model.structure,
                         blocks=np.asarray(spans, dtype=int), segments=tuple(segments))
     jtj = jac.T @ jac
     bread = np.linalg.pinv(jtj, hermitian=True)
     if covariance == "newey-west":
-        cov_s, sig, lags = hac_covariance(pseudo, sol.x[:, None], bread)
+        cov_s, sig, lags = hac_covariance(pseudo, x[:, None], bread)
         cov_theta = cov_s[0]
     elif covariance == "cramer-rao":
-        # rows of sol.fun are (sample, output) interleaved: output i is row % m_out
+        # rows of e are (sample, output) interleaved: output i is row % m_out
         out_of_row = np.arange(len(e)) % m_out
         dof = max(len(e) - len(idx), 1) / m_out
         var = np.array([float(e[out_of_row == i] @ e[out_of_row == i]) / dof
@@ -169,115 +163,43 @@ def refine_output_error(model: Model, segments: Sequence[Segment], max_nfev: int
                             for y, var in zip(ys, variables, strict=True)])
     sigma = np.sqrt(np.mean(resid**2, axis=0))
     prov = dict(model.provenance)
-    prov["refine"] = {"method": "output-error", "nfev": int(sol.nfev), "hac_lags": int(lags),
-                      "covariance": covariance,
-                      "cost_start": start_cost, "cost": float(sol.cost)}
+    prov["refine"] = {"method": "output-error", "nfev": nfev, "hac_lags": int(lags),
+                      "covariance": covariance, "cost_start": start_cost, "cost": cost}
     return replace(refined, covariance=cov, coef_stderr=se, sigma=sigma, provenance=prov)
 
 
-@dataclass(frozen=True)
-class _Solution:
-    """What :func:`box_least_squares` found: the point, its residuals, their Jacobian there,
-    half their sum of squares and the residual evaluations it took (Jacobians' not
-    counted)."""
+def _solve(residuals: Callable[[np.ndarray], np.ndarray], theta0: np.ndarray,
+           lo: np.ndarray, hi: np.ndarray, max_nfev: int
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, float]:
+    """``scipy.optimize.least_squares`` (trust-region reflective, forward-difference
+    Jacobian, each coefficient scaled by its start) of ``residuals`` from ``theta0`` within
+    ``lo <= θ <= hi``; a coefficient whose bounds meet stays there (its Jacobian column
+    zero). Returns the point, its residuals and Jacobian, the residual evaluations (the
+    Jacobians' not counted) and half the sum of squares; SolverError when the solver
+    refuses the start (residuals not finite)."""
+    from scipy import optimize
 
-    x: np.ndarray
-    fun: np.ndarray
-    jac: np.ndarray
-    cost: float
-    nfev: int
+    theta0 = np.clip(theta0, lo, hi)
+    free = lo < hi
+    if not free.any():
+        e = residuals(theta0)
+        return theta0, e, np.zeros((e.size, theta0.size)), 1, 0.5 * float(e @ e)
 
+    def full(z: np.ndarray) -> np.ndarray:
+        theta = theta0.copy()
+        theta[free] = z
+        return theta
 
-def _jacobian(fun: Callable[[np.ndarray], np.ndarray], x: np.ndarray, f: np.ndarray,
-              lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Forward differences, step ``√ε · max(1, |x|)`` (away from a bound it would cross), as
-    ``scipy.optimize.least_squares``' default ``"2-point"`` Jacobian takes them."""
-    h = np.sqrt(np.finfo(float).eps) * np.maximum(1.0, np.abs(x)) * np.where(x < 0, -1.0, 1.0)
-    h = np.where((x + h > hi) | (x + h < lo), -h, h)
-    jac = np.empty((f.size, x.size))
-    for j in range(x.size):
-        step = x.copy()
-        step[j] += h[j]
-        jac[:, j] = (fun(step) - f) / (step[j] - x[j])
-    return jac
-
-
-def box_least_squares(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray,
-                      lo: np.ndarray, hi: np.ndarray, x_scale: np.ndarray, max_nfev: int = 100,
-                      ftol: float = 1e-8, xtol: float = 1e-8, gtol: float = 1e-8) -> _Solution:
-    """Minimise ``½‖fun(x)‖²`` within the box ``lo <= x <= hi`` from ``x0``: Levenberg–Marquardt
-    on the variables scaled by ``x_scale`` (the damping updated by Nielsen's rule): each step
-    solved for the variables no bound holds (one at its bound with the gradient pushing out
-    stays), from the QR factors of their scaled Jacobian (forward differences,
-    :func:`_jacobian`), then projected onto the box. Stops, as
-    ``scipy.optimize.least_squares`` does with the same tolerances, when an accepted step
-    lowers the cost by less than ``ftol`` of it or moves the scaled point by less than
-    ``xtol`` of its norm, when the scaled projected gradient falls below ``gtol``, or after
-    ``max_nfev`` residual evaluations. What the refinement (and
-    :func:`mavsid.frequency.fit_tf`) used from scipy's solver (0.2 s of imports a fit does
-    without); the same optimum to its tolerances (tests compare, with and without bounds).
-    Raises ValueError when the residuals at ``x0`` are not finite.
-
-    Examples
-    --------
-    >>> t = np.linspace(0.0, 1.0, 50)
-    >>> sol = box_least_squares(lambda x: x[0] * np.exp(-x[1] * t) - 2.0 * np.exp(-3.0 * t),
-    ...                         np.array([1.0, 1.0]), np.full(2, -np.inf), np.full(2, np.inf),
-    ...                         np.ones(2))
-    >>> [round(float(v), 6) for v in sol.x], sol.cost < 1e-20
-    ([2.0, 3.0], True)
-    """
-    x = np.clip(np.asarray(x0, float), lo, hi)
-    f = fun(x)
-    if not np.all(np.isfinite(f)):
-        raise ValueError("the residuals are not finite at the starting point")
-    nfev, cost = 1, 0.5 * float(f @ f)
-    jac = _jacobian(fun, x, f, lo, hi)
-    mu, nu = -1.0, 2.0
-    while nfev < max_nfev:
-        js = jac * x_scale  # the Jacobian of the scaled variables z = x / x_scale
-        g = js.T @ f
-        # the gradient's components a bound does not stop (it stops those pointing out)
-        free = ~(((x <= lo) & (g > 0)) | ((x >= hi) & (g < 0)))
-        if float(np.max(np.abs(g[free]), initial=0.0)) < gtol:
-            break
-        q, r = np.linalg.qr(js[:, free])  # (the variables a bound holds stay where they are)
-        qtf = q.T @ f
-        a = r.T @ r
-        if mu < 0:
-            mu = 1e-3 * float(np.max(np.diag(a), initial=0.0)) or 1e-3
-        accepted, n = False, int(free.sum())
-        while nfev < max_nfev:
-            lhs = np.vstack([r, np.sqrt(mu) * np.eye(n)])
-            dz = np.zeros(x.size)
-            dz[free] = np.linalg.lstsq(lhs, np.concatenate([-qtf, np.zeros(n)]), rcond=None)[0]
-            x_new = np.clip(x + dz * x_scale, lo, hi)
-            dz = (x_new - x) / x_scale  # the step the box allows
-            if not np.any(dz):  # (the box stops every variable the step would move)
-                break
-            predicted = -float(g @ dz + 0.5 * np.sum((js @ dz) ** 2))
-            f_new = fun(x_new)
-            nfev += 1
-            cost_new = 0.5 * float(f_new @ f_new)
-            if predicted > 0 and np.isfinite(cost_new) and cost_new < cost:
-                rho = (cost - cost_new) / predicted
-                mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
-                nu = 2.0
-                accepted = True
-                break
-            mu *= nu
-            nu *= 2.0
-            if not np.isfinite(mu) or mu > 1e300:
-                break
-        if not accepted:
-            break
-        drop = cost - cost_new
-        z_norm = float(np.linalg.norm(x / x_scale))
-        x, f, cost = x_new, f_new, cost_new
-        jac = _jacobian(fun, x, f, lo, hi)
-        if drop < ftol * (cost + drop) or float(np.linalg.norm(dz)) < xtol * (xtol + z_norm):
-            break
-    return _Solution(x, f, jac, cost, nfev)
+    z0 = theta0[free]
+    try:
+        sol = optimize.least_squares(lambda z: residuals(full(z)), z0, method="trf",
+                                     bounds=(lo[free], hi[free]), max_nfev=max_nfev,
+                                     x_scale=np.where(np.abs(z0) > 0, np.abs(z0), 1.0))
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        raise SolverError(f"output-error refinement failed: {exc}") from None
+    jac = np.zeros((sol.fun.size, theta0.size))
+    jac[:, free] = sol.jac
+    return full(sol.x), sol.fun, jac, int(sol.nfev), float(sol.cost)
 
 
 def output_error_coef(model: Model, segments: Sequence[Segment], max_nfev: int = 100,

@@ -419,7 +419,7 @@ def _write_outputs(args: argparse.Namespace, result: FitResult,
 
                 worker.send_analysis(tune_analysis(result))
         if args.rrd:
-            from mavsid.viz import save_rrd
+            from mavsid.viz.recording import save_rrd
 
             step(f"writing {args.rrd}", rrd_weight)
             with atomic_path(args.rrd) as tmp:
@@ -579,7 +579,7 @@ def _write_unidentified(args: argparse.Namespace, cfg: PipelineConfig, exc: Mavs
             write_response_report(found, tmp, title="mavsid fit: no plant identified",
                                   notes=notes)
     if args.rrd:
-        from mavsid.viz import save_response_rrd
+        from mavsid.viz.response import save_response_rrd
 
         with atomic_path(args.rrd) as tmp:
             save_response_rrd(found, tmp, notes)
@@ -677,34 +677,44 @@ def _add_view(sub: argparse._SubParsersAction) -> None:
 def _view(args: argparse.Namespace) -> int:
     check_outputs([args.save], [args.log, *([args.model] if args.model else [])])
     _check_inputs([args.log], [args.model] if args.model else [])
-    from mavsid import viz
     from mavsid.pipeline import find_windows, load_models, validate_logs
+    from mavsid.viz.recording import (
+        blueprint,
+        focus_span,
+        log_fit_result,
+        log_flight_windows,
+        rate_targets,
+        result_focus,
+        target_axes,
+    )
+    from mavsid.viz.series import new_recording, write_errors
+    from mavsid.viz.viewer import open_sink, viewer_errors
 
     _check_viewer_address(args)
     cfg = _pipeline_config(args)
-    rec = viz.new_recording()
+    rec = new_recording()
     sink = _sink_args(args)
     save = sink.pop("save")
     with contextlib.ExitStack() as stack:
         if save:
             sink["save"] = stack.enter_context(atomic_path(save))
-            stack.enter_context(viz.write_errors())
+            stack.enter_context(write_errors())
         if not (save or args.stdout or args.headless):
-            stack.enter_context(viz.viewer_errors(f"--url {args.url}" if args.connect else
-                                                  "the rerun viewer mavsid started"))
+            stack.enter_context(viewer_errors(f"--url {args.url}" if args.connect else
+                                              "the rerun viewer mavsid started"))
         if args.model:
             result = validate_logs(load_models(args.model), [args.log], cfg)
-            targets = viz.rate_targets(result)
-            served = viz.open_sink(
-                rec, viz.blueprint(list(result.axes), focus=viz.result_focus(result),
-                                   targets=viz.target_axes(targets)), **sink)
-            viz.log_fit_result(rec, result, targets=targets)
+            targets = rate_targets(result)
+            served = open_sink(
+                rec, blueprint(list(result.axes), focus=result_focus(result),
+                               targets=target_axes(targets)), **sink)
+            log_fit_result(rec, result, targets=targets)
         else:
             flight, windows = find_windows(args.log, cfg)
-            served = viz.open_sink(
-                rec, viz.blueprint([], with_flight=True, focus=viz.focus_span(windows=windows)),
+            served = open_sink(
+                rec, blueprint([], with_flight=True, focus=focus_span(windows=windows)),
                 **sink)
-            viz.log_flight_windows(rec, flight, windows)
+            log_flight_windows(rec, flight, windows)
         rec.flush()
         if save:
             rec.disconnect()
@@ -738,7 +748,7 @@ def _check_viewer_address(args: argparse.Namespace) -> None:
                 and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))):
             raise ConfigError("no display for the rerun viewer (DISPLAY and WAYLAND_DISPLAY "
                               "unset): --serve offers a web viewer, --save OUT.rrd a file")
-        from mavsid.viz import free_port
+        from mavsid.viz.viewer import free_port
 
         try:
             free_port(args.bind)
@@ -892,7 +902,7 @@ def _write_response_outputs(args: argparse.Namespace, found: Sequence[Any],
     """The ``.rrd`` and the report of ``mavsid response``; the paths written."""
     written = []
     if args.rrd:
-        from mavsid.viz import save_response_rrd
+        from mavsid.viz.response import save_response_rrd
 
         step(f"writing {args.rrd}")
         with atomic_path(args.rrd) as tmp:
@@ -964,7 +974,7 @@ def _batch(args: argparse.Namespace) -> int:
         write_trends_html(tables, args.report)
         print(f"wrote {args.report}")
     if args.rrd:
-        from mavsid.viz import save_trends_rrd
+        from mavsid.viz.trends import save_trends_rrd
 
         with atomic_path(args.rrd) as tmp:
             save_trends_rrd(tables["axes"], tmp)

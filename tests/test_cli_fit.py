@@ -221,12 +221,12 @@ def test_a_viewer_address_that_cannot_be_used_is_one_line(flags: list[str], said
 
 def test_a_viewer_that_cannot_be_reached_is_one_line() -> None:
     """rerun says so as a RuntimeError when the recording is flushed (after ~6 s)."""
-    from mavsid import viz
+    from mavsid.viz.viewer import viewer_errors
 
     with pytest.raises(cli.ConfigError, match=r"--url rerun\+http://h:1/proxy: cannot reach"):
-        with viz.viewer_errors("--url rerun+http://h:1/proxy"):
+        with viewer_errors("--url rerun+http://h:1/proxy"):
             raise RuntimeError("gRPC has been unable to connect for 6s, uri: rerun+http://h:1")
-    with pytest.raises(RuntimeError, match="other"), viz.viewer_errors("rerun://h"):
+    with pytest.raises(RuntimeError, match="other"), viewer_errors("rerun://h"):
         raise RuntimeError("other")
 
 

@@ -221,7 +221,7 @@ def test_fit_writes_its_outputs_when_nothing_is_identified(flights, tmp_path) ->
 
 def test_two_logs_overlaid_in_the_report_and_recording(flights, tmp_path) -> None:
     from mavsid.report import write_response_report
-    from mavsid.viz import response_blueprint, save_response_rrd
+    from mavsid.viz.response import response_blueprint, save_response_rrd
 
     found = [response.read_response(flights[s][0], ("roll",)) for s in (1, 2)]
     page = tmp_path / "two.html"

@@ -192,7 +192,7 @@ def test_plots_survive_a_diverging_model(tmp_path) -> None:  # type: ignore[no-u
     """Fit % of -2e6 and free runs of 1e12 rad/s: the .rrd and the HTML are still written
     (no million-tick axis, no 'Maximum allowed size exceeded')."""
     from mavsid.report import render_html
-    from mavsid.viz import save_rrd
+    from mavsid.viz.recording import save_rrd
 
     result = _fit("sysid_roll.bin")
     f = result.axes["roll"]

@@ -17,7 +17,7 @@ from helpers import FIXTURES
 from rerun.chunk import RrdReader
 from toy_plants import toy_flight
 
-from mavsid import viz
+from mavsid.viz import recording, series, viewer
 
 
 @pytest.fixture(scope="module")
@@ -28,7 +28,7 @@ def toy():  # type: ignore[no-untyped-def]
 @pytest.fixture(scope="module")
 def rrd(toy, tmp_path_factory) -> Path:  # type: ignore[no-untyped-def]
     path = tmp_path_factory.mktemp("viz") / "fit.rrd"
-    viz.save_rrd(toy[1], path)
+    recording.save_rrd(toy[1], path)
     return path
 
 
@@ -49,7 +49,7 @@ def _read(path: Path) -> tuple[dict[str, dict[str, list[np.ndarray]]], int]:
 def _series(data: dict[str, dict[str, list]], entity: str) -> tuple[np.ndarray, np.ndarray]:
     cols = data[entity]
     t = np.array([x.total_seconds() if hasattr(x, "total_seconds") else x
-                  for x in cols[viz.TIMELINE]], dtype=float)
+                  for x in cols[series.TIMELINE]], dtype=float)
     v = np.array([np.nan if x is None else x[0] for x in cols["Scalars:scalars"]], dtype=float)
     order = np.argsort(t, kind="stable")
     return t[order], v[order]
@@ -62,7 +62,7 @@ def test_rrd_holds_exactly_the_computed_series(toy, rrd) -> None:  # type: ignor
     # a complete file (footer/manifest written) whose only timeline is the log's clock
     RrdReader(rrd).store()
     timelines = {t for c in RrdReader(rrd).stream().to_chunks() for t in c.timeline_names}
-    assert timelines == {viz.TIMELINE}
+    assert timelines == {series.TIMELINE}
     for axis, fit in result.axes.items():
         v = fit.validation
         for j, state in enumerate(v.state_names):
@@ -87,7 +87,7 @@ def test_rrd_holds_exactly_the_computed_series(toy, rrd) -> None:  # type: ignor
         assert f"/fit/{axis}/p fit" in data or any(k.startswith(f"/fit/{axis}/") for k in data)
         assert any(k.startswith(f"/frequency/{axis}/") for k in data)
     for j, name in enumerate(flight.state_names):
-        t, got = _series(data, f"/flight/{viz._kind(name)}/{name}")
+        t, got = _series(data, f"/flight/{recording.series_kind(name)}/{name}")
         np.testing.assert_allclose(t, flight.time_s, atol=1e-9)
         np.testing.assert_array_equal(got, flight.states[:, j])
     # the summary: each axis's structure and every parameter with σ and unit
@@ -123,11 +123,11 @@ def test_model_attitude_integrates_euler_kinematics() -> None:
     pqr = np.array([rates(x) for x in t])
     seg = Segment(t, np.c_[ref, pqr], np.zeros((len(t), 1)),
                   ("roll", "pitch", "yaw", "p", "q", "r"), ("u_roll",), dt, "roll", "scan")
-    att = viz._model_attitude(seg, "p", pqr[:, 0])
+    att = recording.model_attitude(seg, "p", pqr[:, 0])
     assert att is not None
     assert np.max(np.abs(att - ref)) < 5e-3
     # a model rate 10 % too large shows up in the roll angle, not the others' inputs
-    att_big = viz._model_attitude(seg, "p", 1.1 * pqr[:, 0])
+    att_big = recording.model_attitude(seg, "p", 1.1 * pqr[:, 0])
     assert att_big is not None and np.max(np.abs(att_big[:, 0] - ref[:, 0])) > 0.02
 
 
@@ -139,7 +139,7 @@ def test_blueprint_has_one_view_set_per_axis() -> None:
             return [str(node.origin)]
         return [o for child in getattr(node, "contents", []) for o in origins(child)]
 
-    found = origins(viz.blueprint(["roll", "yaw"]).root_container)
+    found = origins(recording.blueprint(["roll", "yaw"]).root_container)
     for origin in ("bands", "axes/roll", "axes/yaw", "axes/roll/inputs", "fit/roll",
                    "frequency/yaw", "world", "segments", "summary", "flight/attitude",
                    "flight/rates", "flight/inputs", "flight/heading", "flight/thrust"):
@@ -168,7 +168,7 @@ def _screenshot(rrd: Path, out: Path) -> None:
                     "(apt-get install mesa-vulkan-drivers)")
     env = {**os.environ, "XDG_RUNTIME_DIR": str(out.parent)}
     with open(rrd, "rb") as stdin:
-        proc = viz.run_viewer(
+        proc = viewer.run_viewer(
             [exe, "--headless", "--screenshot-to", str(out), "--window-size", "1400x900",
              "--port", "auto", "--bind", "127.0.0.1", "--hide-welcome-screen", "-"],
             stdin=stdin, timeout_s=180, env=env,
@@ -198,13 +198,13 @@ def test_headless_viewer_renders_plots(rrd, tmp_path) -> None:  # type: ignore[n
     def share(colour: tuple[int, int, int]) -> float:
         return float(np.mean(np.all(np.abs(flat - np.array(colour)) <= 40, axis=1)))
 
-    assert share(viz.ONE_STEP) > 0.002, "no one-step prediction lines drawn"
-    assert share(viz.INPUT) > 0.004, "no input lines drawn"
-    assert share(viz.MEASURED) > 0.005, "no measured lines drawn"
+    assert share(series.ONE_STEP) > 0.002, "no one-step prediction lines drawn"
+    assert share(series.INPUT) > 0.004, "no input lines drawn"
+    assert share(series.MEASURED) > 0.005, "no measured lines drawn"
 
 
 def test_recording_is_not_global() -> None:
-    rec = viz.new_recording()
+    rec = series.new_recording()
     assert rr.get_global_data_recording() is not rec
 
 
@@ -216,11 +216,11 @@ def test_bands_phase_and_focus(toy, rrd) -> None:  # type: ignore[no-untyped-def
     for axis, fit in result.axes.items():
         for role, segs in (("train", fit.train), ("validation", fit.held_out)):
             t, level = _series(data, f"/bands/{axis}/{role}")
-            spans = viz._merged((s.start_s, s.stop_s) for s in segs)
+            spans = recording.merged_spans((s.start_s, s.stop_s) for s in segs)
             # each span drawn as its two ends at the axis's level, NaN between spans
             ends = t[np.isfinite(level)]
             np.testing.assert_allclose(ends, np.ravel(spans), atol=1e-9)
-            assert set(level[np.isfinite(level)]) == {viz.BAND_LEVELS[axis]}
+            assert set(level[np.isfinite(level)]) == {recording.BAND_LEVELS[axis]}
         for fr in fit.validation.frequency:
             base = f"/frequency/{axis}/{fr.output_name}_{fr.input_name}"
             assert f"{base}/phase/measured_phase" in data
@@ -232,9 +232,9 @@ def test_bands_phase_and_focus(toy, rrd) -> None:  # type: ignore[no-untyped-def
     fd = dataclasses.replace(flight, flags={**flight.flags, "mode": modes},
                              meta={**flight.meta, "mode_names": {0: "STABILIZE", 25: "SYS→ID"}})
     path = rrd.parent / "bands.rrd"
-    rec = viz.new_recording()
+    rec = series.new_recording()
     rec.save(path)
-    viz.log_bands(rec, fd)
+    recording.log_bands(rec, fd)
     rec.flush()
     rec.disconnect()
     bands, _ = _read(path)
@@ -248,28 +248,28 @@ def test_bands_phase_and_focus(toy, rrd) -> None:  # type: ignore[no-untyped-def
     labels = [str(x) for cols in data.values() for name, xs in cols.items()
               if name.endswith((":labels", ":names")) for x in xs if x is not None]
     assert labels and all(s.isascii() for s in labels), [s for s in labels if not s.isascii()]
-    focus = viz.focus_span({a: (f.train, f.held_out) for a, f in result.axes.items()})
+    focus = recording.focus_span({a: (f.train, f.held_out) for a, f in result.axes.items()})
     first = min((s.start_s, s.stop_s) for f in result.axes.values() for s in f.held_out)
     assert focus == first
 
 
 def test_band_runs_and_merge() -> None:
     t = np.arange(6.0)
-    assert viz._runs(t, np.array([0, 0, 5, 5, 0, 0])) == {0: [(0.0, 2.0), (4.0, 5.0)],
+    assert recording.value_spans(t, np.array([0, 0, 5, 5, 0, 0])) == {0: [(0.0, 2.0), (4.0, 5.0)],
                                                          5: [(2.0, 4.0)]}
-    assert viz._merged([(2.0, 3.0), (0.0, 2.5)]) == [(0.0, 3.0)]
+    assert recording.merged_spans([(2.0, 3.0), (0.0, 2.5)]) == [(0.0, 3.0)]
 
 
 def test_a_long_flight_is_decimated_outside_the_segments(toy, tmp_path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
     """Outside the segments the flight's series keep their envelope (every bucket's min and
     max) within the point budget; inside the segments every sample is kept."""
     flight, _, _ = toy
-    monkeypatch.setattr(viz, "MAX_FLIGHT_POINTS", 300)
+    monkeypatch.setattr(recording, "MAX_FLIGHT_POINTS", 300)
     path = tmp_path / "small.rrd"
     spans = [(110.0, 112.0)]
-    rec = viz.new_recording()
+    rec = series.new_recording()
     rec.save(path)
-    viz.log_flight(rec, flight, keep_spans=spans)
+    recording.log_flight(rec, flight, keep_spans=spans)
     rec.flush()
     rec.disconnect()
     data, _ = _read(path)
@@ -278,7 +278,7 @@ def test_a_long_flight_is_decimated_outside_the_segments(toy, tmp_path, monkeypa
         inside |= (flight.time_s >= a) & (flight.time_s <= b)
     assert len(flight.time_s) > 300 + inside.sum()  # the toy flight is long enough to cut
     for j, name in enumerate(flight.state_names):
-        t, got = _series(data, f"/flight/{viz._kind(name)}/{name}")
+        t, got = _series(data, f"/flight/{recording.series_kind(name)}/{name}")
         ok = np.isfinite(got)
         t, got = t[ok], got[ok]
         want = flight.states[:, j]
@@ -297,22 +297,22 @@ def test_each_series_keeps_every_sample_only_in_its_own_spans(toy, tmp_path, mon
     that axis's segments): a series keeps every sample in its spans and is decimated
     elsewhere, its envelope kept; a series without spans is decimated throughout."""
     flight, _, _ = toy
-    monkeypatch.setattr(viz, "MAX_FLIGHT_POINTS", 300)
+    monkeypatch.setattr(recording, "MAX_FLIGHT_POINTS", 300)
     path = tmp_path / "per_series.rrd"
     mine, other = flight.state_names[0], flight.state_names[1]
-    rec = viz.new_recording()
+    rec = series.new_recording()
     rec.save(path)
-    viz.log_flight(rec, flight, keep_spans={mine: [(110.0, 112.0)]})
+    recording.log_flight(rec, flight, keep_spans={mine: [(110.0, 112.0)]})
     rec.flush()
     rec.disconnect()
     data, _ = _read(path)
     inside = (flight.time_s >= 110.0) & (flight.time_s <= 112.0)
     assert inside.sum() > 100
-    t, got = _series(data, f"/flight/{viz._kind(mine)}/{mine}")
+    t, got = _series(data, f"/flight/{recording.series_kind(mine)}/{mine}")
     k = np.searchsorted(t, flight.time_s[inside] - 1e-9)
     np.testing.assert_allclose(t[k], flight.time_s[inside], atol=1e-9)
     np.testing.assert_array_equal(got[k], flight.states[inside, 0])
-    t, got = _series(data, f"/flight/{viz._kind(other)}/{other}")
+    t, got = _series(data, f"/flight/{recording.series_kind(other)}/{other}")
     ok = np.isfinite(got)
     assert ok.sum() <= 300 + 2 * len(flight.blocks) + 4  # decimated, in the spans too
     assert np.isin(flight.time_s[inside], t).sum() < inside.sum() / 2
@@ -327,9 +327,9 @@ def test_attitude_quaternions_match_scipy_rotation() -> None:
     euler = np.column_stack([rng.uniform(-np.pi, np.pi, 2000), rng.uniform(-1.5, 1.5, 2000),
                              rng.uniform(-np.pi, np.pi, 2000)])
     want = Rotation.from_euler("ZYX", euler[:, ::-1]).as_quat()
-    np.testing.assert_allclose(viz._quaternions(euler), want, atol=1e-15)
+    np.testing.assert_allclose(recording.euler_quaternions(euler), want, atol=1e-15)
     euler[7, 1] = np.nan
-    assert viz._quaternions(euler)[7].tolist() == [0.0, 0.0, 0.0, 1.0]
+    assert recording.euler_quaternions(euler)[7].tolist() == [0.0, 0.0, 0.0, 1.0]
 
 
 def test_several_flights_keep_their_own_series(tmp_path) -> None:  # type: ignore[no-untyped-def]
@@ -344,7 +344,7 @@ def test_several_flights_keep_their_own_series(tmp_path) -> None:  # type: ignor
         result = fit([str(FIXTURES / "sysid_roll.bin"), str(FIXTURES / "doublets.bin")],
                      PipelineConfig(axes=("roll",)))
     path = tmp_path / "two.rrd"
-    viz.save_rrd(result, path)
+    recording.save_rrd(result, path)
     data, _ = _read(path)
     for fd, stem in zip(result.flights, ("sysid_roll", "doublets"), strict=True):
         t, got = _series(data, f"/flight/rates/p/{stem}")
@@ -370,7 +370,7 @@ def test_a_timed_out_viewer_goes_with_its_wrapper(tmp_path: Path) -> None:
         "child.wait()\n")
     wrapper.chmod(0o755)
     with pytest.raises(subprocess.TimeoutExpired):
-        viz.run_viewer([str(wrapper), "--headless"], timeout_s=3)
+        viewer.run_viewer([str(wrapper), "--headless"], timeout_s=3)
     child = int(pid_file.read_text())
 
     def alive(pid: int) -> bool:
@@ -416,7 +416,7 @@ def test_each_axis_has_its_rate_target_against_the_measured_rate(tmp_path: Path)
     log = FIXTURES / "sysid_roll.bin"
     result = fit([str(log)], None)
     path = tmp_path / "t.rrd"
-    bp = viz.save_rrd(result, path)
+    bp = recording.save_rrd(result, path)
     series, _ = _read(path)
     target = np.concatenate(series["/targets/roll/target"]["Scalars:scalars"]).ravel()
     rate = read_log(log, messages=["RATE"])["RATE"]

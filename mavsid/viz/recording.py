@@ -35,19 +35,11 @@ whole :class:`~mavsid.pipeline.FitResult` to an ``.rrd`` file.
 
 from __future__ import annotations
 
-import contextlib
 import math
 import os
 import re
-import signal
-import socket
-import subprocess
-import sys
-import time
-import urllib.parse
-from collections.abc import Iterable, Iterator, Mapping, Sequence
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Final
+from collections.abc import Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 import rerun as rr
@@ -55,24 +47,38 @@ import rerun.blueprint as rrb
 
 from mavsid.axes import AXES, INPUT_OF, RATE_OF, RATES, STATE_UNITS, THRUST_INPUT
 from mavsid.data import FlightData, Segment, decimate
-from mavsid.errors import ConfigError
 from mavsid.validation import Validation, horizon_label
+from mavsid.viz.series import (
+    AXIS_COLOURS,
+    COHERENCE,
+    FREE_RUN,
+    INPUT,
+    MEASURED,
+    ONE_STEP,
+    PANEL_GAP,
+    TARGET,
+    TIMELINE,
+    format_number,
+    joined,
+    plot2d,
+    rrd_file,
+    send_series,
+    style_series,
+    time_column,
+    time_view,
+)
 
 if TYPE_CHECKING:
-    import pandas as pd
-
     from mavsid.excitation import WindowReport
     from mavsid.pipeline import AxisFit, FitResult
-    from mavsid.response import FlightResponse
 
 __all__ = [
-    "APPLICATION_ID",
-    "TIMELINE",
-    "Served",
+    "KINDS",
+    "MAX_FLIGHT_POINTS",
+    "Targets",
     "blueprint",
-    "decimate",
+    "euler_quaternions",
     "focus_span",
-    "free_port",
     "log_attitude",
     "log_bands",
     "log_fit_result",
@@ -82,86 +88,15 @@ __all__ = [
     "log_segments",
     "log_summary",
     "log_validation",
-    "new_recording",
-    "open_sink",
+    "merged_spans",
+    "model_attitude",
     "rate_targets",
     "result_focus",
-    "run_viewer",
-    "save_response_rrd",
     "save_rrd",
-    "save_trends_rrd",
-    "serve_command",
-    "stop_group",
+    "series_kind",
     "target_axes",
-    "viewer_command",
-    "viewer_errors",
-    "wait_listening",
-    "write_errors",
+    "value_spans",
 ]
-
-APPLICATION_ID = "mavsid"
-TIMELINE = "flight_time"
-
-MEASURED = (200, 200, 200)
-ONE_STEP = (70, 140, 255)
-TARGET = (255, 220, 60)
-FREE_RUN = (255, 150, 40)
-INPUT = (90, 200, 110)
-COHERENCE = (180, 120, 255)
-GRID = (90, 90, 90)
-AXIS_COLOURS = {"roll": (230, 80, 80), "pitch": (80, 200, 90), "yaw": (80, 140, 255)}
-
-
-def new_recording(recording_id: str | None = None) -> rr.RecordingStream:
-    """A fresh recording stream for mavsid (not made the global default), whose only
-    timeline is :data:`TIMELINE`."""
-    rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id)
-    rec.set_log_time_enabled(False)
-    rec.set_log_tick_enabled(False)
-    return rec
-
-
-def _time(t: np.ndarray) -> rr.TimeColumn:
-    return rr.TimeColumn(TIMELINE, duration=np.asarray(t, dtype=float))
-
-
-def _send_series(rec: rr.RecordingStream, path: str, t: np.ndarray, v: np.ndarray) -> None:
-    """One scalar series, rows with a non-finite time dropped."""
-    t = np.asarray(t, dtype=float)
-    v = np.asarray(v, dtype=float)
-    ok = np.isfinite(t)
-    if not ok.any():
-        return
-    rr.send_columns(
-        path, indexes=[_time(t[ok])], columns=rr.Scalars.columns(scalars=v[ok]), recording=rec
-    )
-
-
-def _joined(parts: Iterable[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
-    """Concatenate (time, value) pieces with a NaN value between them (a gap in the plot)."""
-    ts: list[np.ndarray] = []
-    vs: list[np.ndarray] = []
-    for t, v in parts:
-        if ts:
-            ts.append(np.array([0.5 * (ts[-1][-1] + t[0])]))
-            vs.append(np.array([np.nan]))
-        ts.append(np.asarray(t, dtype=float))
-        vs.append(np.asarray(v, dtype=float))
-    if not ts:
-        return np.zeros(0), np.zeros(0)
-    return np.concatenate(ts), np.concatenate(vs)
-
-
-#: How a time series is drawn where several samples share a pixel (zoomed out): the
-#: band between their min and max. rerun's default averages them, and a chirp's fast part
-#: (an 18-Hz sine of ±0.2 over a few pixels) drew as a flat line.
-AGGREGATION: Final = "MinMax"
-
-
-def _style(rec: rr.RecordingStream, path: str, colour: Sequence[int], name: str) -> None:
-    rec.log(path, rr.SeriesLines(colors=[colour], names=[name], aggregation_policy=AGGREGATION),
-            static=True)
-
 
 # --------------------------------------------------------------------------- flight data
 
@@ -182,7 +117,7 @@ SERIES_COLOURS: dict[str, tuple[int, int, int]] = {
 }
 
 
-def _kind(name: str) -> str:
+def series_kind(name: str) -> str:
     return next((k for k, names in KINDS.items() if name in names), "other")
 
 
@@ -223,23 +158,23 @@ def log_flight(rec: rr.RecordingStream, flight: FlightData, prefix: str = "fligh
     for names, data, units in ((flight.state_names, flight.states, flight.state_units),
                                (flight.input_names, flight.inputs, flight.input_units)):
         for j, name in enumerate(names):
-            path = f"{prefix}/{_kind(name)}/{name}" + (f"/{tag}" if tag else "")
-            _style(rec, path, SERIES_COLOURS.get(name, INPUT),
+            path = f"{prefix}/{series_kind(name)}/{name}" + (f"/{tag}" if tag else "")
+            style_series(rec, path, SERIES_COLOURS.get(name, INPUT),
                    f"{name} [{units[j]}]" + (f" {tag}" if tag else ""))
             keep = every if every is not None else kept(spans_of.get(name, ()))
             parts = []
             for a, b in blocks:
                 i = a + decimate(data[a:b, j], max(100, int(budget * (b - a))), keep[a:b])
                 parts.append((t[i], data[i, j]))
-            tt, vv = _joined(parts)
-            _send_series(rec, path, tt, vv)
+            tt, vv = joined(parts)
+            send_series(rec, path, tt, vv)
     if all(n in flight.state_names for n in AXES):
         idx = [flight.state_names.index(n) for n in AXES]
         log_attitude(rec, "world/data" + (f"/{tag}" if tag else ""), t, flight.states[:, idx],
                      colour=MEASURED)
 
 
-def _quaternions(euler: np.ndarray) -> np.ndarray:
+def euler_quaternions(euler: np.ndarray) -> np.ndarray:
     """ZYX Euler angles (roll, pitch, yaw; rad) -> quaternions (x, y, z, w): the product
     ``q_z(yaw) q_y(pitch) q_x(roll)`` in closed form (what
     ``Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_quat()`` gives, 10x faster); the
@@ -275,10 +210,10 @@ def log_attitude(
     if len(time_s) > 1:
         step = max(1, round(1.0 / (max_rate_hz * float(np.median(np.diff(time_s))))))
         time_s, euler = time_s[::step], euler[::step]
-    quat = _quaternions(np.asarray(euler, dtype=float))
+    quat = euler_quaternions(np.asarray(euler, dtype=float))
     rr.send_columns(
         path,
-        indexes=[_time(time_s)],
+        indexes=[time_column(time_s)],
         columns=rr.Transform3D.columns(
             quaternion=quat, translation=np.tile(np.asarray(offset_m, float), (len(quat), 1))
         ),
@@ -300,7 +235,7 @@ def log_attitude(
     rec.reset_time()
 
 
-def _model_attitude(segment: Segment, rate_name: str, rate_hat: np.ndarray) -> np.ndarray | None:
+def model_attitude(segment: Segment, rate_name: str, rate_hat: np.ndarray) -> np.ndarray | None:
     """Integrate the Euler kinematics from the segment's first attitude, with the model's
     prediction of ``rate_name`` in place of the measured rate (the others measured)."""
     names = segment.state_names
@@ -369,7 +304,7 @@ def log_segments(
     rows.sort(key=lambda r: r[0])
     rr.send_columns(
         f"segments/{axis}",
-        indexes=[_time(np.array([r[0] for r in rows]))],
+        indexes=[time_column(np.array([r[0] for r in rows]))],
         columns=rr.TextLog.columns(text=[r[1] for r in rows], level=[r[2] for r in rows]),
         recording=rec,
     )
@@ -383,10 +318,10 @@ BAND_WIDTH = 6.0
 REJECTED = (110, 110, 110)
 
 
-def _merged(spans: Iterable[tuple[float, float]]) -> list[tuple[float, float]]:
+def merged_spans(spans: Iterable[tuple[float, float]]) -> list[tuple[float, float]]:
     """Sorted spans with the overlapping ones joined.
 
-    >>> _merged([(3.0, 4.0), (0.0, 1.0), (0.5, 2.0)])
+    >>> merged_spans([(3.0, 4.0), (0.0, 1.0), (0.5, 2.0)])
     [(0.0, 2.0), (3.0, 4.0)]
     """
     out: list[tuple[float, float]] = []
@@ -401,15 +336,15 @@ def _merged(spans: Iterable[tuple[float, float]]) -> list[tuple[float, float]]:
 def _band(rec: rr.RecordingStream, path: str, spans: Iterable[tuple[float, float]],
           level: float, colour: Sequence[int], name: str) -> None:
     """Spans of time as one thick horizontal bar per span at ``level`` (a Gantt row)."""
-    parts = [(np.array([a, b]), np.array([level, level])) for a, b in _merged(spans) if b > a]
+    parts = [(np.array([a, b]), np.array([level, level])) for a, b in merged_spans(spans) if b > a]
     if not parts:
         return
     rec.log(path, rr.SeriesLines(colors=[colour], names=[name], widths=[BAND_WIDTH]),
             static=True)
-    _send_series(rec, path, *_joined(parts))
+    send_series(rec, path, *joined(parts))
 
 
-def _runs(time_s: np.ndarray, values: np.ndarray) -> dict[int, list[tuple[float, float]]]:
+def value_spans(time_s: np.ndarray, values: np.ndarray) -> dict[int, list[tuple[float, float]]]:
     """Per value, the time spans over which an integer series holds it."""
     out: dict[int, list[tuple[float, float]]] = {}
     if len(values) == 0:
@@ -451,7 +386,7 @@ def log_bands(
     names = dict(flight.meta.get("mode_names", {}) or {})  # type: ignore[call-overload]
     mode = flight.flags.get("mode")
     if mode is not None and len(mode) == len(t):
-        for m, spans in sorted(_runs(t, np.asarray(mode)).items()):
+        for m, spans in sorted(value_spans(t, np.asarray(mode)).items()):
             if m < 0:
                 continue
             # a log's own text: the viewer's font has Latin glyphs only (others panic it)
@@ -460,7 +395,7 @@ def log_bands(
                   f"mode {label}")
     air = flight.flags.get("airborne")
     if air is not None and len(air) == len(t):
-        spans = _runs(t, np.asarray(air, dtype=np.int64)).get(1, [])
+        spans = value_spans(t, np.asarray(air, dtype=np.int64)).get(1, [])
         _band(rec, f"bands/airborne{sub}", spans, BAND_LEVELS["airborne"], MEASURED, "airborne")
     for axis in dict.fromkeys([*segments, *windows]):
         level = BAND_LEVELS.get(axis, -1.0)
@@ -500,101 +435,6 @@ def focus_span(
     return min(kept) if kept else None
 
 
-# --------------------------------------------------------------------------- 2-D plots
-
-
-#: A 2-D plot's label layout, in plot units (a plot is 200 wide): tick labels below the
-#: x axis and left of the y axis, far enough that the lowest y label and the first x label
-#: do not overlap; legend entries one text line apart; the Bode panels (magnitude, phase,
-#: coherence) apart by their x labels and a margin (at 6 and 12 units they overlapped at
-#: the viewer's default zoom).
-X_LABEL_GAP, Y_LABEL_GAP, LEGEND_STEP, PANEL_GAP = 9.0, 22.0, 11.0, 32.0
-
-
-def _plot2d(
-    rec: rr.RecordingStream,
-    path: str,
-    series: Sequence[tuple[str, np.ndarray, np.ndarray, Sequence[int]]],
-    *,
-    xlog: bool,
-    x_ticks: Sequence[float] | np.ndarray,
-    y_ticks: Sequence[float] | np.ndarray,
-    x_unit: str,
-    y_unit: str,
-    origin_y: float = 0.0,
-    height: float = 100.0,
-    y_range: tuple[float, float] | None = None,
-    legend: bool = False,
-) -> None:
-    """A static line plot drawn with 2-D primitives (rerun time-series views plot against
-    time only). Plot space: x in [0, 200], y from ``origin_y`` down to ``origin_y - height``
-    (rerun's 2-D y axis points down, so values are flipped). ``legend`` names each series
-    in its colour at the plot's top right."""
-    xs_all = [np.asarray(x, dtype=float) for _, x, _, _ in series]
-    ys_all = [np.asarray(y, dtype=float) for _, _, y, _ in series]
-
-    def fx(x: np.ndarray) -> np.ndarray:
-        return np.log10(x) if xlog else x
-
-    x_lo, x_hi = fx(np.array([min(x_ticks), max(x_ticks)]))
-    if y_range is None:
-        finite = np.concatenate([y[np.isfinite(y)] for y in ys_all] + [np.asarray(y_ticks)])
-        y_lo, y_hi = float(finite.min()), float(finite.max())
-    else:
-        y_lo, y_hi = y_range
-    y_hi = y_hi if y_hi > y_lo else y_lo + 1.0
-
-    def px(x: np.ndarray) -> np.ndarray:
-        return 200.0 * (fx(x) - x_lo) / (x_hi - x_lo)
-
-    def py(y: np.ndarray) -> np.ndarray:
-        return origin_y + height * (1.0 - (np.clip(y, y_lo, y_hi) - y_lo) / (y_hi - y_lo))
-
-    grid: list[np.ndarray] = []
-    labels_at: list[tuple[float, float]] = []
-    labels: list[str] = []
-    for xt in x_ticks:
-        x = float(px(np.array([xt]))[0])
-        grid.append(np.array([[x, origin_y], [x, origin_y + height]]))
-        labels_at.append((x, origin_y + height + X_LABEL_GAP))
-        labels.append(f"{xt:g}{x_unit}")
-    for yt in y_ticks:
-        if y_lo <= yt <= y_hi:
-            y = float(py(np.array([yt]))[0])
-            grid.append(np.array([[0.0, y], [200.0, y]]))
-            labels_at.append((-Y_LABEL_GAP, y))
-            labels.append(f"{yt:g}{y_unit}")
-    rec.log(f"{path}/grid", rr.LineStrips2D(grid, colors=[GRID], radii=0.15), static=True)
-    rec.log(
-        f"{path}/ticks",
-        rr.Points2D(labels_at, labels=labels, radii=0.1, colors=[GRID], show_labels=True),
-        static=True,
-    )
-    for (name, _, _, colour), xv, yv in zip(series, xs_all, ys_all, strict=True):
-        ok = np.isfinite(xv) & np.isfinite(yv) & (xv > 0 if xlog else np.isfinite(xv))
-        if ok.sum() < 1:
-            continue
-        pts = np.c_[px(xv[ok]), py(yv[ok])]
-        entity = f"{path}/{name.replace(' ', '_')}"
-        rec.log(
-            entity,
-            rr.LineStrips2D([pts], colors=[colour], radii=0.6, labels=[name], show_labels=False),
-            static=True,
-        )
-        if len(pts) < 30:  # few points (fit vs horizon): mark them
-            rec.log(f"{entity}/points", rr.Points2D(pts, colors=[colour], radii=1.2),
-                    static=True)
-    if legend:
-        at = [(200.0 + Y_LABEL_GAP, origin_y + 4.0 + LEGEND_STEP * i)
-              for i in range(len(series))]
-        rec.log(
-            f"{path}/legend",
-            rr.Points2D(at, labels=[name for name, *_ in series], radii=1.5,
-                        colors=[colour for *_, colour in series], show_labels=True),
-            static=True,
-        )
-
-
 def _log_fit_plot(rec: rr.RecordingStream, axis: str, v: Validation) -> None:
     """Fit % against horizon per predicted state; free run drawn at twice the longest."""
     h = v.horizons_s
@@ -609,7 +449,7 @@ def _log_fit_plot(rec: rr.RecordingStream, axis: str, v: Validation) -> None:
     decades = 10.0 ** np.arange(np.floor(np.log10(h[0])), np.ceil(np.log10(xs[-1])) + 1)
     lo = np.nanmin([*(s[2] for s in series)]) if series else 0.0
     lo = float(min(0.0, np.floor(np.nan_to_num(lo, nan=0.0) / 20) * 20))
-    _plot2d(
+    plot2d(
         rec,
         f"fit/{axis}",
         series,
@@ -661,7 +501,7 @@ def _log_frequency_plot(rec: rr.RecordingStream, axis: str, v: Validation) -> No
         p_hi = float(np.ceil(both.max() / 90) * 90) if len(both) else 0.0
         p_lo, p_hi = max(p_lo, -1080.0), min(max(p_hi, p_lo + 90.0), 1080.0)
         name = f"frequency/{axis}/{fr.output_name}_{fr.input_name}"
-        _plot2d(
+        plot2d(
             rec,
             f"{name}/magnitude",
             [("measured |H|", f, mag, MEASURED), ("model |H|", f, mod, FREE_RUN)],
@@ -674,7 +514,7 @@ def _log_frequency_plot(rec: rr.RecordingStream, axis: str, v: Validation) -> No
             legend=True,
         )
         step = 90.0 if p_hi - p_lo <= 360 else 180.0
-        _plot2d(
+        plot2d(
             rec,
             f"{name}/phase",
             [("measured phase", f, ph, MEASURED), ("model phase", f, ph_mod, FREE_RUN)],
@@ -688,7 +528,7 @@ def _log_frequency_plot(rec: rr.RecordingStream, axis: str, v: Validation) -> No
             y_range=(p_lo, p_hi),
             legend=True,
         )
-        _plot2d(
+        plot2d(
             rec,
             f"{name}/coherence",
             [("coherence", f, fr.coherence[sel], COHERENCE)],
@@ -737,10 +577,10 @@ def log_validation(
         ):
             path = f"axes/{axis}/{state}/{kind}"
             unit = STATE_UNITS.get(state)
-            _style(rec, path, colour, f"{state} {kind.replace('_', '-')}"
+            style_series(rec, path, colour, f"{state} {kind.replace('_', '-')}"
                    + (f" [{unit}]" if unit else ""))
-            t, y = _joined((s.time_s, pick(s)[:, j]) for s in v.segments)
-            _send_series(rec, path, t, y)
+            t, y = joined((s.time_s, pick(s)[:, j]) for s in v.segments)
+            send_series(rec, path, t, y)
     names = tuple(input_names) or v.input_names
     for name in names:
         parts = [
@@ -750,13 +590,13 @@ def log_validation(
         ]
         if parts:
             path = f"axes/{axis}/inputs/{name}"
-            _style(rec, path, INPUT, name)
-            _send_series(rec, path, *_joined(parts))
+            style_series(rec, path, INPUT, name)
+            send_series(rec, path, *joined(parts))
     rate = RATE_OF.get(axis, "")
     if rate in v.state_names and segments:
         j = v.state_names.index(rate)
         for i, (seg, sv) in enumerate(zip(segments, v.segments, strict=False)):
-            att = _model_attitude(seg, rate, sv.free_run[:, j])
+            att = model_attitude(seg, rate, sv.free_run[:, j])
             if att is not None:
                 log_attitude(
                     rec,
@@ -770,10 +610,6 @@ def log_validation(
                 )
     _log_fit_plot(rec, axis, v)
     _log_frequency_plot(rec, axis, v)
-
-
-def _fmt(x: float) -> str:
-    return "–" if not np.isfinite(x) else f"{x:.4g}"
 
 
 def log_summary(rec: rr.RecordingStream, fits: Sequence[AxisFit]) -> None:
@@ -797,12 +633,13 @@ def log_summary(rec: rr.RecordingStream, fits: Sequence[AxisFit]) -> None:
         stderr = getattr(m, "stderr", {}) or {}
         units = getattr(m, "units", {}) or {}
         for k, val in m.params.items():
-            lines.append(f"| {k} | {_fmt(val)} | {_fmt(stderr.get(k, np.nan))} | "
+            lines.append(f"| {k} | {format_number(val)} | {format_number(stderr.get(k, np.nan))} | "
                          f"{units.get(k, '')} |")
         lines += ["", "| output | " + " | ".join(_fit_keys()) + " |", "|---" * 4 + "|"]
         for state in v.state_names:
             s = v.fit_summary(state)
-            lines.append(f"| {state} | " + " | ".join(_fmt(s[k]) for k in _fit_keys()) + " |")
+            lines.append(f"| {state} | "
+                         + " | ".join(format_number(s[k]) for k in _fit_keys()) + " |")
         lines.append("")
     rec.log("summary", rr.TextDocument("\n".join(lines), media_type="text/markdown"), static=True)
 
@@ -814,23 +651,9 @@ def _fit_keys() -> tuple[str, ...]:
 # --------------------------------------------------------------------------- layout
 
 
-def _time_view(origin: str, name: str, focus: tuple[float, float] | None = None,
-               **kw: object) -> rrb.TimeSeriesView:
-    """A time plot whose time axis moves with every other one (zoom one, all follow),
-    showing ``focus`` (seconds) when given, else the whole flight."""
-    from rerun.encodings import TimeRange, TimeRangeBoundary
-
-    shown = None if focus is None else TimeRange(
-        start=TimeRangeBoundary.absolute(seconds=focus[0]),
-        end=TimeRangeBoundary.absolute(seconds=focus[1]))
-    return rrb.TimeSeriesView(origin=origin, name=name,
-                              axis_x=rrb.TimeAxis(link="LinkToGlobal", view_range=shown),
-                              **kw)  # type: ignore[arg-type]
-
-
 def _bands_view(focus: tuple[float, float] | None = None) -> rrb.TimeSeriesView:
     top = max(BAND_LEVELS.values()) + 0.7
-    return _time_view("bands", "modes & segments (training dim, validation bright, "
+    return time_view("bands", "modes & segments (training dim, validation bright, "
                       "rejected grey)", focus,
                       axis_y=rrb.ScalarAxis(range=(min(BAND_LEVELS.values()) - 0.7, top),
                                             zoom_lock=True),
@@ -859,12 +682,12 @@ def blueprint(
     for axis in axes:
         per_axis.append(
             rrb.Vertical(
-                _time_view(f"axes/{axis}", f"{axis}: {RATE_OF.get(axis, axis)} "
+                time_view(f"axes/{axis}", f"{axis}: {RATE_OF.get(axis, axis)} "
                            f"[{STATE_UNITS.get(RATE_OF.get(axis, ''), '?')}] measured / "
                            "one-step / free-run", focus,
                            contents=["$origin/**", f"- axes/{axis}/inputs/**"]),
-                _time_view(f"axes/{axis}/inputs", f"{axis}: inputs [1]", focus),
-                *([_time_view(f"targets/{axis}", f"{axis}: rate target vs measured "
+                time_view(f"axes/{axis}/inputs", f"{axis}: inputs [1]", focus),
+                *([time_view(f"targets/{axis}", f"{axis}: rate target vs measured "
                               f"{RATE_OF.get(axis, axis)} [rad/s]", focus)]
                   if axis in targets else []),
                 row_shares=[2, 1, 1] if axis in targets else [2, 1],
@@ -872,11 +695,11 @@ def blueprint(
         )
     flight = rrb.Vertical(
         _bands_view(focus),
-        _time_view("flight/attitude", "flight: roll, pitch [rad]", focus),
-        _time_view("flight/heading", "flight: yaw [rad]", focus),
-        _time_view("flight/rates", "flight: body rates p, q, r [rad/s]", focus),
-        _time_view("flight/inputs", "flight: controller outputs [1]", focus),
-        _time_view("flight/thrust", "flight: thrust [1]", focus),
+        time_view("flight/attitude", "flight: roll, pitch [rad]", focus),
+        time_view("flight/heading", "flight: yaw [rad]", focus),
+        time_view("flight/rates", "flight: body rates p, q, r [rad/s]", focus),
+        time_view("flight/inputs", "flight: controller outputs [1]", focus),
+        time_view("flight/thrust", "flight: thrust [1]", focus),
         row_shares=[1, 2, 1, 2, 2, 1],
         name="flight",
     )
@@ -1021,8 +844,8 @@ def log_rate_targets(rec: rr.RecordingStream, result: FitResult,
             for kind, colour, values in (("target", TARGET, target),
                                          ("measured", MEASURED, measured)):
                 path = f"targets/{axis}/{kind}{suffix}"
-                _style(rec, path, colour, f"{rate} {kind} [rad/s]{label}")
-                _send_series(rec, path, *_decimated(fd, values, spans))
+                style_series(rec, path, colour, f"{rate} {kind} [rad/s]{label}")
+                send_series(rec, path, *_decimated(fd, values, spans))
 
 
 def _decimated(fd: FlightData, values: np.ndarray,
@@ -1040,120 +863,8 @@ def _decimated(fd: FlightData, values: np.ndarray,
     for a, b in blocks:
         i = a + decimate(values[a:b], max(100, int(budget * (b - a))), keep[a:b])
         parts.append((t[i], values[i]))
-    return _joined(parts)
+    return joined(parts)
 
-
-def save_trends_rrd(axes: pd.DataFrame, path: str | os.PathLike[str]) -> rrb.Blueprint:
-    """A fleet's parameters against flight date: per vehicle and axis, each continuous-time
-    ``A``/``B`` parameter with its ±σ band, on the timelines ``flight_date`` (the flight's
-    date, where known) and ``flight`` (its index in that vehicle's date order), and the
-    change points of :func:`mavsid.batch.trends` as text-log entries.
-
-    ``axes`` is the per-axis table of :func:`mavsid.batch.run_batch`.
-    """
-    import pandas as pd
-
-    from mavsid.batch import trends
-
-    views: list[rrb.View] = []
-    sends: list[tuple[str, str, tuple[int, int, int], float, list[rr.TimeColumn], np.ndarray]] = []
-    ok = axes[axes["verdict"] != "not identified"] if len(axes) and "verdict" in axes else axes[:0]
-    for (vehicle, axis), group in ok.groupby(["vehicle", "axis"]):
-        group = group.sort_values("flight_date")
-        when = pd.to_datetime(group["flight_date"], errors="coerce")
-        index = np.arange(len(group))
-        safe = str(vehicle).encode("ascii", "replace").decode() or "vehicle"
-        base = f"trends/{safe}/{axis}"
-        colour = AXIS_COLOURS.get(str(axis), FREE_RUN)
-        for col in [c for c in group.columns if c.startswith(("p:B[", "p:A["))]:
-            value = group[col].to_numpy(dtype=float)
-            if not np.isfinite(value).any():
-                continue
-            sigma = group.get(f"sigma:{col[2:]}")
-            sig = (np.zeros(len(group)) if sigma is None else
-                   np.nan_to_num(pd.to_numeric(sigma, errors="coerce").to_numpy(float), nan=0.0))
-            name = col[2:]
-            part = "_".join(filter(None, re.split(r"[^A-Za-z0-9_]+", name)))  # B_p_u_roll
-            indexes = [rr.TimeColumn("flight", sequence=index)]
-            if when.notna().all():
-                indexes.append(rr.TimeColumn(
-                    "flight_date", timestamp=when.to_numpy(dtype="datetime64[ns]")))
-            for kind, label, series, width in (
-                    ("value", name, value, 2.0), ("upper", f"{name} +1 sd", value + sig, 0.5),
-                    ("lower", f"{name} -1 sd", value - sig, 0.5)):
-                sends.append((f"{base}/{part}/{kind}", label, colour, width, indexes, series))
-            views.append(rrb.TimeSeriesView(origin=f"{base}/{part}",
-                                            name=f"{safe} {axis}: {name}"))
-    changes = rrb.TextLogView(origin="changes", name="change points")
-    bp = rrb.Blueprint(
-        rrb.Vertical(rrb.Grid(*views), changes, row_shares=[4, 1]) if views else changes,
-        rrb.TimePanel(timeline="flight"),
-        collapse_panels=True,
-    )
-    with _rrd_file(path, bp) as rec:
-        _log_trends(rec, ok, sends, trends(axes))
-    return bp
-
-
-def _log_trends(rec: rr.RecordingStream, ok: pd.DataFrame,
-                sends: list[tuple[str, str, tuple[int, int, int], float, list[rr.TimeColumn],
-                                  np.ndarray]],
-                found: pd.DataFrame) -> None:
-    """:func:`save_trends_rrd`'s series and change points, into ``rec``."""
-    for entity, label, colour, width, indexes, series in sends:
-        rec.log(entity, rr.SeriesLines(colors=[colour], names=[label], widths=[width]),
-                static=True)
-        if entity.endswith("/value"):
-            rec.log(entity, rr.SeriesPoints(colors=[colour], names=[label], markers=["circle"],
-                                            marker_sizes=[3.0]), static=True)
-        rr.send_columns(entity, indexes=indexes, columns=rr.Scalars.columns(scalars=series),
-                        recording=rec)
-    for r in found[found["changed"]].to_dict("records") if len(found) else []:
-        mine = ok[(ok["vehicle"] == r["vehicle"]) & (ok["axis"] == r["axis"])]
-        at = int((mine["flight_date"].astype(str) <= str(r["change_after"])).sum())
-        text = (f"{r['vehicle']} {r['axis']} {r['param']}: {r['before']:.4g} -> "
-                f"{r['after']:.4g} after {r['change_after']} ({r['z']:.1f} standard errors)")
-        rec.set_time("flight", sequence=at)  # the first flight after the change
-        rec.log("changes", rr.TextLog(text.encode("ascii", "replace").decode(), level="WARN"))
-
-
-@contextlib.contextmanager
-def write_errors() -> Iterator[None]:
-    """rerun reports a failed write (a full disk, ``/dev/full``) as a ``RuntimeError`` naming
-    the OS error: raised here as an ``OSError``, which :func:`mavsid.outputs.atomic_path`
-    turns into one line naming the output."""
-    try:
-        yield
-    except RuntimeError as exc:
-        text = str(exc)
-        if "os error" not in text and "write" not in text.lower():
-            raise
-        raise OSError(text.rsplit(": ", 1)[-1]) from None
-
-
-@contextlib.contextmanager
-def viewer_errors(viewer: str) -> Iterator[None]:
-    """rerun's failure to reach a viewer, or the viewer's end (a ``RuntimeError`` when the
-    recording is flushed), as one :class:`~mavsid.errors.ConfigError` line naming
-    ``viewer`` (as :func:`write_errors` does for a file)."""
-    try:
-        yield
-    except RuntimeError as exc:
-        if "connect" not in str(exc):
-            raise
-        raise ConfigError(f"{viewer}: cannot reach the viewer ({exc})") from None
-
-
-@contextlib.contextmanager
-def _rrd_file(path: str | os.PathLike[str], bp: rrb.Blueprint) -> Iterator[rr.RecordingStream]:
-    """A recording saved to ``path`` with the blueprint ``bp``, flushed and closed when the
-    block ends (:func:`write_errors`)."""
-    rec = new_recording()
-    with write_errors():
-        rec.save(os.fspath(path), default_blueprint=bp)
-        yield rec
-        rec.flush()
-        rec.disconnect()
 
 
 def save_rrd(
@@ -1163,282 +874,6 @@ def save_rrd(
     targets = rate_targets(result)
     bp = blueprint(list(result.axes), with_flight=flight, focus=result_focus(result),
                    targets=target_axes(targets))
-    with _rrd_file(path, bp) as rec:
+    with rrd_file(path, bp) as rec:
         log_fit_result(rec, result, flight=flight, targets=targets)
-    return bp
-
-
-@dataclass(frozen=True)
-class Served:
-    """A rerun process started by :func:`open_sink` (web viewer and gRPC proxy, or a native
-    viewer) and the ports it listens on."""
-
-    url: str
-    process: subprocess.Popen[bytes]
-    ports: tuple[int, ...] = ()
-
-    def close(self) -> None:
-        """Stop the server and every process it started (``python -m rerun_cli`` runs the
-        viewer binary as a child: the whole process group goes), freeing its ports."""
-        stop_group(self.process)
-
-
-def stop_group(process: subprocess.Popen[Any]) -> None:
-    """Stop ``process`` and every process of its group (it was started with
-    ``start_new_session=True``): SIGTERM, then SIGKILL to what is left after 10 s. The
-    ``rerun`` command is a Python wrapper that runs the viewer binary as its child: killing
-    the wrapper alone leaves the viewer running, listening on its port."""
-    for sig in (signal.SIGTERM, signal.SIGKILL):
-        with contextlib.suppress(ProcessLookupError, PermissionError):
-            os.killpg(process.pid, sig)
-        try:
-            process.wait(timeout=10)
-        except subprocess.TimeoutExpired:  # pragma: no cover
-            continue
-        if sig == signal.SIGTERM:  # (the wrapper is gone; its children may linger)
-            time.sleep(0.2)
-            with contextlib.suppress(ProcessLookupError, PermissionError):
-                os.killpg(process.pid, signal.SIGKILL)
-        break
-
-
-def run_viewer(argv: Sequence[str], *, timeout_s: float, stdin: Any = None,
-               env: Mapping[str, str] | None = None) -> subprocess.CompletedProcess[str]:
-    """Run a rerun command to its end (``rerun --headless --screenshot-to PNG -``) in a
-    process group of its own; on timeout (``subprocess.TimeoutExpired``), Ctrl-C or any
-    error the whole group is stopped (:func:`stop_group`), the viewer with its wrapper.
-
-    Examples
-    --------
-    >>> run_viewer([sys.executable, "-c", "print('ok')"], timeout_s=60).stdout
-    'ok\\n'
-    """
-    process = subprocess.Popen(list(argv), stdin=stdin, stdout=subprocess.PIPE,
-                               stderr=subprocess.PIPE, text=True, env=env,
-                               start_new_session=True)
-    try:
-        out, err = process.communicate(timeout=timeout_s)
-    except BaseException:
-        stop_group(process)
-        process.communicate()
-        raise
-    stop_group(process)  # (whatever it left behind)
-    return subprocess.CompletedProcess(list(argv), process.returncode, out, err)
-
-
-def free_port(bind: str = "127.0.0.1") -> int:
-    """A TCP port free on ``bind`` now (the OS's choice).
-
-    Examples
-    --------
-    >>> 1024 <= free_port() <= 65535
-    True
-    """
-    family = socket.AF_INET6 if ":" in bind else socket.AF_INET
-    with socket.socket(family, socket.SOCK_STREAM) as sock:
-        sock.bind((bind, 0))
-        return int(sock.getsockname()[1])
-
-
-def serve_command(bind: str, grpc_port: int, web_port: int) -> list[str]:
-    """The rerun CLI command that hosts the web viewer and the gRPC proxy on ``bind``.
-
-    Examples
-    --------
-    >>> serve_command("127.0.0.1", 40001, 40002)[-7:]
-    ['--serve-web', '--bind', '127.0.0.1', '--port', '40001', '--web-viewer-port', '40002']
-    """
-    return [sys.executable, "-m", "rerun_cli", "--serve-web", "--bind", bind,
-            "--port", str(grpc_port), "--web-viewer-port", str(web_port)]
-
-
-def viewer_command(bind: str, port: int) -> list[str]:
-    """The rerun CLI command for a native viewer whose gRPC server listens on ``bind`` only
-    (the SDK's ``spawn`` would listen on every interface).
-
-    Examples
-    --------
-    >>> viewer_command("127.0.0.1", 40003)[-4:]
-    ['--bind', '127.0.0.1', '--port', '40003']
-    """
-    return [sys.executable, "-m", "rerun_cli", "--bind", bind, "--port", str(port)]
-
-
-def _client_host(bind: str) -> str:
-    host = "127.0.0.1" if bind in ("0.0.0.0", "::", "") else bind
-    return f"[{host}]" if ":" in host else host
-
-
-def wait_listening(process: subprocess.Popen[bytes], host: str, port: int,
-                   timeout_s: float = 20.0) -> None:
-    """Return once ``host:port`` accepts connections; raise if the process exits first or
-    the time runs out (never send data to a server that is not ours)."""
-    deadline = time.monotonic() + timeout_s
-    plain = host.strip("[]")
-    while time.monotonic() < deadline:
-        if process.poll() is not None:
-            raise ConfigError(f"the rerun server exited (code {process.returncode}) before "
-                              f"listening on {host}:{port}")
-        try:
-            with socket.create_connection((plain, port), timeout=0.5):
-                return
-        except OSError:
-            time.sleep(0.1)
-    stop_group(process)
-    raise ConfigError(f"the rerun server did not listen on {host}:{port} within "
-                      f"{timeout_s:.0f} s")
-
-
-def open_sink(
-    rec: rr.RecordingStream,
-    bp: rrb.Blueprint,
-    *,
-    save: str | None = None,
-    serve: bool = False,
-    connect: bool = False,
-    url: str | None = None,
-    stdout: bool = False,
-    headless: bool = False,
-    bind: str = "127.0.0.1",
-) -> Served | None:
-    """Send ``rec`` where the ``view`` flags say.
-
-    ``serve`` runs the rerun CLI's web viewer and gRPC proxy, ``spawn`` (the default) a
-    native viewer; both listen on ``bind`` only (default 127.0.0.1: flight data is not
-    published to the network unless asked) on ports free at the time, and data is sent only
-    once the process mavsid started listens (a port held by another process is never sent
-    to). Returns the process started (call :meth:`Served.close` when done; a spawned
-    viewer is left running for the user).
-    """
-    if stdout:
-        rec.stdout(default_blueprint=bp)
-    elif serve:
-        grpc_port, web_port = free_port(bind), free_port(bind)
-        process = subprocess.Popen(serve_command(bind, grpc_port, web_port),
-                                   start_new_session=True)
-        host = _client_host(bind)
-        wait_listening(process, host, grpc_port)
-        grpc = f"rerun+http://{host}:{grpc_port}/proxy"
-        rec.connect_grpc(grpc, default_blueprint=bp)
-        web = f"http://{host}:{web_port}/?url={urllib.parse.quote(grpc, safe='')}"
-        return Served(web, process, (grpc_port, web_port))
-    elif connect:
-        rec.connect_grpc(url, default_blueprint=bp)
-    elif save is not None:
-        rec.save(save, default_blueprint=bp)
-    elif not headless:
-        port = free_port(bind)
-        process = subprocess.Popen(viewer_command(bind, port), start_new_session=True)
-        host = _client_host(bind)
-        wait_listening(process, host, port)
-        rec.connect_grpc(f"rerun+http://{host}:{port}/proxy", default_blueprint=bp)
-        return Served(f"rerun+http://{host}:{port}/proxy", process, (port,))
-    return None
-
-
-# --------------------------------------------------------------------------- closed-loop response
-
-#: colours of the logs compared in a response recording (first log, second, ...)
-LOG_COLOURS = ((70, 140, 255), (255, 150, 40), (90, 200, 110), (200, 90, 200))
-
-
-def _log_tags(responses: Sequence[FlightResponse]) -> list[str]:
-    """A short ASCII name per log (its file stem, with its index when two share one)."""
-    stems = ["_".join(filter(None, re.split(r"[^A-Za-z0-9_.-]+",
-                                            os.path.splitext(os.path.basename(r.log))[0])))
-             or "log" for r in responses]
-    return [s if stems.count(s) == 1 else f"{s}_{i}" for i, s in enumerate(stems)]
-
-
-def log_response(rec: rr.RecordingStream, responses: Sequence[FlightResponse],
-                 notes: Sequence[str] = ()) -> None:
-    """Closed-loop responses (:mod:`mavsid.response`) into ``rec``: per axis and loop the
-    target and actual on the flight's timeline (``response/<axis>/<loop>/<log>/...``), the
-    step responses with their bands overlaid per log (``step/<axis>/<loop>``, a 2-D plot),
-    the gyro and controller-output spectra with the filters' cut-offs
-    (``spectrum/<axis>``) and a summary of the verdicts, under ``notes`` (lines shown
-    first: why a fit identified nothing)."""
-    tags = _log_tags(responses)
-    lines = [*(f"- {n}" for n in notes), *([""] if notes else []),
-             "| log | axis | loop | rise ms | overshoot % | bandwidth Hz | verdict |",
-             "|---|---|---|---|---|---|---|"]
-    steps: dict[tuple[str, str], list[tuple[str, np.ndarray, np.ndarray, Sequence[int]]]] = {}
-    spectra: dict[str, list[tuple[str, np.ndarray, np.ndarray, Sequence[int]]]] = {}
-    cutoffs: dict[str, dict[str, float]] = {}
-    for i, (fr, tag) in enumerate(zip(responses, tags, strict=True)):
-        colour = LOG_COLOURS[i % len(LOG_COLOURS)]
-        for r in fr.loops:
-            base = f"response/{r.axis}/{r.loop}/{tag}"
-            if r.time_s.size:
-                _send_series(rec, f"{base}/target", r.time_s, r.target_series)
-                _send_series(rec, f"{base}/actual", r.time_s, r.actual_series)
-                _style(rec, f"{base}/target", MEASURED, f"{tag} target {r.target}")
-                _style(rec, f"{base}/actual", colour, f"{tag} actual {r.actual}")
-            if r.step is not None:
-                s = r.step
-                steps.setdefault((r.axis, r.loop), []).extend([
-                    (f"{tag} mean", s.time_s, s.response, colour),
-                    (f"{tag} lower", s.time_s, s.lower, tuple(c // 2 for c in colour)),
-                    (f"{tag} upper", s.time_s, s.upper, tuple(c // 2 for c in colour))])
-            lines.append(f"| {tag} | {r.axis} | {r.loop} | "
-                         f"{_fmt((r.rise_s or math.nan) * 1e3)} | "
-                         f"{_fmt(r.overshoot_pct if r.overshoot_pct is not None else math.nan)}"
-                         f" | {_fmt(r.bandwidth_hz or math.nan)} | {r.verdict} |")
-        for axis, found in fr.spectra.items():
-            for k, sp in enumerate(found):
-                ok = (sp.freq_hz > 0) & (sp.psd > 0)
-                if ok.sum() < 2:
-                    continue
-                shade = colour if k == 0 else tuple(min(255, c + 70) for c in colour)
-                spectra.setdefault(axis, []).append(
-                    (f"{tag} {sp.name}", sp.freq_hz[ok], 10 * np.log10(sp.psd[ok]), shade))
-                cutoffs.setdefault(axis, {}).update(sp.cutoffs)
-    for (axis, loop), series in steps.items():
-        end = max(float(x[-1]) for _, x, _, _ in series)
-        _plot2d(rec, f"step/{axis}/{loop}", series, xlog=False,
-                x_ticks=np.linspace(0.0, end, 6).round(3), y_ticks=np.arange(0.0, 1.6, 0.25),
-                x_unit=" s", y_unit="", legend=True)
-    for axis, series in spectra.items():
-        lo = min(float(x.min()) for _, x, _, _ in series)
-        hi = max(float(x.max()) for _, x, _, _ in series)
-        ys = np.concatenate([y for *_, y, _ in series])
-        y_lo, y_hi = float(np.floor(ys.min() / 10) * 10), float(np.ceil(ys.max() / 10) * 10)
-        marks = [(f"{name} {hz:g} Hz", np.array([hz, hz]), np.array([y_lo, y_hi]), COHERENCE)
-                 for name, hz in cutoffs.get(axis, {}).items() if lo <= hz <= hi]
-        decades = 10.0 ** np.arange(np.floor(np.log10(lo)), np.ceil(np.log10(hi)) + 1)
-        _plot2d(rec, f"spectrum/{axis}", [*series, *marks], xlog=True, x_ticks=decades,
-                y_ticks=np.arange(y_lo, y_hi + 1, 20), x_unit=" Hz", y_unit=" dB",
-                y_range=(y_lo, y_hi), legend=True)
-    rec.log("summary", rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN),
-            static=True)
-
-
-def response_blueprint(responses: Sequence[FlightResponse]) -> rrb.Blueprint:
-    """The layout of :func:`log_response`: the loops' target and actual on linked time
-    axes (left), the step responses, spectra and summary (right)."""
-    keys = list(dict.fromkeys((r.axis, r.loop) for fr in responses for r in fr.loops))
-    times = [_time_view(f"response/{axis}/{loop}", f"{axis} {loop}: target / actual "
-                        f"[{'rad/s' if loop == 'rate' else 'rad'}]") for axis, loop in keys]
-    plots: list[rrb.View] = [rrb.Spatial2DView(origin=f"step/{axis}/{loop}",
-                                               name=f"{axis} {loop}: step response")
-                             for axis, loop in keys
-                             if any(getattr(fr.loop(axis, loop), "step", None) is not None
-                                    for fr in responses)]
-    plots += [rrb.Spatial2DView(origin=f"spectrum/{axis}", name=f"{axis}: spectra [dB]")
-              for axis in dict.fromkeys(a for a, _ in keys)]
-    summary = rrb.TextDocumentView(origin="summary", name="summary")
-    right = rrb.Vertical(summary, rrb.Tabs(*plots), row_shares=[1, 3]) if plots else summary
-    left = rrb.Vertical(*times) if times else rrb.TextDocumentView(origin="summary")
-    return rrb.Blueprint(rrb.Horizontal(left, right, column_shares=[3, 2]),
-                         rrb.TimePanel(timeline=TIMELINE, play_state="paused"),
-                         collapse_panels=True)
-
-
-def save_response_rrd(responses: Sequence[FlightResponse], path: str | os.PathLike[str],
-                      notes: Sequence[str] = ()) -> rrb.Blueprint:
-    """Write :func:`log_response` of ``responses`` (and ``notes``) with its blueprint to an
-    ``.rrd``."""
-    bp = response_blueprint(responses)
-    with _rrd_file(path, bp) as rec:
-        log_response(rec, responses, notes)
     return bp

@@ -1,0 +1,139 @@
+"""Closed-loop responses (:mod:`mavsid.response`) of one or more logs as a rerun recording:
+target and actual per loop, step responses with their bands, spectra with the filters'
+cut-offs, and a summary."""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from mavsid.viz.series import (
+    COHERENCE,
+    MEASURED,
+    TIMELINE,
+    format_number,
+    plot2d,
+    rrd_file,
+    send_series,
+    style_series,
+    time_view,
+)
+
+if TYPE_CHECKING:
+    from mavsid.response import FlightResponse
+
+__all__ = ["log_response", "response_blueprint", "save_response_rrd"]
+
+
+#: colours of the logs compared in a response recording (first log, second, ...)
+LOG_COLOURS = ((70, 140, 255), (255, 150, 40), (90, 200, 110), (200, 90, 200))
+
+
+def _log_tags(responses: Sequence[FlightResponse]) -> list[str]:
+    """A short ASCII name per log (its file stem, with its index when two share one)."""
+    stems = ["_".join(filter(None, re.split(r"[^A-Za-z0-9_.-]+",
+                                            os.path.splitext(os.path.basename(r.log))[0])))
+             or "log" for r in responses]
+    return [s if stems.count(s) == 1 else f"{s}_{i}" for i, s in enumerate(stems)]
+
+
+def log_response(rec: rr.RecordingStream, responses: Sequence[FlightResponse],
+                 notes: Sequence[str] = ()) -> None:
+    """Closed-loop responses (:mod:`mavsid.response`) into ``rec``: per axis and loop the
+    target and actual on the flight's timeline (``response/<axis>/<loop>/<log>/...``), the
+    step responses with their bands overlaid per log (``step/<axis>/<loop>``, a 2-D plot),
+    the gyro and controller-output spectra with the filters' cut-offs
+    (``spectrum/<axis>``) and a summary of the verdicts, under ``notes`` (lines shown
+    first: why a fit identified nothing)."""
+    tags = _log_tags(responses)
+    lines = [*(f"- {n}" for n in notes), *([""] if notes else []),
+             "| log | axis | loop | rise ms | overshoot % | bandwidth Hz | verdict |",
+             "|---|---|---|---|---|---|---|"]
+    steps: dict[tuple[str, str], list[tuple[str, np.ndarray, np.ndarray, Sequence[int]]]] = {}
+    spectra: dict[str, list[tuple[str, np.ndarray, np.ndarray, Sequence[int]]]] = {}
+    cutoffs: dict[str, dict[str, float]] = {}
+    for i, (fr, tag) in enumerate(zip(responses, tags, strict=True)):
+        colour = LOG_COLOURS[i % len(LOG_COLOURS)]
+        for r in fr.loops:
+            base = f"response/{r.axis}/{r.loop}/{tag}"
+            if r.time_s.size:
+                send_series(rec, f"{base}/target", r.time_s, r.target_series)
+                send_series(rec, f"{base}/actual", r.time_s, r.actual_series)
+                style_series(rec, f"{base}/target", MEASURED, f"{tag} target {r.target}")
+                style_series(rec, f"{base}/actual", colour, f"{tag} actual {r.actual}")
+            if r.step is not None:
+                s = r.step
+                steps.setdefault((r.axis, r.loop), []).extend([
+                    (f"{tag} mean", s.time_s, s.response, colour),
+                    (f"{tag} lower", s.time_s, s.lower, tuple(c // 2 for c in colour)),
+                    (f"{tag} upper", s.time_s, s.upper, tuple(c // 2 for c in colour))])
+            overshoot = r.overshoot_pct if r.overshoot_pct is not None else math.nan
+            lines.append(f"| {tag} | {r.axis} | {r.loop} | "
+                         f"{format_number((r.rise_s or math.nan) * 1e3)} | "
+                         f"{format_number(overshoot)}"
+                         f" | {format_number(r.bandwidth_hz or math.nan)} | {r.verdict} |")
+        for axis, found in fr.spectra.items():
+            for k, sp in enumerate(found):
+                ok = (sp.freq_hz > 0) & (sp.psd > 0)
+                if ok.sum() < 2:
+                    continue
+                shade = colour if k == 0 else tuple(min(255, c + 70) for c in colour)
+                spectra.setdefault(axis, []).append(
+                    (f"{tag} {sp.name}", sp.freq_hz[ok], 10 * np.log10(sp.psd[ok]), shade))
+                cutoffs.setdefault(axis, {}).update(sp.cutoffs)
+    for (axis, loop), series in steps.items():
+        end = max(float(x[-1]) for _, x, _, _ in series)
+        plot2d(rec, f"step/{axis}/{loop}", series, xlog=False,
+                x_ticks=np.linspace(0.0, end, 6).round(3), y_ticks=np.arange(0.0, 1.6, 0.25),
+                x_unit=" s", y_unit="", legend=True)
+    for axis, series in spectra.items():
+        lo = min(float(x.min()) for _, x, _, _ in series)
+        hi = max(float(x.max()) for _, x, _, _ in series)
+        ys = np.concatenate([y for *_, y, _ in series])
+        y_lo, y_hi = float(np.floor(ys.min() / 10) * 10), float(np.ceil(ys.max() / 10) * 10)
+        marks = [(f"{name} {hz:g} Hz", np.array([hz, hz]), np.array([y_lo, y_hi]), COHERENCE)
+                 for name, hz in cutoffs.get(axis, {}).items() if lo <= hz <= hi]
+        decades = 10.0 ** np.arange(np.floor(np.log10(lo)), np.ceil(np.log10(hi)) + 1)
+        plot2d(rec, f"spectrum/{axis}", [*series, *marks], xlog=True, x_ticks=decades,
+                y_ticks=np.arange(y_lo, y_hi + 1, 20), x_unit=" Hz", y_unit=" dB",
+                y_range=(y_lo, y_hi), legend=True)
+    rec.log("summary", rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN),
+            static=True)
+
+
+def response_blueprint(responses: Sequence[FlightResponse]) -> rrb.Blueprint:
+    """The layout of :func:`log_response`: the loops' target and actual on linked time
+    axes (left), the step responses, spectra and summary (right)."""
+    keys = list(dict.fromkeys((r.axis, r.loop) for fr in responses for r in fr.loops))
+    times = [time_view(f"response/{axis}/{loop}", f"{axis} {loop}: target / actual "
+                        f"[{'rad/s' if loop == 'rate' else 'rad'}]") for axis, loop in keys]
+    plots: list[rrb.View] = [rrb.Spatial2DView(origin=f"step/{axis}/{loop}",
+                                               name=f"{axis} {loop}: step response")
+                             for axis, loop in keys
+                             if any(getattr(fr.loop(axis, loop), "step", None) is not None
+                                    for fr in responses)]
+    plots += [rrb.Spatial2DView(origin=f"spectrum/{axis}", name=f"{axis}: spectra [dB]")
+              for axis in dict.fromkeys(a for a, _ in keys)]
+    summary = rrb.TextDocumentView(origin="summary", name="summary")
+    right = rrb.Vertical(summary, rrb.Tabs(*plots), row_shares=[1, 3]) if plots else summary
+    left = rrb.Vertical(*times) if times else rrb.TextDocumentView(origin="summary")
+    return rrb.Blueprint(rrb.Horizontal(left, right, column_shares=[3, 2]),
+                         rrb.TimePanel(timeline=TIMELINE, play_state="paused"),
+                         collapse_panels=True)
+
+
+def save_response_rrd(responses: Sequence[FlightResponse], path: str | os.PathLike[str],
+                      notes: Sequence[str] = ()) -> rrb.Blueprint:
+    """Write :func:`log_response` of ``responses`` (and ``notes``) with its blueprint to an
+    ``.rrd``."""
+    bp = response_blueprint(responses)
+    with rrd_file(path, bp) as rec:
+        log_response(rec, responses, notes)
+    return bp

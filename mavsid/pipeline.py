@@ -77,6 +77,7 @@ from mavsid.verdict import Verdict, format_fit, judge, not_identified, unfitted
 if TYPE_CHECKING:
     from mavsid.excitation import WindowReport
     from mavsid.frequency_fit import PlantTF
+    from mavsid.loop.emulation import ControllerEmulation
     from mavsid.loop.twin import ClosedLoopFit, TwinSignals
 
 __all__ = [
@@ -451,6 +452,10 @@ class AxisFit:
     #: not run, ``closed_loop_note`` saying why
     closed_loop: ClosedLoopFit | None = None
     closed_loop_note: str = ""
+    #: the rebuilt controller replayed on the logged rate and target against the logged
+    #: output (:mod:`mavsid.loop.emulation`), run before the twin; the twin is not run when
+    #: it fails
+    emulation: ControllerEmulation | None = None
     #: the plant's transfer function fitted to its response measured against the SYSTEMID
     #: injection (:func:`mavsid.frequency.fit_plant`); None when there is none, ``frequency_note``
     #: saying why
@@ -494,7 +499,7 @@ class AxisFit:
                     for j, s in enumerate(v.state_names)
                 },
                 "verdict": None if self.verdict is None else self.verdict.to_dict(),
-                "closed_loop": None if self.closed_loop is None else self.closed_loop.to_dict(),
+                "closed_loop": _closed_loop_dict(self),
                 "closed_loop_note": self.closed_loop_note,
                 "frequency_response": _frequency_dict(self),
                 "frequency_response_note": self.frequency_note,
@@ -778,10 +783,21 @@ def _validate(model: Model, segments: Sequence[Segment], cfg: PipelineConfig) ->
     )
 
 
+def _closed_loop_dict(fitted: AxisFit) -> dict[str, Any] | None:
+    """``fit --json``'s ``closed_loop``: the twin's figures and the controller emulation (only
+    the emulation when it failed and the twin was not run; None when neither ran)."""
+    out = None if fitted.closed_loop is None else fitted.closed_loop.to_dict()
+    if fitted.emulation is not None:
+        out = {**(out or {}), "emulation": fitted.emulation.to_dict()}
+    return out
+
+
 def _closed_loop(
     fitted: AxisFit, flights: Sequence[FlightData], signals: _Twins
 ) -> AxisFit:
-    """``fitted`` with its closed-loop twin run on the held-out blocks (or the reason not)."""
+    """``fitted`` with its controller emulation and, when that passes, its closed-loop twin
+    run on the held-out blocks (or the reason not)."""
+    from mavsid.loop.emulation import emulation_check
     from mavsid.loop.twin import closed_loop_fit, twin_signals
 
     planes = [fd for fd in flights
@@ -801,9 +817,17 @@ def _closed_loop(
             if isinstance(sig, Exception):
                 raise sig
             sigs.append(sig)
+        emu = emulation_check(fitted.axis, fitted.train, fitted.held_out, flights, sigs)
+    except (MavsidError, ValueError, np.linalg.LinAlgError) as exc:
+        return dataclasses.replace(fitted, closed_loop_note=str(exc))
+    fitted = dataclasses.replace(fitted, emulation=emu)
+    if not emu.passed:
+        return dataclasses.replace(fitted, closed_loop_note="twin not used: " + emu.reason)
+    try:
         j = fitted.validation.state_names.index(fitted.output)
         cl = closed_loop_fit(fitted.model, fitted.axis, fitted.train, fitted.held_out, flights,
-                             sigs, open_loop_percent=float(fitted.validation.fit_free_run[j]))
+                             sigs, open_loop_percent=float(fitted.validation.fit_free_run[j]),
+                             timing=(emu.lag_loops, emu.measurement_delay_loops))
     except (MavsidError, ValueError, np.linalg.LinAlgError) as exc:
         return dataclasses.replace(fitted, closed_loop_note=str(exc))
     return dataclasses.replace(fitted, closed_loop=cl)
@@ -1291,7 +1315,8 @@ def fit(
                                       "the bounded fit (damping >= 0, effectiveness > 0) "
                                       + ("is unstable too" if bounded else "failed")))
                 continue
-            bounded = dataclasses.replace(bounded, closed_loop=None, closed_loop_note="")
+            bounded = dataclasses.replace(bounded, closed_loop=None, closed_loop_note="",
+                                          emulation=None)
             fitted = _closed_loop(bounded, flights, signals)
             verdict = _judge(fitted, flights)
             note = (f"the unconstrained fit was unstable ({_worst_eig(val)}): refused, "
@@ -1317,6 +1342,7 @@ def _judge(fitted: AxisFit, flights: Sequence[FlightData]) -> Verdict:
     return judge(fitted.axis, fitted.validation, fitted.output, model=fitted.model,
                  train=fitted.train, windows=fitted.windows, flights=flights,
                  closed_loop=getattr(fitted, "closed_loop", None),
+                 emulation=getattr(fitted, "emulation", None),
                  frequency=_frequency_evidence(fitted))
 
 
@@ -1548,6 +1574,29 @@ def _frequency_line(f: AxisFit) -> str:
     return text
 
 
+def _emulation_line(e: ControllerEmulation) -> str:
+    """The controller emulation's figures, one line.
+
+    Examples
+    --------
+    >>> from mavsid.loop.emulation import ControllerEmulation, TermFit
+    >>> e = ControllerEmulation(93.4, 0.0031, True, "", 0.047, 1, 0.0, "RATE.ROut",
+    ...                         (TermFit("P", "PIDR.P", 97.0, 0.001, 0.03, 0.03),))
+    >>> _emulation_line(e)
+    'controller emulation: 93.4 % of RATE.ROut (RMS 0.0031 of 0.047; pass >= 80 %); P 97.0 %'
+    """
+    def pct(x: float) -> str:
+        return "n/a" if not math.isfinite(x) else f"{x:.1f} %"
+
+    text = (f"controller emulation: {pct(e.fit_percent)} of {e.output_source} (RMS "
+            f"{e.rms:.2g} of {e.output_rms:.2g}; pass >= {e.threshold_percent:g} %)")
+    if e.terms:
+        text += "; " + ", ".join(f"{t.term} {pct(t.fit_percent)}" for t in e.terms)
+    if not e.passed:
+        text += f": FAILED, {e.reason}"
+    return text
+
+
 def _closed_loop_line(f: AxisFit) -> str:
     """The closed-loop twin's figures (or why there are none), one line."""
     cl = f.closed_loop
@@ -1726,6 +1775,8 @@ def format_result(result: FitResult, validating: bool = False) -> str:
         fp = d["fit_percent"]
         cells = "  ".join(f"{k.replace('_', '-')} {format_fit(fp[k])}" for k in fp)
         lines.append(f"  fit %  {cells}")
+        if f.emulation is not None:
+            lines.append(f"  {_emulation_line(f.emulation)}")
         lines.append(f"  {_closed_loop_line(f)}")
         if f.frequency is not None:
             lines.append(f"  {_frequency_line(f)}")

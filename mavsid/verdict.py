@@ -31,6 +31,7 @@ from mavsid.axes import INPUT_OF, RATE_OF
 
 if TYPE_CHECKING:
     from mavsid.excitation import WindowReport
+    from mavsid.loop.emulation import ControllerEmulation
 
 __all__ = ["FIT_FLOOR_PCT", "LEVELS", "Verdict", "format_fit", "frequency_checks", "judge",
            "not_identified", "unfitted"]
@@ -261,7 +262,8 @@ def frequency_checks(frequency: Mapping[str, Any]) -> dict[str, Any]:
 
 def judge(axis: str, validation: Any, output: str, *, model: Any = None,
           train: Sequence[Any] = (), windows: Sequence[Any] = (), flights: Sequence[Any] = (),
-          closed_loop: Any = None, frequency: Mapping[str, Any] | None = None) -> Verdict:
+          closed_loop: Any = None, frequency: Mapping[str, Any] | None = None,
+          emulation: ControllerEmulation | None = None) -> Verdict:
     """The verdict on one fitted axis from everything known about it.
 
     Checks, each adding its numbers (``Verdict.numbers``) and, when it fails, a reason:
@@ -315,6 +317,10 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
         With ``fit_percent`` and ``baseline_percent`` (``AxisFit.closed_loop``).
     frequency : Mapping, optional
         The chirp's frequency-domain results (see :func:`frequency_checks`).
+    emulation : ControllerEmulation, optional
+        The rebuilt controller against the logged output (``AxisFit.emulation``): its fit is
+        in ``numbers`` and, when it failed, a note says which part did not match and that the
+        twin was not used.
 
     Examples
     --------
@@ -465,6 +471,10 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
     else:
         good.append(f"free run {free:.1f} % on held-out data")
 
+    if emulation is not None:
+        numbers["controller_emulation_pct"] = float(emulation.fit_percent)
+        if not emulation.passed:
+            notes.append(f"closed-loop twin not used: {emulation.reason}")
     # closed loop (the twin), when it ran
     cl_fit = getattr(closed_loop, "fit_percent", None) if closed_loop is not None else None
     cl_base = getattr(closed_loop, "baseline_percent", None) if closed_loop is not None else None

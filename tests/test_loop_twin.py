@@ -268,18 +268,19 @@ def test_real_px4_log_controller_and_twin() -> None:
         out = replay_controller(c, fd.dt, sig.target[axis][a:b],
                                      fd.states[a:b, fd.state_names.index(rate)], u, None, 0, sub)
         assert fit_percent(u, out) > least
-    # the twin on the yaw model: 136 training samples at 50 Hz give a model that predicts
-    # nothing (free run -88 %), and in the loop it loses to "the rate follows its target after
-    # the best delay" (measured -160 % against +66 %); the verdict must refuse it and carry
-    # both closed-loop figures (the model is kept here only by allow_unstable)
+    # the yaw model: 136 training samples at 50 Hz give a model that predicts nothing (free
+    # run -88 %); the verdict must refuse it (the model is kept here only by allow_unstable).
+    # On its held-out blocks the controller emulation reaches 72 % of the logged torque
+    # setpoint (a 50 Hz log of a 400 Hz loop), below the 80 % it needs: the twin is not run
+    # and the verdict says so
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         res = pipeline.fit([str(path)],
                            pipeline.PipelineConfig(axes=("yaw",), allow_unstable=True))
-    cl = res.axes["yaw"].closed_loop
-    assert cl is not None
+    f = res.axes["yaw"]
     verdict = res.verdicts["yaw"]
     assert verdict.level == "not identified"
-    assert verdict.numbers["fit_closed_loop_pct"] == cl.fit_percent
-    if cl.fit_percent <= cl.baseline_percent:
-        assert any("does not beat the baseline" in r for r in verdict.reasons)
+    assert f.emulation is not None and not f.emulation.passed
+    assert verdict.numbers["controller_emulation_pct"] == f.emulation.fit_percent
+    assert f.closed_loop is None and "twin not used" in f.closed_loop_note
+    assert any("closed-loop twin not used" in r for r in verdict.reasons)

@@ -9,9 +9,8 @@ for the twin, kept visible (``strict``: it turns red the day the twin learns the
 Features compared, ArduPilot ``AC_PID``: P, I with IMAX, D on the filtered error with FLTD,
 FLTT, FLTE, FF, I = 0 with FF; not modelled by the twin: the slew limiter SMAX (the twin
 scales P+D by ``SMAX / filtered slew``; ArduPilot tracks the slew's peaks over 300-ms
-windows, needs two exceedance cycles and uses the previous loop's P+D), D_FF, PDMX, the
-integrator held while the motors saturate, and with I = 0 the twin's preset integrator (a
-constant offset ``AC_PID`` cannot have). PX4 ``RateControl``: K, P, I with the
+windows, needs two exceedance cycles and uses the previous loop's P+D), D_FF, PDMX and the
+integrator held while the motors saturate. With I = 0 neither keeps an integrator. PX4 ``RateControl``: K, P, I with the
 400-deg/s reduction and INT_LIM, D on the measured rate's filtered derivative, FF; not
 modelled by the twin: the integrator held in a saturated direction.
 """
@@ -158,12 +157,12 @@ def test_twin_models_the_saturation_hold():
     assert np.max(np.abs(ys - yt)) < 1e-3
 
 
-@finding("twin finding: with I = 0 the twin's preset leaves a constant integrator; AC_PID "
-         "zeroes its integrator whenever I is 0")
 def test_twin_preset_keeps_no_integrator_when_i_is_zero():
+    """With I = 0 AC_PID has no integrator: a preset (or a warm-up's correction) leaves none."""
     g = PIDGains(0.04, 0.0, 0.0012, fltt=20.0, fltd=20.0)  # the real 4.6.2 roll loop
     twin = controller_from_params(ardupilot_params(g), "roll").new_pid()
     twin.preset(0.5, 0.2, 0.1)  # a first output that P*err alone does not explain
+    twin.adjust_integrator(0.05)
     sim = ArduPilotPID(g, DT)
     target, measured = inputs()
     ys = [sim.update(float(a), float(b)) + sim.feedforward for a, b in zip(target, measured,

@@ -126,6 +126,8 @@ class RatePID:
         self.integ = 0.0
         self.slew = 0.0
         self.pd_last = 0.0
+        #: the last :meth:`update`'s P, I, D and FF terms
+        self.terms = (0.0, 0.0, 0.0, 0.0)
         self.reset = True
 
     def update(self, target: float, measured: float) -> float:
@@ -147,14 +149,22 @@ class RatePID:
             self.slew += self.a_s * (abs(pd - self.pd_last) / self.dt - self.slew)
             self.pd_last = pd
             mod = max(_SLEW_MIN_MOD, min(1.0, g.smax / self.slew)) if self.slew > 0 else 1.0
-            return mod * pd + self.integ + g.ff * self.target
-        return g.p * self.error + self.integ + g.d * self.deriv + g.ff * self.target
+        else:
+            mod = 1.0
+        self.terms = (mod * g.p * self.error, self.integ, mod * g.d * self.deriv,
+                      g.ff * self.target)
+        return sum(self.terms)
 
     def run(self, target: np.ndarray, measured: np.ndarray) -> np.ndarray | None:
         """The outputs of :meth:`update` over whole sequences from a fresh controller (after
         :meth:`preset`), without feedback: its filters are first-order recursions
         (``scipy.signal.lfilter``) and the integrator a running sum. None when the slew
         limiter is on or the integrator would reach ``±IMAX`` (callers then step)."""
+        terms = self.run_terms(target, measured)
+        return None if terms is None else terms[:, 0] + terms[:, 1] + terms[:, 2] + terms[:, 3]
+
+    def run_terms(self, target: np.ndarray, measured: np.ndarray) -> np.ndarray | None:
+        """As :meth:`run`, the P, I, D and FF terms apart: shape ``(n, 4)``."""
         g = self.g
         tg, ym = np.asarray(target, dtype=float), np.asarray(measured, dtype=float)
         n = tg.size
@@ -177,18 +187,24 @@ class RatePID:
         integ = np.cumsum(np.concatenate([[self.integ], g.i * err * self.dt]))[1:]
         if np.any(np.abs(integ) > g.imax):
             return None
-        return np.asarray(g.p * err + integ + g.d * deriv + g.ff * tf)
+        return np.column_stack([g.p * err, integ, g.d * deriv, g.ff * tf])
 
     def preset(self, target: float, measured: float, output: float) -> None:
         """Before the first :meth:`update`: set the integrator so that the first output of
-        ``update(target, measured)`` is ``output`` (within ``±IMAX``)."""
+        ``update(target, measured)`` is ``output`` (within ``±IMAX``). With ``I`` = 0 there
+        is no integrator (``AC_PID`` zeroes it): nothing is set."""
         g = self.g
+        if g.i == 0:
+            self.integ = 0.0
+            return
         err = target - measured
         i0 = output - g.p * err - g.ff * target - g.i * err * self.dt
         self.integ = min(max(i0, -g.imax), g.imax)
 
     def adjust_integrator(self, delta: float) -> None:
-        """Add ``delta`` to the integrator (within ``±IMAX``)."""
+        """Add ``delta`` to the integrator (within ``±IMAX``; none with ``I`` = 0)."""
+        if self.g.i == 0:
+            return
         self.integ = min(max(self.integ + delta, -self.g.imax), self.g.imax)
 
 
@@ -229,6 +245,8 @@ class PX4RatePID:
         self.accel_filter = dsp.Lowpass2p(cut, fs, 1)
         self.integ = 0.0
         self.last = 0.0
+        #: the last :meth:`update`'s P, I, D and FF terms
+        self.terms = (0.0, 0.0, 0.0, 0.0)
         self.reset = True
 
     def update(self, target: float, measured: float) -> float:
@@ -240,6 +258,7 @@ class PX4RatePID:
         accel = float(self.accel_filter.advance((measured - self.last) / self.dt))
         self.last = measured
         err = target - measured
+        self.terms = (g.k * g.p * err, self.integ, -g.k * g.d * accel, g.ff * target)
         out = g.k * g.p * err + self.integ - g.k * g.d * accel + g.ff * target
         factor = max(0.0, 1.0 - (err / _PX4_I_ERR) ** 2)
         i_new = self.integ + factor * g.k * g.i * err * self.dt

@@ -39,9 +39,12 @@ if TYPE_CHECKING:
 __all__ = [
     "BASELINE_MAX_DELAY_S",
     "LAGS",
+    "LOGGED_TERMS",
     "MEAS_DELAYS",
     "MEAS_DELAY_TOL",
+    "PID_MESSAGES",
     "SETTLE_S",
+    "TERMS",
     "WARMUP_S",
     "ClosedLoopFit",
     "LocatedBlock",
@@ -50,9 +53,11 @@ __all__ = [
     "baseline_candidates",
     "baseline_fit",
     "closed_loop_fit",
+    "controller_timing",
     "lagged",
     "locate_blocks",
     "replay_controller",
+    "replay_terms",
     "simulate_closed_loop",
     "twin_messages",
     "twin_signals",
@@ -313,7 +318,8 @@ def replay_controller(
     This checks the controller alone (its parameters, and ``lag``: ArduCopter runs the rate
     controller at the start of each loop on the target and injection its attitude controller
     and SYSTEMID set in the loop before, and logs them when they are set: 1 loop).
-    ``substeps`` controller steps per sample (``lag`` counts them) hold the measured rate.
+    ``substeps`` controller steps per sample (``lag`` counts them) take the measured rate
+    and the target interpolated between the samples.
     ``meas_delay`` (controller steps, 0-1): the rate the controller reads lags the logged one
     by that fraction of a step (linear interpolation with the step before): a log may stamp
     the gyro sample a little apart from the one the controller used (the SITL flight's
@@ -327,25 +333,70 @@ def replay_controller(
     >>> u.shape
     (200,)
     """
+    terms = replay_terms(ctrl, dt, target, rate, output, injection, lag, substeps, meas_delay)
+    return np.asarray(terms.sum(axis=1))
+
+
+def _between(x: np.ndarray, substeps: int) -> np.ndarray:
+    """``x`` at ``substeps`` controller steps per sample, interpolated linearly between the
+    samples (the last held): a log slower than the loop holds no rate between its samples,
+    and a held one would give the D term a derivative of steps (on the 100 Hz real chirp of a
+    400 Hz loop the D term then matches the logged one to 55 % instead of 83 %).
+
+    >>> _between(np.array([0.0, 1.0]), 4).tolist()
+    [0.0, 0.25, 0.5, 0.75, 1.0, 1.0, 1.0, 1.0]
+    """
+    if substeps <= 1 or x.size < 2:
+        return np.repeat(x, substeps)
+    return np.interp(np.arange(x.size * substeps) / substeps, np.arange(x.size), x)
+
+
+#: the columns of :func:`replay_terms`
+TERMS = ("P", "I", "D", "FF")
+
+
+def replay_terms(
+    ctrl: AxisController, dt: float, target: np.ndarray, rate: np.ndarray, output: np.ndarray,
+    injection: np.ndarray | None = None, lag: int = 0, substeps: int = 1,
+    meas_delay: float = 0.0,
+) -> np.ndarray:
+    """:func:`replay_controller`'s output as its terms, shape ``(n, 4)``: :data:`TERMS`
+    (PX4: ``K·P·err``, the integrator, ``−K·D·ṁ`` and ``FF·target``).
+
+    Examples
+    --------
+    >>> c = controller_from_params({"ATC_RAT_RLL_I": 0.0}, "roll")
+    >>> t = np.sin(np.arange(200) * 0.05)
+    >>> terms = replay_terms(c, 0.0025, t, 0.9 * t, np.full(200, 0.3))
+    >>> float(np.max(np.abs(terms[:, 1])))   # I = 0: no integrator, whatever the output
+    0.0
+    """
     n = len(target)
     inj = np.zeros(n) if injection is None else np.asarray(injection, dtype=float)
-    tg = lagged(np.repeat(np.asarray(target, dtype=float), substeps), lag)
+    tg = lagged(_between(np.asarray(target, dtype=float), substeps), lag)
     ij = lagged(np.repeat(inj, substeps), lag)[::substeps]
-    ym = np.repeat(np.asarray(rate, dtype=float), substeps)
+    ym = _between(np.asarray(rate, dtype=float), substeps)
     tau = measurement_filter(meas_delay)[0]
     if tau > 0 and ym.size:
         ym = (1.0 - tau) * ym + tau * np.concatenate([ym[:1], ym[:-1]])
     pid = ctrl.new_pid(dt / substeps)
     pid.preset(float(tg[0]), float(rate[0]), float(output[0] - ij[0]))
-    whole = pid.run(tg, ym) if isinstance(pid, RatePID) else None  # (no feedback here)
-    out = whole if whole is not None else np.array(
-        [pid.update(float(a), float(b)) for a, b in zip(tg, ym, strict=True)])
-    out = out[::substeps]
+    whole = pid.run_terms(tg, ym) if isinstance(pid, RatePID) else None  # (no feedback here)
+    if whole is None:
+        rows = []
+        for a, b in zip(tg, ym, strict=True):
+            pid.update(float(a), float(b))
+            rows.append(pid.terms)
+        whole = np.array(rows, dtype=float).reshape(-1, len(TERMS))
+    out = whole[::substeps].copy()
+    if isinstance(pid, RatePID) and pid.g.i == 0:
+        return out  # (no integrator to take an offset: AC_PID has none with I = 0)
     # the first output has no derivative term and an unfiltered error: the integrator takes
     # the offset that leaves, measured once the controller's filters have settled
     settle = min(round(SETTLE_S / dt), n // 2)
     early = slice(settle, min(settle + 20, n))
-    return out + float(np.mean((output - ij - out)[early]))
+    out[:, 1] += float(np.mean((output - ij - out.sum(axis=1))[early]))
+    return out
 
 
 #: time (s) after which the controller's own filters (FLTE 2.5 Hz: 64 ms) have settled
@@ -366,12 +417,17 @@ class TwinSignals:
         Where each came from (``"RATE.RDes"``...).
     rate_injection : Mapping[str, numpy.ndarray]
         SYSTEMID rate-axis injection (rad/s, ``SID_AXIS`` 7-9, part of the rate target).
+    terms : Mapping[str, Mapping[str, numpy.ndarray]]
+        The rate controller's terms as logged, per axis and term (``P``, ``I``, ``D``,
+        ``FF``, ``DFF``: ArduPilot's ``PIDR/PIDP/PIDY``), NaN where they are not logged;
+        their sources in ``sources`` as ``term_<axis>_<term>``.
     """
 
     target: Mapping[str, np.ndarray]
     injection: Mapping[str, np.ndarray]
     sources: Mapping[str, str] = field(default_factory=dict)
     rate_injection: Mapping[str, np.ndarray] = field(default_factory=dict)
+    terms: Mapping[str, Mapping[str, np.ndarray]] = field(default_factory=dict)
 
 
 def _on_grid(t: np.ndarray, v: np.ndarray, grid: np.ndarray, hold: bool) -> np.ndarray:
@@ -391,13 +447,18 @@ def _on_grid(t: np.ndarray, v: np.ndarray, grid: np.ndarray, hold: bool) -> np.n
     return out
 
 
+#: ArduPilot's rate-controller records per axis, and the terms read from them
+PID_MESSAGES = {"roll": "PIDR", "pitch": "PIDP", "yaw": "PIDY"}
+LOGGED_TERMS = ("P", "I", "D", "FF", "DFF")
+
+
 def twin_messages() -> set[str]:
     """The messages :func:`twin_signals` reads (rate targets, SYSTEMID injection), of every
     format: a caller reading the log anyway reads them in the same pass."""
     from mavsid.autopilot.presets import INJECTION_CHANNEL, TARGET_CHANNELS
 
     return {ch.message for chans in TARGET_CHANNELS.values() for ch in chans} | {
-        INJECTION_CHANNEL.message}
+        INJECTION_CHANNEL.message} | set(PID_MESSAGES.values())
 
 
 def twin_signals(flight: FlightData, raw: Any = None) -> TwinSignals:
@@ -456,7 +517,30 @@ def twin_signals(flight: FlightData, raw: Any = None) -> TwinSignals:
                     inj = rate_injection.setdefault(axis, np.zeros(grid.shape))
                     inj[inside] = np.radians(held[inside])
                     sources[f"rate_injection_{axis}"] = src
-    return TwinSignals(targets, injection, sources, rate_injection)
+    return TwinSignals(targets, injection, sources, rate_injection, _logged_terms(
+        raw, grid, sources))
+
+
+def _logged_terms(raw: Any, grid: np.ndarray, sources: dict[str, str]
+                  ) -> dict[str, dict[str, np.ndarray]]:
+    """The rate controller's logged terms per axis on ``grid`` (held; ``sources`` gains
+    their names)."""
+    from mavsid.autopilot.presets import Channel
+    from mavsid.channels import evaluate
+
+    out: dict[str, dict[str, np.ndarray]] = {}
+    for axis, msg in PID_MESSAGES.items():
+        if msg not in raw.messages or not len(raw.messages[msg]):
+            continue
+        for term in LOGGED_TERMS:
+            try:
+                t, v = evaluate(raw, Channel(msg, term, "1"), f"{axis} {term} term")
+            except MavsidError:
+                continue
+            if t.size >= 2:
+                out.setdefault(axis, {})[term] = _on_grid(t, v, grid, hold=True)
+                sources[f"term_{axis}_{term}"] = f"{msg}.{term}"
+    return out
 
 
 @dataclass(frozen=True)
@@ -652,6 +736,7 @@ class LocatedBlock:
     u: np.ndarray
     inputs: np.ndarray
     input_names: tuple[str, ...]
+    terms: Mapping[str, np.ndarray] = field(default_factory=dict)
 
 
 #: measured samples before a block (s) used for the twin's initial conditions
@@ -677,6 +762,7 @@ def closed_loop_fit(
     flights: Sequence[FlightData],
     signals: Sequence[TwinSignals] | None = None,
     open_loop_percent: float = float("nan"),
+    timing: tuple[int, float] | None = None,
 ) -> ClosedLoopFit:
     """Run the closed-loop twin of ``axis`` on the held-out blocks.
 
@@ -686,7 +772,8 @@ def closed_loop_fit(
     the block's start. The lag between a logged target and its use (0-2 loops) is the one
     whose controller replay (:func:`replay_controller`) matches the training blocks best
     (without training blocks: ArduPilot's 1 loop, PX4's 0); then, for a log at the loop
-    rate, the measurement delay (:data:`MEAS_DELAYS`) the same way.
+    rate, the measurement delay (:data:`MEAS_DELAYS`) the same way (:func:`controller_timing`;
+    ``timing`` gives both instead).
 
     Raises
     ------
@@ -708,28 +795,7 @@ def closed_loop_fit(
     ctrl = val[0].ctrl
     dt = val[0].seg.dt
     substeps = max(1, round(ctrl.loop_hz * dt))
-    lag = _DEFAULT_LAG[ctrl.autopilot]
-    meas_delay = 0.0
-
-    def replayed(cand: int, tau: float) -> float:
-        """The controller replay's fit % on the training blocks."""
-        out = [(b.u - lagged(np.repeat(b.injection, substeps), cand)[::substeps],
-                replay_controller(b.ctrl, dt, b.target, b.rate, b.u, b.injection, cand,
-                                  substeps, tau))
-               for b in tr]
-        out = [(m[b.warm:], r[b.warm:]) for b, (m, r) in zip(tr, out, strict=True)]
-        return _pooled_fit([o[0] for o in out], [o[1] for o in out])
-
-    if tr:
-        scores = [replayed(cand, 0.0) for cand in LAGS]
-        if np.any(np.isfinite(scores)):
-            lag = LAGS[int(np.nanargmax(scores))]
-            if substeps == 1:  # (a sample held over several steps has no sub-step timing)
-                by_tau = [(scores[LAGS.index(lag)], 0.0)]
-                by_tau += [(replayed(lag, tau), tau) for tau in MEAS_DELAYS[1:]]
-                best = max(sc for sc, _ in by_tau if np.isfinite(sc))
-                meas_delay = min(tau for sc, tau in by_tau
-                                 if np.isfinite(sc) and sc >= best - MEAS_DELAY_TOL)
+    lag, meas_delay = timing if timing is not None else controller_timing(tr, val)
     try:
         plant = plant_from_model(model, axis, dt / substeps)
     except ConfigError:
@@ -776,6 +842,40 @@ def closed_loop_fit(
     )
 
 
+def controller_timing(train: Sequence[LocatedBlock], held_out: Sequence[LocatedBlock]
+                      ) -> tuple[int, float]:
+    """The lag (controller loops, :data:`LAGS`) between a logged target and its use, and the
+    measurement delay (:data:`MEAS_DELAYS`, for a log at the loop rate), whose controller
+    replay (:func:`replay_controller`) fits the training blocks best; without training
+    blocks ArduPilot's 1 loop, PX4's 0, and no delay."""
+    first = (train or held_out)[0]
+    dt = first.seg.dt
+    substeps = max(1, round(first.ctrl.loop_hz * dt))
+    lag = _DEFAULT_LAG[first.ctrl.autopilot]
+    meas_delay = 0.0
+
+    def replayed(cand: int, tau: float) -> float:
+        """The controller replay's fit % on the training blocks."""
+        out = [(b.u - lagged(np.repeat(b.injection, substeps), cand)[::substeps],
+                replay_controller(b.ctrl, dt, b.target, b.rate, b.u, b.injection, cand,
+                                  substeps, tau))
+               for b in train]
+        out = [(m[b.warm:], r[b.warm:]) for b, (m, r) in zip(train, out, strict=True)]
+        return _pooled_fit([o[0] for o in out], [o[1] for o in out])
+
+    if train:
+        scores = [replayed(cand, 0.0) for cand in LAGS]
+        if np.any(np.isfinite(scores)):
+            lag = LAGS[int(np.nanargmax(scores))]
+            if substeps == 1:  # (a sample held over several steps has no sub-step timing)
+                by_tau = [(scores[LAGS.index(lag)], 0.0)]
+                by_tau += [(replayed(lag, tau), tau) for tau in MEAS_DELAYS[1:]]
+                best = max(sc for sc, _ in by_tau if np.isfinite(sc))
+                meas_delay = min(tau for sc, tau in by_tau
+                                 if np.isfinite(sc) and sc >= best - MEAS_DELAY_TOL)
+    return lag, meas_delay
+
+
 def _others(b: LocatedBlock, plant: LinearPlant) -> np.ndarray | None:
     """The model's other inputs, as measured over the block and its warm-up."""
     if not plant.other_inputs:
@@ -811,6 +911,7 @@ def locate_blocks(segments: Sequence[Segment], axis: str, flights: Sequence[Flig
             out.append(LocatedBlock(
                 seg, ctrl, warm, tgt, inj, fd.states[sl, fd.state_names.index(rate)],
                 fd.inputs[sl, fd.input_names.index(u_name)], fd.inputs[sl], fd.input_names,
+                {name: v[sl] for name, v in sigs[k].terms.get(axis, {}).items()},
             ))
             break
     return out

@@ -9,8 +9,9 @@ for the twin, kept visible (``strict``: it turns red the day the twin learns the
 Features compared, ArduPilot ``AC_PID``: P, I with IMAX, D on the filtered error with FLTD,
 FLTT, FLTE, FF, I = 0 with FF; not modelled by the twin: the slew limiter SMAX (the twin
 scales P+D by ``SMAX / filtered slew``; ArduPilot tracks the slew's peaks over 300-ms
-windows, needs two exceedance cycles and uses the previous loop's P+D), D_FF, PDMX and the
-integrator held while the motors saturate. With I = 0 neither keeps an integrator. PX4 ``RateControl``: K, P, I with the
+windows, needs two exceedance cycles and uses the previous loop's P+D) and the integrator
+held while the motors saturate. D_FF and PDMX are modelled (their own tests), and with
+I = 0 neither keeps an integrator. PX4 ``RateControl``: K, P, I with the
 400-deg/s reduction and INT_LIM, D on the measured rate's filtered derivative, FF; not
 modelled by the twin: the integrator held in a saturated direction.
 """
@@ -102,7 +103,8 @@ def test_simulator_and_twin_agree_where_the_twin_models_the_feature(name, gains)
     assert np.max(np.abs(ys - yt)) < TOL, name
 
 
-#: features the twin does not model (or only approximates): (name, gains, limit mask)
+#: features beyond P, I, D, FF: (name, gains); the twin models D_FF and PDMX, and only
+#: approximates SMAX
 DIFFER = [
     ("SMAX slew limiter", PIDGains(0.135, 0.135, 0.0036, fltt=20.0, fltd=20.0, smax=2.0)),
     ("D_FF", PIDGains(0.135, 0.135, 0.0036, fltt=20.0, fltd=20.0, d_ff=0.002)),
@@ -113,7 +115,8 @@ DIFFER = [
 @pytest.mark.parametrize(("name", "gains"), DIFFER, ids=[m[0] for m in DIFFER])
 def test_features_the_twin_does_not_model_make_a_difference(name, gains):
     """Each feature changes the simulator's output by more than 1 % of its RMS on this
-    chirp (so its absence from the twin matters), and the twin differs by as much."""
+    chirp (so its absence from the twin would matter, and the agreement tests below test
+    something); where the twin only approximates it (SMAX), the twin differs by as much."""
     target, measured = inputs()
     base = ArduPilotPID(PIDGains(gains.p, gains.i, gains.d, fltt=gains.fltt,
                                  fltd=gains.fltd), DT)
@@ -122,7 +125,8 @@ def test_features_the_twin_does_not_model_make_a_difference(name, gains):
     ys, yt = run_both(gains, target, measured)
     rms = float(np.sqrt(np.mean(ys ** 2)))
     assert np.sqrt(np.mean((ys - plain) ** 2)) > 0.01 * rms, name
-    assert np.sqrt(np.mean((ys - yt) ** 2)) > 0.01 * rms, name
+    if name == "SMAX slew limiter":
+        assert np.sqrt(np.mean((ys - yt) ** 2)) > 0.01 * rms, name
 
 
 @finding("twin finding: ArduPilot's SMAX slew limiter "
@@ -133,14 +137,12 @@ def test_twin_models_smax():
     assert np.max(np.abs(ys - yt)) < 1e-3
 
 
-@finding("twin finding: ATC_RAT_*_D_FF is not rebuilt")
 def test_twin_models_d_ff():
     target, measured = inputs()
     ys, yt = run_both(DIFFER[1][1], target, measured)
     assert np.max(np.abs(ys - yt)) < 1e-3
 
 
-@finding("twin finding: ATC_RAT_*_PDMX is not rebuilt")
 def test_twin_models_pdmx():
     target, measured = inputs()
     ys, yt = run_both(DIFFER[2][1], target, measured)

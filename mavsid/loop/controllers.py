@@ -3,9 +3,11 @@ log's parameters.
 
 - ArduPilot ``AC_PID`` (:class:`RatePID`): target low-passed at ``FLTT``, error
   ``target - measured`` low-passed at ``FLTE`` (0 = off), derivative of the filtered error
-  low-passed at ``FLTD``; ``out = P·err + I + D·derr + FF·target`` with ``|I| ≤ IMAX``; when
-  ``SMAX`` > 0 the P and D terms are scaled down so that their slew rate stays near ``SMAX``
-  (an approximation of ArduPilot's slew limiter, see :class:`RatePID`);
+  low-passed at ``FLTD``; ``out = P·err + I + D·derr + FF·target + D_FF·dtarget`` with
+  ``|I| ≤ IMAX`` (no integrator with ``I`` = 0) and the derivative of the filtered target;
+  when ``SMAX`` > 0 the P and D terms are scaled down so that their slew rate stays near
+  ``SMAX`` (an approximation of ArduPilot's slew limiter, see :class:`RatePID`), then both
+  scaled so that ``|P + D| ≤ PDMX`` when ``PDMX`` > 0;
 - PX4 multicopter rate control (:class:`PX4RatePID`): ``out = K·P·err + I - K·D·ṁ + FF·target``
   with the derivative taken on the measured rate (``ṁ``, low-passed at ``IMU_DGYRO_CUTOFF``),
   the integrator gain ``K·I`` scaled down for large errors and limited to ``MC_*R_INT_LIM``.
@@ -80,7 +82,9 @@ def lowpass_alpha(cutoff_hz: float, dt: float) -> float:
 @dataclass(frozen=True)
 class RateGains:
     """One axis of ArduPilot's ``ATC_RAT_<AX>_*`` (P, I, D per rad/s to a normalised output;
-    ``imax`` normalised; filters in Hz, 0 = off; ``smax`` the P+D slew limit, 0 = off)."""
+    ``imax`` normalised; filters in Hz, 0 = off; ``smax`` the P+D slew limit, 0 = off;
+    ``d_ff`` the target's derivative as feed-forward; ``pd_max`` the limit of ``|P + D|``,
+    ``PDMX``, 0 = off)."""
 
     p: float
     i: float
@@ -91,6 +95,8 @@ class RateGains:
     fltd: float
     flte: float
     smax: float = 0.0
+    d_ff: float = 0.0
+    pd_max: float = 0.0
 
 
 #: slew-limiter constants: slew rate low-passed at this cut-off (Hz), the P+D modifier never
@@ -126,8 +132,9 @@ class RatePID:
         self.integ = 0.0
         self.slew = 0.0
         self.pd_last = 0.0
-        #: the last :meth:`update`'s P, I, D and FF terms
-        self.terms = (0.0, 0.0, 0.0, 0.0)
+        self.target_rate = 0.0
+        #: the last :meth:`update`'s P, I, D, FF and D_FF terms
+        self.terms = (0.0, 0.0, 0.0, 0.0, 0.0)
         self.reset = True
 
     def update(self, target: float, measured: float) -> float:
@@ -136,10 +143,12 @@ class RatePID:
         if self.reset:
             self.target = target
             self.error = target - measured
-            self.deriv = 0.0
+            self.deriv = self.target_rate = 0.0
             self.reset = False
         else:
+            target_prev = self.target
             self.target += self.a_t * (target - self.target)
+            self.target_rate = (self.target - target_prev) / self.dt
             err_prev = self.error
             self.error += self.a_e * ((self.target - measured) - self.error)
             self.deriv += self.a_d * ((self.error - err_prev) / self.dt - self.deriv)
@@ -151,8 +160,11 @@ class RatePID:
             mod = max(_SLEW_MIN_MOD, min(1.0, g.smax / self.slew)) if self.slew > 0 else 1.0
         else:
             mod = 1.0
-        self.terms = (mod * g.p * self.error, self.integ, mod * g.d * self.deriv,
-                      g.ff * self.target)
+        p_out, d_out = mod * g.p * self.error, mod * g.d * self.deriv
+        if g.pd_max > 0 and abs(p_out + d_out) > g.pd_max:
+            scale = g.pd_max / abs(p_out + d_out)
+            p_out, d_out = p_out * scale, d_out * scale
+        self.terms = (p_out, self.integ, d_out, g.ff * self.target, g.d_ff * self.target_rate)
         return sum(self.terms)
 
     def run(self, target: np.ndarray, measured: np.ndarray) -> np.ndarray | None:
@@ -161,14 +173,16 @@ class RatePID:
         (``scipy.signal.lfilter``) and the integrator a running sum. None when the slew
         limiter is on or the integrator would reach ``±IMAX`` (callers then step)."""
         terms = self.run_terms(target, measured)
-        return None if terms is None else terms[:, 0] + terms[:, 1] + terms[:, 2] + terms[:, 3]
+        return None if terms is None else (terms[:, 0] + terms[:, 1] + terms[:, 2] + terms[:, 3]
+                                          + terms[:, 4])
 
     def run_terms(self, target: np.ndarray, measured: np.ndarray) -> np.ndarray | None:
-        """As :meth:`run`, the P, I, D and FF terms apart: shape ``(n, 4)``."""
+        """As :meth:`run`, the P, I, D, FF and D_FF terms apart: shape ``(n, 5)`` (None
+        also with ``PDMX``)."""
         g = self.g
         tg, ym = np.asarray(target, dtype=float), np.asarray(measured, dtype=float)
         n = tg.size
-        if not self.reset or g.smax > 0 or n == 0 or ym.size != n:
+        if not self.reset or g.smax > 0 or g.pd_max > 0 or n == 0 or ym.size != n:
             return None
 
         def low(x: np.ndarray, a: float, x0: float) -> np.ndarray:
@@ -187,7 +201,9 @@ class RatePID:
         integ = np.cumsum(np.concatenate([[self.integ], g.i * err * self.dt]))[1:]
         if np.any(np.abs(integ) > g.imax):
             return None
-        return np.column_stack([g.p * err, integ, g.d * deriv, g.ff * tf])
+        t_rate = np.zeros(n)
+        t_rate[1:] = np.diff(tf) / self.dt
+        return np.column_stack([g.p * err, integ, g.d * deriv, g.ff * tf, g.d_ff * t_rate])
 
     def preset(self, target: float, measured: float, output: float) -> None:
         """Before the first :meth:`update`: set the integrator so that the first output of
@@ -245,8 +261,8 @@ class PX4RatePID:
         self.accel_filter = dsp.Lowpass2p(cut, fs, 1)
         self.integ = 0.0
         self.last = 0.0
-        #: the last :meth:`update`'s P, I, D and FF terms
-        self.terms = (0.0, 0.0, 0.0, 0.0)
+        #: the last :meth:`update`'s P, I, D, FF and (none) D_FF terms
+        self.terms = (0.0, 0.0, 0.0, 0.0, 0.0)
         self.reset = True
 
     def update(self, target: float, measured: float) -> float:
@@ -258,7 +274,7 @@ class PX4RatePID:
         accel = float(self.accel_filter.advance((measured - self.last) / self.dt))
         self.last = measured
         err = target - measured
-        self.terms = (g.k * g.p * err, self.integ, -g.k * g.d * accel, g.ff * target)
+        self.terms = (g.k * g.p * err, self.integ, -g.k * g.d * accel, g.ff * target, 0.0)
         out = g.k * g.p * err + self.integ - g.k * g.d * accel + g.ff * target
         factor = max(0.0, 1.0 - (err / _PX4_I_ERR) ** 2)
         i_new = self.integ + factor * g.k * g.i * err * self.dt
@@ -495,8 +511,14 @@ def controller_from_params(
             naming = "Q_A_RAT" if quadplane else "ATC_RAT"
         for n in names:
             vals[n] = get(pre + n, vals[n])
+        extra = {}
+        for n, attr in (("D_FF", "d_ff"), ("PDMX", "pd_max")):
+            # (4.2+ and 4.5+: a log without them flew without them, not at a default)
+            v = params.get(pre + n)
+            if v is not None and math.isfinite(float(v)) and float(v) > 0:
+                extra[attr] = used[pre + n] = float(v)
         gains = RateGains(vals["P"], vals["I"], vals["D"], vals["FF"], vals["IMAX"],
-                          vals["FLTT"], vals["FLTD"], vals["FLTE"], vals["SMAX"])
+                          vals["FLTT"], vals["FLTD"], vals["FLTE"], vals["SMAX"], **extra)
     loop = get_rate("SCHED_LOOP_RATE", _AP_LOOP_HZ)
     gyro = get("INS_GYRO_FILTER", _AP_GYRO_FILTER_HZ)
     notch = 0.0

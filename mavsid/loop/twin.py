@@ -185,7 +185,8 @@ def simulate_closed_loop(
                 x = x + rows[jj]
         return x, y_prev
 
-    if isinstance(pid, RatePID) and pid.g.smax <= 0 and steps > 4 * _BLOCK:
+    if (isinstance(pid, RatePID) and pid.g.smax <= 0 and pid.g.pd_max <= 0
+            and pid.g.d_ff == 0 and steps > 4 * _BLOCK):
         # the first step one at a time (a fresh controller starts from its inputs), the rest
         # as one linear system unless the integrator's or the output's clip binds
         x, y_prev = stepped(0, 1, x, y_prev)
@@ -352,7 +353,7 @@ def _between(x: np.ndarray, substeps: int) -> np.ndarray:
 
 
 #: the columns of :func:`replay_terms`
-TERMS = ("P", "I", "D", "FF")
+TERMS = ("P", "I", "D", "FF", "DFF")
 
 
 def replay_terms(
@@ -360,8 +361,8 @@ def replay_terms(
     injection: np.ndarray | None = None, lag: int = 0, substeps: int = 1,
     meas_delay: float = 0.0,
 ) -> np.ndarray:
-    """:func:`replay_controller`'s output as its terms, shape ``(n, 4)``: :data:`TERMS`
-    (PX4: ``K·P·err``, the integrator, ``−K·D·ṁ`` and ``FF·target``).
+    """:func:`replay_controller`'s output as its terms, shape ``(n, 5)``: :data:`TERMS`
+    (PX4: ``K·P·err``, the integrator, ``−K·D·ṁ``, ``FF·target`` and 0).
 
     Examples
     --------

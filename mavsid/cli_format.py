@@ -124,15 +124,17 @@ def _answer(axis: str, e: Mapping[str, Any]) -> list[str]:
     return lines
 
 
-def format_tune(report: Mapping[str, Any]) -> str:
-    """The text ``mavsid tune`` prints: per axis the answer first (:func:`_answer`), then
-    the loop with the logged gains, the measured loop and the advice."""
+def format_tune(report: Mapping[str, Any], answer: bool = True) -> str:
+    """The text ``mavsid tune`` prints: per axis the answer first (:func:`_answer`; left
+    out with ``answer=False``, as the report shows it as tables), then the loop with the
+    logged gains, the measured loop and the advice."""
     lines = []
     for axis, e in report.items():
         if "error" in e:
             lines.append(f"{axis}: loop not analysed: {e['error']}")
             continue
-        lines += _answer(axis, e)
+        if answer:
+            lines += _answer(axis, e)
         m, c, sd = e["margins"], e["closed_loop"], e.get("stderr", {})
 
         def pm(v: float, key: str, fmt: str, unit: str,

@@ -479,15 +479,32 @@ def _aircraft(result: FitResult) -> str:
                                        for k, v in sources.items()))]
         runs = meta.get("sysid_runs") or []
         for run in runs if isinstance(runs, list) else []:
-            rows.append(("SYSTEMID run", ", ".join(f"{k} {v}" for k, v in dict(run).items())))
+            rows.append(("SYSTEMID run", ", ".join(
+                f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
+                for k, v in dict(run).items())))
         parts.append("<table>" + "".join(
             f'<tr><td class="name">{html.escape(k)}</td><td class="name">{html.escape(v)}</td>'
             "</tr>" for k, v in rows) + "</table>")
         shown = {k: v for k, v in sorted(fd.params.items()) if _PARAMS_IN_FORCE.match(k)}
         if shown:
-            cells = " ".join(f"<code>{html.escape(k)}={v:g}</code>" for k, v in shown.items())
-            parts.append(f'<p class="meta">parameters in force: {cells}</p>')
+            parts.append(_params_table(shown))
     return "\n".join(parts)
+
+
+#: the parameters table's filter: rows whose name holds the typed text
+_FILTER_JS = ("var q=this.value.toUpperCase();this.parentNode.querySelectorAll('tr.p')"
+              ".forEach(function(r){r.style.display=r.cells[0].textContent.indexOf(q)<0?"
+              "'none':''})")
+
+
+def _params_table(params: Mapping[str, float]) -> str:
+    """The parameters in force as a table, filtered by name as one types."""
+    rows = "".join(f'<tr class="p"><td class="name">{html.escape(k)}</td><td>{v:g}</td></tr>'
+                   for k, v in params.items())
+    return ('<details><summary>parameters in force (' + str(len(params)) + ')</summary>'
+            f'<div><input type="search" placeholder="filter by name" oninput="{_FILTER_JS}">'
+            '<table><tr><th class="name">parameter</th><th>value</th></tr>'
+            f"{rows}</table></div></details>")
 
 
 def _axis_section(fit: AxisFit) -> list[str]:
@@ -531,6 +548,17 @@ def _axis_section(fit: AxisFit) -> list[str]:
         + "</div>",
     ]
     return parts
+
+
+def _answer_html(axis: str, analysis: TuneAnalysis | None) -> list[str]:
+    """The axis's gains, limits and their figure (:mod:`mavsid.report_gains`)."""
+    from mavsid.report_gains import gains_figure, gains_html
+
+    if analysis is None or axis not in analysis.report:
+        return []
+    entry = analysis.report[axis]
+    fig = gains_figure(entry)
+    return [gains_html(axis, entry), *([figure_img(fig)] if fig is not None else [])]
 
 
 def _bode_img(fit: AxisFit, lp: _Analysis = None) -> list[str]:
@@ -588,8 +616,11 @@ def render_html(result: FitResult, lp: _Analysis = None) -> str:
     # draws them while the command works ``lp`` out (it waited up to 0.2 s for it when the
     # first axis's Bode figure came next)
     heads = [_axis_section(f) for f in result.axes.values()]
-    axes = ["\n".join(head + _bode_img(f, lp))
-            for head, f in zip(heads, result.axes.values(), strict=True)]
+    bodes = [_bode_img(f, lp) for f in result.axes.values()]
+    analysis = lp() if callable(lp) else lp
+    # the answer first in each axis's section: the verdict, then the gains (or why none)
+    axes = ["\n".join(head[:2] + _answer_html(a, analysis) + head[2:] + bode)
+            for a, head, bode in zip(result.axes, heads, bodes, strict=True)]
     sections = [header, verdict_table, summary, _aircraft(result), *axes]
     return render_html_page(f"mavsid fit: {logs}", sections)
 
@@ -674,8 +705,9 @@ def loop_section(result: FitResult, target_pm_deg: float = 50.0, *,
         if "error" in entry:
             parts.append(f"<p>loop not analysed: {html.escape(str(entry['error']))}</p>")
             continue
-        text = format_tune({axis: entry})
-        parts.append(f"<pre>{html.escape(text)}</pre>")
+        text = format_tune({axis: entry}, answer=False)
+        parts.append("<ul>" + "".join(f"<li>{html.escape(line.strip())}</li>"
+                                      for line in text.splitlines()) + "</ul>")
         if "plant" not in responses.get(axis, {}):
             continue
         if analysis is not None:

@@ -123,7 +123,8 @@ def test_report_leads_with_aircraft_verdicts_and_physics(tmp_path) -> None:  # t
     text = " ".join(page.split())
     assert "Aircraft and log" in text and "ArduCopter V4.5.7" in text
     assert "FRAME_CLASS 1, FRAME_TYPE 1" in text and "SYSTEMID run" in text
-    for p in ("ATC_RAT_RLL_P=0.135", "INS_GYRO_FILTER=20", "MOT_SPIN_MIN=0.15", "SID_AXIS=10"):
+    # (the parameters in force: a table of name and value)
+    for p in ("ATC_RAT_RLL_P 0.135", "INS_GYRO_FILTER 20", "MOT_SPIN_MIN 0.15", "SID_AXIS 10"):
         assert p in text, p
     assert "roll good" in text and "pitch not identified" in text
     truth = json.loads((FIXTURES / "sysid_roll.truth.json").read_text())["axes"]["roll"]
@@ -262,3 +263,30 @@ def test_the_loop_analysis_is_asked_for_after_every_axis_s_other_figures(page) -
     assert len(result.axes) == 3 and asked and asked[0] == 3 * len(result.axes)
     assert len(drawn) == 4 * len(result.axes)  # then a Bode figure per axis
     assert later == report.render_html(result, analysis)
+
+
+@pytest.mark.slow
+def test_each_axis_leads_with_its_gains_and_the_loop_has_no_preformatted_text(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """The report's loop section was a ``<pre>`` running off the page, last on the page,
+    without a gain table. Now each axis's section opens with its verdict and the current
+    against the suggested gains (or why none) and the limits, before the model's tables,
+    with the step and broken-loop figure; nothing is preformatted."""
+    import warnings
+
+    from helpers import FIXTURES
+
+    from mavsid.pipeline import PipelineConfig, fit
+    from mavsid.report import write_report
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = fit([str(FIXTURES / "sysid_roll.bin")], PipelineConfig(axes=("roll",)))
+    out = tmp_path / "r.html"
+    write_report(result, out)
+    page = out.read_text()
+    assert "<pre" not in page
+    section = page[page.index("<h2>roll</h2>"):]
+    gains, fitted = section.index("roll: gains (verdict good)"), section.index("fitted parameter")
+    assert gains < section.index("<th>current</th>") < section.index("phase margin") < fitted
+    assert "ATC_RAT_RLL_P" in section[gains:fitted] and "×0.97" in section[gains:fitted]
+    assert section[gains:fitted].count("<img") == 1  # step response and broken-loop Bode

@@ -92,6 +92,8 @@ class LoopCheck:
         Of the closed loop's unit step (``control.step_info``: 10-90 % rise, 2 % settling).
     step_time_s, step : numpy.ndarray
         That step response.
+    freq_hz, loop_response : numpy.ndarray
+        ``L`` on 300 frequencies to the Nyquist frequency (the broken loop's Bode).
     """
 
     phase_margin_deg: float
@@ -106,6 +108,8 @@ class LoopCheck:
     overshoot_percent: float
     step_time_s: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
     step: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+    freq_hz: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+    loop_response: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0, complex))
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON form (figures, and the step response)."""
@@ -116,7 +120,11 @@ class LoopCheck:
                 "stable": self.stable, "rise_time_s": self.rise_time_s,
                 "settling_time_s": self.settling_time_s,
                 "overshoot_percent": self.overshoot_percent,
-                "step": {"time_s": self.step_time_s.tolist(), "rate": self.step.tolist()}}
+                "step": {"time_s": self.step_time_s.tolist(), "rate": self.step.tolist()},
+                "loop": {"frequency_hz": self.freq_hz.tolist(),
+                         "magnitude_db": (20 * np.log10(np.abs(self.loop_response))).tolist(),
+                         "phase_deg": np.degrees(np.unwrap(np.angle(self.loop_response)))
+                         .tolist()}}
 
 
 def _systems(plant: LinearPlant, ctrl: AxisController, lag: int, meas_delay: float
@@ -185,7 +193,7 @@ def check_loop(plant: LinearPlant, ctrl: AxisController, lag: int = 0,
         stable=stable, rise_time_s=float(info.get("RiseTime", math.nan)),
         settling_time_s=float(info.get("SettlingTime", math.nan)),
         overshoot_percent=float(info.get("Overshoot", math.nan)),
-        step_time_s=t, step=y)
+        step_time_s=t, step=y, freq_hz=f[::10], loop_response=lz[::10])
 
 
 def limit_rows(current: LoopCheck, suggested: LoopCheck | None, limits: Limits,

@@ -482,7 +482,8 @@ def _suggestion(axis: str, fit: Any, ctrl: AxisController, an: LoopAnalysis,
     limited_by: list[str] = []
     if found is not None and found[0] != k:
         limited_by = [r["name"] for r in limit_rows(current, check_loop(
-            plant, _rebuilt(ctrl, _values(ctrl, k)), lag, tau), limits, top) if not r["ok"]]
+            plant, _rebuilt(ctrl, _values(ctrl, k)), lag, tau), limits, top)
+            if not r["ok"] and r["name"] in _SEARCHED]
         k, capped = found[0], False
     values = _values(ctrl, k)
     new = _rebuilt(ctrl, values)

@@ -409,6 +409,7 @@ def _write_outputs(args: argparse.Namespace, result: FitResult,
     with contextlib.ExitStack() as stack:
         report_tmp = None
         handed = False
+        gains = None
         if args.report:
             step(f"writing {args.report}")
             report_tmp = stack.enter_context(atomic_path(args.report))
@@ -417,13 +418,15 @@ def _write_outputs(args: argparse.Namespace, result: FitResult,
                 assert worker is not None
                 from mavsid.loop.tune import tune_analysis
 
-                worker.send_analysis(tune_analysis(result))
+                analysis = tune_analysis(result)
+                worker.send_analysis(analysis)
+                gains = analysis.report
         if args.rrd:
             from mavsid.viz.recording import save_rrd
 
             step(f"writing {args.rrd}", rrd_weight)
             with atomic_path(args.rrd) as tmp:
-                save_rrd(result, tmp)
+                save_rrd(result, tmp, gains=gains)
         if report_tmp is not None:
             if handed:
                 assert worker is not None

@@ -197,7 +197,8 @@ def test_one_bode_figure_serves_the_validation_and_the_loop(tmp_path) -> None:  
     sections, loop = text.split("<h2>loop</h2>")
     assert loop.count("<img") == 1  # the twin; the Bode is the roll section's
     assert "in the roll section's frequency-response figure" in loop
-    assert sections.count("<img") == 4 * len(result.axes)
+    # time, horizon, residual, Bode, and the gains' step and broken-loop figure
+    assert sections.count("<img") == 5 * len(result.axes)
 
 
 @pytest.mark.slow

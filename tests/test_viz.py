@@ -434,3 +434,20 @@ def test_each_axis_has_its_rate_target_against_the_measured_rate(tmp_path: Path)
 
     assert "/targets/roll" in origins(bp.root_container) or "targets/roll" in origins(
         bp.root_container)
+
+
+def test_the_summary_shows_each_axis_gains_current_and_suggested(toy, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """The viewer's summary has the gains ``tune`` suggests (current, suggested, ratio) or
+    the one line why none, per axis."""
+    result = toy[1]
+    axes = list(result.axes)
+    gains = {axes[0]: {"gains": [{"name": "ATC_RAT_RLL_P", "current": 0.135,
+                                  "suggested": 0.1312, "ratio": 0.972, "capped": False}]},
+             axes[-1]: {"gains": [], "no_gains_reason": "the plant model is usable"}}
+    path = tmp_path / "g.rrd"
+    viz.save_rrd(result, path, gains=gains)
+    data, _ = _read(path)
+    summary = " ".join(str(x) for x in data["/summary"]["TextDocument:text"])
+    assert "| parameter | current | suggested | ratio |" in summary
+    assert "| ATC_RAT_RLL_P | 0.135 | 0.1312 | ×0.97 |" in summary
+    assert "no gains: the plant model is usable" in summary

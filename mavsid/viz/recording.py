@@ -39,7 +39,7 @@ import math
 import os
 import re
 from collections.abc import Iterable, Mapping, Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import rerun as rr
@@ -612,15 +612,32 @@ def log_validation(
     _log_frequency_plot(rec, axis, v)
 
 
-def log_summary(rec: rr.RecordingStream, fits: Sequence[AxisFit]) -> None:
-    """A markdown document: per axis the verdict, the model structure (delay, lag, filters),
-    every parameter ± σ with its unit, and fit % on validation data."""
+def _gains_markdown(entry: Mapping[str, Any]) -> list[str]:
+    """An axis's suggested gains (current, suggested, ratio) or why none, in markdown."""
+    from mavsid.cli_format import gain_table
+
+    if entry.get("gains"):
+        rows = gain_table(entry["gains"])
+        out = ["| " + " | ".join(rows[0]) + " |", "|---" * len(rows[0]) + "|"]
+        out += ["| " + " | ".join(r) + " |" for r in rows[1:]]
+        note = entry.get("suggested_note")
+        return out + (["", str(note)] if note else []) + [""]
+    return [f"no gains: {entry.get('no_gains_reason') or entry.get('error', '–')}", ""]
+
+
+def log_summary(rec: rr.RecordingStream, fits: Sequence[AxisFit],
+                gains: Mapping[str, Mapping[str, Any]] | None = None) -> None:
+    """A markdown document: per axis the verdict, the gains (``gains``: the per-axis entries
+    of :func:`mavsid.loop.tune.tune`, when worked out), the model structure (delay, lag,
+    filters), every parameter ± σ with its unit, and fit % on validation data."""
     lines = ["# mavsid fit", ""]
     for fit in fits:
         m, v = fit.model, fit.validation
         lines += [f"## {fit.axis}", ""]
         if fit.verdict is not None:
             lines += [f"**{fit.verdict.level}**: " + "; ".join(fit.verdict.reasons), ""]
+        if gains and fit.axis in gains:
+            lines += _gains_markdown(gains[fit.axis])
         prov = dict(getattr(m, "provenance", {}) or {})
         lag = prov.get("lag_s")
         filters = ", ".join(f"{f.source} {f.cutoff_hz:g} Hz" for f in getattr(m, "filters", ()))
@@ -766,9 +783,11 @@ def _flight_tag(fd: FlightData, flights: Sequence[FlightData]) -> str:
 
 
 def log_fit_result(rec: rr.RecordingStream, result: FitResult, *, flight: bool = True,
-                   targets: Targets | None = None) -> None:
+                   targets: Targets | None = None,
+                   gains: Mapping[str, Mapping[str, Any]] | None = None) -> None:
     """Everything of a pipeline result into ``rec`` (``targets``: :func:`rate_targets` of
-    it, when already read)."""
+    it, when already read; ``gains``: :func:`mavsid.loop.tune.tune`'s entries, shown in the
+    summary)."""
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_DOWN, static=True)
     fits = list(result.axes.values())
     if flight:
@@ -793,7 +812,7 @@ def log_fit_result(rec: rr.RecordingStream, result: FitResult, *, flight: bool =
         log_segments(rec, fit.axis, fit.train, fit.held_out, fit.windows)
         log_validation(rec, fit.axis, fit.validation, fit.held_out)
     log_rate_targets(rec, result, targets)
-    log_summary(rec, fits)
+    log_summary(rec, fits, gains)
 
 
 #: Each flight with its rate target per axis (:func:`rate_targets`).
@@ -868,12 +887,14 @@ def _decimated(fd: FlightData, values: np.ndarray,
 
 
 def save_rrd(
-    result: FitResult, path: str | os.PathLike[str], *, flight: bool = True
+    result: FitResult, path: str | os.PathLike[str], *, flight: bool = True,
+    gains: Mapping[str, Mapping[str, Any]] | None = None,
 ) -> rrb.Blueprint:
-    """Write ``result`` with its blueprint to an ``.rrd`` file; returns the blueprint."""
+    """Write ``result`` with its blueprint to an ``.rrd`` file (``gains``: as
+    :func:`log_fit_result`); returns the blueprint."""
     targets = rate_targets(result)
     bp = blueprint(list(result.axes), with_flight=flight, focus=result_focus(result),
                    targets=target_axes(targets))
     with rrd_file(path, bp) as rec:
-        log_fit_result(rec, result, flight=flight, targets=targets)
+        log_fit_result(rec, result, flight=flight, targets=targets, gains=gains)
     return bp

@@ -10,7 +10,10 @@ Submodules (the names below are also served from here, imported on first use):
   and its baseline;
 - :mod:`mavsid.loop.analysis`: margins, bandwidths and step figures of the loop, on a model
   and on measured responses;
-- :mod:`mavsid.loop.tune`: gains for a target phase margin and ``mavsid tune``'s report.
+- :mod:`mavsid.loop.limits`: the limits a suggested loop must meet, checked with
+  python-control, and a step flown in the twin;
+- :mod:`mavsid.loop.tune`: gains for a target phase margin under those limits, ``mavsid
+  tune``'s report and its parameter file.
 
 The responses measured on SYSTEMID runs are :func:`mavsid.frequency.measured_responses`; the
 text ``mavsid tune`` prints is :func:`mavsid.cli_format.format_tune`.
@@ -60,6 +63,13 @@ if TYPE_CHECKING:  # (served lazily below; the type checker sees them here)
         scale_of,
         scaled,
     )
+    from mavsid.loop.limits import (
+        Limits,
+        LoopCheck,
+        check_loop,
+        limit_rows,
+        twin_step,
+    )
     from mavsid.loop.plant import (
         LinearPlant,
         Poly,
@@ -74,6 +84,7 @@ if TYPE_CHECKING:  # (served lazily below; the type checker sees them here)
         LOOP_MISMATCH_DEG,
         SUGGESTION_CHECK_DEG,
         TuneAnalysis,
+        param_file,
         suggest_gains,
         tune,
         tune_analysis,
@@ -120,12 +131,15 @@ _LAZY = {
         'measurement_filter', 'scale_of', 'scaled',
     ), 'loop.controllers'),
     **dict.fromkeys((
+        'Limits', 'LoopCheck', 'check_loop', 'limit_rows', 'twin_step',
+    ), 'loop.limits'),
+    **dict.fromkeys((
         'LinearPlant', 'Poly', 'as_plant', 'plant_from_model', 'plant_response', 'plant_statespace',
         'ss2tf',
     ), 'loop.plant'),
     **dict.fromkeys((
         'LOOP_MISMATCH_DB', 'LOOP_MISMATCH_DEG', 'SUGGESTION_CHECK_DEG', 'TuneAnalysis',
-        'suggest_gains', 'tune', 'tune_analysis',
+        'param_file', 'suggest_gains', 'tune', 'tune_analysis',
     ), 'loop.tune'),
     **dict.fromkeys((
         'BASELINE_MAX_DELAY_S', 'ClosedLoopFit', 'LAGS', 'LocatedBlock', 'MEAS_DELAYS',
@@ -165,9 +179,11 @@ __all__ = [
     "AxisController",
     "ClosedLoopFit",
     "FrfStructure",
+    "Limits",
     "LinearPlant",
     "LocatedBlock",
     "LoopAnalysis",
+    "LoopCheck",
     "PX4RateGains",
     "PX4RatePID",
     "Poly",
@@ -182,6 +198,7 @@ __all__ = [
     "autopilot_of",
     "baseline_candidates",
     "baseline_fit",
+    "check_loop",
     "closed_figures",
     "closed_loop_fit",
     "compare_response",
@@ -192,6 +209,7 @@ __all__ = [
     "frd_margins_at",
     "gain_params",
     "lagged",
+    "limit_rows",
     "locate_blocks",
     "loop_figures",
     "lowpass_alpha",
@@ -201,6 +219,7 @@ __all__ = [
     "margins_on_frf",
     "measured_responses",
     "measurement_filter",
+    "param_file",
     "plant_from_model",
     "plant_response",
     "plant_statespace",
@@ -216,4 +235,5 @@ __all__ = [
     "tune_analysis",
     "twin_messages",
     "twin_signals",
+    "twin_step",
 ]

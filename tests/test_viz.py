@@ -445,7 +445,7 @@ def test_the_summary_shows_each_axis_gains_current_and_suggested(toy, tmp_path) 
                                   "suggested": 0.1312, "ratio": 0.972, "capped": False}]},
              axes[-1]: {"gains": [], "no_gains_reason": "the plant model is usable"}}
     path = tmp_path / "g.rrd"
-    viz.save_rrd(result, path, gains=gains)
+    recording.save_rrd(result, path, gains=gains)
     data, _ = _read(path)
     summary = " ".join(str(x) for x in data["/summary"]["TextDocument:text"])
     assert "| parameter | current | suggested | ratio |" in summary

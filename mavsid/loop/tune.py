@@ -503,7 +503,9 @@ def _suggestion(axis: str, fit: Any, ctrl: AxisController, an: LoopAnalysis,
                         "agree": bool(gap <= TWIN_STEP_TOL)}
     failed = [r for r in rows if not r["ok"]]
     if failed:
-        band = (suggested.crossover_hz / limits.band_fraction
+        # (the chirp to cover the crossover of the gains flown and of the ones refused)
+        band = (float(np.nanmax([suggested.crossover_hz, current.crossover_hz]))
+                / limits.band_fraction
                 if any(r["name"] == "crossover" for r in failed) else None)
         what = ("capped at ×" + f"{k:.2g}, " if capped else "")
         broken = " and ".join(

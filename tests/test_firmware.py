@@ -211,19 +211,20 @@ def test_centidegree_rates_of_copter_34_dev_are_found_and_said(keep_imu: bool) -
 
 
 def test_the_readme_preset_file_loads_and_fits(tmp_path) -> None:  # type: ignore[no-untyped-def]
-    """The TOML preset example of the README is valid, and its preset reads a fixture."""
+    """The TOML preset example of the presets guide is valid, and its preset reads a fixture."""
     import re
+    import textwrap
     from pathlib import Path
 
     from helpers import FIXTURES
 
     from mavsid.autopilot.config import load_presets
 
-    readme = (Path(__file__).parent.parent / "README.md").read_text()
-    block = re.search(r"```toml\n(.*?)```", readme, re.S)
+    guide = (Path(__file__).parent.parent / "docs" / "guide" / "presets.rst").read_text()
+    block = re.search(r"\.\. code-block:: toml\n\n(.*?)\n\S", guide, re.S)
     assert block is not None
     path = tmp_path / "presets.toml"
-    path.write_text(block.group(1))
+    path.write_text(textwrap.dedent(block.group(1)))
     presets, mixers = load_presets(path)
     assert set(presets) == {"my-quad", "my-hexa-pwm"} and "my-hexa" in mixers
     raw = _quiet_read(FIXTURES / "sysid_roll.bin")

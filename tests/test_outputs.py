@@ -297,15 +297,21 @@ def test_an_interrupted_command_ends_its_worker_and_leaves_no_file(  # type: ign
     assert list(out.iterdir()) == [] and list(own_tmp.iterdir()) == []
 
 
-def test_fit_with_a_report_that_fails_leaves_nothing(log: Path, tmp_path: Path) -> None:
-    """``fit --report --rrd`` on a log without excitation: exit 1, and neither output nor a
-    temporary file is left (the worker was ended with the command)."""
+def test_fit_with_nothing_identified_still_writes_its_outputs(log: Path, tmp_path: Path) -> None:
+    """``fit --report --rrd`` on a log without excitation: exit 1 with the one error line,
+    and both outputs written whole (the verdicts and the closed-loop response), each said on
+    stderr; no temporary file is left beside them."""
     out = tmp_path / "out"
     out.mkdir()
     code, err = _run("fit", str(FIXTURES / "hover.bin"), "--report", str(out / "f.html"),
                      "--rrd", str(out / "f.rrd"))
-    assert code == 1 and err.count("\n") == 1
-    assert list(out.iterdir()) == []
+    lines = err.splitlines()
+    assert code == 1 and lines[-1].startswith("mavsid: error: ") and len(lines) == 3
+    assert all("no plant identified" in ln for ln in lines[:2])
+    assert sorted(p.name for p in out.iterdir()) == ["f.html", "f.rrd"]
+    html = (out / "f.html").read_text(encoding="utf-8")
+    assert html.rstrip().endswith("</html>") and "not identified" in html
+    assert (out / "f.rrd").stat().st_size > 0
 
 
 @pytest.mark.parametrize(("cores", "load", "others", "started"),

@@ -101,7 +101,14 @@ def _axis_lines(axis: str, a: Mapping[str, Any]) -> list[str]:
     cl = a.get("closed_loop") or {}
     emu = cl.get("emulation") or a.get("emulation") or {}
     if emu:
-        lines.append(f"    emulation: {json.dumps(emu, default=str)[:160]}")
+        fits = {k: (v.get("fit_percent") if isinstance(v, dict) else v)
+                for k, v in (emu.get("terms") or {}).items()}
+        terms = ", ".join(f"{k} {v:.1f} %" for k, v in fits.items()
+                          if isinstance(v, (int, float)))
+        lines.append(f"    controller emulation {_g(emu.get('fit_percent'), '.1f')} % "
+                     f"({'passed' if emu.get('passed') else 'failed'}"
+                     f"{'; ' + terms if terms else ''})"
+                     + (f": {emu['reason']}" if emu.get("reason") else ""))
     if cl:
         lines.append(f"    twin {_g(cl.get('fit_percent'), '.1f')} % against baseline "
                      f"{_g(cl.get('baseline_percent'), '.1f')} %")

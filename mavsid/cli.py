@@ -22,11 +22,24 @@ import sys
 import time
 import traceback
 import warnings
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any, NoReturn
 
 from mavsid import __version__
 from mavsid.axes import AXES
+from mavsid.cli_format import (
+    change_line,
+    error_document,
+    flight_line,
+    json_ready,
+    print_error,
+    print_result,
+    progress,
+    readers_build,
+    simulate_command,
+    stages,
+    warning_text,
+)
 from mavsid.errors import (
     ConfigError,
     MavsidError,
@@ -48,18 +61,9 @@ Handler = Callable[[argparse.Namespace], int]
 def _show_warning(message, category, filename, lineno, file=None, line=None):
     """Print mavsid's warnings as one plain line, others as Python would."""
     if issubclass(category, MavsidWarning):
-        print(_warning_text(message), file=sys.stderr)
+        print(warning_text(message), file=sys.stderr)
     else:
         _default_showwarning(message, category, filename, lineno, file, line)
-
-
-def _warning_text(message: Warning | str) -> str:
-    """A mavsid warning's one line.
-
-    >>> _warning_text(MavsidWarning("a.bin: 3 bytes skipped"))
-    'warning: a.bin: 3 bytes skipped'
-    """
-    return f"warning: {escape(message)}"
 
 
 _default_showwarning = warnings.showwarning
@@ -94,7 +98,7 @@ def _info(args: argparse.Namespace) -> int:
     from mavsid.info import format_summary, read_for_summary, summarize
 
     _check_inputs([args.log])
-    with _progress(args, 2) as step:
+    with progress(args, 2) as step:
         step(f"reading {args.log}")
         raw = read_for_summary(args.log, **_dialect(args))
         step("summarising")
@@ -212,7 +216,7 @@ def _segments(args: argparse.Namespace) -> int:
     from mavsid.excitation import ScanOptions, find_segments, format_reports
 
     preset, presets, mixers = _preset_arg(args.preset)
-    with _progress(args, 2) as step:
+    with progress(args, 2) as step:
         step(f"reading {args.log}")
         flight = load_flight(args.log, preset, args.rate, presets=presets, mixers=mixers)
         step("scoring windows")
@@ -221,9 +225,7 @@ def _segments(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps([r.to_dict() for r in reports], indent=1, ensure_ascii=True))
     else:
-        span = flight.time_s[-1] - flight.time_s[0]
-        print(escape(f"{args.log}: preset {flight.preset}, {1 / flight.dt:.0f} Hz, "
-                     f"{span:.1f} s, {len(flight.blocks)} block(s)"))
+        print(escape(flight_line(args.log, flight)))
         print(escape_lines(format_reports(reports, show_all=args.all)))
     return 0
 
@@ -317,22 +319,7 @@ def _simulate(args: argparse.Namespace) -> int:
         frame=args.frame,
     )
     faults = Faults.parse(args.faults, seed=args.seed)
-    opts = [f"-o {o}" for o in args.output] + [f"--manoeuvre {args.manoeuvre}",
-                                                 f"--axis {args.axis}"]
-    if vehicle != "quad":
-        opts.append(f"--vehicle {vehicle}")
-    if args.frame != "quad-x":
-        opts.append(f"--frame {args.frame}")
-    opts += [f"--sid-axis {a}" for a in args.sid_axis or ()]
-    for name in ("duration", "seed", "noise", "magnitude", "f_start", "f_stop", "t_rec",
-                 "rate_hz", "gyro_noise", "vibration", "faults"):
-        value = getattr(args, name)
-        if value not in (None, ""):
-            opts.append(f"--{name.replace('_', '-')} {value}")
-    command = "mavsid simulate " + " ".join(opts)
-    if args.layout is not None:
-        opts.append(f"--layout {args.layout}")
-        command = "mavsid simulate " + " ".join(opts)
+    command = simulate_command(args, vehicle)
     result = simulate(scenario, args.output, faults, command=command, layout=args.layout)
     for path, size in zip(result.logs, result.sizes, strict=True):
         print(f"wrote {path} ({size} bytes)")
@@ -359,53 +346,13 @@ def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
                               preset=preset)
 
 
-@contextlib.contextmanager
-def _progress(args: argparse.Namespace, total: float) -> Iterator[Callable[..., None]]:
-    """A progress bar on stderr over ``total`` units of work, the current stage named;
-    nothing when stderr is not a terminal or with ``--quiet``. Yields the callable the
-    pipeline calls, ``step(stage, weight=1)`` as a stage starts (the one before it is then
-    done). While the bar is shown a warning is written above it (``tqdm.write``), the bar
-    drawn again below: printed into it, it left a stale line on screen."""
-    if getattr(args, "quiet", False) or not sys.stderr.isatty():
-        yield lambda stage, weight=1: None
-        return
-    from tqdm import tqdm
-
-    bar = tqdm(total=total, file=sys.stderr, dynamic_ncols=True, leave=False,
-               mininterval=0, miniters=1,  # a few stages: show each as it starts
-               smoothing=0,  # (the ETA from the whole run's rate: stages differ in length)
-               bar_format="{l_bar}{bar}| [{elapsed}<{remaining}]")
-    running: list[float] = []  # (the weight of the stage under way)
-
-    def step(stage: str, weight: float = 1) -> None:  # a stage starts: the one before is done
-        bar.set_description_str(escape(stage)[-60:], refresh=False)
-        if running:
-            bar.update(running.pop())
-        else:
-            bar.refresh()
-        running.append(weight)
-
-    def show(message, category, filename, lineno, file=None, line=None):
-        text = (_warning_text(message) if issubclass(category, MavsidWarning) else
-                warnings.formatwarning(message, category, filename, lineno, line).rstrip("\n"))
-        bar.write(text, file=sys.stderr)
-
-    previous = warnings.showwarning
-    warnings.showwarning = show
-    try:
-        yield step
-    finally:
-        warnings.showwarning = previous
-        bar.close()
-
-
 def _write_outputs(args: argparse.Namespace, result: FitResult,
                    step: Callable[..., None] = lambda stage, weight=1: None,
                    worker: ReportWorker | None = None, rrd_weight: float = 1) -> None:
     """The ``.rrd`` and the report; the report drawn by ``worker`` (a process started with
     the command, see :class:`~mavsid.outputs.ReportWorker`) while the loop analysis it
     draws and the ``.rrd`` are worked out here, else here after the ``.rrd``.
-    ``rrd_weight``: the ``.rrd``'s stage on the progress bar (:func:`_stages`)."""
+    ``rrd_weight``: the ``.rrd``'s stage on the progress bar (:func:`mavsid.cli_format.stages`)."""
     with contextlib.ExitStack() as stack:
         report_tmp = None
         handed = False
@@ -445,27 +392,6 @@ def _report_worker(args: argparse.Namespace) -> contextlib.AbstractContextManage
     return contextlib.nullcontext()
 
 
-def _print_result(args: argparse.Namespace, result: FitResult, validating: bool = False,
-                  error: MavsidError | None = None) -> None:
-    """The result on stdout: its JSON (with ``error``, when the command fails on it, as
-    :func:`_error_document` has it) or its table and the files written."""
-    import json
-
-    from mavsid.pipeline import format_result
-
-    if args.json:
-        doc = result.to_dict()
-        if error is not None:
-            doc["error"] = {"type": type(error).__name__, "message": str(error)}
-        print(json.dumps(doc, indent=1, ensure_ascii=True, allow_nan=False))
-    else:
-        print(escape_lines(format_result(result, validating=validating)))
-        for flag, path in (("rrd", args.rrd), ("report", args.report)):
-            if path:
-                print(f"wrote {path}" + (f" (open it with: rerun --bind 127.0.0.1 {path})"
-                                         if flag == "rrd" else ""))
-
-
 def _preset_arg(preset: str | None) -> tuple[str | None, dict[str, Any] | None,
                                               dict[str, Any] | None]:
     """``--preset``: a preset's name, or a TOML file's presets and mixers (name None)."""
@@ -499,21 +425,6 @@ def _add_output_flags(p: argparse.ArgumentParser) -> None:
     _add_quiet_flag(p)
 
 
-def _stages(args: argparse.Namespace, axes: int, per_axis: int) -> tuple[int, int]:
-    """The progress bar's total for a fit or validate run (reads, axes, outputs) and the
-    weight of its ``.rrd`` stage: writing the ``.rrd`` takes about as long as the whole fit
-    (the bundled roll flight on a busy 2-core machine: fit 2.7 s, ``.rrd`` 2.7 s), so it
-    weighs as much as the fit's stages together; a bar that gave it one stage read 00:00
-    left while most of the run was still to come.
-
-    >>> _stages(argparse.Namespace(logs=["a.bin"], rrd="a.rrd", report=None), 3, 4)
-    (26, 13)
-    """
-    fitting = len(args.logs) + per_axis * axes
-    weight = fitting if args.rrd else 0
-    return fitting + weight + bool(args.report), weight
-
-
 def _add_fit(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "fit", help="log(s) -> validated attitude-dynamics model per axis",
@@ -541,8 +452,8 @@ def _fit(args: argparse.Namespace) -> int:
         from mavsid.pipeline import FIT_STAGES, fit
 
         cfg = _pipeline_config(args)
-        total, rrd_weight = _stages(args, len(cfg.axes), len(FIT_STAGES))
-        with _progress(args, total) as step:
+        total, rrd_weight = stages(args, len(cfg.axes), len(FIT_STAGES))
+        with progress(args, total) as step:
             try:
                 result = fit(args.logs, cfg, progress=step)
             except NoExcitationError as exc:  # no plant: the outputs asked for still come
@@ -552,7 +463,7 @@ def _fit(args: argparse.Namespace) -> int:
                 with atomic_path(args.output) as tmp, open(tmp, "w", encoding="utf-8") as f:
                     json.dump(result.models_dict(), f, indent=1)
             _write_outputs(args, result, step, worker, rrd_weight)
-    _print_result(args, result)
+    print_result(args, result)
     if args.output and not args.json:
         print(f"wrote {args.output}")
     return 0
@@ -621,8 +532,8 @@ def _validate(args: argparse.Namespace) -> int:
         models = load_models(args.model)
         cfg = _pipeline_config(args)
         axes = len([a for a in models if a in cfg.axes])
-        total, rrd_weight = _stages(args, axes, len(VALIDATE_STAGES))
-        with _progress(args, total) as step:
+        total, rrd_weight = stages(args, axes, len(VALIDATE_STAGES))
+        with progress(args, total) as step:
             try:
                 result = validate_logs(models, args.logs, cfg, progress=step)
             except NoExcitationError as exc:  # (no axis had a segment: said as validate does)
@@ -636,7 +547,7 @@ def _validate(args: argparse.Namespace) -> int:
             f"{', '.join(args.logs)}: the model does not predict this flight ("
             + "; ".join(f"{a}: {validation_figures(v) or 'nothing to validate on'}"
                         for a, v in result.verdicts.items()) + ")")
-    _print_result(args, result, validating=True, error=error)
+    print_result(args, result, validating=True, error=error)
     if error is not None:
         print(f"mavsid: error: {escape(error)}", file=sys.stderr)
         return 1
@@ -810,7 +721,7 @@ def _tune(args: argparse.Namespace) -> int:
     from mavsid.pipeline import FIT_STAGES, _json_safe, fit
 
     cfg = _pipeline_config(args)
-    with _progress(args, 1 + len(FIT_STAGES) * len(cfg.axes) + 1) as step:
+    with progress(args, 1 + len(FIT_STAGES) * len(cfg.axes) + 1) as step:
         result = fit([args.log], cfg, progress=step)
         step("loop analysis")
         report = tune(result, args.target_pm, limits=Limits(max_step=args.max_step))
@@ -856,7 +767,7 @@ def _response(args: argparse.Namespace) -> int:
     found: list[FlightResponse] = []
     docs: list[dict[str, Any]] = []
     errors: list[str] = []
-    with _progress(args, len(args.logs) + bool(args.rrd) + bool(args.report)) as step:
+    with progress(args, len(args.logs) + bool(args.rrd) + bool(args.report)) as step:
         for log in args.logs:
             step(f"reading {log}")
             try:
@@ -867,10 +778,10 @@ def _response(args: argparse.Namespace) -> int:
                 if len(args.logs) == 1:
                     raise
                 errors.append(str(exc))
-                docs.append({"log": log, "error": json.loads(_error_document(exc))["error"]})
+                docs.append({"log": log, "error": json.loads(error_document(exc))["error"]})
                 continue
             found.append(got)
-            docs.append(_json_ready(got.to_dict()))
+            docs.append(json_ready(got.to_dict()))
         written = _write_response_outputs(args, found, step) if found else []
     code = 0 if found and not errors else 1
     if args.json:
@@ -887,17 +798,6 @@ def _response(args: argparse.Namespace) -> int:
     if not found:
         print("mavsid: error: no log could be read", file=sys.stderr)
     return code
-
-
-def _json_ready(doc: Any) -> Any:
-    """``doc`` with every non-finite float None (JSON has no NaN)."""
-    if isinstance(doc, dict):
-        return {k: _json_ready(v) for k, v in doc.items()}
-    if isinstance(doc, (list, tuple)):
-        return [_json_ready(v) for v in doc]
-    if isinstance(doc, float) and not math.isfinite(doc):
-        return None
-    return doc
 
 
 def _write_response_outputs(args: argparse.Namespace, found: Sequence[Any],
@@ -970,9 +870,7 @@ def _batch(args: argparse.Namespace) -> int:
         print(escape(line))
     found = trends(tables["axes"])
     for row in found[found["changed"]].to_dict("records") if len(found) else []:
-        print(escape(f"change: {row['vehicle']} {row['axis']} {row['param']} "
-                     f"{row['before']:.4g} -> {row['after']:.4g} after {row['change_after']} "
-                     f"({row['z']:.1f} standard errors)"))
+        print(escape(change_line(row)))
     if args.report:
         write_trends_html(tables, args.report)
         print(f"wrote {args.report}")
@@ -1029,63 +927,11 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _error_document(exc: BaseException, kind: str | None = None) -> str:
-    """The one JSON document a ``--json`` command prints on stdout when it fails: the error
-    (its type and line) and, when the run judged axes, their verdicts and reasons.
-
-    Examples
-    --------
-    >>> print(_error_document(ConfigError("--axis spin: unknown")))
-    {"error": {"type": "ConfigError", "message": "--axis spin: unknown"}}
-    """
-    import json
-
-    doc: dict[str, Any] = {"error": {"type": kind or type(exc).__name__, "message": str(exc)}}
-    verdicts = getattr(exc, "verdicts", None)
-    if verdicts:
-        doc["axes"] = {}
-        doc["verdicts"] = {a: v.to_dict() for a, v in verdicts.items()}
-    if getattr(exc, "details", ()):
-        doc["details"] = list(getattr(exc, "details", ()))
-    return json.dumps(doc, ensure_ascii=True, allow_nan=False)
-
-
 #: The cyclic collector's thresholds for one command run from the command line: Python's
 #: (700, 10, 10) collected 800 times during ``fit --rrd --report`` on the SITL flight (0.6 s,
 #: a tenth of the run, mostly walking matplotlib's and the fit's long-lived objects); these
 #: 60 times (0.17 s) for 12 MB more peak memory. Results do not depend on it.
 _GC_THRESHOLDS = (20_000, 20, 20)
-
-
-def _one_blas_thread() -> None:
-    """One BLAS thread for this process and the processes it starts (Dask workers), unless
-    the user set a count (:mod:`mavsid.threads`: on a busy 2-core machine a 33x200 by
-    200x165 product took 8 ms with them, 0.7 ms without; `fit` of the 104 MB SITL flight
-    1.1 s of CPU against 0.75 s)."""
-    from mavsid.threads import BLAS_THREAD_VARS, user_set
-
-    if user_set():
-        return
-    for v in BLAS_THREAD_VARS:
-        os.environ[v] = "1"  # (children read it before they load numpy)
-    from threadpoolctl import threadpool_limits
-
-    threadpool_limits(1, user_api="blas")
-
-
-def _readers_build() -> str:
-    """Whether the readers' byte loops are compiled (``mavsid/readers/_scan.c``; the filter
-    recursion, ``mavsid/_filter.c``, is built with them), found on disk without importing
-    the readers (``--version`` loads no numpy)."""
-    import importlib.machinery
-    from pathlib import Path
-
-    folder = Path(__file__).resolve().parent / "readers"
-    built = any((folder / f"_scan{suffix}").is_file()
-                for suffix in importlib.machinery.EXTENSION_SUFFIXES)
-    return ("compiled readers" if built else
-            "numpy readers: built without a C compiler, reading ~1.2x slower and filtering "
-            "through scipy, ~0.3 s more per fit")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -1107,10 +953,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except UsageError as exc:
         print(exc.text, file=sys.stderr)
         if "--json" in words:
-            print(_error_document(exc, "UsageError"))
+            print(error_document(exc, "UsageError"))
         raise SystemExit(2) from None  # (as argparse exits on a usage error)
     if args.version:
-        print(f"mavsid {__version__} ({_readers_build()})")
+        print(f"mavsid {__version__} ({readers_build()})")
         return 0
     if not getattr(args, "handler", None):
         parser.print_help(sys.stderr)
@@ -1122,24 +968,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     once = argv is None  # the process's own command line (not a caller's main([...]))
     if once:
         gc.set_threshold(*_GC_THRESHOLDS)
-        _one_blas_thread()
+        from mavsid.threads import limit_process_blas
+
+        limit_process_blas()
     as_json = bool(getattr(args, "json", False))  # (stdout: one JSON document, always)
     try:
         return handler(args)
     except MavsidError as exc:
         if args.debug:
             traceback.print_exc()
-        if as_json:
-            print(_error_document(exc))
-        elif exc.details:  # the why, as a successful run shows its verdicts: on stdout
-            print("verdict:")
-            for line in exc.details:
-                print(f"  {escape(line)}")
-        print(f"mavsid: error: {escape(exc)}", file=sys.stderr)
+        print_error(exc, as_json)
         return 1
     except KeyboardInterrupt as exc:
         if as_json:
-            print(_error_document(exc, "Interrupted"))
+            print(error_document(exc, "Interrupted"))
         print("mavsid: interrupted", file=sys.stderr)
         return 130
     finally:

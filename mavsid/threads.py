@@ -29,7 +29,7 @@ import os
 from collections.abc import Callable
 from typing import Any, TypeVar
 
-__all__ = ["BLAS_THREAD_VARS", "one_blas_thread", "user_set"]
+__all__ = ["BLAS_THREAD_VARS", "limit_process_blas", "one_blas_thread", "user_set"]
 
 #: Variables that set the BLAS libraries' thread counts (OpenBLAS, OpenMP, MKL).
 BLAS_THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
@@ -72,3 +72,17 @@ def one_blas_thread(func: F) -> F:
             _LIMITED.reset(token)
 
     return wrapper  # type: ignore[return-value]
+
+
+def limit_process_blas() -> None:
+    """One BLAS thread for this process and the processes it starts (Dask workers), unless
+    the user set a count (:func:`user_set`; on a busy 2-core machine a 33x200 by
+    200x165 product took 8 ms with them, 0.7 ms without; `fit` of the 104 MB SITL flight
+    1.1 s of CPU against 0.75 s)."""
+    if user_set():
+        return
+    for v in BLAS_THREAD_VARS:
+        os.environ[v] = "1"  # (children read it before they load numpy)
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(1, user_api="blas")

@@ -97,18 +97,18 @@ def test_an_input_that_cannot_be_read_is_refused_before_the_heavy_imports(
 _BLAS_PROBE = """
 import json, os, sys
 import numpy  # (loaded before, as in a caller's process; the command line loads it after)
-from mavsid import cli
+from mavsid.threads import limit_process_blas
 from threadpoolctl import threadpool_info
 before = [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
-cli._one_blas_thread()
+limit_process_blas()
 after = [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
 print(json.dumps({"before": before, "after": after, "env": os.environ.get("OPENBLAS_NUM_THREADS")}))
 """
 
 _BLAS_FIRST = """
 import json
-from mavsid import cli
-cli._one_blas_thread()  # (numpy not loaded yet: the command line's order)
+from mavsid.threads import limit_process_blas
+limit_process_blas()  # (numpy not loaded yet: the command line's order)
 import numpy
 from threadpoolctl import threadpool_info
 print(json.dumps([i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]))

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 from mavsid.errors import (
     ConfigError,
     DataQualityWarning,
+    ImplausibleModelError,
     LogFormatError,
     MavsidError,
     MavsidWarning,
@@ -59,6 +60,7 @@ __all__ = [
     "ConfigError",
     "DataQualityWarning",
     "FlightData",
+    "ImplausibleModelError",
     "LogFormatError",
     "MavsidError",
     "MavsidWarning",

@@ -31,6 +31,7 @@ from collections.abc import Iterable, Sequence
 __all__ = [
     "ConfigError",
     "DataQualityWarning",
+    "ImplausibleModelError",
     "LogFormatError",
     "MavsidError",
     "MavsidWarning",
@@ -182,6 +183,11 @@ def naming_file(exc: MavsidError, path: object) -> MavsidError:
 
 class NoExcitationError(MavsidError, ValueError):
     """The data cannot identify what was asked: no excitation, or unidentifiable parameters."""
+
+
+class ImplausibleModelError(MavsidError, ValueError):
+    """The data would give a physically absurd model (an aliased output, an effectiveness of
+    the wrong sign, a pole faster than the sampling): refused with the reason."""
 
 
 class ConfigError(MavsidError, ValueError):

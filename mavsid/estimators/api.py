@@ -50,6 +50,7 @@ from mavsid.estimators._base import Estimator, Gram, bartlett_meat, solve
 from mavsid.estimators.least_squares import thresholded
 from mavsid.estimators.model import Model
 from mavsid.estimators.output_error import output_error_coef, refine_output_error
+from mavsid.estimators.plausibility import check_rate_plant, check_sampled_rates
 from mavsid.estimators.regressors import InputFilter, Structure, filters_from_params
 from mavsid.estimators.select import (
     AXES,
@@ -476,6 +477,7 @@ def identify(
     window: int = 9,
     refine: str | None = None,
     oe_covariance: str = "cramer-rao",
+    expect_positive: bool = True,
     **estimator_kwargs: object,
 ) -> Model:
     """Identify ``x[k+1] = Θᵀφ(x[k], u[k−d])`` or ``ẋ = Θᵀφ(x, u(t−d·dt))`` from arrays.
@@ -526,6 +528,13 @@ def identify(
     oe_covariance : {"cramer-rao", "newey-west"}
         Covariance of the output-error estimate: the Cramér–Rao bound for white output
         noise, ``(Σₜ Jₜᵀ R̂⁻¹ Jₜ)⁻¹``, or the Newey–West sandwich (coloured residuals).
+    expect_positive : bool
+        The states are rates of a physical plant sampled above their bandwidth, driven by
+        the input with a positive effectiveness (u → rate): refuse an output whose lag-1
+        autocorrelation is below 0 (aliased; :mod:`mavsid.estimators.plausibility`) and, for
+        one output and one input, a fitted effectiveness ≤ 0 or a pole the sampling cannot
+        hold. False for any other system (a discrete process that alternates, a plant that
+        reverses its input).
     **estimator_kwargs
         Passed to the estimator (``alpha``, ``threshold``, ``n_bootstrap``, ``bounds``...).
 
@@ -537,6 +546,9 @@ def identify(
     ------
     NoExcitationError
         A parameter cannot be identified (the message names it and the cause).
+    ImplausibleModelError
+        With ``expect_positive``: the output is aliased, or the fit is not a rate plant
+        (the message says which and why).
 
     Examples
     --------
@@ -569,12 +581,17 @@ def identify(
     if missing:
         raise ConfigError(f"features use unknown variables {sorted(missing)}; states {sn}, "
                           f"inputs {inn}")
-    return identify_segments(
+    if expect_positive:
+        check_sampled_rates(segs, outs)
+    model = identify_segments(
         segs, outs, feats, tuple(v for v in inn if v in library.variables_of(feats)),
         continuous=kind == "continuous", estimator=estimator, filters=filters, delay=delay,
         max_delay_s=max_delay * float(dt), lags_s=lags_s, derivative=derivative,
         window=window, refine=refine, oe_covariance=oe_covariance, var_units=units,
         estimator_options=estimator_kwargs)
+    if expect_positive:
+        check_rate_plant(model)
+    return model
 
 
 # --------------------------------------------------------------------------- the log path

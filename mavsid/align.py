@@ -924,7 +924,9 @@ def sysid_runs(raw: RawLog) -> list[dict[str, Any]]:
     From DataFlash: one per SIDS record, with SIDS's settings; the span is that of the SIDD
     samples after it whose waveform ``Targ`` is non-zero (the chirp itself, without the
     initial delay and the wait after it), else of all its SIDD samples, else the stay in
-    SYSTEMID mode. From a .tlog: one
+    SYSTEMID mode. From DataFlash with SIDD but no SIDS: one per stay in the mode
+    (:func:`_runs_without_sids`; ``injected`` False when its waveform is zero throughout).
+    From a .tlog: one
     per stay in SYSTEMID mode, the settings being the last SID_* PARAM_VALUE before it
     (``settings_from`` says which; a ground station may have sent the parameters only once,
     so segment selection checks that axis against the data); the span is then ArduCopter's
@@ -978,6 +980,8 @@ def sysid_runs(raw: RawLog) -> list[dict[str, Any]]:
                 run["start_s"], run["stop_s"] = _chirp_span(start, stop, run)
             runs.append(run)
         return runs
+    if "SIDD" in raw.messages and len(raw.messages["SIDD"]):
+        return _runs_without_sids(raw, spans)
     if not spans or "PARAM_VALUE" not in raw.messages:
         return runs
     pv = raw.messages["PARAM_VALUE"]
@@ -1001,6 +1005,55 @@ def sysid_runs(raw: RawLog) -> list[dict[str, Any]]:
         if "axis" in run:
             run["start_s"], run["stop_s"] = _chirp_span(a, b, run)
             runs.append(run)
+    return runs
+
+
+#: How long before its MODE record a SYSTEMID stay's first SIDD record may come (the mode's
+#: record is written after the mode has started: 0.09 s late on a real ArduCopter 4.6 log)
+SIDD_BEFORE_MODE_S = 0.5
+
+
+def _runs_without_sids(raw: RawLog, spans: Sequence[tuple[float, float]]
+                       ) -> list[dict[str, Any]]:
+    """SYSTEMID runs of a DataFlash log with SIDD but no SIDS record (its start not logged):
+    one per stay in the mode holding SIDD records, the settings from the log's SID_*
+    parameters (``settings_from`` ``"PARM"``), the span that of the records whose waveform
+    ``Targ`` is non-zero; where none is, the stay itself and ``injected`` False (the mode
+    was flown, nothing was injected).
+
+    Examples
+    --------
+    >>> from mavsid.data import MessageTable, ModeChange, RawLog, SourceInfo
+    >>> sidd = MessageTable("SIDD", {"Targ": np.zeros(4)}, time_s=np.array([5.0, 6, 8, 9]))
+    >>> log = RawLog(SourceInfo("x.bin", "dataflash", 0), {"SIDD": sidd},
+    ...              modes=(ModeChange(5.1, 25, "SYSTEMID"), ModeChange(9.5, 0, "STABILIZE")),
+    ...              params={"SID_AXIS": 1.0})
+    >>> sysid_runs(log)
+    [{'start_s': 5.1, 'stop_s': 9.0, 'settings_from': 'PARM', 'axis': 1, 'injected': False}]
+    """
+    sidd = raw.messages["SIDD"]
+    t = np.asarray(sidd.time_s, dtype=float)
+    targ = (sidd.numbers("Targ", raw.source.path) if "Targ" in sidd.columns
+            else np.ones(t.size))
+    active = np.isfinite(targ) & (targ != 0)
+    runs: list[dict[str, Any]] = []
+    for a, b in spans:
+        sel = (t >= a - SIDD_BEFORE_MODE_S) & (t < b)
+        if np.count_nonzero(sel) < 2:
+            continue
+        injected = np.count_nonzero(sel & active) >= 2
+        inside = t[sel & active] if injected else t[sel]
+        run: dict[str, Any] = {
+            "start_s": float(np.min(inside)) if injected else float(a),
+            "stop_s": float(np.max(inside)) if injected else float(min(b, np.max(inside))),
+            "settings_from": "PARM"}
+        for pname, key in SID_PARAMS.items():
+            if pname in raw.params:
+                val = float(raw.params[pname])
+                run[key] = _sid_axis_number(val) if key == "axis" else val
+        if not injected:
+            run["injected"] = False
+        runs.append(run)
     return runs
 
 

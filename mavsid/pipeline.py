@@ -960,14 +960,30 @@ def _rollover(fd: FlightData, i0: int, i1: int, sid: int) -> str:
             f"(reaching {worst[0]:.0f}°): the vehicle was lost")
 
 
+def _injected_nothing(run: Mapping[str, Any]) -> str:
+    """Why a SYSTEMID run whose waveform is zero throughout (``injected`` False) is refused.
+
+    Examples
+    --------
+    >>> print(_injected_nothing({"start_s": 3899.27, "stop_s": 3908.8, "axis": 1,
+    ...                          "settings_from": "PARM", "injected": False}))
+    SYSTEMID mode (SID_AXIS 1) 3899.3–3908.8 s injected nothing (SIDD.Targ is 0 throughout, \
+SIDS not logged)
+    """
+    sids = "" if run.get("settings_from") == "SIDS" else ", SIDS not logged"
+    return (f"SYSTEMID mode (SID_AXIS {int(run.get('axis', 0) or 0)}) {run['start_s']:.1f}–"
+            f"{run['stop_s']:.1f} s injected nothing (SIDD.Targ is 0 throughout{sids})")
+
+
 def plant_fit(axis: str, flights: Sequence[FlightData]) -> tuple[PlantTF | None, str, bool]:
     """The plant's response on the axis's SYSTEMID runs measured against the injection
     (``H = S_ry / S_ru``, ``r`` the waveform ``SIDD.Targ``, ``u`` the mixer input, ``y`` the
     rate: the feedback does not bias it, whatever the injection point) and the transfer
     function fitted on its trusted band (:func:`mavsid.frequency.fit_plant`); or None and
     why not. The flag says the runs are refused (the reason then the one line to give): one
-    ends in a roll-over (:data:`ROLLOVER_DEG`), or the injection excites nothing above the
-    noise (no frequency of the sweep where the input and the rate are coherent with it)."""
+    injected nothing (its waveform zero throughout), one ends in a roll-over
+    (:data:`ROLLOVER_DEG`), or the injection excites nothing above the noise (no frequency
+    of the sweep where the input and the rate are coherent with it)."""
     from mavsid.frequency import MIN_COHERENCE, frf, sysid_spans
     from mavsid.frequency_fit import fit_plant
 
@@ -986,6 +1002,8 @@ def plant_fit(axis: str, flights: Sequence[FlightData]) -> tuple[PlantTF | None,
         runs = {int(r.get("axis", 0) or 0): r
                 for r in fd.meta.get("sysid_runs") or ()}  # type: ignore[attr-defined]
         for i0, i1, sid in sysid_spans(fd, axis):
+            if runs[sid].get("injected") is False:
+                return None, _injected_nothing(runs[sid]), True
             lost = _rollover(fd, i0, i1, sid)
             if lost:
                 return None, lost, True

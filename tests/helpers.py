@@ -86,3 +86,30 @@ def table_log(fmt: str, tables: dict[str, dict[str, np.ndarray]], **kw: dict) ->
         n = len(next(iter(cols.values())))
         msgs[name] = MessageTable(name, cols, time_s=np.arange(n) * 0.01, **kw.pop(name, {}))
     return RawLog(SourceInfo(f"x.{fmt}", fmt, 0), msgs)
+
+
+def write_systemid_without_injection(path: Path) -> Path:
+    """A simulated hover (the project's simulator and DataFlash writer) that spends 9.6 s in
+    SYSTEMID mode 8 s after its first sample with SIDD logged at the loop rate but its
+    waveform zero throughout (``F`` the stop frequency) and no SIDS record; SID_* parameters
+    those of a real such run (SID_AXIS 1, 0.15°, 0.05–5 Hz, SID_T_REC 130 s)."""
+    import dataclasses
+
+    from mavsid.synthetic import Scenario, SysIdSettings, fly
+    from mavsid.synthetic.dfwriter import write_dataflash
+    from mavsid.synthetic.flight import MODE_SYSTEMID
+
+    hover = fly(Scenario(manoeuvre="hover", duration_s=20.0, seed=3))
+    t = hover.t_s - hover.t_s[0]
+    inside = (t >= 8.0) & (t < 17.6)
+    settings = SysIdSettings(axis=1, magnitude=0.15, f_start_hz=0.05, f_stop_hz=5.0,
+                             t_fade_in=5.0, t_rec=130.0, t_fade_out=5.0)
+    flight = dataclasses.replace(
+        hover,
+        scenario=dataclasses.replace(hover.scenario, manoeuvre="sysid", sysid=(settings,),
+                                     duration_s=None),  # (its SID_* parameters)
+        mode=np.where(inside, MODE_SYSTEMID, hover.mode),
+        sid_time=np.where(inside, t - 8.0, np.nan), sid_targ=np.where(inside, 0.0, np.nan),
+        sid_freq=np.where(inside, settings.f_stop_hz, np.nan))
+    write_dataflash(flight, path)
+    return path

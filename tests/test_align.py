@@ -256,6 +256,25 @@ def test_sitl_sysid_runs_from_sids(sitl_pair):
         assert fd.params["INS_GYRO_FILTER"] == 20.0
 
 
+def test_systemid_mode_with_sidd_but_no_sids_is_a_run_that_injected_nothing(tmp_path):
+    """SYSTEMID flown, SIDD logged with its waveform zero, no SIDS: one run over the stay in
+    the mode, its settings from the parameters, marked as having injected nothing."""
+    from helpers import write_systemid_without_injection
+
+    from mavsid import read_log
+
+    raw = read_log(write_systemid_without_injection(tmp_path / "quiet.bin"))
+    assert "SIDS" not in raw.messages and len(raw.messages["SIDD"]) > 1000
+    enter = next(m.time_s for m in raw.modes if m.name == "SYSTEMID")
+    runs = sysid_runs(raw)
+    assert len(runs) == 1, runs
+    run = runs[0]
+    assert run["injected"] is False and run["settings_from"] == "PARM"
+    assert run["axis"] == 1 and run["magnitude"] == pytest.approx(0.15)
+    assert run["start_s"] == pytest.approx(enter) and run["stop_s"] - enter == pytest.approx(
+        9.6, abs=0.01)
+
+
 def test_sysid_runs_absent_without_systemid():
     raw = RawLog(SourceInfo("d.bin", "dataflash", 0), {}, modes=(ModeChange(1.0, 0, "STAB"),))
     assert sysid_runs(raw) == []

@@ -104,6 +104,17 @@ def test_model_from_one_flight_predicts_the_next(fitted, tmp_path: Path) -> None
     assert val["fit_percent"]["one_step"] > 90
 
 
+def test_a_systemid_stay_that_injected_nothing_is_refused_in_one_line(tmp_path: Path) -> None:
+    from helpers import write_systemid_without_injection
+
+    path = write_systemid_without_injection(tmp_path / "quiet.bin")
+    proc = run("fit", str(path), "-q")
+    assert proc.returncode == 1
+    errors = [line for line in proc.stderr.splitlines() if line.startswith("mavsid: error:")]
+    assert errors == [f"mavsid: error: {path}: roll: SYSTEMID mode (SID_AXIS 1) 38.0–47.6 s "
+                      "injected nothing (SIDD.Targ is 0 throughout, SIDS not logged)"], proc.stderr
+
+
 @pytest.mark.parametrize(
     ("argv", "needle"),
     [

@@ -141,3 +141,10 @@ def test_a_run_that_ends_in_a_roll_over_is_refused_in_one_line() -> None:
     line = fit_error("00000060.BIN")
     assert "ends in a roll-over" in line and "at t=" in line, line
     assert "on the ground" not in line and "attitude beyond bound" not in line
+
+
+def test_a_systemid_stay_without_sids_that_injected_nothing_is_refused_in_one_line() -> None:
+    """00000062: 9.6 s in SYSTEMID, SIDD logged with Targ 0 throughout, no SIDS record."""
+    line = fit_error("00000062.BIN")
+    assert line.endswith("roll: SYSTEMID mode (SID_AXIS 1) 3899.3–3908.8 s injected nothing "
+                         "(SIDD.Targ is 0 throughout, SIDS not logged)"), line

@@ -67,3 +67,31 @@ def test_the_twin_flies_the_predicted_step(loop) -> None:  # type: ignore[no-unt
         n = min(twin.size, c.step.size)
         assert n > 300
         assert np.max(np.abs(twin[:n] - c.step[:n])) < 0.01
+
+
+def test_an_i_less_loop_around_an_integrator_is_stable_and_its_twin_step_agrees() -> None:
+    """A real ArduCopter rate loop flies with ``I = 0`` (a Pixhawk 6C quad: P 0.04, D 0.0012)
+    around a plant that is an integrator: the controller has no pole at z = 1 (else a mode on
+    the unit circle that no gain moves makes every such loop "unstable"), and the twin's step
+    (the controller stepped sample by sample) is the linear one even when the plant carries a
+    trim bias (which an I-less loop never removes: it is not part of the step)."""
+    import dataclasses
+
+    from mavsid.loop.plant import LinearPlant
+
+    params = {"ATC_RAT_RLL_P": 0.04, "ATC_RAT_RLL_I": 0.0, "ATC_RAT_RLL_D": 0.0012,
+              "ATC_RAT_RLL_FLTD": 20.0, "ATC_RAT_RLL_FLTT": 20.0, "ATC_RAT_RLL_FLTE": 0.0}
+    ctrl = controller_from_params(params, "roll")
+    dt = 1.0 / ctrl.loop_hz
+    (_, af), _ = controller_polys(ctrl, dt)
+    assert not np.any(np.isclose(np.roots(af), 1.0, atol=1e-9))
+    # an integrator with a 13-ms motor lag, B = 500 rad/s^2 per unit (x: lagged input, rate)
+    alpha = dt / 0.013
+    plant = LinearPlant(np.array([[1.0 - alpha, 0.0], [500.0 * dt, 1.0]]),
+                        np.array([alpha, 0.0]), np.array([0.0, 1.0]), dt)
+    got = check_loop(plant, ctrl, horizon_s=0.5)
+    assert got.stable and 0.0 < got.phase_margin_deg < 180.0
+    biased = dataclasses.replace(plant, u_offset=-0.005)
+    step = twin_step(biased, ctrl, horizon_s=0.5)
+    n = min(step.size, got.step.size)
+    assert np.max(np.abs(step[:n] - got.step[:n])) < 0.02

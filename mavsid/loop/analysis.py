@@ -90,17 +90,21 @@ def _first_order(cutoff_hz: float, dt: float) -> tuple[Polynomial, Polynomial]:
 @functools.lru_cache(maxsize=64)
 def _controller_polys(g: RateGains | PX4RateGains, step: float) -> tuple[Poly, Poly]:
     """:func:`controller_polys` by gains and step, cached (callers never modify them)."""
-    back = Polynomial([1.0, -1.0])  # 1 − z⁻¹
+    diff = Polynomial([1.0, -1.0])  # 1 − z⁻¹
+    # over (1 − z⁻¹) with an integrator; without one (I = 0) the factor is not there at all,
+    # rather than cancelled: a pole and zero at z = 1 would leave the closed loop a mode on
+    # the unit circle that no gain moves (an I-less loop judged "unstable")
+    back = diff if g.i != 0 else Polynomial([1.0])
     if isinstance(g, PX4RateGains):
         nd, dd = Polynomial([1.0]), Polynomial([1.0])
         if 0 < g.dgyro_hz < 0.5 / step:
             b, a = dsp.lowpass2p_coefficients(g.dgyro_hz, 1.0 / step)
             nd, dd = Polynomial(b), Polynomial(a)
-        pi = g.k * g.p * back + g.k * g.i * step  # K·(P + I·dt/(1 − z⁻¹)), times 1 − z⁻¹
-        fb = _in_z(pi * dd + (g.k * g.d / step) * nd * back**2, back * dd)
+        pi = g.k * g.p * back + g.k * g.i * step  # K·(P + I·dt/(1 − z⁻¹)), times `back`
+        fb = _in_z(pi * dd + (g.k * g.d / step) * nd * diff * back, back * dd)
         return fb, _in_z(pi + g.ff * back, back)
     (nt, dt_), (ne, de), (nd, dd) = (_first_order(c, step) for c in (g.fltt, g.flte, g.fltd))
-    inner = (g.p * back + g.i * step) * dd + (g.d / step) * nd * back**2  # over (1 − z⁻¹)·F_D's
+    inner = (g.p * back + g.i * step) * dd + (g.d / step) * nd * diff * back  # over back·F_D's
     num, den = ne * inner, de * back * dd
     return _in_z(num, den), _in_z(nt * (num + g.ff * den), dt_ * den)
 

@@ -25,6 +25,7 @@ Examples
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 from dataclasses import dataclass, field
@@ -251,6 +252,9 @@ def twin_step(plant: LinearPlant, ctrl: AxisController, lag: int = 0,
     sample, its integrator and output limits on), at the controller's step."""
     from mavsid.loop.twin import simulate_closed_loop
 
+    # the step of the linear loop, as the limits judge it: without the model's trim (a bias
+    # an I-less controller never removes would otherwise offset the step by bias / P)
+    plant = dataclasses.replace(plant, u_offset=0.0)
     n = round(horizon_s * ctrl.loop_hz)
     target = np.full(n + 1, amplitude)
     target[0] = 0.0

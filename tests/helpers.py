@@ -18,6 +18,21 @@ SHARED = ROOT.parent / "shared"
 LOGS = SHARED / "logs"
 FIXTURES = ROOT / "fixtures"
 REQUIRE_SHARED = os.environ.get("MAVSID_REQUIRE_SHARED") == "1"
+#: real flight logs from public repositories that carry no licence to redistribute, kept
+#: outside the project: ``$MAVSID_REAL_LOGS``, else a ``cache`` folder beside the checkout
+#: (or beside the folder holding it); ``keita/`` holds ArduCopter 4.6.2 SYSTEMID flights
+REAL_LOGS = (Path(os.environ["MAVSID_REAL_LOGS"]) if os.environ.get("MAVSID_REAL_LOGS")
+             else next((d for d in (ROOT.parent / "cache", ROOT.parent.parent / "cache")
+                        if d.is_dir()), ROOT.parent / "cache"))
+
+
+def real_path(*parts: str) -> Path:
+    """Path below :data:`REAL_LOGS`; skips the test when absent (never bundled, so never
+    required)."""
+    path = REAL_LOGS.joinpath(*parts)
+    if not path.exists():
+        pytest.skip(f"{path} not present (a real log, not bundled: set MAVSID_REAL_LOGS)")
+    return path
 
 
 def shared_path(*parts: str) -> Path:

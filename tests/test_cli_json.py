@@ -12,12 +12,12 @@ import sys
 from pathlib import Path
 
 import pytest
-from helpers import FIXTURES
+from helpers import FIXTURES, REAL_LOGS
 
 from mavsid import cli
 
 #: real flights where fitting fails (no window kept: on the ground, or not excited)
-KEITA = Path("/work/cache/keita")
+KEITA = REAL_LOGS / "keita"
 REAL_FAILING = [KEITA / "00000062.BIN", KEITA / "1_00000050.BIN"]
 
 

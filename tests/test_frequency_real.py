@@ -3,7 +3,7 @@ chirp 1 → 40 Hz): the fitted roll model against the plant's response measured 
 ``scipy.signal.csd`` and pymavlink, not mavsid's own code.
 
 The log is not part of the project (no licence): it is looked up in ``$MAVSID_REAL_LOGS`` or
-``cache/keita`` beside the repository, and the test skips without it.
+``keita/`` below ``helpers.REAL_LOGS``, and the test skips without it.
 """
 
 from __future__ import annotations
@@ -16,22 +16,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import real_path
 
 ROOT = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.slow  # (whole real flights, read twice: by mavsid and by pymavlink)
 
 
 def real_log(name: str) -> Path:
-    """``name`` in ``$MAVSID_REAL_LOGS`` (default: ``../cache/keita`` from the repository,
-    or from the folder holding it); skips the test when it is absent."""
-    env = os.environ.get("MAVSID_REAL_LOGS")
-    dirs = [Path(env)] if env else [ROOT.parent / "cache" / "keita",
-                                    ROOT.parent.parent / "cache" / "keita"]
-    for d in dirs:
-        if (d / name).is_file():
-            return d / name
-    pytest.skip(f"real log {name} not found in {', '.join(map(str, dirs))} "
-                "(set MAVSID_REAL_LOGS)")
+    """``name`` among the real ArduCopter 4.6.2 logs (``keita/`` below
+    ``helpers.REAL_LOGS``); skips the test when it is absent."""
+    return real_path("keita", name)
 
 
 def reference_response(path: Path) -> dict[str, np.ndarray | float]:

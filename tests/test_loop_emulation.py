@@ -15,12 +15,13 @@ import warnings
 from pathlib import Path
 
 import pytest
+from helpers import REAL_LOGS
 
 from mavsid import pipeline
 from mavsid.cli import main
 from mavsid.synthetic import dfwriter
 
-REAL = Path("/work/cache/keita/00000071.BIN")
+REAL = REAL_LOGS / "keita" / "00000071.BIN"
 
 
 def _simulate(path: Path) -> None:

@@ -11,14 +11,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import shared_logs
+from helpers import REAL_LOGS, shared_logs
 
 from mavsid import response
 from mavsid.synthetic.controller import ArduPilotPID, motor_outputs
 from mavsid.synthetic.plant import Lowpass2p, discretise
 from mavsid.synthetic.run import scenario_from_options, simulate
 
-CACHE = Path("/work/cache")
+CACHE = REAL_LOGS
 
 
 def true_rate_step(scenario, axis: str, length_s: float) -> tuple[np.ndarray, np.ndarray]:

@@ -2,7 +2,7 @@
 
 Each phenomenon was seen in real ArduCopter 4.6.2 SYSTEMID flights of a Pixhawk 6C quad
 (public logs, kept outside the repository; where they are present — ``MAVSID_REAL_LOGS``,
-default ``/work/cache/keita`` — the simulated log is compared with them, else those checks
+``keita/`` below ``helpers.REAL_LOGS`` — the simulated log is compared with them, else those checks
 skip): RATE/PID/ANG at 100 Hz only while SYSTEMID runs with the loop at 400 Hz and 10 Hz
 outside, ATT 10 Hz, two IMUs at 25 Hz each; an angle injection (``SID_AXIS`` 1) shaped by
 the attitude controller (``ATC_INPUT_TC``, acceleration limits) before the rate loop; rate
@@ -13,12 +13,12 @@ gaps of minutes; a run that ends in a roll-over.
 
 from __future__ import annotations
 
-import os
 import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import REAL_LOGS
 from pymavlink import mavutil
 
 from mavsid import read_log
@@ -39,7 +39,7 @@ from mavsid.synthetic import (
 )
 from mavsid.synthetic.flight import MODE_SYSTEMID, LogRates
 
-REAL = Path(os.environ.get("MAVSID_REAL_LOGS", "/work/cache/keita"))
+REAL = REAL_LOGS / "keita"
 #: what ArduCopter 4.6.2 logs with LOG_BITMASK 180222 and the loop at 400 Hz (IMU: each of
 #: the two IMUs at 25 Hz, 50 records a second)
 RATES_46 = LogRates(rate=100.0, rate_idle=10.0, att=10.0, imu=25.0, rcou=10.0, rcin=10.0)

@@ -62,7 +62,8 @@ from mavsid.outputs import atomic_path
 if TYPE_CHECKING:
     import pandas as pd
 
-    from mavsid.pipeline import FitResult, PipelineConfig
+    from mavsid.pipeline import FitResult
+    from mavsid.pipeline_config import PipelineConfig
 
 __all__ = ["CHANGE_REL", "CHANGE_Z", "LOG_SUFFIXES", "SCHEMA_VERSION", "config_hash",
            "find_logs", "log_task", "read_tables", "run_batch", "summary_lines", "trends",
@@ -107,7 +108,7 @@ def find_logs(inputs: Iterable[str | os.PathLike[str]]) -> list[str]:
 
 def config_hash(config: PipelineConfig | None) -> str:
     """A short hash of the pipeline settings: results from other settings are not reused."""
-    from mavsid.pipeline import PipelineConfig
+    from mavsid.pipeline_config import PipelineConfig
 
     cfg = dataclasses.asdict(config or PipelineConfig())
     cfg.pop("path", None)

@@ -51,7 +51,8 @@ from mavsid.errors import (
 from mavsid.outputs import ReportWorker, atomic_path, check_outputs
 
 if TYPE_CHECKING:
-    from mavsid.pipeline import FitResult, PipelineConfig
+    from mavsid.pipeline import FitResult
+    from mavsid.pipeline_config import PipelineConfig
 
 __all__ = ["build_parser", "main"]
 
@@ -333,7 +334,7 @@ SUBCOMMANDS.append(_add_simulate)
 
 def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     """The pipeline config from ``--config`` with the command line's overrides."""
-    from mavsid.pipeline import PipelineConfig, load_config
+    from mavsid.pipeline_config import PipelineConfig, load_config
 
     cfg = load_config(args.config) if args.config else PipelineConfig()
     axes = tuple(dict.fromkeys(args.axis)) if args.axis else None

@@ -129,7 +129,7 @@ def test_every_parameter_damaged_at_once_fits_or_says_why(monkeypatch, value: fl
 
     import mavsid.align as al
     from mavsid.errors import MavsidError
-    from mavsid.pipeline import PipelineConfig
+    from mavsid.pipeline_config import PipelineConfig
 
     read = al.read_log
 

@@ -393,7 +393,7 @@ def _fast(scenario):  # type: ignore[no-untyped-def]
 
 
 def _roll_fit(path, **cfg):  # type: ignore[no-untyped-def]
-    from mavsid.pipeline import PipelineConfig
+    from mavsid.pipeline_config import PipelineConfig
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -20,13 +20,9 @@ from hypothesis import strategies as st
 from mavsid.autopilot.presets import get_preset
 from mavsid.data import Segment
 from mavsid.errors import ConfigError, NoExcitationError
-from mavsid.pipeline import (
-    PipelineConfig,
-    config_from_dict,
-    fit,
-    load_config,
-    split_segments,
-)
+from mavsid.pipeline import fit
+from mavsid.pipeline_config import PipelineConfig, config_from_dict, load_config
+from mavsid.split import split_segments
 
 PIPELINES = sorted((ROOT / "pipelines").glob("*.toml"))
 

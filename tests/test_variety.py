@@ -22,7 +22,8 @@ from helpers import FIXTURES
 
 from mavsid import pipeline
 from mavsid.errors import NoExcitationError
-from mavsid.pipeline import PipelineConfig, fit, validate_logs
+from mavsid.pipeline import fit, validate_logs
+from mavsid.pipeline_config import PipelineConfig
 
 #: Stated tolerances on every vehicle (relative to the truth). Measured: effectiveness
 #: within 3.7 % and damping within 11 % on all of them, noisy ones included (the lag chosen

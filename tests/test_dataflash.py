@@ -25,7 +25,7 @@ from hypothesis import strategies as st
 
 from mavsid.data import RawLog
 from mavsid.errors import DataQualityWarning, LogFormatError, MissingMessageError
-from mavsid.readers import dataflash, read_log
+from mavsid.readers import dataflash, dataflash_spec, read_log
 from mavsid.readers.dataflash import build_fmt, build_record
 
 BIN_LOGS = [p for p in shared_logs(".bin") if "sitl" not in p.parts]
@@ -660,6 +660,63 @@ def test_compiled_pairs_equal_brute_force(data, start, room):
         assert off[:count].tolist() == want[:room]
         assert types[:count].tolist() == [data[i + 2] for i in want[:room]]
         assert reached == (want[room] if len(want) > room else last)
+
+
+def test_the_compiled_scan_knows_the_header_of_the_spec():
+    """``_scan.c`` keeps its own copy of the two header bytes: of every byte pair, it finds
+    exactly the spec's :data:`~mavsid.readers.dataflash_spec.HEAD`."""
+    pairs_fn = _compiled_or_skip().pairs
+    first, second = np.divmod(np.arange(1 << 16), 1 << 8)
+    data = np.column_stack([first, second, np.full(1 << 16, 0x81)]).astype(np.uint8).tobytes()
+    off, types = np.zeros(1 << 16, np.int64), np.zeros((1 << 16) + 3, np.uint8)
+    count, _ = pairs_fn(data, 0, len(data) - 2, off, types)
+    found = {data[i : i + 2] for i in off[:count].tolist()}
+    assert found == {dataflash_spec.HEAD}
+
+
+def test_the_format_spec_agrees_with_pymavlink():
+    """Every format character's storage (``struct`` code, and a numpy dtype of the same
+    size) and multiplier as pymavlink's ``DFReader.FORMAT_TO_STRUCT`` has them; the FMT
+    record's length as its format packs."""
+    import struct
+
+    from pymavlink import DFReader
+
+    theirs = DFReader.FORMAT_TO_STRUCT
+    assert set(dataflash_spec.FORMAT_CHARS) == set(theirs)
+    for ch, spec in dataflash_spec.FORMAT_CHARS.items():
+        code, mul, _ = theirs[ch]
+        assert spec.code == code, ch
+        assert np.dtype(spec.dtype).itemsize == struct.calcsize("<" + code), ch
+        assert spec.multiplier == mul, ch
+        assert (spec.scale is None) == (mul is None) and (mul is None or spec.scale * mul == 1)
+    fmt_size = struct.calcsize("<" + "".join(theirs[c][0] for c in dataflash_spec.FMT_FORMAT))
+    assert dataflash_spec.FMT_LENGTH == 3 + fmt_size
+
+
+def test_the_simulators_writer_uses_the_spec(tmp_path):
+    """A record of every scaled character, written by the simulator's writer in display
+    units, reads back through pymavlink at those values (to the character's resolution)."""
+    from pymavlink import DFReader
+
+    from mavsid.synthetic.dfwriter import DataFlashBuilder, MessageFormat
+
+    want = {"C1": -12.34, "C2": 12.34, "E1": -1234.56, "E2": 1234.56, "L1": -35.1234567,
+            "B1": 7.0, "F1": 0.5}
+    f = MessageFormat(0x90, "TSC", "QcCeELBf", ("TimeUS", *want))
+    assert f.length == 3 + dataflash_spec.payload_size(f.fmt)
+    b = DataFlashBuilder()
+    b.define(f)
+    b.add("TSC", [2_000_000], **{k: [v] for k, v in want.items()})
+    data = b.to_bytes()
+    assert data[:3] == dataflash_spec.HEAD + bytes((dataflash_spec.FMT_TYPE,))
+    path = tmp_path / "spec.bin"
+    path.write_bytes(data)
+    msg = DFReader.DFReader_binary(str(path)).recv_match(type="TSC")
+    assert msg is not None and msg.TimeUS == 2_000_000
+    for (name, value), ch in zip(want.items(), f.fmt[1:], strict=True):
+        step = dataflash_spec.FORMAT_CHARS[ch].multiplier or 1e-9
+        assert getattr(msg, name) == pytest.approx(value, abs=step / 2 + 1e-12), name
 
 
 def test_compiled_pairs_refuse_what_they_cannot_write():

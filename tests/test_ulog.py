@@ -26,7 +26,7 @@ from pyulog import ULog
 
 from mavsid.data import RawLog
 from mavsid.errors import DataQualityWarning, LogFormatError
-from mavsid.readers import read_log, ulog
+from mavsid.readers import read_log, ulog, ulog_spec
 
 ULOGS = shared_logs(".ulg")
 FIXTURE_ULOGS = sorted(FIXTURES.glob("*.ulg"))
@@ -647,6 +647,28 @@ def fake_header_ulog(samples: int = 400) -> bytes:
     return bytes(out)
 
 
+def test_a_field_of_every_basic_type_reads_as_pyulog(tmp_path: Path) -> None:
+    """A topic with one field of each of the spec's basic types (the compiled pass keeps its
+    own copy of the table): every walk reads pyulog's values."""
+    from fuzz.hostile import _ulog_msg, ulog_file
+
+    kinds = [k for k in ulog_spec.BASIC_TYPES if k != "char"]
+    fields = "".join(f"{k} f_{k};" for k in kinds)
+    out = bytearray(ulog_file(["all:uint64_t timestamp;" + fields], topic=None))
+    out += _ulog_msg(b"A", struct.pack("<BH", 0, 3) + b"all")
+    code = "<HQ" + "".join(ulog_spec.BASIC_TYPES[k].code for k in kinds)
+    for i in range(20):
+        values = [(i % 2 == 0) if k == "bool" else (i * 7 - 60) * (0.25 if k in ("float", "double")
+                  else 1) for k in kinds]
+        values = [abs(v) if k.startswith("uint") else v for k, v in zip(kinds, values, strict=True)]
+        out += _ulog_msg(b"D", struct.pack(code, 3, 10_000 * (i + 1), *values))
+    path = tmp_path / "basic.ulg"
+    path.write_bytes(bytes(out))
+    assert_matches_pyulog(path)
+    log, _ = read(path)
+    assert log["all"]["f_int16_t"].tolist()[:3] == [-60, -53, -46]
+
+
 def test_false_candidates_inside_records_keep_pyulogs_framing(tmp_path: Path) -> None:
     path = tmp_path / "fake.ulg"
     path.write_bytes(fake_header_ulog())
@@ -937,7 +959,7 @@ def test_damaged_logs_read_by_the_compiled_pass_as_by_the_python_reader(
         elif how == 1:  # garbage put in
             out[start:start] = rng.integers(0, 256, int(rng.integers(1, 300)), np.uint8).tobytes()
         elif how == 2:  # sync magics and garbage
-            out[start:start] = (ulog._SYNC + bytes(int(rng.integers(0, 7)))) * 3
+            out[start:start] = (ulog_spec.SYNC + bytes(int(rng.integers(0, 7)))) * 3
         elif how == 3:  # a message header rewritten: another size or type
             out[start] = int(rng.integers(0, 256))
             out[start + 2] = int(rng.choice(list(b"DAOLCIMPQSFB\x00")))

@@ -23,6 +23,8 @@ from typing import Any
 
 from mavsid.data import RawLog
 from mavsid.errors import ConfigError, LogFormatError, MavsidError, naming_file
+from mavsid.readers.dataflash_spec import FMT_TYPE, HEAD
+from mavsid.readers.ulog_spec import MAGIC as ULOG_MAGIC
 
 __all__ = ["READERS", "read_log", "sniff_format"]
 
@@ -34,8 +36,6 @@ READERS: dict[str, str] = {
     "ulog": "mavsid.readers.ulog",
 }
 
-_ULOG_MAGIC = b"ULog\x01\x12\x35"
-_DF_HEAD = b"\xa3\x95"
 _SNIFF_BYTES = 64 * 1024
 
 
@@ -90,9 +90,9 @@ def sniff_format(path: str | os.PathLike[str]) -> str:
         raise LogFormatError(f"cannot open: {exc.strerror or exc}", path=path) from None
     if not head:
         raise LogFormatError("empty file", path=path)
-    if head.startswith(_ULOG_MAGIC):
+    if head.startswith(ULOG_MAGIC):
         return "ulog"
-    if head.startswith(_DF_HEAD):
+    if head.startswith(HEAD):
         return "dataflash"
     if _looks_like_tlog(head):
         return "tlog"
@@ -100,7 +100,7 @@ def sniff_format(path: str | os.PathLike[str]) -> str:
     if text.startswith(b"FMT,") or b"\nFMT," in text[:4096]:
         return "dataflash-text"
     # a DataFlash log whose first bytes are damaged: look for an FMT record further on
-    if _DF_HEAD + b"\x80" in head:
+    if HEAD + bytes((FMT_TYPE,)) in head:
         return "dataflash"
     raise LogFormatError(
         "not a DataFlash .bin/.log, MAVLink .tlog or ULog .ulg file", path=path

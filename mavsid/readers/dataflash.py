@@ -62,7 +62,6 @@ import itertools
 import mmap
 import os
 import re
-import struct
 import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -74,6 +73,18 @@ import numpy as np
 from mavsid.autopilot.modes import ardupilot_modes
 from mavsid.data import MessageTable, ModeChange, RawLog, SourceInfo, TextMessage
 from mavsid.errors import ConfigError, DataQualityWarning, LogFormatError
+from mavsid.readers.dataflash_spec import (
+    FMT_COLUMNS,
+    FMT_FORMAT,
+    FMT_LENGTH,
+    FMT_TYPE,
+    FORMAT_CHARS,
+    HEAD,
+    build_fmt,
+    build_record,
+    payload_dtype,
+    payload_size,
+)
 
 _scan: ModuleType | None
 try:  # the header scan compiled (setup.py); absent where the package was built without a C
@@ -94,9 +105,6 @@ __all__ = [
     "window_mask",
 ]
 
-_HEAD1, _HEAD2 = 0xA3, 0x95
-_FMT_TYPE = 0x80
-_FMT_LEN = 89
 _CHUNK = 1 << 20  # bytes scanned per step when looking for headers
 # chunks scanned between releases of their file pages (8 MB: measured ~10 ms faster over
 # 200 MB than 4, 16 or 32 MB)
@@ -105,43 +113,6 @@ _NEAR = 16  # candidates looked at around a record when checking overlaps
 _GATHER_BYTES = 1 << 18  # record bytes copied per slice when decoding one type
 _BACKWARDS_S = 0.5  # a time step back larger than this is a discontinuity
 
-
-@dataclass(frozen=True)
-class _Char:
-    """How one DataFlash format character is stored and presented."""
-
-    dtype: str  # numpy dtype of the stored value (little-endian)
-    kind: str  # "int", "float", "str" or "array"
-    multiplier: float | None = None  # scaling pymavlink applies (c C e E L)
-
-
-#: format character -> storage and presentation
-FORMAT_CHARS: Mapping[str, _Char] = {
-    "a": _Char("(32,)<i2", "array"),
-    "b": _Char("<i1", "int"),
-    "B": _Char("<u1", "int"),
-    "g": _Char("<f2", "float"),
-    "h": _Char("<i2", "int"),
-    "H": _Char("<u2", "int"),
-    "i": _Char("<i4", "int"),
-    "I": _Char("<u4", "int"),
-    "f": _Char("<f4", "float"),
-    "d": _Char("<f8", "float"),
-    "n": _Char("S4", "str"),
-    "N": _Char("S16", "str"),
-    "Z": _Char("S64", "str"),
-    "c": _Char("<i2", "float", 0.01),
-    "C": _Char("<u2", "float", 0.01),
-    "e": _Char("<i4", "float", 0.01),
-    "E": _Char("<u4", "float", 0.01),
-    "L": _Char("<i4", "float", 1.0e-7),
-    "M": _Char("<i1", "int"),
-    "q": _Char("<i8", "int"),
-    "Q": _Char("<u8", "int"),
-}
-
-_STRUCT_CHARS = {"a": "64s", "g": "e", "n": "4s", "N": "16s", "Z": "64s", "c": "h",
-                 "C": "H", "e": "i", "E": "I", "L": "i", "M": "b"}
 
 # stored as presented: decoding is a plain copy (or a widening cast)
 _PLAIN = frozenset(c for c, spec in FORMAT_CHARS.items()
@@ -181,14 +152,14 @@ class Definition:
     @property
     def payload_dtype(self) -> np.dtype:
         """Packed structured dtype of the payload, fields named ``f0, f1, ...``."""
-        return _payload_dtype(self.format)
+        return payload_dtype(self.format)
 
     def problem(self) -> str | None:
         """Why this definition cannot be used, or None."""
         bad = sorted({c for c in self.format if c not in FORMAT_CHARS})
         if bad:
             return f"unknown format character(s) {''.join(bad)!r}"
-        size = 3 + _payload_size(self.format)  # (no dtype built: a log defines hundreds)
+        size = 3 + payload_size(self.format)  # (no dtype built: a log defines hundreds)
         if size != self.length:
             return f"declared length {self.length} but format {self.format!r} needs {size}"
         return None
@@ -228,68 +199,7 @@ def _fields(columns: tuple[str, ...], n: int) -> tuple[tuple[str, int], ...]:
     return tuple(out)
 
 
-_CHAR_SIZES = {c: np.dtype(spec.dtype).itemsize for c, spec in FORMAT_CHARS.items()}
-
-
-def _payload_size(fmt: str) -> int:
-    """Bytes of a payload of format ``fmt`` (known characters only).
-
-    Examples
-    --------
-    >>> _payload_size("QfB"), _payload_size("a")
-    (13, 64)
-    """
-    return sum(_CHAR_SIZES[c] for c in fmt)
-
-
-@lru_cache(maxsize=4096)
-def _payload_dtype(fmt: str) -> np.dtype:
-    names, formats, offsets, ofs = [], [], [], 0
-    for i, ch in enumerate(fmt):
-        dt = np.dtype(FORMAT_CHARS[ch].dtype)
-        names.append(f"f{i}")
-        formats.append(dt)
-        offsets.append(ofs)
-        ofs += dt.itemsize
-    return np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": ofs})
-
-
-_FMT_DEF = Definition(_FMT_TYPE, "FMT", _FMT_LEN, "BBnNZ",
-                      ("Type", "Length", "Name", "Format", "Columns"))
-
-
-# --------------------------------------------------------------------------- writing helpers
-def build_record(msg_type: int, fmt: str, *values: object) -> bytes:
-    """One binary record (header + packed payload), for tests and synthetic logs.
-
-    Scaled characters take the *raw* stored integer (e.g. centidegrees for ``c``).
-
-    Examples
-    --------
-    >>> build_record(0x81, "Bh", 1, -2).hex()
-    'a3958101feff'
-    """
-    packed = []
-    for ch, v in zip(fmt, values, strict=True):
-        if isinstance(v, str):
-            v = v.encode()
-        if ch == "a" and not isinstance(v, bytes):
-            v = np.asarray(v, "<i2").tobytes()
-        packed.append(v)
-    spec = "<" + "".join(_STRUCT_CHARS.get(c, c) for c in fmt)
-    return bytes((_HEAD1, _HEAD2, msg_type)) + struct.pack(spec, *packed)
-
-
-def build_fmt(msg_type: int, name: str, fmt: str, columns: str) -> bytes:
-    """The FMT record that defines ``msg_type``.
-
-    Examples
-    --------
-    >>> len(build_fmt(0x81, "TST", "Qf", "TimeUS,X"))
-    89
-    """
-    length = 3 + struct.calcsize("<" + "".join(_STRUCT_CHARS.get(c, c) for c in fmt))
-    return build_record(_FMT_TYPE, "BBnNZ", msg_type, length, name, fmt, columns)
+_FMT_DEF = Definition(FMT_TYPE, "FMT", FMT_LENGTH, FMT_FORMAT, FMT_COLUMNS)
 
 
 # --------------------------------------------------------------------------- framing
@@ -382,7 +292,7 @@ def _find_headers_numpy(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     even, odd = np.empty(half, bool), np.empty(half, bool)
     size = max(n // 40, 1024)  # a log has a record per ~50 bytes
     found, types = np.empty(size, dt), np.empty(size, np.uint8)
-    word = np.uint16(_HEAD1 | _HEAD2 << 8)  # the pair, read as a little-endian word
+    word = np.uint16(HEAD[0] | HEAD[1] << 8)  # the pair, read as a little-endian word
     count = 0
     for start in range(0, max(n - 2, 0), _CHUNK):
         limit = min(_CHUNK, n - 2 - start)  # pairs starting here; a header needs its type
@@ -471,19 +381,19 @@ def _read_definitions(a: np.ndarray, fmt_pos: np.ndarray) -> _Definitions:
     """
     out = _Definitions()
     out.defs.append(_FMT_DEF)
-    out.by_type[_FMT_TYPE] = [(-1, 0)]
+    out.by_type[FMT_TYPE] = [(-1, 0)]
     if fmt_pos.size == 0:
         return out
-    payload = _FMT_LEN - 3
+    payload = FMT_LENGTH - 3
     # cheap first: the type is not FMT's and the name starts with a printable character
     head = _lookup(a, fmt_pos + 5)
-    fmt_pos = fmt_pos[(head >= 0x20) & (head < 0x7F) & (_lookup(a, fmt_pos + 3) != _FMT_TYPE)]
+    fmt_pos = fmt_pos[(head >= 0x20) & (head < 0x7F) & (_lookup(a, fmt_pos + 3) != FMT_TYPE)]
     raw = _record_view(a, np.dtype((np.uint8, payload)))
     keep = np.zeros(fmt_pos.size, bool)
     step = 1 << 16
     for k in range(0, fmt_pos.size, step):
         rec = raw[fmt_pos[k : k + step].astype(np.intp) + 3]
-        keep[k : k + step] = (rec[:, 0] != _FMT_TYPE) & _text_ok(rec[:, 2:6], name=True) \
+        keep[k : k + step] = (rec[:, 0] != FMT_TYPE) & _text_ok(rec[:, 2:6], name=True) \
             & _text_ok(rec[:, 6:22], name=False)
     fmt_pos = fmt_pos[keep]
     if fmt_pos.size == 0:
@@ -855,7 +765,7 @@ def _frame(a: np.ndarray, cand: np.ndarray, types: np.ndarray, table: _Definitio
     # a lone record between two stretches of garbage has neither kind of evidence: take it
     # unless it lies inside the declared span of a backed header (e.g. a cut last record)
     # (FMT records need plausible content instead, below)
-    weak = sus[complete & ~backed_sus & (types[sus] != _FMT_TYPE)]
+    weak = sus[complete & ~backed_sus & (types[sus] != FMT_TYPE)]
     weak = weak[~_near(weak, -_NEAR, backed,
                        lambda k, nb: end[nb] > cand[weak[k : k + nb.shape[0]], None])]
     # ... and that has no other header inside it (not one of a flood of header patterns)
@@ -1552,9 +1462,9 @@ def _read_buffer(
     notes: list[str] = []
     wanted = None if messages is None else set(messages)
     cand, types = _find_headers(a)
-    fmt_at = np.flatnonzero(types == _FMT_TYPE)  # (few)
+    fmt_at = np.flatnonzero(types == FMT_TYPE)  # (few)
     fmt_pos = cand[fmt_at]
-    table = _read_definitions(a, fmt_pos[fmt_pos <= n - _FMT_LEN])
+    table = _read_definitions(a, fmt_pos[fmt_pos <= n - FMT_LENGTH])
     framing = _frame(a, cand, types, table)
     _release(a, 0, n)
     # definitions only from FMT records that are part of the log (rarely differs; FMT is

@@ -161,6 +161,7 @@ from mavsid.autopilot.modes import NAV_STATES
 from mavsid.data import MessageTable, ModeChange, RawLog, SourceInfo, TextMessage
 from mavsid.errors import DataQualityWarning, LogFormatError, first_few
 from mavsid.readers.tlog import vehicle_class
+from mavsid.readers.ulog_spec import BASIC_TYPES, MAGIC, SYNC
 
 _scan: ModuleType | None
 try:  # the data walk compiled (setup.py); absent where the package was built without a C
@@ -174,28 +175,17 @@ _MODE_TOPIC = "vehicle_status"
 _STAMPS = ("timestamp", "timestamp_sample")  # (fields in µs)
 _INSTANCE = re.compile(r"^(.*)\[(\d+)\]$")
 
-_MAGIC = b"ULog\x01\x12\x35"
-_SYNC = b"\x2f\x73\x13\x20\x25\x0c\xbb\x12"
-#: basic field types: numpy type, size in bytes, struct code (pyulog's table)
-_BASIC: dict[str, tuple[type[np.generic], int, str]] = {
-    "int8_t": (np.int8, 1, "b"), "uint8_t": (np.uint8, 1, "B"),
-    "int16_t": (np.int16, 2, "h"), "uint16_t": (np.uint16, 2, "H"),
-    "int32_t": (np.int32, 4, "i"), "uint32_t": (np.uint32, 4, "I"),
-    "int64_t": (np.int64, 8, "q"), "uint64_t": (np.uint64, 8, "Q"),
-    "float": (np.float32, 4, "f"), "double": (np.float64, 8, "d"),
-    "bool": (np.int8, 1, "?"), "char": (np.int8, 1, "c"),
-}  # fmt: skip
 #: a parameter key's type as the payload has it (after size, type and key length)
 _FLOAT, _INT32 = np.frombuffer(b"float ", np.uint8), np.frombuffer(b"int32_t ", np.uint8)
 _FLOAT_AT, _INT32_AT = np.arange(4, 10), np.arange(4, 12)
 #: bytes of each basic type
-_SIZE = {kind: size for kind, (_, size, _) in _BASIC.items()}
-#: little-endian numpy dtypes of the basic types; each type's code (its place in _BASIC,
-#: the code ``_scan.ulog_plain`` gives) and the dtype of each code
-_DTYPE = {kind: np.dtype(t).newbyteorder("<") for kind, (t, _, _) in _BASIC.items()}
-_CODE = {kind: code for code, kind in enumerate(_BASIC)}
+_SIZE = {kind: t.size for kind, t in BASIC_TYPES.items()}
+#: little-endian numpy dtypes of the basic types; each type's code (its place in
+#: BASIC_TYPES, the code ``_scan.ulog_plain`` gives) and the dtype of each code
+_DTYPE = {kind: t.dtype for kind, t in BASIC_TYPES.items()}
+_CODE = {kind: code for code, kind in enumerate(BASIC_TYPES)}
 _BY_CODE = tuple(_DTYPE.values())
-_WIDTH = tuple(size for _, size, _ in _BASIC.values())
+_WIDTH = tuple(_SIZE.values())
 #: message types read in the definitions section / in the data section
 _DEF_TYPES = frozenset(b"FIMPQBALC")
 _DATA_TYPES = frozenset(b"IMPQALCDOS")
@@ -283,8 +273,8 @@ def _info(data: bytes, multiple: bool = False) -> tuple[str, str, Any]:
     kind, key, raw = words[0], words[1], data[1 + data[0] :]
     if kind.startswith("char["):
         return kind, key, _text(raw)
-    if kind in _BASIC:
-        return kind, key, _unpack(_BASIC[kind][2], raw)
+    if kind in BASIC_TYPES:
+        return kind, key, _unpack(BASIC_TYPES[kind].code, raw)
     return kind, key, raw  # an array or a damaged type: raw bytes, as pyulog keeps them
 
 
@@ -483,7 +473,7 @@ def _cycle(formats: Mapping[str, Sequence[Field]]) -> list[str] | None:
     >>> _cycle({"a": [("float", 0, "x")]}) is None
     True
     """
-    graph = {name: {kind for kind, _, _ in fields if kind not in _BASIC}
+    graph = {name: {kind for kind, _, _ in fields if kind not in BASIC_TYPES}
              for name, fields in formats.items()}  # fmt: skip
     state: dict[str, int] = {}  # 1: on the current path, 2: done
 
@@ -861,7 +851,7 @@ class _Reader:
         if self.n < 16:
             raise LogFormatError("not a readable ULog (Invalid file format (Header too short))",
                                  path=self.path)
-        if bytes(self.buf[:7]) != _MAGIC:
+        if bytes(self.buf[:7]) != MAGIC:
             raise LogFormatError("not a readable ULog (Invalid file format (Failed to parse "
                                  "header))", path=self.path)
         if self.buf[7] > 1:
@@ -1214,7 +1204,7 @@ class _Reader:
                     self.message(kind, pos, size, data)
                 elif kind == 0 or size == 0 or size > _MAX_UNKNOWN_SIZE:
                     end = self.resync(pos, until)
-                elif self.has_sync and size >= 8 and (k := data.find(_SYNC)) >= 0:
+                elif self.has_sync and size >= 8 and (k := data.find(SYNC)) >= 0:
                     out.corrupt = True  # sync magic inside a message of an unknown type
                     out.skipped += k + 8
                     end = pos + 3 + k + 8
@@ -1305,9 +1295,9 @@ class _Reader:
         self.out.corrupt = True
         nxt = pos + 1
         if self.has_sync:
-            k = self.buf.find(_SYNC, pos + 1)
+            k = self.buf.find(SYNC, pos + 1)
             if k >= 0:
-                nxt = k + len(_SYNC)
+                nxt = k + len(SYNC)
             else:
                 self.has_sync = False
         if not self.has_sync:

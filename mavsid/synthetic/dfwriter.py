@@ -44,24 +44,13 @@ from typing import Any
 import numpy as np
 
 from mavsid.errors import ConfigError
+from mavsid.readers.dataflash_spec import FMT_COLUMNS, FMT_FORMAT, FMT_TYPE, FORMAT_CHARS, HEAD
 from mavsid.synthetic.controller import PID_LOG_FIELDS
 from mavsid.synthetic.faults import Faults
 from mavsid.synthetic.flight import ESC_TYPES, GRAVITY, MODE_SYSTEMID, RCOU_CHANNELS, Flight
 
 __all__ = ["FORMATS", "LAYOUTS", "MULTS", "UNITS", "DataFlashBuilder", "MessageFormat",
            "write_dataflash"]
-
-HEAD = b"\xa3\x95"
-
-#: numpy dtype of each DataFlash format character
-CHAR_DTYPE: dict[str, Any] = {
-    "b": "i1", "B": "u1", "M": "u1", "h": "<i2", "H": "<u2", "i": "<i4", "I": "<u4",
-    "q": "<i8", "Q": "<u8", "f": "<f4", "d": "<f8", "n": "S4", "N": "S16", "Z": "S64",
-    "c": "<i2", "C": "<u2", "e": "<i4", "E": "<u4", "L": "<i4", "a": ("<i2", (32,)),
-}
-#: format characters whose stored integer is the value times this factor
-CHAR_SCALE = {"c": 100.0, "C": 100.0, "e": 100.0, "E": 100.0, "L": 1e7}
-
 
 @dataclass(frozen=True)
 class MessageFormat:
@@ -80,7 +69,7 @@ class MessageFormat:
                 f"message {self.name!r}: FMT allows a 4-char name, 16 format characters "
                 "and 64 characters of column names"
             )
-        if len(self.columns) != len(self.fmt) or not set(self.fmt) <= set(CHAR_DTYPE):
+        if len(self.columns) != len(self.fmt) or not set(self.fmt) <= set(FORMAT_CHARS):
             raise ConfigError(f"message {self.name!r}: format {self.fmt!r} does not match "
                               f"its {len(self.columns)} columns")
 
@@ -88,7 +77,8 @@ class MessageFormat:
     def dtype(self) -> np.dtype:
         """Structured dtype of a whole record (3 header bytes + payload)."""
         fields: list[Any] = [("_head", "u1", (3,))]
-        fields += [(c, CHAR_DTYPE[ch]) for c, ch in zip(self.columns, self.fmt, strict=True)]
+        fields += [(c, FORMAT_CHARS[ch].dtype)
+                   for c, ch in zip(self.columns, self.fmt, strict=True)]
         return np.dtype(fields)
 
     @property
@@ -106,7 +96,7 @@ def _fmt(type_id: int, name: str, fmt: str, columns: str, units: str = "", mults
 FORMATS: dict[str, MessageFormat] = {
     f.name: f
     for f in (
-        _fmt(128, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns"),
+        MessageFormat(FMT_TYPE, "FMT", FMT_FORMAT, FMT_COLUMNS),
         _fmt(116, "FMTU", "QBNN", "TimeUS,FmtType,UnitIds,MultIds"),
         _fmt(117, "UNIT", "QbZ", "TimeUS,Id,Label"),
         _fmt(118, "MULT", "Qbd", "TimeUS,Id,Mult"),
@@ -141,7 +131,7 @@ FORMATS: dict[str, MessageFormat] = {
 FORMATS_46: dict[str, MessageFormat] = {
     **FORMATS,
     **{f.name: f for f in (
-        _fmt(128, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns", "-b---", "-----"),
+        MessageFormat(FMT_TYPE, "FMT", FMT_FORMAT, FMT_COLUMNS, "-b---", "-----"),
         _fmt(118, "FMTU", "QBNN", "TimeUS,FmtType,UnitIds,MultIds", "s---", "F---"),
         _fmt(119, "UNIT", "QbZ", "TimeUS,Id,Label", "s--", "F--"),
         _fmt(120, "MULT", "Qbd", "TimeUS,Id,Mult", "s--", "F--"),
@@ -217,7 +207,7 @@ class DataFlashBuilder:
         f = self.formats[name]
         t = np.asarray(time_us, dtype=np.int64)
         rec = np.zeros(t.shape[0], dtype=f.dtype)
-        rec["_head"] = (0xA3, 0x95, f.type_id)
+        rec["_head"] = (*HEAD, f.type_id)
         if "TimeUS" in f.columns:
             rec["TimeUS"] = np.maximum(t, 0)
         for key, values in columns.items():
@@ -227,9 +217,9 @@ class DataFlashBuilder:
             v = np.asarray(values)
             if ch in "nNZ":
                 v = np.array([s.encode() if isinstance(s, str) else s for s in np.ravel(v)],
-                             dtype=CHAR_DTYPE[ch])
-            elif ch in CHAR_SCALE:
-                v = np.round(v.astype(float) * CHAR_SCALE[ch])
+                             dtype=FORMAT_CHARS[ch].dtype)
+            elif (scale := FORMAT_CHARS[ch].scale) is not None:
+                v = np.round(v.astype(float) * scale)
             elif ch in "bBMhHiIqQa":
                 v = np.round(v.astype(float))
             rec[key] = np.broadcast_to(v, rec.shape[:1] + np.shape(rec[key])[1:])
@@ -646,7 +636,7 @@ _PARM_36 = _fmt(32, "PARM", "QNf", "TimeUS,Name,Value")
 _OLD_33: dict[str, MessageFormat] = {
     f.name: f
     for f in (
-        _fmt(128, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns"),
+        MessageFormat(FMT_TYPE, "FMT", FMT_FORMAT, FMT_COLUMNS),
         _fmt(129, "PARM", "Nf", "Name,Value"),
         _fmt(130, "MSG", "Z", "Message"),
         _fmt(131, "MODE", "Mh", "Mode,ThrCrs"),
@@ -666,7 +656,7 @@ _OLD_33: dict[str, MessageFormat] = {
 _OLD_32: dict[str, MessageFormat] = {
     f.name: f
     for f in (
-        _fmt(128, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns"),
+        MessageFormat(FMT_TYPE, "FMT", FMT_FORMAT, FMT_COLUMNS),
         _fmt(129, "PARM", "Nf", "Name,Value"),
         _fmt(132, "MSG", "Z", "Message"),
         _fmt(3, "MODE", "Mh", "Mode,ThrCrs"),

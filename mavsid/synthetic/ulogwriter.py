@@ -48,22 +48,16 @@ from typing import Any
 import numpy as np
 
 from mavsid.errors import ConfigError
+from mavsid.readers.ulog_spec import BASIC_TYPES, MAGIC
 from mavsid.synthetic.faults import Faults
 from mavsid.synthetic.flight import MODE_SYSTEMID, Flight
 
 __all__ = ["ULOG_LAYOUTS", "ULOG_RELEASES", "write_ulog"]
 
-MAGIC = b"ULog\x01\x12\x35"
-
 #: PX4 generations whose topic sets :func:`write_ulog` writes
 ULOG_LAYOUTS = ("px4-1.14", "px4-1.11", "px4-1.8")
 #: ``ver_sw_release`` (0xMMmmpptt, tt = 255 for a release) written for each layout
 ULOG_RELEASES = {"px4-1.14": 0x010E00FF, "px4-1.11": 0x010B03FF, "px4-1.8": 0x010802FF}
-
-#: ULog type name -> numpy dtype
-_TYPES = {"uint64_t": "<u8", "int64_t": "<i8", "uint32_t": "<u4", "int32_t": "<i4",
-          "uint16_t": "<u2", "int16_t": "<i2", "uint8_t": "u1", "int8_t": "i1",
-          "float": "<f4", "double": "<f8", "bool": "u1", "char": "S1"}
 
 #: PX4 vehicle_status.nav_state for the simulator's modes: its SYSTEMID chirps fly in ACRO
 #: (10, not self-levelling), everything else in STAB (15)
@@ -121,7 +115,7 @@ def _dtype(fields: Sequence[tuple[str, str]]) -> np.dtype:
     out: list[tuple[Any, ...]] = []
     for typ, name in fields:
         base, _, count = typ.partition("[")
-        dt = _TYPES[base]
+        dt = BASIC_TYPES[base].dtype
         out.append((name, dt, (int(count[:-1]),)) if count else (name, dt))
     return np.dtype(out)
 

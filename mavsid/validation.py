@@ -41,7 +41,6 @@ Examples
 from __future__ import annotations
 
 import functools
-import math
 import statistics
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -53,6 +52,7 @@ from mavsid import dsp
 from mavsid.axes import RATE_OF
 from mavsid.data import Segment, demean
 from mavsid.errors import ConfigError, NoExcitationError
+from mavsid.numerics.stats import chi2_sf
 
 __all__ = [
     "DEFAULT_HORIZONS_S",
@@ -231,41 +231,6 @@ class SegmentValidation:
     source: str = ""
     trim_shift: np.ndarray = field(default_factory=lambda: np.zeros(0))
     fit_free_run_own_trim: np.ndarray = field(default_factory=lambda: np.zeros(0))
-
-
-def chi2_sf(q: np.ndarray, dof: int) -> np.ndarray:
-    """``scipy.stats.chi2.sf(q, dof)`` for a whole number of degrees of freedom, in closed
-    form: with ``x = q / 2``, ``exp(-x) Σₖ xᵏ / k!`` (``k < dof / 2``) for an even ``dof``;
-    ``erfc(√x) + exp(-x) Σₖ x^(k-½) / Γ(k+½)`` (``1 ≤ k ≤ (dof - 1) / 2``) for an odd one;
-    the terms summed as logarithms (no overflow for a large ``q``). NaN stays NaN.
-
-    Examples
-    --------
-    >>> [round(float(v), 6) for v in chi2_sf(np.array([3.84145882, 0.0, 1e4]), 1)]
-    [0.05, 1.0, 0.0]
-    >>> round(float(chi2_sf(np.array([31.41043284]), 20)[0]), 6)
-    0.05
-    """
-    if dof < 1:
-        raise ValueError(f"chi2_sf: {dof} degrees of freedom")
-    x = np.asarray(q, float) / 2.0
-    out = np.full(x.shape, np.nan)
-    ok = np.isfinite(x) & (x >= 0)
-    out[np.isposinf(x)] = 0.0
-    xs = x[ok]
-    with np.errstate(divide="ignore"):
-        logx = np.log(xs)
-    if dof % 2 == 0:
-        ks = np.arange(dof // 2, dtype=float)
-        first = np.zeros(xs.shape)
-    else:
-        ks = np.arange(1, (dof - 1) // 2 + 1, dtype=float) - 0.5
-        first = np.array([math.erfc(math.sqrt(v)) for v in xs.tolist()])
-    lgam = np.array([math.lgamma(k + 1.0) for k in ks.tolist()])
-    with np.errstate(invalid="ignore"):  # (0 * log 0: the k = 0 term is exp(-x))
-        terms = np.exp(-xs[:, None] + np.where(ks > 0, ks * logx[:, None], 0.0) - lgam)
-    out[ok] = np.minimum(first + terms.sum(axis=1), 1.0)
-    return out
 
 
 @dataclass(frozen=True)

@@ -5,22 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from helpers import table_log
-from scipy.spatial.transform import Rotation
 
 from mavsid.autopilot.presets import Channel
-from mavsid.channels import evaluate, quat_to_euler
+from mavsid.channels import evaluate
 from mavsid.data import MessageTable, RawLog, SourceInfo
 from mavsid.errors import MissingMessageError
-
-
-def test_quaternion_to_euler_matches_scipy():
-    rng = np.random.default_rng(3)
-    rot = Rotation.random(200, random_state=rng)
-    xyzw = rot.as_quat()
-    wxyz = np.column_stack([xyzw[:, 3], xyzw[:, :3]])
-    ours = quat_to_euler(wxyz)
-    ref = rot.as_euler("ZYX")[:, ::-1]  # scipy: yaw, pitch, roll (intrinsic ZYX)
-    assert np.allclose(ours, ref, atol=1e-9)
 
 
 def test_declared_unit_and_multiplier_win_over_preset_unit():

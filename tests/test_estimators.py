@@ -561,19 +561,6 @@ def test_property_noiseless_plants_are_recovered_and_one_step_equals_predict():
     check()
 
 
-def test_newey_west_meat_equals_the_explicit_lag_sum():
-    from mavsid.estimators._base import bartlett_meat
-
-    rng = np.random.default_rng(5)
-    s = signal.lfilter([1.0], [1.0, -0.8], rng.standard_normal((700, 4)), axis=0)
-    for lags in (0, 1, 13, 200):
-        ref = s.T @ s
-        for lag in range(1, lags + 1):
-            g = s[lag:].T @ s[:-lag]
-            ref += (1 - lag / (lags + 1)) * (g + g.T)
-        np.testing.assert_allclose(bartlett_meat(s, lags), ref, rtol=1e-10, atol=1e-9)
-
-
 def test_rows_with_nan_are_left_out_with_a_warning():
     from mavsid.errors import DataQualityWarning
 

@@ -320,18 +320,6 @@ def test_each_series_keeps_every_sample_only_in_its_own_spans(toy, tmp_path, mon
     assert got[ok].max() == np.nanmax(want) and got[ok].min() == np.nanmin(want)
 
 
-def test_attitude_quaternions_match_scipy_rotation() -> None:
-    from scipy.spatial.transform import Rotation
-
-    rng = np.random.default_rng(3)
-    euler = np.column_stack([rng.uniform(-np.pi, np.pi, 2000), rng.uniform(-1.5, 1.5, 2000),
-                             rng.uniform(-np.pi, np.pi, 2000)])
-    want = Rotation.from_euler("ZYX", euler[:, ::-1]).as_quat()
-    np.testing.assert_allclose(recording.euler_quaternions(euler), want, atol=1e-15)
-    euler[7, 1] = np.nan
-    assert recording.euler_quaternions(euler)[7].tolist() == [0.0, 0.0, 0.0, 1.0]
-
-
 def test_several_flights_keep_their_own_series(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """Two logs fitted together: each flight's series and bands are entities of their own
     (named after the log), not one series interleaving two clocks."""

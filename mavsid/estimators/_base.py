@@ -43,11 +43,11 @@ from mavsid.errors import (
 from mavsid.estimators import library
 from mavsid.estimators.model import Model, provenance
 from mavsid.estimators.regressors import Regression, Structure, stack
+from mavsid.numerics.stats import bartlett_meat
 
 __all__ = [
     "Estimator",
     "Gram",
-    "bartlett_meat",
     "block_grams",
     "check_identifiable",
     "hac_covariance",
@@ -259,28 +259,6 @@ def hac_covariance(reg: Regression, coef: np.ndarray, bread: np.ndarray | list[n
         br = br if br.shape[0] == k else br[np.ix_(cols, cols)]
         cov[i][np.ix_(cols, cols)] = br @ meat @ br
     return cov, sigma, used
-
-
-def bartlett_meat(scores: np.ndarray, lags: int) -> np.ndarray:
-    """``Σ_{|l|≤L} (1 − |l|/(L+1)) Σₜ sₜ sₜ₊ₗᵀ`` (Newey–West) in O(n·k²) whatever ``L``
-    (``L`` is capped at ``n − 1``).
-
-    The Bartlett weights are the autocorrelation of a boxcar of length ``L + 1``, so the sum
-    equals ``Σ bbᵀ / (L+1)`` over the full moving sums ``b`` of the scores.
-
-    Examples
-    --------
-    >>> s = np.array([[1.0], [2.0], [3.0]])
-    >>> float(bartlett_meat(s, 1)[0, 0])   # 1+4+9 + 2 * 0.5 * (1*2 + 2*3)
-    22.0
-    """
-    n, k = scores.shape
-    w = min(int(lags), max(n - 1, 0)) + 1
-    padded = np.zeros((n + 2 * w - 1, k))
-    padded[w - 1 : w - 1 + n] = scores
-    c = np.vstack([np.zeros((1, k)), np.cumsum(padded, axis=0)])
-    b = c[w:] - c[:-w]  # moving sums of length w: n + w - 1 of them
-    return np.asarray(b.T @ b / w)
 
 
 def _auto_lags(scores: np.ndarray, spans: Sequence[tuple[int, int]], shortest: int) -> int:

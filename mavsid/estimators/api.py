@@ -46,7 +46,7 @@ import numpy as np
 from mavsid.data import Segment
 from mavsid.errors import ConfigError, DataQualityWarning, NoExcitationError, SolverError
 from mavsid.estimators import library
-from mavsid.estimators._base import Estimator, Gram, bartlett_meat, solve
+from mavsid.estimators._base import Estimator, Gram, solve
 from mavsid.estimators.least_squares import thresholded
 from mavsid.estimators.model import Model
 from mavsid.estimators.output_error import output_error_coef, refine_output_error
@@ -67,6 +67,7 @@ from mavsid.estimators.select import (
     search_structure,
     with_lag,
 )
+from mavsid.numerics.stats import bartlett_meat
 from mavsid.threads import one_blas_thread
 
 __all__ = [

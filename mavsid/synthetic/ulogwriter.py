@@ -48,6 +48,7 @@ from typing import Any
 import numpy as np
 
 from mavsid.errors import ConfigError
+from mavsid.numerics.rotations import euler_to_quat
 from mavsid.readers.ulog_spec import BASIC_TYPES, MAGIC
 from mavsid.synthetic.faults import Faults
 from mavsid.synthetic.flight import MODE_SYSTEMID, Flight
@@ -153,14 +154,6 @@ def _params(flight: Flight, layout: str) -> dict[str, float | int]:
     return dict(sorted(out.items()))
 
 
-def _quaternion(euler: np.ndarray) -> np.ndarray:
-    """ZYX Euler angles (roll, pitch, yaw) -> Hamilton quaternions (w, x, y, z)."""
-    r, p, y = (euler[:, k] / 2 for k in range(3))
-    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
-    return np.column_stack([cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
-                            cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy])
-
-
 def _every(flight: Flight, hz: float) -> np.ndarray:
     """Loop indices at ``hz`` (the nearest divisor of the loop rate)."""
     step = max(1, round(flight.scenario.controller.loop_hz / hz))
@@ -241,7 +234,7 @@ def write_ulog(
     rate_hz = sc.controller.loop_hz / step
     fast = np.arange(0, len(flight), step)  # the rate controller's (SDLOG_PROFILE high rate)
     slow = _every(flight, min(rate_hz, 50.0))
-    q = _quaternion(flight.attitude)
+    q = euler_to_quat(flight.attitude)
     att: dict[str, Any] = {"q": q}
     if layout == "px4-1.8":
         att.update(rollspeed=flight.gyro[:, 0], pitchspeed=flight.gyro[:, 1],
@@ -260,7 +253,7 @@ def write_ulog(
     nav = np.array([_NAV_STATE.get(int(m), _NAV_STAB) for m in flight.mode], dtype=np.uint8)
     stabilised = slow[nav[slow] == _NAV_STAB]
     target = flight.attitude_target
-    setpoint: dict[str, Any] = {"q_d": _quaternion(target), "thrust_body": thrust_body}
+    setpoint: dict[str, Any] = {"q_d": euler_to_quat(target), "thrust_body": thrust_body}
     if layout != "px4-1.14":
         setpoint.update(roll_body=target[:, 0], pitch_body=target[:, 1], yaw_body=target[:, 2])
     add("vehicle_attitude_setpoint", stabilised, setpoint)

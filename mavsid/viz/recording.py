@@ -47,6 +47,7 @@ import rerun.blueprint as rrb
 
 from mavsid.axes import AXES, INPUT_OF, RATE_OF, RATES, STATE_UNITS, THRUST_INPUT
 from mavsid.data import FlightData, Segment, decimate
+from mavsid.numerics.rotations import euler_to_quat
 from mavsid.validation import Validation, horizon_label
 from mavsid.viz.series import (
     AXIS_COLOURS,
@@ -77,7 +78,6 @@ __all__ = [
     "MAX_FLIGHT_POINTS",
     "Targets",
     "blueprint",
-    "euler_quaternions",
     "focus_span",
     "log_attitude",
     "log_bands",
@@ -174,20 +174,6 @@ def log_flight(rec: rr.RecordingStream, flight: FlightData, prefix: str = "fligh
                      colour=MEASURED)
 
 
-def euler_quaternions(euler: np.ndarray) -> np.ndarray:
-    """ZYX Euler angles (roll, pitch, yaw; rad) -> quaternions (x, y, z, w): the product
-    ``q_z(yaw) q_y(pitch) q_x(roll)`` in closed form (what
-    ``Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_quat()`` gives, 10x faster); the
-    identity where an angle is not finite."""
-    euler = np.asarray(euler, dtype=float)
-    ok = np.all(np.isfinite(euler), axis=1)
-    half = np.where(ok[:, None], euler, 0.0) / 2.0
-    cr, cp, cy = np.cos(half).T
-    sr, sp, sy = np.sin(half).T
-    return np.column_stack([cy * cp * sr - sy * sp * cr, cy * sp * cr + sy * cp * sr,
-                            sy * cp * cr - cy * sp * sr, cy * cp * cr + sy * sp * sr])
-
-
 def log_attitude(
     rec: rr.RecordingStream,
     path: str,
@@ -210,7 +196,7 @@ def log_attitude(
     if len(time_s) > 1:
         step = max(1, round(1.0 / (max_rate_hz * float(np.median(np.diff(time_s))))))
         time_s, euler = time_s[::step], euler[::step]
-    quat = euler_quaternions(np.asarray(euler, dtype=float))
+    quat = euler_to_quat(np.asarray(euler, dtype=float))[:, [1, 2, 3, 0]]  # (x, y, z, w)
     rr.send_columns(
         path,
         indexes=[time_column(time_s)],

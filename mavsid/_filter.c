@@ -1,7 +1,7 @@
-/* The recursion of an IIR filter, compiled: mavsid.dsp.lfilter's loop over the samples (the
- * numerator's sum is numpy's). Optional: where the package is built without a C compiler,
- * mavsid.dsp.lfilter runs the recursion through scipy.signal.lfilter (the same numbers to
- * rounding; tests/test_dsp.py compares both with scipy).
+/* The recursion of an IIR filter, compiled: mavsid.numerics.filters.lfilter's loop over the
+ * samples (the numerator's sum is numpy's). Optional: where the package is built without a C
+ * compiler, mavsid.numerics.filters.lfilter runs the recursion through scipy.signal.lfilter
+ * (the same numbers to rounding; tests/test_dsp.py compares both with scipy).
  *
  * recurse(a, y, n) -> None
  *   a  a readable buffer of p + 1 doubles, the denominator with a[0] = 1 (a[0] not read)
@@ -70,7 +70,7 @@ static PyMethodDef methods[] = {
 
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT, "_filter",
-    "An IIR filter's recursion, compiled (mavsid.dsp.lfilter)", -1,
+    "An IIR filter's recursion, compiled (mavsid.numerics.filters.lfilter)", -1,
     methods, NULL, NULL, NULL, NULL,
 };
 

@@ -101,11 +101,11 @@ from typing import Any
 
 import numpy as np
 
-from mavsid import dsp
 from mavsid.autopilot.ardupilot import SID_IDENTIFIES, sid_axis
 from mavsid.axes import AXES, RATE_OF
 from mavsid.data import FlightData, Segment, detrend_linear
 from mavsid.errors import ConfigError, finite_number
+from mavsid.numerics.spectra import density, segment_ffts
 from mavsid.reasons import Reason, format_number, group
 
 __all__ = [
@@ -423,7 +423,7 @@ def _window_stats(ax: _Axis, fd: FlightData, air: np.ndarray, opts: ScanOptions,
     ``|pitch|``, the input's saturated share and the thrust's share at its limits while
     airborne (NaN when never airborne). Of windows of 8 samples or more, for the metrics:
     the frequencies ``f`` of the Welch spectra (segments of :func:`_nper` samples, half
-    overlapping, linear detrend, Hann: :mod:`mavsid.dsp`); per signal present
+    overlapping, linear detrend, Hann: :mod:`mavsid.numerics.spectra`); per signal present
     (:data:`_SIGNALS`) its spectrum ``psd:<key>`` and, against the output, the
     cross-spectrum ``csd:<key>``; the mean squares of the high-passed input and output
     (``u_ms``, ``y_ms``) and of the command and injection (``<key>_ms``); whether the
@@ -448,15 +448,15 @@ def _window_stats(ax: _Axis, fd: FlightData, air: np.ndarray, opts: ScanOptions,
     for key, x in signals.items():
         if x is None:
             continue
-        s = seg[key] = dsp.segment_ffts(x, nper, detrend=detrend_linear, starts=at).reshape(
+        s = seg[key] = segment_ffts(x, nper, detrend=detrend_linear, starts=at).reshape(
             first.size, count, -1)
-        got[f"psd:{key}"] = dsp.density(s, s, fs, nper, average=False).mean(axis=1).real
+        got[f"psd:{key}"] = density(s, s, fs, nper, average=False).mean(axis=1).real
         if key in ("command", "injection"):
             got[f"{key}_ms"] = np.mean(x[rows] ** 2, axis=1)
     if "y" in seg:
         for key in ("u", "command", "injection"):
             if key in seg:
-                got[f"csd:{key}"] = dsp.density(seg[key], seg["y"], fs, nper,
+                got[f"csd:{key}"] = density(seg[key], seg["y"], fs, nper,
                                                 average=False).mean(axis=1)
     if ax.command is not None:
         got["command_finite"] = np.isfinite(ax.command[rows]).all(axis=1)

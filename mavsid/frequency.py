@@ -34,12 +34,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from mavsid import dsp
 from mavsid.autopilot.ardupilot import sid_axis
 from mavsid.axes import RATE_OF
 from mavsid.errors import MavsidError, NoExcitationError
 from mavsid.loop.plant import plant_from_model, plant_response
 from mavsid.loop.twin import lagged, twin_signals
+from mavsid.numerics.spectra import segment_ffts
 
 if TYPE_CHECKING:
     from mavsid.data import FlightData
@@ -170,8 +170,8 @@ def _welch(us: Sequence[np.ndarray], ys: Sequence[np.ndarray], rs: Sequence[np.n
         if len(u) < nper:
             continue
         starts = _starts(len(u), nper)
-        fu, fy = (dsp.segment_ffts(v, nper, starts=starts) for v in (u, y))
-        fr = fu if rs is None else dsp.segment_ffts(r, nper, starts=starts)
+        fu, fy = (segment_ffts(v, nper, starts=starts) for v in (u, y))
+        fr = fu if rs is None else segment_ffts(r, nper, starts=starts)
         pr = np.abs(fr) ** 2
         # per-window input power: a chirp excites a frequency in few windows only
         sums = {"rr": pr, "uu": pr if rs is None else np.abs(fu) ** 2, "yy": np.abs(fy) ** 2,

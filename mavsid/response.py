@@ -53,11 +53,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mavsid import dsp
 from mavsid.axes import AXES, RATE_OF
 from mavsid.data import FlightData, RawLog
 from mavsid.errors import MissingMessageError, NoExcitationError
 from mavsid.frequency import FRF, frf
+from mavsid.numerics.spectra import welch
 
 __all__ = [
     "AXES",
@@ -634,7 +634,7 @@ def _spectra(flight: FlightData, axis: str, usable: np.ndarray) -> tuple[Spectru
             continue
         a, b = max(runs, key=lambda r: r[1] - r[0])
         v = values[::k][a:b]
-        f, p = dsp.welch(v, 1.0 / (flight.dt * k), nperseg=min(512, v.size))
+        f, p = welch(v, 1.0 / (flight.dt * k), nperseg=min(512, v.size))
         out.append(Spectrum(f"{unit} {name}", f, p, cut))
     return tuple(out)
 

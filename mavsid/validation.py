@@ -48,10 +48,10 @@ from typing import Any, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
 
-from mavsid import dsp
 from mavsid.axes import RATE_OF
 from mavsid.data import Segment, demean
 from mavsid.errors import ConfigError, NoExcitationError
+from mavsid.numerics.spectra import density, segment_ffts
 from mavsid.numerics.stats import chi2_sf
 
 __all__ = [
@@ -773,12 +773,12 @@ def frequency_response(
             continue
         w = float(len(ui))
         # each signal's windows transformed once (scipy.signal.welch / csd to rounding)
-        fu, fy, fm = (dsp.segment_ffts(v, nperseg, detrend=demean) for v in (ui, yi, mi))
+        fu, fy, fm = (segment_ffts(v, nperseg, detrend=demean) for v in (ui, yi, mi))
         freq = np.fft.rfftfreq(nperseg, 1.0 / fs)
-        puu = dsp.density(fu, fu, fs, nperseg).real
-        pyy = dsp.density(fy, fy, fs, nperseg).real
-        puy = dsp.density(fu, fy, fs, nperseg)
-        pum = dsp.density(fu, fm, fs, nperseg)
+        puu = density(fu, fu, fs, nperseg).real
+        pyy = density(fy, fy, fs, nperseg).real
+        puy = density(fu, fy, fs, nperseg)
+        pum = density(fu, fm, fs, nperseg)
         suu = suu + w * puu
         syy = syy + w * pyy
         suy = suy + w * puy

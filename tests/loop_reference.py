@@ -12,7 +12,6 @@ from typing import Any
 import control
 import numpy as np
 
-from mavsid import dsp
 from mavsid.loop.analysis import (
     LoopAnalysis,
     closed_figures,
@@ -28,6 +27,7 @@ from mavsid.loop.controllers import (
     lowpass_alpha,
     measurement_filter,
 )
+from mavsid.numerics.filters import lowpass2p_coefficients
 
 
 def first_order_z(cutoff_hz: float, dt: float) -> tuple[list[float], list[float]]:
@@ -65,7 +65,7 @@ def controller_tf_of(g: RateGains | PX4RateGains, step: float) -> tuple[Any, Any
     if isinstance(g, PX4RateGains):
         fd = one
         if 0 < g.dgyro_hz < 0.5 / step:
-            b, a = dsp.lowpass2p_coefficients(g.dgyro_hz, 1.0 / step)
+            b, a = lowpass2p_coefficients(g.dgyro_hz, 1.0 / step)
             fd = control.tf(list(b), list(a), step)
         pi = g.k * g.p * one + g.k * g.i * integ
         return pi + g.k * g.d * fd * deriv, pi + g.ff * one

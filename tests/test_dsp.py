@@ -1,4 +1,5 @@
-"""mavsid.dsp against the scipy.signal functions it stands in for on the fit path."""
+"""mavsid.numerics (filters, spectra, lti) against the scipy functions they stand in for on
+the fit path."""
 
 from __future__ import annotations
 
@@ -6,8 +7,8 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from mavsid import dsp
 from mavsid.data import demean, detrend_linear
+from mavsid.numerics import filters, lti, spectra
 
 RNG = np.random.default_rng(7)
 X = RNG.standard_normal(20_000)
@@ -24,41 +25,41 @@ X = RNG.standard_normal(20_000)
 def test_lfilter_matches_scipy(b: list[float], a: list[float], zi: list[float] | None) -> None:
     want = signal.lfilter(b, a, X, zi=zi)
     want = want[0] if zi is not None else want
-    got = dsp.lfilter(b, a, X, zi=zi)
+    got = filters.lfilter(b, a, X, zi=zi)
     assert got == pytest.approx(want, rel=1e-12, abs=1e-12)
 
 
 def test_lfilter_along_an_axis_with_states_per_column_and_complex_poles() -> None:
-    b, a = dsp.butter_lowpass(2, 20.0, 1000.0)
+    b, a = filters.butter_lowpass(2, 20.0, 1000.0)
     u = RNG.standard_normal((3000, 3))
-    zi = dsp.lfilter_zi(b, a).reshape(-1, 1) * u[:1]
+    zi = filters.lfilter_zi(b, a).reshape(-1, 1) * u[:1]
     want = signal.lfilter(b, a, u, axis=0, zi=zi)[0]
-    assert dsp.lfilter(b, a, u, axis=0, zi=zi) == pytest.approx(want, rel=1e-12, abs=1e-12)
+    assert filters.lfilter(b, a, u, axis=0, zi=zi) == pytest.approx(want, rel=1e-12, abs=1e-12)
     rows = RNG.standard_normal((4, 3000))
     want = signal.lfilter([1.0], [1.0, -0.7], rows, axis=-1)
-    assert dsp.lfilter([1.0], [1.0, -0.7], rows, axis=-1) == pytest.approx(want, abs=1e-12)
+    assert filters.lfilter([1.0], [1.0, -0.7], rows, axis=-1) == pytest.approx(want, abs=1e-12)
     lam = 0.9 * np.exp(0.3j)
     want = signal.lfilter([1.0], [1.0, -lam], X, zi=[lam * 0.5])[0]
-    got = dsp.lfilter([1.0], [1.0, -lam], X, zi=[lam * 0.5])
+    got = filters.lfilter([1.0], [1.0, -lam], X, zi=[lam * 0.5])
     assert np.iscomplexobj(got) and np.max(np.abs(got - want)) < 1e-12
 
 
 @pytest.mark.parametrize("order", [1, 2, 3, 4])
 @pytest.mark.parametrize(("cutoff", "fs"), [(20.0, 1000.0), (80.0, 400.0), (5.0, 50.0)])
 def test_butterworth_design_and_steady_state(order: int, cutoff: float, fs: float) -> None:
-    b, a = dsp.butter_lowpass(order, cutoff, fs)
+    b, a = filters.butter_lowpass(order, cutoff, fs)
     wb, wa = signal.butter(order, cutoff, fs=fs)
     assert b == pytest.approx(wb, rel=1e-12) and a == pytest.approx(wa, rel=1e-12, abs=1e-14)
-    assert dsp.lfilter_zi(b, a) == pytest.approx(signal.lfilter_zi(wb, wa), rel=1e-10)
+    assert filters.lfilter_zi(b, a) == pytest.approx(signal.lfilter_zi(wb, wa), rel=1e-10)
     with pytest.raises(ValueError):
-        dsp.butter_lowpass(order, fs / 2, fs)
+        filters.butter_lowpass(order, fs / 2, fs)
 
 
 @pytest.mark.parametrize(("num", "den"), [([0.2, 0.3], [1.0, -0.5]), ([1.0], [1.0, 0.0, 0.0]),
                                           ([0.5, 0.5], [1.0, 0.0, 0.0, 0.0]),
                                           ([0.1, 0.2, 0.1], [2.0, -1.5, 0.6]), ([2.0], [3.0])])
 def test_tf2ss_matches_scipy(num: list[float], den: list[float]) -> None:
-    for got, want in zip(dsp.tf2ss(num, den), signal.tf2ss(num, den), strict=True):
+    for got, want in zip(lti.tf2ss(num, den), signal.tf2ss(num, den), strict=True):
         assert np.shape(got) == np.shape(want)
         assert np.asarray(got) == pytest.approx(np.asarray(want), rel=1e-14, abs=1e-15)
 
@@ -69,16 +70,16 @@ def test_tf2ss_matches_scipy(num: list[float], den: list[float]) -> None:
 def test_welch_csd_and_per_window_spectra_match_scipy(nper: int, detrend) -> None:  # type: ignore[no-untyped-def]
     y = signal.lfilter([0.3], [1.0, -0.7], X) + 0.1 * RNG.standard_normal(X.size)
     f0, p0 = signal.welch(y, fs=400.0, nperseg=nper, detrend=detrend)
-    f1, p1 = dsp.welch(y, 400.0, nper, detrend=detrend)
+    f1, p1 = spectra.welch(y, 400.0, nper, detrend=detrend)
     assert np.array_equal(f0, f1) and p1 == pytest.approx(p0, rel=1e-12)
     _, c0 = signal.csd(X, y, fs=400.0, nperseg=nper, noverlap=nper // 3, detrend=detrend)
-    _, c1 = dsp.csd(X, y, 400.0, nper, nper // 3, detrend=detrend)
+    _, c1 = spectra.csd(X, y, 400.0, nper, nper // 3, detrend=detrend)
     assert np.max(np.abs(c1 - c0) / np.abs(c0)) < 1e-10
     _, _, s0 = signal.spectrogram(y, fs=400.0, nperseg=nper, noverlap=nper // 2, detrend=detrend)
-    win = dsp.tukey(nper, 0.25)
+    win = spectra.tukey(nper, 0.25)
     assert win == pytest.approx(signal.get_window(("tukey", 0.25), nper), abs=1e-15)
-    seg = dsp.segment_ffts(y, nper, nper // 2, detrend, window=win)
-    s1 = dsp.density(seg, seg, 400.0, nper, average=False, window=win).real.T
+    seg = spectra.segment_ffts(y, nper, nper // 2, detrend, window=win)
+    s1 = spectra.density(seg, seg, 400.0, nper, average=False, window=win).real.T
     assert s1.shape == s0.shape and s1 == pytest.approx(s0, rel=1e-10, abs=1e-12 * s0.max())
 
 
@@ -95,12 +96,12 @@ def test_lowpass2p_steps_scipys_filter_from_its_steady_state(cutoff: float, fs: 
     the first sample (lfilter_zi): to 1e-12 of the signal (a second-order section rounds
     the last digit or two); a cut-off of 0 lets the samples through."""
     u = RNG.standard_normal((3000, 3)) + 5.0
-    f = dsp.Lowpass2p(cutoff, fs, 3)
+    f = filters.Lowpass2p(cutoff, fs, 3)
     got = np.array([f(row) for row in u])
     b, a = signal.butter(2, cutoff, fs=fs)
     want = signal.lfilter(b, a, u, axis=0, zi=signal.lfilter_zi(b, a)[:, None] * u[:1])[0]
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * np.abs(want).max())
-    off = dsp.Lowpass2p(0.0, fs, 3)
+    off = filters.Lowpass2p(0.0, fs, 3)
     np.testing.assert_array_equal(np.array([off(row) for row in u[:50]]), u[:50])
 
 
@@ -128,26 +129,26 @@ def test_the_compiled_recursion_is_scipys_lfilter(order: int) -> None:
     (:func:`_rounding_scale`: both compute in float64 in their own order, and the
     BLAS-free C loops of each may be compiled with or without fused multiply-adds); a
     denominator coefficient wrong by 1e-12 of itself is far outside it."""
-    if dsp._filter is None:
+    if filters._filter is None:
         pytest.skip("built without a C compiler: the scipy path is the only one")
     b, a = signal.butter(order, 0.03)
     u = RNG.standard_normal((4000, 3))
     want = signal.lfilter(b, a, u, axis=0)
     tol = _rounding_scale(b, a, u, want)
-    got = dsp.lfilter(b, a, u, axis=0)
-    compiled, dsp._filter = dsp._filter, None
+    got = filters.lfilter(b, a, u, axis=0)
+    compiled, filters._filter = filters._filter, None
     try:
-        plain = dsp.lfilter(b, a, u, axis=0)
+        plain = filters.lfilter(b, a, u, axis=0)
         wrong = a.copy()
         wrong[1] *= 1.0 + 1e-12
-        off = dsp.lfilter(b, wrong, u, axis=0)
+        off = filters.lfilter(b, wrong, u, axis=0)
     finally:
-        dsp._filter = compiled
+        filters._filter = compiled
     for out in (got, plain):
         assert np.all(np.abs(out - want).max(axis=0) <= tol)
     assert np.all(np.abs(off - want).max(axis=0) > 100.0 * tol)
     with pytest.raises(ValueError, match="whole columns"):
-        dsp._filter.recurse(np.ones(2), np.zeros(7), 3)
+        filters._filter.recurse(np.ones(2), np.zeros(7), 3)
 
 
 def _structured(rng: np.random.Generator, n: int, m: int) -> np.ndarray:
@@ -161,10 +162,10 @@ def _structured(rng: np.random.Generator, n: int, m: int) -> np.ndarray:
 
 def test_expm_and_logm_refuse_what_scipy_would_turn_into_a_nan_model() -> None:
     with pytest.raises(ValueError, match="square"):
-        dsp.expm(np.ones((2, 3)))
+        lti.expm(np.ones((2, 3)))
     with pytest.raises(ValueError, match="square"):
-        dsp.logm(np.ones(3))
-    for func in (dsp.expm, dsp.logm):
+        lti.logm(np.ones(3))
+    for func in (lti.expm, lti.logm):
         with pytest.raises(ValueError, match="infinities or NaN"):
             func(np.array([[1.0, np.nan], [0.0, 1.0]]))
 
@@ -189,11 +190,11 @@ def test_logm_is_scipys_and_undoes_the_zero_order_hold() -> None:
     for a in cases:
         with np.errstate(all="ignore"):
             want = np.real(linalg.logm(a))
-        np.testing.assert_allclose(dsp.logm(a), want, rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(lti.logm(a), want, rtol=1e-12, atol=1e-14)
     for c in held:
-        np.testing.assert_allclose(dsp.logm(dsp.expm(c)), c, rtol=1e-9,
+        np.testing.assert_allclose(lti.logm(lti.expm(c)), c, rtol=1e-9,
                                    atol=1e-12 * np.abs(c).max())
-    assert dsp.logm(np.array([[0.9, 1.0], [0.0, 0.9]]))[0, 1] == pytest.approx(1 / 0.9,
+    assert lti.logm(np.array([[0.9, 1.0], [0.0, 0.9]]))[0, 1] == pytest.approx(1 / 0.9,
                                                                              rel=1e-12)
 
 
@@ -205,7 +206,7 @@ def test_a_fit_without_the_compiled_recursion_is_the_same_fit(
     bits; the output-error solver, stopping when a step lowers the cost by less than 1e-8 of
     it, carries that to about 1e-8 σ here. A sample of delay in the filters' output moves the
     coefficients by up to 4 σ, a denominator coefficient wrong by 1e-6 of itself by 0.006 σ.)"""
-    if dsp._filter is None:
+    if filters._filter is None:
         pytest.skip("built without a C compiler: the scipy path is the only one")
     from helpers import FIXTURES
 
@@ -213,7 +214,7 @@ def test_a_fit_without_the_compiled_recursion_is_the_same_fit(
 
     cfg = pipeline.PipelineConfig(axes=("roll",))
     compiled = pipeline.fit([FIXTURES / "sysid_roll.bin"], cfg).axes["roll"].model
-    monkeypatch.setattr(dsp, "_filter", None)
+    monkeypatch.setattr(filters, "_filter", None)
     plain = pipeline.fit([FIXTURES / "sysid_roll.bin"], cfg).axes["roll"].model
     assert compiled.coef_stderr is not None and np.all(compiled.coef_stderr > 0)
     assert np.all(np.abs(plain.coef - compiled.coef) <= 1e-3 * compiled.coef_stderr)

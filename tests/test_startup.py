@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from helpers import FIXTURES
 
-#: (scipy.signal and scipy.stats: 0.35 s of imports a plain fit does without, mavsid.dsp)
+#: (scipy.signal and scipy.stats: 0.35 s of imports a plain fit does without, mavsid.numerics)
 HEAVY = ("rerun", "matplotlib", "cvxpy", "control", "dask", "distributed", "statsmodels",
          "scipy.signal", "scipy.stats")
 
@@ -40,7 +40,7 @@ def test_help_and_version_load_no_heavy_library(argv: list[str]) -> None:
 def test_a_plain_fit_loads_neither_the_viewer_nor_plots_nor_cvxpy_nor_scipy_signal(
         name: str) -> None:
     """Each autopilot's path (a PX4 log replays PX4's rate controller): the filters and
-    spectra are mavsid.dsp's (scipy.signal and scipy.stats: 0.35 s of imports); the
+    spectra are mavsid.numerics' (scipy.signal and scipy.stats: 0.35 s of imports); the
     output-error solver is scipy.optimize's and the matrix functions scipy.linalg's."""
     code = ("from mavsid import cli\nwith contextlib.redirect_stdout(io.StringIO()):\n"
             f"    assert cli.main(['fit', {str(FIXTURES / name)!r}]) == 0")

@@ -45,11 +45,12 @@ from typing import Any
 
 import numpy as np
 
-from mavsid import dsp
 from mavsid.data import Segment
 from mavsid.errors import ConfigError, LogFormatError, whole_number
 from mavsid.estimators import library
 from mavsid.estimators.regressors import InputFilter, Structure, variables
+from mavsid.numerics.filters import lfilter
+from mavsid.numerics.lti import c2d, d2c, tf2ss
 
 __all__ = ["UNITS", "Model", "load_model"]
 
@@ -453,9 +454,7 @@ class Model:
             ev = np.linalg.eigvals(ad)
             if np.any(np.abs(ev.imag) > 1e-12) or np.any(ev.real <= 0):
                 return None
-            ac = dsp.logm(ad) / self.dt
-            m = ad - np.eye(n)
-            bc = np.linalg.solve(m, ac @ bd) if np.linalg.cond(m) < 1e12 else bd / self.dt
+            ac, bc = d2c(ad, bd, self.dt)
             return np.concatenate([ac.T.ravel(), bc.T.ravel()])
 
         base = convert(self.coef)
@@ -558,22 +557,19 @@ class Model:
                               f"{1 / dt:.3g} Hz")
         states, exo, _ = self._split
         n, q = len(self.state_names), len(exo)
-        big = np.zeros((n + q, n + q))
+        ad = np.zeros((n, n))
         for j in states:
-            big[:n, self.state_names.index(self.features[j])] = self.coef[j]
-        big[:n, n:] = self.coef[exo].T
-        big[n:, n:] = np.eye(q)
-        ev = np.linalg.eigvals(big[:n, :n])
+            ad[:, self.state_names.index(self.features[j])] = self.coef[j]
+        ev = np.linalg.eigvals(ad)
         if np.any(np.abs(ev.imag) > 1e-12) or np.any(ev.real <= 0):
             raise ConfigError(f"the {1 / self.dt:.3g} Hz model has no continuous-time "
                               f"equivalent (eigenvalues {np.round(ev, 4).tolist()}); refit it at "
                               f"{1 / dt:.3g} Hz")
-        cont = dsp.logm(big) / self.dt
-        again = dsp.expm(cont * dt)
+        phi, gamma = c2d(*d2c(ad, self.coef[exo].T.reshape(n, q), self.dt), dt)
         coef = np.zeros_like(self.coef)
         for j in states:
-            coef[j] = again[:n, self.state_names.index(self.features[j])]
-        coef[exo] = again[:n, n:].T
+            coef[j] = phi[:, self.state_names.index(self.features[j])]
+        coef[exo] = gamma.T
         return replace(self, coef=coef, dt=dt, delay=whole, delay_frac=frac, covariance=None,
                        coef_stderr=None, sigma=None, provenance=prov)
 
@@ -605,12 +601,8 @@ class Model:
         a = self.A
         if not self.continuous:
             return a, forcing
-        m = len(self.state_names)
-        big = np.zeros((2 * m, 2 * m))
-        big[:m, :m] = a
-        big[:m, m:] = np.eye(m)
-        e = dsp.expm(big * self.dt)
-        return e[:m, :m], forcing @ e[:m, m:].T
+        phi, gamma = c2d(a, np.eye(len(self.state_names)), self.dt)
+        return phi, forcing @ gamma.T
 
     def _stepper(self, var: Mapping[str, np.ndarray]) -> Callable[[np.ndarray, np.ndarray],
                                                                   np.ndarray]:
@@ -656,7 +648,7 @@ class Model:
         if self.is_affine:
             phi, f = self._affine(var)
             if m == 1:
-                out[1:, 0] = dsp.lfilter([1.0], [1.0, -phi[0, 0]], f[:-1, 0],
+                out[1:, 0] = lfilter([1.0], [1.0, -phi[0, 0]], f[:-1, 0],
                                          zi=[phi[0, 0] * out[0, 0]])
                 return out
             lam, vec = np.linalg.eig(phi)
@@ -665,7 +657,7 @@ class Model:
                 g = f[:-1] @ vinv.T
                 z0 = vinv @ out[0]
                 modes = np.column_stack([
-                    dsp.lfilter([1.0], [1.0, -lam[i]], g[:, i], zi=[lam[i] * z0[i]])
+                    lfilter([1.0], [1.0, -lam[i]], g[:, i], zi=[lam[i] * z0[i]])
                     for i in range(m)])
                 out[1:] = np.real(modes @ vec.T)
                 return out
@@ -734,7 +726,7 @@ class Model:
             a = float(phi[0, 0]) if m == 1 else np.inf
             if abs(a) < 1.0 and np.isfinite(f).all():
                 z = np.zeros(n)
-                z[1:] = dsp.lfilter([1.0], [1.0, -a], f[:-1, 0])
+                z[1:] = lfilter([1.0], [1.0, -a], f[:-1, 0])
         for h, out in zip(hs, outs, strict=True):
             if h >= n:
                 continue
@@ -787,7 +779,7 @@ class Model:
                 from scipy import signal
 
                 num, den = signal.butter(flt.order, 2 * np.pi * flt.cutoff_hz, analog=True)
-                one = tuple(np.atleast_2d(x) for x in dsp.tf2ss(num, den))
+                one = tuple(np.atleast_2d(x) for x in tf2ss(num, den))
             else:
                 one = tuple(np.atleast_2d(x) for x in flt.statespace(self.dt))
             block = _block_diagonal(one, nin)  # type: ignore[arg-type]
@@ -796,7 +788,7 @@ class Model:
             f = self.delay_frac
             num_d = [1.0 - f, f] if f > 0 else [1.0]
             den_d = [1.0] + [0.0] * (self.delay + (1 if f > 0 else 0))
-            one = tuple(np.atleast_2d(x) for x in dsp.tf2ss(num_d, den_d))
+            one = tuple(np.atleast_2d(x) for x in tf2ss(num_d, den_d))
             block = _block_diagonal(one, nin)  # type: ignore[arg-type]
             chain = block if chain is None else _series(chain, block)
         a, b, c, d = plant if chain is None else _series(chain, plant)

@@ -36,13 +36,13 @@ from dataclasses import replace
 
 import numpy as np
 
-from mavsid import dsp
 from mavsid.data import Segment
 from mavsid.errors import ConfigError, SolverError
 from mavsid.estimators import library
 from mavsid.estimators._base import hac_covariance
 from mavsid.estimators.model import Model
 from mavsid.estimators.regressors import Regression
+from mavsid.numerics.filters import lfilter
 
 __all__ = ["output_error_coef", "refine_output_error"]
 
@@ -268,7 +268,7 @@ def output_error_coef(model: Model, segments: Sequence[Segment], max_nfev: int =
         with np.errstate(all="ignore"):
             for y, ft in zip(ys, fts, strict=True):
                 r = np.empty(ft.shape)
-                r[:k] = dsp.lfilter([1.0], [1.0, -a], ft[:k], axis=-1)
+                r[:k] = lfilter([1.0], [1.0, -a], ft[:k], axis=-1)
                 # the start's free decay a^i x[0] (the recursion's own products, in order),
                 # then the target less it
                 decay = np.full(ft.shape[1], a)
@@ -322,7 +322,7 @@ def output_error_coef(model: Model, segments: Sequence[Segment], max_nfev: int =
         sa_s = np.zeros(k)
         with np.errstate(all="ignore"):
             for y, r, x in zip(ys, resp, xs, strict=True):
-                sa = dsp.lfilter([1.0], [1.0, -a], x[:-1])
+                sa = lfilter([1.0], [1.0, -a], x[:-1])
                 grad += float(np.sum(sa * (x[1:] - y[1:])))
                 sa_sa += float(np.sum(sa * sa))
                 sa_s += r[:k] @ sa

@@ -38,10 +38,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mavsid import dsp
 from mavsid.data import Segment
 from mavsid.errors import ConfigError, DataQualityWarning, NoExcitationError
 from mavsid.estimators import library
+from mavsid.numerics.filters import butter_lowpass, lfilter, lfilter_zi
+from mavsid.numerics.lti import tf2ss
 
 __all__ = [
     "InputFilter",
@@ -110,7 +111,7 @@ class InputFilter:
         """The filter as a discrete state space at the data step ``dt`` (input held over the
         step, output read at its last sub-step), exactly what :meth:`apply` computes."""
         b, a = self.coefficients(dt)
-        af, bf, cf, df = dsp.tf2ss(b, a)
+        af, bf, cf, df = tf2ss(b, a)
         r = self.substeps(dt)
         eye = np.eye(af.shape[0])
         powers = [np.linalg.matrix_power(af, i) for i in range(r)]
@@ -128,7 +129,7 @@ class InputFilter:
         u = np.asarray(u, dtype=float)
         fast = np.repeat(u, r, axis=0) if r > 1 else u
         zi = zi.reshape((-1,) + (1,) * (u.ndim - 1)) * u[:1]
-        out = dsp.lfilter(b, a, fast, axis=0, zi=zi)
+        out = lfilter(b, a, fast, axis=0, zi=zi)
         return np.asarray(out[r - 1 :: r] if r > 1 else out)
 
     def to_dict(self) -> dict[str, object]:
@@ -140,8 +141,8 @@ class InputFilter:
 def _design(order: int, cutoff_hz: float, fs: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Butterworth ``(b, a)`` and the steady-state initial condition, designed once per
     (order, cut-off, rate): the structure search and every rollout reuse them."""
-    b, a = dsp.butter_lowpass(order, cutoff_hz, fs)
-    zi = np.asarray(dsp.lfilter_zi(b, a), float)
+    b, a = butter_lowpass(order, cutoff_hz, fs)
+    zi = np.asarray(lfilter_zi(b, a), float)
     for arr in (b, a, zi):
         arr.flags.writeable = False
     return b, a, zi

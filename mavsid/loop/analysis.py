@@ -15,7 +15,6 @@ from typing import Any
 import numpy as np
 from numpy.polynomial import Polynomial
 
-from mavsid import dsp
 from mavsid.errors import MavsidError
 from mavsid.loop.controllers import (
     AXIS_RATE,
@@ -26,6 +25,8 @@ from mavsid.loop.controllers import (
     measurement_filter,
 )
 from mavsid.loop.plant import LinearPlant, Poly, plant_from_model, ss2tf
+from mavsid.numerics.filters import lowpass2p_coefficients
+from mavsid.numerics.lti import tf2ss
 
 __all__ = [
     "LoopAnalysis",
@@ -98,7 +99,7 @@ def _controller_polys(g: RateGains | PX4RateGains, step: float) -> tuple[Poly, P
     if isinstance(g, PX4RateGains):
         nd, dd = Polynomial([1.0]), Polynomial([1.0])
         if 0 < g.dgyro_hz < 0.5 / step:
-            b, a = dsp.lowpass2p_coefficients(g.dgyro_hz, 1.0 / step)
+            b, a = lowpass2p_coefficients(g.dgyro_hz, 1.0 / step)
             nd, dd = Polynomial(b), Polynomial(a)
         pi = g.k * g.p * back + g.k * g.i * step  # K·(P + I·dt/(1 − z⁻¹)), times `back`
         fb = _in_z(pi * dd + (g.k * g.d / step) * nd * diff * back, back * dd)
@@ -340,8 +341,8 @@ def _closed_step(plant: LinearPlant, fb: tuple[np.ndarray, np.ndarray],
     target filter states side by side (a single polynomial of the closed loop would carry
     the integrators' cancelling pole-zero pair at z = 1 and drift)."""
     ap, bp, cp = plant.a, plant.b.reshape(-1, 1), plant.c.reshape(1, -1)
-    af, bf, cf, df = dsp.tf2ss(*fb)
-    at, bt, ct, dt_ = dsp.tf2ss(*tg)
+    af, bf, cf, df = tf2ss(*fb)
+    at, bt, ct, dt_ = tf2ss(*tg)
     npl, nf, nt = ap.shape[0], af.shape[0], at.shape[0]
     a = np.zeros((npl + nf + nt,) * 2)
     a[:npl, :npl] = ap - bp @ (df @ cp)

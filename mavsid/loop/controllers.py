@@ -40,10 +40,10 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from mavsid import dsp
 from mavsid.autopilot import ardupilot, px4
 from mavsid.axes import AXES, RATE_OF
 from mavsid.errors import ConfigError
+from mavsid.numerics.filters import Lowpass2p, lfilter
 
 if TYPE_CHECKING:
     from mavsid.data import FlightData
@@ -190,7 +190,7 @@ class RatePID:
             y = np.empty(n)
             y[0] = x0
             if n > 1:
-                y[1:] = dsp.lfilter([a], [1.0, a - 1.0], x[1:], zi=[(1.0 - a) * x0])
+                y[1:] = lfilter([a], [1.0, a - 1.0], x[1:], zi=[(1.0 - a) * x0])
             return y
 
         tf = low(tg, self.a_t, float(tg[0]))
@@ -258,7 +258,7 @@ class PX4RatePID:
         self.dt = dt
         fs = 1.0 / dt
         cut = gains.dgyro_hz if 0 < gains.dgyro_hz < 0.5 * fs else 0.0
-        self.accel_filter = dsp.Lowpass2p(cut, fs, 1)
+        self.accel_filter = Lowpass2p(cut, fs, 1)
         self.integ = 0.0
         self.last = 0.0
         #: the last :meth:`update`'s P, I, D, FF and (none) D_FF terms

@@ -21,9 +21,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from mavsid import dsp
 from mavsid.errors import ConfigError
 from mavsid.loop.controllers import AXIS_RATE
+from mavsid.numerics.lti import c2d
 
 if TYPE_CHECKING:
     from mavsid.estimators.model import Model
@@ -88,21 +88,12 @@ def _at_step(model: Model, dt: float) -> Model:
     a = model.A
     n = a.shape[0]
     b = model.coef[exo].T if exo else np.zeros((n, 0))
-    m = b.shape[1]
-    if n == 1:  # the exponential of [[A, B], [0, 0]] dt in closed form
-        x = float(a[0, 0]) * dt
-        e = np.eye(n + m)
-        e[0, 0] = math.exp(x)
-        e[0, 1:] = b[0] * dt * (math.expm1(x) / x if x != 0.0 else 1.0)
-    else:
-        big = np.zeros((n + m, n + m))
-        big[:n, :n], big[:n, n:] = a, b
-        e = dsp.expm(big * dt)
+    phi, gamma = c2d(a, b, dt)
     coef = np.zeros_like(model.coef)
     for j in states:
-        coef[j] = e[:n, :n][:, model.state_names.index(model.features[j])]
+        coef[j] = phi[:, model.state_names.index(model.features[j])]
     for k, j in enumerate(exo):
-        coef[j] = e[:n, n + k]
+        coef[j] = gamma[:, k]
     steps = model.delay_s / dt
     whole = math.floor(steps + 1e-9)
     frac = steps - whole if steps - whole > 1e-9 else 0.0

@@ -13,7 +13,6 @@ from typing import Any
 
 import numpy as np
 
-from mavsid import dsp
 from mavsid.errors import ConfigError, MavsidError
 from mavsid.loop.analysis import (
     LoopAnalysis,
@@ -39,6 +38,7 @@ from mavsid.loop.controllers import (
 from mavsid.loop.limits import Limits, LoopCheck, check_loop, limit_rows, twin_step
 from mavsid.loop.plant import LinearPlant, as_plant, plant_from_model, plant_response
 from mavsid.loop.twin import twin_signals
+from mavsid.numerics.lti import tf2ss
 
 __all__ = [
     "LOOP_MISMATCH_DB",
@@ -69,7 +69,7 @@ def suggest_gains(plant_ss: Any, ctrl: AxisController, target_pm_deg: float = 50
     if tau:
         cfb = (np.polymul(cfb[0], num), np.polymul(cfb[1], den))
     # the plant, then the controller (python-control's ``C_fb * P``)
-    ac, bc, cc, dc = dsp.tf2ss(*cfb)
+    ac, bc, cc, dc = tf2ss(*cfb)
     ap, bp, cp = plant.a, plant.b.reshape(-1, 1), plant.c.reshape(1, -1)
     n_p, n_c = ap.shape[0], ac.shape[0]
     a = np.zeros((n_p + n_c,) * 2)

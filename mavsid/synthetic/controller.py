@@ -55,8 +55,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from mavsid.dsp import Lowpass2p
 from mavsid.errors import ConfigError
+from mavsid.numerics.filters import Lowpass2p
 
 __all__ = [
     "FRAMES",

@@ -35,11 +35,11 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
-from scipy.signal import cont2discrete
 
 from mavsid.axes import AXES
-from mavsid.dsp import Lowpass2p, lowpass2p_coefficients
 from mavsid.errors import ConfigError
+from mavsid.numerics.filters import Lowpass2p, lowpass2p_coefficients
+from mavsid.numerics.lti import c2d
 
 __all__ = [
     "AXES",
@@ -239,24 +239,17 @@ class DiscretePlant:
     n_state: int = field(default=3)
 
 
-def _zoh(a: np.ndarray, b: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
-    """(e^{A t}, integral_0^t e^{A s} ds B)."""
-    n, m = a.shape[0], b.shape[1]
-    phi, gamma, *_ = cont2discrete((a, b, np.eye(n), np.zeros((n, m))), t, method="zoh")
-    return np.asarray(phi), np.asarray(gamma)
-
-
 def discretise(p: PlantParams, dt: float) -> DiscretePlant:
     """Discretise the plant for loop period ``dt`` (s)."""
     a, bu, e = p.continuous()
     steps = p.delay_s / dt
     n = int(np.floor(steps + 1e-9))
     frac = steps - n if steps - n > 1e-9 else 0.0
-    phi, _ = _zoh(a, bu, dt)
+    phi, _ = c2d(a, bu, dt)
     # over one step the delayed input is u[k-n-1] for the first frac*dt, then u[k-n]
-    phi_late, g_late = _zoh(a, bu, (1 - frac) * dt)
-    _, g_early = _zoh(a, bu, frac * dt)
-    _, gw = _zoh(a, e, dt)
+    phi_late, g_late = c2d(a, bu, (1 - frac) * dt)
+    _, g_early = c2d(a, bu, frac * dt)
+    _, gw = c2d(a, e, dt)
     return DiscretePlant(
         phi=phi, gamma_prev=phi_late @ g_early, gamma_now=g_late, gamma_w=gw,
         delay_steps=n, dt=dt, n_state=a.shape[0],

@@ -457,7 +457,7 @@ def _window_stats(ax: _Axis, fd: FlightData, air: np.ndarray, opts: ScanOptions,
         for key in ("u", "command", "injection"):
             if key in seg:
                 got[f"csd:{key}"] = density(seg[key], seg["y"], fs, nper,
-                                                average=False).mean(axis=1)
+                                            average=False).mean(axis=1)
     if ax.command is not None:
         got["command_finite"] = np.isfinite(ax.command[rows]).all(axis=1)
     for key, x in (("u_ms", ax.u_hp), ("y_ms", ax.y_hp)):

@@ -46,7 +46,8 @@ def test_tlog_mode_names():
 def test_no_pymavlink_import():
     """Reading a DataFlash log (modes named) does not import pymavlink."""
     code = ("import sys, tempfile, os\n"
-            "from mavsid.readers.dataflash import build_fmt, build_record, read\n"
+            "from mavsid.readers.dataflash import read\n"
+            "from mavsid.readers.dataflash_spec import build_fmt, build_record\n"
             "data = (build_fmt(0x81, 'MODE', 'QMB', 'TimeUS,Mode,ModeNum')"
             " + build_fmt(0x82, 'MSG', 'QZ', 'TimeUS,Message')"
             " + build_record(0x82, 'QZ', 1, 'ArduCopter V4.6.2 (1ebd4d99)')"

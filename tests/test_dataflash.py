@@ -26,7 +26,7 @@ from hypothesis import strategies as st
 from mavsid.data import RawLog
 from mavsid.errors import DataQualityWarning, LogFormatError, MissingMessageError
 from mavsid.readers import dataflash, dataflash_spec, read_log
-from mavsid.readers.dataflash import build_fmt, build_record
+from mavsid.readers.dataflash_spec import build_fmt, build_record
 
 BIN_LOGS = [p for p in shared_logs(".bin") if "sitl" not in p.parts]
 SITL = ("sitl", "flightA_mixer.BIN")

@@ -33,7 +33,7 @@ def test_log_text_reaching_the_terminal_is_escaped(tmp_path, capsys) -> None:
     """Column names, units, texts and the firmware from a log never reach the terminal raw:
     no escape sequence, carriage return or extra line."""
     from mavsid.cli import main
-    from mavsid.readers.dataflash import build_fmt, build_record
+    from mavsid.readers.dataflash_spec import build_fmt, build_record
 
     evil = "\x1b[2J\x1b]0;pwned\x07\r\x9b31m\u202e"
     data = (build_fmt(0x81, "MSG", "QZ", "TimeUS,Message")

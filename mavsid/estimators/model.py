@@ -649,7 +649,7 @@ class Model:
             phi, f = self._affine(var)
             if m == 1:
                 out[1:, 0] = lfilter([1.0], [1.0, -phi[0, 0]], f[:-1, 0],
-                                         zi=[phi[0, 0] * out[0, 0]])
+                                     zi=[phi[0, 0] * out[0, 0]])
                 return out
             lam, vec = np.linalg.eig(phi)
             if np.linalg.cond(vec) < 1e8:  # modal form: one first-order recursion per mode

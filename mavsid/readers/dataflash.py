@@ -44,7 +44,7 @@ logs they go backwards; the reader notes where (``SourceInfo.notes``) and warns.
 Examples
 --------
 >>> import os, tempfile
->>> from mavsid.readers.dataflash import build_record, build_fmt
+>>> from mavsid.readers.dataflash_spec import build_record, build_fmt
 >>> data = build_fmt(0x81, "TST", "Qc", "TimeUS,Val") + build_record(0x81, "Qc", 1_500_000, -1234)
 >>> with tempfile.NamedTemporaryFile(suffix=".bin", delete=False) as f:
 ...     _ = f.write(data)
@@ -73,18 +73,7 @@ import numpy as np
 from mavsid.autopilot.modes import ardupilot_modes
 from mavsid.data import MessageTable, ModeChange, RawLog, SourceInfo, TextMessage
 from mavsid.errors import ConfigError, DataQualityWarning, LogFormatError
-from mavsid.readers.dataflash_spec import (
-    FMT_COLUMNS,
-    FMT_FORMAT,
-    FMT_LENGTH,
-    FMT_TYPE,
-    FORMAT_CHARS,
-    HEAD,
-    build_fmt,
-    build_record,
-    payload_dtype,
-    payload_size,
-)
+from mavsid.readers import dataflash_spec as dfspec
 
 _scan: ModuleType | None
 try:  # the header scan compiled (setup.py); absent where the package was built without a C
@@ -93,12 +82,9 @@ except ImportError:  # pragma: no cover - depends on the build
     _scan = None
 
 __all__ = [
-    "FORMAT_CHARS",
     "Definition",
     "assemble",
     "backwards_steps",
-    "build_fmt",
-    "build_record",
     "hold_forward",
     "read",
     "vehicle_and_firmware",
@@ -115,7 +101,7 @@ _BACKWARDS_S = 0.5  # a time step back larger than this is a discontinuity
 
 
 # stored as presented: decoding is a plain copy (or a widening cast)
-_PLAIN = frozenset(c for c, spec in FORMAT_CHARS.items()
+_PLAIN = frozenset(c for c, spec in dfspec.FORMAT_CHARS.items()
                    if spec.kind in ("int", "array") or c in "fd")
 
 # always decoded: parameters, texts, modes, units, firmware
@@ -152,14 +138,14 @@ class Definition:
     @property
     def payload_dtype(self) -> np.dtype:
         """Packed structured dtype of the payload, fields named ``f0, f1, ...``."""
-        return payload_dtype(self.format)
+        return dfspec.payload_dtype(self.format)
 
     def problem(self) -> str | None:
         """Why this definition cannot be used, or None."""
-        bad = sorted({c for c in self.format if c not in FORMAT_CHARS})
+        bad = sorted({c for c in self.format if c not in dfspec.FORMAT_CHARS})
         if bad:
             return f"unknown format character(s) {''.join(bad)!r}"
-        size = 3 + payload_size(self.format)  # (no dtype built: a log defines hundreds)
+        size = 3 + dfspec.payload_size(self.format)  # (no dtype built: a log defines hundreds)
         if size != self.length:
             return f"declared length {self.length} but format {self.format!r} needs {size}"
         return None
@@ -199,7 +185,8 @@ def _fields(columns: tuple[str, ...], n: int) -> tuple[tuple[str, int], ...]:
     return tuple(out)
 
 
-_FMT_DEF = Definition(FMT_TYPE, "FMT", FMT_LENGTH, FMT_FORMAT, FMT_COLUMNS)
+_FMT_DEF = Definition(dfspec.FMT_TYPE, "FMT", dfspec.FMT_LENGTH, dfspec.FMT_FORMAT,
+                      dfspec.FMT_COLUMNS)
 
 
 # --------------------------------------------------------------------------- framing
@@ -292,7 +279,7 @@ def _find_headers_numpy(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     even, odd = np.empty(half, bool), np.empty(half, bool)
     size = max(n // 40, 1024)  # a log has a record per ~50 bytes
     found, types = np.empty(size, dt), np.empty(size, np.uint8)
-    word = np.uint16(HEAD[0] | HEAD[1] << 8)  # the pair, read as a little-endian word
+    word = np.uint16(dfspec.HEAD[0] | dfspec.HEAD[1] << 8)  # the pair, read as a little-endian word
     count = 0
     for start in range(0, max(n - 2, 0), _CHUNK):
         limit = min(_CHUNK, n - 2 - start)  # pairs starting here; a header needs its type
@@ -381,19 +368,19 @@ def _read_definitions(a: np.ndarray, fmt_pos: np.ndarray) -> _Definitions:
     """
     out = _Definitions()
     out.defs.append(_FMT_DEF)
-    out.by_type[FMT_TYPE] = [(-1, 0)]
+    out.by_type[dfspec.FMT_TYPE] = [(-1, 0)]
     if fmt_pos.size == 0:
         return out
-    payload = FMT_LENGTH - 3
+    payload = dfspec.FMT_LENGTH - 3
     # cheap first: the type is not FMT's and the name starts with a printable character
     head = _lookup(a, fmt_pos + 5)
-    fmt_pos = fmt_pos[(head >= 0x20) & (head < 0x7F) & (_lookup(a, fmt_pos + 3) != FMT_TYPE)]
+    fmt_pos = fmt_pos[(head >= 0x20) & (head < 0x7F) & (_lookup(a, fmt_pos + 3) != dfspec.FMT_TYPE)]
     raw = _record_view(a, np.dtype((np.uint8, payload)))
     keep = np.zeros(fmt_pos.size, bool)
     step = 1 << 16
     for k in range(0, fmt_pos.size, step):
         rec = raw[fmt_pos[k : k + step].astype(np.intp) + 3]
-        keep[k : k + step] = (rec[:, 0] != FMT_TYPE) & _text_ok(rec[:, 2:6], name=True) \
+        keep[k : k + step] = (rec[:, 0] != dfspec.FMT_TYPE) & _text_ok(rec[:, 2:6], name=True) \
             & _text_ok(rec[:, 6:22], name=False)
     fmt_pos = fmt_pos[keep]
     if fmt_pos.size == 0:
@@ -765,7 +752,7 @@ def _frame(a: np.ndarray, cand: np.ndarray, types: np.ndarray, table: _Definitio
     # a lone record between two stretches of garbage has neither kind of evidence: take it
     # unless it lies inside the declared span of a backed header (e.g. a cut last record)
     # (FMT records need plausible content instead, below)
-    weak = sus[complete & ~backed_sus & (types[sus] != FMT_TYPE)]
+    weak = sus[complete & ~backed_sus & (types[sus] != dfspec.FMT_TYPE)]
     weak = weak[~_near(weak, -_NEAR, backed,
                        lambda k, nb: end[nb] > cand[weak[k : k + nb.shape[0]], None])]
     # ... and that has no other header inside it (not one of a flood of header patterns)
@@ -928,7 +915,7 @@ def _run_gaps(
 # --------------------------------------------------------------------------- decoding
 def _column_into(raw: np.ndarray, ch: str, message: str, out: np.ndarray) -> None:
     """Write one field of a structured gather into ``out``, as pymavlink presents it."""
-    spec = FORMAT_CHARS[ch]
+    spec = dfspec.FORMAT_CHARS[ch]
     if spec.kind == "str":
         if message == "FILE" and ch == "Z":
             rows = np.ascontiguousarray(raw).view(np.uint8).reshape(raw.shape[0], -1)
@@ -1074,8 +1061,8 @@ def _gather_times(a: np.ndarray, d: Definition, pos: np.ndarray) -> np.ndarray |
     if tf is None:
         return None
     _, i, scale = tf
-    dt = np.dtype(FORMAT_CHARS[d.format[i]].dtype)
-    ofs = sum(np.dtype(FORMAT_CHARS[c].dtype).itemsize for c in d.format[:i])
+    dt = np.dtype(dfspec.FORMAT_CHARS[d.format[i]].dtype)
+    ofs = sum(np.dtype(dfspec.FORMAT_CHARS[c].dtype).itemsize for c in d.format[:i])
     return _records(a, dt, pos + 3 + ofs).astype(np.float64) * scale
 
 
@@ -1119,8 +1106,8 @@ def _units(
             if i < len(uids) and unit_of.get(uids[i]):
                 u[col] = unit_of[uids[i]]
             ch = d.format[i]
-            if (i < len(mids) and FORMAT_CHARS[ch].multiplier is None
-                    and FORMAT_CHARS[ch].kind in ("int", "float")):
+            if (i < len(mids) and dfspec.FORMAT_CHARS[ch].multiplier is None
+                    and dfspec.FORMAT_CHARS[ch].kind in ("int", "float")):
                 mult = mult_of.get(mids[i])
                 if mult:
                     mm[col] = mult
@@ -1462,9 +1449,9 @@ def _read_buffer(
     notes: list[str] = []
     wanted = None if messages is None else set(messages)
     cand, types = _find_headers(a)
-    fmt_at = np.flatnonzero(types == FMT_TYPE)  # (few)
+    fmt_at = np.flatnonzero(types == dfspec.FMT_TYPE)  # (few)
     fmt_pos = cand[fmt_at]
-    table = _read_definitions(a, fmt_pos[fmt_pos <= n - FMT_LENGTH])
+    table = _read_definitions(a, fmt_pos[fmt_pos <= n - dfspec.FMT_LENGTH])
     framing = _frame(a, cand, types, table)
     _release(a, 0, n)
     # definitions only from FMT records that are part of the log (rarely differs; FMT is
@@ -1743,8 +1730,8 @@ def _time_slot(d: Definition) -> tuple[int, str, float]:
     tf = d.time_field
     assert tf is not None
     _, i, scale = tf
-    ofs = sum(np.dtype(FORMAT_CHARS[c].dtype).itemsize for c in d.format[:i])
-    return ofs, FORMAT_CHARS[d.format[i]].dtype, scale
+    ofs = sum(np.dtype(dfspec.FORMAT_CHARS[c].dtype).itemsize for c in d.format[:i])
+    return ofs, dfspec.FORMAT_CHARS[d.format[i]].dtype, scale
 
 
 _MAX_UNION = 4  # a message's merged table may hold this many times its records' own cells
@@ -1888,7 +1875,7 @@ def _layout(d: Definition) -> dict[str, tuple[str, str, np.dtype, tuple[int, ...
     out = {}
     for column, i in d.fields:
         ch = d.format[i]
-        spec = FORMAT_CHARS[ch]
+        spec = dfspec.FORMAT_CHARS[ch]
         dt = np.dtype(spec.dtype)
         shape: tuple[int, ...] = ()
         if spec.kind == "str":

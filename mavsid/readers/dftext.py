@@ -37,8 +37,8 @@ import numpy as np
 
 from mavsid.data import RawLog, SourceInfo
 from mavsid.errors import ConfigError, DataQualityWarning, LogFormatError
+from mavsid.readers import dataflash_spec as dfspec
 from mavsid.readers.dataflash import (
-    FORMAT_CHARS,
     Definition,
     assemble,
     backwards_steps,
@@ -58,7 +58,7 @@ def _null_term(s: str) -> str:
 
 def _convert(values: list[str], ch: str) -> tuple[np.ndarray, np.ndarray]:
     """Column of text values -> (array, ok mask) as pymavlink converts them."""
-    kind = FORMAT_CHARS[ch].kind
+    kind = dfspec.FORMAT_CHARS[ch].kind
     n = len(values)
     if ch in "aM":  # pymavlink leaves these as the printed text
         out = np.empty(n, dtype=object)
@@ -324,7 +324,7 @@ def _definition(fields: list[str], delim: str) -> Definition | None:
     columns = ",".join(fields[5:]) if delim == "," else (fields[5] if len(fields) > 5 else "")
     if name == "FMT" and columns == "Type,Length,Name,Format":
         columns += ",Columns"  # some text logs omit it
-    if not name or any(c not in FORMAT_CHARS for c in fmt):
+    if not name or any(c not in dfspec.FORMAT_CHARS for c in fmt):
         return None
     cols = tuple(columns.split(",")) if columns else ()
     return Definition(ftype, name, length, fmt, cols)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mavsid.readers.dataflash import build_fmt, build_record
+from mavsid.readers.dataflash_spec import build_fmt, build_record
 
 ROOT = Path(__file__).resolve().parents[2]
 FIXTURES = ROOT / "fixtures"

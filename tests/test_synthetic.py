@@ -696,11 +696,14 @@ def test_faults(tmp_path):
     assert len(ours["RATE"]) >= n_rate - 1
 
 
-def test_discretisation_is_the_augmented_matrix_exponential():
-    """scipy's cont2discrete against the textbook exp([[A, B], [0, 0]] t), within 1e-12."""
+def test_discretisation_is_scipys_zero_order_hold():
+    """The simulator's plants held over a step (mavsid.numerics.lti.c2d) against scipy's
+    cont2discrete and the textbook exp([[A, B], [0, 0]] t), within 1e-12."""
     from scipy.linalg import expm
+    from scipy.signal import cont2discrete
 
-    from mavsid.synthetic.plant import VEHICLES, _zoh
+    from mavsid.numerics.lti import c2d
+    from mavsid.synthetic.plant import VEHICLES
 
     for p in VEHICLES.values():
         a, b, _ = p.continuous()
@@ -709,9 +712,12 @@ def test_discretisation_is_the_augmented_matrix_exponential():
             big = np.zeros((n + m, n + m))
             big[:n, :n], big[:n, n:] = a, b
             ref = expm(big * t)
-            phi, gamma = _zoh(a, b, t)
+            phi, gamma = c2d(a, b, t)
             np.testing.assert_allclose(phi, ref[:n, :n], rtol=0, atol=1e-12)
             np.testing.assert_allclose(gamma, ref[:n, n:], rtol=0, atol=1e-12)
+            sp_phi, sp_gamma, *_ = cont2discrete((a, b, np.eye(n), np.zeros((n, m))), t)
+            np.testing.assert_allclose(phi, sp_phi, rtol=0, atol=1e-12)
+            np.testing.assert_allclose(gamma, sp_gamma, rtol=0, atol=1e-12)
 
 
 @pytest.mark.parametrize(("cutoff", "fs"), [(20.0, 400.0), (15.0, 400.0), (80.0, 1000.0)])

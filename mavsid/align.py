@@ -32,8 +32,9 @@ log's content unless given) and
 ``FlightData.meta`` holds the native rate of every channel, the mixer used, the samples
 excluded (``excluded_samples``: channel -> count of non-finite, impossible or mistimed
 samples), which boot was used (``boot``: ``used``, ``of``, ``start_s``, ``stop_s``,
-``reason``) and the ArduPilot SYSTEMID runs (``meta["sysid_runs"]``, from SIDS/SIDD or, in
-a .tlog, from the SYSTEMID mode and the SID_* parameter values sent before it).
+``reason``); ``FlightData.sysid_runs`` the ArduPilot SYSTEMID runs (from SIDS/SIDD or, in
+a .tlog, from the SYSTEMID mode and the SID_* parameter values sent before it); the
+platform's names ``autopilot``, ``vehicle`` and ``firmware`` are fields too.
 
 Examples
 --------
@@ -94,7 +95,7 @@ from mavsid.channels import (
     servo_inputs,
     unit_origin,
 )
-from mavsid.data import FlightData, MessageTable, RawLog
+from mavsid.data import FlightData, MessageTable, RawLog, SysidRun
 from mavsid.errors import (
     ConfigError,
     DataQualityWarning,
@@ -918,7 +919,7 @@ def _sid_axis_number(value: float) -> int:
     return int(value) if math.isfinite(value) else 0
 
 
-def sysid_runs(raw: RawLog) -> list[dict[str, Any]]:
+def sysid_runs(raw: RawLog) -> tuple[SysidRun, ...]:
     """ArduPilot SYSTEMID runs: settings and the span of the injected waveform.
 
     From DataFlash: one per SIDS record, with SIDS's settings; the span is that of the SIDD
@@ -943,7 +944,9 @@ def sysid_runs(raw: RawLog) -> list[dict[str, Any]]:
     >>> log = RawLog(SourceInfo("x.bin", "dataflash", 0), {"SIDS": sids, "SIDD": sidd},
     ...              modes=(ModeChange(5.0, 25, "SYSTEMID"), ModeChange(9.5, 0, "STABILIZE")))
     >>> sysid_runs(log)
-    [{'start_s': 6.0, 'stop_s': 8.0, 'settings_from': 'SIDS', 'axis': 10, 'magnitude': 0.05}]
+    (SysidRun(start_s=6.0, stop_s=8.0, settings_from='SIDS', axis=10, magnitude=0.05, \
+f_start_hz=None, f_stop_hz=None, t_fade_in_s=None, t_const_freq_s=None, t_record_s=None, \
+t_fade_out_s=None, injected=True),)
     """
     runs: list[dict[str, Any]] = []
     path = raw.source.path
@@ -979,11 +982,11 @@ def sysid_runs(raw: RawLog) -> list[dict[str, Any]]:
             if inside.size < 2:
                 run["start_s"], run["stop_s"] = _chirp_span(start, stop, run)
             runs.append(run)
-        return runs
+        return tuple(SysidRun(**r) for r in runs)
     if "SIDD" in raw.messages and len(raw.messages["SIDD"]):
-        return _runs_without_sids(raw, spans)
+        return tuple(SysidRun(**r) for r in _runs_without_sids(raw, spans))
     if not spans or "PARAM_VALUE" not in raw.messages:
-        return runs
+        return ()
     pv = raw.messages["PARAM_VALUE"]
     names = np.asarray(pv.columns.get("param_id", []), dtype=object)
     values = (pv.numbers("param_value", path) if "param_value" in pv.columns
@@ -1005,7 +1008,7 @@ def sysid_runs(raw: RawLog) -> list[dict[str, Any]]:
         if "axis" in run:
             run["start_s"], run["stop_s"] = _chirp_span(a, b, run)
             runs.append(run)
-    return runs
+    return tuple(SysidRun(**r) for r in runs)
 
 
 #: How long before its MODE record a SYSTEMID stay's first SIDD record may come (the mode's
@@ -1028,7 +1031,7 @@ def _runs_without_sids(raw: RawLog, spans: Sequence[tuple[float, float]]
     >>> log = RawLog(SourceInfo("x.bin", "dataflash", 0), {"SIDD": sidd},
     ...              modes=(ModeChange(5.1, 25, "SYSTEMID"), ModeChange(9.5, 0, "STABILIZE")),
     ...              params={"SID_AXIS": 1.0})
-    >>> sysid_runs(log)
+    >>> [r.to_dict() for r in sysid_runs(log)]
     [{'start_s': 5.1, 'stop_s': 9.0, 'settings_from': 'PARM', 'axis': 1, 'injected': False}]
     """
     sidd = raw.messages["SIDD"]
@@ -1359,15 +1362,11 @@ def _align(raw: RawLog, preset: Preset | str | None, rate_hz: float | None,
         # ArduPlane's PIDR/PIDP/PIDY Tar and Act are deg/s (Copter's rad/s)
         else dict.fromkeys(("PIDR", "PIDP", "PIDY"), np.pi / 180.0)
         if vehicle_kind(raw) == "plane" else {},
-        "sysid_runs": sysid_runs(raw),
         "excluded_samples": {name: sum(why.values()) for name, why in excluded.items()},
         "excluded_reasons": excluded,
         "boot": boot,
         "mode_names": {m.mode: m.name for m in raw.modes if m.name},
         "flag_notes": flag_notes,
-        "vehicle": raw.vehicle,
-        "autopilot": raw.autopilot,
-        "firmware": raw.firmware,
     }
     if mixer is not None:
         meta["mixer"] = mixer
@@ -1393,6 +1392,10 @@ def _align(raw: RawLog, preset: Preset | str | None, rate_hz: float | None,
         preset=preset.name,
         params=dict(raw.params),
         meta=meta,
+        autopilot=raw.autopilot,
+        vehicle=raw.vehicle,
+        firmware=raw.firmware,
+        sysid_runs=sysid_runs(raw),
     )
 
 

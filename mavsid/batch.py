@@ -207,8 +207,8 @@ def log_task(path: str, config: PipelineConfig | None = None, vehicle: str = "",
             else:
                 fd = result.flights[0]
                 log_row.update(
-                    status="ok", error=None, firmware=fd.meta.get("firmware"),
-                    autopilot=fd.meta.get("autopilot"), preset=fd.preset,
+                    status="ok", error=None, firmware=fd.firmware,
+                    autopilot=fd.autopilot, preset=fd.preset,
                     duration_s=float(fd.time_s[-1] - fd.time_s[0]) if len(fd.time_s) else None,
                     axes_identified=len(result.axes))
                 axes = _axis_rows(base, result, result.verdicts)

@@ -17,7 +17,7 @@ from __future__ import annotations
 import functools
 import os
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
@@ -31,6 +31,7 @@ __all__ = [
     "RawLog",
     "Segment",
     "SourceInfo",
+    "SysidRun",
     "TextMessage",
 ]
 
@@ -224,6 +225,64 @@ class RawLog:
 
 
 @dataclass(frozen=True)
+class SysidRun:
+    """One ArduPilot SYSTEMID run: the span of its injected waveform and its settings.
+
+    Parameters
+    ----------
+    start_s, stop_s : float
+        The injection's first and last instants (log clock).
+    settings_from : str
+        ``"SIDS"`` (the run's own record), ``"PARM"`` (the log's SID_* parameters: no SIDS
+        record) or ``"PARAM_VALUE"`` (parameters a ground station received before it).
+    axis : int or None
+        ``SID_AXIS`` (see :func:`mavsid.autopilot.ardupilot.sid_axis`).
+    magnitude, f_start_hz, f_stop_hz : float or None
+        The chirp's amplitude and frequency range.
+    t_fade_in_s, t_const_freq_s, t_record_s, t_fade_out_s : float or None
+        Its phases' durations.
+    injected : bool
+        False when the mode was flown but its waveform stayed zero throughout.
+
+    Examples
+    --------
+    >>> run = SysidRun(6.0, 8.0, "SIDS", axis=10, magnitude=0.05)
+    >>> run.to_dict()
+    {'start_s': 6.0, 'stop_s': 8.0, 'settings_from': 'SIDS', 'axis': 10, 'magnitude': 0.05}
+    >>> run.settings()
+    {'settings_from': 'SIDS', 'axis': 10, 'magnitude': 0.05}
+    """
+
+    start_s: float
+    stop_s: float
+    settings_from: str
+    axis: int | None = None
+    magnitude: float | None = None
+    f_start_hz: float | None = None
+    f_stop_hz: float | None = None
+    t_fade_in_s: float | None = None
+    t_const_freq_s: float | None = None
+    t_record_s: float | None = None
+    t_fade_out_s: float | None = None
+    injected: bool = True
+
+    @property
+    def sid_axis(self) -> int:
+        """``SID_AXIS``, 0 (no axis) when unknown."""
+        return self.axis or 0
+
+    def to_dict(self) -> dict[str, float | int | str]:
+        """The run as JSON: its span and the settings it has (unknown ones left out;
+        ``injected`` only when False)."""
+        return {f.name: v for f in fields(self)
+                if (v := getattr(self, f.name)) is not None and not (f.name == "injected" and v)}
+
+    def settings(self) -> dict[str, float | int | str]:
+        """:meth:`to_dict` without the span."""
+        return {k: v for k, v in self.to_dict().items() if k not in ("start_s", "stop_s")}
+
+
+@dataclass(frozen=True)
 class FlightData:
     """States and inputs of one flight on one uniform time grid, in SI units.
 
@@ -251,6 +310,10 @@ class FlightData:
         The log's parameters (needed for filters, SYSTEMID settings).
     meta : Mapping[str, object]
         Anything else alignment found (e.g. SYSTEMID runs).
+    autopilot, vehicle, firmware : str or None
+        The platform as the log names it (:class:`RawLog`'s); None when not known.
+    sysid_runs : tuple of SysidRun
+        The ArduPilot SYSTEMID runs alignment found.
     """
 
     time_s: np.ndarray
@@ -267,6 +330,10 @@ class FlightData:
     preset: str
     params: Mapping[str, float] = field(default_factory=dict)
     meta: Mapping[str, object] = field(default_factory=dict)
+    autopilot: str | None = None
+    vehicle: str | None = None
+    firmware: str | None = None
+    sysid_runs: tuple[SysidRun, ...] = ()
 
     def series(self, name: str) -> np.ndarray | None:
         """The state or input ``name`` on the grid; None when the flight has none.

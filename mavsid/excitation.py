@@ -5,7 +5,7 @@ Two sources of windows, per axis (``roll``, ``pitch``, ``yaw``; the plant input 
 rates):
 
 ``sysid``
-    ArduPilot SYSTEMID runs (``FlightData.meta["sysid_runs"]``, found by alignment from
+    ArduPilot SYSTEMID runs (``FlightData.sysid_runs``, found by alignment from
     SIDS/SIDD, or SYSTEMID mode + SID_* parameters in a .tlog). The window is the injected
     chirp; ``SID_AXIS`` 1–12 name the axis (angle, recovery, rate or mixer injection), 13 is
     mixer thrust, which excites no attitude axis and is reported, not kept.
@@ -95,7 +95,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -103,7 +103,7 @@ import numpy as np
 
 from mavsid.autopilot.ardupilot import SID_IDENTIFIES, sid_axis
 from mavsid.axes import AXES, RATE_OF
-from mavsid.data import FlightData, Segment, detrend_linear
+from mavsid.data import FlightData, Segment, SysidRun, detrend_linear
 from mavsid.errors import ConfigError, finite_number
 from mavsid.numerics.spectra import density, segment_ffts
 from mavsid.reasons import Reason, format_number, group
@@ -760,16 +760,14 @@ def _block_parts(fd: FlightData, t0: float, t1: float) -> list[tuple[int, int]]:
 
 def _sysid_windows(fd: FlightData, axes: Sequence[str], axes_cache: Mapping[str, _Axis],
                    opts: ScanOptions, air: np.ndarray) -> list[WindowReport]:
-    runs = fd.meta.get("sysid_runs", [])
     out: list[WindowReport] = []
-    assert isinstance(runs, Iterable)
-    for run in runs:
-        sid = int(run.get("axis", 0))
+    for run in fd.sysid_runs:
+        sid = run.sid_axis
         name, injection = sid_axis(sid)
-        settings = {k: v for k, v in run.items() if k not in ("start_s", "stop_s")}
-        meta: dict[str, Any] = {"sid_axis": sid, "injection": injection, "sysid": settings}
+        meta: dict[str, Any] = {"sid_axis": sid, "injection": injection,
+                                "sysid": run.settings()}
         notes: list[str] = []
-        if run.get("settings_from") == "PARAM_VALUE" and name in AXES:
+        if run.settings_from == "PARAM_VALUE" and name in AXES:
             found = _excited_axis(fd, run, opts, air)
             if found is not None and found != name:
                 notes.append(
@@ -782,29 +780,30 @@ def _sysid_windows(fd: FlightData, axes: Sequence[str], axes_cache: Mapping[str,
             if axes == AXES:  # only when every axis was asked for
                 off = (Reason("not_attitude_axis", {"sid_axis": float(sid)},
                               {"axis": name, "injection": injection}),)
-                for i0, i1 in _block_parts(fd, run["start_s"], run["stop_s"]):
+                for i0, i1 in _block_parts(fd, run.start_s, run.stop_s):
                     out.append(WindowReport(
                         name, float(fd.time_s[i0]), float(fd.time_s[i1 - 1]), float("nan"),
                         False, "sysid", _rejected(off), i0, i1, {}, meta, off))
             continue
         if name not in axes:
             continue
-        for i0, i1 in _block_parts(fd, run["start_s"], run["stop_s"]):
+        nan = float("nan")
+        for i0, i1 in _block_parts(fd, run.start_s, run.stop_s):
             rep = _report(axes_cache[name], fd, i0, i1, opts, air, "sysid", meta)
-            mag = run.get("magnitude", float("nan"))
+            mag = nan if run.magnitude is None else run.magnitude
             note = (f"SYSTEMID {injection} {name} chirp, SID_AXIS {sid}, magnitude {mag:g}, "
-                    f"{run.get('f_start_hz', float('nan')):g}–"
-                    f"{run.get('f_stop_hz', float('nan')):g} Hz")
+                    f"{nan if run.f_start_hz is None else run.f_start_hz:g}–"
+                    f"{nan if run.f_stop_hz is None else run.f_stop_hz:g} Hz")
             if injection in SID_IDENTIFIES:
                 note += f": identifies {SID_IDENTIFIES[injection]}"
             out.append(replace(rep, reasons=(*rep.reasons, note, *notes)))
     return out
 
 
-def _excited_axis(fd: FlightData, run: Mapping[str, Any], opts: ScanOptions,
+def _excited_axis(fd: FlightData, run: SysidRun, opts: ScanOptions,
                   air: np.ndarray) -> str | None:
     """The one attitude axis whose input passes the power gate during a run, if exactly one."""
-    parts = _block_parts(fd, run["start_s"], run["stop_s"])
+    parts = _block_parts(fd, run.start_s, run.stop_s)
     excited = []
     for a in AXES:
         ax = _axis(fd, a, opts, air)

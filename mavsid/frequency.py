@@ -351,12 +351,12 @@ def sysid_spans(flight: FlightData, axis: str) -> list[tuple[int, int, int]]:
     first gap), with their ``SID_AXIS``: 1-3 angle, 4-6 recovery, 7-9 rate, 10-12 mixer."""
     out = []
     t = flight.time_s
-    for run in flight.meta.get("sysid_runs", ()) or ():  # type: ignore[attr-defined]
-        sid = int(run.get("axis", 0) or 0)
+    for run in flight.sysid_runs:
+        sid = run.sid_axis
         if sid_axis(sid)[0] != axis:
             continue
-        i0 = int(np.searchsorted(t, float(run["start_s"])))
-        i1 = int(np.searchsorted(t, float(run["stop_s"]), side="right"))
+        i0 = int(np.searchsorted(t, run.start_s))
+        i1 = int(np.searchsorted(t, run.stop_s, side="right"))
         for a, b in flight.blocks:
             if a <= i0 < b:
                 i1 = min(i1, int(b))
@@ -394,9 +394,8 @@ def measured_responses(fit: Any, flights: Sequence[FlightData],
         if rate not in fd.state_names or u_name not in fd.input_names:
             continue
         for i0, i1, sid in sysid_spans(fd, axis):
-            runs: list[Any] = list(fd.meta.get("sysid_runs") or ())  # type: ignore[call-overload]
-            run = next(r for r in runs if int(r.get("axis", 0) or 0) == sid)
-            lo, hi = run.get("f_start_hz"), run.get("f_stop_hz")
+            run = next(r for r in fd.sysid_runs if r.sid_axis == sid)
+            lo, hi = run.f_start_hz, run.f_stop_hz
             if lo and hi:
                 bands.append((float(lo), float(hi)))
             dt = fd.dt

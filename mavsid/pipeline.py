@@ -28,7 +28,7 @@ import numpy as np
 from mavsid.autopilot.presets import QUADPLANE
 from mavsid.axes import AXES, INPUT_OF, RATE_OF, RATES
 from mavsid.channels import source_text
-from mavsid.data import FlightData, Segment
+from mavsid.data import FlightData, Segment, SysidRun
 from mavsid.errors import (
     ConfigError,
     DataQualityWarning,
@@ -329,7 +329,7 @@ def _injection(flight: FlightData, raw: Any) -> np.ndarray | None:
     from mavsid.autopilot.presets import INJECTION_CHANNEL
     from mavsid.channels import evaluate
 
-    if not flight.meta.get("sysid_runs") or INJECTION_CHANNEL.message not in raw.messages:
+    if not flight.sysid_runs or INJECTION_CHANNEL.message not in raw.messages:
         return None
     try:
         t, v = evaluate(raw, INJECTION_CHANNEL, "SYSTEMID injection")
@@ -438,7 +438,7 @@ def _closed_loop(
     from mavsid.loop.twin import closed_loop_fit, twin_signals
 
     planes = [fd for fd in flights
-              if str(fd.meta.get("vehicle") or "").lower().split()[:1] == ["plane"]
+              if (fd.vehicle or "").lower().split()[:1] == ["plane"]
               and fd.preset != QUADPLANE]  # (a QuadPlane's VTOL: a multicopter's)
     if planes:  # (the twin would run a multicopter's controller on a plane's targets)
         return dataclasses.replace(
@@ -597,19 +597,18 @@ def _rollover(fd: FlightData, i0: int, i1: int, sid: int) -> str:
             f"(reaching {worst[0]:.0f}°): the vehicle was lost")
 
 
-def _injected_nothing(run: Mapping[str, Any]) -> str:
+def _injected_nothing(run: SysidRun) -> str:
     """Why a SYSTEMID run whose waveform is zero throughout (``injected`` False) is refused.
 
     Examples
     --------
-    >>> print(_injected_nothing({"start_s": 3899.27, "stop_s": 3908.8, "axis": 1,
-    ...                          "settings_from": "PARM", "injected": False}))
+    >>> print(_injected_nothing(SysidRun(3899.27, 3908.8, "PARM", axis=1, injected=False)))
     SYSTEMID mode (SID_AXIS 1) 3899.3–3908.8 s injected nothing (SIDD.Targ is 0 throughout, \
 SIDS not logged)
     """
-    sids = "" if run.get("settings_from") == "SIDS" else ", SIDS not logged"
-    return (f"SYSTEMID mode (SID_AXIS {int(run.get('axis', 0) or 0)}) {run['start_s']:.1f}–"
-            f"{run['stop_s']:.1f} s injected nothing (SIDD.Targ is 0 throughout{sids})")
+    sids = "" if run.settings_from == "SIDS" else ", SIDS not logged"
+    return (f"SYSTEMID mode (SID_AXIS {run.sid_axis}) {run.start_s:.1f}–"
+            f"{run.stop_s:.1f} s injected nothing (SIDD.Targ is 0 throughout{sids})")
 
 
 def plant_fit(axis: str, flights: Sequence[FlightData]) -> tuple[PlantTF | None, str, bool]:
@@ -629,23 +628,22 @@ def plant_fit(axis: str, flights: Sequence[FlightData]) -> tuple[PlantTF | None,
     ys: list[np.ndarray] = []
     rs: list[np.ndarray] = []
     bands: list[tuple[float, float]] = []
-    settings: list[Mapping[str, Any]] = []
+    settings: list[SysidRun] = []
     dt = 0.0
     for fd in flights:
         ref = fd.meta.get("sysid_injection")
         if (not isinstance(ref, np.ndarray) or rate not in fd.state_names
                 or u_name not in fd.input_names):
             continue
-        runs = {int(r.get("axis", 0) or 0): r
-                for r in fd.meta.get("sysid_runs") or ()}  # type: ignore[attr-defined]
+        runs = {r.sid_axis: r for r in fd.sysid_runs}
         for i0, i1, sid in sysid_spans(fd, axis):
-            if runs[sid].get("injected") is False:
+            if not runs[sid].injected:
                 return None, _injected_nothing(runs[sid]), True
             lost = _rollover(fd, i0, i1, sid)
             if lost:
                 return None, lost, True
             settings.append(runs[sid])
-            lo, hi = runs[sid].get("f_start_hz"), runs[sid].get("f_stop_hz")
+            lo, hi = runs[sid].f_start_hz, runs[sid].f_stop_hz
             if lo and hi:
                 bands.append((float(lo), float(hi)))
             i0, i1 = _logged_around(fd, ref, i0, i1)
@@ -680,8 +678,8 @@ def plant_fit(axis: str, flights: Sequence[FlightData]) -> tuple[PlantTF | None,
         k = int(np.argmax(trust))
         from mavsid.autopilot.ardupilot import sid_axis
 
-        mags = sorted({float(r["magnitude"]) for r in settings if r.get("magnitude")})
-        sids = sorted({int(r.get("axis", 0) or 0) for r in settings})
+        mags = sorted({r.magnitude for r in settings if r.magnitude})
+        sids = sorted({r.sid_axis for r in settings})
         unit = {"input angle": "°", "recovery angle": "°", "rate": "°/s"}.get(
             sid_axis(sids[0])[1], "") if len(sids) == 1 else ""
         mag = f", magnitude {'/'.join(f'{m:g}{unit}' for m in mags)}" if mags else ""

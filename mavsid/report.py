@@ -470,18 +470,16 @@ def _aircraft(result: FitResult) -> str:
         units_from: Mapping[str, Any] = meta.get("units_from") or {}  # type: ignore[assignment]
         rows = [("log", os.path.basename(fd.source.path)),
                 ("format", f"{fd.source.format}, {fd.source.size_bytes} bytes"),
-                ("vehicle", str(meta.get("vehicle") or "–")),
-                ("autopilot / firmware", f"{meta.get('autopilot') or '–'} / "
-                                         f"{meta.get('firmware') or '–'}"),
+                ("vehicle", fd.vehicle or "–"),
+                ("autopilot / firmware", f"{fd.autopilot or '–'} / {fd.firmware or '–'}"),
                 ("frame", frame), ("span used", f"{span:.1f} s at {1 / fd.dt:.0f} Hz"),
                 ("channel preset", fd.preset),
                 ("channels", ", ".join(f"{k} ← {source_text(v, units_from.get(k))}"
                                        for k, v in sources.items()))]
-        runs = meta.get("sysid_runs") or []
-        for run in runs if isinstance(runs, list) else []:
+        for run in fd.sysid_runs:
             rows.append(("SYSTEMID run", ", ".join(
                 f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
-                for k, v in dict(run).items())))
+                for k, v in run.to_dict().items())))
         parts.append("<table>" + "".join(
             f'<tr><td class="name">{html.escape(k)}</td><td class="name">{html.escape(v)}</td>'
             "</tr>" for k, v in rows) + "</table>")

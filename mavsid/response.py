@@ -753,7 +753,7 @@ def flight_response(flight: FlightData, raw: RawLog, axes: Sequence[str] = AXES
     if not any(r.ok for r in loops):
         notes.append("no loop has enough target activity or a fast enough log for a step "
                      "response")
-    return FlightResponse(flight.source.path, str(flight.meta.get("autopilot", "unknown")),
+    return FlightResponse(flight.source.path, flight.autopilot or "unknown",
                           flight.preset, tuple(loops), spectra, tuple(settings), tuple(notes))
 
 

@@ -312,7 +312,7 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
     windows : sequence of WindowReport, optional
         Every window considered for the axis (kept ones give band and coherence).
     flights : sequence of FlightData, optional
-        Their ``meta["native_rate_hz"]`` and ``meta["autopilot"]``.
+        Their ``meta["native_rate_hz"]`` and ``autopilot``.
     closed_loop : object, optional
         With ``fit_percent`` and ``baseline_percent`` (``AxisFit.closed_loop``).
     frequency : Mapping, optional
@@ -553,16 +553,16 @@ def _telemetry(flights: Sequence[Any]) -> bool:
 
 
 def _autopilot(flights: Sequence[Any]) -> str | None:
-    """The platform the flights' metadata names, if any: ``meta["autopilot"]``, then the
-    vehicle and the firmware banner when known (``ardupilot plane ArduPlane V4.3.8 (...)``),
-    ``quadplane`` after them for a QuadPlane's VTOL flight (its preset)."""
+    """The platform the flights name, if any: ``autopilot``, then the vehicle and the
+    firmware banner when known (``ardupilot plane ArduPlane V4.3.8 (...)``), ``quadplane``
+    after them for a QuadPlane's VTOL flight (its preset)."""
     for fd in flights:
-        meta = getattr(fd, "meta", None)
-        if meta and meta.get("autopilot"):
+        if getattr(fd, "autopilot", None):
             from mavsid.autopilot.presets import QUADPLANE
 
             vtol = "quadplane" if getattr(fd, "preset", "") == QUADPLANE else ""
-            words = (meta.get("autopilot"), meta.get("vehicle"), meta.get("firmware"), vtol)
+            words = (fd.autopilot, getattr(fd, "vehicle", None), getattr(fd, "firmware", None),
+                     vtol)
             return " ".join(str(w) for w in words if w)
     return None
 
@@ -580,7 +580,7 @@ def unfitted(axis: str, why: str, windows: Sequence[WindowReport] = (), flights:
     Examples
     --------
     >>> from types import SimpleNamespace as NS
-    >>> fd = NS(meta={"native_rate_hz": {"p": 10.0, "u_roll": 10.0}, "autopilot": "ArduPilot"})
+    >>> fd = NS(meta={"native_rate_hz": {"p": 10.0, "u_roll": 10.0}}, autopilot="ArduPilot")
     >>> v = unfitted("roll", "no segments to fit", flights=[fd], logs=["a.bin"])
     >>> v.reasons[0]
     'rates/outputs logged at 10 Hz (Nyquist 5 Hz) cannot resolve a rate loop of 5–15 Hz bandwidth'

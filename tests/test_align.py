@@ -247,12 +247,12 @@ def test_sitl_sysid_runs_from_sids(sitl_pair):
     # README: SID_AXIS 10, 11, 12, 13 entered at about 87, 173, 258 and 344 s; SID_T_REC 60 s,
     # injection 1 s (ArduCopter's SYSTEM_ID_DELAY) after entering the mode
     for fd in sitl_pair:
-        runs = fd.meta["sysid_runs"]
-        assert [r["axis"] for r in runs] == [10, 11, 12, 13]
+        runs = fd.sysid_runs
+        assert [r.axis for r in runs] == [10, 11, 12, 13]
         for r, enter in zip(runs, (87, 173, 258, 344), strict=True):
-            assert abs(r["start_s"] - (enter + 1)) < 1.0
-            assert abs(r["stop_s"] - r["start_s"] - 60.0) < 0.2
-            assert r["t_record_s"] == 60.0 and r["f_stop_hz"] == 20.0
+            assert abs(r.start_s - (enter + 1)) < 1.0
+            assert abs(r.stop_s - r.start_s - 60.0) < 0.2
+            assert r.t_record_s == 60.0 and r.f_stop_hz == 20.0
         assert fd.params["INS_GYRO_FILTER"] == 20.0
 
 
@@ -277,7 +277,7 @@ def test_systemid_mode_with_sidd_but_no_sids_is_a_run_that_injected_nothing(tmp_
 
 def test_sysid_runs_absent_without_systemid():
     raw = RawLog(SourceInfo("d.bin", "dataflash", 0), {}, modes=(ModeChange(1.0, 0, "STAB"),))
-    assert sysid_runs(raw) == []
+    assert sysid_runs(raw) == ()
 
 
 _LOGS = shared_logs(".bin", ".log", ".tlog", ".ulg")

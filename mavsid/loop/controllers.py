@@ -558,8 +558,8 @@ def scale_of(gains: Mapping[str, float], ctrl: AxisController) -> float:
 
 
 def autopilot_of(flight: FlightData) -> str | None:
-    """``"px4"`` or ``"ardupilot"`` from the flight's metadata, None when unknown."""
-    ap = str(flight.meta.get("autopilot") or "").lower()
+    """``"px4"`` or ``"ardupilot"`` from the flight's platform, None when unknown."""
+    ap = (flight.autopilot or "").lower()
     if "px4" in ap:
         return "px4"
     if "ardupilot" in ap or "apm" in ap:

@@ -495,8 +495,7 @@ def twin_signals(flight: FlightData, raw: Any = None) -> TwinSignals:
             targets[axis] = _on_grid(t, v * scale, grid, hold=True)
             sources[f"target_{axis}"] = f"{ch.message}.{ch.field}"
     injection: dict[str, np.ndarray] = {}
-    runs = [r for r in flight.meta.get("sysid_runs", ()) or ()  # type: ignore[attr-defined]
-            if int(r.get("axis", 0)) in (7, 8, 9, 10, 11, 12)]
+    runs = [r for r in flight.sysid_runs if r.sid_axis in (7, 8, 9, 10, 11, 12)]
     rate_injection: dict[str, np.ndarray] = {}
     if runs and INJECTION_CHANNEL.message in raw.messages:
         try:
@@ -507,9 +506,9 @@ def twin_signals(flight: FlightData, raw: Any = None) -> TwinSignals:
             held = np.nan_to_num(_on_grid(t, v, grid, hold=True))
             src = f"{INJECTION_CHANNEL.message}.{INJECTION_CHANNEL.field}"
             for r in runs:
-                sid = int(r["axis"])
+                sid = r.sid_axis
                 axis = AXES[(sid - 1) % 3]
-                inside = (grid >= float(r["start_s"]) - 1e-9) & (grid <= float(r["stop_s"]) + 1e-9)
+                inside = (grid >= r.start_s - 1e-9) & (grid <= r.stop_s + 1e-9)
                 if sid >= 10:
                     inj = injection.setdefault(axis, np.zeros(grid.shape))
                     inj[inside] = held[inside]

@@ -31,8 +31,8 @@ log's content unless given) and
 
 ``FlightData.meta`` holds the native rate of every channel, the mixer used, the samples
 excluded (``excluded_samples``: channel -> count of non-finite, impossible or mistimed
-samples), which boot was used (``boot``: ``used``, ``of``, ``start_s``, ``stop_s``,
-``reason``); ``FlightData.sysid_runs`` the ArduPilot SYSTEMID runs (from SIDS/SIDD or, in
+samples); ``FlightData.boot`` which boot was used (:class:`~mavsid.data.Boot`),
+``FlightData.sysid_runs`` the ArduPilot SYSTEMID runs (from SIDS/SIDD or, in
 a .tlog, from the SYSTEMID mode and the SID_* parameter values sent before it); the
 platform's names ``autopilot``, ``vehicle`` and ``firmware`` are fields too.
 
@@ -95,7 +95,7 @@ from mavsid.channels import (
     servo_inputs,
     unit_origin,
 )
-from mavsid.data import FlightData, MessageTable, RawLog, SysidRun
+from mavsid.data import Boot, FlightData, MessageTable, RawLog, SysidRun
 from mavsid.errors import (
     ConfigError,
     DataQualityWarning,
@@ -501,7 +501,7 @@ def _boots(t: np.ndarray) -> list[slice]:
 
 
 def _one_boot(path: str, states: list[_Series], inputs: list[_Series]
-              ) -> tuple[list[_Series], list[_Series], dict[str, Any]]:
+              ) -> tuple[list[_Series], list[_Series], Boot]:
     """Keep one boot of a log whose clock restarts, then sort by time and unwrap yaw.
 
     The boot is the longest one of the reference channel (body rate, else attitude); every
@@ -510,22 +510,20 @@ def _one_boot(path: str, states: list[_Series], inputs: list[_Series]
     ref = _reference(states)
     ref_boots = _boots(ref.t)
     k = 0
-    boot: dict[str, Any] = {"used": 1, "of": 1, "start_s": float(np.min(ref.t)),
-                            "stop_s": float(np.max(ref.t)), "reason": "the log has one boot"}
+    boot = Boot(1, 1, float(np.min(ref.t)), float(np.max(ref.t)), "the log has one boot")
     if len(ref_boots) > 1:
         # the boot with the most time covered by samples (not its span: one mistimed
         # sample must not make a boot look long)
         covered = [_covered_s(np.sort(ref.t[b])) for b in ref_boots]
         k = int(np.argmax(covered))
         b = ref_boots[k]
-        boot = {"used": k + 1, "of": len(ref_boots), "start_s": float(np.min(ref.t[b])),
-                "stop_s": float(np.max(ref.t[b])),
-                "reason": f"the longest: {covered[k]:.1f} s of {ref.source} samples "
-                          f"(next longest {sorted(covered)[-2]:.1f} s)"}
+        boot = Boot(k + 1, len(ref_boots), float(np.min(ref.t[b])), float(np.max(ref.t[b])),
+                    f"the longest: {covered[k]:.1f} s of {ref.source} samples "
+                    f"(next longest {sorted(covered)[-2]:.1f} s)")
         warnings.warn(
             f"{path}: the log's clock restarts {len(ref_boots) - 1} time(s) (reboot or "
             f"concatenated logs): only boot {k + 1} of {len(ref_boots)} is used "
-            f"({boot['start_s']:.1f}–{boot['stop_s']:.1f} s, {boot['reason']})",
+            f"({boot.start_s:.1f}–{boot.stop_s:.1f} s, {boot.reason})",
             DataQualityWarning,
             stacklevel=4,
         )
@@ -1364,16 +1362,15 @@ def _align(raw: RawLog, preset: Preset | str | None, rate_hz: float | None,
         if vehicle_kind(raw) == "plane" else {},
         "excluded_samples": {name: sum(why.values()) for name, why in excluded.items()},
         "excluded_reasons": excluded,
-        "boot": boot,
         "mode_names": {m.mode: m.name for m in raw.modes if m.name},
         "flag_notes": flag_notes,
     }
     if mixer is not None:
         meta["mixer"] = mixer
-    injection = _sysid_injection(raw, t, boot["used"] - 1)
+    injection = _sysid_injection(raw, t, boot.used - 1)
     if injection is not None:
         meta["sysid_injection"] = injection
-    commanded, commanded_from = _commanded(raw, t, boot["used"] - 1)
+    commanded, commanded_from = _commanded(raw, t, boot.used - 1)
     if commanded:
         meta["commanded"] = commanded
         meta["commanded_from"] = commanded_from
@@ -1396,6 +1393,7 @@ def _align(raw: RawLog, preset: Preset | str | None, rate_hz: float | None,
         vehicle=raw.vehicle,
         firmware=raw.firmware,
         sysid_runs=sysid_runs(raw),
+        boot=boot,
     )
 
 

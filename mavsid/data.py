@@ -25,6 +25,7 @@ from mavsid.errors import LogFormatError, MissingMessageError
 
 __all__ = [
     "LOG_FORMATS",
+    "Boot",
     "FlightData",
     "MessageTable",
     "ModeChange",
@@ -225,6 +226,36 @@ class RawLog:
 
 
 @dataclass(frozen=True)
+class Boot:
+    """The boot of a log whose clock restarts that alignment kept (a log has one or more).
+
+    Parameters
+    ----------
+    used, of : int
+        Which boot (1-based) of how many.
+    start_s, stop_s : float
+        Its span by the reference channel's records (log clock).
+    reason : str
+        Why it was chosen.
+
+    Examples
+    --------
+    >>> Boot(2, 3, 10.0, 70.0, "the longest").to_dict()["used"]
+    2
+    """
+
+    used: int
+    of: int
+    start_s: float
+    stop_s: float
+    reason: str
+
+    def to_dict(self) -> dict[str, int | float | str]:
+        """The boot as JSON (``used of start_s stop_s reason``)."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+@dataclass(frozen=True)
 class SysidRun:
     """One ArduPilot SYSTEMID run: the span of its injected waveform and its settings.
 
@@ -314,6 +345,8 @@ class FlightData:
         The platform as the log names it (:class:`RawLog`'s); None when not known.
     sysid_runs : tuple of SysidRun
         The ArduPilot SYSTEMID runs alignment found.
+    boot : Boot or None
+        The boot alignment kept (None: not from alignment).
     """
 
     time_s: np.ndarray
@@ -334,6 +367,7 @@ class FlightData:
     vehicle: str | None = None
     firmware: str | None = None
     sysid_runs: tuple[SysidRun, ...] = ()
+    boot: Boot | None = None
 
     def series(self, name: str) -> np.ndarray | None:
         """The state or input ``name`` on the grid; None when the flight has none.

@@ -228,7 +228,8 @@ class FitResult:
             "logs": list(self.logs),
             "presets": sorted({fd.preset for fd in self.flights}),
             "pipeline": self.config.name,
-            "data": [_json_safe({"log": fd.source.path, "boot": fd.meta.get("boot"),
+            "data": [_json_safe({"log": fd.source.path,
+                                 "boot": fd.boot.to_dict() if fd.boot else None,
                                  "excluded_samples": fd.meta.get("excluded_samples", {})})
                      for fd in self.flights],
         }
@@ -1389,11 +1390,11 @@ def format_result(result: FitResult, validating: bool = False) -> str:
         return f"{logs}: no axis fitted"
     lines = [f"{logs}: {len(result.axes)} axis model(s), fit % on held-out segments"]
     for fd in result.flights:  # what of each log was used (align's boot and exclusions)
-        boot: Any = fd.meta.get("boot")
+        boot = fd.boot
         excluded: Any = fd.meta.get("excluded_samples")
-        if boot and boot.get("of", 1) > 1:
-            lines.append(f"{fd.source.path}: boot {boot['used']} of {boot['of']} used "
-                         f"({boot['start_s']:.1f}–{boot['stop_s']:.1f} s, {boot['reason']})")
+        if boot and boot.of > 1:
+            lines.append(f"{fd.source.path}: boot {boot.used} of {boot.of} used "
+                         f"({boot.start_s:.1f}–{boot.stop_s:.1f} s, {boot.reason})")
         if excluded:
             lines.append(f"{fd.source.path}: samples excluded, never fitted: "
                          + ", ".join(f"{k} {v}" for k, v in excluded.items()))

@@ -112,8 +112,8 @@ def test_boot_choice_is_reported() -> None:
     a, b = np.arange(500) * 0.01, np.arange(2000) * 0.01
     with pytest.warns(DataQualityWarning, match=r"only boot 2 of 2 .*the longest"):
         fd = align(_att_log(np.concatenate([a + 50, b])))
-    assert fd.meta["boot"]["used"] == 2 and fd.meta["boot"]["of"] == 2
-    assert "longest" in fd.meta["boot"]["reason"]
+    assert fd.boot is not None and (fd.boot.used, fd.boot.of) == (2, 2)
+    assert "longest" in fd.boot.reason
 
 
 @pytest.mark.slow

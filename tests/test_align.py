@@ -269,9 +269,9 @@ def test_systemid_mode_with_sidd_but_no_sids_is_a_run_that_injected_nothing(tmp_
     runs = sysid_runs(raw)
     assert len(runs) == 1, runs
     run = runs[0]
-    assert run["injected"] is False and run["settings_from"] == "PARM"
-    assert run["axis"] == 1 and run["magnitude"] == pytest.approx(0.15)
-    assert run["start_s"] == pytest.approx(enter) and run["stop_s"] - enter == pytest.approx(
+    assert run.injected is False and run.settings_from == "PARM"
+    assert run.axis == 1 and run.magnitude == pytest.approx(0.15)
+    assert run.start_s == pytest.approx(enter) and run.stop_s - enter == pytest.approx(
         9.6, abs=0.01)
 
 

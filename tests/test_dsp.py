@@ -221,3 +221,23 @@ def test_a_fit_without_the_compiled_recursion_is_the_same_fit(
     assert plain.params.keys() == compiled.params.keys()
     for name, value in compiled.params.items():
         assert plain.params[name] == pytest.approx(value, abs=1e-3 * compiled.stderr[name])
+
+
+def test_zero_order_hold_against_scipy_and_back() -> None:
+    """lti.c2d against scipy.signal.cont2discrete, and lti.d2c giving back the continuous
+    system, also with an integrator (a pole of the held system at 1: the block logarithm)."""
+    from scipy.signal import cont2discrete
+
+    rng = np.random.default_rng(11)
+    for n, m, integrator in ((1, 1, False), (1, 2, True), (3, 2, False), (3, 1, True)):
+        a = -np.diag(rng.uniform(1.0, 30.0, n)) + 0.1 * rng.standard_normal((n, n))
+        if integrator:
+            a[:, 0] = 0.0
+        b = rng.standard_normal((n, m))
+        phi, gamma = lti.c2d(a, b, 0.01)
+        want_phi, want_gamma, *_ = cont2discrete((a, b, np.eye(n), np.zeros((n, m))), 0.01)
+        np.testing.assert_allclose(phi, want_phi, rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(gamma, want_gamma, rtol=1e-12, atol=1e-14)
+        back_a, back_b = lti.d2c(phi, gamma, 0.01)
+        np.testing.assert_allclose(back_a, a, rtol=1e-8, atol=1e-8)
+        np.testing.assert_allclose(back_b, b, rtol=1e-8, atol=1e-8)

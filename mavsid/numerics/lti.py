@@ -35,14 +35,18 @@ import numpy as np
 __all__ = ["c2d", "d2c", "expm", "logm", "tf2ss"]
 
 
+def _pair(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A square matrix and its input matrix as floats, a 1-D input as one column."""
+    a = np.atleast_2d(np.asarray(a, float))
+    b = np.asarray(b, float)
+    return a, (b[:, None] if b.ndim == 1 else b)
+
+
 def c2d(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """Zero-order-hold discretisation of ``x' = A x + B u`` over ``dt``: ``(Φ, Γ)`` with
     ``Φ = e^{A dt}`` (n, n) and ``Γ = ∫₀^dt e^{A s} ds B`` (n, m)."""
-    a = np.atleast_2d(np.asarray(a, float))
-    n = a.shape[0]
-    b = np.asarray(b, float)
-    b = b[:, None] if b.ndim == 1 else b
-    m = b.shape[1]
+    a, b = _pair(a, b)
+    n, m = b.shape
     if n == 1:  # the exponential of [[A, B], [0, 0]] dt in closed form
         x = float(a[0, 0]) * dt
         e = np.eye(n + m)
@@ -60,16 +64,13 @@ def d2c(phi: np.ndarray, gamma: np.ndarray, dt: float) -> tuple[np.ndarray, np.n
 
     ``Φ`` must have a real logarithm (eigenvalues real and positive: a stable,
     non-oscillating discrete model's); the caller checks it."""
-    phi = np.atleast_2d(np.asarray(phi, float))
-    n = phi.shape[0]
-    gamma = np.asarray(gamma, float)
-    gamma = gamma[:, None] if gamma.ndim == 1 else gamma
+    phi, gamma = _pair(phi, gamma)
+    n, m = gamma.shape
     ac = logm(phi) / dt
     shifted = phi - np.eye(n)
     if np.linalg.cond(shifted) < 1e12:
         return ac, np.linalg.solve(shifted, ac @ gamma)
-    m = gamma.shape[1]  # (a pole at 1: the logarithm of [[Φ, Γ], [0, I]])
-    big = np.eye(n + m)
+    big = np.eye(n + m)  # (a pole at 1: the logarithm of [[Φ, Γ], [0, I]])
     big[:n, :n], big[:n, n:] = phi, gamma
     whole = logm(big) / dt
     return whole[:n, :n], whole[:n, n:]

@@ -66,8 +66,8 @@ if TYPE_CHECKING:
     from mavsid.pipeline_config import PipelineConfig
 
 __all__ = ["CHANGE_REL", "CHANGE_Z", "LOG_SUFFIXES", "SCHEMA_VERSION", "config_hash",
-           "find_logs", "log_task", "read_tables", "run_batch", "summary_lines", "trends",
-           "write_trends_html"]
+           "find_logs", "log_task", "read_tables", "run_batch", "summary_lines", "table_paths",
+           "trends", "write_trends_html"]
 
 SCHEMA_VERSION = 1
 LOG_SUFFIXES = (".bin", ".log", ".tlog", ".ulg")
@@ -234,7 +234,14 @@ def _peak_rss_mb() -> float | None:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def _paths(out: str | os.PathLike[str]) -> dict[str, str]:
+def table_paths(out: str | os.PathLike[str]) -> dict[str, str]:
+    """The three tables of a batch written to ``out`` (per axis, per log, per segment).
+
+    Examples
+    --------
+    >>> table_paths("results.parquet")["logs"]
+    'results.logs.parquet'
+    """
     o = os.fspath(out)
     stem = o[: -len(".parquet")] if o.endswith(".parquet") else o
     return {"axes": f"{stem}.parquet", "logs": f"{stem}.logs.parquet",
@@ -246,7 +253,7 @@ def read_tables(out: str | os.PathLike[str]) -> dict[str, pd.DataFrame]:
     import pandas as pd
 
     tables = {}
-    for kind, path in _paths(out).items():
+    for kind, path in table_paths(out).items():
         try:
             tables[kind] = pd.read_parquet(path) if os.path.exists(path) else pd.DataFrame()
         except (OSError, ValueError) as exc:
@@ -263,7 +270,7 @@ def read_tables(out: str | os.PathLike[str]) -> dict[str, pd.DataFrame]:
 def _write(out: str | os.PathLike[str], rows: Mapping[str, list[dict[str, Any]]]) -> None:
     import pandas as pd
 
-    for kind, path in _paths(out).items():
+    for kind, path in table_paths(out).items():
         frame = pd.DataFrame(rows[kind])
         with atomic_path(path) as tmp:
             frame.to_parquet(tmp, index=False)

@@ -855,11 +855,11 @@ def _add_batch(sub: argparse._SubParsersAction) -> None:
 
 
 def _batch(args: argparse.Namespace) -> int:
-    from mavsid.batch import _paths, run_batch, summary_lines, trends, write_trends_html
+    from mavsid.batch import run_batch, summary_lines, table_paths, trends, write_trends_html
 
     if not args.output.endswith(".parquet"):
         raise ConfigError(f"{args.output}: the results table must be a .parquet file")
-    outs = list(_paths(args.output).values())
+    outs = list(table_paths(args.output).values())
     check_outputs([*outs, args.report, args.rrd], args.inputs)
     if args.workers is not None and args.workers < 1:
         raise ConfigError(f"--workers {args.workers}: must be at least 1")

@@ -1094,7 +1094,7 @@ def _commanded(raw: RawLog, t: np.ndarray, boot: int = 0
     return out, source
 
 
-#: what ends a commanded attitude's source (``FlightData.meta["commanded_from"]``) when the
+#: what ends a commanded attitude's source (``FlightData.commanded_from``) when the
 #: pilot's sticks stand in for it
 STICK_SOURCE = "the pilot's stick"
 
@@ -1371,9 +1371,6 @@ def _align(raw: RawLog, preset: Preset | str | None, rate_hz: float | None,
     if injection is not None:
         meta["sysid_injection"] = injection
     commanded, commanded_from = _commanded(raw, t, boot.used - 1)
-    if commanded:
-        meta["commanded"] = commanded
-        meta["commanded_from"] = commanded_from
     return FlightData(
         time_s=t,
         states=x,
@@ -1394,6 +1391,8 @@ def _align(raw: RawLog, preset: Preset | str | None, rate_hz: float | None,
         firmware=raw.firmware,
         sysid_runs=sysid_runs(raw),
         boot=boot,
+        commanded=commanded,
+        commanded_from=commanded_from,
     )
 
 

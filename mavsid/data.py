@@ -347,6 +347,11 @@ class FlightData:
         The ArduPilot SYSTEMID runs alignment found.
     boot : Boot or None
         The boot alignment kept (None: not from alignment).
+    commanded : Mapping[str, numpy.ndarray]
+        The commanded attitude per axis on the grid (roll and pitch angles, rad; the yaw
+        heading's rate, rad/s; NaN outside its span).
+    commanded_from : Mapping[str, str]
+        Each commanded axis's source (``MESSAGE.field``).
     """
 
     time_s: np.ndarray
@@ -368,6 +373,8 @@ class FlightData:
     firmware: str | None = None
     sysid_runs: tuple[SysidRun, ...] = ()
     boot: Boot | None = None
+    commanded: Mapping[str, np.ndarray] = field(default_factory=dict)
+    commanded_from: Mapping[str, str] = field(default_factory=dict)
 
     def series(self, name: str) -> np.ndarray | None:
         """The state or input ``name`` on the grid; None when the flight has none.

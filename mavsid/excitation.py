@@ -351,9 +351,9 @@ def _axis(fd: FlightData, name: str, opts: ScanOptions, air: np.ndarray) -> _Axi
             y_floor = max(float(np.median(y_env[quiet])), 1e-9)
     inj = fd.meta.get("sysid_injection")
     injection = np.asarray(inj, dtype=float) if isinstance(inj, np.ndarray) else None
-    cmd = dict(fd.meta.get("commanded") or {}).get(name)  # type: ignore[call-overload]
+    cmd = fd.commanded.get(name)
     command = np.asarray(cmd, dtype=float) if isinstance(cmd, np.ndarray) else None
-    source = dict(fd.meta.get("commanded_from") or {}).get(name, "")  # type: ignore[call-overload]
+    source = fd.commanded_from.get(name, "")
     thrust = _col(fd, "u_thrust")
     if thrust is not None and not np.ptp(thrust) > 1e-6:
         thrust = None

@@ -837,7 +837,7 @@ class _InstrumentCheck:
 def _instrument_check(axis: str, flights: Sequence[FlightData],
                       segments: Sequence[Segment]) -> _InstrumentCheck | None:
     """An :class:`_InstrumentCheck` of ``segments`` (cut from ``flights``), with the flights'
-    commanded attitude (``meta["commanded"]``, from alignment) on their samples; None where
+    commanded attitude (``FlightData.commanded``, from alignment) on their samples; None where
     the logs have none for the axis."""
     from mavsid.align import STICK_SOURCE
 
@@ -846,11 +846,11 @@ def _instrument_check(axis: str, flights: Sequence[FlightData],
     for seg in segments:
         ref = None
         for fd in flights:
-            desired = dict(fd.meta.get("commanded") or {}).get(axis)  # type: ignore[call-overload]
+            desired = fd.commanded.get(axis)
             i = fd.index_of(seg) if desired is not None else None
-            if i is not None:
+            if desired is not None and i is not None:
                 ref = desired[i:i + len(seg)]
-                source = dict(fd.meta.get("commanded_from") or {}).get(axis, "")  # type: ignore[call-overload]
+                source = fd.commanded_from.get(axis, "")
                 sticks |= str(source).endswith(STICK_SOURCE)
                 break
         refs.append(ref)

@@ -688,8 +688,7 @@ def flight_response(flight: FlightData, raw: RawLog, axes: Sequence[str] = AXES
     from mavsid.loop.twin import twin_signals
 
     signals = twin_signals(flight, raw)
-    commanded = flight.meta.get("commanded")
-    cmd = commanded if isinstance(commanded, Mapping) else {}
+    cmd = flight.commanded
     if not signals.target and not cmd:
         from mavsid.autopilot.presets import DESIRED_CHANNELS, TARGET_CHANNELS
 
@@ -702,8 +701,7 @@ def flight_response(flight: FlightData, raw: RawLog, axes: Sequence[str] = AXES
     rates = native if isinstance(native, Mapping) else {}
     sources = flight.meta.get("sources")
     state_src = sources if isinstance(sources, Mapping) else {}
-    cmd_from = flight.meta.get("commanded_from")
-    cmd_src = cmd_from if isinstance(cmd_from, Mapping) else {}
+    cmd_src = flight.commanded_from
     grid = 1.0 / flight.dt
 
     def one(mask: np.ndarray) -> list[LoopResponse]:

@@ -352,7 +352,7 @@ def test_the_command_and_the_injection_come_from_the_boot_used():
         warnings.simplefilter("always")
         fd = align(raw)
     assert any("boot 1 of 2" in str(w.message) for w in caught)
-    cmd = fd.meta["commanded"]
+    cmd = fd.commanded
     np.testing.assert_allclose(cmd["roll"], np.radians(5 * np.sin(fd.time_s)), atol=1e-4)
     np.testing.assert_allclose(cmd["yaw"], 0.5, atol=1e-6)
     assert np.allclose(fd.meta["sysid_injection"], 1.0)
@@ -431,8 +431,8 @@ def test_a_tlogs_commanded_attitude_follows_the_simulated_pilots_sticks(tmp_path
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         fd = load_flight(str(path))
-    got = fd.meta["commanded"]["roll"]
-    assert fd.meta["commanded_from"]["roll"] == "RC_CHANNELS.chan1_raw, the pilot's stick"
+    got = fd.commanded["roll"]
+    assert fd.commanded_from["roll"] == "RC_CHANNELS.chan1_raw, the pilot's stick"
     want = np.interp(fd.time_s, flight.t_s, flight.desired[:, 0])
     ok = np.isfinite(got)
     assert ok.mean() > 0.9 and np.ptp(want) > 0.1

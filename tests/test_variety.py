@@ -863,7 +863,7 @@ def test_a_pilot_who_never_lets_go_of_the_stick_is_fitted(  # type: ignore[no-un
 @pytest.mark.parametrize(("layout", "name"), [(None, "yaw.bin"), ("px4-1.14", "yaw.ulg")])
 def test_the_commanded_yaw_is_the_rate_of_the_commanded_heading(tmp_path, layout: str | None,  # type: ignore[no-untyped-def]
                                                                 name: str) -> None:
-    """Alignment's commanded yaw (``meta["commanded"]["yaw"]``, rad/s) follows the
+    """Alignment's commanded yaw (``FlightData.commanded["yaw"]``, rad/s) follows the
     simulator's own heading target's rate, across the heading's wrap at 360 deg."""
     from mavsid.align import load_flight
     from mavsid.synthetic.run import scenario_from_options, simulate
@@ -876,13 +876,13 @@ def test_the_commanded_yaw_is_the_rate_of_the_commanded_heading(tmp_path, layout
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         fd = load_flight(str(path))
-    got = fd.meta["commanded"]["yaw"]
+    got = fd.commanded["yaw"]
     # (ATT is logged at 10 Hz in ArduCopter's default layout: its rate is the heading's
     # central differences over ±0.1 s, which scale a 1-Hz rate by sin(ωh)/(ωh) ≈ 0.9; the
     # reference is the simulator's heading target differenced at the same instants)
     from mavsid.readers import read_log
 
-    message = fd.meta["commanded_from"]["yaw"].split(".")[0]
+    message = fd.commanded_from["yaw"].split(".")[0]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         ts = read_log(path)[message].time_s

@@ -226,8 +226,8 @@ class Flight:
     mode : (n,) flight mode number. sid_time, sid_targ, sid_freq : (n,) SYSTEMID waveform clock,
     signal and frequency (NaN outside SYSTEMID).
     run_index : (n,) index of the SYSTEMID run, -1 outside.
-    pid_terms : (n, 3, 11) float32, per axis the values of its PID record (PIDR, PIDP, PIDY:
-    :data:`~mavsid.synthetic.controller.PID_LOG_FIELDS`; rates in rad/s).
+    pid_terms : (n, 3, 11) float32, per axis the values of its PID record (PIDR, PIDP,
+    PIDY, fields as in :data:`~mavsid.synthetic.controller.PID_LOG_FIELDS`; rates in rad/s).
     texts : ((loop index, text), ...) the firmware's messages on events (a SYSTEMID run
     stopped by its lean limit). disarm_index : the loop at which the vehicle disarmed after a
     crash (None: armed throughout).

@@ -91,7 +91,11 @@ def test_failed_fit_json_holds_the_verdicts_and_reasons(log: str, tmp_path: Path
     assert doc["axes"] == {} and set(doc["verdicts"]) == {"roll", "pitch", "yaw"}
     for verdict in doc["verdicts"].values():
         assert verdict["level"] == "not identified" and verdict["reasons"]
-    assert err.count("mavsid: error: ") == 1 and "nothing identifiable" in err
+    # the one error line on stderr is the document's error (nothing identifiable, or the
+    # one-line refusal of the flight's SYSTEMID run)
+    assert err.count("mavsid: error: ") == 1
+    assert f"mavsid: error: {doc['error']['message']}" in err
+    assert doc["error"]["type"] == "NoExcitationError"
 
 
 def test_json_in_a_fresh_process_on_a_failing_log() -> None:

@@ -211,26 +211,43 @@ class Flight:
 
     Attributes
     ----------
-    t_s : (n,) time since boot (s).
-    rate_true, gyro_raw, gyro : (n, 3) true, measured and filtered body rates (rad/s).
-    attitude, attitude_target : (n, 3) roll, pitch, yaw (rad).
-    desired : (n, 3) desired roll, pitch angle (rad) and yaw rate (rad/s) before input shaping:
-    pilot sticks plus any SYSTEMID angle injection.
-    rate_target : (n, 3) rate-controller targets (rad/s).
-    pid_out : (n, 3) rate-PID outputs, before any SYSTEMID mixer injection.
-    u : (n, 3) mixer inputs (RATE.ROut/POut/YOut). u_eff : what the motors realised.
-    throttle : (n,) collective (0-1). motors : (n, motors) motor demands (0-1), the frame's
-    motor order. pwm : (n, motors) (µs).
-    accel : (n, 3) specific force (m/s²). sticks : (n, 4) roll, pitch, throttle, yaw (-1..1;
-    throttle 0..1).
-    mode : (n,) flight mode number. sid_time, sid_targ, sid_freq : (n,) SYSTEMID waveform clock,
-    signal and frequency (NaN outside SYSTEMID).
-    run_index : (n,) index of the SYSTEMID run, -1 outside.
-    pid_terms : (n, 3, 11) float32, per axis the values of its PID record (PIDR, PIDP,
-    PIDY, fields as in :data:`~mavsid.synthetic.controller.PID_LOG_FIELDS`; rates in rad/s).
-    texts : ((loop index, text), ...) the firmware's messages on events (a SYSTEMID run
-    stopped by its lean limit). disarm_index : the loop at which the vehicle disarmed after a
-    crash (None: armed throughout).
+    t_s : numpy.ndarray
+        (n,) time since boot (s).
+    rate_true, gyro_raw, gyro : numpy.ndarray
+        (n, 3) true, measured and filtered body rates (rad/s).
+    attitude, attitude_target : numpy.ndarray
+        (n, 3) roll, pitch, yaw (rad).
+    desired : numpy.ndarray
+        (n, 3) desired roll, pitch angle (rad) and yaw rate (rad/s) before input shaping:
+        pilot sticks plus any SYSTEMID angle injection.
+    rate_target : numpy.ndarray
+        (n, 3) rate-controller targets (rad/s).
+    pid_out : numpy.ndarray
+        (n, 3) rate-PID outputs, before any SYSTEMID mixer injection.
+    u, u_eff : numpy.ndarray
+        (n, 3) mixer inputs (RATE.ROut/POut/YOut), and what the motors realised.
+    throttle : numpy.ndarray
+        (n,) collective (0-1).
+    motors, pwm : numpy.ndarray
+        (n, motors) motor demands (0-1) in the frame's motor order, and their PWM (µs).
+    accel : numpy.ndarray
+        (n, 3) specific force (m/s²).
+    sticks : numpy.ndarray
+        (n, 4) roll, pitch, throttle, yaw (-1..1; throttle 0..1).
+    mode : numpy.ndarray
+        (n,) flight mode number.
+    sid_time, sid_targ, sid_freq : numpy.ndarray
+        (n,) SYSTEMID waveform clock, signal and frequency (NaN outside SYSTEMID).
+    run_index : numpy.ndarray
+        (n,) index of the SYSTEMID run, -1 outside.
+    pid_terms : numpy.ndarray
+        (n, 3, 11) float32, per axis the values of its PID record (PIDR, PIDP, PIDY, fields
+        as in :data:`~mavsid.synthetic.controller.PID_LOG_FIELDS`; rates in rad/s).
+    texts : tuple
+        ((loop index, text), ...) the firmware's messages on events (a SYSTEMID run stopped
+        by its lean limit).
+    disarm_index : int or None
+        The loop at which the vehicle disarmed after a crash (None: armed throughout).
     """
 
     scenario: Scenario

@@ -31,7 +31,6 @@ from mavsid.cli_format import (
     change_line,
     error_document,
     flight_line,
-    json_ready,
     print_error,
     print_result,
     progress,
@@ -719,7 +718,7 @@ def _tune(args: argparse.Namespace) -> int:
     from mavsid.cli_format import format_tune
     from mavsid.loop.limits import Limits
     from mavsid.loop.tune import param_file, tune
-    from mavsid.pipeline import FIT_STAGES, _json_safe, fit
+    from mavsid.pipeline import FIT_STAGES, fit, json_safe
 
     cfg = _pipeline_config(args)
     with progress(args, 1 + len(FIT_STAGES) * len(cfg.axes) + 1) as step:
@@ -731,7 +730,7 @@ def _tune(args: argparse.Namespace) -> int:
         with atomic_path(args.params_out) as tmp, open(tmp, "w", encoding="utf-8") as f:
             f.write(text)
     if args.json:
-        print(json.dumps({"axes": _json_safe(report), "log": args.log,
+        print(json.dumps({"axes": json_safe(report), "log": args.log,
                           "target_pm_deg": args.target_pm, "max_step": args.max_step,
                           "params_out": args.params_out}))
     else:
@@ -762,6 +761,7 @@ def _response(args: argparse.Namespace) -> int:
     import json
 
     check_outputs([args.rrd, args.report], args.logs)
+    from mavsid.pipeline import json_safe
     from mavsid.response import FlightResponse, read_response
 
     cfg = _pipeline_config(args)
@@ -782,7 +782,7 @@ def _response(args: argparse.Namespace) -> int:
                 docs.append({"log": log, "error": json.loads(error_document(exc))["error"]})
                 continue
             found.append(got)
-            docs.append(json_ready(got.to_dict()))
+            docs.append(json_safe(got.to_dict()))
         written = _write_response_outputs(args, found, step) if found else []
     code = 0 if found and not errors else 1
     if args.json:

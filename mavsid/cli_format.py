@@ -23,7 +23,7 @@ if TYPE_CHECKING:
     from mavsid.response import FlightResponse, LoopResponse
 
 __all__ = ["change_line", "error_document", "figure", "flight_line", "format_loop",
-           "format_responses", "format_tune", "gain_table", "json_ready", "limit_table",
+           "format_responses", "format_tune", "gain_table", "limit_table",
            "print_error", "print_result", "progress", "readers_build", "simulate_command", "stages",
            "value_text", "warning_text"]
 
@@ -298,17 +298,6 @@ def progress(args: argparse.Namespace, total: float) -> Iterator[Callable[..., N
     finally:
         warnings.showwarning = previous
         bar.close()
-
-
-def json_ready(doc: Any) -> Any:
-    """``doc`` with every non-finite float None (JSON has no NaN)."""
-    if isinstance(doc, dict):
-        return {k: json_ready(v) for k, v in doc.items()}
-    if isinstance(doc, (list, tuple)):
-        return [json_ready(v) for v in doc]
-    if isinstance(doc, float) and not math.isfinite(doc):
-        return None
-    return doc
 
 
 def error_document(exc: BaseException, kind: str | None = None) -> str:

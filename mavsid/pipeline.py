@@ -58,6 +58,7 @@ __all__ = [
     "find_windows",
     "fit",
     "format_result",
+    "json_safe",
     "load_config",
     "load_models",
     "split_segments",
@@ -111,7 +112,7 @@ class AxisFit:
         stderr = getattr(self.model, "stderr", {}) or {}
         units = getattr(self.model, "units", {}) or {}
         prov = dict(getattr(self.model, "provenance", {}) or {})
-        return _json_safe(
+        return json_safe(
             {
                 "output": self.output,
                 "estimator": self.estimator,
@@ -228,7 +229,7 @@ class FitResult:
             "logs": list(self.logs),
             "presets": sorted({fd.preset for fd in self.flights}),
             "pipeline": self.config.name,
-            "data": [_json_safe({"log": fd.source.path,
+            "data": [json_safe({"log": fd.source.path,
                                  "boot": fd.boot.to_dict() if fd.boot else None,
                                  "excluded_samples": fd.meta.get("excluded_samples", {})})
                      for fd in self.flights],
@@ -242,14 +243,20 @@ class FitResult:
         }
 
 
-def _json_safe(x: Any) -> Any:
-    """NaN/inf -> None, numpy scalars -> Python, recursively."""
+def json_safe(x: Any) -> Any:
+    """``x`` ready for JSON: NaN/inf -> None, numpy scalars and arrays -> Python, recursively.
+
+    Examples
+    --------
+    >>> json_safe({"a": np.float64("nan"), "b": np.arange(2), "c": (1.5, np.int64(3))})
+    {'a': None, 'b': [0, 1], 'c': [1.5, 3]}
+    """
     if isinstance(x, Mapping):
-        return {str(k): _json_safe(v) for k, v in x.items()}
+        return {str(k): json_safe(v) for k, v in x.items()}
     if isinstance(x, list | tuple):
-        return [_json_safe(v) for v in x]
+        return [json_safe(v) for v in x]
     if isinstance(x, np.ndarray):
-        return _json_safe(x.tolist())
+        return json_safe(x.tolist())
     if isinstance(x, bool | np.bool_):
         return bool(x)
     if isinstance(x, int | np.integer):

@@ -27,8 +27,9 @@ from mavsid.errors import (
 
 if TYPE_CHECKING:  # (served lazily below; the type checker sees them here)
     from mavsid.data import FlightData, MessageTable, ModeChange, RawLog, Segment, SourceInfo
-    from mavsid.estimators.api import RegressionResult, identify, regress
+    from mavsid.estimators.identification import identify
     from mavsid.estimators.model import Model, load_model
+    from mavsid.estimators.regression import RegressionResult, regress
     from mavsid.frequency_fit import PlantTF, identify_frequency
     from mavsid.readers import read_log
 
@@ -37,8 +38,8 @@ __version__ = "0.1.0"
 #: Names served from their modules on first use: the data types and the readers import numpy,
 #: the estimators scipy; ``mavsid --help`` and ``--version`` pay for neither.
 _LAZY = {"Model": "estimators.model", "load_model": "estimators.model",
-         "RegressionResult": "estimators.api", "identify": "estimators.api",
-         "regress": "estimators.api", "read_log": "readers",
+         "RegressionResult": "estimators.regression", "regress": "estimators.regression",
+         "identify": "estimators.identification", "read_log": "readers",
          "identify_frequency": "frequency_fit", "PlantTF": "frequency_fit",
          **dict.fromkeys(("FlightData", "MessageTable", "ModeChange", "RawLog", "Segment",
                           "SourceInfo"), "data")}

@@ -494,9 +494,9 @@ def test_every_parameter_is_documented(func):
     import inspect
     import re
 
-    from mavsid.estimators import api
+    import mavsid.estimators
 
-    f = getattr(api, func)
+    f = getattr(mavsid.estimators, func)
     doc = inspect.getdoc(f) or ""
     section = doc.split("Parameters\n----------\n", 1)[1].split("\n\nReturns", 1)[0]
     entries = set()

@@ -158,7 +158,7 @@ def test_the_library_fits_on_one_blas_thread_and_gives_the_callers_back(
 
     from mavsid import pipeline
     from mavsid.align import load_flight
-    from mavsid.estimators import api
+    from mavsid.estimators import axis_fit, identification, regression
     from mavsid.excitation import find_segments, select_segments
 
     for v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
@@ -181,23 +181,25 @@ def test_the_library_fits_on_one_blas_thread_and_gives_the_callers_back(
         pipeline.validate_logs({"roll": result.axes["roll"].model}, [log],
                                progress=lambda stage: seen.append(_blas_threads()))
         assert kept()
-        original, original_solve = api.identify_segments, api.solve
+        original, original_solve = identification.identify_segments, regression.solve
 
         def spy(*args: object, **kwargs: object) -> object:
             seen.append(_blas_threads())
             return original(*args, **kwargs)  # type: ignore[arg-type]
 
-        monkeypatch.setattr(api, "identify_segments", spy)
-        monkeypatch.setattr(api, "solve", lambda *a, **k: (seen.append(_blas_threads()),
-                                                              original_solve(*a, **k))[1])
+        monkeypatch.setattr(axis_fit, "identify_segments", spy)
+        monkeypatch.setattr(identification, "identify_segments", spy)
+        monkeypatch.setattr(regression, "solve", lambda *a, **k: (
+            seen.append(_blas_threads()), original_solve(*a, **k))[1])
         flight = load_flight(log)
-        api.fit_axis(select_segments(flight, reports=find_segments(flight, "roll")), "roll")
+        axis_fit.fit_axis(select_segments(flight, reports=find_segments(flight, "roll")),
+                          "roll")
         assert kept()
         seg = select_segments(flight, reports=find_segments(flight, "roll"))[0]
         x = seg.states[:, [seg.state_names.index("p")]]
         u = seg.inputs[:, [seg.input_names.index("u_roll")]]
-        api.identify(x, u, seg.dt)
-        api.regress(np.column_stack([x[:-1], u[:-1]]), x[1:, 0])
+        identification.identify(x, u, seg.dt)
+        regression.regress(np.column_stack([x[:-1], u[:-1]]), x[1:, 0])
         assert kept()
     assert len(seen) > 5 and all({k: t[k] for k in inside} == inside for t in seen), seen
 

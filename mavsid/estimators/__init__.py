@@ -3,9 +3,11 @@
 One regression core (:mod:`._base`) on Gram matrices; rows from segments
 (:mod:`.regressors`); SINDy-style libraries (:mod:`.library`); solvers
 (:mod:`.least_squares`, :mod:`.l1`); output-error refinement (:mod:`.output_error`); the
-fitted :class:`Model` (:mod:`.model`); structure search (:mod:`.select`); the array API
-:func:`identify` and :func:`regress`, and the log path's per-axis :func:`fit_axis` built on
-it (:mod:`.api`).
+fitted :class:`Model` (:mod:`.model`); structure search (:mod:`.select`); arrays in
+(:func:`records`, :mod:`.arrays`); the identification core :func:`identify_segments` and the
+array API :func:`identify` on it (:mod:`.identification`); the log path's per-axis
+:func:`fit_axis` on the same core (:mod:`.axis_fit`); equation-error :func:`regress`
+(:mod:`.regression`).
 
 Examples
 --------
@@ -16,18 +18,14 @@ Examples
 
 from mavsid.estimators import library
 from mavsid.estimators._base import Estimator, Gram, check_identifiable, rollout_fit, solve
-from mavsid.estimators.api import (
-    RegressionResult,
-    fit_axis,
-    identify,
-    identify_segments,
-    records,
-    regress,
-)
+from mavsid.estimators.arrays import records
+from mavsid.estimators.axis_fit import fit_axis
+from mavsid.estimators.identification import identify, identify_segments
 from mavsid.estimators.l1 import ElasticNet, Lasso
 from mavsid.estimators.least_squares import STLSQ, LeastSquares, Ridge
 from mavsid.estimators.model import Model, load_model
 from mavsid.estimators.output_error import refine_output_error
+from mavsid.estimators.regression import RegressionResult, regress
 from mavsid.estimators.regressors import (
     InputFilter,
     Regression,

@@ -50,8 +50,11 @@ __all__ = [
     "Gram",
     "block_grams",
     "check_identifiable",
+    "collinear",
+    "column_scales",
     "hac_covariance",
     "param_names",
+    "penalised",
     "rollout_fit",
     "solve",
 ]
@@ -97,16 +100,39 @@ def block_grams(reg: Regression) -> list[Gram]:
 
 def param_names(structure: Structure) -> list[list[str]]:
     """``names[j][i]``: the parameter name of feature ``j`` for output ``i``."""
-    m = Model(structure.outputs, structure.inputs, structure.features,
-              np.zeros((len(structure.features), len(structure.outputs))), 1.0,
-              continuous=structure.continuous)
+    m = Model.of(structure, np.zeros((len(structure.features), len(structure.outputs))), 1.0)
     return [[m._name(o, f)[0] for o in structure.outputs] for f in structure.features]
 
 
-def _scales(g: Gram) -> np.ndarray:
+def column_scales(g: Gram) -> np.ndarray:
     """Column RMS (1 for an all-zero column)."""
     s = np.sqrt(np.clip(np.diag(g.zz), 0, None) / max(g.n, 1))
     return np.where(s > 0, s, 1.0)
+
+
+def penalised(structure: Structure) -> np.ndarray:
+    """Which features a penalty acts on: every one but the bias (bool, per feature)."""
+    return np.array([f != library.BIAS for f in structure.features])
+
+
+def collinear(corr: np.ndarray, max_condition: float) -> tuple[float, list[int]]:
+    """The condition number of a correlation matrix and, when it exceeds ``max_condition``,
+    the columns that are collinear (the large weights of its smallest eigenvector; else
+    none).
+
+    Examples
+    --------
+    >>> cond, cols = collinear(np.array([[1.0, 1.0, 0.0], [1.0, 1.0, 0.0], [0.0, 0.0, 1.0]]),
+    ...                        1e10)
+    >>> cond > 1e10, cols
+    (True, [0, 1])
+    """
+    lam, vec = np.linalg.eigh(corr)
+    cond = float(lam[-1] / max(lam[0], 1e-300))
+    if not cond > max_condition:
+        return cond, []
+    w = np.abs(vec[:, 0])
+    return cond, [int(j) for j in np.flatnonzero(w > 0.2 * w.max())]
 
 
 def check_identifiable(reg: Regression, g: Gram, max_condition: float = 1e10) -> None:
@@ -153,11 +179,9 @@ def check_identifiable(reg: Regression, g: Gram, max_condition: float = 1e10) ->
         keep = list(range(p))
     if len(keep) < 2:
         return
-    lam, vec = np.linalg.eigh(corr)
-    cond = lam[-1] / max(lam[0], 1e-300)
-    if cond > max_condition:
-        v = np.abs(vec[:, 0])
-        js = [keep[i] for i in np.flatnonzero(v > 0.2 * v.max())]
+    cond, cols = collinear(corr, max_condition)
+    if cols:
+        js = [keep[i] for i in cols]
         feats = " and ".join(st.features[j] for j in js)
         raise NoExcitationError(
             f"{label(js)} unidentifiable: {feats} are collinear in the selected segments "
@@ -184,7 +208,7 @@ def solve(g: Gram, ridge: float = 0.0, penalize: np.ndarray | None = None,
     coef = np.zeros((p, g.zy.shape[1]))
     if not act.any():
         return coef
-    s = _scales(g)[act] if standardize else np.ones(int(act.sum()))
+    s = column_scales(g)[act] if standardize else np.ones(int(act.sum()))
     a = g.zz[np.ix_(act, act)] / np.outer(s, s)
     b = g.zy[act] / s[:, None]
     if ridge > 0:
@@ -381,8 +405,8 @@ class Estimator:
                 continue
             a = g.zz[np.ix_(act, act)]
             if alpha > 0 and self.penalised:
-                s = _scales(g)[act]
-                pen = np.array([f != library.BIAS for f in structure.features])[act]
+                s = column_scales(g)[act]
+                pen = penalised(structure)[act]
                 a = a + alpha * g.n * np.diag(s**2 * pen)
             out.append(np.linalg.pinv(a, hermitian=True))
         return out
@@ -440,11 +464,8 @@ class Estimator:
         self.sigma_ = sigma
         self.hac_lags_ = lags
         self.n_rows_ = reg.n
-        self.model_ = Model(
-            state_names=st.outputs, input_names=st.inputs, features=st.features, coef=coef,
-            dt=float(segments[0].dt), delay=st.delay, continuous=st.continuous,
-            filters=st.filters, delay_frac=st.delay_frac, covariance=cov, coef_stderr=se,
-            sigma=sigma,
+        self.model_ = Model.of(
+            st, coef, float(segments[0].dt), covariance=cov, coef_stderr=se, sigma=sigma,
             provenance=provenance(
                 segments, estimator=self.name, alpha_selected=alpha, rows=reg.n,
                 blocks=len(reg.blocks), hac_lags=lags, derivative=st.derivative
@@ -491,9 +512,7 @@ class Estimator:
                 except (SolverError, np.linalg.LinAlgError):
                     scores.append(-np.inf)
                     continue
-                m = Model(st.outputs, st.inputs, st.features, coef, subs[i].dt,
-                          delay=st.delay, continuous=st.continuous, filters=st.filters,
-                          delay_frac=st.delay_frac)
+                m = Model.of(st, coef, subs[i].dt)
                 with np.errstate(all="ignore"):
                     scores.append(rollout_fit(m, subs[i], self.cv_horizon))
             score = float(np.mean(scores))

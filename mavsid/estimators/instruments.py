@@ -12,8 +12,8 @@ filters and delay,
 
 (the *instrumental-variable* estimate, Söderström & Stoica, *System Identification*, ch. 8).
 It is used as the frequency response against an injection is: its difference to the fit
-joins the fit's covariance (:func:`mavsid.estimators.api.identify_segments`), so that a fit
-the feedback biased reports a σ that covers it.
+joins the fit's covariance (:func:`mavsid.estimators.identification.identify_segments`), so
+that a fit the feedback biased reports a σ that covers it.
 
 Examples
 --------

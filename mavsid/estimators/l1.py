@@ -30,8 +30,7 @@ from typing import Any
 import numpy as np
 
 from mavsid.errors import ConfigError, SolverError
-from mavsid.estimators import library
-from mavsid.estimators._base import Estimator, Gram, _scales, param_names
+from mavsid.estimators._base import Estimator, Gram, column_scales, param_names, penalised
 from mavsid.estimators.regressors import Structure
 
 __all__ = ["ElasticNet", "Lasso", "gram_sqrt"]
@@ -131,13 +130,13 @@ class ElasticNet(Estimator):
         import cvxpy as cp
 
         p, m = g.zy.shape
-        s = _scales(g)
+        s = column_scales(g)
         zz = g.zz / np.outer(s, s) / g.n
         zy = g.zy / s[:, None] / g.n
         r, q = gram_sqrt(zz, zy)
         r_full, q_full = np.zeros((p, p)), np.zeros((p, m))
         r_full[: r.shape[0]], q_full[: q.shape[0]] = r, q
-        pen = np.array([f != library.BIAS for f in structure.features], float)
+        pen = penalised(structure).astype(float)
         lo, hi = self._constraints(structure)
         lo_s, hi_s = lo * s[:, None], hi * s[:, None]
         lo_mask, hi_mask = np.isfinite(lo_s), np.isfinite(hi_s)

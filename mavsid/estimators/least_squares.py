@@ -24,16 +24,10 @@ from collections.abc import Sequence
 import numpy as np
 
 from mavsid.errors import ConfigError
-from mavsid.estimators import library
-from mavsid.estimators._base import Estimator, Gram, _scales, solve
+from mavsid.estimators._base import Estimator, Gram, column_scales, penalised, solve
 from mavsid.estimators.regressors import Structure
 
 __all__ = ["STLSQ", "LeastSquares", "Ridge", "thresholded"]
-
-
-def _penalty_mask(structure: Structure) -> np.ndarray:
-    """Every feature but the bias is penalised."""
-    return np.array([f != library.BIAS for f in structure.features])
 
 
 class LeastSquares(Estimator):
@@ -63,7 +57,7 @@ class Ridge(Estimator):
         super().__init__(structure, alpha=alpha, **kwargs)  # type: ignore[arg-type]
 
     def _solve(self, g: Gram, alpha: float, structure: Structure) -> np.ndarray:
-        return solve(g, ridge=alpha, penalize=_penalty_mask(structure))
+        return solve(g, ridge=alpha, penalize=penalised(structure))
 
 
 class STLSQ(Estimator):
@@ -97,7 +91,7 @@ class STLSQ(Estimator):
         if unknown:
             raise ConfigError(f"STLSQ keep= names unknown features {sorted(unknown)}")
         keep = np.array([f in self.keep for f in structure.features])
-        return thresholded(g, self.threshold, keep, alpha, _penalty_mask(structure),
+        return thresholded(g, self.threshold, keep, alpha, penalised(structure),
                            self.max_iter)
 
 
@@ -116,7 +110,7 @@ def thresholded(g: Gram, threshold: float, keep: np.ndarray | None = None, alpha
         Zero exactly where a term was removed.
     """
     p, m = g.zy.shape
-    s = _scales(g)
+    s = column_scales(g)
     ys = np.sqrt(np.clip(np.diag(g.yy), 0, None) / max(g.n, 1))
     ys = np.where(ys > 0, ys, 1.0)
     keep = np.zeros(p, bool) if keep is None else np.asarray(keep, bool)

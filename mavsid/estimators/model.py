@@ -338,6 +338,22 @@ class Model:
 
     # ----------------------------------------------------------------- structure
 
+    @classmethod
+    def of(cls, structure: Structure, coef: np.ndarray, dt: float, **fields: Any) -> Model:
+        """The model of ``structure`` (its names, delay, filters, time base) with ``coef``;
+        ``fields``: the others (``covariance``, ``provenance``...).
+
+        Examples
+        --------
+        >>> st = Structure(("p",), ("p", "u_roll"), delay=2)
+        >>> m = Model.of(st, np.array([[0.9], [0.5]]), 0.01)
+        >>> m.input_names, m.delay, m.structure == st
+        (('u_roll',), 2, True)
+        """
+        return cls(structure.outputs, structure.inputs, structure.features, coef, dt,
+                   delay=structure.delay, continuous=structure.continuous,
+                   filters=structure.filters, delay_frac=structure.delay_frac, **fields)
+
     @property
     def structure(self) -> Structure:
         """The regression structure this model evaluates."""

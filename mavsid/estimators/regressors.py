@@ -52,6 +52,7 @@ __all__ = [
     "filter_inputs",
     "filters_from_params",
     "rows",
+    "segment_column",
     "stack",
     "variables",
 ]
@@ -294,7 +295,7 @@ class Regression:
         return int(self.z.shape[0])
 
 
-def _column(segment: Segment, name: str) -> tuple[np.ndarray, bool]:
+def segment_column(segment: Segment, name: str) -> tuple[np.ndarray, bool]:
     """A segment column by name and whether it is an input."""
     if name in segment.input_names:
         return segment.inputs[:, segment.input_names.index(name)], True
@@ -337,14 +338,14 @@ def variables(
     if ins and filtered is not None and all(v in filtered for v in ins):
         u = np.column_stack([filtered[v] for v in ins]).astype(float)
     elif ins:
-        u = np.column_stack([_column(segment, v)[0] for v in ins]).astype(float)
+        u = np.column_stack([segment_column(segment, v)[0] for v in ins]).astype(float)
         u = filter_inputs(u, segment.dt, structure.filters)
     if ins:
         u = _shift(u, structure.delay, structure.delay_frac)
         out.update({v: u[:, i] for i, v in enumerate(ins)})
     for v in names:
         if v not in out:
-            out[v] = np.asarray(_column(segment, v)[0], dtype=float)
+            out[v] = np.asarray(segment_column(segment, v)[0], dtype=float)
     return out
 
 
@@ -414,7 +415,7 @@ def rows(segment: Segment, structure: Structure) -> tuple[np.ndarray, np.ndarray
         return np.empty((0, len(structure.features))), np.empty((0, len(structure.outputs)))
     var = variables(segment, structure)
     z = library.evaluate(structure.features, var)[lead : n - trail]
-    x = np.column_stack([_column(segment, o)[0] for o in structure.outputs]).astype(float)
+    x = np.column_stack([segment_column(segment, o)[0] for o in structure.outputs]).astype(float)
     if structure.continuous:
         y = derivative(x, segment.dt, structure.derivative, structure.window,
                        structure.tv_weight)[lead : n - trail]

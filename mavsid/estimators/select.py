@@ -1,15 +1,15 @@
 """Structure from data: which input lag and which delay, chosen by the one-step residual.
 
-The search is what :func:`~mavsid.estimators.api.identify` (``delay="search"``) and the log
-path's :func:`~mavsid.estimators.api.fit_axis` run before fitting:
+The search is what :func:`~mavsid.estimators.identification.identify` (``delay="search"``)
+and the log path's :func:`~mavsid.estimators.axis_fit.fit_axis` run before fitting:
 
 * a first-order input lag (motor and ESC response, in no log parameter) and the input delay
   ``d`` (whole samples, then fractions of a sample around the best) are chosen together;
 * each candidate is scored by the mean squared one-step residual of a least-squares fit;
 * parsimony: the simplest (lag, delay) within ``structure_tol`` of the best wins;
-* on noisy data (see :data:`ONE_STEP_NOISE`) :func:`~mavsid.estimators.api.identify_segments`
-  then re-chooses the lag by the output-error cost of each lag's best delay
-  (:attr:`StructureChoice.by_lag`).
+* on noisy data (see :data:`ONE_STEP_NOISE`)
+  :func:`~mavsid.estimators.identification.identify_segments` then re-chooses the lag by the
+  output-error cost of each lag's best delay (:attr:`StructureChoice.by_lag`).
 
 Cost: the candidates share their rows. For a linear discrete-time structure the inputs are
 filtered once per lag (the Butterworth designs are cached), every delayed copy of them is
@@ -61,7 +61,13 @@ from mavsid.estimators import library
 from mavsid.estimators._base import Estimator, Gram, block_grams, check_identifiable, solve
 from mavsid.estimators.l1 import ElasticNet, Lasso
 from mavsid.estimators.least_squares import STLSQ, LeastSquares, Ridge
-from mavsid.estimators.regressors import InputFilter, Structure, _column, filter_inputs, stack
+from mavsid.estimators.regressors import (
+    InputFilter,
+    Structure,
+    filter_inputs,
+    segment_column,
+    stack,
+)
 
 __all__ = [
     "AXES",
@@ -198,13 +204,13 @@ class _StaticRows:
             w = np.empty((n_stat, n - 1))
             c = 0
             for v in self.others:
-                w[c] = np.asarray(_column(seg, v)[0], float)[:-1]
+                w[c] = np.asarray(segment_column(seg, v)[0], float)[:-1]
                 c += 1
             if self.has_bias:
                 w[c] = 1.0
                 c += 1
             for v in self.outputs:
-                w[c] = np.asarray(_column(seg, v)[0], float)[1:]
+                w[c] = np.asarray(segment_column(seg, v)[0], float)[1:]
                 c += 1
             if not np.isfinite(w).all():
                 self.rows.append(None)
@@ -271,7 +277,7 @@ class DelayScan:
             if inputs is not None:
                 u = inputs[si]
             elif ins:
-                u = filter_inputs(np.column_stack([_column(seg, v)[0] for v in ins])
+                u = filter_inputs(np.column_stack([segment_column(seg, v)[0] for v in ins])
                                   .astype(float), seg.dt, st.filters)
             else:
                 u = np.empty((n, 0))
@@ -576,7 +582,7 @@ def search_structure(
     ins = [f for f in structure.features if f in structure.inputs]
     base: list[np.ndarray] | None = None
     if ins:
-        base = [filter_inputs(np.column_stack([_column(s, v)[0] for v in ins]).astype(float),
+        base = [filter_inputs(np.column_stack([segment_column(s, v)[0] for v in ins]).astype(float),
                               s.dt, structure.filters) for s in segments]
     # the regressors no lag changes (states, bias, outputs), built once for every lag
     static = None

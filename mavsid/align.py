@@ -18,7 +18,7 @@ log's content unless given) and
   multicopter reports (a body rate beyond ``MAX_RATE_RAD_S``, roll or pitch beyond ±π, yaw
   outside −π..2π) and samples whose time stamp lies far off their neighbours' (a
   far-future ``TimeUS`` or ``time_boot_ms``): none is interpolated over (the grid has a gap
-  there), each is counted in ``FlightData.meta["excluded_samples"]`` (channel -> count) and
+  there), each is counted in ``FlightData.channels`` (``excluded_samples``: channel -> count) and
   warned about once (:class:`~mavsid.errors.DataQualityWarning`);
 - never builds a grid larger than the samples justify: points are laid only where every
   channel has data, and at most ``MAX_GRID_PER_SAMPLE`` points per sample of the densest
@@ -29,12 +29,13 @@ log's content unless given) and
 - warns (:class:`~mavsid.errors.DataQualityWarning`) when an input is logged too slowly
   for attitude dynamics (below ``min_input_rate_hz``, e.g. 10 Hz RCOU).
 
-``FlightData.meta`` holds the native rate of every channel, the mixer used, the samples
-excluded (``excluded_samples``: channel -> count of non-finite, impossible or mistimed
-samples); ``FlightData.boot`` which boot was used (:class:`~mavsid.data.Boot`),
-``FlightData.sysid_runs`` the ArduPilot SYSTEMID runs (from SIDS/SIDD or, in
-a .tlog, from the SYSTEMID mode and the SID_* parameter values sent before it); the
-platform's names ``autopilot``, ``vehicle`` and ``firmware`` are fields too.
+``FlightData.channels`` holds each channel's source, native rate, unit read in and the
+samples excluded (non-finite, impossible or mistimed), ``FlightData.mixer`` the mixer used,
+``FlightData.sysid_injection`` SYSTEMID's logged waveform; ``FlightData.boot`` which boot
+was used (:class:`~mavsid.data.Boot`), ``FlightData.sysid_runs`` the ArduPilot SYSTEMID
+runs (from SIDS/SIDD or, in a .tlog, from the SYSTEMID mode and the SID_* parameter values
+sent before it); the platform's names ``autopilot``, ``vehicle`` and ``firmware`` are
+fields too.
 
 Examples
 --------
@@ -95,7 +96,7 @@ from mavsid.channels import (
     servo_inputs,
     unit_origin,
 )
-from mavsid.data import Boot, FlightData, MessageTable, RawLog, SysidRun
+from mavsid.data import Boot, ChannelOrigin, FlightData, MessageTable, RawLog, SysidRun
 from mavsid.errors import (
     ConfigError,
     DataQualityWarning,
@@ -1348,28 +1349,14 @@ def _align(raw: RawLog, preset: Preset | str | None, rate_hz: float | None,
             )
     input_names = tuple(s.name for s in inputs)
     flags, flag_notes = _flags(raw, t, u, input_names)
-    meta: dict[str, object] = {
-        "preset_description": preset.description,
-        "native_rate_hz": {s.name: round(rates[s.name], 3) for s in series},
-        "sources": {s.name: s.source for s in series},
-        "units_from": {s.name: s.unit_from for s in series if s.unit_from},
-        # scales inferred for whole messages (ArduCopter 3.4-dev RATE): readers of the same
-        # message's other fields (the twin's RATE.RDes targets) apply them too
-        "scales": {"RATE": _CENTI} if any(s.source.endswith("(centideg/s, inferred)")
-                                            for s in series)
-        # ArduPlane's PIDR/PIDP/PIDY Tar and Act are deg/s (Copter's rad/s)
-        else dict.fromkeys(("PIDR", "PIDP", "PIDY"), np.pi / 180.0)
-        if vehicle_kind(raw) == "plane" else {},
-        "excluded_samples": {name: sum(why.values()) for name, why in excluded.items()},
-        "excluded_reasons": excluded,
-        "mode_names": {m.mode: m.name for m in raw.modes if m.name},
-        "flag_notes": flag_notes,
-    }
-    if mixer is not None:
-        meta["mixer"] = mixer
-    injection = _sysid_injection(raw, t, boot.used - 1)
-    if injection is not None:
-        meta["sysid_injection"] = injection
+    channels = {s.name: ChannelOrigin(s.source, round(rates[s.name], 3), s.unit_from,
+                                      dict(s.excluded)) for s in series}
+    # scales inferred for whole messages (ArduCopter 3.4-dev RATE): readers of the same
+    # message's other fields (the twin's RATE.RDes targets) apply them too
+    scales = ({"RATE": _CENTI} if any(s.source.endswith("(centideg/s, inferred)") for s in series)
+              # ArduPlane's PIDR/PIDP/PIDY Tar and Act are deg/s (Copter's rad/s)
+              else dict.fromkeys(("PIDR", "PIDP", "PIDY"), np.pi / 180.0)
+              if vehicle_kind(raw) == "plane" else {})
     commanded, commanded_from = _commanded(raw, t, boot.used - 1)
     return FlightData(
         time_s=t,
@@ -1385,7 +1372,6 @@ def _align(raw: RawLog, preset: Preset | str | None, rate_hz: float | None,
         source=raw.source,
         preset=preset.name,
         params=dict(raw.params),
-        meta=meta,
         autopilot=raw.autopilot,
         vehicle=raw.vehicle,
         firmware=raw.firmware,
@@ -1393,6 +1379,12 @@ def _align(raw: RawLog, preset: Preset | str | None, rate_hz: float | None,
         boot=boot,
         commanded=commanded,
         commanded_from=commanded_from,
+        channels=channels,
+        mixer=mixer,
+        scales=scales,
+        mode_names={m.mode: m.name for m in raw.modes if m.name},
+        flag_notes=flag_notes,
+        sysid_injection=_sysid_injection(raw, t, boot.used - 1),
     )
 
 

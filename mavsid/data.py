@@ -26,6 +26,7 @@ from mavsid.errors import LogFormatError, MissingMessageError
 __all__ = [
     "LOG_FORMATS",
     "Boot",
+    "ChannelOrigin",
     "FlightData",
     "MessageTable",
     "ModeChange",
@@ -314,6 +315,48 @@ class SysidRun:
 
 
 @dataclass(frozen=True)
+class ChannelOrigin:
+    """Where one aligned state or input came from: its source, native rate and unit.
+
+    Parameters
+    ----------
+    source : str
+        The field it was read from (``MESSAGE.field``), or how it was made (e.g.
+        ``"RCOU (quad-x mixer)"``).
+    native_rate_hz : float
+        Its own sample rate in the log (Hz, rounded to 3 decimals; 0 when it has a single
+        sample interval of 0).
+    unit_from : str
+        The unit the field was read in and where that came from (declared by the log, the
+        preset's, inferred from evidence); empty when not known.
+    excluded : Mapping[str, int]
+        Samples excluded as never measured or mistimed: why -> how many.
+
+    Examples
+    --------
+    >>> ch = ChannelOrigin("RATE.R", 400.0, "deg/s, declared by the log", {"non-finite": 2})
+    >>> ch.excluded_count, ch.message
+    (2, 'RATE')
+    """
+
+    source: str
+    native_rate_hz: float
+    unit_from: str = ""
+    excluded: Mapping[str, int] = field(default_factory=dict)
+
+    @property
+    def excluded_count(self) -> int:
+        """How many samples were excluded, for any reason."""
+        return sum(self.excluded.values())
+
+    @property
+    def message(self) -> str:
+        """The message (or topic) the channel was read from: ``source`` before its first dot
+        or space."""
+        return self.source.split(".")[0].split(" ")[0]
+
+
+@dataclass(frozen=True)
 class FlightData:
     """States and inputs of one flight on one uniform time grid, in SI units.
 
@@ -339,8 +382,6 @@ class FlightData:
         Name of the channel preset used.
     params : Mapping[str, float]
         The log's parameters (needed for filters, SYSTEMID settings).
-    meta : Mapping[str, object]
-        Anything else alignment found (e.g. SYSTEMID runs).
     autopilot, vehicle, firmware : str or None
         The platform as the log names it (:class:`RawLog`'s); None when not known.
     sysid_runs : tuple of SysidRun
@@ -352,6 +393,36 @@ class FlightData:
         heading's rate, rad/s; NaN outside its span).
     commanded_from : Mapping[str, str]
         Each commanded axis's source (``MESSAGE.field``).
+    channels : Mapping[str, ChannelOrigin]
+        Per state and input name, where it came from (source, native rate, unit read in,
+        samples excluded); empty when not from alignment.
+    mixer : str or None
+        The mixer that turned motor outputs into the inputs (None: the inputs were logged).
+    scales : Mapping[str, float]
+        Factors inferred for whole messages (message -> factor to SI), which readers of the
+        same message's other fields apply too (ArduCopter 3.4-dev ``RATE`` in centideg/s,
+        ArduPlane's ``PIDR/PIDP/PIDY`` in deg/s).
+    mode_names : Mapping[int, str]
+        Flight-mode number -> name, for the modes the log names.
+    flag_notes : Mapping[str, str]
+        Per flag that had to be assumed (``armed``, ``airborne``), why.
+    sysid_injection : numpy.ndarray or None
+        SYSTEMID's logged waveform on the grid: alignment's ``SIDD.Targ`` interpolated
+        (0 between runs), which the fitting pipeline replaces by the injection channel held
+        (NaN where no record lies near); None when not logged.
+    inputs_at_state_times : Mapping[str, numpy.ndarray]
+        Inputs interpolated between their native samples like the states (not held), for
+        the frequency response against ``sysid_injection``; empty unless computed.
+
+    Examples
+    --------
+    >>> fd = FlightData(np.arange(2) * 0.1, np.zeros((2, 1)), np.ones((2, 1)), ("p",),
+    ...                 ("u_roll",), ("rad/s",), ("1",), 0.1, np.array([[0, 2]]), {},
+    ...                 SourceInfo("a.bin", "dataflash", 0), "t",
+    ...                 channels={"p": ChannelOrigin("RATE.R", 400.0, excluded={"spike": 1}),
+    ...                           "u_roll": ChannelOrigin("RATE.ROut", 400.0)})
+    >>> fd.native_rate_hz, fd.excluded_samples, fd.sources["u_roll"]
+    ({'p': 400.0, 'u_roll': 400.0}, {'p': 1}, 'RATE.ROut')
     """
 
     time_s: np.ndarray
@@ -367,7 +438,6 @@ class FlightData:
     source: SourceInfo
     preset: str
     params: Mapping[str, float] = field(default_factory=dict)
-    meta: Mapping[str, object] = field(default_factory=dict)
     autopilot: str | None = None
     vehicle: str | None = None
     firmware: str | None = None
@@ -375,6 +445,33 @@ class FlightData:
     boot: Boot | None = None
     commanded: Mapping[str, np.ndarray] = field(default_factory=dict)
     commanded_from: Mapping[str, str] = field(default_factory=dict)
+    channels: Mapping[str, ChannelOrigin] = field(default_factory=dict)
+    mixer: str | None = None
+    scales: Mapping[str, float] = field(default_factory=dict)
+    mode_names: Mapping[int, str] = field(default_factory=dict)
+    flag_notes: Mapping[str, str] = field(default_factory=dict)
+    sysid_injection: np.ndarray | None = field(default=None, repr=False)
+    inputs_at_state_times: Mapping[str, np.ndarray] = field(default_factory=dict, repr=False)
+
+    @property
+    def native_rate_hz(self) -> dict[str, float]:
+        """Each channel's own sample rate in the log, Hz (:attr:`channels`)."""
+        return {n: c.native_rate_hz for n, c in self.channels.items()}
+
+    @property
+    def sources(self) -> dict[str, str]:
+        """Each channel's source (:attr:`ChannelOrigin.source`)."""
+        return {n: c.source for n, c in self.channels.items()}
+
+    @property
+    def units_from(self) -> dict[str, str]:
+        """Each channel's unit read in and where that came from, where known."""
+        return {n: c.unit_from for n, c in self.channels.items() if c.unit_from}
+
+    @property
+    def excluded_samples(self) -> dict[str, int]:
+        """Channel -> how many of its samples were excluded (channels with any)."""
+        return {n: c.excluded_count for n, c in self.channels.items() if c.excluded}
 
     def series(self, name: str) -> np.ndarray | None:
         """The state or input ``name`` on the grid; None when the flight has none.

@@ -349,8 +349,7 @@ def _axis(fd: FlightData, name: str, opts: ScanOptions, air: np.ndarray) -> _Axi
             if u_env is not None:  # where the input has no power
                 quiet = u_env[sel] <= np.percentile(u_env[sel], 20)
             y_floor = max(float(np.median(y_env[quiet])), 1e-9)
-    inj = fd.meta.get("sysid_injection")
-    injection = np.asarray(inj, dtype=float) if isinstance(inj, np.ndarray) else None
+    injection = None if fd.sysid_injection is None else np.asarray(fd.sysid_injection, float)
     cmd = fd.commanded.get(name)
     command = np.asarray(cmd, dtype=float) if isinstance(cmd, np.ndarray) else None
     source = fd.commanded_from.get(name, "")
@@ -618,8 +617,7 @@ def _gates(ax: _Axis, fd: FlightData, i0: int, i1: int, m: Mapping[str, float],
     mode = fd.flags.get("mode")
     k = int(st.get("mode_change", -1))
     if check_mode and mode is not None and k >= 0:
-        names = fd.meta.get("mode_names", {})
-        assert isinstance(names, Mapping)
+        names = fd.mode_names
         a, b = (names.get(int(v), str(int(v))) for v in (mode[i0 + k], mode[i0 + k + 1]))
         out.append(Reason("mode_change", {"at_s": float(fd.time_s[i0 + k + 1])},
                           {"from": str(a), "to": str(b)}))

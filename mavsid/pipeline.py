@@ -231,7 +231,7 @@ class FitResult:
             "pipeline": self.config.name,
             "data": [json_safe({"log": fd.source.path,
                                  "boot": fd.boot.to_dict() if fd.boot else None,
-                                 "excluded_samples": fd.meta.get("excluded_samples", {})})
+                                 "excluded_samples": fd.excluded_samples})
                      for fd in self.flights],
         }
 
@@ -294,9 +294,8 @@ def _read_flight(path: str | os.PathLike[str], cfg: PipelineConfig,
     )
     injection = _injection(flight, raw)
     if injection is not None:  # (the reference of the plant's measured response)
-        flight = dataclasses.replace(flight, meta={
-            **dict(flight.meta), "sysid_injection": injection,
-            "inputs_at_state_times": _inputs_interpolated(flight, raw)})
+        flight = dataclasses.replace(flight, sysid_injection=injection,
+                                     inputs_at_state_times=_inputs_interpolated(flight, raw))
     if twins is not None:
         from mavsid.loop.twin import twin_signals
 
@@ -311,13 +310,13 @@ def _inputs_interpolated(flight: FlightData, raw: Any) -> dict[str, np.ndarray]:
     """The inputs interpolated between their native samples like the states, not held: a
     held input lags an interpolated state by up to a sample (its share depending on where
     the grid falls between the records), a delay the frequency response would take for the
-    plant's. Per input whose source is one message's field (``meta["sources"]``): the held
+    plant's. Per input whose source is one message's field (``FlightData.sources``): the held
     grid values mapped back to the native sample each holds, then interpolated."""
     out: dict[str, np.ndarray] = {}
-    sources = flight.meta.get("sources")
+    sources = flight.sources
     t = flight.time_s
     for j, name in enumerate(flight.input_names):
-        src = str(dict(sources).get(name, "")) if isinstance(sources, Mapping) else ""
+        src = sources.get(name, "")
         msg = src.split(".")[0]
         if "." not in src or msg not in raw.messages or len(raw.messages[msg]) < 2:
             continue
@@ -387,8 +386,7 @@ def _slowest_rate(fd: FlightData,
                   ) -> float | None:
     """The slowest native rate (Hz) of a flight's channels ``names`` (default: the body
     rates and attitude inputs the rate models are fitted on), if known."""
-    found = fd.meta.get("native_rate_hz")
-    native = found if isinstance(found, Mapping) else {}
+    native = fd.native_rate_hz
     rates = [float(native[n]) for n in names if native.get(n)]
     return min(rates) if rates else None
 
@@ -639,8 +637,8 @@ def plant_fit(axis: str, flights: Sequence[FlightData]) -> tuple[PlantTF | None,
     settings: list[SysidRun] = []
     dt = 0.0
     for fd in flights:
-        ref = fd.meta.get("sysid_injection")
-        if (not isinstance(ref, np.ndarray) or rate not in fd.state_names
+        ref = fd.sysid_injection
+        if (ref is None or rate not in fd.state_names
                 or u_name not in fd.input_names):
             continue
         runs = {r.sid_axis: r for r in fd.sysid_runs}
@@ -655,8 +653,7 @@ def plant_fit(axis: str, flights: Sequence[FlightData]) -> tuple[PlantTF | None,
             if lo and hi:
                 bands.append((float(lo), float(hi)))
             i0, i1 = _logged_around(fd, ref, i0, i1)
-            interpolated = dict(fd.meta.get("inputs_at_state_times") or {})  # type: ignore[call-overload]
-            u = interpolated.get(u_name, fd.inputs[:, fd.input_names.index(u_name)])
+            u = fd.inputs_at_state_times.get(u_name, fd.inputs[:, fd.input_names.index(u_name)])
             us.append(u[i0:i1])
             ys.append(fd.states[i0:i1, fd.state_names.index(rate)])
             rs.append(ref[i0:i1])
@@ -665,7 +662,7 @@ def plant_fit(axis: str, flights: Sequence[FlightData]) -> tuple[PlantTF | None,
         return None, "no SYSTEMID run on this axis with its injection logged", False
     # a channel logged slower than the grid holds nothing above its own Nyquist frequency
     native = [float(r) for fd in flights
-              for n in (rate, u_name) if (r := dict(fd.meta.get("native_rate_hz") or {}).get(n))]  # type: ignore[call-overload]
+              for n in (rate, u_name) if (r := fd.native_rate_hz.get(n))]
     top = 0.4 * min([1.0 / dt, *native])
     excited = (min(b[0] for b in bands), min(max(b[1] for b in bands), top)) if bands \
         else (0.0, top)
@@ -1398,16 +1395,16 @@ def format_result(result: FitResult, validating: bool = False) -> str:
     lines = [f"{logs}: {len(result.axes)} axis model(s), fit % on held-out segments"]
     for fd in result.flights:  # what of each log was used (align's boot and exclusions)
         boot = fd.boot
-        excluded: Any = fd.meta.get("excluded_samples")
+        excluded = fd.excluded_samples
         if boot and boot.of > 1:
             lines.append(f"{fd.source.path}: boot {boot.used} of {boot.of} used "
                          f"({boot.start_s:.1f}–{boot.stop_s:.1f} s, {boot.reason})")
         if excluded:
             lines.append(f"{fd.source.path}: samples excluded, never fitted: "
                          + ", ".join(f"{k} {v}" for k, v in excluded.items()))
-        sources: Any = fd.meta.get("sources") or {}
+        sources = fd.sources
         used = [n for ax in result.axes.values() for n in (ax.output, f"u_{ax.axis}")]
-        units_from: Any = fd.meta.get("units_from") or {}
+        units_from = fd.units_from
         if sources:  # where each channel came from, read in what unit (declared, preset's,
             # inferred), in which SI unit
             lines.append(f"{fd.source.path}: preset {fd.preset}; " + ", ".join(

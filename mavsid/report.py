@@ -461,13 +461,11 @@ def _aircraft(result: FitResult) -> str:
     parameters in force."""
     parts = ["<h2>Aircraft and log</h2>"]
     for fd in result.flights:
-        meta = fd.meta
         span = float(fd.time_s[-1] - fd.time_s[0]) if len(fd.time_s) else 0.0
         frame = ", ".join(f"{k} {fd.params[k]:g}" for k in ("FRAME_CLASS", "FRAME_TYPE", "FRAME",
                                                            "SYS_AUTOSTART", "CA_AIRFRAME")
                           if k in fd.params) or "–"
-        sources: Mapping[str, Any] = meta.get("sources") or {}  # type: ignore[assignment]
-        units_from: Mapping[str, Any] = meta.get("units_from") or {}  # type: ignore[assignment]
+        sources, units_from = fd.sources, fd.units_from
         rows = [("log", os.path.basename(fd.source.path)),
                 ("format", f"{fd.source.format}, {fd.source.size_bytes} bytes"),
                 ("vehicle", fd.vehicle or "–"),

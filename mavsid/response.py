@@ -617,8 +617,7 @@ def _dense(raw: RawLog, sources: Sequence[str], grid: np.ndarray, rate_hz: float
 def _spectra(flight: FlightData, axis: str, usable: np.ndarray) -> tuple[Spectrum, ...]:
     """Gyro and controller-output spectra of ``axis`` over the longest usable stretch, at
     the signals' logging rates."""
-    native = flight.meta.get("native_rate_hz")
-    rates = native if isinstance(native, Mapping) else {}
+    rates = flight.native_rate_hz
     out = []
     cut = filter_cutoffs(flight.params, axis)
     for name, values, unit in (
@@ -697,10 +696,8 @@ def flight_response(flight: FlightData, raw: RawLog, axes: Sequence[str] = AXES
         raise MissingMessageError(", ".join(names), what="rate target nor commanded "
                                   "attitude among", path=flight.source.path)
     usable = _usable(flight)
-    native = flight.meta.get("native_rate_hz")
-    rates = native if isinstance(native, Mapping) else {}
-    sources = flight.meta.get("sources")
-    state_src = sources if isinstance(sources, Mapping) else {}
+    rates = flight.native_rate_hz
+    state_src = flight.sources
     cmd_src = flight.commanded_from
     grid = 1.0 / flight.dt
 

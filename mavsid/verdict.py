@@ -176,7 +176,7 @@ def _rates(flights: Sequence[Any], names: Sequence[str]) -> float | None:
     """The slowest native logging rate (Hz) of the named channels over the flights."""
     found = []
     for fd in flights:
-        native = dict((getattr(fd, "meta", {}) or {}).get("native_rate_hz", {}) or {})
+        native = fd.native_rate_hz
         found += [float(native[n]) for n in names if native.get(n)]
     return min(found) if found else None
 
@@ -312,7 +312,7 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
     windows : sequence of WindowReport, optional
         Every window considered for the axis (kept ones give band and coherence).
     flights : sequence of FlightData, optional
-        Their ``meta["native_rate_hz"]`` and ``autopilot``.
+        Their ``native_rate_hz`` and ``autopilot``.
     closed_loop : object, optional
         With ``fit_percent`` and ``baseline_percent`` (``AxisFit.closed_loop``).
     frequency : Mapping, optional
@@ -580,7 +580,7 @@ def unfitted(axis: str, why: str, windows: Sequence[WindowReport] = (), flights:
     Examples
     --------
     >>> from types import SimpleNamespace as NS
-    >>> fd = NS(meta={"native_rate_hz": {"p": 10.0, "u_roll": 10.0}}, autopilot="ArduPilot")
+    >>> fd = NS(native_rate_hz={"p": 10.0, "u_roll": 10.0}, autopilot="ArduPilot")
     >>> v = unfitted("roll", "no segments to fit", flights=[fd], logs=["a.bin"])
     >>> v.reasons[0]
     'rates/outputs logged at 10 Hz (Nyquist 5 Hz) cannot resolve a rate loop of 5–15 Hz bandwidth'

@@ -126,7 +126,7 @@ def test_slow_input_warns_with_message_and_rate():
                  params={"FRAME_CLASS": 1.0, "FRAME_TYPE": 1.0})
     with pytest.warns(DataQualityWarning, match=r"RCOU .*10\.0 Hz"):
         fd = align(raw)
-    assert fd.preset == "ardupilot-rcou" and fd.meta["mixer"] == "quad-x"
+    assert fd.preset == "ardupilot-rcou" and fd.mixer == "quad-x"
     assert np.isclose(1 / fd.dt, 400.0)
 
 
@@ -233,7 +233,7 @@ def test_tlog_mixer_inputs_match_dataflash_rate_outputs(sitl_pair, name, lo, hi)
     # the same flight: SERVO_OUTPUT_RAW PWMs through the quad-plus mixer (tlog) against the
     # rate controller's own RATE.ROut/POut/YOut (DataFlash), over the first 30 s of each chirp
     binf, tlog = sitl_pair
-    assert tlog.meta["mixer"] == "quad-plus"  # FRAME_CLASS 1, FRAME_TYPE 0 (README: + frame)
+    assert tlog.mixer == "quad-plus"  # FRAME_CLASS 1, FRAME_TYPE 0 (README: + frame)
     sel = (tlog.time_s > lo) & (tlog.time_s < hi)
     ut = tlog.inputs[sel, tlog.input_names.index(name)]
     ub = np.interp(tlog.time_s[sel], binf.time_s, binf.inputs[:, binf.input_names.index(name)])
@@ -355,7 +355,7 @@ def test_the_command_and_the_injection_come_from_the_boot_used():
     cmd = fd.commanded
     np.testing.assert_allclose(cmd["roll"], np.radians(5 * np.sin(fd.time_s)), atol=1e-4)
     np.testing.assert_allclose(cmd["yaw"], 0.5, atol=1e-6)
-    assert np.allclose(fd.meta["sysid_injection"], 1.0)
+    assert np.allclose(fd.sysid_injection, 1.0)
 
 
 def test_sorted_unique_is_numpys_unique_on_overlapping_runs() -> None:

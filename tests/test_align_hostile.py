@@ -54,7 +54,7 @@ def test_far_future_samples_are_dropped_counted_and_bound_the_grid() -> None:
     with pytest.warns(DataQualityWarning, match="3 mistimed"):
         fd = align(_att_log(t))
     assert fd.time_s.size < 2000 and fd.time_s[-1] < 20.0
-    assert fd.meta["excluded_samples"]["p"] == 3
+    assert fd.excluded_samples["p"] == 3
     # the mistimed frames leave a gap: nothing interpolated across them
     assert len(fd.blocks) == 2
 
@@ -87,7 +87,7 @@ def test_non_finite_and_impossible_samples_excluded_and_counted() -> None:
     roll[400] = 7.0  # beyond ±π after conversion
     with pytest.warns(DataQualityWarning, match="non-finite"):
         fd = align(_att_log(t, rollspeed=p, roll=roll))
-    assert fd.meta["excluded_samples"] == {"p": 4, "roll": 1}
+    assert fd.excluded_samples == {"p": 4, "roll": 1}
     assert np.all(np.isfinite(fd.states)) and np.abs(fd.states).max() <= math.pi + 1e-3
     # every excluded sample splits the grid: 5 gaps -> 6 blocks
     assert len(fd.blocks) == 6
@@ -103,7 +103,7 @@ def test_minus_inf_in_a_crc_valid_tlog_is_never_fitted(tmp_path: Path) -> None:
     path.write_bytes(data)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DataQualityWarning)
-        assert load_flight(path).meta["excluded_samples"]["p"] == 236
+        assert load_flight(path).excluded_samples["p"] == 236
         with pytest.raises(NoExcitationError, match=r"ninf\.tlog: nothing identifiable"):
             fit([path])
 

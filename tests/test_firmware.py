@@ -121,7 +121,7 @@ def test_rcou_channels_of_every_generation(channel: str) -> None:
         warnings.simplefilter("ignore")
         fd = align(_rcou_raw(channel))
     assert fd.input_names == ("u_roll", "u_pitch", "u_yaw", "u_thrust")
-    assert fd.meta["mixer"] == "quad-x"
+    assert fd.mixer == "quad-x"
 
 
 def test_old_throttle_range_and_minimum() -> None:
@@ -204,7 +204,7 @@ def test_centidegree_rates_of_copter_34_dev_are_found_and_said(keep_imu: bool) -
     # float32 storage: equal to its precision
     np.testing.assert_allclose(got.states, ref.states, rtol=1e-6, atol=1e-9)
     np.testing.assert_allclose(got.inputs, ref.inputs, rtol=1e-6, atol=1e-9)
-    assert "inferred" in got.meta["sources"]["p"]
+    assert "inferred" in got.sources["p"]
     with warnings.catch_warnings():
         warnings.simplefilter("error", DataQualityWarning)
         align(raw)  # the same log in its right units: nothing to say
@@ -272,7 +272,7 @@ def test_firmware_matrix_gives_the_truth_back(layout: str, tmp_path) -> None:  #
     want = truth["axes"]["roll"]
     assert b == pytest.approx(want["effectiveness"], rel=0.12)
     assert damping == pytest.approx(want["damping"], rel=0.35)
-    sources = result.flights[0].meta["sources"]
+    sources = result.flights[0].sources
     assert ("inferred" in sources["p"]) == (layout == "copter-3.4-dev")
     # the unit each channel was read in, and where it came from, is in info and in fit
     info = format_summary(summarize(raw))
@@ -446,7 +446,7 @@ def test_copter_32_layout_has_no_rate_and_fits_through_the_motor_mix(tmp_path) -
     assert "before 3.3 logs no RATE" in advice and "SID_AXIS" not in advice
     result, b, damping = _roll_fit(fast)
     assert result.flights[0].preset == "ardupilot-rcou"
-    assert result.flights[0].meta["sources"]["u_roll"] == "RCOU (quad-x mixer)"
+    assert result.flights[0].sources["u_roll"] == "RCOU (quad-x mixer)"
     want = truth["axes"]["roll"]
     assert b == pytest.approx(want["effectiveness"], rel=0.12)
     assert damping == pytest.approx(want["damping"], rel=0.35)
@@ -546,7 +546,7 @@ def test_plane_layout_fits_from_the_pid_sums_and_from_the_servos(tmp_path) -> No
              "RCOU.C1 (aileron, SERVO1)")):
         result, b, damping = _roll_fit(log, **cfg)
         assert result.flights[0].preset == preset
-        assert result.flights[0].meta["sources"]["u_roll"] == source
+        assert result.flights[0].sources["u_roll"] == source
         assert b == pytest.approx(want["effectiveness"], rel=0.12), preset
         assert damping == pytest.approx(want["damping"], rel=0.35), preset
         assert "no closed-loop twin for ArduPlane" in (result.axes["roll"].closed_loop_note

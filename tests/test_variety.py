@@ -313,7 +313,7 @@ def test_a_centidegree_rate_log_is_screened_in_si_units(tmp_path) -> None:  # ty
                                      axis="pitch", rate_hz=200.0, gyro_noise_dps=6.0,
                                      vibration_dps=2.0, seed=28)
     f = result.axes["pitch"]
-    assert not result.flights[0].meta.get("excluded")
+    assert not result.flights[0].excluded_samples
     assert f.model.params["B[q,u_pitch]"] == pytest.approx(truth["effectiveness"],
                                                           rel=B_TOLERANCE)
     assert -f.model.params["A[q,q]"] == pytest.approx(truth["damping"], rel=DAMPING_TOLERANCE)

@@ -230,7 +230,7 @@ def test_bands_phase_and_focus(toy, rrd) -> None:  # type: ignore[no-untyped-def
 
     modes = np.where(flight.time_s < flight.time_s[len(flight.time_s) // 3], 0, 25)
     fd = dataclasses.replace(flight, flags={**flight.flags, "mode": modes},
-                             meta={**flight.meta, "mode_names": {0: "STABILIZE", 25: "SYS→ID"}})
+                             mode_names={0: "STABILIZE", 25: "SYS→ID"})
     path = rrd.parent / "bands.rrd"
     rec = series.new_recording()
     rec.save(path)

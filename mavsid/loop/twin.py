@@ -491,7 +491,7 @@ def twin_signals(flight: FlightData, raw: Any = None) -> TwinSignals:
         got = first_of(raw, TARGET_CHANNELS[AXIS_RATE[axis]], f"target {axis}")
         if got is not None:
             ch, t, v = got
-            scale = dict(flight.meta.get("scales") or {}).get(ch.message, 1.0)  # type: ignore[call-overload]
+            scale = flight.scales.get(ch.message, 1.0)
             targets[axis] = _on_grid(t, v * scale, grid, hold=True)
             sources[f"target_{axis}"] = f"{ch.message}.{ch.field}"
     injection: dict[str, np.ndarray] = {}

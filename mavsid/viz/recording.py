@@ -369,7 +369,7 @@ def log_bands(
     if len(t) == 0:
         return
     sub = f"/{tag}" if tag else ""  # one flight of several: its own entities
-    names = dict(flight.meta.get("mode_names", {}) or {})  # type: ignore[call-overload]
+    names = flight.mode_names
     mode = flight.flags.get("mode")
     if mode is not None and len(mode) == len(t):
         for m, spans in sorted(value_spans(t, np.asarray(mode)).items()):

@@ -539,7 +539,13 @@ class Segment:
     reasons : tuple of str
         Why it was kept.
     meta : Mapping[str, object]
-        Extras, e.g. SYSTEMID settings of the run.
+        Notes no stage reads, kept for the reader: the channel preset and the window's
+        metrics (:func:`~mavsid.excitation.select_segments`), the block index
+        (:func:`~mavsid.split.split_segments`), the record index (the array API).
+    params : Mapping[str, float]
+        The log's parameters (the estimators take known filters from them).
+    sysid : SysidRun or None
+        The ArduPilot SYSTEMID run the segment was cut from (its chirp's band and settings).
     """
 
     time_s: np.ndarray
@@ -554,6 +560,8 @@ class Segment:
     log: str = ""
     reasons: tuple[str, ...] = ()
     meta: Mapping[str, object] = field(default_factory=dict)
+    params: Mapping[str, float] = field(default_factory=dict)
+    sysid: SysidRun | None = None
 
     @property
     def start_s(self) -> float:

@@ -225,7 +225,10 @@ class WindowReport:
     ``start_s``/``stop_s`` are the first and last sample times (log clock); ``i0``/``i1``
     the ``[start, stop)`` sample indices into the FlightData. ``checks`` are the gates a
     rejected window failed, as values; ``reasons`` the sentences made from them (or why it
-    was kept), then notes (the SYSTEMID run's settings, a merge).
+    was kept), then notes (the SYSTEMID run's settings, a merge). ``sysid`` is the SYSTEMID
+    run a ``"sysid"`` window lies in, ``axis_from_data`` the axis its input shows when that
+    differs from the run's ``SID_AXIS``; ``merged_windows`` how many overlapping scan windows
+    a kept window was merged from (0: not merged).
     """
 
     axis: str
@@ -238,8 +241,24 @@ class WindowReport:
     i0: int
     i1: int
     metrics: Mapping[str, float] = field(default_factory=dict)
-    meta: Mapping[str, Any] = field(default_factory=dict)
     checks: tuple[Reason, ...] = ()
+    sysid: SysidRun | None = None
+    axis_from_data: str | None = None
+    merged_windows: int = 0
+
+    @property
+    def meta(self) -> dict[str, object]:
+        """The window's SYSTEMID run (``sid_axis injection sysid``, its settings, and
+        ``axis_from_data``) or merge (``merged_windows``) as JSON; empty for others."""
+        out: dict[str, object] = {}
+        if self.sysid is not None:
+            sid = self.sysid.sid_axis
+            out.update(sid_axis=sid, injection=sid_axis(sid)[1], sysid=self.sysid.settings())
+            if self.axis_from_data is not None:
+                out["axis_from_data"] = self.axis_from_data
+        if self.merged_windows:
+            out["merged_windows"] = self.merged_windows
+        return out
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-safe dict (``axis start_s stop_s score kept source reasons reason_kinds
@@ -256,7 +275,7 @@ class WindowReport:
             "reason_kinds": [r.kind for r in self.checks],
             "checks": [r.to_dict() for r in self.checks],
             "metrics": {k: _json_float(v) for k, v in self.metrics.items()},
-            "meta": {k: v for k, v in self.meta.items() if k != "params"},
+            "meta": self.meta,
         }
 
 
@@ -726,19 +745,18 @@ def _kept_reason(ax: _Axis, m: Mapping[str, float]) -> str:
 
 
 def _report(ax: _Axis, fd: FlightData, i0: int, i1: int, opts: ScanOptions, air: np.ndarray,
-            source: str, meta: Mapping[str, Any],
+            source: str, run: SysidRun | None = None,
             stats: Mapping[str, Any] | None = None) -> WindowReport:
     band = None
-    sysid = meta.get("sysid") if source == "sysid" else None
-    if isinstance(sysid, Mapping) and "f_start_hz" in sysid and "f_stop_hz" in sysid:
-        band = (float(sysid["f_start_hz"]), float(sysid["f_stop_hz"]))
+    if run is not None and run.f_start_hz is not None and run.f_stop_hz is not None:
+        band = (float(run.f_start_hz), float(run.f_stop_hz))
     st = _window_stats(ax, fd, air, opts, [i0], i1 - i0)[0] if stats is None else stats
     m = _metrics(ax, fd, i0, i1, opts, band, st)
     checks = tuple(_gates(ax, fd, i0, i1, m, opts, st, source == "scan"))
     kept = not checks
     return WindowReport(
         ax.name, float(fd.time_s[i0]), float(fd.time_s[i1 - 1]), _score(m), kept, source,
-        (_kept_reason(ax, m),) if kept else _rejected(checks), i0, i1, m, dict(meta), checks,
+        (_kept_reason(ax, m),) if kept else _rejected(checks), i0, i1, m, checks, run,
     )
 
 
@@ -762,8 +780,7 @@ def _sysid_windows(fd: FlightData, axes: Sequence[str], axes_cache: Mapping[str,
     for run in fd.sysid_runs:
         sid = run.sid_axis
         name, injection = sid_axis(sid)
-        meta: dict[str, Any] = {"sid_axis": sid, "injection": injection,
-                                "sysid": run.settings()}
+        from_data: str | None = None
         notes: list[str] = []
         if run.settings_from == "PARAM_VALUE" and name in AXES:
             found = _excited_axis(fd, run, opts, air)
@@ -772,8 +789,7 @@ def _sysid_windows(fd: FlightData, axes: Sequence[str], axes_cache: Mapping[str,
                     f"SID_AXIS {sid} ({name}) comes from a parameter message sent before the "
                     f"run, but only the {found} input is excited: taken as a {found} run"
                 )
-                name = found
-                meta["axis_from_data"] = found
+                name = from_data = found
         if name not in AXES:
             if axes == AXES:  # only when every axis was asked for
                 off = (Reason("not_attitude_axis", {"sid_axis": float(sid)},
@@ -781,13 +797,14 @@ def _sysid_windows(fd: FlightData, axes: Sequence[str], axes_cache: Mapping[str,
                 for i0, i1 in _block_parts(fd, run.start_s, run.stop_s):
                     out.append(WindowReport(
                         name, float(fd.time_s[i0]), float(fd.time_s[i1 - 1]), float("nan"),
-                        False, "sysid", _rejected(off), i0, i1, {}, meta, off))
+                        False, "sysid", _rejected(off), i0, i1, {}, off, run, from_data))
             continue
         if name not in axes:
             continue
         nan = float("nan")
         for i0, i1 in _block_parts(fd, run.start_s, run.stop_s):
-            rep = _report(axes_cache[name], fd, i0, i1, opts, air, "sysid", meta)
+            rep = replace(_report(axes_cache[name], fd, i0, i1, opts, air, "sysid", run),
+                          axis_from_data=from_data)
             mag = nan if run.magnitude is None else run.magnitude
             note = (f"SYSTEMID {injection} {name} chirp, SID_AXIS {sid}, magnitude {mag:g}, "
                     f"{nan if run.f_start_hz is None else run.f_start_hz:g}–"
@@ -858,12 +875,12 @@ def _scan_windows(fd: FlightData, ax: _Axis, opts: ScanOptions, air: np.ndarray,
         starts = [s for s in starts if not any(s < x1 and x0 < min(b, s + win)
                                                for x0, x1 in exclude)]
         if b - a < win:  # one window, shorter
-            reports += [_report(ax, fd, s, b, opts, air, "scan", {}) for s in starts]
+            reports += [_report(ax, fd, s, b, opts, air, "scan") for s in starts]
             continue
         for k in range(0, len(starts), _BATCH):
             batch = starts[k : k + _BATCH]
             for s, st in zip(batch, _window_stats(ax, fd, air, opts, batch, win), strict=True):
-                reports.append(_report(ax, fd, s, s + win, opts, air, "scan", {}, st))
+                reports.append(_report(ax, fd, s, s + win, opts, air, "scan", None, st))
     return _merge(fd, ax, reports, opts, air)
 
 
@@ -878,7 +895,7 @@ def _merge(fd: FlightData, ax: _Axis, reports: list[WindowReport], opts: ScanOpt
             return
         i0, i1 = run[0].i0, max(r.i1 for r in run)
         j0, j1 = _trim(ax, fd, i0, i1, opts)
-        merged = _report(ax, fd, j0, j1, opts, air, "scan", {"merged_windows": len(run)})
+        merged = replace(_report(ax, fd, j0, j1, opts, air, "scan"), merged_windows=len(run))
         if merged.kept:
             out.append(replace(merged, reasons=(
                 *merged.reasons,
@@ -953,7 +970,7 @@ def find_segments(
             n = flight.time_s.size
             missing = tuple(_gates(cache[a], flight, 0, n, {}, opts, {}, False, False))
             reports.append(WindowReport(a, float(flight.time_s[0]), float(flight.time_s[-1]),
-                                        0.0, False, "scan", _rejected(missing), 0, n, {}, {},
+                                        0.0, False, "scan", _rejected(missing), 0, n, {},
                                         missing))
             continue
         found = _scan_windows(flight, cache[a], opts, air, mine)
@@ -965,7 +982,7 @@ def find_segments(
                                                  "need_samples": 8.0}),)
             found = [WindowReport(
                 a, float(flight.time_s[0]), float(flight.time_s[-1]), 0.0, False, "scan",
-                _rejected(little), 0, n, {}, {}, little)]
+                _rejected(little), 0, n, {}, little)]
         reports += found
     order = {a: i for i, a in enumerate(AXES)}
     reports.sort(key=lambda r: (order.get(r.axis, len(AXES)), r.start_s))
@@ -980,9 +997,9 @@ def select_segments(
 ) -> list[Segment]:
     """The kept windows as :class:`~mavsid.data.Segment` objects for the estimators.
 
-    Each segment carries every state and input column of the flight; ``meta`` holds the
-    log's parameters (``params``), the preset, the window's metrics and, for SYSTEMID runs,
-    the SIDS settings (``sysid``, ``sid_axis``, ``injection``).
+    Each segment carries every state and input column of the flight, the log's parameters
+    (``params``) and, for SYSTEMID runs, the run (``sysid``); ``meta`` the preset and the
+    window's metrics.
 
     Parameters
     ----------
@@ -994,8 +1011,7 @@ def select_segments(
     for r in reps:
         if not r.kept:
             continue
-        meta = {**r.meta, "params": dict(flight.params), "preset": flight.preset,
-                "metrics": dict(r.metrics)}
+        meta = {"preset": flight.preset, "metrics": dict(r.metrics)}
         out.append(Segment(
             time_s=flight.time_s[r.i0:r.i1].copy(),
             states=flight.states[r.i0:r.i1].copy(),
@@ -1009,6 +1025,8 @@ def select_segments(
             log=flight.source.path,
             reasons=r.reasons,
             meta=meta,
+            params=dict(flight.params),
+            sysid=r.sysid,
         ))
     return out
 

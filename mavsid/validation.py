@@ -42,7 +42,7 @@ from __future__ import annotations
 
 import functools
 import statistics
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, Protocol, TypeVar, runtime_checkable
 
@@ -702,19 +702,11 @@ def residual_test(
 
 
 def _band(segment: Segment) -> tuple[float, float] | None:
-    """The chirp band a SYSTEMID segment declares in ``meta`` (Hz), if any."""
-    meta: Mapping[str, object] = segment.meta or {}
-    nested = meta.get("sysid")
-    if isinstance(nested, Mapping):
-        meta = {**meta, **nested}
-    for lo_key, hi_key in (
-        ("f_start_hz", "f_stop_hz"),
-        ("FSt", "FSp"),
-        ("SID_F_START_HZ", "SID_F_STOP_HZ"),
-    ):
-        lo, hi = meta.get(lo_key), meta.get(hi_key)
-        if isinstance(lo, int | float) and isinstance(hi, int | float) and hi > lo > 0:
-            return float(lo), float(hi)
+    """The chirp band of a segment's SYSTEMID run (Hz), if it declares one."""
+    run = segment.sysid
+    lo, hi = (None, None) if run is None else (run.f_start_hz, run.f_stop_hz)
+    if lo is not None and hi is not None and hi > lo > 0:
+        return float(lo), float(hi)
     return None
 
 

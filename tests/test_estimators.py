@@ -62,7 +62,7 @@ def plant(a: np.ndarray, b: np.ndarray, c: np.ndarray, delay: int, n: int, seed:
         x[k + 1] = a @ x[k] + b @ vk + c + w[k]
     names = STATES[:nx]
     return Segment(np.arange(n) * DT, x, u, names, INPUTS[:nu], DT, "all", "scan",
-                   meta={"params": {"INS_GYRO_FILTER": filt.cutoff_hz} if filt else {}})
+                   params={"INS_GYRO_FILTER": filt.cutoff_hz} if filt else {})
 
 
 A2 = np.array([[0.995, 0.002], [-0.003, 0.993]])

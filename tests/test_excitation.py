@@ -113,8 +113,8 @@ def test_kept_windows_become_segments_with_params(doublets):
     assert s.source == "scan" and s.log.endswith("doublets.bin")
     assert len(s) > 100 and s.states.shape == (len(s), len(s.state_names))
     assert np.allclose(np.diff(s.time_s), s.dt)
-    assert s.meta["params"]["INS_GYRO_FILTER"] == fd.params["INS_GYRO_FILTER"]
-    assert "ATC_RAT_RLL_P" in s.meta["params"]
+    assert s.params["INS_GYRO_FILTER"] == fd.params["INS_GYRO_FILTER"]
+    assert "ATC_RAT_RLL_P" in s.params
 
 
 # --------------------------------------------------------------------------- hand-built

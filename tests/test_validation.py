@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from toy_plants import DiagonalPlant, chirp, run_plant
 
+from mavsid.data import SysidRun
 from mavsid.errors import ConfigError, NoExcitationError
 from mavsid.validation import fit_percent, residual_test, rmse, validate
 
@@ -119,8 +120,8 @@ def test_eigenvalues_and_stability() -> None:
 
 def test_chirp_frequency_response_matches_true_plant() -> None:
     n = round(60 / DT)
-    meta = {"f_start_hz": 0.5, "f_stop_hz": 20.0}
-    seg = run_plant(PLANT, chirp(n, DT), source="sysid", meta=meta)
+    run = SysidRun(0.0, (n - 1) * DT, "SIDS", f_start_hz=0.5, f_stop_hz=20.0)
+    seg = run_plant(PLANT, chirp(n, DT), source="sysid", sysid=run)
     v = validate(PLANT, [seg], horizons_s=())
     (fr,) = v.frequency
     assert (fr.input_name, fr.output_name, fr.band_hz) == ("u_roll", "p", (0.5, 20.0))

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import signal
 
-from mavsid.data import Segment
+from mavsid.data import Segment, SysidRun
 
 
 @dataclass(frozen=True)
@@ -112,7 +112,7 @@ def run_plant(
     t0: float = 0.0,
     source: str = "scan",
     axis: str = "roll",
-    meta: dict[str, object] | None = None,
+    sysid: SysidRun | None = None,
 ) -> Segment:
     """Drive the plant with inputs u (n, nu) plus equation noise; return the Segment."""
     u = np.asarray(u, dtype=float).reshape(len(u), -1)
@@ -132,7 +132,7 @@ def run_plant(
         dt=plant.dt,
         axis=axis,
         source=source,
-        meta=meta or {},
+        sysid=sysid,
     )
 
 
@@ -179,7 +179,8 @@ def toy_flight(duration_s: float = 40.0, dt: float = 0.005, seed: int = 0):  # t
             time_s=t[a:b], states=flight.states[a:b], inputs=u[a:b],
             state_names=flight.state_names, input_names=flight.input_names, dt=dt,
             axis=axis, source="sysid", reasons=(f"SYSTEMID run on {axis}",),
-            meta={"sysid": {"f_start_hz": 0.5, "f_stop_hz": 15.0}},
+            sysid=SysidRun(float(t[a]), float(t[b - 1]), "SIDS", f_start_hz=0.5,
+                           f_stop_hz=15.0),
         )
         train, held = split_segments([seg], block_s=duration_s / 3 / 4)
         val = validate(plants[axis], held, fft_window_s=1.0)

@@ -35,13 +35,13 @@ __all__ = ["fit_axis", "log_params"]
 
 def log_params(segments: Iterable[Segment], params: Mapping[str, float] | None = None
                ) -> dict[str, float]:
-    """The log parameters to use: ``params`` if given, else ``segment.meta['params']``."""
+    """The log parameters to use: ``params`` if given, else the first segment's that has
+    any (:attr:`Segment.params <mavsid.data.Segment.params>`)."""
     if params is not None:
         return dict(params)
     for s in segments:
-        got = s.meta.get("params") if isinstance(s.meta, Mapping) else None
-        if isinstance(got, Mapping) and got:
-            return {str(k): float(v) for k, v in got.items()
+        if s.params:
+            return {str(k): float(v) for k, v in s.params.items()
                     if isinstance(v, (int, float, np.floating))}
     return {}
 
@@ -91,7 +91,7 @@ def fit_axis(
     estimator : str
         ``ls``, ``ridge``, ``l1``, ``elasticnet`` or ``stlsq``.
     params : Mapping, optional
-        The log's parameters (default: ``segment.meta['params']``); used for known filters.
+        The log's parameters (default: the segments' ``params``); used for known filters.
     filters : sequence of InputFilter, optional
         Override the filters derived from ``params`` (``()`` for none).
     delays : iterable of float, optional

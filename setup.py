@@ -1,6 +1,6 @@
 """The compiled pieces, optional: where they do not build (no C compiler), the package
 installs without them and reads logs with the numpy scans they replace (same results,
-slower; see ``mavsid.readers.dataflash._find_headers``), and filters with
+slower; see ``mavsid.readers.dataflash_scan.find_headers``), and filters with
 ``scipy.signal.lfilter`` (``mavsid.numerics.filters.lfilter``). Everything else is in
 pyproject.toml."""
 

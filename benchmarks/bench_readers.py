@@ -138,11 +138,11 @@ def _reader(who: str, fmt: str, path: Path, types: list[str] | None) -> Callable
         tlog.load_dialect()  # the dialect import, as pymavlink's at its import
         return quiet(lambda: tlog.read(path, messages=types))
     if who in ("mavsid", "mavsid-numpy"):
-        import mavsid.readers.dataflash  # (read_log imports it on first use)
-        from mavsid.readers import read_log
+        import mavsid.readers.dataflash  # noqa: F401  (read_log imports it on first use)
+        from mavsid.readers import dataflash_scan, read_log
 
         if who == "mavsid-numpy":  # as built without a C compiler: the numpy header scan
-            mavsid.readers.dataflash._scan = None
+            dataflash_scan._scan = None
 
         return quiet(lambda: read_log(path, messages=types))
     from pymavlink import DFReader, mavutil  # noqa: F401

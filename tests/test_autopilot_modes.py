@@ -8,7 +8,7 @@ import sys
 import pytest
 
 from mavsid.autopilot.modes import ARDUPILOT_MODES, MAV_TYPE_MODES, ardupilot_modes, px4_mode_name
-from mavsid.readers import dataflash, tlog
+from mavsid.readers import dataflash_assemble, tlog
 
 mavutil = pytest.importorskip("pymavlink.mavutil")
 
@@ -26,8 +26,9 @@ def test_mav_type_tables_equal_pymavlink():
 def test_vehicle_classes_name_pymavlink_tables(vehicle, mav_type):
     """The DataFlash reader's vehicle words pick the table pymavlink gives that MAV_TYPE."""
     assert dict(ARDUPILOT_MODES[vehicle]) == mavutil.mode_mapping_bynumber(mav_type)
-    assert dataflash._mode_names(f"{vehicle} QUAD/X") == mavutil.mode_mapping_bynumber(mav_type)
-    assert dataflash._mode_names(None) == {} and dataflash._mode_names("boat") == {}
+    names = dataflash_assemble.mode_names
+    assert names(f"{vehicle} QUAD/X") == mavutil.mode_mapping_bynumber(mav_type)
+    assert names(None) == {} and names("boat") == {}
 
 
 def test_px4_names_equal_pymavlink():

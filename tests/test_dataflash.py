@@ -25,7 +25,15 @@ from hypothesis import strategies as st
 
 from mavsid.data import RawLog
 from mavsid.errors import DataQualityWarning, LogFormatError, MissingMessageError
-from mavsid.readers import dataflash, dataflash_spec, read_log
+from mavsid.readers import (
+    dataflash,
+    dataflash_decode,
+    dataflash_formats,
+    dataflash_framing,
+    dataflash_scan,
+    dataflash_spec,
+    read_log,
+)
 from mavsid.readers.dataflash_spec import build_fmt, build_record
 
 BIN_LOGS = [p for p in shared_logs(".bin") if "sitl" not in p.parts]
@@ -433,7 +441,7 @@ def test_chain_follows_the_greedy_rule(nodes):
     while i < len(nodes):
         expected.append(i)
         i = next((k for k in range(i + 1, len(nodes)) if pos[k] >= end[i]), len(nodes))
-    assert dataflash._chain(pos, end).tolist() == expected
+    assert dataflash_framing.chain(pos, end).tolist() == expected
 
 
 @settings(max_examples=200, deadline=None)
@@ -447,12 +455,12 @@ def test_chain_over_nodes_in_place_equals_chaining_the_nodes_copied_out(spans, s
     end = pos + np.array([n for n, _ in spans], np.int32)
     node = np.array([b for _, b in spans], bool)
     expected = np.zeros(pos.size, bool)
-    expected[np.flatnonzero(node)[dataflash._chain(pos[node], end[node])]] = True
+    expected[np.flatnonzero(node)[dataflash_framing.chain(pos[node], end[node])]] = True
     fwd = np.zeros(pos.size, bool)
     fwd[:-1] = end[:-1] == pos[1:]
     skip = np.flatnonzero(~node).astype(np.int32)
     for args in ((), ((np.flatnonzero(~fwd), skip - 1), skip)):
-        keep, starts, stops = dataflash._chain_nodes(pos, end, node, *args)
+        keep, starts, stops = dataflash_framing.chain_nodes(pos, end, node, *args)
         assert keep.tolist() == expected.tolist()
         runs = np.zeros(pos.size, bool)
         for a, b in zip(starts.tolist(), stops.tolist(), strict=True):
@@ -466,7 +474,7 @@ def _frame_reference(a, cand, types, table):
     implementation before the suspects-only one), as the reference it must equal."""
     n, m = a.size, cand.size
     lengths = np.array([d.length for d in table.defs] + [0], cand.dtype)
-    defid = dataflash._sweep(cand, types, table, lengths)[0]
+    defid = dataflash_framing.sweep(cand, types, table, lengths)[0]
     end = lengths[defid] + cand
     known = end > cand
     complete = known & (end <= n)
@@ -483,7 +491,7 @@ def _frame_reference(a, cand, types, table):
     backed = (fwd | has_in[:m]) & known
     node = complete & backed
     weak = np.flatnonzero(complete & ~backed & (types != 0x80))
-    near = dataflash._near
+    near = dataflash_framing.near
     weak = weak[~near(weak, -16, backed,
                       lambda k, nb: end[nb] > cand[weak[k:k + nb.shape[0]], None])]
     weak = weak[~near(weak, 16, np.ones(m, bool),
@@ -497,7 +505,7 @@ def _frame_reference(a, cand, types, table):
                    lambda k, nb: cand[nb] < end[back[k:k + nb.shape[0]], None])]] = False
     keep = node.copy()
     keep[node] = False
-    keep[np.flatnonzero(node)[dataflash._chain(cand[node], end[node])]] = True
+    keep[np.flatnonzero(node)[dataflash_framing.chain(cand[node], end[node])]] = True
     return cand[keep], defid[keep]
 
 
@@ -515,13 +523,13 @@ def test_framing_on_suspects_equals_the_full_length_rules(mutator):
         for k in range(4):
             data = mutate.mutate(seed, mutator, k)
             a = np.frombuffer(data, np.uint8)
-            cand, types = dataflash._find_headers(a)
+            cand, types = dataflash_scan.find_headers(a)
             pairs = [i for i in range(len(data) - 2) if data[i:i + 2] == b"\xa3\x95"]
             assert cand.tolist() == pairs
             assert types.tolist() == [data[i + 2] for i in pairs]
             fmt = cand[types == 0x80]
-            table = dataflash._read_definitions(a, fmt[fmt <= a.size - 89])
-            framing = dataflash._frame(a, cand, types, table)
+            table = dataflash_formats.read_definitions(a, fmt[fmt <= a.size - 89])
+            framing = dataflash_framing.frame(a, cand, types, table)
             pos, defid = _frame_reference(a, cand, types, table)
             got_pos, got_defid = framing.records()
             assert got_pos.tolist() == pos.tolist(), (seed, mutator, k)
@@ -549,9 +557,9 @@ def test_times_only_columns_equal_the_full_decode(parts):
 
 
 def _compiled_or_skip() -> Any:
-    if dataflash._scan is None:
+    if dataflash_scan._scan is None:
         pytest.skip("mavsid built without a C compiler: the numpy header scan only")
-    return dataflash._scan
+    return dataflash_scan._scan
 
 
 @pytest.fixture(params=["compiled", "numpy"])
@@ -561,7 +569,7 @@ def scan(request, monkeypatch):
     if request.param == "compiled":
         _compiled_or_skip()
     else:
-        monkeypatch.setattr(dataflash, "_scan", None)
+        monkeypatch.setattr(dataflash_scan, "_scan", None)
     return request.param
 
 
@@ -579,7 +587,7 @@ def test_the_compiled_header_scan_is_built():
     compiler = (sysconfig.get_config_var("CC") or "cc").split()[0]
     if shutil.which(compiler) is None:
         pytest.skip(f"no C compiler ({compiler}): the numpy header scan is used")
-    if dataflash._scan is None:
+    if dataflash_scan._scan is None:
         installed = [Path(d) / "mavsid" / "readers" / f"_scan{suffix}"
                      for d in site.getsitepackages()
                      for suffix in importlib.machinery.EXTENSION_SUFFIXES]
@@ -587,7 +595,7 @@ def test_the_compiled_header_scan_is_built():
             pytest.skip(f"these tests import {Path(dataflash.__file__).parent}, built without "
                         "its extension; the installed copy has it (pip install -e . builds it "
                         "here)")
-    assert dataflash._scan is not None, "mavsid.readers._scan was not built (see setup.py)"
+    assert dataflash_scan._scan is not None, "mavsid.readers._scan was not built (see setup.py)"
 
 
 def test_version_says_whether_the_readers_are_compiled(capsys: pytest.CaptureFixture[str]
@@ -598,8 +606,8 @@ def test_version_says_whether_the_readers_are_compiled(capsys: pytest.CaptureFix
 
     assert cli.main(["--version"]) == 0
     out = capsys.readouterr().out
-    assert ("(compiled readers)" in out) == (dataflash._scan is not None)
-    assert ("built without a C compiler" in out) == (dataflash._scan is None)
+    assert ("(compiled readers)" in out) == (dataflash_scan._scan is not None)
+    assert ("built without a C compiler" in out) == (dataflash_scan._scan is None)
 
 
 @pytest.mark.parametrize("chunk", [4, 6, 64])
@@ -607,13 +615,13 @@ def test_header_search_finds_pairs_at_both_parities_across_chunks(monkeypatch, s
     """Every ``A3 95`` with a type byte after it is found once, at either parity, on either
     side of a chunk's (numpy) or window's (compiled: 8 chunks) end, in files of odd and even
     sizes (brute force as reference)."""
-    monkeypatch.setattr(dataflash, "_CHUNK", chunk)
+    monkeypatch.setattr(dataflash_scan, "_CHUNK", chunk)
     rng = np.random.default_rng(7)
     for size in [*range(0, 12), 63, 64, 65, 66, 127, 128, 129, 1001]:
         for _ in range(4):
             data = rng.choice(np.array([0xA3, 0x95, 0x81], np.uint8), size=size,
                               p=[0.4, 0.4, 0.2]).tobytes()
-            cand, types = dataflash._find_headers(np.frombuffer(data, np.uint8))
+            cand, types = dataflash_scan.find_headers(np.frombuffer(data, np.uint8))
             pairs = [i for i in range(len(data) - 2) if data[i : i + 2] == b"\xa3\x95"]
             assert cand.tolist() == pairs, (chunk, size)
             assert types.tolist() == [data[i + 2] for i in pairs]
@@ -627,16 +635,16 @@ def test_a_scan_built_without_vectors_leaves_the_search_to_numpy(monkeypatch):
     def refuse(*args: Any) -> None:
         raise AssertionError("the byte loop was used")
 
-    monkeypatch.setattr(dataflash, "_scan", types.SimpleNamespace(vectorised=0, pairs=refuse))
+    monkeypatch.setattr(dataflash_scan, "_scan", types.SimpleNamespace(vectorised=0, pairs=refuse))
     data = b"\x00\xa3\x95\x81" * 10
-    cand, types_ = dataflash._find_headers(np.frombuffer(data, np.uint8))
+    cand, types_ = dataflash_scan.find_headers(np.frombuffer(data, np.uint8))
     assert cand.tolist() == list(range(1, 40, 4)) and set(types_.tolist()) == {0x81}
 
 
 def test_header_search_grows_past_its_estimate(scan):
     """A file denser in header patterns than a log (its result grows)."""
     data = bytes(3000) + b"\xa3\x95\x81" * 50_000 + b"\xa3\x95"
-    cand, types = dataflash._find_headers(np.frombuffer(data, np.uint8))
+    cand, types = dataflash_scan.find_headers(np.frombuffer(data, np.uint8))
     assert cand.tolist() == list(range(3000, 3000 + 150_000, 3))
     assert set(types.tolist()) == {0x81}
 
@@ -743,14 +751,14 @@ def test_compiled_and_numpy_header_scans_agree_on_shared_logs():
     assert paths
     for path in paths:
         a = np.memmap(path, np.uint8, mode="r")
-        got, ref = dataflash._find_headers(a), dataflash._find_headers_numpy(a)
+        got, ref = dataflash_scan.find_headers(a), dataflash_scan.find_headers_numpy(a)
         assert got[0].dtype == ref[0].dtype, path
         assert np.array_equal(got[0], ref[0]) and np.array_equal(got[1], ref[1]), path
         del a
 
 
 def test_columns_from_one_block_are_independent():
-    cols = dataflash._alloc_columns(5, {"a": (np.dtype(np.uint8), ()),
+    cols = dataflash_decode.alloc_columns(5, {"a": (np.dtype(np.uint8), ()),
                                         "b": (np.dtype(np.float64), ()),
                                         "s": (np.dtype(object), ()),
                                         "r": (np.dtype(np.int16), (32,))})

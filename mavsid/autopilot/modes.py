@@ -29,7 +29,7 @@ def _table(spec: str) -> Mapping[int, str]:
     return MappingProxyType({int(number): name for number, name in pairs})
 
 
-#: vehicle class (the words :func:`mavsid.readers.dataflash.vehicle_and_firmware` gives)
+#: vehicle class (the words :func:`mavsid.readers.dataflash_assemble.vehicle_and_firmware` gives)
 #: -> mode number -> name
 ARDUPILOT_MODES: Mapping[str, Mapping[int, str]] = MappingProxyType({
     "copter": _table(

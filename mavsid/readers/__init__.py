@@ -3,6 +3,15 @@
 Each reader module exposes ``read(path, messages=None, start=None, stop=None, **options)
 -> RawLog``. :func:`read_log` sniffs the format and dispatches.
 
+The DataFlash binary reader, :mod:`~mavsid.readers.dataflash`, is built from
+:mod:`~mavsid.readers.dataflash_scan` (the header scan, views of records),
+:mod:`~mavsid.readers.dataflash_formats` (FMT definitions), :mod:`~mavsid.readers.dataflash_framing`
+(which candidates are records, the damage between them), :mod:`~mavsid.readers.dataflash_decode`
+(records to columns) and :mod:`~mavsid.readers.dataflash_assemble` (tables to a RawLog, shared
+with the text reader :mod:`~mavsid.readers.dftext`); :mod:`~mavsid.readers.arrays` holds the
+array operations over compact indices; :mod:`~mavsid.readers.dataflash_spec` is the format
+shared with the simulator's writer.
+
 Examples
 --------
 >>> import tempfile, os

@@ -11,7 +11,7 @@ clock from GPS time, so logs whose GPS messages lack a week field read fine.
 Each message type's lines are split once and converted column by column with numpy; a line
 with too few values or a value that does not parse is skipped, counted and reported in one
 :class:`~mavsid.errors.DataQualityWarning`. Timing, parameters, texts and modes follow
-:mod:`mavsid.readers.dataflash`.
+:mod:`mavsid.readers.dataflash_assemble`, as for binary logs.
 
 Examples
 --------
@@ -38,13 +38,13 @@ import numpy as np
 from mavsid.data import RawLog, SourceInfo
 from mavsid.errors import ConfigError, DataQualityWarning, LogFormatError
 from mavsid.readers import dataflash_spec as dfspec
-from mavsid.readers.dataflash import (
-    Definition,
+from mavsid.readers.dataflash_assemble import (
     assemble,
     backwards_steps,
     hold_forward,
     window_mask,
 )
+from mavsid.readers.dataflash_formats import Definition
 
 __all__ = ["read"]
 

@@ -98,11 +98,12 @@ def set_tlog_field(data: bytes, msg_name: str, field: str, values: dict[int, flo
 def dataflash_time_outlier(base: bytes, name: str | None, value: int, last: int = 1) -> bytes:
     """A copy of a .bin with ``TimeUS`` of the ``last`` final records of ``name`` (of every
     type with a leading ``TimeUS`` when None) set to ``value``."""
-    from mavsid.readers.dataflash import _find_headers, _read_definitions
+    from mavsid.readers.dataflash_formats import read_definitions
+    from mavsid.readers.dataflash_scan import find_headers
 
     a = np.frombuffer(base, np.uint8)
-    cand, types = _find_headers(a)
-    table = _read_definitions(a, cand[types == 0x80][cand[types == 0x80] <= a.size - 89])
+    cand, types = find_headers(a)
+    table = read_definitions(a, cand[types == 0x80][cand[types == 0x80] <= a.size - 89])
     out = bytearray(base)
     for d in table.defs:
         if (name is None or d.name == name) and d.columns[:1] == ("TimeUS",) \

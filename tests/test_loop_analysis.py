@@ -16,12 +16,13 @@ from mavsid.loop.analysis import (
     closed_figures,
     controller_polys,
     frd_margins_at,
+    grid_margins,
     loop_figures,
     margin_db,
     margin_grid,
     margins_of,
 )
-from mavsid.loop.controllers import controller_from_params
+from mavsid.loop.controllers import controller_from_params, scaled
 from mavsid.loop.plant import ss2tf
 from mavsid.synthetic.plant import PlantParams
 
@@ -217,3 +218,44 @@ def test_frd_margins_are_python_controls(seed: int) -> None:
     assert got[0] == pytest.approx(gm, rel=1e-12)
     assert got[1] == pytest.approx(pm, rel=1e-12)
     assert got[2] == pytest.approx(wc, rel=1e-12)
+
+
+@pytest.mark.parametrize(("params", "k", "lag", "tau"), [
+    ({}, 1.0, 0, 0.0), ({}, 3.0, 0, 0.0), ({}, 0.5, 2, 0.3),
+    ({"MC_ROLLRATE_P": 0.15, "MC_ROLLRATE_D": 0.003, "IMU_GYRO_RATEMAX": 400.0}, 2.0, 1, 0.5)])
+def test_grid_margins_are_python_controls_stability_margins(params: dict[str, float], k: float,
+                                                            lag: int, tau: float) -> None:
+    """Every margin read off the loop's response on the grid (what the limits are checked
+    with) is one ``control.stability_margins(loop, returnall=True)`` gives for the loop built
+    from python-control's parts: the phase margins to 0.01 deg, the gain margins (crossings
+    above the grid's lowest frequency) to 1e-3, the stability margins to 1e-5."""
+    import control
+
+    from mavsid.loop.controllers import measurement_filter
+
+    ctrl = scaled(controller_from_params(params, "roll"), k)
+    dt = 1.0 / ctrl.loop_hz
+    tp = true_plant(PlantParams(), 0, dt)
+    cfb, _ = controller_tf(ctrl, dt)
+    m, num, den = measurement_filter(tau)
+    if m:
+        cfb = cfb * control.tf(num, den, dt)
+    ss = control.ss(tp.a, tp.b.reshape(-1, 1), tp.c.reshape(1, -1), 0.0, dt)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # (python-control's fall-back to its FRD method)
+        gms, pms, sms, wpc, wgc, _ = control.stability_margins(control.ss(cfb) * ss,
+                                                               returnall=True)
+    f = np.geomspace(0.01, 0.499 / dt, 3000)
+    z = np.exp(2j * np.pi * f * dt)
+    (bf, af), _ = controller_polys(ctrl, dt)
+    bp, ap = ss2tf(tp.a, tp.b, tp.c)
+    lz = (np.polyval(bp, z) / np.polyval(ap, z) * np.polyval(np.polymul(bf, num), z)
+          / np.polyval(np.polymul(af, den), z))
+    got = grid_margins(f, lz)
+    assert got[1].size == pms.size >= 1
+    np.testing.assert_allclose(np.sort(got[1]), np.sort(pms), atol=0.01)
+    np.testing.assert_allclose(np.sort(got[4]), np.sort(wgc), rtol=1e-4)
+    inside = wpc > 2 * np.pi * f[0]
+    assert got[0].size == np.count_nonzero(inside) >= 1
+    np.testing.assert_allclose(np.sort(got[0]), np.sort(gms[inside]), rtol=1e-3)
+    assert float(np.min(got[2])) == pytest.approx(float(np.min(sms)), rel=1e-5)

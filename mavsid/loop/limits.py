@@ -1,4 +1,4 @@
-"""The limits a suggested rate loop must meet, checked with python-control, and the same
+"""The limits a suggested rate loop must meet, the figures they are about, and the same
 gains flown in the closed-loop twin.
 
 A suggestion is admissible only when the loop the controller closes (the rate PID with the
@@ -6,7 +6,9 @@ vehicle's filters, the delay and the identified plant) meets every limit of
 :class:`Limits`: phase margin at least the target, gain margin, sensitivity peak ``Ms``,
 closed-loop peak, one gain crossover, that crossover inside the trusted band (at most half
 its top: above it the plant is extrapolated) and a stable closed loop. :func:`check_loop`
-computes the figures (``control.stability_margins``, ``control.step_info``);
+computes the figures (the margins read off the loop's response on a dense grid,
+:func:`mavsid.loop.analysis.grid_margins`; the step by ``control.step_response`` and
+``control.step_info``);
 :func:`limit_rows` sets them against the limits for the current and the suggested gains;
 :func:`twin_step` flies a step through :func:`mavsid.loop.twin.simulate_closed_loop`.
 
@@ -33,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from mavsid.loop.analysis import controller_polys
+from mavsid.loop.analysis import controller_polys, grid_margins, loop_statespace
 from mavsid.loop.controllers import AxisController, measurement_filter
 from mavsid.loop.plant import LinearPlant, plant_response
 
@@ -80,7 +82,8 @@ class LoopCheck:
     Attributes
     ----------
     phase_margin_deg, gain_margin_db, crossover_hz : float
-        Of ``L = C_fb·P`` (``control.stability_margins``; inf where there is no crossing).
+        Of ``L = C_fb·P`` (:func:`~mavsid.loop.analysis.grid_margins`, as
+        ``control.stability_margins`` gives them; inf where there is no crossing).
     sensitivity_peak : float
         ``Ms = max |1/(1+L)|`` (``1 / stability margin``).
     closed_peak_db : float
@@ -128,9 +131,9 @@ class LoopCheck:
                          .tolist()}}
 
 
-def _systems(plant: LinearPlant, ctrl: AxisController, lag: int, meas_delay: float
-             ) -> tuple[Any, Any, Any]:
-    """``(L, closed loop target -> rate, plant)`` as python-control systems."""
+def _closed_loop(plant: LinearPlant, ctrl: AxisController, lag: int, meas_delay: float
+                 ) -> Any:
+    """The closed loop from rate target to rate as a python-control system, for its step."""
     import control
 
     dt = 1.0 / ctrl.loop_hz
@@ -142,36 +145,34 @@ def _systems(plant: LinearPlant, ctrl: AxisController, lag: int, meas_delay: flo
     if tau:
         cfb = cfb * control.tf(num, den, dt)
     p = control.ss(plant.a, plant.b.reshape(-1, 1), plant.c.reshape(1, -1), [[0.0]], dt)
-    loop = control.ss(cfb) * p
-    closed = control.feedback(p, control.ss(cfb)) * control.ss(ct)
-    return loop, closed, p
+    return control.feedback(p, control.ss(cfb)) * control.ss(ct)
 
 
 def check_loop(plant: LinearPlant, ctrl: AxisController, lag: int = 0,
-               meas_delay: float = 0.0, horizon_s: float = 1.0) -> LoopCheck:
+               meas_delay: float = 0.0, horizon_s: float = 1.0, step: bool = True
+               ) -> LoopCheck:
     """:class:`LoopCheck` of ``ctrl`` around ``plant`` (a :class:`LinearPlant` at the
     controller's step); ``lag`` loops of delay on the target path, ``meas_delay`` (0-1 loop)
-    on the measured rate, as in :func:`mavsid.loop.analysis.analyse_plant`."""
-    import control
-
+    on the measured rate, as in :func:`mavsid.loop.analysis.analyse_plant`. ``step=False``
+    leaves out the step response and its figures (NaN), which no limit reads: a search over
+    gains needs only the rest."""
     dt = 1.0 / ctrl.loop_hz
-    loop, closed, _ = _systems(plant, ctrl, lag, meas_delay)
     # the responses on a grid as polynomials in numpy (python-control's state-space
-    # evaluation is 20x slower); margins, Ms and stability from python-control
+    # evaluation is 20x slower), the margins read off it (python-control's on an FRD of the
+    # same loop fit a spline per call); the step by python-control
     f = np.geomspace(0.01, 0.499 / dt, 3000)
     z = np.exp(2j * np.pi * f * dt)
     (bf, af), (bt, at) = controller_polys(ctrl, dt)
     if lag:
         at = np.polymul(at, [1.0] + [0.0] * lag)
-    _, num, den = measurement_filter(meas_delay)
-    with np.errstate(all="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # python-control's fall-backs
+    tau, num, den = measurement_filter(meas_delay)
+    cfb = (np.polymul(bf, num), np.polymul(af, den))
+    with np.errstate(all="ignore"):
         p = plant_response(plant, f)
-        lz = p * np.polyval(np.polymul(bf, num), z) / np.polyval(np.polymul(af, den), z)
+        lz = p * np.polyval(cfb[0], z) / np.polyval(cfb[1], z)
         mag = np.abs(lz)
         t_mag = np.abs(p * np.polyval(bt, z) / np.polyval(at, z) / (1.0 + lz))
-        gms, pms, sms, _, wgcs, _ = (np.atleast_1d(np.asarray(v, dtype=float))
-                                     for v in control.stability_margins(loop, returnall=True))
+        gms, pms, sms, _, wgcs, _ = grid_margins(f, lz)
         # the gain margin upwards: a loop with an integrator in the plant and one in the
         # controller sits at -180 deg near 0 Hz, a crossing a gain reduction never reaches
         gm = float(np.min(gms[gms > 1.0])) if np.any(gms > 1.0) else math.inf
@@ -179,11 +180,20 @@ def check_loop(plant: LinearPlant, ctrl: AxisController, lag: int = 0,
         pm = float(pms[i]) if i >= 0 else math.inf
         wgc = float(wgcs[i]) if 0 <= i < wgcs.size else math.nan
         sm = float(np.min(sms)) if sms.size else 1.0
-        # the roots of 1 + L (the target path's integrator cancels in ``closed``)
-        stable = bool(np.all(np.abs(control.feedback(loop).poles()) < 1.0))
-        t = np.arange(0.0, horizon_s, dt)
-        y = np.asarray(control.step_response(closed, T=t).outputs, dtype=float).ravel()
-        info = control.step_info(y, T=t, SettlingTimeThreshold=0.02) if stable else {}
+    # the roots of 1 + L (the target path's integrator cancels in the closed loop)
+    a, b, c = loop_statespace(plant, cfb if tau else (bf, af))
+    stable = bool(np.all(np.abs(np.linalg.eigvals(a - b @ c)) < 1.0))
+    t, y = np.zeros(0), np.zeros(0)
+    info: dict[str, float] = {}
+    if step:
+        import control
+
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # python-control's fall-backs
+            t = np.arange(0.0, horizon_s, dt)
+            y = np.asarray(control.step_response(_closed_loop(plant, ctrl, lag, meas_delay),
+                                                 T=t).outputs, dtype=float).ravel()
+            info = control.step_info(y, T=t, SettlingTimeThreshold=0.02) if stable else {}
     crossings = int(np.count_nonzero(np.diff(np.sign(mag - 1.0)) != 0))
     gm_db = 20 * math.log10(gm) if np.isfinite(gm) and gm > 0 else math.inf
     return LoopCheck(

@@ -21,6 +21,7 @@ from mavsid.loop.analysis import (
     compare_response,
     controller_polys,
     frd_margins,
+    loop_statespace,
     margin_grid,
     margins_of,
     margins_on_frf,
@@ -38,7 +39,6 @@ from mavsid.loop.controllers import (
 from mavsid.loop.limits import Limits, LoopCheck, check_loop, limit_rows, twin_step
 from mavsid.loop.plant import LinearPlant, as_plant, plant_from_model, plant_response
 from mavsid.loop.twin import twin_signals
-from mavsid.numerics.lti import tf2ss
 
 __all__ = [
     "LOOP_MISMATCH_DB",
@@ -68,16 +68,7 @@ def suggest_gains(plant_ss: Any, ctrl: AxisController, target_pm_deg: float = 50
     cfb, _ = controller_polys(ctrl, dt)
     if tau:
         cfb = (np.polymul(cfb[0], num), np.polymul(cfb[1], den))
-    # the plant, then the controller (python-control's ``C_fb * P``)
-    ac, bc, cc, dc = tf2ss(*cfb)
-    ap, bp, cp = plant.a, plant.b.reshape(-1, 1), plant.c.reshape(1, -1)
-    n_p, n_c = ap.shape[0], ac.shape[0]
-    a = np.zeros((n_p + n_c,) * 2)
-    a[:n_p, :n_p] = ap
-    a[n_p:, :n_p] = bc @ cp
-    a[n_p:, n_p:] = ac
-    b = np.concatenate([bp, np.zeros((n_c, 1))])
-    c = np.concatenate([dc @ cp, cc], axis=1)
+    a, b, c = loop_statespace(plant, cfb)
     fm = margin_grid(dt)
     with np.errstate(all="ignore"):
         zm = np.exp(2j * np.pi * fm * dt)
@@ -402,11 +393,11 @@ def _within_limits(plant: LinearPlant, ctrl: AxisController, lag: int, tau: floa
                    limits: Limits, top: float, k_hi: float
                    ) -> tuple[float, LoopCheck] | None:
     """The largest gain scale in ``[1 / max_step, k_hi]`` whose loop meets the stability
-    limits (:data:`_SEARCHED`; each loosens as the gains come down), and its check: ``k_hi``
-    itself when it does; None when not even the smallest step does. Geometric bisection to
-    0.5 %."""
+    limits (:data:`_SEARCHED`; each loosens as the gains come down), and its check (without
+    the step: :func:`check_loop`'s ``step=False``): ``k_hi`` itself when it does; None when
+    not even the smallest step does. Geometric bisection to 0.5 %."""
     def check(k: float) -> tuple[bool, LoopCheck]:
-        c = check_loop(plant, _rebuilt(ctrl, _values(ctrl, k)), lag, tau)
+        c = check_loop(plant, _rebuilt(ctrl, _values(ctrl, k)), lag, tau, step=False)
         rows = limit_rows(c, c, limits, top)
         return all(r["ok"] for r in rows if r["name"] in _SEARCHED), c
 
@@ -482,12 +473,12 @@ def _suggestion(axis: str, fit: Any, ctrl: AxisController, an: LoopAnalysis,
     limited_by: list[str] = []
     if found is not None and found[0] != k:
         limited_by = [r["name"] for r in limit_rows(current, check_loop(
-            plant, _rebuilt(ctrl, _values(ctrl, k)), lag, tau), limits, top)
+            plant, _rebuilt(ctrl, _values(ctrl, k)), lag, tau, step=False), limits, top)
             if not r["ok"] and r["name"] in _SEARCHED]
         k, capped = found[0], False
     values = _values(ctrl, k)
     new = _rebuilt(ctrl, values)
-    suggested = found[1] if found is not None else check_loop(plant, new, lag, tau)
+    suggested = check_loop(plant, new, lag, tau)  # (with its step, the search's had none)
     rows = limit_rows(current, suggested, limits, top)
     out["limits"] = rows
     out["suggested_loop_check"] = suggested.to_dict()

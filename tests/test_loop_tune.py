@@ -136,6 +136,54 @@ def test_the_sitl_flights_roll_is_refused_in_one_line_naming_the_limits() -> Non
         assert "SID_F_STOP_HZ" in e["next_flight"]
 
 
+def _stop_hz(texts: list[str]) -> set[int]:
+    """Every ``SID_F_STOP_HZ N`` the texts name."""
+    import re
+
+    return {int(m) for t in texts for m in re.findall(r"SID_F_STOP_HZ (\d+)", t)}
+
+
+@pytest.mark.slow
+def test_the_sitl_flights_next_flight_and_advice_name_one_chirp_top() -> None:
+    """The SITL flight's roll and pitch: the next flight said "with SID_F_STOP_HZ 31, so the
+    band covers twice the crossover" and the advice beside it "the loop needs up to 70 Hz: set
+    SID_F_STOP_HZ 70" (three times the closed-loop bandwidth). Now both name the top the
+    crossover limit needs for the current and the refused gains' crossovers, one number."""
+    from mavsid.loop.limits import Limits
+
+    rep = _sitl_report()
+    for axis in ("roll", "pitch"):
+        e = rep[axis]
+        named = _stop_hz([e["next_flight"]]) | _stop_hz(e["advice"])
+        assert named == {int(e["chirp_top_hz"])}, (e["next_flight"], e["advice"])
+        crossovers = (e["current_loop"]["crossover_hz"],
+                      e["suggested_loop_check"]["crossover_hz"])
+        assert max(crossovers) <= Limits().band_fraction * e["chirp_top_hz"]
+        assert e["chirp_top_hz"] == 31.0  # (15.4 Hz crossover, twice it rounded up)
+
+
+def test_the_advices_chirp_top_is_the_one_computed_for_the_next_flight() -> None:
+    """The SYSTEMID fixture's roll (crossover 5 Hz, chirp to 15 Hz): the advice names the
+    chirp top :func:`mavsid.loop.tune.chirp_top_hz` gives for its crossovers, the number a
+    next flight to measure the loop would name (the limits' rule, at least 20 Hz)."""
+    from pathlib import Path
+
+    from mavsid import pipeline
+    from mavsid.loop.limits import Limits
+    from mavsid.loop.tune import chirp_top_hz
+
+    path = Path(__file__).resolve().parents[1] / "fixtures" / "sysid_roll.bin"
+    res = pipeline.fit([str(path)], pipeline.PipelineConfig(axes=("roll",)))
+    e = tune(res, samples=5)["roll"]
+    crossovers = [e["current_loop"]["crossover_hz"]]
+    if "suggested_loop_check" in e:
+        crossovers.append(e["suggested_loop_check"]["crossover_hz"])
+    rate = 1.0 / res.axes["roll"].validation.dt
+    assert e["chirp_top_hz"] == chirp_top_hz(crossovers, rate, Limits())
+    assert _stop_hz(e["advice"]) == {int(e["chirp_top_hz"])}
+    assert _stop_hz([e.get("next_flight", "")]) <= {int(e["chirp_top_hz"])}
+
+
 @pytest.mark.slow
 def test_params_out_loads_with_pymavlink_and_holds_only_the_changes(tmp_path, capsys) -> None:
     from helpers import shared_path

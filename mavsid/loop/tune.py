@@ -7,7 +7,7 @@ measured responses, the suggestion under its stated limits and next-flight advic
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -43,8 +43,10 @@ from mavsid.loop.twin import twin_signals
 __all__ = [
     "LOOP_MISMATCH_DB",
     "LOOP_MISMATCH_DEG",
+    "MIN_CHIRP_TOP_HZ",
     "SUGGESTION_CHECK_DEG",
     "TuneAnalysis",
+    "chirp_top_hz",
     "param_file",
     "suggest_gains",
     "tune",
@@ -99,8 +101,9 @@ def suggest_gains(plant_ss: Any, ctrl: AxisController, target_pm_deg: float = 50
 
 
 def _advice(axis: str, fit: Any, ctrl: AxisController, bandwidth_hz: float,
-            plant_frf: Any) -> list[str]:
-    """What to change next flight, from what this one showed."""
+            plant_frf: Any, chirp_top: float) -> list[str]:
+    """What to change next flight, from what this one showed (``chirp_top``: the band's top
+    the loop needs, :func:`chirp_top_hz`, the number the next flight names too)."""
     out: list[str] = []
     rate_hz = 1.0 / fit.validation.dt
     if np.isfinite(bandwidth_hz) and rate_hz < 5 * bandwidth_hz:
@@ -110,9 +113,7 @@ def _advice(axis: str, fit: Any, ctrl: AxisController, bandwidth_hz: float,
             "PID, or INS_RAW_LOG_OPT; PX4 SDLOG_PROFILE 'high rate' / 'system identification')")
     if plant_frf is not None:
         band = plant_frf.band()
-        want_lo = 0.5
-        want_hi = min(0.4 * rate_hz, max(3 * bandwidth_hz if np.isfinite(bandwidth_hz) else 20.0,
-                                          20.0))
+        want_lo, want_hi = 0.5, chirp_top
         if band is None:
             out.append(f"{axis}: no coherent band: raise SID_MAGNITUDE (PX4: the "
                        "system-identification chirp amplitude) and fly SID_AXIS "
@@ -214,7 +215,8 @@ def tune(result: Any, target_pm_deg: float = 50.0, samples: int = 40,
             entry["gains_mismatch"] = mismatch
         entry.update(_suggestion(axis, fit, ctrl, an, entry, plant, measured.get("loop"),
                                  lag, tau, limits))
-        entry["advice"] = _advice(axis, fit, ctrl, an.bandwidth_hz, plant)
+        entry["advice"] = _advice(axis, fit, ctrl, an.bandwidth_hz, plant,
+                                  entry["chirp_top_hz"])
         out[axis] = entry
     return out
 
@@ -370,12 +372,35 @@ def _next_flight(axis: str, ctrl: AxisController, *, wanted: float | None = None
         return (f"fly these gains and {chirp}, then tune again from that log: the loop "
                 f"wants ×{wanted:.2g} in all, more than one flight's ×{max_step:g} step")
     if band_hz is not None:
-        stop = (f" with SID_F_STOP_HZ {math.ceil(band_hz):.0f}"
-                if ctrl.autopilot == "ardupilot" else f" up to {math.ceil(band_hz):.0f} Hz")
+        stop = (f" with SID_F_STOP_HZ {band_hz:.0f}" if ctrl.autopilot == "ardupilot"
+                else f" up to {band_hz:.0f} Hz")
         return f"fly {chirp}{stop}, so the band covers twice the crossover"
     if refused:
         return f"fly {chirp} with more amplitude, or simplify the frame's loop before tuning"
     return f"fly these gains and {chirp} to measure the loop they close"
+
+
+#: the lowest top of the band a SYSTEMID chirp is advised to sweep to (Hz)
+MIN_CHIRP_TOP_HZ = 20.0
+
+
+def chirp_top_hz(crossovers_hz: Iterable[float], rate_hz: float, limits: Limits) -> float:
+    """The top of the band (whole Hz) the next SYSTEMID chirp should sweep to, for the
+    crossover limit to trust the loop: the largest of ``crossovers_hz`` (the gains flown and
+    those suggested; NaN ignored) over :attr:`Limits.band_fraction`, at least
+    :data:`MIN_CHIRP_TOP_HZ`, at most what the log's ``rate_hz`` resolves (0.4 of it). The
+    one number the advice and the next flight name (``SID_F_STOP_HZ``).
+
+    Examples
+    --------
+    >>> chirp_top_hz([15.4, 11.7], 400.0, Limits()), chirp_top_hz([4.9], 400.0, Limits())
+    (31.0, 20.0)
+    >>> chirp_top_hz([15.4], 50.0, Limits()), chirp_top_hz([float("nan")], 400.0, Limits())
+    (20.0, 20.0)
+    """
+    need = max((c for c in crossovers_hz if math.isfinite(c)), default=0.0)
+    top = math.ceil(max(need / limits.band_fraction, MIN_CHIRP_TOP_HZ))
+    return float(min(top, math.floor(0.4 * rate_hz)))
 
 
 def _values(ctrl: AxisController, k: float) -> dict[str, float]:
@@ -436,6 +461,8 @@ def _suggestion(axis: str, fit: Any, ctrl: AxisController, an: LoopAnalysis,
                            "max_step": limits.max_step}
     plant = plant_from_model(fit.model, axis, 1.0 / ctrl.loop_hz)
     current = check_loop(plant, ctrl, lag, tau)
+    rate_hz = 1.0 / fit.validation.dt
+    out["chirp_top_hz"] = chirp_top_hz([current.crossover_hz], rate_hz, limits)
     top, band_text = _trusted_top(fit, plant_frf)
     out["trusted_band"] = {"top_hz": top, "what": band_text}
     out["current_loop"] = current.to_dict()
@@ -456,7 +483,8 @@ def _suggestion(axis: str, fit: Any, ctrl: AxisController, an: LoopAnalysis,
     if entry.get("gains_mismatch"):
         return refuse("the logged gains they would scale do not describe this flight")
     if top is None:
-        return refuse(band_text, next_flight=_next_flight(axis, ctrl, band_hz=20.0))
+        return refuse(band_text, next_flight=_next_flight(axis, ctrl,
+                                                          band_hz=out["chirp_top_hz"]))
     if agreement is not None and not agreement["agree"]:
         return refuse(
             f"the phase margin at the mixer measured ({agreement['measured_deg']:.0f} deg) and "
@@ -479,6 +507,9 @@ def _suggestion(axis: str, fit: Any, ctrl: AxisController, an: LoopAnalysis,
     values = _values(ctrl, k)
     new = _rebuilt(ctrl, values)
     suggested = check_loop(plant, new, lag, tau)  # (with its step, the search's had none)
+    # (the chirp to cover the crossover of the gains flown and of the ones suggested)
+    out["chirp_top_hz"] = chirp_top_hz([current.crossover_hz, suggested.crossover_hz],
+                                       rate_hz, limits)
     rows = limit_rows(current, suggested, limits, top)
     out["limits"] = rows
     out["suggested_loop_check"] = suggested.to_dict()
@@ -494,10 +525,8 @@ def _suggestion(axis: str, fit: Any, ctrl: AxisController, an: LoopAnalysis,
                         "agree": bool(gap <= TWIN_STEP_TOL)}
     failed = [r for r in rows if not r["ok"]]
     if failed:
-        # (the chirp to cover the crossover of the gains flown and of the ones refused)
-        band = (float(np.nanmax([suggested.crossover_hz, current.crossover_hz]))
-                / limits.band_fraction
-                if any(r["name"] == "crossover" for r in failed) else None)
+        band = (out["chirp_top_hz"] if any(r["name"] == "crossover" for r in failed)
+                else None)
         what = ("capped at ×" + f"{k:.2g}, " if capped else "")
         broken = " and ".join(
             f"{r['name']} {_value_text(r['suggested'])}{' ' + r['unit'] if r['unit'] else ''}"

@@ -7,7 +7,8 @@ Rates are medians: for each message type the median interval between samples (pe
 when the type has an instance column, so two IMUs logged together count as one rate), as Hz,
 for types sampled periodically only; parameters, events, texts and definitions are counted
 and shown with ``-`` (see :func:`median_rate_hz`).
-SYSTEMID runs are the ArduPilot SIDS records, one per run, with their settings as logged.
+SYSTEMID runs are alignment's (:func:`mavsid.align.sysid.sysid_runs`): the span of each run's
+injected waveform and its settings.
 
 Examples
 --------
@@ -152,31 +153,19 @@ def _span(log: RawLog) -> tuple[float | None, float | None]:
     return (_num(lo), _num(hi)) if hi >= lo else (None, None)
 
 
-def _value(v: Any) -> Any:
-    """JSON-safe scalar."""
-    if isinstance(v, (np.integer, int)) and not isinstance(v, bool):
-        return int(v)
-    if isinstance(v, (np.floating, float)):
-        return _num(float(v))
-    if isinstance(v, bytes):
-        return v.hex()
-    return str(v)
+def _sysid_runs(log: RawLog) -> tuple[list[dict[str, Any]], list[str]]:
+    """Alignment's SYSTEMID runs (:func:`mavsid.align.sysid.sysid_runs`) as JSON-safe dicts
+    (:meth:`SysidRun.to_dict <mavsid.data.SysidRun.to_dict>`), and a note when their records
+    cannot be read."""
+    from mavsid.align.sysid import sysid_runs
+    from mavsid.errors import MavsidError
 
-
-def _sysid_runs(log: RawLog) -> list[dict[str, Any]]:
-    """One entry per SIDS record: its time and settings as logged."""
-    if "SIDS" not in log:
-        return []
-    table = log["SIDS"]
-    runs = []
-    for k in range(len(table)):
-        run: dict[str, Any] = {"time_s": _num(float(table.time_s[k]))}
-        for name in table.fields:
-            col = _column(table, name)
-            if name != "TimeUS" and col is not None:
-                run[name] = _value(col[k])
-        runs.append(run)
-    return runs
+    try:
+        runs = sysid_runs(log)
+    except MavsidError as exc:
+        return [], [f"SYSTEMID runs not read: {exc}"]
+    return [{k: _num(v) if isinstance(v, float) else v for k, v in r.to_dict().items()}
+            for r in runs], []
 
 
 def read_for_summary(path: str | os.PathLike[str], **options: Any) -> RawLog:
@@ -215,7 +204,8 @@ def summarize(log: RawLog) -> dict[str, Any]:
 
     Keys: ``path, format, size_bytes, autopilot, firmware, vehicle, start_s, end_s,
     duration_s, messages`` (name -> ``count, rate_hz, fields`` (name -> unit or None)),
-    ``modes`` (``time_s, mode, name``), ``param_count, text_count, sysid_runs, channels``
+    ``modes`` (``time_s, mode, name``), ``param_count, text_count, sysid_runs`` (each run's
+    ``start_s stop_s settings_from`` and settings, :class:`~mavsid.data.SysidRun`), ``channels``
     (the preset ``fit`` would use and per channel its SI ``unit``, ``source`` and the unit it
     is ``read_in`` with where that came from; or the ``error`` why none fits),
     ``skipped_bytes, notes``.
@@ -224,6 +214,7 @@ def summarize(log: RawLog) -> dict[str, Any]:
     from mavsid.errors import MavsidError
 
     start, end = _span(log)
+    runs, run_notes = _sysid_runs(log)
     try:  # the channels fit would read, and the unit each is read in (and why)
         preset, used = channel_units(log)
         channels: dict[str, Any] = {"preset": preset, "channels": used}
@@ -253,10 +244,10 @@ def summarize(log: RawLog) -> dict[str, Any]:
                   for m in log.modes],
         "param_count": len(log.params),
         "text_count": len(log.texts),
-        "sysid_runs": _sysid_runs(log),
+        "sysid_runs": runs,
         "channels": channels,
         "skipped_bytes": log.source.skipped_bytes,
-        "notes": list(log.source.notes),
+        "notes": [*log.source.notes, *run_notes],
     }
 
 
@@ -298,8 +289,9 @@ def format_summary(summary: Mapping[str, Any], max_fields: int | None = None) ->
     lines.append(f"  SYSTEMID    {len(s['sysid_runs'])} runs")
     for run in s["sysid_runs"]:
         settings = " ".join(f"{e(k)}={v:.6g}" if isinstance(v, float) else f"{e(k)}={e(v)}"
-                            for k, v in run.items() if k != "time_s")
-        lines.append(f"    {_fmt_time(run['time_s']):>12}  {settings}")
+                            for k, v in run.items() if k not in ("start_s", "stop_s"))
+        lines.append(f"    {_fmt_time(run['start_s']):>12} .. {_fmt_time(run['stop_s'])}  "
+                     f"{settings}")
     ch = s.get("channels") or {}
     if ch.get("preset"):
         lines.append(f"  channels    preset {e(ch['preset'])} (what fit reads, in SI units)")

@@ -361,14 +361,14 @@ def test_the_command_and_the_injection_come_from_the_boot_used():
 def test_sorted_unique_is_numpys_unique_on_overlapping_runs() -> None:
     """The grid's indices (ascending runs that overlap at their ends) made unique without
     numpy's hashing: the same as ``np.unique`` on 200 random sets of runs."""
-    from mavsid.align import _sorted_unique
+    from mavsid.align.grid import sorted_unique
 
     rng = np.random.default_rng(5)
     for _ in range(200):
         runs = [np.arange(lo, lo + rng.integers(0, 40))
                 for lo in np.cumsum(rng.integers(-3, 30, rng.integers(0, 12)))]
         x = np.concatenate([np.zeros(0, np.int64), *runs]).astype(np.int64)
-        assert np.array_equal(_sorted_unique(x), np.unique(x))
+        assert np.array_equal(sorted_unique(x), np.unique(x))
 
 
 def _rc_log(autopilot: str, params: dict[str, float]) -> RawLog:
@@ -387,27 +387,27 @@ def test_a_mavlink_logs_sticks_are_read_on_the_channels_the_autopilot_maps() -> 
     instruments need neither their scale nor their offset), on the RC channel the
     autopilot's parameters map to each axis, without the dead zone; a PX4 log that does not
     say its mapping gives none, as a channel out of range does."""
-    from mavsid.align import _sticks
+    from mavsid.align.commanded import pilot_sticks
 
-    remapped = _sticks(_rc_log("ardupilot", {"RCMAP_ROLL": 2.0, "RCMAP_PITCH": 1.0,
+    remapped = pilot_sticks(_rc_log("ardupilot", {"RCMAP_ROLL": 2.0, "RCMAP_PITCH": 1.0,
                                              "RC2_DZ": 20.0}))
     field, t, roll = remapped["roll"]
     assert field == "RC_CHANNELS.chan2_raw"
     want = np.round(200 * np.sin(2 * np.pi * 0.7 * t))
     np.testing.assert_allclose(roll, np.sign(want) * np.maximum(np.abs(want) - 20, 0))
     assert not np.ptp(remapped["pitch"][2]) and set(remapped) == {"roll", "pitch", "yaw"}
-    assert not np.ptp(_sticks(_rc_log("ardupilot", {}))["roll"][2])  # (default: channel 1)
-    assert _sticks(_rc_log("px4", {})) == {}
-    px4 = _sticks(_rc_log("px4", {"RC_MAP_ROLL": 2.0, "RC_MAP_YAW": 0.0}))
+    assert not np.ptp(pilot_sticks(_rc_log("ardupilot", {}))["roll"][2])  # (default: channel 1)
+    assert pilot_sticks(_rc_log("px4", {})) == {}
+    px4 = pilot_sticks(_rc_log("px4", {"RC_MAP_ROLL": 2.0, "RC_MAP_YAW": 0.0}))
     assert set(px4) == {"roll"} and np.ptp(px4["roll"][2]) > 300
-    assert "roll" not in _sticks(_rc_log("ardupilot", {"RCMAP_ROLL": 19.0}))
+    assert "roll" not in pilot_sticks(_rc_log("ardupilot", {"RCMAP_ROLL": 19.0}))
     # MAVLink 1's RC_CHANNELS_RAW: channels 1-8 on port 0 (port 1 carries 9-16)
     old = _rc_log("ardupilot", {"RCMAP_ROLL": 2.0})
     table = old.messages.pop("RC_CHANNELS")
     port = np.arange(len(table)) % 2
     old.messages["RC_CHANNELS_RAW"] = MessageTable(
         "RC_CHANNELS_RAW", {**table.columns, "port": port}, time_s=table.time_s)
-    field, t_old, _ = _sticks(old)["roll"]
+    field, t_old, _ = pilot_sticks(old)["roll"]
     assert field == "RC_CHANNELS_RAW.chan2_raw"
     np.testing.assert_array_equal(t_old, table.time_s[port == 0])
     # a second vehicle's sticks in the same telemetry are not the pilot's of the first
@@ -416,7 +416,7 @@ def test_a_mavlink_logs_sticks_are_read_on_the_channels_the_autopilot_maps() -> 
     ids = np.where(np.arange(len(table)) % 3 == 0, 2, 1)
     two.messages["RC_CHANNELS"] = MessageTable("RC_CHANNELS", {**table.columns, "_sysid": ids},
                                                time_s=table.time_s)
-    np.testing.assert_array_equal(_sticks(two)["roll"][1], table.time_s[ids == 1])
+    np.testing.assert_array_equal(pilot_sticks(two)["roll"][1], table.time_s[ids == 1])
 
 
 @pytest.mark.slow

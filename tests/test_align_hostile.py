@@ -127,7 +127,7 @@ def test_every_parameter_damaged_at_once_fits_or_says_why(monkeypatch, value: fl
     inf, 1e9 and -5, on this flight, a simulated QuadPlane and a PX4 1.14 ULog: no crash.)"""
     import dataclasses
 
-    import mavsid.align as al
+    import mavsid.align.flight as al
     from mavsid.errors import MavsidError
     from mavsid.pipeline_config import PipelineConfig
 

@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 from helpers import shared_path
 
-from mavsid.align import _armed_events, align
+from mavsid.align import align
+from mavsid.align.flags import armed_events
 from mavsid.autopilot.ardupilot import pwm_to_thrust
 from mavsid.data import MessageTable, RawLog, SourceInfo
 from mavsid.errors import DataQualityWarning, MissingMessageError, NoExcitationError
@@ -100,7 +101,7 @@ def test_arm_event_before_the_first_timed_record_is_kept(tmp_path) -> None:  # t
     with pytest.warns(DataQualityWarning, match="before the first timed record"):
         raw = read_log(path)
     assert raw["EV"].time_s.tolist() == [1.0, 2.9]
-    assert _armed_events(raw) == [(1.0, True), (2.9, False)]
+    assert armed_events(raw) == [(1.0, True), (2.9, False)]
 
 
 def _rcou_raw(channel: str) -> RawLog:

@@ -83,10 +83,14 @@ def test_info_lists_the_sysid_runs_pymavlink_sees():
         sids.append(m.to_dict())
     conn.close()
     runs = summarize(_read(path))["sysid_runs"]
-    assert [r["Ax"] for r in runs] == [s["Ax"] for s in sids] == [10, 11, 12, 13]
-    for run, ref in zip(runs, sids, strict=True):
-        assert run["time_s"] == pytest.approx(ref["TimeUS"] * 1e-6)
-        assert run["FSp"] == pytest.approx(ref["FSp"]) and run["Mag"] == pytest.approx(ref["Mag"])
+    assert [r["axis"] for r in runs] == [s["Ax"] for s in sids] == [10, 11, 12, 13]
+    starts = [s["TimeUS"] * 1e-6 for s in sids]
+    for k, (run, ref) in enumerate(zip(runs, sids, strict=True)):
+        # the injection starts after its run's SIDS record, and ends before the next one's
+        assert starts[k] <= run["start_s"] < run["stop_s"] < [*starts, np.inf][k + 1]
+        assert run["settings_from"] == "SIDS"
+        assert run["f_stop_hz"] == pytest.approx(ref["FSp"])
+        assert run["magnitude"] == pytest.approx(ref["Mag"])
 
 
 def test_median_rate_counts_instances_separately():
@@ -297,7 +301,10 @@ def test_summary_of_a_message_lacking_a_declared_field() -> None:
                        {"UpdateMS": "instance"}, declared=("TimeUS", "I", "H", "Use", "UpdateMS"))
     sids = MessageTable("SIDS", {"Ax": np.array([1])}, np.array([1.0]),
                         declared=("TimeUS", "Ax", "Mag"))
-    s = summarize(RawLog(SourceInfo("r.bin", "dataflash", 0), {"RASI": tab, "SIDS": sids}))
+    sidd = MessageTable("SIDD", {"Targ": np.array([0.0, 0.5, -0.5])}, np.array([1.1, 1.5, 2.0]))
+    s = summarize(RawLog(SourceInfo("r.bin", "dataflash", 0),
+                         {"RASI": tab, "SIDS": sids, "SIDD": sidd}))
     assert s["messages"]["RASI"]["rate_hz"] == 100.0
-    assert s["sysid_runs"] == [{"time_s": 1.0, "Ax": 1}]
+    assert s["sysid_runs"] == [{"start_s": 1.5, "stop_s": 2.0, "settings_from": "SIDS",
+                                "axis": 1}]
     format_summary(s)

@@ -547,7 +547,7 @@ def test_px4s_attitude_setpoint_is_not_ramped_across_a_gap(tmp_path) -> None:  #
     elsewhere it is the setpoint's roll (PX4's own ``roll_body``, px4-1.11 layout)."""
     from dataclasses import replace
 
-    from mavsid.align import _commanded
+    from mavsid.align.commanded import commanded_attitude
     from mavsid.data import MessageTable
 
     raw = _simulated_raw(tmp_path / "s.ulg", "px4-1.11", manoeuvre="doublet", axis="roll",
@@ -560,7 +560,7 @@ def test_px4s_attitude_setpoint_is_not_ramped_across_a_gap(tmp_path) -> None:  #
                          sp.time_s[keep], sp.units)
     raw = replace(raw, messages={**raw.messages, sp.name: table})
     t = np.linspace(t0, t1, 4001)
-    cmd = _commanded(raw, t)[0]["roll"]
+    cmd = commanded_attitude(raw, t)[0]["roll"]
     lo, hi = sp.time_s[cut][[0, -1]]
     # (within three of its intervals of a sample it is interpolated: 0.1 s is more)
     assert np.isnan(cmd[(t > lo + 0.1) & (t < hi - 0.1)]).all()

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import functools
 import os
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, fields
 
 import numpy as np
@@ -30,11 +30,13 @@ __all__ = [
     "FlightData",
     "MessageTable",
     "ModeChange",
+    "ParamChange",
     "RawLog",
     "Segment",
     "SourceInfo",
     "SysidRun",
     "TextMessage",
+    "param_changes",
 ]
 
 
@@ -152,6 +154,43 @@ class ModeChange:
 
 
 @dataclass(frozen=True)
+class ParamChange:
+    """A parameter set to a new value while the log ran (log clock, seconds)."""
+
+    time_s: float
+    name: str
+    value: float
+
+
+def param_changes(initial: Mapping[str, float],
+                  records: Iterable[tuple[float, str, float]]) -> tuple[ParamChange, ...]:
+    """The records ``(time_s, name, value)`` that change a parameter's value, in time order.
+
+    ``initial`` holds the values the log starts with (a ULog's header, the first record
+    of each name in a DataFlash log, which writes every parameter at its start); a record
+    of a name not seen before is its initial value, and one that repeats the value it had
+    is no change. Values that are not finite numbers are left out.
+
+    Examples
+    --------
+    >>> param_changes({"A": 1.0}, [(5.0, "A", 1.0), (2.0, "B", 3.0), (9.0, "A", 2.0),
+    ...                            (12.0, "B", 4.0)])
+    (ParamChange(time_s=9.0, name='A', value=2.0), ParamChange(time_s=12.0, name='B', \
+value=4.0))
+    """
+    current = dict(initial)
+    out = []
+    for t, name, value in sorted(records, key=lambda r: r[0]):
+        if not np.isfinite(value):
+            continue
+        before = current.get(name)
+        current[name] = value
+        if before is not None and before != value:
+            out.append(ParamChange(float(t), str(name), float(value)))
+    return tuple(out)
+
+
+@dataclass(frozen=True)
 class SourceInfo:
     """Where data came from and what the reader had to skip.
 
@@ -200,6 +239,9 @@ class RawLog:
     #: the log's span (s) by its format's own clock where that differs from the records'
     #: times (a ULog: its header's start time to its last data timestamp, as pyulog has it)
     span_s: tuple[float, float] | None = None
+    #: parameters set to a new value while the log ran, in time order (``params`` holds
+    #: the values at its end; see :func:`param_changes`)
+    param_changes: tuple[ParamChange, ...] = ()
 
     def __getitem__(self, name: str) -> MessageTable:
         try:

@@ -16,8 +16,9 @@ rate; ``attitude``: commanded -> estimated roll/pitch angle):
   with coherence: the -3 dB bandwidth and the phase delay there;
 - **tracking**: the error's RMS, and the delay that best aligns actual with target;
 - **noise**: gyro and controller-output spectra with the configured filters' cut-offs;
-- **settings**: where the rate-controller parameters change in flight (DataFlash ``PARM``
-  records after the start), one response per setting.
+- **settings**: where the rate-controller parameters change in flight (the log's
+  :attr:`~mavsid.data.RawLog.param_changes`: DataFlash ``PARM`` records, ULog parameter
+  changes, MAVLink ``PARAM_VALUE``), one response per setting.
 
 Honest limits: every result carries the band the log's rate resolves (``band_hz``: from one
 over the window to the Nyquist frequency of the slower of target and actual); below
@@ -95,11 +96,6 @@ MAX_BAND = 0.2
 MIN_WINDOWS = 3
 #: longest delay (s) searched when aligning actual with target
 MAX_DELAY_S = 0.25
-#: parameters whose change in flight starts a new setting (prefixes, ArduPilot and PX4)
-RATE_PARAM_PREFIXES = ("ATC_RAT_", "RATE_RLL_", "RATE_PIT_", "RATE_YAW_", "ATC_ANG_",
-                       "MC_ROLLRATE_", "MC_PITCHRATE_", "MC_YAWRATE_", "MC_ROLL_P",
-                       "MC_PITCH_P", "MC_YAW_P", "INS_GYRO_FILTER", "IMU_GYRO_CUTOFF",
-                       "IMU_DGYRO_CUTOFF")
 _PREFIX = {"roll": "RLL", "pitch": "PIT", "yaw": "YAW"}
 
 
@@ -647,29 +643,21 @@ def _usable(flight: FlightData) -> np.ndarray:
     return np.ones(flight.time_s.shape, bool)
 
 
-def _settings(raw: RawLog, span: tuple[float, float]) -> list[tuple[float, dict[str, float]]]:
-    """``(time, changed)`` where rate-controller parameters change after the log starts
-    (DataFlash ``PARM`` records; changes within one second are one)."""
-    tab = raw.messages.get("PARM")
-    if tab is None or "Name" not in tab.columns or "Value" not in tab.columns:
-        return []
-    t = np.asarray(tab.time_s, float)
-    names = [str(n) for n in np.asarray(tab.columns["Name"]).tolist()]
-    values = np.asarray(tab.columns["Value"], float)
-    current: dict[str, float] = {}
+def _settings(raw: RawLog, span: tuple[float, float], platform: str | None
+              ) -> list[tuple[float, dict[str, float]]]:
+    """``(time, changed)`` where rate-controller parameters change inside ``span``
+    (:attr:`RawLog.param_changes` that :func:`mavsid.autopilot.is_rate_setting`; changes
+    within one second are one)."""
+    from mavsid.autopilot import is_rate_setting
+
     changes: list[tuple[float, dict[str, float]]] = []
-    for ti, name, value in sorted(zip(t.tolist(), names, values.tolist(), strict=True),
-                                  key=lambda r: r[0]):
-        if not name.startswith(RATE_PARAM_PREFIXES) or not math.isfinite(value):
+    for c in raw.param_changes:
+        if not (span[0] < c.time_s < span[1] and is_rate_setting(c.name, platform)):
             continue
-        before = current.get(name)
-        current[name] = value
-        if before is None or before == value or not span[0] < ti < span[1]:
-            continue
-        if changes and ti - changes[-1][0] < 1.0:
-            changes[-1][1][name] = value
+        if changes and c.time_s - changes[-1][0] < 1.0:
+            changes[-1][1][c.name] = c.value
         else:
-            changes.append((ti, {name: value}))
+            changes.append((c.time_s, {c.name: c.value}))
     return changes
 
 
@@ -736,7 +724,7 @@ def flight_response(flight: FlightData, raw: RawLog, axes: Sequence[str] = AXES
     loops = one(usable)
     spectra = {axis: _spectra(flight, axis, usable) for axis in axes}
     span = (float(flight.time_s[0]), float(flight.time_s[-1]))
-    changes = _settings(raw, span)
+    changes = _settings(raw, span, flight.autopilot or raw.autopilot)
     settings: list[Setting] = []
     if changes:
         edges = [span[0], *[c[0] for c in changes], span[1]]

@@ -131,26 +131,30 @@ def test_nothing_is_said_below_the_least_rate() -> None:
 
 
 def test_a_parameter_change_in_flight_splits_the_response(tmp_path) -> None:
+    from dataclasses import replace
+
     from mavsid.align import read_flight
-    from mavsid.data import MessageTable, RawLog
+    from mavsid.data import ParamChange
     from mavsid.loop import twin_messages
 
     sc = scenario_from_options(manoeuvre="random", axis="roll", duration_s=60.0, seed=4)
     path = tmp_path / "f.bin"
     simulate(sc, [path])
-    flight, raw = read_flight(path, also=sorted(twin_messages() | {"PARM"}))
+    flight, raw = read_flight(path, also=sorted(twin_messages()))
     t0 = float(flight.time_s[0])
-    parm = raw.messages["PARM"]
-    names = np.concatenate([np.asarray(parm.columns["Name"], object),
-                            np.array(["ATC_RAT_RLL_P"], object)])
-    values = np.concatenate([np.asarray(parm.columns["Value"], float), [0.2]])
-    times = np.concatenate([np.asarray(parm.time_s, float), [t0 + 30.0]])
-    changed = RawLog(raw.source, {**raw.messages, "PARM": MessageTable(
-        "PARM", {"Name": names, "Value": values}, times)}, params=raw.params)
+    changed = replace(raw, param_changes=(
+        ParamChange(t0 + 30.0, "ATC_RAT_RLL_P", 0.2),
+        ParamChange(t0 + 30.5, "ATC_RAT_RLL_D", 0.005),  # (within a second: one change)
+        ParamChange(t0 + 40.0, "LOG_BITMASK", 1.0)))  # (not the rate loop's: no split)
     got = response.flight_response(flight, changed)
     assert len(got.settings) == 2
-    assert got.settings[1].changed == {"ATC_RAT_RLL_P": 0.2}
+    assert got.settings[1].changed == {"ATC_RAT_RLL_P": 0.2, "ATC_RAT_RLL_D": 0.005}
+    assert got.settings[0].stop_s == got.settings[1].start_s == t0 + 30.0
     assert all(s.loops[0].axis == "roll" for s in got.settings)
+    # PX4's names split a PX4 log, not an ArduPilot one
+    px4 = replace(changed, param_changes=(ParamChange(t0 + 30.0, "MC_ROLLRATE_P", 0.2),))
+    assert response.flight_response(flight, px4).settings == ()
+    assert len(response.flight_response(replace(flight, autopilot="px4"), px4).settings) == 2
 
 
 def _mavsid(*args: str) -> subprocess.CompletedProcess[str]:

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 from mavsid.autopilot import ardupilot, px4
 
-__all__ = ["excitation_advice", "logging_advice", "longer_advice"]
+__all__ = ["excitation_advice", "is_rate_setting", "logging_advice", "longer_advice"]
 
 
 def excitation_advice(axis: str, platform: str | None) -> str:
@@ -44,6 +44,18 @@ def excitation_advice(axis: str, platform: str | None) -> str:
     if px4.is_px4(platform):
         return px4.excitation_advice(axis)
     return ardupilot.excitation_advice(axis, platform)
+
+
+def is_rate_setting(name: str, platform: str | None) -> bool:
+    """Whether parameter ``name`` shapes the rate loop's response on this autopilot (its
+    change in flight starts a new setting).
+
+    >>> is_rate_setting("MC_ROLLRATE_P", "px4"), is_rate_setting("MC_ROLLRATE_P", "ardupilot")
+    (True, False)
+    """
+    if px4.is_px4(platform):
+        return px4.is_rate_setting(name)
+    return ardupilot.is_rate_setting(name)
 
 
 def longer_advice(platform: str | None) -> str:

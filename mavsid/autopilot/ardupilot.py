@@ -468,6 +468,27 @@ def rate_naming(params: Mapping[str, float], axis: str) -> str:
     return "ATC_RAT"
 
 
+#: the gyro's low-pass filter, which shapes the rate loop's response as its gains do
+GYRO_FILTER_PARAM = "INS_GYRO_FILTER"
+
+
+def is_rate_setting(name: str) -> bool:
+    """Whether parameter ``name`` shapes the rate loop's response: any rate-PID parameter of
+    one of the families (gains, filters, limits), the attitude P around it, or the gyro
+    filter. A change of one in flight starts a new setting of the closed-loop response.
+
+    Examples
+    --------
+    >>> [is_rate_setting(n) for n in ("ATC_RAT_PIT_D", "RATE_YAW_IMAX", "STB_RLL_P",
+    ...                                "Q_A_RAT_RLL_FLTT", "INS_GYRO_FILTER", "ATC_ACCEL_R_MAX")]
+    [True, True, True, True, True, False]
+    """
+    if name == GYRO_FILTER_PARAM:
+        return True
+    return any(name.startswith(rate_prefix(axis, naming)) or name == angle_p_param(axis, naming)
+               for naming in _RATE_FAMILY for axis in RATE_AXIS)
+
+
 def param_file_text(values: Mapping[str, float], header: Sequence[str]) -> str:
     """A parameter file MAVProxy (``param load``) and Mission Planner load: ``#`` comment
     lines, then one ``NAME VALUE`` line per parameter.

@@ -123,6 +123,29 @@ def angle_p_param(axis: str) -> str:
     return f"MC_{RATE_AXIS[axis]}_P"
 
 
+#: the multicopter rate controller's gains per axis (MC_ROLLRATE_P ... MC_ROLLRATE_FF)
+RATE_GAINS = ("P", "I", "D", "K", "FF")
+#: the gyro's and its derivative's low-pass filters, which shape the rate loop's response
+GYRO_FILTER_PARAMS = ("IMU_GYRO_CUTOFF", "IMU_DGYRO_CUTOFF")
+
+
+def is_rate_setting(name: str) -> bool:
+    """Whether parameter ``name`` shapes the rate loop's response: a rate gain
+    (:data:`RATE_GAINS`), a rate integrator's limit, the attitude P around the rate loop,
+    or a gyro filter. A change of one in flight starts a new setting of the closed-loop
+    response.
+
+    Examples
+    --------
+    >>> [is_rate_setting(n) for n in ("MC_YAWRATE_K", "MC_RR_INT_LIM", "MC_PITCH_P",
+    ...                                "IMU_GYRO_CUTOFF", "MC_ROLLRATE_MAX")]
+    [True, True, True, True, False]
+    """
+    return name in GYRO_FILTER_PARAMS or any(
+        name in {*(rate_prefix(axis) + g for g in RATE_GAINS), int_lim_param(axis),
+                 angle_p_param(axis)} for axis in RATE_AXIS)
+
+
 def has_rate_params(params: Mapping[str, float]) -> bool:
     """Whether a log's parameters hold PX4's multicopter rate controller.
 

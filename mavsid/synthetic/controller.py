@@ -310,18 +310,23 @@ class ArduPilotPID:
     """
 
     def __init__(self, gains: PIDGains, dt: float) -> None:
-        self.g = gains
         self.dt = dt
-        self.a_t = lowpass_alpha(gains.fltt, dt)
-        self.a_e = lowpass_alpha(gains.flte, dt)
-        self.a_d = lowpass_alpha(gains.fltd, dt)
-        self.slew = SlewLimiter(gains.smax, gains.sr_tau)
+        self.set_gains(gains)
         self.target = self.error = self.derivative = self.target_derivative = 0.0
         self.integrator = 0.0
         self.p_out = self.d_out = 0.0
         self.feedforward = 0.0
         self.log = np.zeros(len(PID_LOG_FIELDS))
         self.reset = True
+
+    def set_gains(self, gains: PIDGains) -> None:
+        """Use ``gains`` from the next loop on, the controller's state carried on (a
+        parameter set in flight; the slew limiter starts again)."""
+        self.g = gains
+        self.a_t = lowpass_alpha(gains.fltt, self.dt)
+        self.a_e = lowpass_alpha(gains.flte, self.dt)
+        self.a_d = lowpass_alpha(gains.fltd, self.dt)
+        self.slew = SlewLimiter(gains.smax, gains.sr_tau)
 
     def update(self, target: float, measured: float, limit: bool = False,
                now_s: float = 0.0) -> float:
@@ -612,14 +617,30 @@ class AttitudeController:
     """
 
     def __init__(self, params: ControllerParams) -> None:
-        self.params = params
         self.dt = 1.0 / params.loop_hz
         self.pids = [ArduPilotPID(params.rate_gains(ax), self.dt) for ax in _PREFIX]
+        self.set_params(params)
+        self.att_target = np.zeros(3)
+        self.rate_ff = np.zeros(3)  # the target's rate (feed-forward), rad/s
+
+    def set_params(self, params: ControllerParams) -> None:
+        """Use ``params`` from the next loop on (parameters set in flight): the gains,
+        filters and limits change, the targets and the PIDs' state carry on.
+
+        Raises
+        ------
+        ConfigError
+            ``params`` runs at another loop rate.
+        """
+        if round(1.0 / params.loop_hz, 12) != round(self.dt, 12):
+            raise ConfigError(f"the loop rate cannot change in flight ({params.loop_hz:g} Hz "
+                              f"for {1.0 / self.dt:g} Hz)")
+        self.params = params
+        for pid, ax in zip(self.pids, _PREFIX, strict=True):
+            pid.set_gains(params.rate_gains(ax))
         self.ang_p = np.array([params.angle_p(ax) for ax in _PREFIX])
         self.accel = params.accel_limits()
         self.rate_max = params.rate_limits()
-        self.att_target = np.zeros(3)
-        self.rate_ff = np.zeros(3)  # the target's rate (feed-forward), rad/s
 
     def _shape(self, desired: np.ndarray, feedforward: bool) -> None:
         """Advance the attitude target and its rate towards ``desired``."""

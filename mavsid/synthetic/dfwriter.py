@@ -327,6 +327,11 @@ def _build(flight: Flight, lo: int, hi: int, shift_s: float, faults: Faults,
         cols = {k: (v if np.ndim(v) == 0 else np.asarray(v)[keep]) for k, v in cols.items()}
         data.add(name, tus[idx][keep], **cols)
 
+    retune = flight.retuned(lambda f: layout_params(f, layout))
+    if retune is not None and lo <= retune[0] < hi and retune[1]:  # (set in flight)
+        changed = retune[1]
+        data.add("PARM", np.full(len(changed), tus[retune[0]]), Name=list(changed),
+                 Value=list(changed.values()), Default=list(changed.values()))
     # mode changes (the first sample states the current mode)
     m = (np.full(len(flight), _PLANE_FBWA) if plane
          else np.full(len(flight), _QSTABILIZE) if vtol else flight.mode)

@@ -16,7 +16,8 @@ Examples
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -123,6 +124,10 @@ class Scenario:
         records go on, the waveform held); the vehicle disarms once on its back (or 2 s
         later: the crash check) and lies still, motors at ``MOT_PWM_MIN``, while logging
         continues.
+    retune : (float, ControllerParams), optional
+        ``(at_s, controller)``: seconds after the first logged sample the controller's
+        parameters become ``controller``'s (set in flight from a ground station: the
+        controller's state carries on, the logs record the changed parameters).
     """
 
     manoeuvre: str = "sysid"
@@ -142,6 +147,7 @@ class Scenario:
     motor_output: int = 1
     esc: str = "pwm"
     motor_failure_s: float | None = None
+    retune: tuple[float, ControllerParams] | None = None
 
     def __post_init__(self) -> None:
         if self.manoeuvre not in ("sysid", *MANOEUVRES):
@@ -165,6 +171,12 @@ class Scenario:
         if self.motor_failure_s is not None and not 0 < self.motor_failure_s < self.length_s:
             raise ConfigError(f"motor failure at {self.motor_failure_s} s is outside the "
                               f"flight (0-{self.length_s:g} s)")
+        if self.retune is not None:
+            if not 0 < self.retune[0] < self.length_s:
+                raise ConfigError(f"retune at {self.retune[0]} s is outside the flight "
+                                  f"(0-{self.length_s:g} s)")
+            if self.retune[1].loop_hz != self.controller.loop_hz:
+                raise ConfigError("a retune cannot change the loop rate")
         if self.esc not in ESC_TYPES:
             raise ConfigError(f"esc must be one of {', '.join(ESC_TYPES)}, got {self.esc!r}")
         for name in ("rate", "att", "imu", "rcou", "rcin", "tlog", "rate_idle"):
@@ -292,6 +304,26 @@ class Flight:
         rc[:, 3] = 1500 + 500 * st[:, 3]
         rc[:, 4] = np.where(self.mode == MODE_SYSTEMID, 1815, 1165)
         return np.round(rc)
+
+    def retuned(self, params_of: Callable[[Flight], Mapping[str, float | int]]
+                ) -> tuple[int, dict[str, float | int]] | None:
+        """The loop index of the scenario's retune and the parameters it changes, named as
+        ``params_of`` (a writer's parameters of a flight) names them; None without one.
+
+        >>> from mavsid.synthetic.controller import ControllerParams
+        >>> fl = fly(Scenario(manoeuvre="hover", duration_s=0.1,
+        ...                   retune=(0.05, ControllerParams(rll_p=0.2))))
+        >>> fl.retuned(Flight.params)
+        (20, {'ATC_RAT_RLL_P': 0.2})
+        """
+        if self.scenario.retune is None:
+            return None
+        at_s, controller = self.scenario.retune
+        before = params_of(self)
+        after = params_of(replace(self, scenario=replace(self.scenario, controller=controller,
+                                                         retune=None)))
+        changed = {k: v for k, v in after.items() if before.get(k) != v}
+        return round(at_s / self.dt), changed
 
     def params(self) -> dict[str, float]:
         """ArduPilot parameters describing this vehicle and run (PARM / PARAM_VALUE)."""
@@ -565,7 +597,10 @@ def fly(sc: Scenario) -> Flight:
     terms = np.zeros((n, 3, len(PID_LOG_FIELDS)), dtype=np.float32)
     limit = np.zeros(3, dtype=bool)  # the motors saturated on an axis in the previous loop
     crash = _Crash(sc, n, dt) if sc.motor_failure_s is not None else None
+    retune_k = round(sc.retune[0] / dt) if sc.retune is not None else -1
     for k in range(n):
+        if k == retune_k and sc.retune is not None:
+            control.set_params(sc.retune[1])
         rate = x[:3]
         g_raw = rate + bias + noise[k]
         g = gyro_filter(g_raw)

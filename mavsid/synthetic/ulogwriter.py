@@ -280,6 +280,11 @@ def write_ulog(
     add("vehicle_status", status, {"nav_state": nav, "arming_state": 2, "vehicle_type": 1})
     add("vehicle_land_detected", one_hz, {"landed": 0, "maybe_landed": 0})
 
+    retune = flight.retuned(lambda f: _params(f, layout))
+    for name, val in (retune[1] if retune is not None else {}).items():  # (set in flight)
+        msg = (_keyed(b"P", "int32_t", name, struct.pack("<i", val)) if isinstance(val, int)
+               else _keyed(b"P", "float", name, struct.pack("<f", val)))
+        parts.append((tus[[retune[0]]], np.frombuffer(msg, np.uint8)[None, :]))
     times = np.concatenate([t for t, _ in parts])
     sizes = np.concatenate([np.full(len(t), r.shape[1]) for t, r in parts])
     flat = np.concatenate([r.ravel() for _, r in parts])

@@ -67,3 +67,24 @@ def test_the_writers_record_the_retune(retuned) -> None:
     assert {(n, round(v, 6)) for _, n, v in u.changed_parameters} == {
         ("MC_ROLLRATE_P", 0.2), ("MC_ROLLRATE_D", 0.005)}
     assert [t * 1e-6 for t, _, _ in u.changed_parameters] == pytest.approx([t_change] * 2)
+
+
+def test_the_tlog_reader_gives_the_retune(retuned) -> None:
+    from pymavlink import mavutil
+
+    from mavsid.readers import read_log
+
+    sc, (_, _, tlog) = retuned
+    raw = read_log(tlog)
+    got = [(c.name, round(c.value, 6)) for c in raw.param_changes]
+    assert sorted(got) == [("ATC_RAT_RLL_D", 0.005), ("ATC_RAT_RLL_P", 0.2)]
+    # pymavlink: the PARAM_VALUE messages after the first of each name; the reader's
+    # times on the vehicle's clock
+    log = mavutil.mavlink_connection(str(tlog))
+    seen, later = set(), []
+    while (m := log.recv_match(type="PARAM_VALUE")) is not None:
+        if m.param_id in seen:
+            later.append((m.param_id, round(m.param_value, 6)))
+        seen.add(m.param_id)
+    assert sorted(later) == sorted(got)
+    assert all(c.time_s == pytest.approx(sc.boot_s + AT_S, abs=0.1) for c in raw.param_changes)

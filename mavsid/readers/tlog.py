@@ -85,7 +85,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mavsid.autopilot.modes import ardupilot_modes, px4_mode_name
-from mavsid.data import MessageTable, ModeChange, RawLog, SourceInfo, TextMessage
+from mavsid.data import (
+    MessageTable,
+    ModeChange,
+    ParamChange,
+    RawLog,
+    SourceInfo,
+    TextMessage,
+    param_changes,
+)
 from mavsid.errors import ConfigError, DataQualityWarning, LogFormatError
 
 __all__ = ["MessageDef", "load_dialect", "read", "vehicle_class"]
@@ -714,15 +722,18 @@ def _of(table: MessageTable | None, sysid: int, compid: int) -> NDArray[np.bool_
     return (table["_sysid"] == sysid) & (table["_compid"] == compid)
 
 
-def _params(table: MessageTable | None, vehicle: tuple[int, int, int, int]) -> dict[str, float]:
-    """PARAM_VALUE of the main vehicle, the last value of each name.
+def _params(table: MessageTable | None, vehicle: tuple[int, int, int, int]
+            ) -> tuple[dict[str, float], tuple[ParamChange, ...]]:
+    """PARAM_VALUE of the main vehicle: the last value of each name, and the values that
+    changed one after its first (a ground station fetches every parameter when it
+    connects; the vehicle answers each later PARAM_SET with a PARAM_VALUE).
 
     PX4 sends integer parameters byte-wise in the float (MAVLink's PARAM_ENCODE_BYTEWISE):
     for it, ``MAV_PARAM_TYPE_UINT32``/``INT32`` values are reinterpreted as integers.
     """
     rows = _of(table, *vehicle[:2])
     if table is None or rows is None:
-        return {}
+        return {}, ()
     names = table["param_id"][rows]
     value = table["param_value"][rows].astype(np.float32)
     kind = table["param_type"][rows]
@@ -731,7 +742,9 @@ def _params(table: MessageTable | None, vehicle: tuple[int, int, int, int]) -> d
         for code, as_int in ((5, np.uint32), (6, np.int32)):
             pick = kind == code
             out[pick] = value[pick].view(as_int).astype(np.float64)
-    return dict(zip(names.tolist(), out.tolist(), strict=True))
+    records = zip(table.time_s[rows].tolist(), names.tolist(), out.tolist(), strict=True)
+    return (dict(zip(names.tolist(), out.tolist(), strict=True)),
+            param_changes({}, records))
 
 
 def _texts(table: MessageTable | None, sysid: int | None) -> tuple[TextMessage, ...]:
@@ -936,7 +949,7 @@ def _read(
     hb, pv, st = (tables.get(n) for n in ("HEARTBEAT", "PARAM_VALUE", "STATUSTEXT"))
     texts = _texts(st, vehicle[0] if vehicle else None)
     firmware = next((m.text for m in texts if _FIRMWARE.match(m.text)), None)
-    params = _params(pv, vehicle) if vehicle else {}
+    params, changes = _params(pv, vehicle) if vehicle else ({}, ())
     modes = _modes(hb, vehicle) if vehicle else ()
     span = _span(frames, offsets, vehicle[0] if vehicle else None,
                  [t for i, t in own.items() if t is not None])
@@ -948,6 +961,7 @@ def _read(
         tables = {n: _window(t, lo, hi) for n, t in tables.items()}
         texts = tuple(m for m in texts if lo <= m.time_s <= hi)
         modes = tuple(m for m in modes if lo <= m.time_s <= hi)
+        changes = tuple(c for c in changes if lo <= c.time_s <= hi)
     if wanted is not None:
         tables = {n: t for n, t in tables.items() if n in wanted}
 
@@ -969,6 +983,7 @@ def _read(
         vehicle=vehicle_name,
         firmware=firmware,
         span_s=span,
+        param_changes=changes,
     )
 
 

@@ -4,10 +4,11 @@ Each record is the 8-byte big-endian receive time (µs since the UNIX epoch, the
 station's wall clock) followed by one MAVLink 2 frame, encoded by pymavlink's own
 ``ardupilotmega`` encoder. The vehicle (system 1, component 1) streams ATTITUDE, SCALED_IMU,
 SERVO_OUTPUT_RAW and RC_CHANNELS at the telemetry rate (``LogRates.tlog``, 50 Hz by default,
-sampled from the loop), HEARTBEAT at 1 Hz, all parameters as PARAM_VALUE at the start and
-STATUSTEXT for the firmware banner and SYSTEMID start/finish; the ground station's own
-HEARTBEAT (system 255) appears once a second. Receive times carry link latency with random
-jitter (never running backwards); the messages' ``time_boot_ms``/``time_usec`` carry the
+sampled from the loop), HEARTBEAT at 1 Hz, all parameters as PARAM_VALUE at the start (and
+those a retune changes when it does, as the vehicle answers a PARAM_SET), and STATUSTEXT for
+the firmware banner and SYSTEMID start/finish; the ground station's own HEARTBEAT (system
+255) appears once a second. Receive times carry link latency with random jitter (never
+running backwards); the messages' ``time_boot_ms``/``time_usec`` carry the
 vehicle's clock.
 
 Examples
@@ -99,6 +100,7 @@ def write_tlog(
     for i, (name, value) in enumerate(params.items()):
         emit(0, vehicle.param_value_encode(name.encode(), float(value),
                                            mavlink.MAV_PARAM_TYPE_REAL32, len(params), i))
+    retune = flight.retuned(Flight.params)  # (a PARAM_SET in flight, answered)
     hb_step = round(loop_hz)
     run = flight.run_index
     rc_in = flight.rc_in()
@@ -115,6 +117,11 @@ def write_tlog(
             emit(k, vehicle.statustext_encode(mavlink.MAV_SEVERITY_INFO, text))
         if run[k] >= 0 and (k == n - 1 or run[k + 1] != run[k]):
             emit(k, vehicle.statustext_encode(mavlink.MAV_SEVERITY_INFO, b"SystemID Finished"))
+        if retune is not None and k == retune[0]:
+            for name, value in retune[1].items():
+                emit(k, vehicle.param_value_encode(name.encode(), float(value),
+                                                   mavlink.MAV_PARAM_TYPE_REAL32, len(params),
+                                                   list(params).index(name)))
         if k % step:
             continue
         g = flight.gyro[k]

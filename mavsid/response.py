@@ -610,6 +610,28 @@ def _dense(raw: RawLog, sources: Sequence[str], grid: np.ndarray, rate_hz: float
     return ok
 
 
+def _attitude_pair(raw: RawLog, axis: str, grid: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, tuple[str, str], float] | None:
+    """The attitude target and attitude of ``axis`` logged together
+    (:data:`mavsid.autopilot.presets.ATTITUDE_PAIRS`) on ``grid`` (rad, interpolated; NaN
+    outside their span), their sources and their logging rate; None when the log has none."""
+    from mavsid.autopilot.presets import ATTITUDE_PAIRS
+    from mavsid.channels import first_of
+
+    for pair in ATTITUDE_PAIRS.get(axis, ()):
+        got = [first_of(raw, [ch], f"{axis} attitude loop") for ch in pair]
+        names = (f"{pair[0].message}.{pair[0].field}", f"{pair[1].message}.{pair[1].field}")
+        hz = _native_rate(raw, names[0])
+        if got[0] is None or got[1] is None or hz is None:
+            continue
+        series = []
+        for _, ts, v in (got[0], got[1]):
+            order = np.argsort(ts, kind="stable")
+            series.append(np.interp(grid, ts[order], v[order], left=np.nan, right=np.nan))
+        return series[0], series[1], names, hz
+    return None
+
+
 def _spectra(flight: FlightData, axis: str, usable: np.ndarray) -> tuple[Spectrum, ...]:
     """Gyro and controller-output spectra of ``axis`` over the longest usable stretch, at
     the signals' logging rates."""
@@ -712,8 +734,15 @@ def flight_response(flight: FlightData, raw: RawLog, axes: Sequence[str] = AXES
             if axis == "yaw":
                 continue  # (the commanded heading is a rate: the rate loop is its loop)
             att = flight.series(axis)
-            if axis in cmd and att is not None:
-                hz = min(float(rates.get(axis) or grid), grid)
+            hz = min(float(rates.get(axis) or grid), grid)
+            fast = _attitude_pair(raw, axis, flight.time_s)
+            if fast is not None and fast[3] > 1.5 * hz:  # (logged faster together)
+                target, actual, names, hz = fast
+                hz = min(hz, grid)
+                dense = _dense(raw, names, flight.time_s, hz)
+                loops.append(loop_response(axis, "attitude", flight.time_s, target, actual, hz,
+                                           names=names, usable=mask & dense))
+            elif axis in cmd and att is not None:
                 names = (str(cmd_src.get(axis, "commanded")), str(state_src.get(axis, axis)))
                 dense = _dense(raw, names, flight.time_s, hz)
                 loops.append(loop_response(
@@ -743,7 +772,7 @@ def flight_response(flight: FlightData, raw: RawLog, axes: Sequence[str] = AXES
 def read_response(path: str | os.PathLike[str], axes: Sequence[str] = AXES, *,
                   preset: str | None = None, presets: Mapping[str, object] | None = None,
                   mixers: Mapping[str, object] | None = None) -> FlightResponse:
-    """Read and align ``path`` with the rate targets and PARM records, and work out its
+    """Read and align ``path`` with the rate and attitude targets, and work out its
     :func:`flight_response`.
 
     Raises
@@ -754,8 +783,12 @@ def read_response(path: str | os.PathLike[str], axes: Sequence[str] = AXES, *,
     from mavsid.align import read_flight
     from mavsid.loop.twin import twin_messages
 
+    from mavsid.autopilot.presets import ATTITUDE_PAIRS, DESIRED_CHANNELS
+
+    attitude = {c.message for chans in DESIRED_CHANNELS.values() for c in chans}
+    attitude |= {c.message for pairs in ATTITUDE_PAIRS.values() for p in pairs for c in p}
     flight, raw = read_flight(path, preset, None, presets=presets or None,  # type: ignore[arg-type]
                               mixers=mixers or None,  # type: ignore[arg-type]
-                              also=sorted(twin_messages() | {"PARM"}))
+                              also=sorted(twin_messages() | attitude))
     return flight_response(flight, raw, axes)
 

@@ -114,6 +114,21 @@ def test_two_flights_of_one_vehicle_agree_within_their_bands(flights) -> None:
     assert agree.mean() >= 0.9
 
 
+def test_the_attitude_loop_from_the_records_logged_with_the_rate(tmp_path) -> None:
+    # ArduCopter 4.5+ logs ANG (attitude target and attitude) with RATE; ATT stays slow
+    sc = scenario_from_options(manoeuvre="random", axis="roll", duration_s=60.0, seed=5)
+    new, old = tmp_path / "new.bin", tmp_path / "old.bin"
+    simulate(sc, [new], layout="copter-4.6")
+    simulate(sc, [old], layout="copter-4")
+    fast = response.read_response(new, ("roll",)).loop("roll", "attitude")
+    slow = response.read_response(old, ("roll",)).loop("roll", "attitude")
+    assert fast is not None and slow is not None
+    assert (fast.target, fast.actual) == ("ANG.DesRoll", "ANG.Roll")
+    assert slow.target == "ATT.DesRoll" and fast.rate_hz > 1.5 * slow.rate_hz
+    assert fast.step is not None and fast.band_hz is not None
+    assert fast.band_hz[1] == pytest.approx(fast.rate_hz / 2, rel=0.01)
+
+
 def test_a_slow_log_says_what_it_resolves(tmp_path) -> None:
     sc = scenario_from_options(manoeuvre="random", axis="roll", duration_s=60.0, seed=3,
                                rate_hz=10.0)

@@ -82,6 +82,7 @@ from mavsid.data import RawLog
 from mavsid.errors import ConfigError, MissingMessageError
 
 __all__ = [
+    "ATTITUDE_PAIRS",
     "DESIRED_CHANNELS",
     "INJECTION_CHANNEL",
     "PRESETS",
@@ -455,6 +456,13 @@ DESIRED_CHANNELS: dict[str, tuple[Channel, ...]] = {
            _ch("vehicle_attitude_setpoint", "q_d", "1", transform=f"quat_{axis}"),
            _ch("ATSP", f"{axis.capitalize()}SP", "rad"))  # (PX4 sdlog2)
     for axis in AXES
+}
+#: The attitude target and the attitude logged together, per axis (roll, pitch), where a log
+#: has them faster than the attitude alignment uses: ArduCopter >= 4.5 ANG.DesRoll/Roll
+#: (deg), written with RATE at its rate (ATT stays at 10 Hz).
+ATTITUDE_PAIRS: dict[str, tuple[tuple[Channel, Channel], ...]] = {
+    axis: ((_ch("ANG", f"Des{axis.capitalize()}", "deg"), _ch("ANG", axis.capitalize(), "deg")),)
+    for axis in ("roll", "pitch")
 }
 #: ArduPilot SYSTEMID's injected waveform (added to the mixer input on SID_AXIS 10-12)
 INJECTION_CHANNEL = _ch("SIDD", "Targ")

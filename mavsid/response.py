@@ -781,9 +781,8 @@ def read_response(path: str | os.PathLike[str], axes: Sequence[str] = AXES, *,
         The log cannot be read or aligned, or has no rate target.
     """
     from mavsid.align import read_flight
-    from mavsid.loop.twin import twin_messages
-
     from mavsid.autopilot.presets import ATTITUDE_PAIRS, DESIRED_CHANNELS
+    from mavsid.loop.twin import twin_messages
 
     attitude = {c.message for chans in DESIRED_CHANNELS.values() for c in chans}
     attitude |= {c.message for pairs in ATTITUDE_PAIRS.values() for p in pairs for c in p}

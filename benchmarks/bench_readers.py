@@ -429,9 +429,9 @@ if which == "pyulog":
         with contextlib.redirect_stdout(io.StringIO()):
             return ULog(path)
 else:
-    from mavsid.readers import ulog
+    from mavsid.readers import ulog, ulog_messages
     if which == "mavsid-numpy":  # as built without a C compiler: the numpy walk
-        ulog._scan = None
+        ulog_messages.compiled = None
     def run(path):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -503,7 +503,7 @@ def bench_ulog(min_mb: float = 100.0, repeat: int = 5, runs: int = 3) -> None:
 
     from pyulog import ULog
 
-    from mavsid.readers import ulog
+    from mavsid.readers import ulog, ulog_layout, ulog_messages
 
     paths = sorted(LOGS.rglob("*.ulg"))
     if not paths:
@@ -517,18 +517,18 @@ def bench_ulog(min_mb: float = 100.0, repeat: int = 5, runs: int = 3) -> None:
 
     def forgetting(fn: Callable[[], Any]) -> Callable[[], Any]:
         def run() -> Any:  # a log of a firmware not met before: no format known
-            for kept in (ulog._format, ulog._layout):
+            for kept in (ulog_layout.known_format, ulog_layout.known_layout):
                 kept.clear()
             return fn()
         return run
 
     def numpy_walk(path: Path) -> Callable[[], Any]:
         def run() -> Any:  # as built without a C compiler
-            compiled, ulog._scan = ulog._scan, None
+            compiled, ulog_messages.compiled = ulog_messages.compiled, None
             try:
                 return ulog.read(path)
             finally:
-                ulog._scan = compiled
+                ulog_messages.compiled = compiled
         return forgetting(quiet(run))
 
     # the per-file figures summed: warm, cold (pyulog, mavsid), selective, numpy walk, known

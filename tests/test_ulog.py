@@ -26,7 +26,15 @@ from pyulog import ULog
 
 from mavsid.data import RawLog
 from mavsid.errors import DataQualityWarning, LogFormatError
-from mavsid.readers import read_log, ulog, ulog_spec
+from mavsid.readers import (
+    read_log,
+    ulog,
+    ulog_data,
+    ulog_definitions,
+    ulog_layout,
+    ulog_messages,
+    ulog_spec,
+)
 
 ULOGS = shared_logs(".ulg")
 FIXTURE_ULOGS = sorted(FIXTURES.glob("*.ulg"))
@@ -38,21 +46,21 @@ def walk(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str
     """The log read by the compiled pass where it takes it (``_scan.ulog_plain``: "plain"),
     by the Python reader with its data section walked by ``_scan.ulog_data`` ("compiled";
     both where the package was built with a C compiler), or by the Python reader with the
-    numpy candidates and runs (see ``ulog``'s *Framing*)."""
+    numpy candidates and runs (see ``ulog_data``'s *Framing*)."""
     if request.param != "numpy":
-        if ulog._scan is None:
+        if ulog_messages.compiled is None:
             pytest.skip("mavsid built without a C compiler: the numpy walk only")
-        monkeypatch.setattr(ulog, "_PLAIN", request.param == "plain")
+        monkeypatch.setattr(ulog_data, "PLAIN", request.param == "plain")
     else:
-        monkeypatch.setattr(ulog, "_scan", None)
+        monkeypatch.setattr(ulog_messages, "compiled", None)
     return str(request.param)
 
 
 def test_compiled_walk_takes_data_and_sync_messages_up_to_the_first_other() -> None:
     """``_scan.ulog_data`` directly: data messages written out, sync messages and ``M`` / ``Q``
-    messages that carry nothing stepped over (``ulog._checked`` on each), stopped by another
-    type, a data message under 2 bytes, ``until``, the end of the
-    buffer, or outputs without room (then resumed where it stopped)."""
+    messages that carry nothing stepped over (``ulog_messages.checked`` on each), stopped by
+    another type, a data message under 2 bytes, ``until``, the end of the buffer, or outputs
+    without room (then resumed where it stopped)."""
     walk_fn = pytest.importorskip("mavsid.readers._scan").ulog_data  # (the fixture's
     # "numpy" run hides it from the reader only)
 
@@ -60,7 +68,7 @@ def test_compiled_walk_takes_data_and_sync_messages_up_to_the_first_other() -> N
         return struct.pack("<HB", len(payload), kind[0]) + payload
 
     d1, d2 = msg(b"D", b"\x01\x00abc"), msg(b"D", b"\x02\x01")
-    # sync, a text and a parameter default that carry nothing (stepped over, as _checked
+    # sync, a text and a parameter default that carry nothing (stepped over, as checked
     # says), then an M whose value is not 4 bytes: it stops the walk
     sync = (msg(b"S", bytes(8)) + msg(b"M", b"\x00\x09char[1] ab")
             + msg(b"Q", b"\x01\x07float x" + bytes(4)))
@@ -96,7 +104,7 @@ INFO_KEYS = [b"char[3] a", b"char[3]a", b"char[", b"float x", b"float ", b"float
 
 
 def _random_info(rng: np.random.Generator) -> bytes:
-    """An ``M`` or ``Q`` message near the forms ``ulog._checked`` accepts: texts, 4-byte
+    """An ``M`` or ``Q`` message near the forms ``ulog_messages.checked`` accepts: texts, 4-byte
     values, keys cut short or running past the message, spaces and none."""
     junk = rng.integers(0, 256, rng.integers(0, 3), dtype=np.uint8).tobytes()
     key = INFO_KEYS[rng.integers(len(INFO_KEYS))] + junk
@@ -109,7 +117,7 @@ def _random_info(rng: np.random.Generator) -> bytes:
 
 
 def test_compiled_walk_steps_over_the_info_messages_python_checks() -> None:
-    """The compiled walk steps over an ``M`` / ``Q`` message exactly when ``ulog._checked``
+    """The compiled walk steps over an ``M`` / ``Q`` message exactly when ``ulog_messages.checked``
     accepts it (4 000 random ones)."""
     walk_fn = pytest.importorskip("mavsid.readers._scan").ulog_data
     rng = np.random.default_rng(7)
@@ -120,7 +128,7 @@ def test_compiled_walk_steps_over_the_info_messages_python_checks() -> None:
         info = _random_info(rng)
         data = d1 + info + d1
         k, _ = walk_fn(data, 0, len(data), *room)
-        want = ulog._checked(data, len(d1), len(d1) + len(info))
+        want = ulog_messages.checked(data, len(d1), len(d1) + len(info))
         assert k == (2 if want else 1), (info, want)
         taken += want
     assert 400 < taken < 3600, taken  # both outcomes met
@@ -129,7 +137,7 @@ def test_compiled_walk_steps_over_the_info_messages_python_checks() -> None:
 @pytest.mark.slow
 def test_compiled_info_runs_end_where_python_checks_stop() -> None:
     """``_scan.ulog_infos`` (the definitions' runs of ``M`` / ``Q`` messages) ends a run
-    where stepping message by message with ``ulog._checked`` does: 3 000 random runs of 0 to
+    where stepping message by message with ``ulog_messages.checked`` does: 3 000 random runs of 0 to
     6 of them, then a format message, some with ``until`` inside."""
     infos = pytest.importorskip("mavsid.readers._scan").ulog_infos
     rng = np.random.default_rng(11)
@@ -140,7 +148,8 @@ def test_compiled_info_runs_end_where_python_checks_stop() -> None:
         pos = 0
         while pos + 3 <= len(data):
             end = pos + 3 + int.from_bytes(data[pos : pos + 2], "little")
-            if end > until or data[pos + 2] not in b"MQ" or not ulog._checked(data, pos, end):
+            if end > until or data[pos + 2] not in b"MQ" or not ulog_messages.checked(
+                    data, pos, end):
                 break
             pos = end
         assert infos(data, 0, until) == pos, data
@@ -161,7 +170,7 @@ def _formats_of(path: Path) -> list[bytes]:
 
 @pytest.mark.slow
 def test_the_compiled_format_parser_is_the_python_one() -> None:
-    """``_scan.ulog_format`` gives ``_parse_format``'s objects, or fails where it does: on
+    """``_scan.ulog_format`` gives ``parse_format``'s objects, or fails where it does: on
     every format of the shared and fixture ULogs, and on 20 000 of them damaged (bytes
     replaced by separators, brackets, digits, spaces, non-ASCII and invalid UTF-8)."""
     scan = pytest.importorskip("mavsid.readers._scan")
@@ -181,11 +190,11 @@ def test_the_compiled_format_parser_is_the_python_one() -> None:
     outcomes = set()
     for text in texts:
         try:
-            want: Any = ulog._parse_format(text)
-        except ulog._Bad:
+            want: Any = ulog_messages.parse_format(text)
+        except ulog_messages.BadPayload:
             want = "bad"
         try:
-            got: Any = scan.ulog_format(text, ulog._SIZE)
+            got: Any = scan.ulog_format(text, ulog_messages.TYPE_SIZE)
         except ValueError:
             got = "bad"
         assert got == want, text
@@ -483,12 +492,12 @@ def test_parameters_read_at_once_are_pyulogs(tmp_path: Path, odd: bytes | None) 
     want = [(k, repr(v), type(v)) for k, v in ref.initial_parameters.items()]
     singly: list[int] = []
 
-    class Reader(ulog._Reader):
+    class Reader(ulog_definitions.Definitions):
         def parameter(self, pos: int) -> None:
             singly.append(pos)
             super().parameter(pos)
 
-    reader = Reader(path.read_bytes(), path, None)
+    reader = Reader(path.read_bytes(), path, ulog_definitions.Parsed())
     reader.header()
     reader.definitions()
     assert bool(singly) == (odd is not None)  # the batch, or each on its own
@@ -501,7 +510,7 @@ def test_parameters_read_at_once_are_pyulogs(tmp_path: Path, odd: bytes | None) 
 
 def test_runs_of_plain_parameters_are_pyulogs(tmp_path: Path) -> None:
     """Runs of plain parameters are found at once, a window of the definitions at a time
-    (``_Reader.plain_run``): over several windows, with a key of 255 bytes (a size above
+    (``Definitions.plain_run``): over several windows, with a key of 255 bytes (a size above
     255) and bytes inside a key that look like a plain parameter's header, the reader's
     parameters are pyulog's, in its order."""
     keys = [b"float P%d" % k for k in range(8000)]
@@ -509,9 +518,9 @@ def test_runs_of_plain_parameters_are_pyulogs(tmp_path: Path) -> None:
     keys[20] = keys[5000] = b"int32_t A_\x5f\x00PZ_B"  # "_\0" then "PZ": size 95 = 90 + 5
     path = tmp_path / "params.ulg"
     path.write_bytes(_parameter_ulog(keys))
-    assert path.stat().st_size > 2 * ulog._PLAIN_WINDOW
+    assert path.stat().st_size > 2 * ulog_definitions.PLAIN_WINDOW
     ref, _ = pyulog(path)
-    reader = ulog._Reader(path.read_bytes(), path, None)
+    reader = ulog_definitions.Definitions(path.read_bytes(), path, ulog_definitions.Parsed())
     reader.header()
     reader.definitions()
     want = [(k, repr(v), type(v)) for k, v in ref.initial_parameters.items()]
@@ -874,7 +883,7 @@ def test_logs_read_in_threads_with_little_kept_are_each_their_own(
     for p in paths:
         log, _ = read(p)
         alone[p] = {name: _content(table) for name, table in log.messages.items()}
-    for kept in (ulog._format, ulog._layout):
+    for kept in (ulog_layout.known_format, ulog_layout.known_layout):
         monkeypatch.setattr(kept, "budget", 400)
         kept.clear()
 
@@ -885,7 +894,7 @@ def test_logs_read_in_threads_with_little_kept_are_each_their_own(
     with warnings.catch_warnings(), ThreadPoolExecutor(6) as pool:  # (corruption warned)
         warnings.simplefilter("ignore", DataQualityWarning)
         assert all(pool.map(check, paths * 4))
-    assert all(k.total <= 400 for k in (ulog._format, ulog._layout))
+    assert all(k.total <= 400 for k in (ulog_layout.known_format, ulog_layout.known_layout))
 
 
 def _everything(path: Path, **kwargs: Any) -> Any:
@@ -903,9 +912,9 @@ def _everything(path: Path, **kwargs: Any) -> Any:
 def _both_ways(path: Path, monkeypatch: pytest.MonkeyPatch, **kwargs: Any) -> tuple[Any, Any]:
     """The read by the compiled pass (where it takes the log) and by the Python reader."""
     with monkeypatch.context() as m:
-        m.setattr(ulog, "_PLAIN", True)
+        m.setattr(ulog_data, "PLAIN", True)
         plain = _everything(path, **kwargs)
-        m.setattr(ulog, "_PLAIN", False)
+        m.setattr(ulog_data, "PLAIN", False)
         return plain, _everything(path, **kwargs)
 
 
@@ -971,7 +980,7 @@ def test_damaged_logs_read_by_the_compiled_pass_as_by_the_python_reader(
         path.write_bytes(bytes(out))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", DataQualityWarning)
-            taken += ulog._plain(bytes(out), None) is not None
+            taken += ulog_data.read_plain(bytes(out), None) is not None
         plain, python = _both_ways(path, monkeypatch)
         assert plain == python, (k, how)
         if k % 4 == 0:

@@ -18,7 +18,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from mavsid.data import RawLog
 from mavsid.errors import ConfigError, DataQualityWarning, LogFormatError
-from mavsid.readers import read_log, sniff_format, tlog
+from mavsid.readers import read_log, sniff_format, tlog, tlog_frames
 
 TLOGS = shared_logs(".tlog")
 VTOL = ("public", "ArduPilot__UAVLogViewer", "vtol.tlog")
@@ -574,7 +574,7 @@ def test_info_duration_is_pymavlinks_where_the_receive_clock_holds(path: Path) -
 def test_block_boundaries_lose_nothing(monkeypatch: pytest.MonkeyPatch, vtol: Any) -> None:
     """The scan works in blocks (16 MiB); with tiny blocks every kind of record straddles
     one, and the result is still pymavlink's."""
-    monkeypatch.setattr(tlog, "_BLOCK", 997)
+    monkeypatch.setattr(tlog_frames, "BLOCK", 997)
     path = shared_path(*VTOL)
     log = tlog.read(path)
     by_type: dict[str, list[Any]] = defaultdict(list)
@@ -644,7 +644,7 @@ def test_block_wise_gathers_give_the_whole_file_read(monkeypatch) -> None:  # ty
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         whole = tlog.read(path)
-        monkeypatch.setattr(tlog, "_BLOCK", 1 << 16)
+        monkeypatch.setattr(tlog_frames, "BLOCK", 1 << 16)
         blocks = tlog.read(path)
     assert set(blocks.messages) == set(whole.messages)
     for name, table in whole.messages.items():

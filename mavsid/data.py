@@ -17,7 +17,8 @@ from __future__ import annotations
 import functools
 import os
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
+from typing import Any
 
 import numpy as np
 
@@ -588,6 +589,12 @@ class Segment:
         The log's parameters (the estimators take known filters from them).
     sysid : SysidRun or None
         The ArduPilot SYSTEMID run the segment was cut from (its chirp's band and settings).
+    inputs_before : numpy.ndarray, shape (k, nu), optional
+        The inputs of the ``k`` samples just before the first (oldest first, columns as
+        ``inputs``) when the segment was cut from a longer record (:meth:`cut`): the
+        history that sets the input filters' and delay's state at the first sample, as
+        the first measured state sets the model's. None: no history (filters start in
+        steady state at the first input).
     """
 
     time_s: np.ndarray
@@ -604,6 +611,7 @@ class Segment:
     meta: Mapping[str, object] = field(default_factory=dict)
     params: Mapping[str, float] = field(default_factory=dict)
     sysid: SysidRun | None = None
+    inputs_before: np.ndarray | None = None
 
     @property
     def start_s(self) -> float:
@@ -617,6 +625,42 @@ class Segment:
 
     def __len__(self) -> int:
         return int(self.time_s.shape[0])
+
+    def cut(self, a: int, b: int, **changes: Any) -> Segment:
+        """Samples ``[a, b)`` as a segment, carrying the inputs before ``a`` (up to
+        :data:`INPUT_HISTORY_S`, this segment's own history included) as its
+        ``inputs_before``; ``changes`` replace other fields.
+
+        A block cut from a longer record then starts its input filters and delay where
+        the record had them: started cold at its first input instead, a free run over a
+        chirp's fast part drifted as the slow plant integrated the filters' transient.
+
+        Examples
+        --------
+        >>> u = np.arange(10.0)[:, None]
+        >>> seg = Segment(u[:, 0] * 0.5, u, u, ("p",), ("u_roll",), 0.5, "roll", "scan")
+        >>> late = seg.cut(6, 9)  # (2 s of history: 4 samples)
+        >>> late.inputs[:, 0].tolist(), late.inputs_before[:, 0].tolist()
+        ([6.0, 7.0, 8.0], [2.0, 3.0, 4.0, 5.0])
+        >>> late.cut(1, 3).inputs_before[:, 0].tolist()  # (its own history carried on)
+        [3.0, 4.0, 5.0, 6.0]
+        >>> seg.cut(0, 3).inputs_before is None
+        True
+        """
+        k = max(1, round(INPUT_HISTORY_S / self.dt)) if self.dt > 0 else 0
+        own = self.inputs[max(0, a - k):a]
+        before = self.inputs_before
+        if a < k and before is not None and len(before):
+            own = np.concatenate([before[max(0, len(before) - (k - a)):], own], axis=0)
+        return replace(self, time_s=self.time_s[a:b], states=self.states[a:b],
+                       inputs=self.inputs[a:b], inputs_before=own if len(own) else None,
+                       **changes)
+
+
+#: How far back :meth:`Segment.cut` keeps a block's input history, s: the slowest input
+#: filter a model may hold (a heavy-lift frame's 170 ms motor lag, the longest searched)
+#: forgets its start to 1e-5 in 2 s.
+INPUT_HISTORY_S = 2.0
 
 
 def demean(x: np.ndarray) -> np.ndarray:

@@ -2,12 +2,13 @@
 
 Every segment of an axis is cut into blocks of about ``block_s`` seconds (one long SYSTEMID
 run becomes several), the blocks are put in time order and alternate — even blocks train,
-odd blocks validate (a lone block is cut in two halves).
+odd blocks validate (a lone block is cut in two halves). Each block carries the inputs
+before it (:meth:`mavsid.data.Segment.cut`): a model's input filters and delay start there
+as they were, as its state starts from the block's first measured one.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import itertools
 from collections.abc import Sequence
 
@@ -20,13 +21,10 @@ __all__ = ["CHIRP_BLOCKS", "MIN_BLOCK_S", "split_segments"]
 
 
 def _slice(seg: Segment, a: int, b: int, block: int) -> Segment:
-    return dataclasses.replace(
-        seg,
-        time_s=seg.time_s[a:b],
-        states=seg.states[a:b],
-        inputs=seg.inputs[a:b],
-        meta={**dict(seg.meta), "block": block},
-    )
+    """Samples ``[a, b)`` of ``seg`` as block ``block``, with the inputs before them
+    (:meth:`~mavsid.data.Segment.cut`: a block's input filters start where the record had
+    them, not cold at its first sample)."""
+    return seg.cut(a, b, meta={**dict(seg.meta), "block": block})
 
 
 #: the shortest training or validation block a configuration may ask for, s
@@ -65,6 +63,7 @@ def split_segments(
 
     Examples
     --------
+    >>> import dataclasses
     >>> import numpy as np
     >>> from mavsid.data import Segment
     >>> t = np.arange(0, 30, 0.01)

@@ -230,22 +230,26 @@ _INTERLEAVED = pytest.mark.xfail(strict=True, reason="lag choice / free run sinc
 
 
 @pytest.mark.parametrize(("name", "axis"), [("noisy_sysid.bin", "roll"),
-                                            pytest.param("noisy_sysid.bin", "pitch",
-                                                         marks=_INTERLEAVED),
-                                            pytest.param("heavy_sysid.bin", "pitch",
-                                                         marks=_INTERLEAVED)])
+                                            ("noisy_sysid.bin", "pitch"),
+                                            ("heavy_sysid.bin", "pitch")])
 def test_noisy_gyros_get_their_motor_lag_and_a_good_verdict(name: str, axis: str) -> None:
     """With 2-3 deg/s of gyro noise fed back, the one-step score cannot see the motor lag.
     These are SYSTEMID chirps: the lag is chosen against the FRF measured from the injection
     (the feedback does not bias it) and comes out at the truth (measured: 15, 15, 30 ms;
-    the output-error choice gave 20, 20, 30 ms), and the model predicts held-out data."""
+    the output-error choice gave 20, 20, 30 ms), and the model predicts held-out data.
+
+    The chirps are cut into interleaved blocks: a held-out block's input filters start from
+    the inputs before it (cold, the filters' transient integrated by the slow plant drifted
+    the free run over the chirp's fast end: 84.1 and 77.7 % on the pitch axes), and the FRF's
+    pick stands where the one-step score agrees with it (heavy_sysid pitch was relabelled
+    and rescored by output error)."""
     f = _fit(name).axes[axis]
     prov = dict(f.model.provenance)
     truth = _truth(name)["axes"][axis]
     assert prov["lag_chosen_by"] == "frequency response"
     assert float(prov["lag_s"]) == pytest.approx(truth["motor_tau_s"], abs=1e-6)
     assert f.verdict is not None and f.verdict.level == "good"
-    # measured: 88.0, 88.5, 89.3 % (by output error: 84.0, 85.0, 83.3 %)
+    # measured: 88.4, 88.2, 91.2 % (by output error, halves: 84.0, 85.0, 83.3 %)
     assert f.validation.fit_summary(f.output)["free_run"] > 86.0
 
 
@@ -418,9 +422,7 @@ def test_lags_the_data_cannot_tell_apart_widen_the_sigma(tmp_path) -> None:  # t
 
 @pytest.mark.slow
 @pytest.mark.parametrize(("vehicle", "gyro", "vibration", "rate", "seed"),
-                         [("quad", 1.0, 2.0, 200.0, 61),
-                          # free run 74.5 % on the interleaved held-out blocks (> 80 before)
-                          pytest.param("heavy-x", 3.0, 0.0, 400.0, 774, marks=_INTERLEAVED)],
+                         [("quad", 1.0, 2.0, 200.0, 61), ("heavy-x", 3.0, 0.0, 400.0, 774)],
                          ids=["quad-1dps", "heavy-x-3dps"])
 def test_a_little_fed_back_gyro_noise_does_not_shorten_the_motor_lag(
         tmp_path, vehicle: str, gyro: float, vibration: float, rate: float, seed: int

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -310,9 +310,7 @@ def _subsegment(reg: Regression, block: np.ndarray) -> Segment:
     seg = reg.segments[si]
     lo = max(0, start - reg.structure.lead)
     hi = min(len(seg), start + (b - a) + reg.structure.trail)
-    meta = dict(seg.meta)
-    return replace(seg, time_s=seg.time_s[lo:hi], states=seg.states[lo:hi],
-                   inputs=seg.inputs[lo:hi], meta=meta)
+    return seg.cut(lo, hi, meta=dict(seg.meta))
 
 
 def rollout_fit(model: Model, segment: Segment, horizon: int | None = None) -> float:

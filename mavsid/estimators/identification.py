@@ -299,14 +299,15 @@ def _search_ls_model(choice: StructureChoice, base: Structure, dt: float, lag: f
 
 def _pick(choice: StructureChoice, base: Structure, dt: float, chooser: StructureChooser
           ) -> tuple[float, float] | None:
-    """``chooser``'s (lag, delay) among the search's candidates, None to keep its own."""
+    """``chooser``'s (lag, delay) among the search's candidates, None when it gives none
+    (the search's own then stands). A pick that agrees with the search's is the chooser's
+    too: it decides, the output-error scoring of noisy data does not overrule it."""
     models = {lg: m for lg in choice.ls_coef
               if (m := _search_ls_model(choice, base, dt, lg)) is not None}
     got = chooser(models) if len(models) > 1 else None
     if got is None or got[0] not in choice.by_lag:
         return None
-    lag, dly = float(got[0]), max(float(got[1]), 0.0)
-    return None if (lag, dly) == (choice.lag_s, choice.delay) else (lag, dly)
+    return float(got[0]), max(float(got[1]), 0.0)
 
 
 def _farthest(model: Model, others: Sequence[Model]) -> Model | None:

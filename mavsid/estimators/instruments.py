@@ -89,9 +89,10 @@ def instrument_estimate(model: Model, segments: Sequence[Segment],
         if ref is None or len(ref) != len(seg):
             continue
         var = variables(seg, st, names=(state, inp))
-        # the command through the input's filters and delay, as the input goes
-        r = variables(replace(seg, inputs=np.asarray(ref, float)[:, None], input_names=(inp,)),
-                      st, names=(inp,))[inp]
+        # the command through the input's filters and delay, as the input goes (from its
+        # first value: the input's history is not the command's)
+        r = variables(replace(seg, inputs=np.asarray(ref, float)[:, None], input_names=(inp,),
+                              inputs_before=None), st, names=(inp,))[inp]
         k = np.arange(st.lead + m, len(seg) - st.trail)
         cols = {state: var[state][k], inp: var[inp][k], "1": np.ones(k.size)}
         xs.append(np.column_stack([cols[f] for f in model.features]))

@@ -50,7 +50,9 @@ __all__ = [
     "Structure",
     "derivative",
     "filter_inputs",
+    "filtered_inputs",
     "filters_from_params",
+    "input_history",
     "rows",
     "segment_column",
     "stack",
@@ -324,24 +326,61 @@ def _shift(u: np.ndarray, d: int, frac: float = 0.0) -> np.ndarray:
     return out
 
 
+def filtered_inputs(segment: Segment, names: Sequence[str],
+                    filters: Iterable[InputFilter]) -> np.ndarray:
+    """The inputs ``names`` of ``segment`` through ``filters``, from its input history on:
+    ``(k + n, len(names))``, the ``k`` rows of ``segment.inputs_before`` first (the filters
+    start in steady state at the history's first input, or the segment's without one).
+
+    Examples
+    --------
+    >>> import dataclasses
+    >>> from mavsid.data import Segment
+    >>> u = np.r_[np.zeros(50), np.ones(5)][:, None]
+    >>> seg = Segment(np.arange(55) * 0.01, u, u, ("p",), ("u_roll",), 0.01, "roll", "scan")
+    >>> lag = (InputFilter(5.0, order=1),)
+    >>> block = seg.cut(50, 55)  # the step's first 5 samples, 50 before them
+    >>> warm = filtered_inputs(block, ["u_roll"], lag)
+    >>> cold = filtered_inputs(dataclasses.replace(block, inputs_before=None), ["u_roll"], lag)
+    >>> warm.shape, round(float(warm[50, 0]), 2), round(float(cold[0, 0]), 6)  # (or already 1)
+    ((55, 1), 0.14, 1.0)
+    """
+    cols = [segment_column(segment, v)[0] for v in names]
+    u = np.column_stack(cols).astype(float) if cols else np.empty((len(segment), 0))
+    before = input_history(segment, names)
+    if before is not None:
+        u = np.concatenate([before, u], axis=0)
+    return filter_inputs(u, segment.dt, filters)
+
+
+def input_history(segment: Segment, names: Sequence[str]) -> np.ndarray | None:
+    """The rows of ``segment.inputs_before`` for the inputs ``names`` (None without a
+    history or when a name is not among the segment's inputs)."""
+    before = segment.inputs_before
+    if before is None or not len(before) or not set(names) <= set(segment.input_names):
+        return None
+    return np.asarray(before, float)[:, [segment.input_names.index(v) for v in names]]
+
+
 def variables(
     segment: Segment, structure: Structure, names: Sequence[str] | None = None,
     filtered: Mapping[str, np.ndarray] | None = None,
 ) -> dict[str, np.ndarray]:
     """Every variable the structure needs, full segment length: inputs filtered and delayed
-    (held at their first filtered value before the delay has elapsed), states as measured.
-    ``filtered``: the inputs already through ``structure.filters`` (input name -> column),
-    as the structure search keeps them; they are then only delayed."""
+    from the segment's input history on (:func:`filtered_inputs`; without one, held at
+    their first filtered value before the delay has elapsed), states as measured.
+    ``filtered``: the inputs already through ``structure.filters`` (input name -> column,
+    from the history's first row, as :func:`filtered_inputs` gives them), as the structure
+    search keeps them; they are then only delayed."""
     names = tuple(names) if names is not None else library.variables_of(structure.features)
     out: dict[str, np.ndarray] = {}
     ins = [v for v in names if v in structure.inputs]
     if ins and filtered is not None and all(v in filtered for v in ins):
         u = np.column_stack([filtered[v] for v in ins]).astype(float)
     elif ins:
-        u = np.column_stack([segment_column(segment, v)[0] for v in ins]).astype(float)
-        u = filter_inputs(u, segment.dt, structure.filters)
+        u = filtered_inputs(segment, ins, structure.filters)
     if ins:
-        u = _shift(u, structure.delay, structure.delay_frac)
+        u = _shift(u, structure.delay, structure.delay_frac)[len(u) - len(segment):]
         out.update({v: u[:, i] for i, v in enumerate(ins)})
     for v in names:
         if v not in out:

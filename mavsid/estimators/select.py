@@ -65,6 +65,7 @@ from mavsid.estimators.regressors import (
     InputFilter,
     Structure,
     filter_inputs,
+    filtered_inputs,
     segment_column,
     stack,
 )
@@ -277,8 +278,7 @@ class DelayScan:
             if inputs is not None:
                 u = inputs[si]
             elif ins:
-                u = filter_inputs(np.column_stack([segment_column(seg, v)[0] for v in ins])
-                                  .astype(float), seg.dt, st.filters)
+                u = filtered_inputs(seg, ins, st.filters)[-n:]
             else:
                 u = np.empty((n, 0))
             srows, stat_gram = static.rows[si], static.tail[si]
@@ -510,7 +510,9 @@ class StructureChoice:
         when the candidates were refitted one by one.
     inputs : dict of float to list of dict
         Per candidate lag: per segment, its inputs (name -> column) through the known
-        filters and that lag, not delayed (what a fit of that lag filters again).
+        filters and that lag, not delayed, from the segment's input history on
+        (:func:`~mavsid.estimators.regressors.filtered_inputs`: what a fit of that lag
+        filters again).
     """
 
     structure: Structure
@@ -578,12 +580,12 @@ def search_structure(
     else:
         max_shift = top + 1
     # the known filters run once; each lag filters their output again (exactly what
-    # filtering by the whole chain does: every filter starts in steady state)
+    # filtering by the whole chain does: every filter starts in steady state), from each
+    # segment's input history on (the scan reads the segment's own rows)
     ins = [f for f in structure.features if f in structure.inputs]
     base: list[np.ndarray] | None = None
     if ins:
-        base = [filter_inputs(np.column_stack([segment_column(s, v)[0] for v in ins]).astype(float),
-                              s.dt, structure.filters) for s in segments]
+        base = [filtered_inputs(s, ins, structure.filters) for s in segments]
     # the regressors no lag changes (states, bias, outputs), built once for every lag
     static = None
     if not structure.continuous and library.is_linear(structure.features):
@@ -598,7 +600,10 @@ def search_structure(
         st = replace(structure, filters=structure.filters + extra)
         pre = None if base is None else [filter_inputs(u, s.dt, extra)
                                          for u, s in zip(base, segments, strict=True)]
-        score, scans[lag] = _scorer(segments, st, max_shift, pre, static)
+        score, scans[lag] = _scorer(
+            segments, st, max_shift,
+            None if pre is None else [u[len(u) - len(s):]
+                                      for u, s in zip(pre, segments, strict=True)], static)
         if pre is not None:
             filtered[lag] = [{v: u[:, i] for i, v in enumerate(ins)} for u in pre]
         if fixed is not None:

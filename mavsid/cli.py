@@ -52,6 +52,7 @@ from mavsid.outputs import ReportWorker, atomic_path, check_outputs
 if TYPE_CHECKING:
     from mavsid.pipeline import FitResult
     from mavsid.pipeline_config import PipelineConfig
+    from mavsid.response import FlightResponse
 
 __all__ = ["build_parser", "main"]
 
@@ -70,12 +71,11 @@ _default_showwarning = warnings.showwarning
 
 
 # --------------------------------------------------------------------------- subcommands
-# Each ``_add_<name>`` declares one subcommand and sets ``handler`` to a function that makes
-# one library call and prints its result. Library modules are imported lazily so that
-# ``mavsid --help`` stays fast.
-
-
-SUBCOMMANDS: list[Callable[[argparse._SubParsersAction], None]] = []
+# A subcommand is a handler ``_<name>``, which makes one library call and prints its result,
+# and ``_add_<name>``, which declares its arguments; the handler's docstring is its help (the
+# first paragraph in the list of ``mavsid --help``, the rest in its own ``--help``), and
+# :data:`SUBCOMMANDS` lists them. Library modules are imported lazily so that ``mavsid
+# --help`` stays fast.
 
 
 def _dialect(args: argparse.Namespace) -> dict[str, Any]:
@@ -83,16 +83,15 @@ def _dialect(args: argparse.Namespace) -> dict[str, Any]:
     return {"dialect": args.dialect} if getattr(args, "dialect", None) else {}
 
 
-def _add_info(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("info", help="what a log holds: messages, rates, units, modes, SYSTEMID")
+def _add_info(p: argparse.ArgumentParser) -> None:
     p.add_argument("log", help="flight log (.bin, .log, .tlog, .ulg)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--dialect", help="MAVLink dialect of a .tlog (default ardupilotmega)")
     _add_quiet_flag(p)
-    p.set_defaults(handler=_info)
 
 
 def _info(args: argparse.Namespace) -> int:
+    """what a log holds: messages, rates, units, modes, SYSTEMID"""
     import json
 
     from mavsid.info import format_summary, read_for_summary, summarize
@@ -132,8 +131,7 @@ def _check_inputs(logs: Sequence[str], files: Sequence[str] = ()) -> None:
         sniff_format(log)
 
 
-def _add_extract(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("extract", help="decoded messages to .npz (or one type to .parquet/.csv)")
+def _add_extract(p: argparse.ArgumentParser) -> None:
     p.add_argument("log", help="flight log (.bin, .log, .tlog, .ulg)")
     p.add_argument("--messages", help="comma-separated message types (default: all)")
     p.add_argument("--start", type=float, help="first time to keep, s (log clock)")
@@ -142,10 +140,10 @@ def _add_extract(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--dialect", help="MAVLink dialect of a .tlog (default ardupilotmega)")
     p.add_argument("--aligned", action="store_true",
                    help="write the aligned FlightData (states, inputs, flags on one grid)")
-    p.set_defaults(handler=_extract)
 
 
 def _extract(args: argparse.Namespace) -> int:
+    """decoded messages to .npz (or one type to .parquet/.csv)"""
     from pathlib import Path
 
     from mavsid.export import SUFFIXES, write
@@ -187,14 +185,7 @@ def _extract(args: argparse.Namespace) -> int:
     return 0
 
 
-SUBCOMMANDS.extend([_add_info, _add_extract])
-
-
-def _add_segments(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    p = sub.add_parser(
-        "segments",
-        help="list the well-excited windows of a log, and why the others were rejected",
-    )
+def _add_segments(p: argparse.ArgumentParser) -> None:
     p.add_argument("log", help="flight log (.bin, .log, .tlog, .ulg)")
     p.add_argument("--axis", choices=AXES, help="one axis only")
     p.add_argument("--json", action="store_true", help="print a JSON list of windows")
@@ -205,10 +196,10 @@ def _add_segments(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     _add_preset_flag(p)
     p.add_argument("--rate", type=float, help="grid rate, Hz (default: the rate channel's)")
     _add_quiet_flag(p)
-    p.set_defaults(handler=_segments)
 
 
 def _segments(args: argparse.Namespace) -> int:
+    """list the well-excited windows of a log, and why the others were rejected"""
     import json
 
     _check_inputs([args.log])
@@ -230,19 +221,7 @@ def _segments(args: argparse.Namespace) -> int:
     return 0
 
 
-SUBCOMMANDS.append(_add_segments)
-
-
-def _add_simulate(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "simulate",
-        help="fly a known plant like ArduCopter and write real-format logs + truth JSON",
-        description="Simulate an ArduCopter-like quadrotor (known plant, ArduPilot-style "
-        "controller, SYSTEMID chirps or pilot manoeuvres) and write a DataFlash .bin and/or "
-        "a MAVLink .tlog (format from the suffix), with OUT.truth.json beside it. "
-        "--layout writes other firmware: ArduCopter 3.2-4.x, a traditional heli, ArduPlane "
-        "4.x (.bin), PX4 1.8-1.14 (.ulg).",
-    )
+def _add_simulate(p: argparse.ArgumentParser) -> None:
     p.add_argument("-o", "--output", action="append", required=True, metavar="OUT",
                    help="OUT.bin, OUT.tlog or OUT.ulg (repeat to write several from one "
                    "flight)")
@@ -303,10 +282,16 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--faults", default="", metavar="SPEC",
                    help="damage: drop=FRACTION,reboot=SECONDS,truncate=BYTES,gap=AT:SECONDS "
                    "(logging stops AT s after the first sample for SECONDS; .bin only)")
-    p.set_defaults(handler=_simulate)
 
 
 def _simulate(args: argparse.Namespace) -> int:
+    """fly a known plant like ArduCopter and write real-format logs + truth JSON
+
+    Simulate an ArduCopter-like quadrotor (known plant, ArduPilot-style controller, SYSTEMID
+    chirps or pilot manoeuvres) and write a DataFlash .bin and/or a MAVLink .tlog (format from
+    the suffix), with OUT.truth.json beside it. --layout writes other firmware: ArduCopter
+    3.2-4.x, a traditional heli, ArduPlane 4.x (.bin), PX4 1.8-1.14 (.ulg).
+    """
     from mavsid.synthetic.faults import Faults
     from mavsid.synthetic.run import scenario_from_options, simulate
 
@@ -326,9 +311,6 @@ def _simulate(args: argparse.Namespace) -> int:
     for path in result.truths:
         print(f"wrote {path}")
     return 0
-
-
-SUBCOMMANDS.append(_add_simulate)
 
 
 def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
@@ -414,23 +396,31 @@ def _add_preset_flag(p: argparse.ArgumentParser) -> None:
                    "presets and mixers to choose from (default: chosen from the log)")
 
 
-def _add_output_flags(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--axis", action="append", choices=AXES,
-                   help="axis to fit (repeat for several; default all with excitation)")
+def _add_axis_flag(p: argparse.ArgumentParser, help: str) -> None:
+    p.add_argument("--axis", action="append", choices=AXES, help=help)
+
+
+def _add_config_flag(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", metavar="FILE.toml", help="pipeline settings (see pipelines/)")
+
+
+def _add_output_flags(p: argparse.ArgumentParser,
+                      axis: str = "axis to fit (repeat for several; default all with "
+                      "excitation)", files: bool = True) -> None:
+    """The flags of a command that fits: ``--axis`` (``axis`` its help), ``--config``,
+    ``--preset``, with ``files`` ``--rrd`` and ``--report``, ``--json``, ``--quiet``."""
+    _add_axis_flag(p, axis)
+    _add_config_flag(p)
     _add_preset_flag(p)
-    p.add_argument("--rrd", metavar="OUT.rrd", help="write a rerun recording")
-    p.add_argument("--report", metavar="OUT.html", help="write a self-contained HTML report")
+    if files:
+        p.add_argument("--rrd", metavar="OUT.rrd", help="write a rerun recording")
+        p.add_argument("--report", metavar="OUT.html",
+                       help="write a self-contained HTML report")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     _add_quiet_flag(p)
 
 
-def _add_fit(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "fit", help="log(s) -> validated attitude-dynamics model per axis",
-        description="Read, align, find excited segments, fit per axis on alternate blocks "
-        "and validate on the held-out ones (one-step, 0.5 s and free-run fit %).",
-    )
+def _add_fit(p: argparse.ArgumentParser) -> None:
     p.add_argument("logs", nargs="+", metavar="LOG", help="flight log(s) (.bin .log .tlog .ulg)")
     p.add_argument("--estimator", choices=("ls", "ridge", "l1", "stlsq"),
                    help="regression: least squares (default), ridge, L1 (cvxpy) or stlsq "
@@ -440,10 +430,14 @@ def _add_fit(sub: argparse._SubParsersAction) -> None:
                    help="keep a rate model identified unstable (default: refuse it and use "
                    "the bounded fit: damping >= 0, effectiveness > 0)")
     _add_output_flags(p)
-    p.set_defaults(handler=_fit)
 
 
 def _fit(args: argparse.Namespace) -> int:
+    """log(s) -> validated attitude-dynamics model per axis
+
+    Read, align, find excited segments, fit per axis on alternate blocks and validate on the
+    held-out ones (one-step, 0.5 s and free-run fit %).
+    """
     import json
 
     check_outputs([args.output, args.rrd, args.report], args.logs)
@@ -475,49 +469,35 @@ def _write_unidentified(args: argparse.Namespace, cfg: PipelineConfig, exc: Mavs
     each log's closed-loop response (:mod:`mavsid.response`), said as such on stderr."""
     if not (args.report or args.rrd):
         return
-    from mavsid.response import read_response
-
     notes = [f"no plant identified: {exc}", *exc.details]
     found = []
     for log in args.logs:
         step(f"closed-loop response of {log}")
         try:
-            found.append(read_response(log, cfg.axes, preset=cfg.preset, presets=cfg.presets,
-                                       mixers=cfg.mixers))
+            found.append(_read_response(log, cfg))
         except MavsidError as why:
             notes.append(f"no closed-loop response: {why}")
-    if args.report:
-        from mavsid.report import write_response_report
-
-        with atomic_path(args.report) as tmp:
-            write_response_report(found, tmp, title="mavsid fit: no plant identified",
-                                  notes=notes)
-    if args.rrd:
-        from mavsid.viz.response import save_response_rrd
-
-        with atomic_path(args.rrd) as tmp:
-            save_response_rrd(found, tmp, notes)
+    _write_response_outputs(args, found, notes=notes, title="mavsid fit: no plant identified")
     for path in (args.report, args.rrd):
         if path:
             print(f"mavsid: wrote {path} (no plant identified: the verdicts and the "
                   "closed-loop response)", file=sys.stderr)
 
 
-def _add_validate(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "validate", help="apply saved models to another flight (all its segments held out)",
-        description="Apply the models of `mavsid fit -o` to other flights: every excited "
-        "segment of theirs is held out; fit % at one step, 0.5 s and free run, residual "
-        "checks, the closed-loop twin and a verdict per axis. A model fitted at another rate "
-        "is re-discretised to the log's (said in the verdict).",
-    )
+def _add_validate(p: argparse.ArgumentParser) -> None:
     p.add_argument("model", metavar="MODEL", help="model.json written by mavsid fit -o")
     p.add_argument("logs", nargs="+", metavar="LOG", help="flight log(s) to validate on")
     _add_output_flags(p)
-    p.set_defaults(handler=_validate)
 
 
 def _validate(args: argparse.Namespace) -> int:
+    """apply saved models to another flight (all its segments held out)
+
+    Apply the models of `mavsid fit -o` to other flights: every excited segment of theirs is
+    held out; fit % at one step, 0.5 s and free run, residual checks, the closed-loop twin and a
+    verdict per axis. A model fitted at another rate is re-discretised to the log's (said in the
+    verdict).
+    """
     check_outputs([args.rrd, args.report], [args.model, *args.logs])
     _check_inputs(args.logs, [args.model])
     with _report_worker(args) as worker:  # (first: it imports while this one does too)
@@ -554,20 +534,11 @@ def _validate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _add_view(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "view", help="show a log (and a model's predictions) in the rerun viewer",
-        description="Log the flight, its segments and, with --model, the model's one-step and "
-        "free-run predictions to rerun: a native viewer by default, or a web viewer "
-        "(--serve), a running viewer (--connect), a file (--save) or stdout (--stdout). A "
-        "viewer mavsid starts listens on 127.0.0.1 (unless --bind says otherwise), on free "
-        "ports.",
-    )
+def _add_view(p: argparse.ArgumentParser) -> None:
     p.add_argument("log", metavar="LOG", help="flight log (.bin .log .tlog .ulg)")
     p.add_argument("--model", metavar="model.json", help="models written by mavsid fit -o")
-    p.add_argument("--config", metavar="FILE.toml", help="pipeline settings (see pipelines/)")
-    p.add_argument("--axis", action="append", choices=AXES,
-                   help="axis to show (repeat for several)")
+    _add_config_flag(p)
+    _add_axis_flag(p, "axis to show (repeat for several)")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--spawn", action="store_true",
                        help="start a native rerun viewer (the default)")
@@ -585,10 +556,16 @@ def _add_view(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--bind", default="127.0.0.1",
                    help="address a viewer mavsid starts listens on (default 127.0.0.1; "
                    "0.0.0.0 offers the flight to the network)")
-    p.set_defaults(handler=_view)
 
 
 def _view(args: argparse.Namespace) -> int:
+    """show a log (and a model's predictions) in the rerun viewer
+
+    Log the flight, its segments and, with --model, the model's one-step and free-run
+    predictions to rerun: a native viewer by default, or a web viewer (--serve), a running
+    viewer (--connect), a file (--save) or stdout (--stdout). A viewer mavsid starts listens on
+    127.0.0.1 (unless --bind says otherwise), on free ports.
+    """
     check_outputs([args.save], [args.log, *([args.model] if args.model else [])])
     _check_inputs([args.log], [args.model] if args.model else [])
     from mavsid.pipeline import find_windows, load_models, validate_logs
@@ -676,17 +653,7 @@ def _sink_args(args: argparse.Namespace) -> dict[str, Any]:
             "stdout": args.stdout, "headless": args.headless, "bind": args.bind}
 
 
-SUBCOMMANDS.extend([_add_fit, _add_validate, _add_view])
-
-
-def _add_tune(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "tune", help="log -> rate-loop margins, bandwidth, suggested gains, next-flight advice",
-        description="Fit the plant per axis, put it in the vehicle's rate controller rebuilt "
-        "from the log's parameters and report margins, closed-loop bandwidth and step response "
-        "(± σ from the parameter covariance), gains for a target phase margin (only for axes "
-        "whose model is good) and what to change next flight.",
-    )
+def _add_tune(p: argparse.ArgumentParser) -> None:
     p.add_argument("log", metavar="LOG", help="flight log (.bin .log .tlog .ulg)")
     p.add_argument("--target-pm", type=float, default=50.0, metavar="DEG",
                    help="phase margin the suggested gains aim at and must reach (default 50)")
@@ -697,16 +664,17 @@ def _add_tune(sub: argparse._SubParsersAction) -> None:
                    help="write the suggested changes as a parameter file (ArduPilot: NAME "
                    "VALUE lines MAVProxy and Mission Planner load; PX4: a QGroundControl "
                    ".params file); refused when no gain is suggested")
-    p.add_argument("--axis", action="append", choices=AXES,
-                   help="axis to analyse (repeat for several; default all)")
-    p.add_argument("--config", metavar="FILE.toml", help="pipeline settings (see pipelines/)")
-    _add_preset_flag(p)
-    p.add_argument("--json", action="store_true", help="print the result as JSON")
-    _add_quiet_flag(p)
-    p.set_defaults(handler=_tune)
+    _add_output_flags(p, "axis to analyse (repeat for several; default all)", files=False)
 
 
 def _tune(args: argparse.Namespace) -> int:
+    """log -> rate-loop margins, bandwidth, suggested gains, next-flight advice
+
+    Fit the plant per axis, put it in the vehicle's rate controller rebuilt from the log's
+    parameters and report margins, closed-loop bandwidth and step response (± σ from the
+    parameter covariance), gains for a target phase margin (only for axes whose model is good)
+    and what to change next flight.
+    """
     import json
 
     if not 0 < args.target_pm < 90:
@@ -738,31 +706,25 @@ def _tune(args: argparse.Namespace) -> int:
     return 0
 
 
-SUBCOMMANDS.append(_add_tune)
-
-
-def _add_response(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "response", help="how well the vehicle followed its commands: step, bandwidth, noise",
-        description="Per axis and controller loop (rate; attitude where logged): the step "
-        "response from target to actual by regularised deconvolution over overlapping "
-        "windows (mean and band), rise time, overshoot, settling, the closed-loop bandwidth "
-        "with coherence, tracking error and delay, gyro and controller-output spectra with "
-        "the configured filters, one response per rate-controller setting where parameters "
-        "change in flight. Needs only a rate target and the rate: works on ordinary "
-        "flights.",
-    )
+def _add_response(p: argparse.ArgumentParser) -> None:
     p.add_argument("logs", nargs="+", metavar="LOG", help="flight log(s) (.bin .log .tlog .ulg)")
     _add_output_flags(p)
-    p.set_defaults(handler=_response)
 
 
 def _response(args: argparse.Namespace) -> int:
+    """how well the vehicle followed its commands: step, bandwidth, noise
+
+    Per axis and controller loop (rate; attitude where logged): the step response from target to
+    actual by regularised deconvolution over overlapping windows (mean and band), rise time,
+    overshoot, settling, the closed-loop bandwidth with coherence, tracking error and delay,
+    gyro and controller-output spectra with the configured filters, one response per
+    rate-controller setting where parameters change in flight. Needs only a rate target and
+    the rate: works on ordinary flights.
+    """
     import json
 
     check_outputs([args.rrd, args.report], args.logs)
     from mavsid.pipeline import json_safe
-    from mavsid.response import FlightResponse, read_response
 
     cfg = _pipeline_config(args)
     found: list[FlightResponse] = []
@@ -773,8 +735,7 @@ def _response(args: argparse.Namespace) -> int:
             step(f"reading {log}")
             try:
                 _check_inputs([log])
-                got = read_response(log, cfg.axes, preset=cfg.preset, presets=cfg.presets,
-                                    mixers=cfg.mixers)
+                got = _read_response(log, cfg)
             except MavsidError as exc:
                 if len(args.logs) == 1:
                     raise
@@ -801,44 +762,46 @@ def _response(args: argparse.Namespace) -> int:
     return code
 
 
-def _write_response_outputs(args: argparse.Namespace, found: Sequence[Any],
-                            step: Callable[[str], None]) -> list[str]:
-    """The ``.rrd`` and the report of ``mavsid response``; the paths written."""
-    written = []
-    if args.rrd:
+def _read_response(log: str, cfg: PipelineConfig) -> FlightResponse:
+    """A log's closed-loop response on ``cfg``'s axes and channels."""
+    from mavsid.response import read_response
+
+    return read_response(log, cfg.axes, preset=cfg.preset, presets=cfg.presets,
+                         mixers=cfg.mixers)
+
+
+def _write_response_outputs(args: argparse.Namespace, found: Sequence[FlightResponse],
+                            step: Callable[[str], None] = lambda stage: None,
+                            notes: Sequence[str] = (), title: str = "mavsid response"
+                            ) -> list[str]:
+    """The ``.rrd`` and the report of ``mavsid response`` (of ``fit`` when no plant was
+    identified: ``notes`` say why, first); the paths written."""
+    def rrd(tmp: str) -> None:
         from mavsid.viz.response import save_response_rrd
 
-        step(f"writing {args.rrd}")
-        with atomic_path(args.rrd) as tmp:
-            save_response_rrd(found, tmp)
-        written.append(args.rrd)
-    if args.report:
+        save_response_rrd(found, tmp, notes)
+
+    def report(tmp: str) -> None:
         from mavsid.report import write_response_report
 
-        step(f"writing {args.report}")
-        with atomic_path(args.report) as tmp:
-            write_response_report(found, tmp)
-        written.append(args.report)
+        write_response_report(found, tmp, title=title, notes=notes)
+
+    written = []
+    for path, write in ((args.rrd, rrd), (args.report, report)):
+        if path:
+            step(f"writing {path}")
+            with atomic_path(path) as tmp:
+                write(tmp)
+            written.append(path)
     return written
 
 
-SUBCOMMANDS.append(_add_response)
-
-
-def _add_batch(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "batch", help="fit many logs on Dask (locally, or on a cluster) into Parquet tables",
-        description="One `mavsid fit` per log on a dask.distributed cluster: a local cluster "
-        "of worker processes by default (listening on 127.0.0.1), or the scheduler at "
-        "--scheduler. Results (per log x axis, per log, per segment) go to Parquet after "
-        "each log, atomically; a rerun skips logs already in the tables with the same "
-        "settings; a failing log is a row with its error.",
-    )
+def _add_batch(p: argparse.ArgumentParser) -> None:
     p.add_argument("inputs", nargs="+", metavar="LOG|DIR",
                    help="logs, or folders searched for .bin .log .tlog .ulg")
     p.add_argument("-o", "--output", default="results.parquet", metavar="OUT.parquet",
                    help="results table (also OUT.logs.parquet, OUT.segments.parquet)")
-    p.add_argument("--config", metavar="FILE.toml", help="pipeline settings (see pipelines/)")
+    _add_config_flag(p)
     p.add_argument("--workers", type=int, metavar="N",
                    help="worker processes of the local cluster (default: cores)")
     p.add_argument("--scheduler", metavar="tcp://HOST:PORT",
@@ -851,10 +814,17 @@ def _add_batch(sub: argparse._SubParsersAction) -> None:
                    help="write the trends as a rerun recording (timelines flight and "
                    "flight_date; parameters with ±σ, change points)")
     _add_quiet_flag(p)
-    p.set_defaults(handler=_batch, axis=None)
+    p.set_defaults(axis=None)
 
 
 def _batch(args: argparse.Namespace) -> int:
+    """fit many logs on Dask (locally, or on a cluster) into Parquet tables
+
+    One `mavsid fit` per log on a dask.distributed cluster: a local cluster of worker processes
+    by default (listening on 127.0.0.1), or the scheduler at --scheduler. Results (per log x
+    axis, per log, per segment) go to Parquet after each log, atomically; a rerun skips logs
+    already in the tables with the same settings; a failing log is a row with its error.
+    """
     from mavsid.batch import run_batch, summary_lines, table_paths, trends, write_trends_html
 
     if not args.output.endswith(".parquet"):
@@ -884,9 +854,6 @@ def _batch(args: argparse.Namespace) -> int:
     return 0
 
 
-SUBCOMMANDS.append(_add_batch)
-
-
 class UsageError(Exception):
     """A command line argparse refuses (exit 2): raised by :class:`_Parser` instead of
     exiting, so that :func:`main` can answer ``--json`` with a JSON document."""
@@ -901,6 +868,26 @@ class _Parser(argparse.ArgumentParser):
 
     def error(self, message: str) -> NoReturn:
         raise UsageError(message, f"{self.format_usage()}{self.prog}: error: {message}")
+
+
+#: The subcommands (handler, its arguments), in the order ``mavsid --help`` lists them.
+SUBCOMMANDS: tuple[tuple[Handler, Callable[[argparse.ArgumentParser], None]], ...] = (
+    (_info, _add_info), (_extract, _add_extract), (_segments, _add_segments),
+    (_simulate, _add_simulate), (_fit, _add_fit), (_validate, _add_validate),
+    (_view, _add_view), (_tune, _add_tune), (_response, _add_response),
+    (_batch, _add_batch),
+)
+
+
+def _add_subcommand(sub: argparse._SubParsersAction, handler: Handler,
+                    add: Callable[[argparse.ArgumentParser], None]) -> None:
+    """Declare the subcommand ``handler`` runs (named after it, its help from its docstring)
+    with the arguments ``add`` declares."""
+    summary, _, description = (handler.__doc__ or "").partition("\n\n")
+    p = sub.add_parser(handler.__name__.lstrip("_"), help=" ".join(summary.split()),
+                       description=" ".join(description.split()) or None)
+    p.set_defaults(handler=handler)
+    add(p)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -920,8 +907,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="store_true", help="print the version and exit")
     parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for add in SUBCOMMANDS:
-        add(sub)
+    for handler, add in SUBCOMMANDS:
+        _add_subcommand(sub, handler, add)
     for command in sub.choices.values():  # (SUPPRESS: absent, it keeps the top level's)
         command.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
                              help="show tracebacks on errors")

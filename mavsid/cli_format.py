@@ -25,7 +25,7 @@ if TYPE_CHECKING:
 __all__ = ["change_line", "error_document", "figure", "flight_line", "format_loop",
            "format_responses", "format_tune", "gain_table", "limit_table",
            "print_error", "print_result", "progress", "readers_build", "simulate_command", "stages",
-           "value_text", "warning_text"]
+           "tune_notes", "value_text", "warning_text"]
 
 def figure(v: float | None, fmt: str, unit: str, sd: float | None = None) -> str:
     """A loop figure as ``mavsid tune`` prints it, with its σ; ``none`` where it does not
@@ -126,13 +126,29 @@ def _answer(axis: str, e: Mapping[str, Any]) -> list[str]:
                 f"  step ({label} gains): rise {figure(c['rise_time_s'] * 1e3, '.0f', 'ms')}, "
                 f"settling {figure(c['settling_time_s'] * 1e3, '.0f', 'ms')}, overshoot "
                 f"{figure(c['overshoot_percent'], '.0f', '%')}")
+    return lines + [f"  {n}" for n in tune_notes(e)]
+
+
+def tune_notes(e: Mapping[str, Any]) -> list[str]:
+    """An axis's last sentences (of ``mavsid tune`` and of the report): the suggested gains
+    flown in the closed-loop twin, and what to change next flight.
+
+    Examples
+    --------
+    >>> for n in tune_notes({"gains": [{}], "twin_step": {"max_difference": 0.031},
+    ...                      "next_flight": "a longer chirp"}):
+    ...     print(n)
+    flown in the closed-loop twin: step within 3.1% of the predicted one
+    next flight: a longer chirp
+    """
+    notes = []
     twin = e.get("twin_step")
     if twin and e.get("gains"):
-        lines.append(f"  flown in the closed-loop twin: step within "
-                     f"{twin['max_difference']:.1%} of the predicted one")
+        notes.append(f"flown in the closed-loop twin: step within {twin['max_difference']:.1%} "
+                     "of the predicted one")
     if e.get("next_flight"):
-        lines.append(f"  next flight: {e['next_flight']}")
-    return lines
+        notes.append(f"next flight: {e['next_flight']}")
+    return notes
 
 
 def format_tune(report: Mapping[str, Any], answer: bool = True) -> str:

@@ -21,7 +21,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from mavsid.cli_format import gain_table, limit_table
+from mavsid.cli_format import gain_table, limit_table, tune_notes
 
 __all__ = ["gains_figure", "gains_html", "sig_text"]
 
@@ -81,12 +81,7 @@ def gains_html(axis: str, e: Mapping[str, Any]) -> str:
             f"{sig_text(agree['measured_deg'], agree['measured_sigma_deg'])} deg, predicted "
             f"{sig_text(agree['predicted_deg'], agree['predicted_sigma_deg'])} deg"
             + ("" if agree["agree"] else " (they disagree)"))
-    twin = e.get("twin_step")
-    if twin and e.get("gains"):
-        notes.append(f"flown in the closed-loop twin the suggested step is within "
-                     f"{twin['max_difference']:.1%} of the predicted one")
-    if e.get("next_flight"):
-        notes.append(f"next flight: {e['next_flight']}")
+    notes += tune_notes(e)
     parts += [f'<p class="meta">{html.escape(n)}</p>' for n in notes]
     return "\n".join(parts)
 

@@ -113,7 +113,6 @@ import itertools
 import mmap
 import os
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -165,6 +164,8 @@ _WALK_ROOM = 1 << 16
 #: read the logs with nothing unusual in one compiled pass (see read_plain); off: Reader only
 PLAIN = True
 _LOST = "no subscription found for message id {}"
+#: data messages met: their positions, sizes, message ids and subscriptions (see Reader.chunk)
+_Run = tuple[NDArray[np.int64], NDArray[np.uint16], NDArray[np.uint16], NDArray[np.int32]]
 
 
 @dataclass
@@ -200,8 +201,7 @@ class Reader:
         self.final: list[int] = []  # subscriptions whose data is kept, pyulog's order
         self.keys: dict[str, LayoutKey] = {}  # topic -> its layout's key (layout_key)
         # data messages met: (positions, sizes, ids, their subscriptions), and how many
-        self.chunks: list[tuple[NDArray[Any], NDArray[Any], NDArray[Any], NDArray[np.int32]]]
-        self.chunks = []
+        self.chunks: list[_Run] = []
         self.pending: list[tuple[int, int, int, int]] = []
         self.count = self.taken = 0
         self.room: tuple[NDArray[np.int64], NDArray[np.uint16], NDArray[np.uint16]] | None = None
@@ -435,7 +435,8 @@ class Reader:
             self.chunks.append((table[:, 0].copy(), table[:, 1].astype(np.uint16),
                                 table[:, 2].astype(np.uint16), table[:, 3].astype(np.int32)))
 
-    def chunk(self, pos: NDArray[np.int64], size: NDArray[Any], ids: NDArray[Any]) -> int:
+    def chunk(self, pos: NDArray[np.int64], size: NDArray[np.uint16],
+              ids: NDArray[np.uint16]) -> int:
         """Consecutive data messages with their subscriptions, checked later. Returns 0, or
         where the section ends (after a decodable record of a topic without room for a
         timestamp: pyulog's struct.error stops reading there); the rest is not taken."""
@@ -457,7 +458,7 @@ class Reader:
             self.chunks = [self.joined()]
         return stop_at
 
-    def joined(self) -> tuple[NDArray[np.int64], NDArray[Any], NDArray[Any], NDArray[Any]]:
+    def joined(self) -> _Run:
         """The chunks so far as one (positions, sizes, ids, subscriptions)."""
         self.flush()
         if not self.chunks:
@@ -523,7 +524,7 @@ class Reader:
         self.decode(*self.resolve())
         return self.out
 
-    def resolve(self) -> tuple[NDArray[np.int64], NDArray[Any]]:
+    def resolve(self) -> tuple[NDArray[np.int64], NDArray[np.signedinteger]]:
         """Every data message of the walk against the subscription it met: the positions
         and subscriptions of the decodable ones (in file order); the last timestamp, and
         with it the time of each dropout and parameter change; corruption found."""
@@ -577,7 +578,7 @@ class Reader:
         out.changed_params = [(upto[c], key, v) for c, (_, key, v) in changed]
         return pos, sub
 
-    def decode(self, pos: NDArray[np.int64], sub: NDArray[np.int64]) -> None:
+    def decode(self, pos: NDArray[np.int64], sub: NDArray[np.signedinteger]) -> None:
         """Gather each kept subscription's records: one fancy index per topic into a view
         of the file as raw records of its size at every byte (as ``void``: fast)."""
         at = pos[np.argsort(sub, kind="stable")]  # grouped by subscription, in file order

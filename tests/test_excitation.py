@@ -349,7 +349,7 @@ def test_moving_average_by_slices_is_the_clipped_window_mean() -> None:
     """The centred moving average (high-pass and envelopes of every axis, taken by slices of
     the running sum) against its definition: each sample the mean of the ``n`` around it,
     the window clipped at either end, on random lengths and widths."""
-    from mavsid.excitation import _moving
+    from mavsid.excitation_scores import moving_mean
 
     rng = np.random.default_rng(7)
     for _ in range(3000):
@@ -358,5 +358,5 @@ def test_moving_average_by_slices_is_the_clipped_window_mean() -> None:
         width = max(1, min(n, size))
         want = np.array([x[max(i - width // 2, 0) : max(i - width // 2, 0) + width].mean()
                          for i in range(size)])
-        assert np.allclose(_moving(x, n), want, rtol=1e-12, atol=1e-9 * np.abs(x).max(
+        assert np.allclose(moving_mean(x, n), want, rtol=1e-12, atol=1e-9 * np.abs(x).max(
             initial=0)), (size, n)

@@ -10,7 +10,8 @@ The DataFlash binary reader, :mod:`~mavsid.readers.dataflash`, is built from
 (records to columns) and :mod:`~mavsid.readers.dataflash_assemble` (tables to a RawLog, shared
 with the text reader :mod:`~mavsid.readers.dftext`); :mod:`~mavsid.readers.arrays` holds the
 array operations over compact indices; :mod:`~mavsid.readers.dataflash_spec` is the format
-shared with the simulator's writer.
+shared with the simulator's writer. :mod:`~mavsid.readers.files` opens and maps a log for any
+reader.
 
 Examples
 --------
@@ -28,11 +29,11 @@ import importlib
 import os
 import stat
 from collections.abc import Sequence
-from typing import Any
 
 from mavsid.data import RawLog
 from mavsid.errors import ConfigError, LogFormatError, MavsidError, naming_file
 from mavsid.readers.dataflash_spec import FMT_TYPE, HEAD
+from mavsid.readers.files import LogPath
 from mavsid.readers.ulog_spec import MAGIC as ULOG_MAGIC
 
 __all__ = ["READERS", "read_log", "sniff_format"]
@@ -75,7 +76,7 @@ def _tlog_chain(head: bytes, pos: int) -> tuple[list[int], int]:
     return starts, pos
 
 
-def sniff_format(path: str | os.PathLike[str]) -> str:
+def sniff_format(path: LogPath) -> str:
     """Return the log format of ``path`` from its first bytes.
 
     Raises
@@ -116,13 +117,8 @@ def sniff_format(path: str | os.PathLike[str]) -> str:
     )
 
 
-def read_log(
-    path: str | os.PathLike[str],
-    messages: Sequence[str] | None = None,
-    start: float | None = None,
-    stop: float | None = None,
-    **options: Any,
-) -> RawLog:
+def read_log(path: LogPath, messages: Sequence[str] | None = None, start: float | None = None,
+             stop: float | None = None, **options: object) -> RawLog:
     """Read any supported log into a :class:`~mavsid.data.RawLog`.
 
     Parameters

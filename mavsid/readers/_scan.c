@@ -4,7 +4,7 @@
  * (same results; tests compare the two).
  *
  * The DataFlash header scan: every 0xA3 0x95 byte pair of a buffer with the byte after it
- * (its message type), as mavsid.readers.dataflash._find_headers_numpy finds them, in one
+ * (its message type), as mavsid.readers.dataflash_scan.find_headers_numpy finds them, in one
  * pass over the bytes instead of five over masks.
  *
  * pairs(data, start, stop, offsets, types) -> (count, reached)
@@ -1484,7 +1484,7 @@ static PyMethodDef methods[] = {
 
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT, "_scan",
-    "Readers' byte loops, compiled (mavsid.readers.dataflash._find_headers, "
+    "Readers' byte loops, compiled (mavsid.readers.dataflash_scan.find_headers, "
     "mavsid.readers.ulog)", -1,
     methods, NULL, NULL, NULL, NULL,
 };

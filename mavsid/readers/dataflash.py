@@ -57,7 +57,6 @@ Examples
 from __future__ import annotations
 
 import functools
-import mmap
 import os
 import warnings
 from collections.abc import Callable, Sequence
@@ -65,7 +64,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from mavsid.data import RawLog, SourceInfo
-from mavsid.errors import ConfigError, DataQualityWarning, LogFormatError
+from mavsid.errors import DataQualityWarning, LogFormatError
 from mavsid.readers import dataflash_spec as dfspec
 from mavsid.readers.arrays import group, lookup, select, sorted_concat, unique
 from mavsid.readers.dataflash_assemble import (
@@ -93,6 +92,7 @@ from mavsid.readers.dataflash_formats import (
 )
 from mavsid.readers.dataflash_framing import NEAR, Framing, frame
 from mavsid.readers.dataflash_scan import find_headers, records_at, release_pages
+from mavsid.readers.files import LogPath, mapped, refuse_options
 
 __all__ = [
     "INSTANCE_COLUMNS",
@@ -118,14 +118,8 @@ INSTANCE_COLUMNS = ("I", "Instance", "C", "Id")
 _FORMAT_ONLY = frozenset({"FMT", "FMTU", "UNIT", "MULT"})
 
 
-def read(
-    path: str | os.PathLike[str],
-    messages: Sequence[str] | None = None,
-    start: float | None = None,
-    stop: float | None = None,
-    times_only: bool = False,
-    **options: object,
-) -> RawLog:
+def read(path: LogPath, messages: Sequence[str] | None = None, start: float | None = None,
+         stop: float | None = None, times_only: bool = False, **options: object) -> RawLog:
     """Read a DataFlash ``.bin`` log.
 
     Parameters
@@ -164,29 +158,10 @@ def read(
         log holds only format definitions.
     """
     spath = os.fspath(path)
-    if options:
-        names = ", ".join(sorted(options))
-        raise ConfigError(f"{spath}: option(s) {names} do not apply to DataFlash .bin logs")
-    try:
-        with open(spath, "rb") as f:
-            size = os.fstat(f.fileno()).st_size
-            if size == 0:
-                raise LogFormatError("empty file", path=spath)
-            buf: mmap.mmap | bytes = (
-                mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) if size >= 1 << 16
-                else f.read()
-            )
-    except OSError as exc:
-        raise LogFormatError(f"cannot open: {exc.strerror or exc}", path=spath) from None
-    try:
+    refuse_options(spath, options, "DataFlash .bin logs")
+    with mapped(spath) as buf:
         return _read_buffer(spath, np.frombuffer(buf, dtype=np.uint8), messages, start, stop,
                             times_only)
-    finally:
-        if isinstance(buf, mmap.mmap):
-            try:
-                buf.close()
-            except BufferError:  # a view is still referenced somewhere: leave it to the GC
-                pass
 
 
 def _read_buffer(

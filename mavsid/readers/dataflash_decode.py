@@ -32,7 +32,7 @@ import numpy as np
 
 from mavsid.readers import dataflash_spec as dfspec
 from mavsid.readers.arrays import unique
-from mavsid.readers.dataflash_formats import Definition, column_layout, decode_text
+from mavsid.readers.dataflash_formats import Definition, column_layout, decode_text, time_slot
 from mavsid.readers.dataflash_scan import RELEASE_MIN, field_view, records_at, release_pages
 
 __all__ = [
@@ -195,13 +195,10 @@ def _quiet_nans(v: np.ndarray) -> None:
 
 def gather_times(a: np.ndarray, d: Definition, pos: np.ndarray) -> np.ndarray | None:
     """Boot time (s) of the records of ``d`` at ``pos``, or None when ``d`` has none."""
-    tf = d.time_field
-    if tf is None:
+    if d.time_field is None:
         return None
-    _, i, scale = tf
-    dt = np.dtype(dfspec.FORMAT_CHARS[d.format[i]].dtype)
-    ofs = sum(np.dtype(dfspec.FORMAT_CHARS[c].dtype).itemsize for c in d.format[:i])
-    return records_at(a, dt, pos + 3 + ofs).astype(np.float64) * scale
+    ofs, dtype, scale = time_slot(d)
+    return records_at(a, np.dtype(dtype), pos + 3 + ofs).astype(np.float64) * scale
 
 
 _MAX_UNION = 4  # a message's merged table may hold this many times its records' own cells

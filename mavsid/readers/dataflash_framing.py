@@ -150,14 +150,7 @@ def _chain_mask(pos: np.ndarray, end: np.ndarray) -> np.ndarray:
         if c >= m:
             break
         k = next_irr[k]
-    # runs are disjoint and ascending: off before each run, on along it, off after the last
-    edges = np.empty(2 * len(starts) + 2, np.int64)
-    edges[0], edges[-1] = 0, m
-    edges[1:-1:2] = np.frombuffer(starts, np.int64)
-    edges[2:-1:2] = np.frombuffer(stops, np.int64)
-    on = np.zeros(edges.size - 1, bool)
-    on[1::2] = True
-    return np.repeat(on, np.diff(edges))
+    return _runs_mask(m, np.frombuffer(starts, np.int64), np.frombuffer(stops, np.int64))
 
 
 def near(
@@ -307,6 +300,24 @@ class _Ends:
         return ends
 
 
+def _runs_mask(m: int, starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
+    """Which of ``0..m-1`` lie in the ranges ``starts[k]..stops[k]`` (ascending, disjoint).
+
+    Examples
+    --------
+    >>> _runs_mask(6, np.array([1, 4]), np.array([3, 5])).astype(int).tolist()
+    [0, 1, 1, 0, 1, 0]
+    """
+    # off before each run, on along it, off after the last
+    edges = np.empty(2 * starts.size + 2, np.int64)
+    edges[0], edges[-1] = 0, m
+    edges[1:-1:2] = starts
+    edges[2:-1:2] = stops
+    on = np.zeros(edges.size - 1, bool)
+    on[1::2] = True
+    return np.repeat(on, np.diff(edges))
+
+
 def _outside_runs(m: int, starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
     """Indices ``0..m-1`` outside the ranges ``starts[k]..stops[k]`` (ascending, disjoint).
 
@@ -396,13 +407,7 @@ def chain_nodes(
     first, last = np.frombuffer(starts, np.int64), np.frombuffer(stops, np.int64)
     if not mask:
         return None, first, last
-    edges = np.empty(2 * first.size + 2, np.int64)
-    edges[0], edges[-1] = 0, m
-    edges[1:-1:2] = first
-    edges[2:-1:2] = last
-    on = np.zeros(edges.size - 1, bool)
-    on[1::2] = True
-    return np.repeat(on, np.diff(edges)), first, last
+    return _runs_mask(m, first, last), first, last
 
 
 def _run_gaps(

@@ -36,7 +36,7 @@ from collections.abc import Iterator, Sequence
 import numpy as np
 
 from mavsid.data import RawLog, SourceInfo
-from mavsid.errors import ConfigError, DataQualityWarning, LogFormatError
+from mavsid.errors import DataQualityWarning, LogFormatError
 from mavsid.readers import dataflash_spec as dfspec
 from mavsid.readers.dataflash_assemble import (
     assemble,
@@ -45,6 +45,7 @@ from mavsid.readers.dataflash_assemble import (
     window_mask,
 )
 from mavsid.readers.dataflash_formats import Definition
+from mavsid.readers.files import LogPath, refuse_options
 
 __all__ = ["read"]
 
@@ -84,13 +85,8 @@ def _convert(values: list[str], ch: str) -> tuple[np.ndarray, np.ndarray]:
     return out, ok
 
 
-def read(
-    path: str | os.PathLike[str],
-    messages: Sequence[str] | None = None,
-    start: float | None = None,
-    stop: float | None = None,
-    **options: object,
-) -> RawLog:
+def read(path: LogPath, messages: Sequence[str] | None = None, start: float | None = None,
+         stop: float | None = None, **options: object) -> RawLog:
     """Read a DataFlash text log; same parameters and result as
     :func:`mavsid.readers.dataflash.read`.
 
@@ -100,9 +96,7 @@ def read(
         The file cannot be opened or holds no FMT line or no decodable record.
     """
     spath = os.fspath(path)
-    if options:
-        names = ", ".join(sorted(options))
-        raise ConfigError(f"{spath}: option(s) {names} do not apply to DataFlash text logs")
+    refuse_options(spath, options, "DataFlash text logs")
     try:
         size = os.path.getsize(spath)
         if size > _MAX_BYTES:

@@ -62,8 +62,8 @@ from mavsid.outputs import atomic_path
 if TYPE_CHECKING:
     import pandas as pd
 
-    from mavsid.pipeline import FitResult
     from mavsid.pipeline_config import PipelineConfig
+    from mavsid.pipeline_results import FitResult
 
 __all__ = ["CHANGE_REL", "CHANGE_Z", "LOG_SUFFIXES", "SCHEMA_VERSION", "config_hash",
            "find_logs", "log_task", "read_tables", "run_batch", "summary_lines", "table_paths",

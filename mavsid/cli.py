@@ -37,6 +37,8 @@ from mavsid.cli_format import (
     readers_build,
     simulate_command,
     stages,
+    validate_line,
+    validation_figures,
     warning_text,
 )
 from mavsid.errors import (
@@ -50,8 +52,8 @@ from mavsid.errors import (
 from mavsid.outputs import ReportWorker, atomic_path, check_outputs
 
 if TYPE_CHECKING:
-    from mavsid.pipeline import FitResult
     from mavsid.pipeline_config import PipelineConfig
+    from mavsid.pipeline_results import FitResult
     from mavsid.response import FlightResponse
 
 __all__ = ["build_parser", "main"]
@@ -501,13 +503,7 @@ def _validate(args: argparse.Namespace) -> int:
     check_outputs([args.rrd, args.report], [args.model, *args.logs])
     _check_inputs(args.logs, [args.model])
     with _report_worker(args) as worker:  # (first: it imports while this one does too)
-        from mavsid.pipeline import (
-            VALIDATE_STAGES,
-            load_models,
-            validate_line,
-            validate_logs,
-            validation_figures,
-        )
+        from mavsid.pipeline import VALIDATE_STAGES, load_models, validate_logs
 
         models = load_models(args.model)
         cfg = _pipeline_config(args)
@@ -686,7 +682,8 @@ def _tune(args: argparse.Namespace) -> int:
     from mavsid.cli_format import format_tune
     from mavsid.loop.limits import Limits
     from mavsid.loop.tune import param_file, tune
-    from mavsid.pipeline import FIT_STAGES, fit, json_safe
+    from mavsid.pipeline import FIT_STAGES, fit
+    from mavsid.pipeline_results import json_safe
 
     cfg = _pipeline_config(args)
     with progress(args, 1 + len(FIT_STAGES) * len(cfg.axes) + 1) as step:
@@ -724,7 +721,7 @@ def _response(args: argparse.Namespace) -> int:
     import json
 
     check_outputs([args.rrd, args.report], args.logs)
-    from mavsid.pipeline import json_safe
+    from mavsid.pipeline_results import json_safe
 
     cfg = _pipeline_config(args)
     found: list[FlightResponse] = []

@@ -1,7 +1,8 @@
 """What the ``mavsid`` command line prints: the text of the loop commands (``mavsid tune``,
 the report's loop section, ``mavsid response``, made from the data
 :func:`mavsid.loop.tune.tune` and :func:`mavsid.response.read_response` return), a fit's
-result and the files written, warnings, the progress bar, the one JSON document of a
+result (:func:`format_result`; a validation's lines, :func:`validate_line`) and the files
+written, warnings, the progress bar, the one JSON document of a
 failed ``--json`` command, and the lines of ``segments``, ``batch``, ``simulate`` and
 ``--version``."""
 
@@ -19,13 +20,17 @@ from mavsid.errors import MavsidError, MavsidWarning, escape, escape_lines
 
 if TYPE_CHECKING:
     from mavsid.data import FlightData
-    from mavsid.pipeline import FitResult
+    from mavsid.loop.emulation import ControllerEmulation
+    from mavsid.pipeline_results import AxisFit, FitResult
     from mavsid.response import FlightResponse, LoopResponse
+    from mavsid.verdict import Verdict
 
 __all__ = ["change_line", "error_document", "figure", "flight_line", "format_loop",
-           "format_responses", "format_tune", "gain_table", "limit_table",
-           "print_error", "print_result", "progress", "readers_build", "simulate_command", "stages",
-           "tune_notes", "value_text", "warning_text"]
+           "format_responses", "format_result", "format_tune", "gain_table", "limit_table",
+           "print_error", "print_result", "progress", "readers_build", "simulate_command",
+           "stages", "tune_notes", "validate_line", "validation_figures", "value_text",
+           "warning_text"]
+
 
 def figure(v: float | None, fmt: str, unit: str, sd: float | None = None) -> str:
     """A loop figure as ``mavsid tune`` prints it, with its σ; ``none`` where it does not
@@ -380,13 +385,272 @@ def stages(args: argparse.Namespace, axes: int, per_axis: int) -> tuple[int, int
     return fitting + weight + bool(args.report), weight
 
 
+# --------------------------------------------------------------------------- a fit's result
+
+
+def _pm(value: float, sigma: float | None) -> str:
+    text = f"{value:.6g}" if math.isfinite(value) else "nan"
+    if sigma is not None and math.isfinite(sigma):
+        text += f" ± {sigma:.2g}"
+    return text
+
+
+def _structure(d: Mapping[str, Any]) -> str:
+    """The modelled filters (beside the input lag), as the text table's head shows them."""
+    parts = []
+    for flt in d.get("filters") or ():
+        if not str(flt.get("source", "")).startswith("input lag"):
+            parts.append(f"{flt.get('source') or 'filter'} {flt.get('cutoff_hz', 0):.3g} Hz")
+    return "".join(f", {p}" for p in parts)
+
+
+def _frequency_line(f: AxisFit) -> str:
+    """The transfer function fitted to the response measured against the injection, and the
+    model's error against that response."""
+    tf = f.frequency
+    assert tf is not None
+    sd = tf.stderr
+    pole = ("" if tf.structure == "integrator"
+            else f", pole {tf.pole:.3g} ± {sd.get('pole', math.nan):.2g} 1/s")
+    text = (f"frequency response (against the injection): {tf.structure.replace('_', ' ')} "
+            f"B {tf.gain:.4g} ± {sd['gain']:.2g}{pole}, lag {tf.lag_s * 1e3:.3g} ± "
+            f"{sd['lag_s'] * 1e3:.2g} ms, delay {tf.delay_s * 1e3:.3g} ± {sd['delay_s'] * 1e3:.2g}"
+            f" ms, J {tf.cost:.3g}, band {tf.band_hz[0]:.2g}–{tf.band_hz[1]:.3g} Hz")
+    from mavsid.pipeline_frequency import model_response_check
+
+    check = model_response_check(f.model, f.axis, tf)
+    if check is not None:
+        text += f"; model {check['rms_db']:.2g} dB / {check['rms_deg']:.2g}° RMS"
+    return text
+
+
+def _emulation_line(e: ControllerEmulation) -> str:
+    """The controller emulation's figures, one line.
+
+    Examples
+    --------
+    >>> from mavsid.loop.emulation import ControllerEmulation, TermFit
+    >>> e = ControllerEmulation(93.4, 0.0031, True, "", 0.047, 1, 0.0, "RATE.ROut",
+    ...                         (TermFit("P", "PIDR.P", 97.0, 0.001, 0.03, 0.03),))
+    >>> _emulation_line(e)
+    'controller emulation: 93.4 % of RATE.ROut (RMS 0.0031 of 0.047; pass >= 80 %); P 97.0 %'
+    """
+    def pct(x: float) -> str:
+        return "n/a" if not math.isfinite(x) else f"{x:.1f} %"
+
+    text = (f"controller emulation: {pct(e.fit_percent)} of {e.output_source} (RMS "
+            f"{e.rms:.2g} of {e.output_rms:.2g}; pass >= {e.threshold_percent:g} %)")
+    if e.terms:
+        text += "; " + ", ".join(f"{t.term} {pct(t.fit_percent)}" for t in e.terms)
+    if not e.passed:
+        text += f": FAILED, {e.reason}"
+    return text
+
+
+def _closed_loop_line(f: AxisFit) -> str:
+    """The closed-loop twin's figures (or why there are none), one line."""
+    cl = f.closed_loop
+    if cl is None:
+        return f"closed loop: not run ({f.closed_loop_note or 'no rate target'})"
+
+    def pct(x: float) -> str:
+        return "n/a" if not math.isfinite(x) else f"{x:.1f}"
+
+    text = (f"closed loop %  rate {pct(cl.fit_percent)}  output {pct(cl.output_fit_percent)}  "
+            f"(baseline {pct(cl.baseline_percent)} at {cl.baseline_delay_s * 1e3:.0f} ms)")
+    if cl.measurement_delay_loops:
+        text += (f"; the controller read the rate {cl.measurement_delay_loops:g} loop after "
+                 "the logged sample (replay on the training blocks)")
+    if cl.defaults_used:
+        text += f"; defaults used: {', '.join(cl.defaults_used)}"
+    return text
+
+
+def _si_unit(fd: FlightData, name: str) -> str:
+    """The SI unit a flight channel is held in."""
+    if name in fd.state_names:
+        return fd.state_units[fd.state_names.index(name)]
+    if name in fd.input_names:
+        return fd.input_units[fd.input_names.index(name)]
+    return "?"
+
+
+def _physical_lines(axis: str, output: str, d: Mapping[str, Any]) -> list[str]:
+    """What a tuner reads first: the rate response's time constant (and its corner, the
+    open-loop bandwidth), the control effectiveness B, the delay and the input lag.
+
+    Examples
+    --------
+    >>> d = {"params": {"A[p,p]": -3.98, "B[p,u_roll]": 177.76},
+    ...      "stderr": {"A[p,p]": 0.12, "B[p,u_roll]": 3.7},
+    ...      "units": {"B[p,u_roll]": "rad/s^2"}, "delay_s": 0.0056, "input_lag_s": 0.015}
+    >>> print("\\n".join(_physical_lines("roll", "p", d)))
+      time constant  0.251 ± 0.0076 s (bandwidth 0.63 Hz)
+      effectiveness  B[p,u_roll] 177.8 ± 3.7 rad/s^2
+      delay          5.6 ms, input lag 15.0 ms
+    """
+    params, stderr = d["params"], d["stderr"]
+    lines = []
+    a = params.get(f"A[{output},{output}]")
+    if a is not None and math.isfinite(a) and a < 0:
+        sa = stderr.get(f"A[{output},{output}]")
+        sigma = "" if sa is None or not math.isfinite(sa) else f" ± {sa / a**2:.2g}"
+        lines.append(f"  time constant  {-1 / a:.3g}{sigma} s (bandwidth "
+                     f"{-a / (2 * math.pi):.2g} Hz)")
+    elif a is not None and math.isfinite(a):
+        lines.append(f"  time constant  none: A[{output},{output}] {a:.3g} 1/s >= 0 (an "
+                     "integrator or unstable)")
+    name = f"B[{output},u_{axis}]"
+    b = params.get(name)
+    if b is not None and math.isfinite(b):
+        sb = stderr.get(name)
+        sigma = "" if sb is None or not math.isfinite(sb) else f" ± {sb:.2g}"
+        lines.append(f"  effectiveness  {name} {b:.4g}{sigma} {d['units'].get(name, '')}"
+                     .rstrip())
+    lag = d.get("input_lag_s")
+    lines.append(f"  delay          {d['delay_s'] * 1e3:.1f} ms"
+                 + (f", input lag {lag * 1e3:.1f} ms" if lag else ""))
+    return lines
+
+
+def validation_figures(v: Verdict) -> str:
+    """An axis's fit % on a validation flight, for people (empty when it had no segment).
+
+    Examples
+    --------
+    >>> from mavsid.verdict import Verdict
+    >>> validation_figures(Verdict("roll", "good", numbers={
+    ...     "fit_one_step_pct": 99.1, "fit_0.5s_pct": 93.0, "fit_free_run_pct": 92.8}))
+    'one step 99.1 %, 0.5 s 93.0 %, free run 92.8 %'
+    """
+    n = v.numbers
+    if "fit_free_run_pct" not in n:
+        return ""
+    text = ", ".join(f"{what} {_pct_text(n.get(key))}" for what, key in (
+        ("one step", "fit_one_step_pct"), ("0.5 s", "fit_0.5s_pct"),
+        ("free run", "fit_free_run_pct")))
+    if n.get("fit_closed_loop_pct") is not None:
+        text += (f", closed-loop twin {_pct_text(n['fit_closed_loop_pct'])} (baseline "
+                 f"{_pct_text(n.get('baseline_closed_loop_pct'))})")
+    return text
+
+
+def validate_line(v: Verdict) -> str:
+    """A verdict as ``mavsid validate`` says it: the model against this flight, with the
+    numbers (no advice: that is for the flight a model is fitted from).
+
+    Examples
+    --------
+    >>> from mavsid.verdict import Verdict
+    >>> v = Verdict("roll", "not identified", ("free run diverges",), (),
+    ...             {"fit_one_step_pct": 84.9, "fit_0.5s_pct": -3e5, "fit_free_run_pct": -3e5},
+    ...             ("fly a chirp",))
+    >>> validate_line(v)
+    'roll: does not predict this flight: one step 84.9 %, 0.5 s diverges (< -100 %), free \
+run diverges (< -100 %); free run diverges'
+    """
+    figures = validation_figures(v)
+    said = "; ".join(v.reasons)
+    if not figures and ("windows_rejected" in v.numbers
+                        or any(w in said for w in ("no window", "no segment", "no body rate"))):
+        return f"{v.axis}: nothing to validate on: {said}"
+    if not figures:  # (validation ran and failed: the model's prediction is no number)
+        return f"{v.axis}: does not predict this flight: {said}"
+    if v.identified:
+        head = f"{v.axis}: {v.level}" + (f" (for {', '.join(v.usable_for)})"
+                                         if v.usable_for else "")
+    else:
+        head = f"{v.axis}: does not predict this flight"
+    return f"{head}: {figures}" + "".join(f"; {r}" for r in v.reasons)
+
+
+def _pct_text(value: float | None) -> str:
+    """``93.4 %``, ``diverges (< -100 %)`` or ``n/a``."""
+    from mavsid.verdict import format_fit
+
+    text = format_fit(value)
+    return text.replace(")", " %)") if text.startswith("diverges") else (
+        text if text == "n/a" else f"{text} %")
+
+
+def format_result(result: FitResult, validating: bool = False) -> str:
+    """The compact per-axis table ``mavsid fit`` prints: the physical parameters a tuner
+    reads (time constant, bandwidth, effectiveness, delay, lag), then every parameter ± σ
+    (continuous-time, then the discrete-time coefficients), fit % on held-out data at one
+    step, 0.5 s and free run, and the verdicts. ``validating``: as ``mavsid validate`` says
+    them (the model against another flight: :func:`validate_line`).
+
+    Examples
+    --------
+    >>> from mavsid.pipeline_results import FitResult
+    >>> print(format_result(FitResult({}, (), ("x.bin",))))
+    x.bin: no axis fitted
+    """
+    from mavsid.channels import source_text
+    from mavsid.verdict import format_fit
+
+    logs = ", ".join(result.logs)
+    if not result.axes:
+        return f"{logs}: no axis fitted"
+    lines = [f"{logs}: {len(result.axes)} axis model(s), fit % on held-out segments"]
+    for fd in result.flights:  # what of each log was used (align's boot and exclusions)
+        boot = fd.boot
+        excluded = fd.excluded_samples
+        if boot and boot.of > 1:
+            lines.append(f"{fd.source.path}: boot {boot.used} of {boot.of} used "
+                         f"({boot.start_s:.1f}–{boot.stop_s:.1f} s, {boot.reason})")
+        if excluded:
+            lines.append(f"{fd.source.path}: samples excluded, never fitted: "
+                         + ", ".join(f"{k} {v}" for k, v in excluded.items()))
+        sources = fd.sources
+        used = [n for ax in result.axes.values() for n in (ax.output, f"u_{ax.axis}")]
+        units_from = fd.units_from
+        if sources:  # where each channel came from, read in what unit (declared, preset's,
+            # inferred), in which SI unit
+            lines.append(f"{fd.source.path}: preset {fd.preset}; " + ", ".join(
+                f"{n} [{_si_unit(fd, n)}] <- {escape(source_text(sources[n], units_from.get(n)))}"
+                for n in dict.fromkeys(used) if n in sources))
+    for axis, f in result.axes.items():
+        d = f.to_dict()
+        train_s = sum(s.stop_s - s.start_s for s in f.train)
+        val_s = sum(s.stop_s - s.start_s for s in f.held_out)
+        stable = {True: "stable", False: "UNSTABLE", None: "stability n/a"}[f.validation.stable]
+        lines.append(
+            f"{axis} ({f.output}; {f.estimator or 'model'}; {1 / f.validation.dt:.0f} Hz"
+            f"{_structure(d)}; train {len(f.train)} seg "
+            f"{train_s:.1f} s, validation {len(f.held_out)} seg {val_s:.1f} s; {stable})"
+        )
+        lines += _physical_lines(axis, f.output, d)
+        width = max((len(k) for k in d["params"]), default=0)
+        # continuous-time parameters first, the discrete-time coefficients after them
+        for name, value in sorted(d["params"].items(), key=lambda kv: "_d[" in kv[0]):
+            sigma = d["stderr"].get(name)
+            unit = d["units"].get(name, "")
+            lines.append(
+                f"  {name:<{width}}  {_pm(math.nan if value is None else value, sigma)} {unit}"
+                .rstrip()
+            )
+        fp = d["fit_percent"]
+        cells = "  ".join(f"{k.replace('_', '-')} {format_fit(fp[k])}" for k in fp)
+        lines.append(f"  fit %  {cells}")
+        if f.emulation is not None:
+            lines.append(f"  {_emulation_line(f.emulation)}")
+        lines.append(f"  {_closed_loop_line(f)}")
+        if f.frequency is not None:
+            lines.append(f"  {_frequency_line(f)}")
+    verdicts = [validate_line(v) if validating else v.line()
+                for v in result.verdicts.values()]
+    if verdicts:
+        lines.append("verdict:")
+        lines += [f"  {v}" for v in verdicts]
+    return "\n".join(lines)
+
+
 def print_result(args: argparse.Namespace, result: FitResult, validating: bool = False,
                   error: MavsidError | None = None) -> None:
     """The result on stdout: its JSON (with ``error``, when the command fails on it, as
     :func:`error_document` has it) or its table and the files written."""
     import json
-
-    from mavsid.pipeline import format_result
 
     if args.json:
         doc = result.to_dict()

@@ -42,7 +42,7 @@ from mavsid.validation import Validation, horizon_label
 
 if TYPE_CHECKING:
     from mavsid.loop.tune import TuneAnalysis
-    from mavsid.pipeline import AxisFit, FitResult
+    from mavsid.pipeline_results import AxisFit, FitResult
     from mavsid.response import FlightResponse
 
     #: The loop analysis a report draws, or a function that returns it when first needed.

@@ -16,10 +16,11 @@ from helpers import shared_path
 from mavsid.align import align
 from mavsid.align.flags import armed_events
 from mavsid.autopilot.ardupilot import pwm_to_thrust
+from mavsid.cli_format import format_result
 from mavsid.data import MessageTable, RawLog, SourceInfo
 from mavsid.errors import DataQualityWarning, MissingMessageError, NoExcitationError
 from mavsid.info import format_summary, summarize
-from mavsid.pipeline import fit, format_result
+from mavsid.pipeline import fit
 from mavsid.readers import read_log
 
 _OLD_COPTER = ("tradheli_brownout.log", "mechanical_fail.log", "robert_lefebvre_octo_PM.log")

@@ -21,6 +21,7 @@ import pytest
 from helpers import FIXTURES
 
 from mavsid import pipeline
+from mavsid.cli_format import format_result
 from mavsid.errors import NoExcitationError
 from mavsid.pipeline import fit, validate_logs
 from mavsid.pipeline_config import PipelineConfig
@@ -100,7 +101,7 @@ def test_every_axis_asked_for_has_a_verdict_that_points_somewhere() -> None:
     assert not yaw.identified
     assert "mavsid segments" in yaw.reasons[0] and "--all" in yaw.reasons[0]
     assert any("SID_AXIS 12" in a for a in yaw.advice)
-    assert "yaw: not identified" in pipeline.format_result(result)
+    assert "yaw: not identified" in format_result(result)
 
 
 def test_a_10_hz_log_says_why_and_which_logging_setting() -> None:
@@ -207,8 +208,8 @@ def test_plots_survive_a_diverging_model(tmp_path) -> None:  # type: ignore[no-u
     assert (tmp_path / "x.rrd").stat().st_size > 1000
     html = render_html(diverging)
     assert "<html" in html.lower()
-    assert "diverges" in pipeline.format_result(diverging)
-    assert "-2245833" not in pipeline.format_result(diverging)
+    assert "diverges" in format_result(diverging)
+    assert "-2245833" not in format_result(diverging)
 
 
 def test_advice_is_for_the_autopilot_that_flew() -> None:

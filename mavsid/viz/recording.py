@@ -71,7 +71,7 @@ from mavsid.viz.series import (
 
 if TYPE_CHECKING:
     from mavsid.excitation import WindowReport
-    from mavsid.pipeline import AxisFit, FitResult
+    from mavsid.pipeline_results import AxisFit, FitResult
 
 __all__ = [
     "KINDS",

@@ -7,10 +7,12 @@ log's parameters.
   ``|I| ≤ IMAX`` (no integrator with ``I`` = 0) and the derivative of the filtered target;
   when ``SMAX`` > 0 the P and D terms are scaled down so that their slew rate stays near
   ``SMAX`` (an approximation of ArduPilot's slew limiter, see :class:`RatePID`), then both
-  scaled so that ``|P + D| ≤ PDMX`` when ``PDMX`` > 0;
+  scaled so that ``|P + D| ≤ PDMX`` when ``PDMX`` > 0; while the output saturated in the
+  previous loop (the motors' limit) the integrator may only shrink;
 - PX4 multicopter rate control (:class:`PX4RatePID`): ``out = K·P·err + I - K·D·ṁ + FF·target``
   with the derivative taken on the measured rate (``ṁ``, low-passed at ``IMU_DGYRO_CUTOFF``),
-  the integrator gain ``K·I`` scaled down for large errors and limited to ``MC_*R_INT_LIM``.
+  the integrator gain ``K·I`` scaled down for large errors and limited to ``MC_*R_INT_LIM``,
+  no error integrated that pushes further in a saturated direction.
 
 :func:`controller_from_params` rebuilds one axis's controller from a log's parameters
 (ArduPilot ``ATC_RAT_{RLL,PIT,YAW}_*``, the 3.x ``RATE_{RLL,PIT,YAW}_*`` names, the 3.5–4.0
@@ -137,8 +139,11 @@ class RatePID:
         self.terms = (0.0, 0.0, 0.0, 0.0, 0.0)
         self.reset = True
 
-    def update(self, target: float, measured: float) -> float:
-        """One step: target and measured rate (rad/s) -> normalised output."""
+    def update(self, target: float, measured: float, saturation: int = 0) -> float:
+        """One step: target and measured rate (rad/s) -> normalised output. ``saturation``:
+        the sign of the output's clip in the previous loop (the motors' limit on this axis;
+        0 none): ``AC_PID``'s integrator then may only shrink (its limit flag has no
+        direction)."""
         g = self.g
         if self.reset:
             self.target = target
@@ -152,7 +157,8 @@ class RatePID:
             err_prev = self.error
             self.error += self.a_e * ((self.target - measured) - self.error)
             self.deriv += self.a_d * ((self.error - err_prev) / self.dt - self.deriv)
-        self.integ = min(max(self.integ + g.i * self.error * self.dt, -g.imax), g.imax)
+        if not saturation or self.integ * self.error < 0:
+            self.integ = min(max(self.integ + g.i * self.error * self.dt, -g.imax), g.imax)
         if g.smax > 0:
             pd = g.p * self.error + g.d * self.deriv
             self.slew += self.a_s * (abs(pd - self.pd_last) / self.dt - self.slew)
@@ -265,8 +271,11 @@ class PX4RatePID:
         self.terms = (0.0, 0.0, 0.0, 0.0, 0.0)
         self.reset = True
 
-    def update(self, target: float, measured: float) -> float:
-        """One step: target and measured rate (rad/s) -> normalised torque."""
+    def update(self, target: float, measured: float, saturation: int = 0) -> float:
+        """One step: target and measured rate (rad/s) -> normalised torque. ``saturation``:
+        the sign of the output's clip in the previous loop (0 none): PX4 integrates no
+        error that would push further that way (the control allocator's saturation
+        flags)."""
         g = self.g
         if self.reset:
             self.last = measured
@@ -276,8 +285,9 @@ class PX4RatePID:
         err = target - measured
         self.terms = (g.k * g.p * err, self.integ, -g.k * g.d * accel, g.ff * target, 0.0)
         out = g.k * g.p * err + self.integ - g.k * g.d * accel + g.ff * target
-        factor = max(0.0, 1.0 - (err / _PX4_I_ERR) ** 2)
-        i_new = self.integ + factor * g.k * g.i * err * self.dt
+        e_i = min(err, 0.0) if saturation > 0 else max(err, 0.0) if saturation < 0 else err
+        factor = max(0.0, 1.0 - (e_i / _PX4_I_ERR) ** 2)
+        i_new = self.integ + factor * g.k * g.i * e_i * self.dt
         self.integ = min(max(i_new, -g.int_lim), g.int_lim)
         return out
 
@@ -297,7 +307,7 @@ class PX4RatePID:
 class PID(Protocol):
     """What the twin needs of a rate controller."""
 
-    def update(self, target: float, measured: float) -> float: ...
+    def update(self, target: float, measured: float, saturation: int = 0) -> float: ...
 
     def preset(self, target: float, measured: float, output: float) -> None: ...
 

@@ -172,31 +172,36 @@ def simulate_closed_loop(
     tgl, ijl = tg.tolist(), ij.tolist()  # Python floats: no numpy scalar per step
     rows = list(ew) if w.shape[1] else None  # no other inputs: nothing to add
 
-    def stepped(i0: int, i1: int, x: np.ndarray, y_prev: float) -> tuple[np.ndarray, float]:
-        """Steps ``i0`` to ``i1`` (from the first after the warm-up), one at a time."""
+    def stepped(i0: int, i1: int, x: np.ndarray, y_prev: float, sat: int
+                ) -> tuple[np.ndarray, float, int]:
+        """Steps ``i0`` to ``i1`` (from the first after the warm-up), one at a time; ``sat``
+        the sign of the clip in the step before (the clip stands for the motors' limit: the
+        controller's integrator is held by it, :meth:`RatePID.update`)."""
         for jj in range(j + i0, j + i1):
             y = float(c @ x)
             seen = (1.0 - tau) * y + tau * y_prev
             y_prev = y
-            uk = min(max(pid.update(tgl[jj], seen) + ijl[jj], -limit), limit)
+            raw = pid.update(tgl[jj], seen, sat) + ijl[jj]
+            uk = min(max(raw, -limit), limit)
+            sat = int(raw > limit) - int(raw < -limit)
             y_all[jj - j], u_all[jj - j] = y, uk
             x = a @ x + b * (uk + off)
             if rows is not None:
                 x = x + rows[jj]
-        return x, y_prev
+        return x, y_prev, sat
 
     if (isinstance(pid, RatePID) and pid.g.smax <= 0 and pid.g.pd_max <= 0
             and pid.g.d_ff == 0 and steps > 4 * _BLOCK):
         # the first step one at a time (a fresh controller starts from its inputs), the rest
         # as one linear system unless the integrator's or the output's clip binds
-        x, y_prev = stepped(0, 1, x, y_prev)
-        if not _linear_steps(pid, plant, x, y_prev, tau, limit, tg[j + 1:j + steps],
-                             ij[j + 1:j + steps],
-                             ew[j + 1:j + steps] if rows is not None else None,
-                             y_all[1:], u_all[1:]):
-            stepped(1, steps, x, y_prev)
+        x, y_prev, sat = stepped(0, 1, x, y_prev, 0)
+        if sat or not _linear_steps(pid, plant, x, y_prev, tau, limit, tg[j + 1:j + steps],
+                                    ij[j + 1:j + steps],
+                                    ew[j + 1:j + steps] if rows is not None else None,
+                                    y_all[1:], u_all[1:]):
+            stepped(1, steps, x, y_prev, sat)
     else:
-        stepped(0, steps, x, y_prev)
+        stepped(0, steps, x, y_prev, 0)
     return y_all[::substeps].copy(), u_all[::substeps].copy()
 
 

@@ -2,8 +2,9 @@
 
 Every function takes an explicit :class:`rerun.RecordingStream`; nothing touches rerun's
 global recording. Time series are sent whole with ``send_columns`` on the timeline
-``flight_time`` (the log's own clock, seconds since boot; rerun's automatic wall-clock
-``log_time`` and ``log_tick`` timelines are switched off). Entity layout:
+``time_ms`` (:data:`mavsid.viz.series.TIMELINE`: the log's own clock, milliseconds since
+boot; rerun's automatic wall-clock ``log_time`` and ``log_tick`` timelines are switched
+off). Entity layout:
 
 ====================================  ==================================================
 entity                                content
@@ -16,6 +17,7 @@ entity                                content
                                       segment's own trim: :func:`mavsid.validation.segment_trim`)
 ``axes/<axis>/inputs/<name>``         the model's inputs on the validation segments
 ``segments/<axis>``                   text log: each segment's start and end, role, reasons
+``segments/modes``                    text log: each flight-mode change, with the mode's name
 ``world/data``                        measured attitude (3-D transform, FRD body in NED)
 ``world/model/<axis>/<i>``            attitude with the model's free-run rate in place
                                       of the measured one, on validation segment i
@@ -38,7 +40,7 @@ from __future__ import annotations
 import math
 import os
 import re
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -54,18 +56,25 @@ from mavsid.viz.series import (
     COHERENCE,
     FREE_RUN,
     INPUT,
+    LEGEND_STEP,
     MEASURED,
     ONE_STEP,
     PANEL_GAP,
+    RANGE_MARGIN,
     TARGET,
-    TIMELINE,
+    X_LABEL_GAP,
+    Y_LABEL_GAP,
     format_number,
     joined,
+    legend_rows,
+    nice_range,
     plot2d,
     rrd_file,
     send_series,
+    set_time,
     style_series,
     time_column,
+    time_panel,
     time_view,
 )
 
@@ -95,6 +104,7 @@ __all__ = [
     "save_rrd",
     "series_kind",
     "target_axes",
+    "value_ranges",
     "value_spans",
 ]
 
@@ -214,9 +224,9 @@ def log_attitude(
     if not clear_after:
         rec.log(f"{path}/airframe", airframe, static=True)
         return
-    rec.set_time(TIMELINE, duration=float(time_s[0]))
+    set_time(rec, float(time_s[0]))
     rec.log(f"{path}/airframe", airframe)
-    rec.set_time(TIMELINE, duration=t_end + 1e-3)
+    set_time(rec, t_end + 1e-3)
     rec.log(path, rr.Clear(recursive=True))
     rec.reset_time()
 
@@ -372,6 +382,7 @@ def log_bands(
     names = flight.mode_names
     mode = flight.flags.get("mode")
     if mode is not None and len(mode) == len(t):
+        changes: list[tuple[float, str]] = []
         for m, spans in sorted(value_spans(t, np.asarray(mode)).items()):
             if m < 0:
                 continue
@@ -379,6 +390,14 @@ def log_bands(
             label = str(names.get(m) or m).encode("ascii", "replace").decode()
             _band(rec, f"bands/mode/{m}{sub}", spans, BAND_LEVELS["mode"], _mode_colour(m),
                   f"mode {label}")
+            changes += [(a, f"mode {label} ({m})" + (f" {tag}" if tag else "")) for a, _ in spans]
+        if changes:  # (the bands have no legend: it would cover them)
+            changes.sort()
+            rr.send_columns(f"segments/modes{sub}",
+                            indexes=[time_column(np.array([a for a, _ in changes]))],
+                            columns=rr.TextLog.columns(text=[c for _, c in changes],
+                                                       level=["INFO"] * len(changes)),
+                            recording=rec)
     air = flight.flags.get("airborne")
     if air is not None and len(air) == len(t):
         spans = value_spans(t, np.asarray(air, dtype=np.int64)).get(1, [])
@@ -449,8 +468,8 @@ def _log_fit_plot(rec: rr.RecordingStream, axis: str, v: Validation) -> None:
     )
     rec.log(
         f"fit/{axis}/free_run_label",
-        rr.Points2D([[150.0, -8.0]], labels=["last point: free run"], show_labels=True,
-                    radii=0.1),
+        rr.Points2D([[150.0, 100.0 + 4 * X_LABEL_GAP]], labels=["last point: free run"],
+                    show_labels=True, radii=0.1),
         static=True,
     )
 
@@ -654,13 +673,47 @@ def _fit_keys() -> tuple[str, ...]:
 # --------------------------------------------------------------------------- layout
 
 
-def _bands_view(focus: tuple[float, float] | None = None) -> rrb.TimeSeriesView:
+def _bands_view() -> rrb.TimeSeriesView:
     top = max(BAND_LEVELS.values()) + 0.7
-    return time_view("bands", "modes & segments (training dim, validation bright, "
-                      "rejected grey)", focus,
-                      axis_y=rrb.ScalarAxis(range=(min(BAND_LEVELS.values()) - 0.7, top),
-                                            zoom_lock=True),
-                      plot_legend=rrb.PlotLegend(corner="RightTop"))
+    return time_view("bands", "modes & segments: roll, pitch, yaw rows (training dim, "
+                     "validation bright, rejected grey), airborne, modes (named in segments)",
+                     axis_y=rrb.ScalarAxis(range=(min(BAND_LEVELS.values()) - 0.7, top),
+                                           zoom_lock=True))
+
+
+#: Colour names of the series, for the plots' titles (the plots have no legend).
+_COLOUR_NAMES = {"roll": "red", "pitch": "green", "yaw": "blue"}
+
+
+def _axis_views(axis: str, target: bool,
+                view: Callable[..., rrb.TimeSeriesView] = time_view) -> rrb.Vertical:
+    """An axis's tab: the bands, its predicted against measured rate, its input and, when
+    logged, its rate target against the measured rate (each a ``view``)."""
+    rate = RATE_OF.get(axis, axis)
+    unit = STATE_UNITS.get(rate, "?")
+    views: list[rrb.View] = [
+        _bands_view(),
+        view(f"axes/{axis}", f"{axis}: {rate} [{unit}]: measured (grey), one-step (blue), "
+             "free-run (orange)", contents=["$origin/**", f"- axes/{axis}/inputs/**"]),
+        view(f"axes/{axis}/inputs", f"{axis}: model input {INPUT_OF.get(axis, '')} [1] "
+             "(green)"),
+    ]
+    if target:
+        views.append(view(f"targets/{axis}", f"{axis}: {rate} target (yellow), measured "
+                          "(grey) [rad/s]"))
+    return rrb.Vertical(*views, row_shares=[1, 3, 2, 2][:len(views)], name=axis)
+
+
+#: The Bode view's frame, in plot units (:func:`mavsid.viz.series.plot2d`): the three
+#: panels with their tick labels left and below and their one-row legends above.
+BODE_BOUNDS = ((-Y_LABEL_GAP - 26.0, 222.0),
+               (-LEGEND_STEP - 4.0, 160.0 + 2 * PANEL_GAP + 40.0 + X_LABEL_GAP + 16.0))
+
+
+def _fit_bounds(states: int = 1) -> tuple[tuple[float, float], tuple[float, float]]:
+    """The fit-% view's frame: the plot, its tick labels and note below, its legend above."""
+    return ((-Y_LABEL_GAP - 26.0, 222.0),
+            (-LEGEND_STEP * legend_rows(states) - 4.0, 100.0 + 4 * X_LABEL_GAP + 16.0))
 
 
 def blueprint(
@@ -669,54 +722,59 @@ def blueprint(
     with_flight: bool = True,
     focus: tuple[float, float] | None = None,
     targets: Sequence[str] = (),
+    y_ranges: Mapping[str, tuple[float, float]] = {},
 ) -> rrb.Blueprint:
-    """The layout: per axis predicted vs measured and inputs under the modes-and-segments
-    bands; the flight by kind; attitude, fit % vs horizon, Bode plots, summary.
+    """The layout: a tab per axis (predicted vs measured rate, input, rate target, under the
+    modes-and-segments bands) and two of the flight by kind; beside them the summary and segments,
+    the Bode plots, fit % vs horizon and the attitude.
 
     ``targets``: the axes that have a logged rate target, each given a plot of the target
     against the measured rate (:func:`log_rate_targets`).
 
     ``focus`` (seconds on the log clock, e.g. from :func:`focus_span`) is selected on the
-    time panel, paused, and is the span every time plot shows, so that the viewer opens on
-    a segment rather than on the whole log (or the minute before any segment).
+    time panel, paused, and is the span every time plot opens on (their time axis is one),
+    so that the viewer opens on a segment rather than on the whole log (or the minute
+    before any segment).
+
+    Each time plot is a few hundred pixels tall in a 1600 × 1000 window (ten stacked in one
+    column were 45 pixels each: a tick at 0 and nothing else); none has a legend (rerun
+    draws it over the data): titles name the colours. ``y_ranges`` (from
+    :func:`value_ranges`) fixes a plot's y axis by its origin: without, rerun fits it to the
+    data, on which a small range can get a single tick.
     """
-    columns: list[rrb.Container | rrb.View] = []
-    per_axis: list[rrb.Container | rrb.View] = [_bands_view(focus)] if axes else []
-    for axis in axes:
-        per_axis.append(
-            rrb.Vertical(
-                time_view(f"axes/{axis}", f"{axis}: {RATE_OF.get(axis, axis)} "
-                           f"[{STATE_UNITS.get(RATE_OF.get(axis, ''), '?')}] measured / "
-                           "one-step / free-run", focus,
-                           contents=["$origin/**", f"- axes/{axis}/inputs/**"]),
-                time_view(f"axes/{axis}/inputs", f"{axis}: inputs [1]", focus),
-                *([time_view(f"targets/{axis}", f"{axis}: rate target vs measured "
-                              f"{RATE_OF.get(axis, axis)} [rad/s]", focus)]
-                  if axis in targets else []),
-                row_shares=[2, 1, 1] if axis in targets else [2, 1],
-            )
-        )
-    flight = rrb.Vertical(
-        _bands_view(focus),
-        time_view("flight/attitude", "flight: roll, pitch [rad]", focus),
-        time_view("flight/heading", "flight: yaw [rad]", focus),
-        time_view("flight/rates", "flight: body rates p, q, r [rad/s]", focus),
-        time_view("flight/inputs", "flight: controller outputs [1]", focus),
-        time_view("flight/thrust", "flight: thrust [1]", focus),
-        row_shares=[1, 2, 1, 2, 2, 1],
-        name="flight",
+    def view(origin: str, name: str, **kw: object) -> rrb.TimeSeriesView:
+        shown = y_ranges.get(origin)
+        return time_view(origin, name, **kw, **(
+            {"axis_y": rrb.ScalarAxis(range=shown)} if shown is not None else {}))
+
+    # the flight in two tabs: six plots in one column left each too short for its ticks
+    angles = rrb.Vertical(
+        _bands_view(),
+        view("flight/attitude", "flight: roll (red), pitch (green) [rad]"),
+        view("flight/heading", "flight: yaw (blue) [rad]"),
+        row_shares=[1, 3, 2],
+        name="flight: attitude",
     )
-    if per_axis:
-        validation = rrb.Vertical(*per_axis, row_shares=[1] + [3] * len(axes),
-                                  name="validation")
-        columns.append(rrb.Tabs(validation, flight) if with_flight else validation)
-    else:
-        columns.append(flight)
+    rates = rrb.Vertical(
+        _bands_view(),
+        view("flight/rates", "flight: body rates p (red), q (green), r (blue) [rad/s]"),
+        view("flight/inputs", "flight: controller outputs u_roll (red), u_pitch (green), "
+             "u_yaw (blue) [1]"),
+        view("flight/thrust", "flight: thrust u_thrust (grey) [1]"),
+        row_shares=[1, 3, 3, 1.5],
+        name="flight: rates, outputs",
+    )
+    tabs: list[rrb.Container | rrb.View] = [_axis_views(a, a in targets, view) for a in axes]
+    left = rrb.Tabs(*tabs, *([angles, rates] if with_flight or not tabs else []))
     plots: list[rrb.View] = []
     for axis in axes:
-        plots.append(rrb.Spatial2DView(origin=f"fit/{axis}", name=f"{axis}: fit % vs horizon"))
-        plots.append(rrb.Spatial2DView(origin=f"frequency/{axis}",
-                                       name=f"{axis}: Bode |H|, phase, coherence"))
+        plots.append(rrb.Spatial2DView(
+            origin=f"frequency/{axis}", name=f"{axis}: Bode |H|, phase, coherence",
+            visual_bounds=rrb.VisualBounds2D(x_range=BODE_BOUNDS[0], y_range=BODE_BOUNDS[1])))
+        x_range, y_range = _fit_bounds()
+        plots.append(rrb.Spatial2DView(
+            origin=f"fit/{axis}", name=f"{axis}: fit % vs horizon",
+            visual_bounds=rrb.VisualBounds2D(x_range=x_range, y_range=y_range)))
     texts = rrb.Tabs(
         rrb.TextDocumentView(origin="summary", name="summary"),
         rrb.TextLogView(origin="segments", name="segments"),
@@ -725,21 +783,41 @@ def blueprint(
     attitude = rrb.Spatial3DView(
         origin="world", name="attitude: data (left) / model roll, pitch, yaw (right)"
     )
-    if plots:
-        # the Bode plot of the first axis in front: what a tuner looks at first
-        columns.append(rrb.Vertical(texts, rrb.Tabs(*plots, active_tab=1), attitude,
-                                    row_shares=[3, 3, 1]))
-    else:
-        columns.append(rrb.Vertical(attitude, texts, row_shares=[1, 1]))
-    panel = rrb.TimePanel(timeline=TIMELINE, play_state="paused",
-                          time_selection=rrb.components.AbsoluteTimeRange(
-                              int(focus[0] * 1e9), int(focus[1] * 1e9))
-                          if focus is not None else None)
+    # the Bode plot of the first axis in front: what a tuner looks at first
+    right = (rrb.Vertical(texts, rrb.Tabs(*plots, attitude, active_tab=0), row_shares=[2, 3])
+             if plots else rrb.Vertical(texts, attitude, row_shares=[1, 1]))
     return rrb.Blueprint(
-        rrb.Horizontal(*columns, column_shares=[3, 2]),
-        panel,
+        rrb.Horizontal(left, right, column_shares=[3, 2]),
+        time_panel(focus),
         collapse_panels=True,
     )
+
+
+def value_ranges(result: FitResult) -> dict[str, tuple[float, float]]:
+    """Each plot's y range (:func:`mavsid.viz.series.nice_range`) where the data's is known
+    before the viewer opens, by the plot's origin: the flight's series by kind (the whole
+    flight: what the flight tab is for) and each axis's model inputs on its validation
+    segments (inputs of ± 0.07 drew a plot ticked at 0 only); thrust on its own scale, 0 to
+    1 (a hover's 0.39 ... 0.40 otherwise gets no tick a short plot can label). The predicted
+    rates and the rate targets are left to rerun (a free run can diverge)."""
+    pad = RANGE_MARGIN
+    out: dict[str, tuple[float, float]] = {"flight/thrust": (-pad, 1.0 + pad)}
+    for kind, names in KINDS.items():
+        if kind == "thrust":
+            continue
+        found = [data[:, names_of.index(n)] for fd in result.flights
+                 for names_of, data in ((fd.state_names, fd.states), (fd.input_names, fd.inputs))
+                 for n in names if n in names_of]
+        shown = nice_range(np.concatenate(found)) if found else None
+        if shown is not None:
+            out[f"flight/{kind}"] = shown
+    for axis, fit in result.axes.items():
+        found = [seg.inputs[:, seg.input_names.index(n)] for seg in fit.held_out
+                 for n in fit.validation.input_names if n in seg.input_names]
+        shown = nice_range(np.concatenate(found)) if found else None
+        if shown is not None:
+            out[f"axes/{axis}/inputs"] = shown
+    return out
 
 
 def log_flight_windows(
@@ -880,7 +958,7 @@ def save_rrd(
     :func:`log_fit_result`); returns the blueprint."""
     targets = rate_targets(result)
     bp = blueprint(list(result.axes), with_flight=flight, focus=result_focus(result),
-                   targets=target_axes(targets))
+                   targets=target_axes(targets), y_ranges=value_ranges(result))
     with rrd_file(path, bp) as rec:
         log_fit_result(rec, result, flight=flight, targets=targets, gains=gains)
     return bp

@@ -17,12 +17,12 @@ import rerun.blueprint as rrb
 from mavsid.viz.series import (
     COHERENCE,
     MEASURED,
-    TIMELINE,
     format_number,
     plot2d,
     rrd_file,
     send_series,
     style_series,
+    time_panel,
     time_view,
 )
 
@@ -112,8 +112,12 @@ def response_blueprint(responses: Sequence[FlightResponse]) -> rrb.Blueprint:
     """The layout of :func:`log_response`: the loops' target and actual on linked time
     axes (left), the step responses, spectra and summary (right)."""
     keys = list(dict.fromkeys((r.axis, r.loop) for fr in responses for r in fr.loops))
-    times = [time_view(f"response/{axis}/{loop}", f"{axis} {loop}: target / actual "
-                        f"[{'rad/s' if loop == 'rate' else 'rad'}]") for axis, loop in keys]
+    # one log: its colours in the title; several: a legend says which colour is which log
+    several = len(responses) > 1
+    actual = "actual (log colours)" if several else "actual (blue)"
+    times = [time_view(f"response/{axis}/{loop}", f"{axis} {loop}: target (grey), {actual} "
+                       f"[{'rad/s' if loop == 'rate' else 'rad'}]", legend=several)
+             for axis, loop in keys]
     plots: list[rrb.View] = [rrb.Spatial2DView(origin=f"step/{axis}/{loop}",
                                                name=f"{axis} {loop}: step response")
                              for axis, loop in keys
@@ -124,8 +128,7 @@ def response_blueprint(responses: Sequence[FlightResponse]) -> rrb.Blueprint:
     summary = rrb.TextDocumentView(origin="summary", name="summary")
     right = rrb.Vertical(summary, rrb.Tabs(*plots), row_shares=[1, 3]) if plots else summary
     left = rrb.Vertical(*times) if times else rrb.TextDocumentView(origin="summary")
-    return rrb.Blueprint(rrb.Horizontal(left, right, column_shares=[3, 2]),
-                         rrb.TimePanel(timeline=TIMELINE, play_state="paused"),
+    return rrb.Blueprint(rrb.Horizontal(left, right, column_shares=[3, 2]), time_panel(),
                          collapse_panels=True)
 
 

@@ -1,13 +1,21 @@
 """The pieces every mavsid recording is built from: the timeline, colours, one scalar
-series sent whole, a series' line style, a static 2-D line plot, a linked time view and an
-``.rrd`` file that reports a failed write as an ``OSError``."""
+series sent whole, a series' line style, a static 2-D line plot, a linked time view, the
+time panel that sets the span those views open on, and an ``.rrd`` file that reports a
+failed write as an ``OSError``.
+
+The timeline, :data:`TIMELINE`, counts milliseconds on the log's clock (a rerun *sequence*
+timeline): rerun 0.41 draws a sequence as a plain number (``#95 000``), a *duration* as
+minutes and seconds (``+1m 35s``) and a *timestamp* as a clock time (``00:01:35``), while
+mavsid's command line and report speak seconds. Milliseconds, not seconds, because a sequence
+holds integers only; rounding moves a sample by at most 0.5 ms.
+"""
 
 from __future__ import annotations
 
 import contextlib
 import os
 from collections.abc import Iterable, Iterator, Sequence
-from typing import Final
+from typing import Any, Final
 
 import numpy as np
 import rerun as rr
@@ -15,22 +23,32 @@ import rerun.blueprint as rrb
 
 __all__ = [
     "AGGREGATION",
+    "ANCHOR_S",
     "APPLICATION_ID",
+    "RANGE_MARGIN",
     "TIMELINE",
     "format_number",
     "joined",
+    "legend_rows",
     "new_recording",
+    "nice_range",
     "plot2d",
     "rrd_file",
     "send_series",
+    "set_time",
     "style_series",
+    "ticks",
     "time_column",
+    "time_panel",
     "time_view",
     "write_errors",
 ]
 
 APPLICATION_ID = "mavsid"
-TIMELINE = "flight_time"
+#: The log's clock in milliseconds (a sequence timeline: see the module's docstring).
+TIMELINE = "time_ms"
+#: :data:`TIMELINE`'s ticks per second.
+TICKS_PER_S = 1000
 
 MEASURED = (200, 200, 200)
 ONE_STEP = (70, 140, 255)
@@ -51,20 +69,81 @@ def new_recording(recording_id: str | None = None) -> rr.RecordingStream:
     return rec
 
 
+def ticks(t_s: np.ndarray | float) -> np.ndarray:
+    """Seconds on the log's clock as :data:`TIMELINE`'s integer ticks (milliseconds).
+
+    >>> ticks(np.array([95.0, 95.0004, 101.2506])).tolist()
+    [95000, 95000, 101251]
+    """
+    return np.round(np.asarray(t_s, dtype=float) * TICKS_PER_S).astype(np.int64)
+
+
 def time_column(t: np.ndarray) -> rr.TimeColumn:
-    return rr.TimeColumn(TIMELINE, duration=np.asarray(t, dtype=float))
+    return rr.TimeColumn(TIMELINE, sequence=ticks(t))
+
+
+def set_time(rec: rr.RecordingStream, t_s: float) -> None:
+    """Log what follows at ``t_s`` seconds on :data:`TIMELINE`."""
+    rec.set_time(TIMELINE, sequence=int(ticks(t_s)))
+
+
+#: Each series starts with one NaN sample (a gap: nothing drawn) on a whole multiple of
+#: this many seconds: rerun ticks a sequence plot from its earliest sample, and a flight
+#: whose log starts at 127.184 s was ticked #127 184, #128 184, ... instead of #128 000.
+ANCHOR_S = 10.0
 
 
 def send_series(rec: rr.RecordingStream, path: str, t: np.ndarray, v: np.ndarray) -> None:
-    """One scalar series, rows with a non-finite time dropped."""
+    """One scalar series, rows with a non-finite time dropped, after an anchor
+    (:data:`ANCHOR_S`)."""
     t = np.asarray(t, dtype=float)
     v = np.asarray(v, dtype=float)
     ok = np.isfinite(t)
     if not ok.any():
         return
+    t, v = t[ok], v[ok]
+    first = float(np.floor(t.min() / ANCHOR_S) * ANCHOR_S)
+    if ticks(first) < ticks(t.min()):
+        t, v = np.r_[first, t], np.r_[np.nan, v]
     rr.send_columns(
-        path, indexes=[time_column(t[ok])], columns=rr.Scalars.columns(scalars=v[ok]), recording=rec
+        path, indexes=[time_column(t)], columns=rr.Scalars.columns(scalars=v), recording=rec
     )
+
+
+#: A plot's y range reaches this share of itself beyond its outer ticks, so that their
+#: labels (centred on the tick) are not cut by the plot's edge.
+RANGE_MARGIN = 0.08
+
+
+def nice_range(values: np.ndarray | Sequence[float]) -> tuple[float, float] | None:
+    """A y range for a plot of ``values`` (``None`` without a finite value): the smallest
+    one on whole steps of the decade below their spread that holds them, and a margin
+    (:data:`RANGE_MARGIN`). rerun ticks a plot on decade steps and labels a step only when
+    it is some 25 pixels tall: a 170-pixel plot of 0 ± 0.067 had one labelled tick, 0
+    (steps of 0.1 fall outside, steps of 0.01 are 11 pixels apart); on -0.1 ... 0.1 it has
+    three.
+
+    Examples
+    --------
+    >>> nice_range([-0.067, 0.067]), nice_range([2.93, 3.06])
+    ((-0.116, 0.116), (2.884, 3.116))
+    >>> nice_range([0.39, 0.39]), nice_range([0.0]), nice_range([np.nan])
+    ((0.292, 0.408), (-1.16, 1.16), None)
+    """
+    x = np.asarray(values, dtype=float)
+    x = x[np.isfinite(x)]
+    if not x.size:
+        return None
+    lo, hi = float(x.min()), float(x.max())
+    spread = hi - lo if hi > lo else abs(lo)
+    if spread == 0.0:
+        a, b = -1.0, 1.0
+    else:
+        step = 10.0 ** np.floor(np.log10(spread))
+        a = float(np.floor(lo / step + 1e-9) * step)
+        b = float(np.ceil(hi / step - 1e-9) * step)
+    pad = RANGE_MARGIN * (b - a)
+    return round(a - pad, 12) + 0.0, round(b + pad, 12) + 0.0
 
 
 def joined(parts: Iterable[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
@@ -97,12 +176,24 @@ def style_series(rec: rr.RecordingStream, path: str, colour: Sequence[int], name
 # --------------------------------------------------------------------------- 2-D plots
 
 
-#: A 2-D plot's label layout, in plot units (a plot is 200 wide): tick labels below the
-#: x axis and left of the y axis, far enough that the lowest y label and the first x label
-#: do not overlap; legend entries one text line apart; the Bode panels (magnitude, phase,
-#: coherence) apart by their x labels and a margin (at 6 and 12 units they overlapped at
-#: the viewer's default zoom).
-X_LABEL_GAP, Y_LABEL_GAP, LEGEND_STEP, PANEL_GAP = 9.0, 22.0, 11.0, 32.0
+#: A 2-D plot's label layout, in plot units (a plot is 200 wide). rerun draws a label below
+#: its point, at a fixed size in pixels (about 12 units high at 1.6 pixels per unit, the Bode
+#: view's scale in a 1600 × 1000 window): x tick labels below the x axis, y tick labels left
+#: of the y axis and raised by ``LABEL_RISE`` to sit on their grid line; the legend in rows
+#: of ``LEGEND_COLUMNS`` above the plot (beside it, 11 units apart, its entries overlapped
+#: each other and the data); stacked panels (Bode magnitude, phase, coherence) apart by the
+#: upper one's x labels and the lower one's legend.
+X_LABEL_GAP, Y_LABEL_GAP, LABEL_RISE = 8.0, 26.0, 6.0
+LEGEND_STEP, LEGEND_COLUMNS, PANEL_GAP = 15.0, 3, 40.0
+
+
+def legend_rows(n: int) -> int:
+    """Rows of a legend of ``n`` entries.
+
+    >>> [legend_rows(n) for n in (0, 1, 3, 4)]
+    [0, 1, 1, 2]
+    """
+    return -(-n // LEGEND_COLUMNS)
 
 
 def plot2d(
@@ -123,7 +214,7 @@ def plot2d(
     """A static line plot drawn with 2-D primitives (rerun time-series views plot against
     time only). Plot space: x in [0, 200], y from ``origin_y`` down to ``origin_y - height``
     (rerun's 2-D y axis points down, so values are flipped). ``legend`` names each series
-    in its colour at the plot's top right."""
+    in its colour above the plot (:func:`legend_rows` rows of :data:`LEGEND_STEP`)."""
     xs_all = [np.asarray(x, dtype=float) for _, x, _, _ in series]
     ys_all = [np.asarray(y, dtype=float) for _, _, y, _ in series]
 
@@ -156,7 +247,7 @@ def plot2d(
         if y_lo <= yt <= y_hi:
             y = float(py(np.array([yt]))[0])
             grid.append(np.array([[0.0, y], [200.0, y]]))
-            labels_at.append((-Y_LABEL_GAP, y))
+            labels_at.append((-Y_LABEL_GAP, y - LABEL_RISE))
             labels.append(f"{yt:g}{y_unit}")
     rec.log(f"{path}/grid", rr.LineStrips2D(grid, colors=[GRID], radii=0.15), static=True)
     rec.log(
@@ -179,7 +270,9 @@ def plot2d(
             rec.log(f"{entity}/points", rr.Points2D(pts, colors=[colour], radii=1.2),
                     static=True)
     if legend:
-        at = [(200.0 + Y_LABEL_GAP, origin_y + 4.0 + LEGEND_STEP * i)
+        rows = legend_rows(len(series))
+        at = [(200.0 * (i % LEGEND_COLUMNS + 0.5) / LEGEND_COLUMNS,
+               origin_y - LEGEND_STEP * (rows - i // LEGEND_COLUMNS))
               for i in range(len(series))]
         rec.log(
             f"{path}/legend",
@@ -194,18 +287,53 @@ def format_number(x: float) -> str:
 
 
 
-def time_view(origin: str, name: str, focus: tuple[float, float] | None = None,
-               **kw: object) -> rrb.TimeSeriesView:
-    """A time plot whose time axis moves with every other one (zoom one, all follow),
-    showing ``focus`` (seconds) when given, else the whole flight."""
-    from rerun.encodings import TimeRange, TimeRangeBoundary
-
-    shown = None if focus is None else TimeRange(
-        start=TimeRangeBoundary.absolute(seconds=focus[0]),
-        end=TimeRangeBoundary.absolute(seconds=focus[1]))
+def time_view(origin: str, name: str, *, legend: bool = False,
+              **kw: object) -> rrb.TimeSeriesView:
+    """A time plot whose time axis is the viewer's shared one (zoom one, all follow; it opens
+    on the span :func:`time_panel` sets). No legend unless ``legend``: rerun draws it over
+    the data, so the name says which colour is which."""
     return rrb.TimeSeriesView(origin=origin, name=name,
-                              axis_x=rrb.TimeAxis(link="LinkToGlobal", view_range=shown),
+                              axis_x=rrb.TimeAxis(link="LinkToGlobal"),
+                              plot_legend=rrb.PlotLegend(corner="RightBottom", visible=legend),
                               **kw)  # type: ignore[arg-type]
+
+
+#: The blueprint entity of the time axis that every linked time plot shares: the view rerun
+#: keeps for "blueprint data shared between views" (``GLOBAL_VIEW_ID`` in the viewer's
+#: source, rerun 0.41; no SDK call sets it). Unset, a linked plot opens on rerun's default,
+#: ±1 000 ticks around the time cursor (±1 s here) at the log's start, where nothing is.
+SHARED_VIEW: Final = "view/5c0dca6a-e63f-9cf7-f657-2602590474cc"
+
+
+class _TimePanel(rrb.TimePanel):
+    """rerun's time panel that also writes the shared time axis's span (seconds), or the
+    whole recording when ``None``."""
+
+    def __init__(self, shown: tuple[float, float] | None, **kw: Any) -> None:
+        super().__init__(**kw)
+        self.shown = shown
+
+    def _log_to_stream(self, stream: rr.RecordingStream) -> None:
+        from rerun.encodings import TimeRange, TimeRangeBoundary
+
+        super()._log_to_stream(stream)
+        if self.shown is None:
+            start = end = TimeRangeBoundary.infinite()
+        else:
+            a, b = (int(x) for x in ticks(np.asarray(self.shown)))
+            start, end = TimeRangeBoundary.absolute(seq=a), TimeRangeBoundary.absolute(seq=b)
+        stream.log(f"{SHARED_VIEW}/TimeAxis",
+                   rrb.archetypes.TimeAxis(view_range=TimeRange(start=start, end=end)))
+
+
+def time_panel(focus: tuple[float, float] | None = None) -> rrb.TimePanel:
+    """The time panel, collapsed to its play bar, paused on :data:`TIMELINE`; ``focus``
+    (seconds) selected and the span every :func:`time_view` opens on (else the whole
+    recording)."""
+    selection = None if focus is None else rrb.components.AbsoluteTimeRange(
+        *(int(x) for x in ticks(np.asarray(focus))))
+    return _TimePanel(focus, timeline=TIMELINE, play_state="paused", state="collapsed",
+                      time_selection=selection)
 
 
 

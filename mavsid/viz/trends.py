@@ -62,8 +62,10 @@ def save_trends_rrd(axes: pd.DataFrame, path: str | os.PathLike[str]) -> rrb.Blu
                     ("value", name, value, 2.0), ("upper", f"{name} +1 sd", value + sig, 0.5),
                     ("lower", f"{name} -1 sd", value - sig, 0.5)):
                 sends.append((f"{base}/{part}/{kind}", label, colour, width, indexes, series))
+            # (no legend: rerun draws it over the points)
             views.append(rrb.TimeSeriesView(origin=f"{base}/{part}",
-                                            name=f"{safe} {axis}: {name}"))
+                                            name=f"{safe} {axis}: {name}, thin: ±1 sd",
+                                            plot_legend=rrb.PlotLegend(visible=False)))
     changes = rrb.TextLogView(origin="changes", name="change points")
     bp = rrb.Blueprint(
         rrb.Vertical(rrb.Grid(*views), changes, row_shares=[4, 1]) if views else changes,

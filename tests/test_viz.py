@@ -559,7 +559,7 @@ def test_bode_labels_do_not_overlap(rrd) -> None:  # type: ignore[no-untyped-def
     overlap each other nor the plots' areas, and lie inside the view's frame (beside the
     plot, 11 units apart, the legend's entries overlapped each other and the data)."""
     data, _ = _read(rrd)
-    (x_lo, x_hi), (y_lo, y_hi) = recording.BODE_BOUNDS
+    (x_lo, x_hi), (y_lo, y_hi) = recording.BODE_FRAME
     plots = [k.removesuffix("/magnitude/ticks") for k in data if k.startswith("/frequency/")
              and k.endswith("/magnitude/ticks")]
     assert plots

@@ -56,19 +56,17 @@ from mavsid.viz.series import (
     COHERENCE,
     FREE_RUN,
     INPUT,
-    LEGEND_STEP,
     MEASURED,
     ONE_STEP,
     PANEL_GAP,
     RANGE_MARGIN,
     TARGET,
     X_LABEL_GAP,
-    Y_LABEL_GAP,
     format_number,
     joined,
-    legend_rows,
     nice_range,
     plot2d,
+    plot_frame,
     rrd_file,
     send_series,
     set_time,
@@ -466,10 +464,11 @@ def _log_fit_plot(rec: rr.RecordingStream, axis: str, v: Validation) -> None:
         y_range=(lo, 100.0),
         legend=True,
     )
+    note_y = 100.0 + 4 * X_LABEL_GAP  # (below the x tick labels: FIT_FRAME has room)
     rec.log(
         f"fit/{axis}/free_run_label",
-        rr.Points2D([[150.0, 100.0 + 4 * X_LABEL_GAP]], labels=["last point: free run"],
-                    show_labels=True, radii=0.1),
+        rr.Points2D([[150.0, note_y]], labels=["last point: free run"], show_labels=True,
+                    radii=0.1),
         static=True,
     )
 
@@ -704,16 +703,13 @@ def _axis_views(axis: str, target: bool,
     return rrb.Vertical(*views, row_shares=[1, 3, 2, 2][:len(views)], name=axis)
 
 
-#: The Bode view's frame, in plot units (:func:`mavsid.viz.series.plot2d`): the three
-#: panels with their tick labels left and below and their one-row legends above.
-BODE_BOUNDS = ((-Y_LABEL_GAP - 26.0, 222.0),
-               (-LEGEND_STEP - 4.0, 160.0 + 2 * PANEL_GAP + 40.0 + X_LABEL_GAP + 16.0))
-
-
-def _fit_bounds(states: int = 1) -> tuple[tuple[float, float], tuple[float, float]]:
-    """The fit-% view's frame: the plot, its tick labels and note below, its legend above."""
-    return ((-Y_LABEL_GAP - 26.0, 222.0),
-            (-LEGEND_STEP * legend_rows(states) - 4.0, 100.0 + 4 * X_LABEL_GAP + 16.0))
+#: The Bode view's frame (:func:`mavsid.viz.series.plot_frame`): magnitude, phase and
+#: coherence (:func:`_log_frequency_plot`), each with a one-row legend.
+BODE_FRAME = (plot_frame(legend_rows=1)[0],
+              (plot_frame(legend_rows=1)[1][0],
+               plot_frame(160.0 + 2 * PANEL_GAP, 40.0, legend_rows=1)[1][1]))
+#: The fit-% view's frame: one state a row of legend, the note under the x labels.
+FIT_FRAME = plot_frame(legend_rows=1, below=3 * X_LABEL_GAP)
 
 
 def blueprint(
@@ -744,8 +740,9 @@ def blueprint(
     """
     def view(origin: str, name: str, **kw: object) -> rrb.TimeSeriesView:
         shown = y_ranges.get(origin)
-        return time_view(origin, name, **kw, **(
-            {"axis_y": rrb.ScalarAxis(range=shown)} if shown is not None else {}))
+        if shown is not None:
+            kw["axis_y"] = rrb.ScalarAxis(range=shown)
+        return time_view(origin, name, legend=False, **kw)
 
     # the flight in two tabs: six plots in one column left each too short for its ticks
     angles = rrb.Vertical(
@@ -770,11 +767,10 @@ def blueprint(
     for axis in axes:
         plots.append(rrb.Spatial2DView(
             origin=f"frequency/{axis}", name=f"{axis}: Bode |H|, phase, coherence",
-            visual_bounds=rrb.VisualBounds2D(x_range=BODE_BOUNDS[0], y_range=BODE_BOUNDS[1])))
-        x_range, y_range = _fit_bounds()
+            visual_bounds=rrb.VisualBounds2D(x_range=BODE_FRAME[0], y_range=BODE_FRAME[1])))
         plots.append(rrb.Spatial2DView(
             origin=f"fit/{axis}", name=f"{axis}: fit % vs horizon",
-            visual_bounds=rrb.VisualBounds2D(x_range=x_range, y_range=y_range)))
+            visual_bounds=rrb.VisualBounds2D(x_range=FIT_FRAME[0], y_range=FIT_FRAME[1])))
     texts = rrb.Tabs(
         rrb.TextDocumentView(origin="summary", name="summary"),
         rrb.TextLogView(origin="segments", name="segments"),

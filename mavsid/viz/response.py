@@ -18,7 +18,9 @@ from mavsid.viz.series import (
     COHERENCE,
     MEASURED,
     format_number,
+    legend_layout,
     plot2d,
+    plot_frame,
     rrd_file,
     send_series,
     style_series,
@@ -34,6 +36,9 @@ __all__ = ["log_response", "response_blueprint", "save_response_rrd"]
 
 #: colours of the logs compared in a response recording (first log, second, ...)
 LOG_COLOURS = ((70, 140, 255), (255, 150, 40), (90, 200, 110), (200, 90, 200))
+LOG_COLOUR_NAMES = ("blue", "orange", "green", "purple")
+#: a step response's series per log: the mean and its band
+STEP_PARTS = ("mean", "lower", "upper")
 
 
 def _log_tags(responses: Sequence[FlightResponse]) -> list[str]:
@@ -42,6 +47,22 @@ def _log_tags(responses: Sequence[FlightResponse]) -> list[str]:
                                             os.path.splitext(os.path.basename(r.log))[0])))
              or "log" for r in responses]
     return [s if stems.count(s) == 1 else f"{s}_{i}" for i, s in enumerate(stems)]
+
+
+def _step_range(values: np.ndarray) -> tuple[float, float]:
+    """A normalised step response's y range: 0 ... 1.5 widened on quarters to hold the
+    values, within -1 ... 3 (a band's wild edge would squeeze the ticks of the rest: a
+    range fitted to it put 0 ... 1.5 on a third of the plot, its labels overlapping).
+
+    >>> _step_range(np.array([0.1, 1.2])), _step_range(np.array([-0.3, 1.7, np.nan]))
+    ((0.0, 1.5), (-0.5, 1.75))
+    >>> _step_range(np.array([-40.0, 9.0]))
+    (-1.0, 3.0)
+    """
+    v = values[np.isfinite(values)]
+    lo = float(np.floor(min(0.0, v.min(initial=0.0)) / 0.25) * 0.25)
+    hi = float(np.ceil(max(1.5, v.max(initial=1.5)) / 0.25) * 0.25)
+    return max(lo, -1.0), min(hi, 3.0)
 
 
 def log_response(rec: rr.RecordingStream, responses: Sequence[FlightResponse],
@@ -70,10 +91,11 @@ def log_response(rec: rr.RecordingStream, responses: Sequence[FlightResponse],
                 style_series(rec, f"{base}/actual", colour, f"{tag} actual {r.actual}")
             if r.step is not None:
                 s = r.step
-                steps.setdefault((r.axis, r.loop), []).extend([
-                    (f"{tag} mean", s.time_s, s.response, colour),
-                    (f"{tag} lower", s.time_s, s.lower, tuple(c // 2 for c in colour)),
-                    (f"{tag} upper", s.time_s, s.upper, tuple(c // 2 for c in colour))])
+                dim = tuple(c // 2 for c in colour)
+                steps.setdefault((r.axis, r.loop), []).extend(
+                    (f"{tag} {part}", s.time_s, y, shade) for part, y, shade in zip(
+                        STEP_PARTS, (s.response, s.lower, s.upper), (colour, dim, dim),
+                        strict=True))
             overshoot = r.overshoot_pct if r.overshoot_pct is not None else math.nan
             lines.append(f"| {tag} | {r.axis} | {r.loop} | "
                          f"{format_number((r.rise_s or math.nan) * 1e3)} | "
@@ -90,9 +112,11 @@ def log_response(rec: rr.RecordingStream, responses: Sequence[FlightResponse],
                 cutoffs.setdefault(axis, {}).update(sp.cutoffs)
     for (axis, loop), series in steps.items():
         end = max(float(x[-1]) for _, x, _, _ in series)
+        lo, hi = _step_range(np.concatenate([y for _, _, y, _ in series]))
         plot2d(rec, f"step/{axis}/{loop}", series, xlog=False,
-                x_ticks=np.linspace(0.0, end, 6).round(3), y_ticks=np.arange(0.0, 1.6, 0.25),
-                x_unit=" s", y_unit="", legend=True)
+               x_ticks=np.linspace(0.0, end, 6).round(3),
+               y_ticks=np.arange(lo, hi + 1e-9, 0.25 if hi - lo <= 2 else 0.5), x_unit=" s",
+               y_unit="", y_range=(lo, hi), legend=True)
     for axis, series in spectra.items():
         lo = min(float(x.min()) for _, x, _, _ in series)
         hi = max(float(x.max()) for _, x, _, _ in series)
@@ -112,17 +136,23 @@ def response_blueprint(responses: Sequence[FlightResponse]) -> rrb.Blueprint:
     """The layout of :func:`log_response`: the loops' target and actual on linked time
     axes (left), the step responses, spectra and summary (right)."""
     keys = list(dict.fromkeys((r.axis, r.loop) for fr in responses for r in fr.loops))
-    # one log: its colours in the title; several: a legend says which colour is which log
-    several = len(responses) > 1
-    actual = "actual (log colours)" if several else "actual (blue)"
-    times = [time_view(f"response/{axis}/{loop}", f"{axis} {loop}: target (grey), {actual} "
-                       f"[{'rad/s' if loop == 'rate' else 'rad'}]", legend=several)
+    # the logs' colours in the titles (rerun draws a legend over the data)
+    tags = _log_tags(responses)
+    actual = ", ".join(f"{tag} ({LOG_COLOUR_NAMES[i % len(LOG_COLOUR_NAMES)]})"
+                       for i, tag in enumerate(tags))
+    times = [time_view(f"response/{axis}/{loop}", f"{axis} {loop}: target (grey), actual "
+                       f"{actual} [{'rad/s' if loop == 'rate' else 'rad'}]")
              for axis, loop in keys]
-    plots: list[rrb.View] = [rrb.Spatial2DView(origin=f"step/{axis}/{loop}",
-                                               name=f"{axis} {loop}: step response")
-                             for axis, loop in keys
-                             if any(getattr(fr.loop(axis, loop), "step", None) is not None
-                                    for fr in responses)]
+    plots: list[rrb.View] = []
+    for axis, loop in keys:
+        names = [f"{tag} {part}" for tag, fr in zip(tags, responses, strict=True)
+                 if getattr(fr.loop(axis, loop), "step", None) is not None
+                 for part in STEP_PARTS]
+        if names:
+            x_range, y_range = plot_frame(legend_rows=legend_layout(names)[0])
+            plots.append(rrb.Spatial2DView(
+                origin=f"step/{axis}/{loop}", name=f"{axis} {loop}: step response",
+                visual_bounds=rrb.VisualBounds2D(x_range=x_range, y_range=y_range)))
     plots += [rrb.Spatial2DView(origin=f"spectrum/{axis}", name=f"{axis}: spectra [dB]")
               for axis in dict.fromkeys(a for a, _ in keys)]
     summary = rrb.TextDocumentView(origin="summary", name="summary")

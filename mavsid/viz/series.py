@@ -29,10 +29,11 @@ __all__ = [
     "TIMELINE",
     "format_number",
     "joined",
-    "legend_rows",
+    "legend_layout",
     "new_recording",
     "nice_range",
     "plot2d",
+    "plot_frame",
     "rrd_file",
     "send_series",
     "set_time",
@@ -187,13 +188,28 @@ X_LABEL_GAP, Y_LABEL_GAP, LABEL_RISE = 8.0, 26.0, 6.0
 LEGEND_STEP, LEGEND_COLUMNS, PANEL_GAP = 15.0, 3, 40.0
 
 
-def legend_rows(n: int) -> int:
-    """Rows of a legend of ``n`` entries.
+#: rerun's 2-D label text, in plot units at about 1.6 pixels per unit: 4.3 a character
+#: and some padding (measured on screenshots of the Bode view).
+LABEL_CHAR, LABEL_PAD = 4.3, 4.0
+#: How far a plot's frame (:func:`plot2d`) reaches beyond its right edge: half the widest
+#: x tick label ("100 Hz").
+RIGHT_MARGIN = 22.0
 
-    >>> [legend_rows(n) for n in (0, 1, 3, 4)]
-    [0, 1, 1, 2]
+
+def legend_layout(names: Sequence[str]) -> tuple[int, int]:
+    """``(rows, columns)`` of a legend of ``names`` above a plot: up to
+    :data:`LEGEND_COLUMNS` a row, fewer when a name would not fit its column.
+
+    >>> legend_layout(["p fit"]), legend_layout(["a", "b", "c", "d"])
+    ((1, 3), (2, 3))
+    >>> legend_layout(["log gyro", "ATC_RAT_YAW_FLTT 20 Hz", "ATC_RAT_YAW_FLTD 20 Hz"])
+    (2, 2)
     """
-    return -(-n // LEGEND_COLUMNS)
+    if not names:
+        return 0, LEGEND_COLUMNS
+    widest = LABEL_CHAR * max(len(n) for n in names) + LABEL_PAD
+    columns = max(1, min(LEGEND_COLUMNS, int((200.0 + RIGHT_MARGIN) // widest)))
+    return -(-len(names) // columns), columns
 
 
 def plot2d(
@@ -214,7 +230,8 @@ def plot2d(
     """A static line plot drawn with 2-D primitives (rerun time-series views plot against
     time only). Plot space: x in [0, 200], y from ``origin_y`` down to ``origin_y - height``
     (rerun's 2-D y axis points down, so values are flipped). ``legend`` names each series
-    in its colour above the plot (:func:`legend_rows` rows of :data:`LEGEND_STEP`)."""
+    in its colour above the plot (:func:`legend_layout`, rows :data:`LEGEND_STEP` apart);
+    :func:`plot_frame` is what a view must show of it."""
     xs_all = [np.asarray(x, dtype=float) for _, x, _, _ in series]
     ys_all = [np.asarray(y, dtype=float) for _, _, y, _ in series]
 
@@ -269,17 +286,32 @@ def plot2d(
         if len(pts) < 30:  # few points (fit vs horizon): mark them
             rec.log(f"{entity}/points", rr.Points2D(pts, colors=[colour], radii=1.2),
                     static=True)
-    if legend:
-        rows = legend_rows(len(series))
-        at = [(200.0 * (i % LEGEND_COLUMNS + 0.5) / LEGEND_COLUMNS,
-               origin_y - LEGEND_STEP * (rows - i // LEGEND_COLUMNS))
-              for i in range(len(series))]
+    names = [name for name, *_ in series] if legend else []
+    rows, columns = legend_layout(names)
+    if names:
+        at = [(200.0 * (i % columns + 0.5) / columns,
+               origin_y - LEGEND_STEP * (rows - i // columns)) for i in range(len(names))]
         rec.log(
             f"{path}/legend",
-            rr.Points2D(at, labels=[name for name, *_ in series], radii=1.5,
+            rr.Points2D(at, labels=names, radii=1.5,
                         colors=[colour for *_, colour in series], show_labels=True),
             static=True,
         )
+
+
+def plot_frame(origin_y: float = 0.0, height: float = 100.0, legend_rows: int = 0,
+               below: float = 0.0) -> tuple[tuple[float, float], tuple[float, float]]:
+    """The ``(x, y)`` ranges of a :func:`plot2d` plot with its tick labels and a legend of
+    ``legend_rows`` rows (and ``below`` more units under its x labels): a 2-D view's
+    ``VisualBounds2D`` (fitted to its content, rerun leaves margins that shrank the text's
+    room: the Bode legends overlapped).
+
+    >>> plot_frame(legend_rows=1)
+    ((-52.0, 222.0), (-19.0, 124.0))
+    """
+    top = origin_y - LEGEND_STEP * legend_rows - 4.0 if legend_rows else origin_y - 2 * LABEL_RISE
+    return ((-Y_LABEL_GAP - 26.0, 200.0 + RIGHT_MARGIN),
+            (top, origin_y + height + X_LABEL_GAP + 16.0 + below))
 
 
 def format_number(x: float) -> str:

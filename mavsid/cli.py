@@ -52,6 +52,7 @@ from mavsid.errors import (
 from mavsid.outputs import ReportWorker, atomic_path, check_outputs
 
 if TYPE_CHECKING:
+    from mavsid.loop.tune import TuneAnalysis
     from mavsid.pipeline_config import PipelineConfig
     from mavsid.pipeline_results import FitResult
     from mavsid.response import FlightResponse
@@ -334,30 +335,30 @@ def _write_outputs(args: argparse.Namespace, result: FitResult,
                    step: Callable[..., None] = lambda stage, weight=1: None,
                    worker: ReportWorker | None = None, rrd_weight: float = 1) -> None:
     """The ``.rrd`` and the report; the report drawn by ``worker`` (a process started with
-    the command, see :class:`~mavsid.outputs.ReportWorker`) while the loop analysis it
-    draws and the ``.rrd`` are worked out here, else here after the ``.rrd``.
-    ``rrd_weight``: the ``.rrd``'s stage on the progress bar (:func:`mavsid.cli_format.stages`)."""
+    the command, see :class:`~mavsid.outputs.ReportWorker`), which works out the loop
+    analysis first and hands it back for the ``.rrd``'s gains while this one imports rerun;
+    else here, the analysis worked out once for both. ``rrd_weight``: the ``.rrd``'s stage
+    on the progress bar (:func:`mavsid.cli_format.stages`)."""
     with contextlib.ExitStack() as stack:
         report_tmp = None
         handed = False
-        gains = None
+        analysis: TuneAnalysis | None = None
         if args.report:
             step(f"writing {args.report}")
             report_tmp = stack.enter_context(atomic_path(args.report))
             handed = worker is not None and worker.start(result, report_tmp, args.report)
-            if handed:  # (worked out here while the worker draws the first figures)
-                assert worker is not None
-                from mavsid.loop.tune import tune_analysis
-
-                analysis = tune_analysis(result)
-                worker.send_analysis(analysis)
-                gains = analysis.report
         if args.rrd:
             from mavsid.viz.recording import save_rrd
 
             step(f"writing {args.rrd}", rrd_weight)
+            if args.report:  # (the gains the report shows, shown in the .rrd too)
+                from mavsid.loop.tune import tune_analysis
+
+                analysis = worker.analysis() if worker is not None and handed else None
+                if analysis is None:  # (no worker, or one that could not hand it back)
+                    analysis = tune_analysis(result)
             with atomic_path(args.rrd) as tmp:
-                save_rrd(result, tmp, gains=gains)
+                save_rrd(result, tmp, gains=analysis.report if analysis is not None else None)
         if report_tmp is not None:
             if handed:
                 assert worker is not None
@@ -365,7 +366,9 @@ def _write_outputs(args: argparse.Namespace, result: FitResult,
             else:
                 from mavsid.report import write_report
 
-                write_report(result, report_tmp)
+                done = analysis
+                write_report(result, report_tmp,
+                             analysis=(lambda: done) if done is not None else None)
 
 
 def _report_worker(args: argparse.Namespace) -> contextlib.AbstractContextManager[Any]:

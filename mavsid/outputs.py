@@ -134,10 +134,13 @@ FORK = sys.platform.startswith("linux") and hasattr(os, "fork")
 
 class ReportWorker:
     """:func:`mavsid.report.write_report` in a process of its own, started when a command
-    begins: it imports matplotlib and the report and builds the report's figures
-    (:func:`mavsid.report.warm_up`; ~1 s of CPU) while this process reads and fits the
-    logs, then draws the report (~1.2 s on a 100 MB flight) while this one writes the
-    other outputs (the ``.rrd``: ~1.2 s with rerun's import).
+    begins: it imports matplotlib, the report and python-control (the loop analysis's step
+    responses) and builds the report's figures (:func:`mavsid.report.warm_up`; ~2 s of CPU)
+    while this process reads and fits the logs; then works the loop analysis out
+    (:func:`mavsid.loop.tune.tune_analysis`, ~0.4 s on a 100 MB flight), hands it back
+    (:meth:`analysis`: the ``.rrd`` shows its gains) and draws the report (~1.7 s) while this
+    one writes the other outputs (the ``.rrd``: ~0.8 s with rerun's import). Worked out
+    here, the analysis cost python-control's import too (1.3 s of CPU) after the fit.
 
     On Linux the worker is forked from this process once the modules of the result's
     classes are imported (:class:`_Forked`): a new interpreter imported them again, ~0.8 s
@@ -156,7 +159,7 @@ class ReportWorker:
 
     Use it as a context manager: leaving the block without :meth:`wait` ends the process
     (a fit that failed, Ctrl-C), and no file it was writing is left behind (the caller's
-    :func:`atomic_path` removes it), nor the result's temporary file.
+    :func:`atomic_path` removes it), nor the result's or the analysis's temporary file.
 
     Examples
     --------
@@ -179,7 +182,10 @@ class ReportWorker:
             self._proc = subprocess.Popen([sys.executable, "-c", _SERVE],
                                           stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
         self._handoff: str | None = None
-        self._analysis: str | None = None
+        self._analysis: str | None = None  # (the file the worker puts the analysis in)
+        self._answered = False  # (the worker's line about the analysis read)
+        self._said = ""  # (that line when it was not about the analysis)
+        self._ready = False  # (the analysis is in its file)
         self._target = ""
 
     @staticmethod
@@ -220,38 +226,36 @@ class ReportWorker:
         """Hand the worker ``result`` to write to ``path`` (a temporary file of ``target``,
         the output named in errors); returns once the result is on disk. False when it
         could not be put there (a full temporary folder): the caller draws the report
-        itself (the worker, told nothing, ends). The worker draws every axis's figures but
-        the Bode ones while the caller works out the loop analysis (:meth:`send_analysis`)."""
+        itself (the worker, told nothing, ends). The worker works the loop analysis out
+        first (:meth:`analysis`), then draws the report."""
         self._target = target
-        self._handoff = self._pickled((result, path))
-        if self._handoff is None:
-            self._close_stdin()
-            return False
-        self._line(self._handoff)
-        return True
-
-    def send_analysis(self, analysis: Any) -> None:
-        """Hand the worker the loop analysis of the result (:func:`mavsid.loop.tune.
-        tune_analysis`), which its report first needs for the Bode figures, drawn after the
-        others; one that cannot be handed over the worker works out itself."""
-        self._analysis = self._pickled(analysis)
-        self._line(self._analysis or "")
+        self._analysis = _pickled(None)  # (the file the worker puts the analysis in)
+        if self._analysis is not None:
+            self._handoff = _pickled((result, path, self._analysis))
+        if self._handoff is not None:
+            self._line(self._handoff)
         self._close_stdin()
+        return self._handoff is not None
 
-    def _pickled(self, obj: Any) -> str | None:
-        """``obj`` pickled into a new temporary file: its name, None when it cannot be."""
-        try:
-            fd, name = tempfile.mkstemp(prefix="mavsid-report-", suffix=".pickle")
-        except OSError:
-            return None
-        try:
-            with os.fdopen(fd, "wb") as f:
-                pickle.dump(obj, f, protocol=pickle.HIGHEST_PROTOCOL)
-        except (OSError, pickle.PicklingError):
-            with contextlib.suppress(OSError):
-                os.unlink(name)
-            return None
-        return name
+    def analysis(self) -> Any:
+        """The loop analysis of the result handed over (:func:`mavsid.loop.tune.
+        tune_analysis`) as the worker worked it out for its report, once it has; None when
+        it could not hand it back (it failed: :meth:`wait` says why)."""
+        if self._read_answer() and self._analysis is not None:
+            with contextlib.suppress(OSError, EOFError, pickle.UnpicklingError):
+                return _unpickled(self._analysis)
+        return None
+
+    def _read_answer(self) -> bool:
+        """Whether the worker's first line (read once) says the analysis is in its file
+        (``analysis``); any other line is kept for :meth:`wait`."""
+        if not self._answered:
+            self._answered = True
+            assert self._proc.stdout is not None
+            line = self._proc.stdout.readline().decode("utf-8", "replace")
+            self._ready = line == "analysis\n"
+            self._said = "" if line in ("analysis\n", "no analysis\n") else line
+        return self._ready
 
     def _line(self, text: str) -> None:
         stdin = self._proc.stdin
@@ -276,8 +280,9 @@ class ReportWorker:
             defect's traceback is printed by the worker itself.
         """
         assert self._proc.stdout is not None
-        self._close_stdin()  # (no analysis handed over: the worker works it out)
-        said = self._proc.stdout.read().decode("utf-8", "replace").strip()
+        self._close_stdin()
+        self._read_answer()
+        said = (self._said + self._proc.stdout.read().decode("utf-8", "replace")).strip()
         if self._proc.wait() == 0:
             return
         kind, _, message = said.partition("\t")
@@ -297,7 +302,7 @@ class ReportWorker:
                 if stream is not None:
                     stream.close()
         self._proc.wait()
-        for name in (self._handoff, self._analysis):  # (the worker removes them once read)
+        for name in (self._handoff, self._analysis):  # (the worker removes the first)
             if name is not None:
                 with contextlib.suppress(OSError):
                     os.unlink(name)
@@ -416,6 +421,22 @@ def _others_busy(window_s: float) -> float | None:
     return last[2] * (total - idle) / total
 
 
+def _pickled(obj: Any) -> str | None:
+    """``obj`` pickled into a new temporary file: its name, None when it cannot be."""
+    try:
+        fd, name = tempfile.mkstemp(prefix="mavsid-report-", suffix=".pickle")
+    except OSError:
+        return None
+    try:
+        with os.fdopen(fd, "wb") as f:
+            pickle.dump(obj, f, protocol=pickle.HIGHEST_PROTOCOL)
+    except (OSError, pickle.PicklingError):
+        with contextlib.suppress(OSError):
+            os.unlink(name)
+        return None
+    return name
+
+
 def _unpickled(name: str) -> Any:
     """The object pickled in the temporary file ``name``, which is then removed."""
     try:
@@ -428,11 +449,16 @@ def _unpickled(name: str) -> Any:
 
 def _serve_report() -> None:
     """The worker's side of :class:`ReportWorker`: import the report, read ``(result,
-    path)`` from standard input, write it; a :class:`~mavsid.errors.MavsidError` or a file
-    that cannot be written is one line ``class<TAB>message`` on standard output, exit 1."""
+    path, file)`` from standard input, work the loop analysis out and hand it back (its
+    pickle in ``file``, then a line ``analysis`` on standard output), write the report; a
+    :class:`~mavsid.errors.MavsidError` or a file that cannot be written is one line
+    ``class<TAB>message`` on standard output, exit 1."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the command's Ctrl-C ends it, not this
-    # while the logs are fitted: the report's modules and those of the result's classes
-    # (unpickling them here after the fit took 0.35 s)
+    # while the logs are fitted: the report's modules, those of the result's classes
+    # (unpickling them here after the fit took 0.35 s) and python-control (the loop
+    # analysis's step responses)
+    import control  # noqa: F401
+
     from mavsid import estimators, excitation, frequency, pipeline, report  # noqa: F401
     from mavsid.loop.tune import tune_analysis  # (and the loop's other modules)
 
@@ -440,18 +466,17 @@ def _serve_report() -> None:
     handoff = sys.stdin.readline().rstrip("\n")
     if not handoff:  # the command stopped before its outputs
         return
-    result, path = _unpickled(handoff)
-
-    def analysis() -> Any:
-        """The loop analysis the command hands over, else worked out here."""
-        name = sys.stdin.readline().rstrip("\n")
-        if name:
-            with contextlib.suppress(OSError, EOFError, pickle.UnpicklingError):
-                return _unpickled(name)
-        return tune_analysis(result)
-
+    result, path, put = _unpickled(handoff)
+    analysis = tune_analysis(result)
     try:
-        report.write_report(result, path, analysis=analysis)
+        with open(put, "wb") as f:
+            pickle.dump(analysis, f, protocol=pickle.HIGHEST_PROTOCOL)
+    except (OSError, pickle.PicklingError):
+        print("no analysis", flush=True)  # (the command works it out itself)
+    else:
+        print("analysis", flush=True)
+    try:
+        report.write_report(result, path, analysis=lambda: analysis)
     except MavsidError as exc:
         print(f"{type(exc).__name__}\t{exc}", flush=True)
         sys.exit(1)

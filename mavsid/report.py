@@ -608,9 +608,8 @@ def render_html(result: FitResult, lp: _Analysis = None) -> str:
         for a, v in result.verdicts.items())
     verdict_table = ('<table><tr><th class="name">axis</th><th class="name">verdict</th>'
                      f'<th class="name">why</th></tr>{verdicts}</table>') if verdicts else ""
-    # every axis's figures but the Bode ones first: :class:`~mavsid.outputs.ReportWorker`
-    # draws them while the command works ``lp`` out (it waited up to 0.2 s for it when the
-    # first axis's Bode figure came next)
+    # every axis's figures but the Bode ones first: ``lp`` is worked out, when it is, only
+    # once they are drawn
     heads = [_axis_section(f) for f in result.axes.values()]
     bodes = [_bode_img(f, lp) for f in result.axes.values()]
     analysis = lp() if callable(lp) else lp
@@ -626,9 +625,7 @@ def write_report(result: FitResult, path: str | os.PathLike[str],
     """Write :func:`render_html` of ``result`` to ``path``, with :func:`loop_section`: the
     loop analysed once for both (one Bode figure per axis), by
     :func:`mavsid.loop.tune.tune_analysis` or by ``analysis`` — a function called when the
-    first Bode figure is drawn, after every axis's other figures:
-    :class:`~mavsid.outputs.ReportWorker` draws those while the command works the analysis
-    out."""
+    first Bode figure is drawn, after every axis's other figures."""
     from mavsid.loop.tune import tune_analysis
 
     lp = functools.cache(analysis or (lambda: tune_analysis(result)))

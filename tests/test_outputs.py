@@ -192,30 +192,57 @@ def test_the_report_worker_writes_the_report_drawn_here(fitted, tmp_path: Path, 
 
 @pytest.mark.slow
 @pytest.mark.usefixtures("own_tmp")
-def test_the_worker_draws_the_loop_analysis_handed_to_it(fitted, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
-    """The command works the loop analysis out while the worker draws the first figures:
-    the report is the same bytes as one drawn here, the analysis handed over is the one
-    drawn (not worked out again), and its temporary file is gone."""
-    import dataclasses
-
+def test_the_worker_hands_back_the_loop_analysis_it_drew(fitted, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """The worker works the loop analysis out before it draws (python-control imported
+    while the logs are fitted) and hands it back for the ``.rrd``'s gains: the analysis is
+    the one worked out here, the report the same bytes as one drawn here, and no temporary
+    file is left."""
     from mavsid import report
     from mavsid.loop.tune import tune_analysis
     from mavsid.outputs import ReportWorker
 
-    here, there, other = (tmp_path / f"{n}.html" for n in ("here", "there", "other"))
+    here, there = tmp_path / "here.html", tmp_path / "there.html"
     report.write_report(fitted, here)
     with ReportWorker() as worker:
         assert worker.start(fitted, str(there), "fit.html")
-        worker.send_analysis(tune_analysis(fitted))
+        got = worker.analysis()
+        assert worker.analysis() is None  # (handed back once)
         worker.wait()
+    assert got is not None and got.error is None and got.report
+    assert (json.dumps(got.report, sort_keys=True, default=str)
+            == json.dumps(tune_analysis(fitted).report, sort_keys=True, default=str))
     assert there.read_bytes() == here.read_bytes()
-    marked = dataclasses.replace(tune_analysis(fitted), error="handed over by the command")
-    with ReportWorker() as worker:
-        assert worker.start(fitted, str(other), "fit.html")
-        worker.send_analysis(marked)
-        worker.wait()
-    assert "loop analysis failed: handed over by the command" in other.read_text()
     assert not list(Path(tempfile.gettempdir()).glob("mavsid-report-*"))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("worker", [True, False])
+def test_the_rrd_shows_the_reports_gains_with_or_without_a_worker(
+        log: Path, tmp_path: Path, monkeypatch, worker: bool) -> None:  # type: ignore[no-untyped-def]
+    """``fit --rrd --report``: the ``.rrd`` is handed the loop analysis's per-axis entries
+    (its summary shows the gains) whether the report is drawn by a worker or here (drawn
+    here, the ``.rrd`` had none: what it showed depended on the machine's load)."""
+    from mavsid.loop.tune import tune_analysis
+    from mavsid.outputs import ReportWorker
+    from mavsid.viz import recording
+
+    handed: list[object] = []
+    save = recording.save_rrd
+
+    def spy(result, path, **kw):  # type: ignore[no-untyped-def]
+        handed.append(kw.get("gains"))
+        return save(result, path, **kw)
+
+    monkeypatch.setattr(recording, "save_rrd", spy)
+    monkeypatch.setattr(ReportWorker, "available", staticmethod(lambda: worker))
+    code, err = _run("fit", str(log), "--quiet", "--rrd", str(tmp_path / "f.rrd"),
+                     "--report", str(tmp_path / "f.html"))
+    assert code == 0, err
+    from mavsid import pipeline
+
+    want = tune_analysis(pipeline.fit([str(log)])).report
+    assert len(handed) == 1 and isinstance(handed[0], dict) and set(handed[0]) == set(want)
+    assert all(handed[0][a].get("gains") == want[a].get("gains") for a in want)
 
 
 @pytest.mark.slow
@@ -261,6 +288,7 @@ def test_a_defect_in_the_worker_is_an_error_naming_the_report(capfd) -> None:  #
 
     with ReportWorker() as worker:
         worker.start(42, os.devnull, "fit.html")
+        assert worker.analysis() is None  # (the command works it out itself)
         with pytest.raises(MavsidError, match=r"^fit\.html: the report could not be drawn"):
             worker.wait()
     assert "Traceback" in capfd.readouterr().err

@@ -259,8 +259,8 @@ def _gains_mismatch(compared: Mapping[str, Any] | None, ctrl: AxisController | N
 class TuneAnalysis:
     """The loop analysis of a result, computed once for a report (:func:`tune_analysis`):
     :func:`tune`'s per-axis report, the measured responses and the loop analyses it drew
-    them from, or the error that stopped it. Computed where no plotting library is loaded:
-    ``mavsid fit`` works it out while its report worker draws (:mod:`mavsid.outputs`)."""
+    them from, or the error that stopped it. ``mavsid fit``'s report worker works it out
+    before it draws and hands it back for the ``.rrd`` (:mod:`mavsid.outputs`)."""
 
     report: dict[str, Any] = field(default_factory=dict)
     measured: dict[str, dict[str, Any]] = field(default_factory=dict)

@@ -3,7 +3,7 @@ the whole ``mavsid fit`` of a big log against a previous checkout, in the same r
 
     python benchmarks/bench_startup.py [--runs 5]
     python benchmarks/bench_startup.py --log ../shared/logs/sitl/flightA_mixer.BIN \
-        [--baseline DIR] [--runs 5]
+        [--baseline DIR | --baseline-rev REV] [--runs 5]
 
 Without ``--log``: min and median wall time of ``python -c pass``, ``mavsid --version``,
 ``mavsid --help`` and ``mavsid fit`` on the small bundled fixture, and each one's excess over
@@ -12,10 +12,12 @@ the bare interpreter (what importing mavsid costs), cold and warm (first run vs 
 With ``--log``: ``mavsid fit LOG`` and ``mavsid fit LOG --rrd --report`` (written to a
 temporary directory), min / median / max of ``--runs`` fresh processes, with the bare
 interpreter's time beside; with ``--baseline DIR`` (a checkout of the previous release, e.g.
-``git clone -b main . /tmp/mavsid-base``) the same commands from that checkout, run
-alternately with this one's (a busy machine slows both alike), and the ratio of the medians
-of wall and of CPU time (user + system of the process; steadier than wall time when other
-work shares the machine).
+``git clone -b main . /tmp/mavsid-base``) or ``--baseline-rev REV`` (that commit of this
+repository, exported to a temporary folder with ``git archive``; its compiled extensions
+copied from this tree where their C source is the same, else built there) the same commands
+from that tree, run alternately with this one's (a busy machine slows both alike), and the
+ratio of the medians of wall and of CPU time (user + system of the process and of the
+report worker it waits for; steadier than wall time when other work shares the machine).
 
 Bytecode: ``pip install .`` (the README's install) compiles every module to bytecode once, at
 install; a checkout run with ``PYTHONDONTWRITEBYTECODE=1`` set (as on some CI machines)
@@ -30,6 +32,7 @@ from __future__ import annotations
 import argparse
 import os
 import resource
+import shutil
 import statistics
 import subprocess
 import sys
@@ -63,9 +66,33 @@ def _time(argv: list[str], runs: int, env: dict[str, str]) -> list[float]:
     return out
 
 
+def _exported(rev: str, into: Path) -> Path:
+    """Commit ``rev`` of this repository as a tree in ``into``, ready to run: ``mavsid/``
+    from ``git archive``, each compiled extension copied from this tree when its C source
+    is the same at ``rev``, else built there (``setup.py build_ext --inplace``)."""
+    archive = subprocess.run(["git", "archive", rev, "mavsid", "setup.py", "pyproject.toml"],
+                             cwd=ROOT, capture_output=True, check=True).stdout
+    into.mkdir(parents=True)
+    subprocess.run(["tar", "-x", "-C", str(into)], input=archive, check=True)
+    build = False
+    for source in sorted((into / "mavsid").rglob("*.c")):
+        here = ROOT / source.relative_to(into)
+        built = sorted(here.parent.glob(f"{source.stem}.*.so"))
+        if here.exists() and built and here.read_bytes() == source.read_bytes():
+            for so in built:
+                shutil.copy2(so, source.parent / so.name)
+        else:
+            build = True
+    if build:
+        subprocess.run([sys.executable, "setup.py", "-q", "build_ext", "--inplace"], cwd=into,
+                       check=True, capture_output=True)
+    return into
+
+
 def _whole_fit(log: str, baseline: str | None, runs: int, bytecode: bool) -> None:
     """``fit LOG`` and ``fit LOG --rrd --report`` from this checkout (and ``baseline``)."""
     trees = {"this": ROOT} | ({"baseline": Path(baseline).resolve()} if baseline else {})
+    log = str(Path(log).resolve())  # (each tree runs in its own folder)
     with tempfile.TemporaryDirectory() as tmp:
         envs = {tree: _env(root, str(Path(tmp) / f"pyc-{tree}") if bytecode else None)
                 for tree, root in trees.items()}
@@ -117,11 +144,21 @@ def main() -> None:
     ap.add_argument("--runs", type=int, default=5)
     ap.add_argument("--log", help="time the whole `mavsid fit` of this log instead")
     ap.add_argument("--baseline", metavar="DIR", help="with --log: a checkout to compare with")
+    ap.add_argument("--baseline-rev", metavar="REV",
+                    help="with --log: this repository's commit REV to compare with")
     ap.add_argument("--no-bytecode", action="store_true",
                     help="compile mavsid in every run (PYTHONDONTWRITEBYTECODE=1)")
     args = ap.parse_args()
     runs = args.runs
     if args.log:
+        if args.baseline_rev:
+            with tempfile.TemporaryDirectory() as tmp:
+                base = _exported(args.baseline_rev, Path(tmp) / "baseline")
+                print(f"baseline: {args.baseline_rev} "
+                      + subprocess.run(["git", "log", "-1", "--format=%h %s", args.baseline_rev],
+                                       cwd=ROOT, capture_output=True, text=True).stdout.strip())
+                _whole_fit(args.log, str(base), runs, not args.no_bytecode)
+            return
         _whole_fit(args.log, args.baseline, runs, not args.no_bytecode)
         return
     py = [sys.executable]

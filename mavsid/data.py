@@ -165,23 +165,25 @@ class ParamChange:
 
 def param_changes(initial: Mapping[str, float],
                   records: Iterable[tuple[float, str, float]]) -> tuple[ParamChange, ...]:
-    """The records ``(time_s, name, value)`` that change a parameter's value, in time order.
+    """The records ``(time_s, name, value)``, in the log's order, that change a parameter's
+    value.
 
-    ``initial`` holds the values the log starts with (a ULog's header, the first record
-    of each name in a DataFlash log, which writes every parameter at its start); a record
-    of a name not seen before is its initial value, and one that repeats the value it had
-    is no change. Values that are not finite numbers are left out.
+    ``initial`` holds the values the log starts with (a ULog's header; empty for a DataFlash
+    log, which writes every parameter at its start, and a ground station's, which fetches
+    them when it connects): a record of a name not seen before is its initial value, and
+    one that repeats the value it had is no change (a reboot writing them all again). Values
+    that are not finite numbers are left out.
 
     Examples
     --------
-    >>> param_changes({"A": 1.0}, [(5.0, "A", 1.0), (2.0, "B", 3.0), (9.0, "A", 2.0),
+    >>> param_changes({"A": 1.0}, [(5.0, "A", 1.0), (6.0, "B", 3.0), (9.0, "A", 2.0),
     ...                            (12.0, "B", 4.0)])
     (ParamChange(time_s=9.0, name='A', value=2.0), ParamChange(time_s=12.0, name='B', \
 value=4.0))
     """
     current = dict(initial)
     out = []
-    for t, name, value in sorted(records, key=lambda r: r[0]):
+    for t, name, value in records:
         if not np.isfinite(value):
             continue
         before = current.get(name)

@@ -88,3 +88,73 @@ def test_the_tlog_reader_gives_the_retune(retuned) -> None:
         seen.add(m.param_id)
     assert sorted(later) == sorted(got)
     assert all(c.time_s == pytest.approx(sc.boot_s + AT_S, abs=0.1) for c in raw.param_changes)
+
+
+def _pymavlink_changes(path) -> list[tuple[float, str, float]]:
+    """PARM records that change a value, by pymavlink: each after the first of its name."""
+    from pymavlink import mavutil
+
+    log = mavutil.mavlink_connection(str(path))
+    last: dict[str, float] = {}
+    out = []
+    while (m := log.recv_match(type="PARM")) is not None:
+        if m.Name in last and last[m.Name] != m.Value:
+            out.append((m.TimeUS * 1e-6, m.Name, m.Value))
+        last[m.Name] = m.Value
+    return out
+
+
+def _pyulog_changes(path, messages=None) -> list[tuple[float, str, float]]:
+    """pyulog's changed parameters that change a value (its list keeps repeats too)."""
+    from pyulog import ULog
+
+    u = ULog(str(path), messages)
+    last = {k: float(v) for k, v in u.initial_parameters.items()}
+    out = []
+    for t, name, value in u.changed_parameters:
+        if name in last and last[name] != float(value):
+            out.append((t * 1e-6, name, float(value)))
+        last[name] = float(value)
+    return out
+
+
+def _ours(raw) -> list[tuple[float, str, float]]:
+    return [(c.time_s, c.name, c.value) for c in raw.param_changes]
+
+
+def _same(a: list[tuple[float, str, float]], b: list[tuple[float, str, float]]) -> bool:
+    return ([n for _, n, _ in a] == [n for _, n, _ in b]
+            and np.allclose([(t, v) for t, _, v in a], [(t, v) for t, _, v in b],
+                            rtol=0, atol=1e-6))
+
+
+def test_the_dataflash_and_ulog_readers_give_the_retune(retuned) -> None:
+    from mavsid.readers import read_log
+
+    _, (binary, ulog, _) = retuned
+    got = _ours(read_log(binary, messages=["RATE"]))
+    assert _same(got, _pymavlink_changes(binary)) and len(got) == 2
+    got = _ours(read_log(ulog))
+    assert _same(got, _pyulog_changes(ulog)) and len(got) == 2
+
+
+@pytest.mark.parametrize("messages", [None, ["vehicle_status"]])
+def test_ulog_changes_match_pyulog_on_a_public_log(messages) -> None:
+    from helpers import shared_path
+
+    from mavsid.readers import read_log
+
+    path = shared_path("public", "PX4__pyulog", "sample.ulg")
+    got = _ours(read_log(path, messages=messages))
+    # (the time of a change: the latest record before it of the topics read, as pyulog's)
+    assert _same(got, _pyulog_changes(path, messages)) and len(got) >= 3
+
+
+def test_real_dataflash_changes_match_pymavlink() -> None:
+    from helpers import real_path
+
+    from mavsid.readers import read_log
+
+    path = real_path("keita", "00000064.BIN")
+    got = _ours(read_log(path, messages=["RATE"]))
+    assert _same(got, _pymavlink_changes(path)) and got  # (STAT_* in flight)

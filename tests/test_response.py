@@ -172,6 +172,35 @@ def test_a_parameter_change_in_flight_splits_the_response(tmp_path) -> None:
     assert len(response.flight_response(replace(flight, autopilot="px4"), px4).settings) == 2
 
 
+@pytest.mark.parametrize("suffix", [".bin", ".ulg"])
+def test_a_retune_in_flight_gives_each_setting_its_own_response(tmp_path, suffix) -> None:
+    from dataclasses import replace
+
+    sc = scenario_from_options(manoeuvre="random", axis="roll", duration_s=90.0, seed=6)
+    after = replace(sc.controller, rll_p=0.27, rll_d=0.0072)  # (twice the roll P and D)
+    sc = replace(sc, retune=(45.0, after))
+    path = tmp_path / f"retuned{suffix}"
+    simulate(sc, [path])
+    got = response.read_response(path, ("roll",))
+    assert len(got.settings) == 2
+    changed = got.settings[1].changed
+    names = (("ATC_RAT_RLL_P", "ATC_RAT_RLL_D") if suffix == ".bin"
+             else ("MC_ROLLRATE_P", "MC_ROLLRATE_D"))
+    assert set(changed) == set(names)
+    assert [changed[n] for n in names] == pytest.approx([0.27, 0.0072])
+    assert got.settings[1].start_s == pytest.approx(sc.boot_s + 45.0, abs=0.01)
+    rises = []
+    for setting, controller in zip(got.settings, (sc.controller, after), strict=True):
+        loop = setting.loops[0]
+        assert loop.axis == "roll" and loop.loop == "rate" and loop.step is not None
+        t, truth = true_rate_step(replace(sc, controller=controller, retune=None), "roll",
+                                  float(loop.step.time_s[-1]))
+        inside = (truth >= loop.step.lower) & (truth <= loop.step.upper)
+        assert inside.mean() >= 0.9, (inside.mean(), loop.verdict)
+        rises.append(loop.rise_s)
+    assert rises[0] is not None and rises[1] is not None and rises[1] < rises[0]
+
+
 def _mavsid(*args: str) -> subprocess.CompletedProcess[str]:
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
     return subprocess.run([sys.executable, "-m", "mavsid", *args], capture_output=True,

@@ -28,7 +28,15 @@ from dataclasses import replace
 import numpy as np
 
 from mavsid.autopilot.modes import ardupilot_modes
-from mavsid.data import MessageTable, ModeChange, RawLog, SourceInfo, TextMessage
+from mavsid.data import (
+    MessageTable,
+    ModeChange,
+    ParamChange,
+    RawLog,
+    SourceInfo,
+    TextMessage,
+    param_changes,
+)
 from mavsid.errors import DataQualityWarning
 from mavsid.readers import dataflash_spec as dfspec
 from mavsid.readers.dataflash_formats import Definition
@@ -307,6 +315,13 @@ def assemble(
             for name, value in zip(names.tolist(), values.tolist(), strict=True):
                 if (number := _number(value)) is not None:  # another layout: not a number
                     params[str(name)] = number
+    changes: tuple[ParamChange, ...] = ()
+    if "Name" in parm and "Value" in parm and "PARM" in meta_times:  # (in the log's order)
+        numbers = [_number(v) for v in parm["Value"].tolist()]
+        changes = param_changes({}, [
+            (t, str(name), v) for t, name, v in
+            zip(meta_times["PARM"].tolist(), parm["Name"].tolist(), numbers, strict=True)
+            if v is not None])
     texts: tuple[TextMessage, ...] = ()
     msg = meta_columns.get("MSG", {})
     if "Message" in msg:
@@ -316,7 +331,8 @@ def assemble(
                                              meta_columns)
     modes = _modes(meta_columns.get("MODE"), meta_times.get("MODE"), vehicle)
     return RawLog(source, messages, params=params, texts=texts, modes=modes,
-                  autopilot="ardupilot", vehicle=vehicle, firmware=firmware)
+                  autopilot="ardupilot", vehicle=vehicle, firmware=firmware,
+                  param_changes=changes)
 
 
 def backwards_steps(time_s: np.ndarray, where: np.ndarray) -> list[tuple[int, float, float]]:

@@ -64,7 +64,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mavsid.autopilot.modes import NAV_STATES
-from mavsid.data import MessageTable, ModeChange, RawLog, SourceInfo, TextMessage
+from mavsid.data import (
+    MessageTable,
+    ModeChange,
+    RawLog,
+    SourceInfo,
+    TextMessage,
+    param_changes,
+)
 from mavsid.errors import DataQualityWarning, LogFormatError, first_few
 from mavsid.readers.tlog import vehicle_class
 from mavsid.readers.ulog_data import parse
@@ -292,6 +299,10 @@ def read(
         units: dict[str, str] = dict.fromkeys(data.layout[5], "us")
         tables[name] = MessageTable(name, data, time_s, units)
     params, n_changes, bad_params = _params(parsed)
+    initial = {k: v for k, value in parsed.initial_params.items()
+               if (v := _number(value)) is not None}
+    changes = param_changes(initial, [(t / 1e6, name, v) for t, name, value in
+                                      parsed.changed_params if (v := _number(value)) is not None])
     texts = _texts(parsed)
     modes = _modes(tables.get(_MODE_TOPIC))
     # the log's span: the header's start time to the latest data timestamp
@@ -303,6 +314,7 @@ def read(
         tables = {n: _window(t, lo, hi) for n, t in tables.items()}
         texts = [m for m in texts if lo <= m.time_s <= hi]
         modes = [m for m in modes if lo <= m.time_s <= hi]
+        changes = tuple(c for c in changes if lo <= c.time_s <= hi)
     if wanted is not None:
         tables = {n: t for n, t in tables.items() if n in wanted or _base(n) in wanted}
 
@@ -332,6 +344,7 @@ def read(
         vehicle=_vehicle(params.get("MAV_TYPE")),
         firmware=_firmware(parsed.info),
         span_s=span,
+        param_changes=changes,
     )
 
 

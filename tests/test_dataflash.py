@@ -956,3 +956,21 @@ def test_signalling_nan_is_read_as_nan_without_warnings(tmp_path: Path) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)
         assert np.isnan(v.astype(np.float64)[1])
+
+
+def test_the_autopilot_comes_from_the_format(tmp_path) -> None:
+    # a PX4 sdlog2 .px4log is DataFlash-framed; its clock record TIME.StartTime names it
+    px4 = tmp_path / "a.px4log"
+    px4.write_bytes(build_fmt(0x81, "TIME", "Q", "StartTime") + build_fmt(0x82, "ATT", "f", "Roll")
+                    + build_record(0x81, "Q", 1_000_000) + build_record(0x82, "f", 0.1))
+    ap = tmp_path / "a.bin"
+    ap.write_bytes(build_fmt(0x82, "ATT", "Qf", "TimeUS,Roll") + build_record(0x82, "Qf", 1, 0.1))
+    assert dataflash.read(px4, messages=["ATT"]).autopilot == "px4"
+    assert dataflash.read(ap).autopilot == "ardupilot"
+
+
+def test_a_real_px4log_is_px4() -> None:
+    from helpers import real_path
+
+    log = dataflash.read(real_path("px4tools", "test", "log", "01_07_59.px4log"), messages=["ATT"])
+    assert log.autopilot == "px4" and "MC_ROLLRATE_P" in log.params

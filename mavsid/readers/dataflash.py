@@ -86,6 +86,7 @@ from mavsid.readers.dataflash_decode import (
 from mavsid.readers.dataflash_formats import (
     Definition,
     Definitions,
+    autopilot_of,
     column_layout,
     read_definitions,
     time_slot,
@@ -351,7 +352,7 @@ def _read_buffer(
                 for name in columns if skeleton(name)}
     return assemble(source, columns, time_s, defs_by_name,
                     None if times_only else wanted, meta_columns, meta_times,
-                    declared=declared)
+                    declared=declared, autopilot=autopilot_of(table.defs))
 
 
 def _held_times(

@@ -279,13 +279,15 @@ def assemble(
     meta_times: Mapping[str, np.ndarray] | None = None,
     banner: Sequence[str] = (),
     declared: Mapping[str, tuple[str, ...]] | None = None,
+    autopilot: str = "ardupilot",
 ) -> RawLog:
     """Build the :class:`RawLog` from decoded columns (shared by the binary and text readers).
 
     ``columns``/``times`` hold the messages to return; ``meta_*`` the full-log PARM, MSG,
     MODE, VER and FMTU/UNIT/MULT tables used for parameters, texts, modes and units;
     ``banner`` extra lines (text logs' preamble) searched for the firmware after the texts;
-    ``declared`` the fields of tables read for their times only.
+    ``declared`` the fields of tables read for their times only; ``autopilot`` the one the
+    log's definitions name (:func:`~mavsid.readers.dataflash_formats.autopilot_of`).
     """
     declared = declared or {}
     meta_columns = meta_columns if meta_columns is not None else columns
@@ -331,7 +333,7 @@ def assemble(
                                              meta_columns)
     modes = _modes(meta_columns.get("MODE"), meta_times.get("MODE"), vehicle)
     return RawLog(source, messages, params=params, texts=texts, modes=modes,
-                  autopilot="ardupilot", vehicle=vehicle, firmware=firmware,
+                  autopilot=autopilot, vehicle=vehicle, firmware=firmware,
                   param_changes=changes)
 
 

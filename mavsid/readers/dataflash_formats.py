@@ -16,6 +16,7 @@ Examples
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from functools import cached_property, lru_cache
 
@@ -29,6 +30,7 @@ __all__ = [
     "FMT_DEFINITION",
     "Definition",
     "Definitions",
+    "autopilot_of",
     "column_layout",
     "decode_text",
     "read_definitions",
@@ -78,6 +80,20 @@ class Definition:
     def time_field(self) -> tuple[str, int, float] | None:
         """``(column, format index, seconds per count)`` of the boot-time field, if any."""
         return _time_field(self.name, self.format, self.fields)
+
+
+def autopilot_of(defs: Iterable[Definition]) -> str:
+    """The autopilot a DataFlash-format log's definitions name: ``px4`` for a PX4 sdlog2
+    ``.px4log`` (its clock record ``TIME.StartTime``, written at the start of each logging
+    cycle; ArduPilot's logs have none), else ``ardupilot``.
+
+    >>> autopilot_of([Definition(0x81, "TIME", 3 + 8, "Q", ("StartTime",))])
+    'px4'
+    >>> autopilot_of([Definition(0x81, "ATT", 3 + 12, "Qf", ("TimeUS", "Roll"))])
+    'ardupilot'
+    """
+    sdlog2 = any(d.time_field is not None and d.time_field[0] == "StartTime" for d in defs)
+    return "px4" if sdlog2 else "ardupilot"
 
 
 @lru_cache(maxsize=4096)

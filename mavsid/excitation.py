@@ -69,7 +69,7 @@ from mavsid.excitation_scores import (
     score,
     window_stats,
 )
-from mavsid.reasons import Reason, group
+from mavsid.reasons import Reason, group, injected_nothing
 
 __all__ = [
     "AXES",
@@ -199,6 +199,13 @@ def _sysid_windows(fd: FlightData, axes: Sequence[str], axes_cache: Mapping[str,
                         False, "sysid", rejected(off), i0, i1, {}, off, run, from_data))
             continue
         if name not in axes:
+            continue
+        if not run.injected:  # (one line: the gates would only say so in many words)
+            nothing = (injected_nothing(run),)
+            for i0, i1 in _block_parts(fd, run.start_s, run.stop_s):
+                out.append(WindowReport(
+                    name, float(fd.time_s[i0]), float(fd.time_s[i1 - 1]), float("nan"),
+                    False, "sysid", rejected(nothing), i0, i1, {}, nothing, run, from_data))
             continue
         nan = float("nan")
         for i0, i1 in _block_parts(fd, run.start_s, run.stop_s):

@@ -17,6 +17,7 @@ from mavsid.axes import RATE_OF
 from mavsid.data import FlightData, Segment, SysidRun
 from mavsid.errors import MavsidError
 from mavsid.pipeline_config import PipelineConfig
+from mavsid.reasons import injected_nothing
 from mavsid.validation import Model
 
 if TYPE_CHECKING:
@@ -114,9 +115,7 @@ def _injected_nothing(run: SysidRun) -> str:
     SYSTEMID mode (SID_AXIS 1) 3899.3–3908.8 s injected nothing (SIDD.Targ is 0 throughout, \
 SIDS not logged)
     """
-    sids = "" if run.settings_from == "SIDS" else ", SIDS not logged"
-    return (f"SYSTEMID mode (SID_AXIS {run.sid_axis}) {run.start_s:.1f}–"
-            f"{run.stop_s:.1f} s injected nothing (SIDD.Targ is 0 throughout{sids})")
+    return injected_nothing(run).message
 
 
 def plant_fit(axis: str, flights: Sequence[FlightData]) -> tuple[PlantTF | None, str, bool]:

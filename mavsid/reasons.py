@@ -19,15 +19,19 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Literal, get_args
+from typing import TYPE_CHECKING, Literal, get_args
 
-__all__ = ["KINDS", "Reason", "ReasonKind", "format_number", "group", "summarize"]
+if TYPE_CHECKING:
+    from mavsid.data import SysidRun
+
+__all__ = ["KINDS", "Reason", "ReasonKind", "format_number", "group", "injected_nothing",
+           "summarize"]
 
 ReasonKind = Literal[
     "missing_channel", "not_airborne", "mode_change", "attitude_bound", "input_saturated",
     "thrust_limits", "too_short", "input_below_floor", "response_below_floor",
     "ill_conditioned", "injection_coverage", "injection_coherence", "coverage", "coherence",
-    "too_little_data", "not_attitude_axis",
+    "too_little_data", "not_attitude_axis", "injected_nothing",
 ]
 
 #: every reason kind, in the order the gates check them
@@ -104,6 +108,9 @@ _MESSAGES: dict[str, _Message] = {
     "not_attitude_axis": lambda n, w: (
         f"SYSTEMID run on {w['axis']} ({w['injection']}, SID_AXIS {n['sid_axis']:.0f}) does "
         "not excite roll, pitch or yaw"),
+    "injected_nothing": lambda n, w: (
+        f"SYSTEMID mode (SID_AXIS {n['sid_axis']:.0f}) {n['start_s']:.1f}–{n['stop_s']:.1f} s "
+        f"injected nothing (SIDD.Targ is 0 throughout{w['sids']})"),
 }
 
 #: kind -> (label of a group, the number whose range it states, its unit, the bound's number)
@@ -126,6 +133,7 @@ _GROUPS: dict[str, tuple[str, str, str, str]] = {
     "coherence": ("low coherence", "coherence", "", "min_coherence"),
     "too_little_data": ("too little data", "", "", ""),
     "not_attitude_axis": ("SYSTEMID run off the attitude axes", "", "", ""),
+    "injected_nothing": ("SYSTEMID run that injected nothing", "", "", ""),
 }
 
 
@@ -165,6 +173,21 @@ class Reason:
         """JSON-safe dict (``kind numbers names message``)."""
         return {"kind": self.kind, "numbers": {k: float(v) for k, v in self.numbers.items()},
                 "names": dict(self.names), "message": self.message}
+
+
+def injected_nothing(run: SysidRun) -> Reason:
+    """Why a SYSTEMID run whose waveform stayed zero (``injected`` False) gives nothing.
+
+    Examples
+    --------
+    >>> from mavsid.data import SysidRun
+    >>> print(injected_nothing(SysidRun(3899.27, 3908.8, "PARM", axis=1)).message)
+    SYSTEMID mode (SID_AXIS 1) 3899.3–3908.8 s injected nothing (SIDD.Targ is 0 throughout, \
+SIDS not logged)
+    """
+    return Reason("injected_nothing", {"sid_axis": float(run.sid_axis), "start_s": run.start_s,
+                                       "stop_s": run.stop_s},
+                  {"sids": "" if run.settings_from == "SIDS" else ", SIDS not logged"})
 
 
 def _num(x: float, unit: str) -> str:

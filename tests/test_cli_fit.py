@@ -115,6 +115,22 @@ def test_a_systemid_stay_that_injected_nothing_is_refused_in_one_line(tmp_path: 
                       "injected nothing (SIDD.Targ is 0 throughout, SIDS not logged)"], proc.stderr
 
 
+def test_segments_say_in_one_line_that_a_systemid_stay_injected_nothing(tmp_path: Path
+                                                                        ) -> None:
+    from helpers import write_systemid_without_injection
+
+    path = write_systemid_without_injection(tmp_path / "quiet.bin")
+    proc = run("segments", str(path), "--axis", "roll")
+    assert proc.returncode == 0, proc.stderr
+    rows = [line for line in proc.stdout.splitlines() if "sysid" in line]
+    assert len(rows) == 1 and rows[0].endswith(
+        "rejected: SYSTEMID mode (SID_AXIS 1) 38.0–47.6 s injected nothing (SIDD.Targ is 0 "
+        "throughout, SIDS not logged)"), proc.stdout
+    doc = json.loads(run("segments", str(path), "--axis", "roll", "--json").stdout)
+    sysid = [w for w in doc if w["source"] == "sysid"]
+    assert [w["reason_kinds"] for w in sysid] == [["injected_nothing"]]
+
+
 @pytest.mark.parametrize(
     ("argv", "needle"),
     [

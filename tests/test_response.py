@@ -195,6 +195,7 @@ def test_a_retune_in_flight_gives_each_setting_its_own_response(tmp_path, suffix
         assert loop.axis == "roll" and loop.loop == "rate" and loop.step is not None
         t, truth = true_rate_step(replace(sc, controller=controller, retune=None), "roll",
                                   float(loop.step.time_s[-1]))
+        assert np.allclose(t, loop.step.time_s)
         inside = (truth >= loop.step.lower) & (truth <= loop.step.upper)
         assert inside.mean() >= 0.9, (inside.mean(), loop.verdict)
         rises.append(loop.rise_s)

@@ -92,6 +92,10 @@ REGULARISATION = 1e-4
 #: the step's median band half-width (of a unit step) above which its rise time, overshoot
 #: and settling time are not given
 MAX_BAND = 0.2
+#: a step whose first tenth lies below minus this, band included, is not the loop's: no
+#: loop answers a step by moving the other way that far at once (the target then follows the
+#: actual through the outer loop, with no commands of its own to speak of)
+MAX_DIP = 0.2
 #: fewest windows behind a step response
 MIN_WINDOWS = 3
 #: longest delay (s) searched when aligning actual with target
@@ -515,7 +519,11 @@ def loop_response(axis: str, loop: str, time_s: np.ndarray, target: np.ndarray,
     except NoExcitationError as exc:
         return _with(base, verdict=f"{loop}: no step response: {exc}")
     spread = float(np.median(step.upper - step.lower) / 2)
-    rise, over, settle = step_metrics(step) if spread <= MAX_BAND else (None, None, None)
+    lead = max(1, step.response.size // 10)
+    dip = float(np.min(step.response[:lead]))
+    fed_back = bool(np.min(step.upper[:lead]) < -MAX_DIP)
+    measurable = spread <= MAX_BAND and not fed_back
+    rise, over, settle = step_metrics(step) if measurable else (None, None, None)
     fr: FRF | None = None
     fb = delay_fb = None
     try:
@@ -532,6 +540,10 @@ def loop_response(axis: str, loop: str, time_s: np.ndarray, target: np.ndarray,
              "no frequency response")
     wide = (f"; band ±{spread:.2g} (median) too wide for rise time and overshoot"
             if spread > MAX_BAND else "")
+    if fed_back:
+        wide += (f"; the step starts at {dip:.2g}, below zero beyond its band: the target is "
+                 "not independent of the actual (it answers it through the outer loop, with "
+                 "no commands to speak of), so this is not the loop's step response")
     verdict = (f"{loop}: {step.windows} windows of {step.window_s:.3g} s ({step.span_s:.0f} s); "
                f"{where}; resolves {band[0]:g}-{band[1]:g} Hz{slow}{wide}")
     return _with(base, verdict=verdict, step=step, rise_s=rise, overshoot_pct=over,

@@ -14,6 +14,7 @@ import pytest
 from helpers import REAL_LOGS, shared_logs
 
 from mavsid import response
+from mavsid.axes import AXES
 from mavsid.synthetic.controller import ArduPilotPID, motor_outputs
 from mavsid.synthetic.plant import Lowpass2p, discretise
 from mavsid.synthetic.run import scenario_from_options, simulate
@@ -129,6 +130,36 @@ def test_the_attitude_loop_from_the_records_logged_with_the_rate(tmp_path) -> No
     assert fast.band_hz[1] == pytest.approx(fast.rate_hz / 2, rel=0.01)
 
 
+def test_two_real_flights_of_one_vehicle_agree_within_their_bands() -> None:
+    """KeitaTK's Pixhawk 6C quad (ArduCopter 4.6.2), flights 64 and 65: the same frame and
+    rate-controller parameters, flown in SYSTEMID mode with nothing injected (RATE at
+    100 Hz). The two flights' rate-loop steps agree within their bands on every axis; both
+    are flagged as not the loop's own step (the targets answer the actual: hover, no
+    commands to speak of), and neither reaches its bandwidth in the coherent band."""
+    from helpers import real_path
+
+    from mavsid.autopilot import ardupilot
+    from mavsid.readers import read_log
+
+    paths = [real_path("keita", f"000000{n}.BIN") for n in (64, 65)]
+    raws = [read_log(p, messages=["RATE"]) for p in paths]
+    settings = [{k: v for k, v in r.params.items() if ardupilot.is_rate_setting(k)}
+                for r in raws]
+    assert settings[0] == settings[1] and settings[0]
+    assert raws[0].params["FRAME_CLASS"] == raws[1].params["FRAME_CLASS"]
+    assert not any(ardupilot.is_rate_setting(c.name) for r in raws for c in r.param_changes)
+    found = [response.read_response(p) for p in paths]
+    for axis in AXES:
+        a, b = (f.loop(axis, "rate") for f in found)
+        assert a is not None and b is not None and a.step is not None and b.step is not None
+        band = np.hypot((a.step.upper - a.step.lower) / 2, (b.step.upper - b.step.lower) / 2)
+        agree = np.abs(a.step.response - b.step.response) <= band
+        assert agree.mean() >= 0.9, (axis, agree.mean())
+        for r in (a, b):
+            assert "not the loop's step response" in r.verdict and r.rise_s is None
+            assert r.bandwidth_hz is None
+
+
 def test_a_slow_log_says_what_it_resolves(tmp_path) -> None:
     sc = scenario_from_options(manoeuvre="random", axis="roll", duration_s=60.0, seed=3,
                                rate_hz=10.0)
@@ -137,6 +168,19 @@ def test_a_slow_log_says_what_it_resolves(tmp_path) -> None:
     got = response.read_response(path).loop("roll", "rate")
     assert got is not None and got.band_hz is not None and got.band_hz[1] == 5.0
     assert "only the slow part" in got.verdict
+
+
+def test_a_target_driven_by_the_actual_gives_no_step_metrics() -> None:
+    # hovering without commands: the target is the outer loop's answer to the actual (here
+    # -0.8 times it, at once), and a deconvolution target -> actual starts far below zero
+    rng = np.random.default_rng(2)
+    t = np.arange(0, 120, 0.01)
+    actual = np.convolve(rng.standard_normal(t.size), np.ones(5) / 5, mode="same")
+    target = -0.8 * actual + 0.05 * rng.standard_normal(t.size)
+    got = response.loop_response("roll", "rate", t, target, actual, rate_hz=100.0)
+    assert got.step is not None and got.step.upper[0] < -response.MAX_DIP
+    assert got.rise_s is None and got.overshoot_pct is None
+    assert "not the loop's step response" in got.verdict
 
 
 def test_nothing_is_said_below_the_least_rate() -> None:

@@ -60,6 +60,7 @@ def test_the_writers_record_the_retune(retuned) -> None:
     parm = []
     while (m := log.recv_match(type="PARM")) is not None:
         parm.append((m.TimeUS * 1e-6, m.Name, m.Value))
+    log.close()
     later = {(n, round(v, 6)) for t, n, v in parm if t > sc.boot_s}
     assert later == {("ATC_RAT_RLL_P", 0.2), ("ATC_RAT_RLL_D", 0.005)}
     assert [t for t, _, _ in parm if t > sc.boot_s] == pytest.approx([t_change] * 2)
@@ -86,6 +87,7 @@ def test_the_tlog_reader_gives_the_retune(retuned) -> None:
         if m.param_id in seen:
             later.append((m.param_id, round(m.param_value, 6)))
         seen.add(m.param_id)
+    log.close()
     assert sorted(later) == sorted(got)
     assert all(c.time_s == pytest.approx(sc.boot_s + AT_S, abs=0.1) for c in raw.param_changes)
 
@@ -101,6 +103,7 @@ def _pymavlink_changes(path) -> list[tuple[float, str, float]]:
         if m.Name in last and last[m.Name] != m.Value:
             out.append((m.TimeUS * 1e-6, m.Name, m.Value))
         last[m.Name] = m.Value
+    log.close()
     return out
 
 

@@ -457,13 +457,23 @@ def test_empty_and_foreign_files_raise_log_format_error(tmp_path: Path) -> None:
         tlog.read(noise)
     with pytest.raises(LogFormatError):
         read_log(noise)
-    with pytest.raises(LogFormatError, match="cannot read"):
+    with pytest.raises(LogFormatError, match="cannot open"):
         tlog.read(tmp_path / "missing.tlog")
 
 
 def test_unknown_dialect_is_a_config_error(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="no_such_dialect"):
         tlog.read(tmp_path / "x.tlog", dialect="no_such_dialect")
+
+
+def test_an_option_of_another_format_is_a_config_error_naming_the_file(tmp_path: Path) -> None:
+    """``read_log`` passes its options on: one the .tlog reader does not take is one
+    ConfigError naming the file and the option, before the file is read."""
+    path = tmp_path / "sysid_roll.tlog"
+    synthetic_tlog(path)
+    with pytest.raises(ConfigError, match=r"sysid_roll\.tlog: option\(s\) times_only do not "
+                                          r"apply to MAVLink \.tlog files"):
+        read_log(path, times_only=True)
 
 
 def test_other_dialect_gives_its_messages(tmp_path: Path) -> None:

@@ -25,7 +25,7 @@ from helpers import (
 from pyulog import ULog
 
 from mavsid.data import RawLog
-from mavsid.errors import DataQualityWarning, LogFormatError
+from mavsid.errors import ConfigError, DataQualityWarning, LogFormatError
 from mavsid.readers import (
     read_log,
     ulog,
@@ -342,6 +342,15 @@ def test_read_log_dispatches_ulog() -> None:
     assert log.source.format == "ulog" and "vehicle_angular_velocity" in log
 
 
+def test_an_option_is_a_config_error_naming_the_file() -> None:
+    """``read_log`` passes its options on: the ULog reader takes none, and says so in one
+    ConfigError naming the file and the option."""
+    path = FIXTURE_ULOGS[0]
+    with pytest.raises(ConfigError, match=rf"{path.name}: option\(s\) times_only do not "
+                                          r"apply to PX4 ULog files"):
+        read_log(path, times_only=True)
+
+
 def test_empty_and_header_only_files(tmp_path: Path) -> None:
     empty = tmp_path / "empty.ulg"
     empty.write_bytes(b"")
@@ -352,7 +361,7 @@ def test_empty_and_header_only_files(tmp_path: Path) -> None:
     header_only.write_bytes(head)
     with pytest.raises(LogFormatError, match="no ULog data"):
         ulog.read(header_only)
-    with pytest.raises(LogFormatError, match="cannot read"):
+    with pytest.raises(LogFormatError, match="cannot open"):
         ulog.read(tmp_path / "missing.ulg")
 
 

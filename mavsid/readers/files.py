@@ -41,10 +41,17 @@ MAP_MIN = 1 << 16
 
 
 @contextmanager
-def mapped(path: LogPath) -> Iterator[mmap.mmap | bytes]:
+def mapped(path: LogPath, populate: bool = False) -> Iterator[mmap.mmap | bytes]:
     """The bytes of the file ``path``: memory-mapped (read-only; closed on leaving, unless a
     view of it is still referenced: then when collected), or read whole when smaller than
     :data:`MAP_MIN`.
+
+    Parameters
+    ----------
+    path : path-like
+    populate : bool
+        Map every page at once where the system can (``MAP_POPULATE``), for a reader that
+        walks the whole file: faulting the pages in one by one is slower.
 
     Raises
     ------
@@ -56,10 +63,14 @@ def mapped(path: LogPath) -> Iterator[mmap.mmap | bytes]:
             size = os.fstat(f.fileno()).st_size
             if size == 0:
                 raise LogFormatError("empty file", path=path)
-            buf: mmap.mmap | bytes = (
-                mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) if size >= MAP_MIN
-                else f.read()
-            )
+            buf: mmap.mmap | bytes
+            if size < MAP_MIN:
+                buf = f.read()
+            elif populate and hasattr(mmap, "MAP_POPULATE"):
+                buf = mmap.mmap(f.fileno(), 0, flags=mmap.MAP_SHARED | mmap.MAP_POPULATE,
+                                prot=mmap.PROT_READ)
+            else:
+                buf = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
     except OSError as exc:
         raise LogFormatError(f"cannot open: {exc.strerror or exc}", path=path) from None
     try:

@@ -68,8 +68,6 @@ zero truncated on the wire), then 20 ms later an ATTITUDE stamped 5 s after boot
 
 from __future__ import annotations
 
-import mmap
-import os
 import re
 import warnings
 from collections.abc import Callable, Sequence
@@ -89,6 +87,7 @@ from mavsid.data import (
     param_changes,
 )
 from mavsid.errors import DataQualityWarning, LogFormatError
+from mavsid.readers.files import LogPath, mapped, refuse_options
 from mavsid.readers.mavlink_dialect import MessageDef, field_units, load_dialect
 from mavsid.readers.tlog_frames import Frames, in_blocks, payloads, release, scan_frames
 
@@ -170,23 +169,6 @@ def _table(
 
 
 # ----------------------------------------------------------------------------- reading
-
-
-def _load(path: str | os.PathLike[str]) -> tuple[NDArray[np.uint8], int, mmap.mmap | None]:
-    """The file's bytes (memory-mapped, not copied; a small file read whole), its size and
-    the map to close once read."""
-    try:
-        with open(path, "rb") as f:
-            size = os.fstat(f.fileno()).st_size
-            if size < 1 << 16:
-                return np.frombuffer(f.read(), np.uint8), size, None
-            mm = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
-    except OSError as exc:
-        raise LogFormatError(f"cannot read: {exc.strerror or exc}", path=path) from None
-    if len(mm) != size:
-        mm.close()
-        raise LogFormatError("file changed while reading", path=path)
-    return np.frombuffer(mm, np.uint8), size, mm
 
 
 def _vehicles(hb: MessageTable | None) -> tuple[tuple[int, int, int, int] | None, set[int]]:
@@ -350,13 +332,9 @@ def _clock_offsets(
     return offsets
 
 
-def read(
-    path: str | os.PathLike[str],
-    messages: Sequence[str] | None = None,
-    start: float | None = None,
-    stop: float | None = None,
-    dialect: str = "ardupilotmega",
-) -> RawLog:
+def read(path: LogPath, messages: Sequence[str] | None = None, start: float | None = None,
+         stop: float | None = None, dialect: str = "ardupilotmega", **options: object
+         ) -> RawLog:
     """Read a MAVLink ``.tlog`` into a :class:`~mavsid.data.RawLog`.
 
     Parameters
@@ -371,13 +349,15 @@ def read(
         (seconds on the vehicle's clock).
     dialect : str
         pymavlink dialect (module under ``pymavlink.dialects.v20``).
+    **options
+        No other applies (a ConfigError names any given).
 
     Raises
     ------
     LogFormatError
         Empty or unreadable file, or no valid MAVLink frame in it.
     ConfigError
-        Unknown dialect.
+        Unknown dialect, or another option given.
 
     Warns
     -----
@@ -385,21 +365,18 @@ def read(
         Bytes skipped (garbage, bad CRC, truncation), frames of message ids the dialect does
         not define, receive times running backwards or jumping.
     """
+    refuse_options(path, options, "MAVLink .tlog files")
     defs = load_dialect(dialect)
-    buf, size, mm = _load(path)
-    try:
-        return _read(path, buf, size, defs, messages, start, stop, dialect)
-    finally:
-        del buf
-        if mm is not None:
-            try:
-                mm.close()
-            except BufferError:  # a view is still referenced somewhere: leave it to the GC
-                pass
+    with mapped(path) as raw:
+        buf = np.frombuffer(raw, np.uint8)
+        try:
+            return _read(path, buf, buf.size, defs, messages, start, stop, dialect)
+        finally:
+            del buf  # (no view of the map left: it closes at once)
 
 
 def _read(
-    path: str | os.PathLike[str],
+    path: LogPath,
     buf: NDArray[np.uint8],
     size: int,
     defs: dict[int, MessageDef],
@@ -409,8 +386,6 @@ def _read(
     dialect: str,
 ) -> RawLog:
     """:func:`read` of the file's bytes ``buf``."""
-    if size == 0:
-        raise LogFormatError("empty file", path=path)
     frames = scan_frames(buf, size, defs)
     if not frames.payload.size:
         raise LogFormatError("no valid MAVLink frame found (not a .tlog?)", path=path)

@@ -54,7 +54,6 @@ mavsid.errors.LogFormatError: ...: not a readable ULog (Invalid file format (Hea
 from __future__ import annotations
 
 import math
-import os
 import re
 import warnings
 from collections.abc import Mapping, Sequence
@@ -73,6 +72,7 @@ from mavsid.data import (
     param_changes,
 )
 from mavsid.errors import DataQualityWarning, LogFormatError, first_few
+from mavsid.readers.files import LogPath, mapped, refuse_options
 from mavsid.readers.tlog import vehicle_class
 from mavsid.readers.ulog_data import parse
 from mavsid.readers.ulog_definitions import Parsed
@@ -247,12 +247,8 @@ def _wanted_topics(messages: Sequence[str] | None) -> tuple[set[str] | None, set
     return {_base(n) for n in messages} | {_MODE_TOPIC}, set(messages)
 
 
-def read(
-    path: str | os.PathLike[str],
-    messages: Sequence[str] | None = None,
-    start: float | None = None,
-    stop: float | None = None,
-) -> RawLog:
+def read(path: LogPath, messages: Sequence[str] | None = None, start: float | None = None,
+         stop: float | None = None, **options: object) -> RawLog:
     """Read a PX4 ULog into a :class:`~mavsid.data.RawLog`.
 
     Parameters
@@ -265,6 +261,8 @@ def read(
     start, stop : float, optional
         Keep only samples (and texts, mode changes) with ``start <= time_s <= stop``
         (seconds since boot).
+    **options
+        None applies to ULog (a ConfigError names any given).
 
     Raises
     ------
@@ -272,6 +270,8 @@ def read(
         Empty or unreadable file, a bad header or incompatible flags, formats that
         contain themselves, or one without any topic sample or parameter (when all
         topics were asked for).
+    ConfigError
+        An option was given.
 
     Warns
     -----
@@ -279,14 +279,11 @@ def read(
         Corruption found (bytes skipped to resynchronise, data of unknown message ids,
         wrong sizes, unreadable definitions), or parameter values of an unreadable type.
     """
-    try:
-        size = os.path.getsize(path)
-    except OSError as exc:
-        raise LogFormatError(f"cannot read: {exc.strerror or exc}", path=path) from None
-    if size == 0:
-        raise LogFormatError("empty file", path=path)
+    refuse_options(path, options, "PX4 ULog files")
     topics, wanted = _wanted_topics(messages)
-    parsed = parse(path, topics)
+    with mapped(path, populate=True) as buf:  # (a walk over all of it: mapped at once)
+        size = len(buf)
+        parsed = parse(buf, path, topics)
     if messages is None and not parsed.data and not parsed.initial_params:
         raise LogFormatError("no ULog data (no topic samples, no parameters)", path=path)
 

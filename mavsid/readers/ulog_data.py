@@ -110,8 +110,6 @@ from __future__ import annotations
 
 import functools
 import itertools
-import mmap
-import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -119,6 +117,7 @@ from numpy.typing import NDArray
 
 from mavsid.errors import LogFormatError
 from mavsid.readers import ulog_messages as msg
+from mavsid.readers.files import LogPath
 from mavsid.readers.ulog_definitions import Definitions, Parsed, garbage_end, other_message
 from mavsid.readers.ulog_layout import (
     Fields,
@@ -182,7 +181,7 @@ class _Sub:
 class Reader:
     """One pass over a mapped ULog (see the module's *Framing*)."""
 
-    def __init__(self, buf: Buffer, path: str | os.PathLike[str], topics: set[str] | None) -> None:
+    def __init__(self, buf: Buffer, path: LogPath, topics: set[str] | None) -> None:
         self.buf = buf  # the mmap (bytes-like, with .find)
         self.u8 = np.frombuffer(buf, np.uint8)
         self.n = self.u8.size
@@ -599,21 +598,10 @@ class Reader:
         self.out.data = items
 
 
-def parse(path: str | os.PathLike[str], topics: set[str] | None) -> Parsed:
-    """Map the file and read it (see the module's *Framing*); any failure is one
-    :class:`~mavsid.errors.LogFormatError` naming the file. (Mapped, not read into memory,
-    even when small: a first read in a process maps the cached pages faster than it copies
-    them into fresh ones.)"""
-    try:
-        with open(path, "rb") as f:
-            if hasattr(mmap, "MAP_POPULATE"):  # read ahead at once (faults one by one: slow)
-                buf = mmap.mmap(f.fileno(), 0, flags=mmap.MAP_SHARED | mmap.MAP_POPULATE,
-                                prot=mmap.PROT_READ)
-            else:
-                buf = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
-    except (OSError, ValueError) as exc:
-        raise LogFormatError(f"cannot read: {getattr(exc, 'strerror', None) or exc}",
-                             path=path) from None
+def parse(buf: Buffer, path: LogPath, topics: set[str] | None) -> Parsed:
+    """Read the file's bytes ``buf`` (see the module's *Framing*): by the compiled pass where
+    it takes the log, else by :class:`Reader`; any failure is one
+    :class:`~mavsid.errors.LogFormatError` naming the file."""
     try:
         return read_plain(buf, topics) or Reader(buf, path, topics).run()
     except RecursionError:
@@ -621,11 +609,6 @@ def parse(path: str | os.PathLike[str], topics: set[str] | None) -> Parsed:
                              path=path) from None
     except MemoryError:
         raise LogFormatError("not a readable ULog (out of memory)", path=path) from None
-    finally:
-        try:
-            buf.close()
-        except BufferError:  # a view still refers to it: closed when collected
-            pass
 
 
 def read_plain(buf: Buffer, topics: set[str] | None) -> Parsed | None:

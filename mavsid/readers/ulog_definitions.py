@@ -23,7 +23,6 @@ Examples
 
 from __future__ import annotations
 
-import os
 import struct
 from dataclasses import dataclass, field
 
@@ -32,6 +31,7 @@ from numpy.typing import NDArray
 
 from mavsid.errors import LogFormatError
 from mavsid.readers import ulog_messages as msg
+from mavsid.readers.files import LogPath
 from mavsid.readers.ulog_layout import Fields, known_format
 from mavsid.readers.ulog_messages import (
     HEAD,
@@ -201,7 +201,7 @@ class Definitions:
     """The header and definitions section of a mapped ULog (or its bytes), read into
     ``out``; :attr:`offsets`: where appended data begins (flag bits)."""
 
-    def __init__(self, buf: Buffer, path: str | os.PathLike[str], out: Parsed) -> None:
+    def __init__(self, buf: Buffer, path: LogPath, out: Parsed) -> None:
         self.buf = buf
         self.u8 = np.frombuffer(buf, np.uint8)
         self.n = self.u8.size

@@ -20,7 +20,10 @@ from __future__ import annotations
 from collections.abc import Mapping
 from types import MappingProxyType
 
-__all__ = ["ARDUPILOT_MODES", "MAV_TYPE_MODES", "NAV_STATES", "ardupilot_modes", "px4_mode_name"]
+__all__ = [
+    "ARDUPILOT_MODES", "MAV_TYPE_MODES", "NAV_STATES", "VEHICLE_CLASSES", "ardupilot_modes",
+    "px4_mode_name", "vehicle_class",
+]
 
 
 def _table(spec: str) -> Mapping[int, str]:
@@ -118,3 +121,23 @@ def px4_mode_name(custom_mode: int) -> str:
     if main == _PX4_AUTO:
         return _PX4_AUTO_SUB.get((custom_mode >> 24) & 0xFF, "UNKNOWN")
     return _PX4_MAIN.get(main, "UNKNOWN")
+
+
+#: MAV_TYPE -> vehicle class (the words the DataFlash reader uses for :data:`ARDUPILOT_MODES`)
+VEHICLE_CLASSES = {
+    1: "plane", 2: "copter", 3: "copter", 4: "heli", 5: "tracker", 7: "blimp", 10: "rover",
+    11: "rover", 12: "sub", 13: "copter", 14: "copter", 15: "copter", 19: "plane",
+    20: "plane", 21: "plane", 22: "plane", 23: "plane", 24: "plane", 25: "plane",
+    29: "copter", 35: "copter",
+}  # fmt: skip
+
+
+def vehicle_class(mav_type: int) -> str | None:
+    """The vehicle class of a MAVLink ``MAV_TYPE`` (also PX4's ``MAV_TYPE`` parameter).
+
+    Examples
+    --------
+    >>> vehicle_class(2), vehicle_class(22), vehicle_class(11), vehicle_class(6)
+    ('copter', 'plane', 'rover', None)
+    """
+    return VEHICLE_CLASSES.get(int(mav_type))

@@ -76,7 +76,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from mavsid.autopilot.modes import ardupilot_modes, px4_mode_name
+from mavsid.autopilot.modes import ardupilot_modes, px4_mode_name, vehicle_class
 from mavsid.data import (
     MessageTable,
     ModeChange,
@@ -91,7 +91,7 @@ from mavsid.readers.files import LogPath, mapped, refuse_options
 from mavsid.readers.mavlink_dialect import MessageDef, field_units, load_dialect
 from mavsid.readers.tlog_frames import Frames, in_blocks, payloads, release, scan_frames
 
-__all__ = ["MessageDef", "load_dialect", "read", "vehicle_class"]
+__all__ = ["MessageDef", "load_dialect", "read"]
 
 _TIME_JUMP_S = 3600.0  # a forward step in receive time larger than this counts as a jump
 _UNIX_USEC = 1e15  # a time_usec above this (31 years) is a UNIX time, not time since boot
@@ -269,26 +269,6 @@ def _mode_names(autopilot: int, mav_type: int) -> Callable[[int], str | None]:
         return px4_mode_name
     table = ardupilot_modes(mav_type) if autopilot == 3 else None
     return lambda mode: table.get(mode) if table else None
-
-
-#: MAV_TYPE -> vehicle class (the words the DataFlash reader uses)
-_VEHICLE_CLASSES = {
-    1: "plane", 2: "copter", 3: "copter", 4: "heli", 5: "tracker", 7: "blimp", 10: "rover",
-    11: "rover", 12: "sub", 13: "copter", 14: "copter", 15: "copter", 19: "plane",
-    20: "plane", 21: "plane", 22: "plane", 23: "plane", 24: "plane", 25: "plane",
-    29: "copter", 35: "copter",
-}  # fmt: skip
-
-
-def vehicle_class(mav_type: int) -> str | None:
-    """The vehicle class of a MAVLink ``MAV_TYPE`` (also PX4's ``MAV_TYPE`` parameter).
-
-    Examples
-    --------
-    >>> vehicle_class(2), vehicle_class(22), vehicle_class(11), vehicle_class(6)
-    ('copter', 'plane', 'rover', None)
-    """
-    return _VEHICLE_CLASSES.get(int(mav_type))
 
 
 _FIRMWARE = re.compile(r"^(Ardu\w+|APM:\w+|PX4\w*|Rover|AntennaTracker|Blimp)\s+V?\d")

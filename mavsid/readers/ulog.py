@@ -62,7 +62,7 @@ from typing import Any, cast
 import numpy as np
 from numpy.typing import NDArray
 
-from mavsid.autopilot.modes import NAV_STATES
+from mavsid.autopilot.modes import NAV_STATES, vehicle_class
 from mavsid.data import (
     MessageTable,
     ModeChange,
@@ -73,7 +73,6 @@ from mavsid.data import (
 )
 from mavsid.errors import DataQualityWarning, LogFormatError, first_few
 from mavsid.readers.files import LogPath, mapped, refuse_options
-from mavsid.readers.tlog import vehicle_class
 from mavsid.readers.ulog_data import parse
 from mavsid.readers.ulog_definitions import Parsed
 from mavsid.readers.ulog_layout import Fields, field_index

@@ -452,12 +452,12 @@ class FlightData:
     flag_notes : Mapping[str, str]
         Per flag that had to be assumed (``armed``, ``airborne``), why.
     sysid_injection : numpy.ndarray or None
-        SYSTEMID's logged waveform on the grid: alignment's ``SIDD.Targ`` interpolated
-        (0 between runs), which the fitting pipeline replaces by the injection channel held
-        (NaN where no record lies near); None when not logged.
+        SYSTEMID's logged waveform (``SIDD.Targ``) held on the grid, NaN where no record
+        lies near (:func:`mavsid.align.sysid.sysid_injection`); None when not logged.
     inputs_at_state_times : Mapping[str, numpy.ndarray]
         Inputs interpolated between their native samples like the states (not held), for
-        the frequency response against ``sysid_injection``; empty unless computed.
+        the frequency response against ``sysid_injection``; empty when the flight has no
+        injection (:func:`mavsid.align.grid.between_held`).
 
     Examples
     --------

@@ -196,7 +196,7 @@ class AxisSignals:
     floor: float
     y_hp: np.ndarray | None = None  # output without content below the band (per block)
     y_floor: float = math.nan  # output's 1-s RMS where the input has no power
-    injection: np.ndarray | None = None  # SYSTEMID's logged waveform (SIDD.Targ), 0 outside
+    injection: np.ndarray | None = None  # SYSTEMID's logged waveform (SIDD.Targ), NaN unlogged
     command: np.ndarray | None = None  # commanded attitude (rad; yaw: rate), NaN if not logged
     command_from: str = ""  # where the command came from (``ATT.DesRoll``, the sticks ...)
     # the collective thrust, where it was really logged (a constant column was not): judged

@@ -1,15 +1,14 @@
 """The flights a run reads: each log read once and aligned (:func:`flight_of`; the twin's
-signals and the SYSTEMID injection taken in the same pass), several logs on one grid
+signals taken in the same pass), several logs on one grid
 (:func:`flights_of`), and per axis the windows considered and the segments kept
 (:func:`axis_windows`, :func:`axis_segments`, :func:`find_windows`)."""
 
 from __future__ import annotations
 
-import dataclasses
 import os
 import warnings
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -58,10 +57,6 @@ def flight_of(path: str | os.PathLike[str], cfg: PipelineConfig,
         mixers=cfg.mixers or None,
         also=also,
     )
-    injection = _injection(flight, raw)
-    if injection is not None:  # (the reference of the plant's measured response)
-        flight = dataclasses.replace(flight, sysid_injection=injection,
-                                     inputs_at_state_times=_inputs_interpolated(flight, raw))
     if twins is not None:
         from mavsid.loop.twin import twin_signals
 
@@ -70,53 +65,6 @@ def flight_of(path: str | os.PathLike[str], cfg: PipelineConfig,
         except (MavsidError, ValueError, np.linalg.LinAlgError) as exc:
             twins[id(flight)] = exc  # (raised where the twin runs, as a second read would)
     return flight
-
-
-def _inputs_interpolated(flight: FlightData, raw: Any) -> dict[str, np.ndarray]:
-    """The inputs interpolated between their native samples like the states, not held: a
-    held input lags an interpolated state by up to a sample (its share depending on where
-    the grid falls between the records), a delay the frequency response would take for the
-    plant's. Per input whose source is one message's field (``FlightData.sources``): the held
-    grid values mapped back to the native sample each holds, then interpolated."""
-    out: dict[str, np.ndarray] = {}
-    sources = flight.sources
-    t = flight.time_s
-    for j, name in enumerate(flight.input_names):
-        src = sources.get(name, "")
-        msg = src.split(".")[0]
-        if "." not in src or msg not in raw.messages or len(raw.messages[msg]) < 2:
-            continue
-        tn = np.sort(np.asarray(raw.messages[msg].time_s, dtype=float))
-        i = np.searchsorted(tn, t + 1e-6 * flight.dt, side="right") - 1
-        first = np.concatenate([[True], i[1:] != i[:-1]]) & (i >= 0)
-        if first.sum() < 2:
-            continue
-        out[name] = np.interp(t, tn[i[first]], flight.inputs[first, j])
-    return out
-
-
-def _injection(flight: FlightData, raw: Any) -> np.ndarray | None:
-    """SYSTEMID's injected waveform held on ``flight``'s grid (NaN where no record lies
-    within two of its steps), whatever the injection point: the reference its plant response
-    is measured against."""
-    from mavsid.autopilot.presets import INJECTION_CHANNEL
-    from mavsid.channels import evaluate
-
-    if not flight.sysid_runs or INJECTION_CHANNEL.message not in raw.messages:
-        return None
-    try:
-        t, v = evaluate(raw, INJECTION_CHANNEL, "SYSTEMID injection")
-    except MavsidError:
-        return None
-    order = np.argsort(t, kind="stable")
-    t, v = t[order], v[order]
-    if t.size < 2:
-        return None
-    i = np.clip(np.searchsorted(t, flight.time_s + 1e-9, side="right") - 1, 0, None)
-    out = v[i].astype(float)
-    step = float(np.median(np.diff(t)))
-    out[(flight.time_s < t[0]) | (flight.time_s - t[i] > 2 * max(step, flight.dt))] = np.nan
-    return out
 
 
 def flights_of(logs: Sequence[str | os.PathLike[str]], cfg: PipelineConfig,

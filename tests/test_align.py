@@ -181,6 +181,37 @@ def test_dataflash_values_match_pymavlink(doublets_rate):
     assert np.allclose(fd.inputs[:, fd.input_names.index("u_roll")], ref[k, 2], atol=1e-7)
 
 
+def test_sysid_injection_is_pymavlinks_sidd_held_and_nan_where_not_logged():
+    """A direct alignment gives the waveform the fit uses: each grid point the Targ of
+    pymavlink's latest SIDD record at or before it, NaN where none lies within two record
+    steps (between the runs, where SIDD is not logged); and the inputs interpolated
+    between the RATE records the grid holds."""
+    from pymavlink import mavutil
+
+    path = FIXTURES / "sysid_roll.bin"
+    if not path.exists():
+        pytest.skip("fixtures/sysid_roll.bin not generated")
+    m = mavutil.mavlink_connection(str(path))
+    sidd, rate = [], []
+    while (msg := m.recv_match(type=["SIDD", "RATE"])) is not None:
+        (sidd if msg.get_type() == "SIDD" else rate).append(
+            (msg.TimeUS * 1e-6, msg.Targ if msg.get_type() == "SIDD" else msg.ROut))
+    m.close()
+    ts, targ = np.array(sidd).T
+    fd = load_flight(path)
+    t = fd.time_s
+    k = np.searchsorted(ts, t + 1e-6 * fd.dt, side="right") - 1
+    known = (k >= 0) & (t - ts[k.clip(0)] <= 2 * max(np.median(np.diff(ts)), fd.dt))
+    assert 0 < known.sum() < t.size  # the runs, and the flight around them
+    inj = fd.sysid_injection
+    assert np.array_equal(np.isnan(inj), ~known)
+    assert np.allclose(inj[known], targ[k[known]], atol=1e-7)
+    tr, rout = np.array(rate).T
+    held = np.unique(np.searchsorted(tr, t + 1e-6 * fd.dt, side="right") - 1)
+    assert np.allclose(fd.inputs_at_state_times["u_roll"], np.interp(t, tr[held], rout[held]),
+                       atol=1e-7)
+
+
 def test_extract_aligned_writes_flightdata(doublets_rate, tmp_path, capsys):
     import pandas as pd
 

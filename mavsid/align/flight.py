@@ -31,7 +31,9 @@ log's content unless given) and
 
 ``FlightData.channels`` holds each channel's source, native rate, unit read in and the
 samples excluded (non-finite, impossible or mistimed), ``FlightData.mixer`` the mixer used,
-``FlightData.sysid_injection`` SYSTEMID's logged waveform; ``FlightData.boot`` which boot
+``FlightData.sysid_injection`` SYSTEMID's logged waveform (held, NaN where not logged) and
+``FlightData.inputs_at_state_times`` the inputs interpolated like the states (for a log that
+has the waveform: the frequency response against it); ``FlightData.boot`` which boot
 was used (:class:`~mavsid.data.Boot`), ``FlightData.sysid_runs`` the ArduPilot SYSTEMID
 runs (from SIDS/SIDD or, in a .tlog, from the SYSTEMID mode and the SID_* parameter values
 sent before it); the platform's names ``autopilot``, ``vehicle`` and ``firmware`` are
@@ -61,7 +63,7 @@ import numpy as np
 from mavsid.align.boots import one_boot
 from mavsid.align.commanded import commanded_attitude
 from mavsid.align.flags import flags_on_grid
-from mavsid.align.grid import MAX_GAP_SAMPLES, hold, uniform_grid
+from mavsid.align.grid import MAX_GAP_SAMPLES, between_held, hold, uniform_grid
 from mavsid.align.series import first_fitting, message_scales, reference
 from mavsid.align.sysid import sysid_injection, sysid_runs
 from mavsid.autopilot.mixers import Mixer
@@ -197,6 +199,13 @@ def _align(raw: RawLog, preset: Preset | str | None, rate_hz: float | None,
     channels = {s.name: ChannelOrigin(s.source, round(rates[s.name], 3), s.unit_from,
                                       dict(s.excluded)) for s in series}
     commanded, commanded_from = commanded_attitude(raw, t, boot.used - 1)
+    injection = sysid_injection(raw, t, dt, boot.used - 1)
+    between: dict[str, np.ndarray] = {}
+    if injection is not None:  # (its one use: the frequency response against the injection)
+        for s in inputs:
+            got = between_held(s, t, dt)
+            if got is not None:
+                between[s.name] = got
     return FlightData(
         time_s=t,
         states=x,
@@ -223,7 +232,8 @@ def _align(raw: RawLog, preset: Preset | str | None, rate_hz: float | None,
         scales=message_scales(raw, series),
         mode_names={m.mode: m.name for m in raw.modes if m.name},
         flag_notes=flag_notes,
-        sysid_injection=sysid_injection(raw, t, boot.used - 1),
+        sysid_injection=injection,
+        inputs_at_state_times=between,
     )
 
 

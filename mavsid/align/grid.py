@@ -20,8 +20,8 @@ from mavsid.errors import ConfigError
 if TYPE_CHECKING:
     from mavsid.align.series import Series
 
-__all__ = ["MAX_GAP_SAMPLES", "MAX_GRID_PER_SAMPLE", "hold", "resampled", "sorted_unique",
-           "uniform_grid"]
+__all__ = ["MAX_GAP_SAMPLES", "MAX_GRID_PER_SAMPLE", "between_held", "held_known", "hold",
+           "resampled", "sorted_unique", "uniform_grid"]
 
 #: a channel pausing longer than this many of its own median sample intervals is a gap
 MAX_GAP_SAMPLES = 4.0
@@ -143,14 +143,56 @@ def uniform_grid(series: list[Series], ref: Series, rate_hz: float | None, max_g
     return t[sel], np.column_stack([new_edges[:-1], new_edges[1:]]).astype(np.int64), dt
 
 
-def hold(s: Series, t: np.ndarray, dt: float) -> np.ndarray:
-    """Zero-order hold: the latest native sample at or before each time.
+def _latest(ts: np.ndarray, t: np.ndarray, dt: float) -> np.ndarray:
+    """Index of the latest of the sorted times ``ts`` at or before each time ``t`` (-1 before
+    the first). "At" allows ``1e-6 * dt`` for the rounding of the grid times, so that a grid
+    point meant to fall on a sample does not pick the one before it."""
+    return np.searchsorted(ts, t + 1e-6 * dt, side="right") - 1
 
-    "At" allows ``1e-6 * dt`` for the rounding of the grid times, so that a grid point meant
-    to fall on a sample does not pick the one before it.
+
+def hold(s: Series, t: np.ndarray, dt: float) -> np.ndarray:
+    """Zero-order hold: the latest native sample at or before each time (the first before
+    it; see :func:`_latest` for "at")."""
+    return s.v[np.clip(_latest(s.t, t, dt), 0, None)]
+
+
+def held_known(ts: np.ndarray, v: np.ndarray, t: np.ndarray, dt: float) -> np.ndarray:
+    """Zero-order hold of samples ``v`` at sorted times ``ts`` on the grid ``t`` (step ``dt``),
+    NaN where the value is not known: before the first sample, and where the latest sample
+    lies more than two of the samples' median intervals (or of the grid's steps) back.
+
+    Examples
+    --------
+    >>> held_known(np.array([0.0, 0.1, 0.2]), np.array([1.0, 2.0, 3.0]),
+    ...            np.array([-0.1, 0.0, 0.15, 0.4, 0.5]), 0.05).tolist()
+    [nan, 1.0, 2.0, 3.0, nan]
     """
-    i = np.searchsorted(s.t, t + 1e-6 * dt, side="right") - 1
-    return s.v[np.clip(i, 0, None)]
+    i = _latest(ts, t, dt)
+    out = v[np.clip(i, 0, None)].astype(float)
+    step = max(float(np.median(np.diff(ts))) if ts.size >= 2 else 0.0, dt)
+    out[(i < 0) | (t - ts[np.clip(i, 0, None)] > 2 * step)] = np.nan
+    return out
+
+
+def between_held(s: Series, t: np.ndarray, dt: float) -> np.ndarray | None:
+    """An input interpolated between the native samples its :func:`hold` puts on the grid
+    ``t``, like the states, instead of held: a held input lags an interpolated state by up
+    to a sample (its share depending on where the grid falls between the records), a delay
+    a frequency response would take for the plant's. None when the grid holds fewer than two
+    of its samples.
+
+    Examples
+    --------
+    >>> from mavsid.align.series import Series
+    >>> s = Series("u_roll", "RATE.ROut", np.array([0.0, 0.1, 0.2]), np.array([0.0, 1.0, 0.0]))
+    >>> between_held(s, np.array([0.0, 0.05, 0.1, 0.15, 0.2]), 0.05).round(6).tolist()
+    [0.0, 0.5, 1.0, 0.5, 0.0]
+    """
+    i = _latest(s.t, t, dt)
+    first = np.concatenate([[True], i[1:] != i[:-1]]) & (i >= 0)
+    if np.count_nonzero(first) < 2:
+        return None
+    return np.interp(t, s.t[i[first]], s.v[i[first]])
 
 
 def resampled(ts: np.ndarray, v: np.ndarray, t: np.ndarray, fill: float) -> np.ndarray:

@@ -16,9 +16,12 @@ from typing import Any
 import numpy as np
 
 from mavsid.align.boots import boot_records
-from mavsid.align.grid import resampled
+from mavsid.align.grid import held_known
 from mavsid.autopilot.ardupilot import SID_PARAMS, SIDS_FIELDS, SYSTEM_ID_DELAY_S, SYSTEMID_MODE
+from mavsid.autopilot.presets import INJECTION_CHANNEL
+from mavsid.channels import evaluate
 from mavsid.data import RawLog, SysidRun
+from mavsid.errors import MavsidError
 
 __all__ = ["SIDD_BEFORE_MODE_S", "sysid_injection", "sysid_runs"]
 
@@ -183,16 +186,39 @@ def _runs_without_sids(raw: RawLog, spans: Sequence[tuple[float, float]]
     return runs
 
 
-def sysid_injection(raw: RawLog, t: np.ndarray, boot: int = 0) -> np.ndarray | None:
-    """SYSTEMID's logged waveform ``SIDD.Targ`` on the grid ``t`` (interpolated inside runs,
-    0 elsewhere; its records of the grid's ``boot``), or None when the log has none.
-    Excitation judges SYSTEMID runs by it."""
-    sidd = raw.messages.get("SIDD")
-    if sidd is None or "Targ" not in sidd.columns or len(sidd) < 2:
+def sysid_injection(raw: RawLog, t: np.ndarray, dt: float, boot: int = 0
+                    ) -> np.ndarray | None:
+    """SYSTEMID's logged waveform (``SIDD.Targ``,
+    :data:`~mavsid.autopilot.presets.INJECTION_CHANNEL`) held on the grid ``t`` of step
+    ``dt`` (its records of the grid's ``boot``), NaN where no record lies within two of its
+    steps; None when the log has fewer than two records. The reference a SYSTEMID run's
+    response is measured against (excitation, the plant's frequency response), whatever the
+    injection point.
+
+    Held: each record is the value the autopilot added over its loop tick. NaN, not 0,
+    between records: SIDD is logged only while a run injects, so there the value is not in
+    the log (0 outside SYSTEMID mode, but a gap in the records inside a run is unknown too),
+    and a window that takes it in is not measured against the injection.
+
+    Examples
+    --------
+    >>> from mavsid.data import MessageTable, RawLog, SourceInfo
+    >>> sidd = MessageTable("SIDD", {"Targ": np.array([0.5, -0.5, 0.5])},
+    ...                     time_s=np.array([1.0, 1.1, 1.2]))
+    >>> log = RawLog(SourceInfo("x.bin", "dataflash", 0), {"SIDD": sidd})
+    >>> sysid_injection(log, np.array([0.9, 1.0, 1.15, 1.3, 2.0]), 0.05).tolist()
+    [nan, 0.5, -0.5, 0.5, nan]
+    """
+    if INJECTION_CHANNEL.message not in raw.messages:
         return None
-    ts, targ = boot_records(np.asarray(sidd.time_s, dtype=float),
-                             np.nan_to_num(sidd.numbers("Targ", raw.source.path)), boot)
-    return resampled(ts, targ, t, 0.0)  # between runs SIDD is not logged: no injection there
+    try:
+        ts, v = evaluate(raw, INJECTION_CHANNEL, "SYSTEMID injection")
+    except MavsidError:
+        return None
+    ts, v = boot_records(ts, v, boot)
+    if ts.size < 2:
+        return None
+    return held_known(ts, v, t, dt)
 
 
 def _chirp_span(enter: float, leave: float, run: Mapping[str, Any]) -> tuple[float, float]:

@@ -63,6 +63,7 @@ __all__ = [
     "Validation",
     "eigenvalues",
     "fit_percent",
+    "fit_sums",
     "frequency_response",
     "horizon_label",
     "residual_test",
@@ -118,15 +119,26 @@ def fit_percent(y: np.ndarray, yhat: np.ndarray) -> np.ndarray:
     numpy.ndarray
         Shape ``()`` for 1-D input, ``(m,)`` otherwise.
     """
-    err, norm = _fit_sums(y, yhat)
+    err, norm = fit_sums(y, yhat)
     with np.errstate(divide="ignore", invalid="ignore"):
         out = 100.0 * (1.0 - np.sqrt(err / norm))
     out = np.where(norm > 0, out, np.nan)
     return out if np.ndim(y) > 1 else out.reshape(())
 
 
-def _fit_sums(y: np.ndarray, yhat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Sum of squared errors and of squared deviations about the mean, per column."""
+def fit_sums(y: np.ndarray, yhat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The two sums :func:`fit_percent` is made of, per column, over the rows where both
+    are finite: the squared errors ``sum((y - yhat)**2)`` and the squared deviations of
+    ``y`` about its mean. Summed over several pieces (segments, delays) they give the fit %
+    of the pieces pooled.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> err, norm = fit_sums(np.array([1.0, 2.0, 3.0, np.nan]), np.array([1.0, 2.0, 4.0, 0.0]))
+    >>> float(err[0]), float(norm[0])
+    (1.0, 2.0)
+    """
     y2 = np.asarray(y, dtype=float).reshape(len(y), -1)
     p2 = np.asarray(yhat, dtype=float).reshape(len(yhat), -1)
     ok = np.isfinite(y2) & np.isfinite(p2)
@@ -567,15 +579,15 @@ def validate(
             pred = _as_2d(raw, n, ny, "predict")
             if k == 1:
                 one = pred
-            e, m = _fit_sums(y, pred)
+            e, m = fit_sums(y, pred)
             err_h[i] += e
             norm_h[i] += m
         free = own if fitted is model else _as_2d(fitted.simulate(seg), n, ny, "simulate")
         free_runs.append(free)
-        e, m = _fit_sums(y, free)
+        e, m = fit_sums(y, free)
         err_free += e
         norm_free += m
-        e, m = _fit_sums(y, own)
+        e, m = fit_sums(y, own)
         err_own += e
         norm_own += m
         for pred, sq, cnt in ((one, sq1, n1), (free, sqf, nf)):

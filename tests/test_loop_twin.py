@@ -85,7 +85,7 @@ def test_simulate_closed_loop_linear_run_equals_stepping(case: str,
 def _baseline_every_delay(pool: list[tuple[np.ndarray, np.ndarray]], max_d: int
                           ) -> tuple[float, int]:
     """The exhaustive search :func:`baseline_fit` did: every delay's exact score."""
-    from mavsid.validation import _fit_sums
+    from mavsid.validation import fit_sums
 
     best, best_d = -np.inf, 0
     for d in range(max_d + 1):
@@ -94,7 +94,7 @@ def _baseline_every_delay(pool: list[tuple[np.ndarray, np.ndarray]], max_d: int
             shifted = np.full(t.shape, np.nan)
             if d < len(t):
                 shifted[d:] = t[: len(t) - d]
-            e, n = _fit_sums(y, shifted)
+            e, n = fit_sums(y, shifted)
             err, norm = err + float(e[0]), norm + float(n[0])
         sc = -err / norm if norm > 0 else -np.inf
         if sc > best:

@@ -665,7 +665,7 @@ def baseline_fit(
     >>> round(fit, 6), delay
     (100.0, 0.03)
     """
-    from mavsid.validation import _fit_sums
+    from mavsid.validation import fit_sums
 
     def shifted(x: np.ndarray, d: int) -> np.ndarray:
         out = np.full(x.shape, np.nan)  # (a block shorter than the delay: all unknown)
@@ -680,7 +680,7 @@ def baseline_fit(
     def score(d: int) -> float:
         err = norm = 0.0
         for t, y in pool:
-            e, n = _fit_sums(y, shifted(t, d))
+            e, n = fit_sums(y, shifted(t, d))
             err, norm = err + float(e[0]), norm + float(n[0])
         return -err / norm if norm > 0 else -np.inf
 

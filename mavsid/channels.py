@@ -34,10 +34,17 @@ from mavsid.autopilot.ardupilot import (
 from mavsid.autopilot.mixers import Mixer
 from mavsid.autopilot.presets import TRANSFORMS, UNIT_TO_SI, Channel, Preset
 from mavsid.data import MessageTable, RawLog
-from mavsid.errors import ConfigError, DataQualityWarning, MavsidError, MissingMessageError
+from mavsid.errors import (
+    ConfigError,
+    DataQualityWarning,
+    LogFormatError,
+    MavsidError,
+    MissingMessageError,
+)
 from mavsid.numerics.rotations import quat_to_euler
 
 __all__ = [
+    "column",
     "evaluate",
     "first_of",
     "motor_thrusts",
@@ -52,23 +59,35 @@ __all__ = [
 _INDEXED = re.compile(r"^(\w+)\[(\d+)\]$")
 
 
-def _column(table: MessageTable, name: str) -> np.ndarray | None:
-    """One column (``name`` or ``name[i]``) as float64, scaled by the declared multiplier."""
-    if name in table.columns:
-        col = np.asarray(table.columns[name])
-        mult = table.multipliers.get(name, 1.0)
-    else:
+def column(table: MessageTable, name: str) -> np.ndarray | None:
+    """One column (``name``, or element ``i`` of an array field as ``name[i]``) as float64
+    numbers (:meth:`MessageTable.numbers`), scaled by the multiplier the log declares; None
+    when the table lacks it, it is not one value per record, or it holds no numbers.
+
+    Examples
+    --------
+    >>> tab = MessageTable("X", {"a": np.array([1, 2]), "q": np.ones((2, 4)),
+    ...                          "s": np.array(["x", "y"], object)}, np.zeros(2),
+    ...                    multipliers={"a": 0.5})
+    >>> column(tab, "a").tolist(), column(tab, "q[3]").tolist(), column(tab, "s")
+    ([0.5, 1.0], [1.0, 1.0], None)
+    """
+    base, k = name, None
+    if name not in table.columns:
         m = _INDEXED.match(name)
         if not m or m.group(1) not in table.columns:
             return None
-        col = np.asarray(table.columns[m.group(1)])
-        if col.ndim != 2 or int(m.group(2)) >= col.shape[1]:
-            return None
-        col = col[:, int(m.group(2))]
-        mult = table.multipliers.get(m.group(1), 1.0)
-    if col.dtype.kind not in "biuf":
+        base, k = m.group(1), int(m.group(2))
+    raw = np.asarray(table.columns[base])
+    if len(raw) != len(table) or raw.ndim != (1 if k is None else 2) or (
+            k is not None and k >= raw.shape[1]):
         return None
-    out = col.astype(np.float64)
+    try:
+        col = table.numbers(base)
+    except LogFormatError:
+        return None
+    out = col if k is None else col[:, k]
+    mult = table.multipliers.get(base, 1.0)
     return out * mult if mult not in (None, 1.0) else out
 
 
@@ -76,7 +95,7 @@ def resolve(table: MessageTable, expr: str) -> tuple[np.ndarray, str] | None:
     """Evaluate a field expression; returns the values and the first column's name."""
     for alternative in expr.split("|"):
         parts = [p.strip() for p in alternative.split("+")]
-        cols = [c for c in (_column(table, p) for p in parts) if c is not None]
+        cols = [c for c in (column(table, p) for p in parts) if c is not None]
         if len(cols) == len(parts):
             return np.sum(cols, axis=0), parts[0]
     return None
@@ -86,7 +105,7 @@ def _quaternion(table: MessageTable, fld: str) -> np.ndarray | None:
     col = table.columns.get(fld)
     if col is not None and np.ndim(col) == 2 and np.shape(col)[1] == 4:
         return np.asarray(col, dtype=np.float64)
-    parts = [_column(table, f"{fld}[{i}]") for i in range(4)]
+    parts = [column(table, f"{fld}[{i}]") for i in range(4)]
     if any(p is None for p in parts):
         return None
     return np.column_stack(parts)  # type: ignore[arg-type]
@@ -172,7 +191,7 @@ def unit_origin(raw: RawLog, channel: Channel) -> str:
     table = raw[channel.message]
     for alternative in channel.field.split("|"):
         parts = [p.strip() for p in alternative.split("+")]
-        if all(_column(table, p) is not None for p in parts):
+        if all(column(table, p) is not None for p in parts):
             return ", ".join(_unit_of(table, parts[0], channel))
     return ", ".join(_unit_of(table, "", channel))
 

@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from mavsid.channels import source_text
+from mavsid.channels import column, source_text
 from mavsid.data import MessageTable, RawLog
 from mavsid.errors import escape
 from mavsid.readers.dataflash import INSTANCE_COLUMNS
@@ -51,22 +51,6 @@ def _num(x: float | None, digits: int | None = None) -> float | None:
     return float(f"{x:.{digits}g}") if digits else float(x)
 
 
-def _column(table: MessageTable, name: str) -> np.ndarray | None:
-    """Field ``name``'s values, one per record; None when the table lacks them (a field
-    declared but not decoded, or not one value per record): a summary reads every field
-    it shows by this, so a message without one is summarised with what it has.
-
-    >>> tab = MessageTable("AUXF", {"pos": np.zeros(2)}, np.arange(2.0),
-    ...                    declared=("TimeUS", "function", "pos"))
-    >>> _column(tab, "function") is None, _column(tab, "pos").tolist()
-    (True, [0.0, 0.0])
-    """
-    col = table.columns.get(name)
-    if col is None or np.ndim(col) != 1 or len(col) != len(table):
-        return None
-    return np.asarray(col)
-
-
 def declared_instance(table: MessageTable) -> str | None:
     """The field the log declares as the instance (unit ``instance``), if any.
 
@@ -81,11 +65,15 @@ def _instance_column(table: MessageTable) -> np.ndarray | None:
     the usual names (an integer column); None when the table has neither."""
     declared = declared_instance(table)
     if declared is not None:
-        return _column(table, declared)
+        got = column(table, declared)
+        names = table.columns.get(declared)
+        if got is None and names is not None and np.ndim(names) == 1 and len(names) == len(
+                table):  # instances named by text (SCR.Name)
+            return np.asarray(names)
+        return got
     for name in INSTANCE_COLUMNS:
-        col = _column(table, name)
-        if col is not None and col.dtype.kind in "iu":
-            return col
+        if name in table.columns and np.asarray(table.columns[name]).dtype.kind in "iu":
+            return column(table, name)
     return None
 
 

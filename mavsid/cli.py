@@ -570,12 +570,12 @@ def _view(args: argparse.Namespace) -> int:
     from mavsid.pipeline import find_windows, load_models, validate_logs
     from mavsid.viz.recording import (
         blueprint,
+        flight_ranges,
         focus_span,
         log_fit_result,
         log_flight_windows,
         rate_targets,
-        result_focus,
-        target_axes,
+        result_blueprint,
     )
     from mavsid.viz.series import new_recording, write_errors
     from mavsid.viz.viewer import open_sink, viewer_errors
@@ -595,15 +595,13 @@ def _view(args: argparse.Namespace) -> int:
         if args.model:
             result = validate_logs(load_models(args.model), [args.log], cfg)
             targets = rate_targets(result)
-            served = open_sink(
-                rec, blueprint(list(result.axes), focus=result_focus(result),
-                               targets=target_axes(targets)), **sink)
+            served = open_sink(rec, result_blueprint(result, targets), **sink)
             log_fit_result(rec, result, targets=targets)
         else:
             flight, windows = find_windows(args.log, cfg)
             served = open_sink(
-                rec, blueprint([], with_flight=True, focus=focus_span(windows=windows)),
-                **sink)
+                rec, blueprint([], with_flight=True, focus=focus_span(windows=windows),
+                               y_ranges=flight_ranges([flight])), **sink)
             log_flight_windows(rec, flight, windows)
         rec.flush()
         if save:

@@ -10,6 +10,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import pytest
 from helpers import FIXTURES
 from rerun.chunk import RrdReader
@@ -201,6 +202,49 @@ def _blueprint_ranges(rrd: Path) -> tuple[list[tuple[float, float]], list[tuple[
             selected += [(r[0]["min"] / TICKS_PER_S, r[0]["max"] / TICKS_PER_S) for r in
                          batch.column("TimePanelBlueprint:time_selection").to_pylist() if r]
     return shown, selected, linked
+
+
+def _y_ranges(rrd: Path) -> dict[str, tuple[float, float]]:
+    """In a saved .rrd: the fixed y range of each time plot by its origin (not the bands)."""
+    reader = RrdReader(rrd)
+    origin, shown = {}, {}
+    for chunk in reader.stream(store=reader.blueprints()[0]).to_chunks():
+        batch = chunk.to_record_batch()
+        if "ViewBlueprint:space_origin" in batch.schema.names:
+            origin[chunk.entity_path] = batch.column("ViewBlueprint:space_origin").to_pylist()[0][0]
+        if "ScalarAxis:range" in batch.schema.names:
+            shown[chunk.entity_path.removesuffix("/ScalarAxis")] = tuple(
+                batch.column("ScalarAxis:range").to_pylist()[0][0])
+    return {origin[v]: r for v, r in shown.items() if origin[v] != "bands"}
+
+
+def test_view_with_a_model_fixes_the_y_ranges_fit_does(fitted, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """``view --model`` sets the plots' y ranges as ``fit --rrd`` does (without, rerun fits a
+    ± 0.07 input to a plot ticked at 0 only), each holding every value logged under it; the
+    flight alone gets the flight's."""
+    out_dir, _ = fitted
+    log = str(FIXTURES / "sysid_roll.bin")
+    out, bare = tmp_path / "view.rrd", tmp_path / "bare.rrd"
+    assert run("view", log, "--model", str(out_dir / "model.json"), "--save",
+               str(out)).returncode == 0
+    assert run("view", log, "--save", str(bare)).returncode == 0
+    got, fit = _y_ranges(out), _y_ranges(out_dir / "fit.rrd")
+    assert {"flight/rates", "flight/inputs", "flight/thrust", "axes/roll/inputs"} <= set(got)
+    assert {k: v for k, v in got.items() if k.startswith("flight/")} == {
+        k: v for k, v in fit.items() if k.startswith("flight/")}
+    assert set(fit) <= set(got)
+    assert _y_ranges(bare) == {k: v for k, v in got.items() if k.startswith("flight/")}
+    values: dict[str, list[float]] = {}
+    for chunk in RrdReader(out).stream().to_chunks():
+        batch = chunk.to_record_batch()
+        if "Scalars:scalars" in batch.schema.names:
+            values[chunk.entity_path] = [x[0] for x in batch.column("Scalars:scalars").to_pylist()
+                                         if x and x[0] is not None]
+    for origin, (lo, hi) in got.items():
+        shown = [x for k, xs in values.items() if k.startswith(f"/{origin}/") for x in xs]
+        assert shown, origin
+        finite = np.array(shown)[np.isfinite(shown)]
+        assert lo <= finite.min() and finite.max() <= hi, origin
 
 
 def test_view_with_a_model_opens_on_the_first_validation_segment(fitted, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]

@@ -85,6 +85,7 @@ __all__ = [
     "MAX_FLIGHT_POINTS",
     "Targets",
     "blueprint",
+    "flight_ranges",
     "focus_span",
     "log_attitude",
     "log_bands",
@@ -98,6 +99,7 @@ __all__ = [
     "merged_spans",
     "model_attitude",
     "rate_targets",
+    "result_blueprint",
     "result_focus",
     "save_rrd",
     "series_kind",
@@ -789,24 +791,32 @@ def blueprint(
     )
 
 
-def value_ranges(result: FitResult) -> dict[str, tuple[float, float]]:
-    """Each plot's y range (:func:`mavsid.viz.series.nice_range`) where the data's is known
-    before the viewer opens, by the plot's origin: the flight's series by kind (the whole
-    flight: what the flight tab is for) and each axis's model inputs on its validation
-    segments (inputs of ± 0.07 drew a plot ticked at 0 only); thrust on its own scale, 0 to
-    1 (a hover's 0.39 ... 0.40 otherwise gets no tick a short plot can label). The predicted
-    rates and the rate targets are left to rerun (a free run can diverge)."""
+def flight_ranges(flights: Sequence[FlightData]) -> dict[str, tuple[float, float]]:
+    """Each flight plot's y range (:func:`mavsid.viz.series.nice_range`) by its origin: the
+    flights' series by kind over the whole flight (what the flight tab is for); thrust on its
+    own scale, 0 to 1 (a hover's 0.39 ... 0.40 otherwise gets no tick a short plot can
+    label)."""
     pad = RANGE_MARGIN
     out: dict[str, tuple[float, float]] = {"flight/thrust": (-pad, 1.0 + pad)}
     for kind, names in KINDS.items():
         if kind == "thrust":
             continue
-        found = [data[:, names_of.index(n)] for fd in result.flights
+        found = [data[:, names_of.index(n)] for fd in flights
                  for names_of, data in ((fd.state_names, fd.states), (fd.input_names, fd.inputs))
                  for n in names if n in names_of]
         shown = nice_range(np.concatenate(found)) if found else None
         if shown is not None:
             out[f"flight/{kind}"] = shown
+    return out
+
+
+def value_ranges(result: FitResult) -> dict[str, tuple[float, float]]:
+    """Each plot's y range (:func:`mavsid.viz.series.nice_range`) where the data's is known
+    before the viewer opens, by the plot's origin: the flight's (:func:`flight_ranges`) and
+    each axis's model inputs on its validation segments (inputs of ± 0.07 drew a plot ticked
+    at 0 only). The predicted rates and the rate targets are left to rerun (a free run can
+    diverge)."""
+    out = flight_ranges(result.flights)
     for axis, fit in result.axes.items():
         found = [seg.inputs[:, seg.input_names.index(n)] for seg in fit.held_out
                  for n in fit.validation.input_names if n in seg.input_names]
@@ -814,6 +824,15 @@ def value_ranges(result: FitResult) -> dict[str, tuple[float, float]]:
         if shown is not None:
             out[f"axes/{axis}/inputs"] = shown
     return out
+
+
+def result_blueprint(result: FitResult, targets: Targets, *,
+                     flight: bool = True) -> rrb.Blueprint:
+    """:func:`blueprint` of a fit or validation ``result`` (``targets``: its
+    :func:`rate_targets`): opening on its first validation segment, with its y ranges
+    (:func:`value_ranges`) -- the one layout of ``fit --rrd`` and ``view --model``."""
+    return blueprint(list(result.axes), with_flight=flight, focus=result_focus(result),
+                     targets=target_axes(targets), y_ranges=value_ranges(result))
 
 
 def log_flight_windows(
@@ -953,8 +972,7 @@ def save_rrd(
     """Write ``result`` with its blueprint to an ``.rrd`` file (``gains``: as
     :func:`log_fit_result`); returns the blueprint."""
     targets = rate_targets(result)
-    bp = blueprint(list(result.axes), with_flight=flight, focus=result_focus(result),
-                   targets=target_axes(targets), y_ranges=value_ranges(result))
+    bp = result_blueprint(result, targets, flight=flight)
     with rrd_file(path, bp) as rec:
         log_fit_result(rec, result, flight=flight, targets=targets, gains=gains)
     return bp

@@ -587,6 +587,7 @@ def format_result(result: FitResult, validating: bool = False) -> str:
     x.bin: no axis fitted
     """
     from mavsid.channels import source_text
+    from mavsid.physical import parameter_order
     from mavsid.verdict import format_fit
 
     logs = ", ".join(result.logs)
@@ -623,7 +624,8 @@ def format_result(result: FitResult, validating: bool = False) -> str:
         lines += _physical_lines(axis, f.output, d)
         width = max((len(k) for k in d["params"]), default=0)
         # continuous-time parameters first, the discrete-time coefficients after them
-        for name, value in sorted(d["params"].items(), key=lambda kv: "_d[" in kv[0]):
+        for name in parameter_order(d["params"]):
+            value = d["params"][name]
             sigma = d["stderr"].get(name)
             unit = d["units"].get(name, "")
             lines.append(

@@ -426,32 +426,13 @@ def _verdict_html(fit: AxisFit) -> str:
 
 
 def _physical(fit: AxisFit) -> str:
-    """What a tuner reads first: time constant, bandwidth, effectiveness, delay, lag,
-    filters, with σ where the model gives them."""
-    m = fit.model
-    y, u = fit.output, f"u_{fit.axis}"
-    params, stderr = m.params, getattr(m, "stderr", {}) or {}
-    prov = dict(getattr(m, "provenance", {}) or {})
-    rows = []
-    a, sa = params.get(f"A[{y},{y}]"), stderr.get(f"A[{y},{y}]", np.nan)
-    b, sb = params.get(f"B[{y},{u}]"), stderr.get(f"B[{y},{u}]", np.nan)
-    if a is not None and a < 0:
-        tau = -1.0 / a
-        rows.append(("time constant 1/damping", _num(tau), _num(tau * sa / abs(a)), "s"))
-        rows.append(("open-loop pole (bandwidth)", _num(-a / (2 * np.pi)),
-                     _num(sa / (2 * np.pi)), "Hz"))
-    if b is not None:
-        rows.append((f"control effectiveness B ({u} → {y}′)", _num(b), _num(sb),
-                     "rad/s² per unit"))
-    delay = float(getattr(m, "delay_s", 0.0) or 0.0)
-    rows.append(("input delay", _num(delay * 1e3), "", "ms"))
-    lag = prov.get("lag_s")
-    if isinstance(lag, (int, float)) and lag > 0:
-        rows.append(("input lag (motor/ESC)", _num(float(lag) * 1e3), "", "ms"))
-    for f in getattr(m, "filters", ()):
-        rows.append((f"known filter ({f.source})", _num(f.cutoff_hz), "", f"Hz, order {f.order}"))
-    body = "".join(f'<tr><td class="name">{html.escape(n)}</td><td>{v}</td><td>{s}</td>'
-                   f"<td>{html.escape(un)}</td></tr>" for n, v, s, un in rows)
+    """What a tuner reads first (:func:`mavsid.physical.physical_rows`): time constant,
+    bandwidth, effectiveness, delay, lag, filters, with σ where the model gives them."""
+    from mavsid.physical import physical_rows
+
+    body = "".join(f'<tr><td class="name">{html.escape(r.name)}</td><td>{_num(r.value)}</td>'
+                   f"<td>{'' if np.isnan(r.sigma) else _num(r.sigma)}</td>"
+                   f"<td>{html.escape(r.unit)}</td></tr>" for r in physical_rows(fit))
     return ('<table><tr><th class="name">physical parameter</th><th>value</th><th>σ</th>'
             f"<th>unit</th></tr>{body}</table>")
 
@@ -509,10 +490,13 @@ def _axis_section(fit: AxisFit) -> list[str]:
     m, v = fit.model, fit.validation
     stderr = getattr(m, "stderr", {}) or {}
     units = getattr(m, "units", {}) or {}
+    from mavsid.physical import parameter_order
+
+    # the continuous-time parameters, then the discrete-time coefficients
     rows = "".join(
-        f'<tr><td class="name">{html.escape(k)}</td><td>{_num(val)}</td>'
+        f'<tr><td class="name">{html.escape(k)}</td><td>{_num(m.params[k])}</td>'
         f"<td>{_num(stderr.get(k, np.nan))}</td><td>{html.escape(str(units.get(k, '')))}</td></tr>"
-        for k, val in m.params.items()
+        for k in parameter_order(m.params)
     )
     keys = ("one_step", horizon_label(0.5), "free_run")
     fit_rows = "".join(

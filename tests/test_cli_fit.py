@@ -579,3 +579,45 @@ def test_fit_table_leads_with_the_physical_parameters() -> None:
     assert abs(float(tau) - 1 / truth["damping"]) < 3 * float(sigma)
     b, _, sb = lines[head + 2].split()[2:5]
     assert abs(float(b) - truth["effectiveness"]) < 3 * float(sb)
+
+
+def _rows(lines: list[str]) -> list[list[str]]:
+    """The rows of a markdown table's body (``lines`` from its header on)."""
+    body = []
+    for line in lines[2:]:
+        if not line.startswith("|"):
+            break
+        body.append([c.strip() for c in line.strip("|").split("|")])
+    return body
+
+
+def test_viewer_summary_and_report_lead_with_the_physical_parameters(fitted) -> None:  # type: ignore[no-untyped-def]
+    """The rerun summary's and the HTML report's first parameter row of an axis is its time
+    constant (within 3σ of the truth's 1/damping), before B, delay and lag; the
+    discrete-time coefficients come after the continuous-time ones (``A_d[p,p]`` led)."""
+    import html as html_mod
+    import re
+
+    out_dir, _ = fitted
+    truth = json.loads((FIXTURES / "sysid_roll.truth.json").read_text())["axes"]["roll"]
+    docs = [x[0] for c in RrdReader(out_dir / "fit.rrd").stream().to_chunks()
+            if c.entity_path == "/summary"
+            for x in c.to_record_batch().column("TextDocument:text").to_pylist()]
+    lines = docs[0].split("\n")[docs[0].split("\n").index("## roll"):]
+    tables = [i for i, x in enumerate(lines) if x.startswith("| ") and "| value | σ |" in x]
+    physical, fitted_rows = _rows(lines[tables[0]:]), _rows(lines[tables[1]:])
+    assert lines[tables[0]].startswith("| physical parameter |")
+    assert [r[0].split()[0] for r in physical[:4]] == ["time", "open-loop", "control", "input"]
+    tau, sigma = float(physical[0][1]), float(physical[0][2])
+    assert physical[0][3] == "s" and abs(tau - 1 / truth["damping"]) < 3 * sigma
+    names = [r[0] for r in fitted_rows]
+    assert names[0] == "A[p,p]" and all("_d[" in n for n in names[names.index("A_d[p,p]"):])
+
+    page = (out_dir / "fit.html").read_text()
+    section = page[page.index("<h2>roll</h2>"):]
+    cells = [html_mod.unescape(re.sub(r"<[^>]+>", "", c))
+             for c in re.findall(r'<td class="name">(.*?)</td>', section)]
+    assert cells[0] == "time constant 1/damping"
+    assert cells.index("control effectiveness B (u_roll → p′)") < cells.index("A[p,p]")
+    fitted_names = [c for c in cells if re.fullmatch(r"\w+\[[\w,]+\]", c)][:len(names)]
+    assert fitted_names == names

@@ -50,6 +50,7 @@ import rerun.blueprint as rrb
 from mavsid.axes import AXES, INPUT_OF, RATE_OF, RATES, STATE_UNITS, THRUST_INPUT
 from mavsid.data import FlightData, Segment, decimate
 from mavsid.numerics.rotations import euler_to_quat
+from mavsid.physical import parameter_order, physical_rows
 from mavsid.validation import Validation, horizon_label
 from mavsid.viz.series import (
     AXIS_COLOURS,
@@ -652,12 +653,17 @@ def log_summary(rec: rr.RecordingStream, fits: Sequence[AxisFit],
                   + (f", input lag {float(lag) * 1e3:.0f} ms"
                      if isinstance(lag, (int, float)) and lag > 0 else "")
                   + (f", {filters}" if filters else "") + f"; estimator {fit.estimator}", ""]
-        lines += ["| parameter | value | σ | unit |", "|---|---|---|---|"]
+        # what a tuner reads first, then the continuous- and discrete-time coefficients
+        lines += ["| physical parameter | value | σ | unit |", "|---|---|---|---|"]
+        lines += [f"| {r.name} | {format_number(r.value)} | "
+                  f"{'' if np.isnan(r.sigma) else format_number(r.sigma)} | {r.unit} |"
+                  for r in physical_rows(fit)]
+        lines += ["", "| parameter | value | σ | unit |", "|---|---|---|---|"]
         stderr = getattr(m, "stderr", {}) or {}
         units = getattr(m, "units", {}) or {}
-        for k, val in m.params.items():
-            lines.append(f"| {k} | {format_number(val)} | {format_number(stderr.get(k, np.nan))} | "
-                         f"{units.get(k, '')} |")
+        for k in parameter_order(m.params):
+            lines.append(f"| {k} | {format_number(m.params[k])} | "
+                         f"{format_number(stderr.get(k, np.nan))} | {units.get(k, '')} |")
         lines += ["", "| output | " + " | ".join(_fit_keys()) + " |", "|---" * 4 + "|"]
         for state in v.state_names:
             s = v.fit_summary(state)

@@ -252,7 +252,8 @@ def test_bands_phase_and_focus(toy, rrd) -> None:  # type: ignore[no-untyped-def
     for m, name in ((0, "STABILIZE"), (25, "SYS?ID")):
         t, level = _series(bands, f"/bands/mode/{m}")
         inside = (_ms(flight.time_s) >= t[0]) & (_ms(flight.time_s) < t[-1])
-        assert np.all(modes[inside] == m) and set(level[np.isfinite(level)]) == {0.0}
+        assert np.all(modes[inside] == m)
+        assert set(level[np.isfinite(level)]) == {recording.BAND_LEVELS["mode"]}
         assert bands[f"/bands/mode/{m}"]["SeriesLines:names"] == [[f"mode {name}"]]
     data.update(bands)
     # nothing the viewer's font cannot draw (an unknown glyph in a label panics it)
@@ -587,3 +588,96 @@ def test_bode_labels_do_not_overlap(rrd) -> None:  # type: ignore[no-untyped-def
                                                     "coherence"):
                 for p0, p1, q0, q1 in areas:
                     assert a1 <= p0 or p1 <= a0 or b1 <= q0 or q1 <= b0, (a, "plot area")
+
+
+def _views(path: Path) -> dict[str, dict[str, object]]:
+    """The blueprint's views by origin: class and visual bounds (several of one origin:
+    the last)."""
+    bp = _blueprint_rows(path)
+    out: dict[str, dict[str, object]] = {}
+    for entity, cols in bp.items():
+        if "ViewBlueprint:space_origin" in cols:
+            out[cols["ViewBlueprint:space_origin"][0][0]] = {
+                "class": cols["ViewBlueprint:class_identifier"][0][0],
+                "bounds": (bp.get(f"{entity}/VisualBounds2D", {})
+                           .get("VisualBounds2D:range", [[None]])[0][0]),
+                "y_range": (bp.get(f"{entity}/ScalarAxis", {})
+                            .get("ScalarAxis:range", [[None]])[0][0])}
+    return out
+
+
+def test_the_bands_plot_has_no_tick_for_its_rows(rrd) -> None:  # type: ignore[no-untyped-def]
+    """The bands' y values are rows, not values: its fixed y range holds every row and no
+    whole number, the step rerun labels at a band plot's height (from -0.7 to 4.7 it
+    labelled a lone "0")."""
+    data, _ = _read(rrd)
+    lo, hi = _views(rrd)["bands"]["y_range"]  # type: ignore[misc]
+    rows = {x[0] for k, cols in data.items() if k.startswith("/bands/")
+            for x in cols.get("Scalars:scalars", []) if x and np.isfinite(x[0])}
+    assert rows and all(lo < r < hi for r in rows)
+    assert np.floor(lo) == np.floor(hi) and lo > np.floor(lo)
+
+
+@pytest.mark.slow
+def test_an_axis_without_a_bode_plot_says_why(toy, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """On a real flight whose yaw segments are no SYSTEMID run, the yaw Bode tab is a text
+    saying so (it read "No data available"); roll's is the plot; the toy's chirps give every
+    axis a plot and no note."""
+    import warnings
+
+    from helpers import real_path
+
+    from mavsid.pipeline import fit
+
+    assert all(recording.bode_note(f) is None for f in toy[1].axes.values())
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = fit([str(real_path("keita", "00000071.BIN"))])
+    assert {"roll", "yaw"} <= set(result.axes)
+    assert not any(s.source == "sysid" for s in result.axes["yaw"].held_out)
+    path = tmp_path / "k.rrd"
+    recording.save_rrd(result, path, flight=False)
+    data, _ = _read(path)
+    views = _views(path)
+    note = " ".join(x[0] for x in data["/frequency/yaw"]["TextDocument:text"])
+    assert "no validation segment is a SYSTEMID run" in note
+    assert result.axes["yaw"].frequency_note in note
+    assert views["frequency/yaw"]["class"] == "TextDocument"
+    assert views["frequency/roll"]["class"] == "2D"
+    assert any(k.startswith("/frequency/roll/") for k in data)
+
+
+def test_response_spectra_are_framed_and_a_missing_one_says_why(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """Each spectra plot of ``response --rrd`` has its frame set and holds every point it
+    logs (labels included) inside it (fitted by rerun, the labels lost their room); an axis
+    with no spectrum shows why instead of "No data available"."""
+    import dataclasses
+    import warnings
+
+    from mavsid import response
+    from mavsid.viz.response import save_response_rrd
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        found = response.read_response(FIXTURES / "sysid_3axis.bin", ("roll", "pitch", "yaw"))
+    assert {"roll", "yaw"} <= set(found.spectra)
+    bare = dataclasses.replace(found, spectra={k: v for k, v in found.spectra.items()
+                                               if k != "yaw"})
+    path = tmp_path / "r.rrd"
+    save_response_rrd([bare], path)
+    data, _ = _read(path)
+    views = _views(path)
+    for axis in ("roll", "pitch"):
+        bounds = views[f"spectrum/{axis}"]["bounds"]
+        assert views[f"spectrum/{axis}"]["class"] == "2D" and bounds is not None
+        (x0, x1), (y0, y1) = bounds["x_range"], bounds["y_range"]  # type: ignore[index]
+        pts = [np.asarray(p, dtype=float).reshape(-1, 2) for k, cols in data.items()
+               if k.startswith(f"/spectrum/{axis}/")
+               for col in ("Points2D:positions", "LineStrips2D:strips")
+               for row in cols.get(col, []) for p in row]
+        every = np.concatenate(pts)
+        assert len(pts) > 3
+        assert (x0 <= every[:, 0].min() and every[:, 0].max() <= x1
+                and y0 <= every[:, 1].min() and every[:, 1].max() <= y1)
+    assert views["spectrum/yaw"]["class"] == "TextDocument"
+    assert "No spectrum for yaw" in data["/spectrum/yaw"]["TextDocument:text"][0][0]

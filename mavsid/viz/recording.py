@@ -51,7 +51,7 @@ from mavsid.axes import AXES, INPUT_OF, RATE_OF, RATES, STATE_UNITS, THRUST_INPU
 from mavsid.data import FlightData, Segment, decimate
 from mavsid.numerics.rotations import euler_to_quat
 from mavsid.physical import parameter_order, physical_rows
-from mavsid.validation import Validation, horizon_label
+from mavsid.validation import FrequencyResponse, Validation, horizon_label
 from mavsid.viz.series import (
     AXIS_COLOURS,
     COHERENCE,
@@ -86,6 +86,7 @@ __all__ = [
     "MAX_FLIGHT_POINTS",
     "Targets",
     "blueprint",
+    "bode_note",
     "flight_ranges",
     "focus_span",
     "log_attitude",
@@ -310,7 +311,11 @@ def log_segments(
 # --------------------------------------------------------------------------- bands
 
 #: Band levels on the ``bands`` plot (top to bottom): one row per axis, then airborne, modes.
-BAND_LEVELS = {"roll": 4.0, "pitch": 3.0, "yaw": 2.0, "airborne": 1.0, "mode": 0.0}
+#: The bands' rows (y values) and the bands plot's y range: rows, not values, so the range
+#: lies between two whole numbers, 0.15 apart, where rerun labels no tick at a band plot's
+#: height (from 0 ... 4 it labelled a "0", the modes' row).
+BAND_LEVELS = {"roll": 0.8, "pitch": 0.65, "yaw": 0.5, "airborne": 0.35, "mode": 0.2}
+BAND_RANGE = (0.05, 0.95)
 BAND_WIDTH = 6.0
 REJECTED = (110, 110, 110)
 
@@ -404,7 +409,7 @@ def log_bands(
         spans = value_spans(t, np.asarray(air, dtype=np.int64)).get(1, [])
         _band(rec, f"bands/airborne{sub}", spans, BAND_LEVELS["airborne"], MEASURED, "airborne")
     for axis in dict.fromkeys([*segments, *windows]):
-        level = BAND_LEVELS.get(axis, -1.0)
+        level = BAND_LEVELS.get(axis, 0.9)  # (an axis without a row: above them)
         colour = AXIS_COLOURS.get(axis, FREE_RUN)
         train, held_out = segments.get(axis, ((), ()))
         dim = tuple(int(c * 0.55) for c in colour)
@@ -476,12 +481,36 @@ def _log_fit_plot(rec: rr.RecordingStream, axis: str, v: Validation) -> None:
     )
 
 
+def _bode_bins(fr: FrequencyResponse) -> np.ndarray:
+    """The frequencies of ``fr`` a Bode plot shows: those in the chirp's band."""
+    band = fr.band_hz or (fr.freq_hz[1], fr.freq_hz[-1])
+    return (fr.freq_hz >= band[0]) & (fr.freq_hz <= band[1])
+
+
+def bode_note(fit: AxisFit) -> str | None:
+    """Why ``fit`` has no Bode plot (:func:`log_validation` draws one per frequency response
+    of its validation with two frequencies or more in the chirp's band), or None when it has
+    one."""
+    v = fit.validation
+    if any(_bode_bins(fr).sum() >= 2 for fr in v.frequency):
+        return None
+    chirps = [s for s in fit.held_out if s.source == "sysid"]
+    if not chirps:
+        why = "no validation segment is a SYSTEMID run (a chirp): the Bode plot is measured on one"
+    elif not v.frequency:
+        why = (f"its {len(chirps)} SYSTEMID validation segment(s) are shorter than 1 s, too "
+               "short for a frequency response")
+    else:
+        why = "the frequency response has fewer than two frequencies in the chirp's band"
+    note = f"; against the injection: {fit.frequency_note}" if fit.frequency_note else ""
+    return f"No Bode plot for {fit.axis}: {why}{note}."
+
+
 def _log_frequency_plot(rec: rr.RecordingStream, axis: str, v: Validation) -> None:
     """Bode plot of measured and model response: magnitude (dB) on top, phase (deg) below
     it, coherence at the bottom, each with a legend."""
     for fr in v.frequency:
-        band = fr.band_hz or (fr.freq_hz[1], fr.freq_hz[-1])
-        sel = (fr.freq_hz >= band[0]) & (fr.freq_hz <= band[1])
+        sel = _bode_bins(fr)
         if sel.sum() < 2:
             continue
         f = fr.freq_hz[sel]
@@ -681,11 +710,9 @@ def _fit_keys() -> tuple[str, ...]:
 
 
 def _bands_view() -> rrb.TimeSeriesView:
-    top = max(BAND_LEVELS.values()) + 0.7
     return time_view("bands", "modes & segments: roll, pitch, yaw rows (training dim, "
                      "validation bright, rejected grey), airborne, modes (named in segments)",
-                     axis_y=rrb.ScalarAxis(range=(min(BAND_LEVELS.values()) - 0.7, top),
-                                           zoom_lock=True))
+                     axis_y=rrb.ScalarAxis(range=BAND_RANGE, zoom_lock=True))
 
 
 #: Colour names of the series, for the plots' titles (the plots have no legend).
@@ -727,6 +754,7 @@ def blueprint(
     focus: tuple[float, float] | None = None,
     targets: Sequence[str] = (),
     y_ranges: Mapping[str, tuple[float, float]] = {},
+    no_bode: Sequence[str] = (),
 ) -> rrb.Blueprint:
     """The layout: a tab per axis (predicted vs measured rate, input, rate target, under the
     modes-and-segments bands) and two of the flight by kind; beside them the summary and segments,
@@ -744,7 +772,8 @@ def blueprint(
     column were 45 pixels each: a tick at 0 and nothing else); none has a legend (rerun
     draws it over the data): titles name the colours. ``y_ranges`` (from
     :func:`value_ranges`) fixes a plot's y axis by its origin: without, rerun fits it to the
-    data, on which a small range can get a single tick.
+    data, on which a small range can get a single tick. ``no_bode``: the axes without a Bode
+    plot, whose tab shows why (:func:`bode_note`) instead.
     """
     def view(origin: str, name: str, **kw: object) -> rrb.TimeSeriesView:
         shown = y_ranges.get(origin)
@@ -773,7 +802,8 @@ def blueprint(
     left = rrb.Tabs(*tabs, *([angles, rates] if with_flight or not tabs else []))
     plots: list[rrb.View] = []
     for axis in axes:
-        plots.append(rrb.Spatial2DView(
+        plots.append(rrb.TextDocumentView(origin=f"frequency/{axis}", name=f"{axis}: no Bode")
+                     if axis in no_bode else rrb.Spatial2DView(
             origin=f"frequency/{axis}", name=f"{axis}: Bode |H|, phase, coherence",
             visual_bounds=rrb.VisualBounds2D(x_range=BODE_FRAME[0], y_range=BODE_FRAME[1])))
         plots.append(rrb.Spatial2DView(
@@ -838,7 +868,8 @@ def result_blueprint(result: FitResult, targets: Targets, *,
     :func:`rate_targets`): opening on its first validation segment, with its y ranges
     (:func:`value_ranges`) -- the one layout of ``fit --rrd`` and ``view --model``."""
     return blueprint(list(result.axes), with_flight=flight, focus=result_focus(result),
-                     targets=target_axes(targets), y_ranges=value_ranges(result))
+                     targets=target_axes(targets), y_ranges=value_ranges(result),
+                     no_bode=[a for a, f in result.axes.items() if bode_note(f) is not None])
 
 
 def log_flight_windows(
@@ -896,6 +927,9 @@ def log_fit_result(rec: rr.RecordingStream, result: FitResult, *, flight: bool =
     for fit in fits:
         log_segments(rec, fit.axis, fit.train, fit.held_out, fit.windows)
         log_validation(rec, fit.axis, fit.validation, fit.held_out)
+        note = bode_note(fit)
+        if note is not None:  # (the blueprint shows it where the Bode plot would be)
+            rec.log(f"frequency/{fit.axis}", rr.TextDocument(note), static=True)
     log_rate_targets(rec, result, targets)
     log_summary(rec, fits, gains)
 

@@ -65,6 +65,50 @@ def _step_range(values: np.ndarray) -> tuple[float, float]:
     return max(lo, -1.0), min(hi, 3.0)
 
 
+Series2D = tuple[str, np.ndarray, np.ndarray, Sequence[int]]
+
+
+def _axes(responses: Sequence[FlightResponse]) -> list[str]:
+    """The axes of any loop of ``responses``, in order."""
+    return list(dict.fromkeys(r.axis for fr in responses for r in fr.loops))
+
+
+def _no_spectrum(axis: str) -> str:
+    return (f"No spectrum for {axis}: no log has a stretch of its gyro or controller output "
+            "in flight long enough for one.")
+
+
+def _spectrum_plots(
+    responses: Sequence[FlightResponse],
+) -> dict[str, tuple[list[Series2D], tuple[float, float]]]:
+    """Per axis with one, the spectra plot's series (each log's gyro and controller-output
+    spectra [dB], then the filters' cut-offs within their band as vertical marks) and its
+    y range (on whole 10 dB)."""
+    spectra: dict[str, list[Series2D]] = {}
+    cutoffs: dict[str, dict[str, float]] = {}
+    for i, (fr, tag) in enumerate(zip(responses, _log_tags(responses), strict=True)):
+        colour = LOG_COLOURS[i % len(LOG_COLOURS)]
+        for axis, found in fr.spectra.items():
+            for k, sp in enumerate(found):
+                ok = (sp.freq_hz > 0) & (sp.psd > 0)
+                if ok.sum() < 2:
+                    continue
+                shade = colour if k == 0 else tuple(min(255, c + 70) for c in colour)
+                spectra.setdefault(axis, []).append(
+                    (f"{tag} {sp.name}", sp.freq_hz[ok], 10 * np.log10(sp.psd[ok]), shade))
+                cutoffs.setdefault(axis, {}).update(sp.cutoffs)
+    out = {}
+    for axis, series in spectra.items():
+        lo = min(float(x.min()) for _, x, _, _ in series)
+        hi = max(float(x.max()) for _, x, _, _ in series)
+        ys = np.concatenate([y for *_, y, _ in series])
+        y_lo, y_hi = float(np.floor(ys.min() / 10) * 10), float(np.ceil(ys.max() / 10) * 10)
+        marks = [(f"{name} {hz:g} Hz", np.array([hz, hz]), np.array([y_lo, y_hi]), COHERENCE)
+                 for name, hz in cutoffs.get(axis, {}).items() if lo <= hz <= hi]
+        out[axis] = ([*series, *marks], (y_lo, y_hi))
+    return out
+
+
 def log_response(rec: rr.RecordingStream, responses: Sequence[FlightResponse],
                  notes: Sequence[str] = ()) -> None:
     """Closed-loop responses (:mod:`mavsid.response`) into ``rec``: per axis and loop the
@@ -78,8 +122,6 @@ def log_response(rec: rr.RecordingStream, responses: Sequence[FlightResponse],
              "| log | axis | loop | rise ms | overshoot % | bandwidth Hz | verdict |",
              "|---|---|---|---|---|---|---|"]
     steps: dict[tuple[str, str], list[tuple[str, np.ndarray, np.ndarray, Sequence[int]]]] = {}
-    spectra: dict[str, list[tuple[str, np.ndarray, np.ndarray, Sequence[int]]]] = {}
-    cutoffs: dict[str, dict[str, float]] = {}
     for i, (fr, tag) in enumerate(zip(responses, tags, strict=True)):
         colour = LOG_COLOURS[i % len(LOG_COLOURS)]
         for r in fr.loops:
@@ -101,15 +143,6 @@ def log_response(rec: rr.RecordingStream, responses: Sequence[FlightResponse],
                          f"{format_number((r.rise_s or math.nan) * 1e3)} | "
                          f"{format_number(overshoot)}"
                          f" | {format_number(r.bandwidth_hz or math.nan)} | {r.verdict} |")
-        for axis, found in fr.spectra.items():
-            for k, sp in enumerate(found):
-                ok = (sp.freq_hz > 0) & (sp.psd > 0)
-                if ok.sum() < 2:
-                    continue
-                shade = colour if k == 0 else tuple(min(255, c + 70) for c in colour)
-                spectra.setdefault(axis, []).append(
-                    (f"{tag} {sp.name}", sp.freq_hz[ok], 10 * np.log10(sp.psd[ok]), shade))
-                cutoffs.setdefault(axis, {}).update(sp.cutoffs)
     for (axis, loop), series in steps.items():
         end = max(float(x[-1]) for _, x, _, _ in series)
         lo, hi = _step_range(np.concatenate([y for _, _, y, _ in series]))
@@ -117,17 +150,18 @@ def log_response(rec: rr.RecordingStream, responses: Sequence[FlightResponse],
                x_ticks=np.linspace(0.0, end, 6).round(3),
                y_ticks=np.arange(lo, hi + 1e-9, 0.25 if hi - lo <= 2 else 0.5), x_unit=" s",
                y_unit="", y_range=(lo, hi), legend=True)
-    for axis, series in spectra.items():
+    plotted = _spectrum_plots(responses)
+    for axis in _axes(responses):
+        if axis not in plotted:
+            rec.log(f"spectrum/{axis}", rr.TextDocument(_no_spectrum(axis)), static=True)
+            continue
+        series, (y_lo, y_hi) = plotted[axis]
         lo = min(float(x.min()) for _, x, _, _ in series)
         hi = max(float(x.max()) for _, x, _, _ in series)
-        ys = np.concatenate([y for *_, y, _ in series])
-        y_lo, y_hi = float(np.floor(ys.min() / 10) * 10), float(np.ceil(ys.max() / 10) * 10)
-        marks = [(f"{name} {hz:g} Hz", np.array([hz, hz]), np.array([y_lo, y_hi]), COHERENCE)
-                 for name, hz in cutoffs.get(axis, {}).items() if lo <= hz <= hi]
         decades = 10.0 ** np.arange(np.floor(np.log10(lo)), np.ceil(np.log10(hi)) + 1)
-        plot2d(rec, f"spectrum/{axis}", [*series, *marks], xlog=True, x_ticks=decades,
-                y_ticks=np.arange(y_lo, y_hi + 1, 20), x_unit=" Hz", y_unit=" dB",
-                y_range=(y_lo, y_hi), legend=True)
+        plot2d(rec, f"spectrum/{axis}", series, xlog=True, x_ticks=decades,
+               y_ticks=np.arange(y_lo, y_hi + 1, 20), x_unit=" Hz", y_unit=" dB",
+               y_range=(y_lo, y_hi), legend=True)
     rec.log("summary", rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN),
             static=True)
 
@@ -153,8 +187,18 @@ def response_blueprint(responses: Sequence[FlightResponse]) -> rrb.Blueprint:
             plots.append(rrb.Spatial2DView(
                 origin=f"step/{axis}/{loop}", name=f"{axis} {loop}: step response",
                 visual_bounds=rrb.VisualBounds2D(x_range=x_range, y_range=y_range)))
-    plots += [rrb.Spatial2DView(origin=f"spectrum/{axis}", name=f"{axis}: spectra [dB]")
-              for axis in dict.fromkeys(a for a, _ in keys)]
+    # framed as the step plots are (fitted to its content, rerun left the labels no room)
+    spectra = _spectrum_plots(responses)
+    for axis in _axes(responses):
+        if axis not in spectra:
+            plots.append(rrb.TextDocumentView(origin=f"spectrum/{axis}",
+                                              name=f"{axis}: no spectra"))
+            continue
+        names = [name for name, *_ in spectra[axis][0]]
+        x_range, y_range = plot_frame(legend_rows=legend_layout(names)[0])
+        plots.append(rrb.Spatial2DView(
+            origin=f"spectrum/{axis}", name=f"{axis}: spectra [dB]",
+            visual_bounds=rrb.VisualBounds2D(x_range=x_range, y_range=y_range)))
     summary = rrb.TextDocumentView(origin="summary", name="summary")
     right = rrb.Vertical(summary, rrb.Tabs(*plots), row_shares=[1, 3]) if plots else summary
     left = rrb.Vertical(*times) if times else rrb.TextDocumentView(origin="summary")

@@ -45,6 +45,7 @@ if TYPE_CHECKING:
     from mavsid.data import FlightData
     from mavsid.estimators.model import Model
     from mavsid.loop.twin import TwinSignals
+    from mavsid.pipeline_results import AxisFit
 
 __all__ = ["FRF", "FRF_STRUCTURE_FLOOR", "FRF_STRUCTURE_MIN_POINTS", "FRF_STRUCTURE_SHIFT",
            "MIN_COHERENCE", "FrfStructure", "TFFit", "fit_tf", "frf", "measured_responses",
@@ -366,10 +367,10 @@ def sysid_spans(flight: FlightData, axis: str) -> list[tuple[int, int, int]]:
     return out
 
 
-def measured_responses(fit: Any, flights: Sequence[FlightData],
+def measured_responses(fit: AxisFit | str, flights: Sequence[FlightData],
                        signals: Sequence[TwinSignals] | None = None, lag: int = 0,
                        which: Sequence[str] = ("plant", "loop", "closed_loop")
-                       ) -> dict[str, Any]:
+                       ) -> dict[str, FRF]:
     """Frequency responses measured on the axis's SYSTEMID runs (whole runs, not the
     train/validation blocks: a chirp's low frequencies need the long windows):
 
@@ -474,7 +475,7 @@ class FrfStructure:
     rate from one input.
     """
 
-    def __init__(self, measured: Any, axis: str, delay_step: float = 0.125) -> None:
+    def __init__(self, measured: FRF, axis: str, delay_step: float = 0.125) -> None:
         ok = (measured.coherent & np.isfinite(measured.response)
               & np.isfinite(measured.error) & (measured.error > 0))
         self.axis, self.delay_step = axis, delay_step

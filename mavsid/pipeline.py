@@ -23,7 +23,7 @@ import dataclasses
 import math
 import os
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -54,6 +54,11 @@ from mavsid.split import split_segments
 from mavsid.threads import one_blas_thread
 from mavsid.validation import Model, Validation, validate
 from mavsid.verdict import Verdict, judge, not_identified, unfitted
+
+if TYPE_CHECKING:
+    from mavsid.estimators.identification import StructureChooser
+    from mavsid.estimators.model import Model as EstimatorModel
+    from mavsid.frequency import FrfStructure
 
 __all__ = [
     "AXES",
@@ -161,7 +166,7 @@ def _nothing(logs: Sequence[str | os.PathLike[str]], verdicts: Mapping[str, Verd
 
 
 def _fit_model(train: Sequence[Segment], axis: str, cfg: PipelineConfig,
-               choose: Any = None) -> Model:
+               choose: StructureChooser | None = None) -> Model:
     from mavsid import estimators
 
     options = dict(cfg.model_options)
@@ -173,7 +178,7 @@ def _fit_model(train: Sequence[Segment], axis: str, cfg: PipelineConfig,
 
 
 def _frf_chooser(axis: str, flights: Sequence[FlightData], signals: Twins,
-                 cfg: PipelineConfig) -> Any:
+                 cfg: PipelineConfig) -> FrfStructure | None:
     """The structure chooser from the axis's SYSTEMID injection (its FRF against the
     injection, :class:`mavsid.frequency.FrfStructure`), None where there is none or the
     configuration fixes the delay or lags."""
@@ -211,10 +216,10 @@ class _InstrumentCheck:
             self.estimate_source = ("the estimate with the commanded attitude (the pilot's "
                                     "sticks) as instrument")
 
-    def __call__(self, models: Any) -> None:
+    def __call__(self, models: Mapping[float, EstimatorModel]) -> None:
         return None
 
-    def estimate(self, model: Any) -> Any:
+    def estimate(self, model: EstimatorModel) -> EstimatorModel | None:
         from mavsid.estimators.instruments import instrument_estimate
 
         return instrument_estimate(model, self.segments, self.references)

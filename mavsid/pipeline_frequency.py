@@ -21,6 +21,8 @@ from mavsid.reasons import injected_nothing
 from mavsid.validation import Model
 
 if TYPE_CHECKING:
+    from mavsid.estimators.identification import StructureChooser
+    from mavsid.estimators.model import Model as EstimatorModel
     from mavsid.frequency_fit import PlantTF
 
 __all__ = [
@@ -224,7 +226,7 @@ def disagrees(model: Model, axis: str, tf: PlantTF) -> bool:
                                       and check["rms_deg"] <= MAX_RESPONSE_RMS_DEG)
 
 
-def tf_chooser(axis: str, tf: PlantTF | None, cfg: PipelineConfig) -> Any:
+def tf_chooser(axis: str, tf: PlantTF | None, cfg: PipelineConfig) -> StructureChooser | None:
     """The structure chooser from the injection-referenced response :func:`plant_fit`
     measured (:class:`mavsid.frequency.FrfStructure`: the lag and delay candidates scored
     against it; the coefficients stay the data's), None without one or where the
@@ -238,10 +240,11 @@ def tf_chooser(axis: str, tf: PlantTF | None, cfg: PipelineConfig) -> Any:
     return chooser.__call__
 
 
-def take_lag(lag_s: float, delay: float) -> Callable[[Mapping[float, Any]], tuple[float, float]]:
+def take_lag(lag_s: float, delay: float
+             ) -> Callable[[Mapping[float, EstimatorModel]], tuple[float, float]]:
     """A ``choose_structure`` that takes the candidate lag nearest ``lag_s`` at ``delay``
     samples (the search always tries no lag too, and prefers it unless it scores worse)."""
-    def choose(models: Mapping[float, Any]) -> tuple[float, float]:
+    def choose(models: Mapping[float, EstimatorModel]) -> tuple[float, float]:
         return min(models, key=lambda lag: abs(lag - lag_s)), delay
 
     return choose

@@ -30,8 +30,11 @@ from mavsid.autopilot import excitation_advice, logging_advice, longer_advice
 from mavsid.axes import INPUT_OF, RATE_OF
 
 if TYPE_CHECKING:
+    from mavsid.data import FlightData, Segment
     from mavsid.excitation import WindowReport
     from mavsid.loop.emulation import ControllerEmulation
+    from mavsid.loop.twin import ClosedLoopFit
+    from mavsid.validation import Model, Validation
 
 __all__ = ["FIT_FLOOR_PCT", "LEVELS", "Verdict", "format_fit", "frequency_checks", "judge",
            "not_identified", "unfitted"]
@@ -172,7 +175,7 @@ def _pole(z: complex, dt: float) -> float:
     return math.log(max(abs(z), 1e-300)) / dt
 
 
-def _rates(flights: Sequence[Any], names: Sequence[str]) -> float | None:
+def _rates(flights: Sequence[FlightData], names: Sequence[str]) -> float | None:
     """The slowest native logging rate (Hz) of the named channels over the flights."""
     found = []
     for fd in flights:
@@ -260,9 +263,10 @@ def frequency_checks(frequency: Mapping[str, Any]) -> dict[str, Any]:
     return {"numbers": nums, "passed": passed, "good": good, "caps": caps, "notes": notes}
 
 
-def judge(axis: str, validation: Any, output: str, *, model: Any = None,
-          train: Sequence[Any] = (), windows: Sequence[Any] = (), flights: Sequence[Any] = (),
-          closed_loop: Any = None, frequency: Mapping[str, Any] | None = None,
+def judge(axis: str, validation: Validation, output: str, *, model: Model | None = None,
+          train: Sequence[Segment] = (), windows: Sequence[WindowReport] = (),
+          flights: Sequence[FlightData] = (), closed_loop: ClosedLoopFit | None = None,
+          frequency: Mapping[str, Any] | None = None,
           emulation: ControllerEmulation | None = None) -> Verdict:
     """The verdict on one fitted axis from everything known about it.
 
@@ -307,14 +311,14 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
     validation : mavsid.validation.Validation
     output : str
         The state that represents the axis (its body rate).
-    model : fitted model, optional
+    model : Model, optional
     train : sequence of Segment, optional
     windows : sequence of WindowReport, optional
         Every window considered for the axis (kept ones give band and coherence).
     flights : sequence of FlightData, optional
         Their ``native_rate_hz`` and ``autopilot``.
-    closed_loop : object, optional
-        With ``fit_percent`` and ``baseline_percent`` (``AxisFit.closed_loop``).
+    closed_loop : ClosedLoopFit, optional
+        The twin's ``fit_percent`` and ``baseline_percent`` (``AxisFit.closed_loop``).
     frequency : Mapping, optional
         The chirp's frequency-domain results (see :func:`frequency_checks`).
     emulation : ControllerEmulation, optional
@@ -517,7 +521,7 @@ def judge(axis: str, validation: Any, output: str, *, model: Any = None,
     return Verdict(axis, "good", tuple(good + notes), (), numbers, tuple(dict.fromkeys(advice)))
 
 
-def _effectiveness(model: Any, output: str, axis: str) -> tuple[str, float, float] | None:
+def _effectiveness(model: Model | None, output: str, axis: str) -> tuple[str, float, float] | None:
     """The model's control effectiveness of ``output`` by the axis's own input (continuous
     ``B[output,u_axis]``): its name, value and standard error; None when it has none.
 
@@ -536,7 +540,7 @@ def _effectiveness(model: Any, output: str, axis: str) -> tuple[str, float, floa
     return name, value, se
 
 
-def _too_slow(rate: float, flights: Sequence[Any]) -> tuple[str, str] | None:
+def _too_slow(rate: float, flights: Sequence[FlightData]) -> tuple[str, str] | None:
     """(reason, advice) when ``rate`` (Hz) cannot resolve a rate loop, else None."""
     lo, hi = RATE_LOOP_BANDWIDTH_HZ
     if rate >= 4 * lo:
@@ -546,13 +550,13 @@ def _too_slow(rate: float, flights: Sequence[Any]) -> tuple[str, str] | None:
     return reason, logging_advice(_autopilot(flights), _telemetry(flights))
 
 
-def _telemetry(flights: Sequence[Any]) -> bool:
+def _telemetry(flights: Sequence[FlightData]) -> bool:
     """Whether every flight was read from a ground station's telemetry (``.tlog``)."""
     formats = [getattr(getattr(fd, "source", None), "format", None) for fd in flights]
     return bool(formats) and all(f == "tlog" for f in formats)
 
 
-def _autopilot(flights: Sequence[Any]) -> str | None:
+def _autopilot(flights: Sequence[FlightData]) -> str | None:
     """The platform the flights name, if any: ``autopilot``, then the vehicle and the
     firmware banner when known (``ardupilot plane ArduPlane V4.3.8 (...)``), ``quadplane``
     after them for a QuadPlane's VTOL flight (its preset)."""
@@ -569,7 +573,8 @@ def _autopilot(flights: Sequence[Any]) -> str | None:
 
 
 
-def unfitted(axis: str, why: str, windows: Sequence[WindowReport] = (), flights: Sequence[Any] = (),
+def unfitted(axis: str, why: str, windows: Sequence[WindowReport] = (),
+             flights: Sequence[FlightData] = (),
              logs: Sequence[str] = ()) -> Verdict:
     """The ``not identified`` verdict of an axis that got no model, in one honest line.
 

@@ -10,7 +10,7 @@ import functools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.polynomial import Polynomial
@@ -27,6 +27,9 @@ from mavsid.loop.controllers import (
 from mavsid.loop.plant import LinearPlant, Poly, plant_from_model, ss2tf
 from mavsid.numerics.filters import lowpass2p_coefficients
 from mavsid.numerics.lti import tf2ss
+
+if TYPE_CHECKING:
+    from mavsid.frequency import FRF
 
 __all__ = [
     "LoopAnalysis",
@@ -483,7 +486,7 @@ def analyse_model(model: Any, axis: str, ctrl: AxisController, lag: int = 0,
     return replace(base, stderr=err)
 
 
-def margins_on_frf(plant_frf: Any, ctrl: AxisController) -> dict[str, float]:
+def margins_on_frf(plant_frf: FRF, ctrl: AxisController) -> dict[str, float]:
     """Margins of ``ctrl`` around a measured plant FRF (controller output -> rate): the loop
     ``C_fb(e^{jωT})·P̂(f)`` over the FRF's coherent band, a check on a model's promise that
     does not go through the model (NaN where the band holds no crossover)."""
@@ -502,7 +505,7 @@ def margins_on_frf(plant_frf: Any, ctrl: AxisController) -> dict[str, float]:
     return got if f[0] < got["crossover_hz"] < f[-1] else nan
 
 
-def compare_response(measured: Any, freq_hz: np.ndarray, response: np.ndarray
+def compare_response(measured: FRF, freq_hz: np.ndarray, response: np.ndarray
                      ) -> dict[str, Any]:
     """Median and largest absolute error in dB and degrees of a predicted response against a
     measured FRF over the measured one's coherent band (NaN when none)."""
@@ -520,7 +523,7 @@ def compare_response(measured: Any, freq_hz: np.ndarray, response: np.ndarray
             "band_hz": [float(f.min()), float(f.max())]}
 
 
-def frd_margins(measured: Any, freq_hz: np.ndarray | None = None,
+def frd_margins(measured: FRF, freq_hz: np.ndarray | None = None,
                 response: np.ndarray | None = None) -> dict[str, float]:
     """Gain and phase margin of a measured broken-loop FRF over its coherent band; with
     ``freq_hz`` and ``response``, those of that (predicted) response over the same band, for

@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -39,6 +39,10 @@ from mavsid.loop.controllers import (
 from mavsid.loop.limits import Limits, LoopCheck, check_loop, limit_rows, twin_step
 from mavsid.loop.plant import LinearPlant, as_plant, plant_from_model, plant_response
 from mavsid.loop.twin import twin_signals
+
+if TYPE_CHECKING:
+    from mavsid.frequency import FRF
+    from mavsid.pipeline_results import AxisFit, FitResult
 
 __all__ = [
     "LOOP_MISMATCH_DB",
@@ -100,8 +104,8 @@ def suggest_gains(plant_ss: Any, ctrl: AxisController, target_pm_deg: float = 50
     return gain_params(new), result
 
 
-def _advice(axis: str, fit: Any, ctrl: AxisController, bandwidth_hz: float,
-            plant_frf: Any, chirp_top: float) -> list[str]:
+def _advice(axis: str, fit: AxisFit, ctrl: AxisController, bandwidth_hz: float,
+            plant_frf: FRF | None, chirp_top: float) -> list[str]:
     """What to change next flight, from what this one showed (``chirp_top``: the band's top
     the loop needs, :func:`chirp_top_hz`, the number the next flight names too)."""
     out: list[str] = []
@@ -142,7 +146,7 @@ def _advice(axis: str, fit: Any, ctrl: AxisController, bandwidth_hz: float,
     return out
 
 
-def tune(result: Any, target_pm_deg: float = 50.0, samples: int = 40,
+def tune(result: FitResult, target_pm_deg: float = 50.0, samples: int = 40,
          measured_out: dict[str, dict[str, Any]] | None = None,
          analyses_out: dict[str, LoopAnalysis] | None = None,
          limits: Limits | None = None) -> dict[str, Any]:
@@ -269,7 +273,7 @@ class TuneAnalysis:
     target_pm_deg: float = 50.0
 
 
-def tune_analysis(result: Any, target_pm_deg: float = 50.0) -> TuneAnalysis:
+def tune_analysis(result: FitResult, target_pm_deg: float = 50.0) -> TuneAnalysis:
     """:func:`tune` of ``result`` (20 σ draws) with what a report plots; an error that stops
     it is kept in :attr:`TuneAnalysis.error`, not raised."""
     out = TuneAnalysis(target_pm_deg=target_pm_deg)
@@ -302,7 +306,7 @@ def _sig(v: float, digits: int = GAIN_DIGITS) -> float:
     return float(f"{v:.{digits}g}")
 
 
-def _trusted_top(fit: Any, plant_frf: Any) -> tuple[float | None, str]:
+def _trusted_top(fit: AxisFit, plant_frf: FRF | None) -> tuple[float | None, str]:
     """The top of the band the plant is trusted over (Hz) and what it is: the SYSTEMID
     frequency response's coherent band when one was measured, else 0.4 × the log's rate
     (what its samples resolve). None when a SYSTEMID run has no coherent band."""
@@ -315,7 +319,7 @@ def _trusted_top(fit: Any, plant_frf: Any) -> tuple[float | None, str]:
     return 0.4 * rate, f"no SYSTEMID run: 0.4 × the log's {rate:.0f} Hz"
 
 
-def _margin_sigma(measured: Any, crossover_hz: float) -> float:
+def _margin_sigma(measured: FRF, crossover_hz: float) -> float:
     """One σ (deg) of a phase margin read off a measured broken-loop FRF: its normalised
     random error at the crossover with the estimator's bias floor
     (:data:`mavsid.frequency.FRF_STRUCTURE_FLOOR`), as an angle (NaN without a crossover)."""
@@ -329,7 +333,7 @@ def _margin_sigma(measured: Any, crossover_hz: float) -> float:
 
 
 def _loop_agreement(entry: Mapping[str, Any], an: LoopAnalysis,
-                    measured: Any) -> dict[str, float] | None:
+                    measured: FRF | None) -> dict[str, float] | None:
     """The phase margin at the mixer measured and predicted (like for like over the
     measured band), their σ and whether they agree within :data:`MARGIN_AGREE_SIGMA`."""
     if measured is None or "loop_frf_margins" not in entry:
@@ -450,7 +454,7 @@ def _rebuilt(ctrl: AxisController, values: Mapping[str, float]) -> AxisControlle
     return controller_from_params({**ctrl.params, **values}, ctrl.axis, ctrl.autopilot)
 
 
-def _suggestion(axis: str, fit: Any, ctrl: AxisController, an: LoopAnalysis,
+def _suggestion(axis: str, fit: AxisFit, ctrl: AxisController, an: LoopAnalysis,
                 entry: Mapping[str, Any], plant_frf: Any, loop_frf: Any, lag: int,
                 tau: float, limits: Limits) -> dict[str, Any]:
     """The suggestion's part of :func:`tune`'s entry: ``gains`` (rows of

@@ -34,7 +34,8 @@ from mavsid.loop.controllers import (
 from mavsid.loop.plant import LinearPlant, plant_from_model
 
 if TYPE_CHECKING:
-    from mavsid.data import FlightData, Segment
+    from mavsid.data import FlightData, RawLog, Segment
+    from mavsid.validation import Model
 
 __all__ = [
     "BASELINE_MAX_DELAY_S",
@@ -467,7 +468,7 @@ def twin_messages() -> set[str]:
         INJECTION_CHANNEL.message} | set(PID_MESSAGES.values())
 
 
-def twin_signals(flight: FlightData, raw: Any = None) -> TwinSignals:
+def twin_signals(flight: FlightData, raw: RawLog | None = None) -> TwinSignals:
     """Rate targets and SYSTEMID mixer injections of ``flight``, from its log (re-read for
     the few messages needed unless ``raw`` is given).
 
@@ -526,7 +527,7 @@ def twin_signals(flight: FlightData, raw: Any = None) -> TwinSignals:
         raw, grid, sources))
 
 
-def _logged_terms(raw: Any, grid: np.ndarray, sources: dict[str, str]
+def _logged_terms(raw: RawLog, grid: np.ndarray, sources: dict[str, str]
                   ) -> dict[str, dict[str, np.ndarray]]:
     """The rate controller's logged terms per axis on ``grid`` (held; ``sources`` gains
     their names)."""
@@ -760,7 +761,7 @@ _DEFAULT_LAG = {"ardupilot": 1, "px4": 0}
 
 
 def closed_loop_fit(
-    model: Any,
+    model: Model,
     axis: str,
     train: Sequence[Segment],
     held_out: Sequence[Segment],

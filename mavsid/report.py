@@ -51,7 +51,7 @@ if TYPE_CHECKING:
 __all__ = ["figure_img", "loop_section", "render_html", "render_html_page",
            "response_section", "write_report", "write_response_report"]
 
-#: the grids' opacity (major and, from :func:`_log_minor`, minor lines)
+#: the grids' opacity (major and, from :func:`log_minor`, minor lines)
 _GRID_ALPHA = 0.3
 
 _COLOURS = {"measured": "#333333", "one_step": "#2f6fde", "free_run": "#f08a12", "input": "#2a9d46"}
@@ -92,9 +92,10 @@ def warm_up() -> None:
     figures then reuse them (see :func:`_panels`)."""
     for name, (figsize, rows, cols, kw) in _LAYOUTS.items():
         fig, axes = _panels(figsize, rows, cols, **kw)
+        for ax in axes[:, _LOG_X.get(name, slice(0))].ravel():
+            # (a linear axis stays linear: its figure only plots on it)
+            ax.set_xscale("log")
         for ax in axes.ravel():
-            if name in _LOG_X:  # (a linear axis stays linear: its figure only plots on it)
-                ax.set_xscale("log")
             ax.plot([0.1, 10.0], [0.0, 1.0], label="x")
             ax.set_title("x")
             ax.legend(fontsize=7)
@@ -149,13 +150,16 @@ _LAYOUTS: dict[str, tuple[tuple[float, float], int, int, dict[str, Any]]] = {
     "bode1": ((11, 6), 3, 1, _BODE_KW),
     "bode2": ((11, 6), 3, 2, _BODE_KW),
     "twin": ((11, 3.2), 1, 1, {}),
+    "gains": ((11, 3.4), 1, 3, {}),  # (mavsid.report_gains)
 }
-#: the layouts whose x axes are logarithmic
-_LOG_X = frozenset({"horizon", "bode1", "bode2"})
+#: the layouts whose x axes are logarithmic: their columns that are
+_LOG_X = {"horizon": slice(None), "bode1": slice(None), "bode2": slice(None),
+          "gains": slice(1, None)}
 
 
-def _layout_panels(name: str) -> tuple[Figure, np.ndarray]:
-    """:func:`_panels` of the layout ``name`` of :data:`_LAYOUTS`."""
+def layout_panels(name: str) -> tuple[Figure, np.ndarray]:
+    """:func:`_panels` of the layout ``name`` of :data:`_LAYOUTS` (built beforehand by
+    :func:`warm_up`)."""
     figsize, rows, cols, kw = _LAYOUTS[name]
     return _panels(figsize, rows, cols, **kw)
 
@@ -163,12 +167,12 @@ def _layout_panels(name: str) -> tuple[Figure, np.ndarray]:
 _PLAIN = FuncFormatter(lambda x, _pos: f"{x:g}")
 
 
-def _log_minor(ax: Axes) -> None:
-    """A log x axis's minor grid lines and tick marks (2-9 of each decade) as two artists,
-    drawn as matplotlib draws them, instead of a tick object (five artists) per line: a
-    third of the report's drawing went into the minor ticks of its log axes (the report's
-    log axes all have a minor grid: ``grid(True, alpha=_GRID_ALPHA)`` draws the major one).
-    Call it when the axis's limits are final."""
+def log_minor(ax: Axes, grid: bool = True) -> None:
+    """A log x axis's minor grid lines (unless not ``grid``) and tick marks (2-9 of each
+    decade) as two artists, drawn as matplotlib draws them, instead of a tick object (five
+    artists) per line: a third of the report's drawing went into the minor ticks of its log
+    axes (``grid(True, alpha=_GRID_ALPHA)`` draws the major grid lines). Call it when the
+    axis's limits are final."""
     lo, hi = sorted(ax.get_xlim())
     if not (lo > 0 and np.isfinite(hi)):
         return
@@ -184,7 +188,8 @@ def _log_minor(ax: Axes) -> None:
     lines = LineCollection([[(x, 0.0), (x, 1.0)] for x in xs], transform=trans,
                            colors=rc["grid.color"], linewidths=rc["grid.linewidth"],
                            linestyles=rc["grid.linestyle"], alpha=_GRID_ALPHA, zorder=1.5)
-    ax.add_collection(lines, autolim=False)
+    if grid:
+        ax.add_collection(lines, autolim=False)
     ticks = Line2D(xs, np.zeros(xs.size), transform=trans, ls="none", marker=3,  # TICKDOWN
                    markersize=rc["xtick.minor.size"], markeredgewidth=rc["xtick.minor.width"],
                    color=rc["xtick.color"], clip_on=False)
@@ -199,7 +204,7 @@ def _layout(fig: Figure, left: float = 0.85, right: float = 0.15, top: float = 0
     labels of a few digits, one y label, an x label and a title."""
     for ax in fig.axes:
         if ax.get_xscale() == "log":
-            _log_minor(ax)
+            log_minor(ax)
     w, h = fig.get_size_inches()
     spec = fig.axes[0].get_subplotspec() if fig.axes else None
     rows, cols = spec.get_gridspec().get_geometry() if spec is not None else (1, 1)
@@ -238,7 +243,7 @@ def _gapped(parts: Sequence[tuple[np.ndarray, np.ndarray]],
 def _time_figure(fit: AxisFit) -> Figure:
     v = fit.validation
     j = v.state_names.index(fit.output)
-    fig, axes = _layout_panels("time")
+    fig, axes = layout_panels("time")
     ax, ax_u = axes[:, 0]
     for kind in ("measured", "one_step", "free_run"):
         t, y = _gapped([(s.time_s, getattr(s, kind)[:, j]) for s in v.segments])
@@ -263,7 +268,7 @@ def _time_figure(fit: AxisFit) -> Figure:
 
 
 def _horizon_figure(v: Validation) -> Figure:
-    fig, axes = _layout_panels("horizon")
+    fig, axes = layout_panels("horizon")
     ax = axes[0, 0]
     h = v.horizons_s
     for j, state in enumerate(v.state_names):
@@ -283,7 +288,7 @@ def _horizon_figure(v: Validation) -> Figure:
 
 def _residual_figure(v: Validation) -> Figure:
     r = v.residuals
-    fig, axes = _layout_panels("residual")
+    fig, axes = layout_panels("residual")
     ax, ax_u = axes[:, 0]
     for j, state in enumerate(v.state_names):
         ax.plot(r.lags * v.dt * 1e3, r.autocorr[:, j], ".-", ms=3, label=f"{state}")
@@ -370,7 +375,7 @@ def _bode_figure(fit: AxisFit, lp: TuneAnalysis | None = None) -> Figure | None:
     if not cols:
         return None
     name = f"bode{len(cols)}"
-    fig, axes = (_layout_panels(name) if name in _LAYOUTS
+    fig, axes = (layout_panels(name) if name in _LAYOUTS
                  else _panels((14, 6), 3, len(cols), **_BODE_KW))
     for i, col in enumerate(cols):
         mag, ph, coh = axes[0, i], axes[1, i], axes[2, i]
@@ -627,7 +632,7 @@ def _twin_figure(fit: AxisFit) -> Figure | None:
     cl = fit.closed_loop
     if cl is None or not cl.blocks:
         return None
-    fig, axes = _layout_panels("twin")
+    fig, axes = layout_panels("twin")
     ax = axes[0, 0]
     curves: tuple[tuple[str, str, str, float, str], ...] = (
         ("rate", "measured", _COLOURS["measured"], 0.8, "-"),

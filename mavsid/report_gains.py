@@ -18,7 +18,6 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from mavsid.cli_format import gain_table, limit_table, tune_notes
@@ -93,9 +92,10 @@ def gains_figure(e: Mapping[str, Any]) -> Figure | None:
     cur = e.get("current_loop")
     if not cur:
         return None
-    fig = Figure(figsize=(11, 3.4))
-    FigureCanvasAgg(fig)
-    step_ax, mag_ax, ph_ax = fig.subplots(1, 3)
+    from mavsid.report import layout_panels, log_minor
+
+    fig, axes = layout_panels("gains")  # (built beforehand in the report worker)
+    step_ax, mag_ax, ph_ax = axes[0]
     loops = [("current", cur)]
     if e.get("suggested_loop_check"):
         loops.append(("suggested" if e.get("gains") else "suggested (refused)",
@@ -136,6 +136,8 @@ def gains_figure(e: Mapping[str, Any]) -> Figure | None:
     if top:
         mag_ax.axvspan(0.5 * top, top, color="#f0c0c0", alpha=0.3, lw=0)
     mag_ax.set_title("broken rate loop (shaded: above half the trusted band)", fontsize=8)
+    for ax in (mag_ax, ph_ax):  # (the minor ticks as two artists, decades plain numbers)
+        log_minor(ax, grid=False)
     fig.subplots_adjust(left=0.07, right=0.98, bottom=0.16, top=0.9, wspace=0.3)
     return fig
 

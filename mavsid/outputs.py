@@ -26,16 +26,19 @@ mavsid.errors.ConfigError: ...a.bin: is an input of this command; refusing to ov
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import pickle
 import signal
 import sys
 import tempfile
-from collections.abc import Iterable, Iterator
-from typing import IO, Any, NoReturn
+from collections.abc import Callable, Iterable, Iterator
+from typing import IO, Any, NoReturn, TypeVar
 
 from mavsid import errors
 from mavsid.errors import ConfigError, MavsidError
+
+_T = TypeVar("_T")
 
 __all__ = ["ReportWorker", "atomic_path", "check_outputs"]
 
@@ -138,9 +141,11 @@ class ReportWorker:
     responses) and builds the report's figures (:func:`mavsid.report.warm_up`; ~2 s of CPU)
     while this process reads and fits the logs; then works the loop analysis out
     (:func:`mavsid.loop.tune.tune_analysis`, ~0.4 s on a 100 MB flight), hands it back
-    (:meth:`analysis`: the ``.rrd`` shows its gains) and draws the report (~1.7 s) while this
-    one writes the other outputs (the ``.rrd``: ~0.8 s with rerun's import). Worked out
-    here, the analysis cost python-control's import too (1.3 s of CPU) after the fit.
+    (:meth:`analysis`: the ``.rrd`` shows its gains) and draws the report (~1.3 s) while this
+    one writes the other outputs (the ``.rrd``: ~0.8 s with rerun's import), the figures
+    that need no analysis drawn meanwhile by a process forked from the worker
+    (:func:`_drawn_aside`: this one waits once the ``.rrd`` is written). Worked out here,
+    the analysis cost python-control's import too (1.3 s of CPU) after the fit.
 
     On Linux the worker is forked from this process once the modules of the result's
     classes are imported (:class:`_Forked`): a new interpreter imported them again, ~0.8 s
@@ -447,6 +452,53 @@ def _unpickled(name: str) -> Any:
             os.unlink(name)
 
 
+def _drawn_aside(draw: Callable[[], _T]) -> Callable[[], _T]:
+    """``draw()`` begun at once in a process forked from this one (the report worker: two
+    cores, one of them this process's, the other's command writing its ``.rrd`` and then
+    waiting): a function that returns what it drew (pickled through a pipe), or draws it
+    then, here, when there was no fork or the process failed (a defect's traceback is then
+    this process's).
+
+    Examples
+    --------
+    >>> _drawn_aside(lambda: ["<p>drawn</p>"])()
+    ['<p>drawn</p>']
+    """
+    if not FORK:
+        return draw
+    down, up = os.pipe()
+    try:
+        pid = os.fork()
+    except OSError:
+        os.close(down)
+        os.close(up)
+        return draw
+    if pid == 0:  # (never back in the caller's code)
+        code = 1
+        try:
+            os.close(down)
+            for stream in (sys.stdin, sys.stdout):  # (the command reads to the worker's end)
+                with contextlib.suppress(OSError, ValueError):
+                    os.close(stream.fileno())
+            with open(up, "wb") as f:
+                pickle.dump(draw(), f, protocol=pickle.HIGHEST_PROTOCOL)
+            code = 0
+        finally:
+            os._exit(code)
+    os.close(up)
+
+    def drawn() -> _T:
+        with open(down, "rb") as f:
+            data = f.read()
+        _, status = os.waitpid(pid, 0)
+        if os.waitstatus_to_exitcode(status) == 0 and data:
+            with contextlib.suppress(pickle.UnpicklingError, EOFError):
+                return pickle.loads(data)
+        return draw()
+
+    return drawn
+
+
 def _serve_report() -> None:
     """The worker's side of :class:`ReportWorker`: import the report, read ``(result,
     path, file)`` from standard input, work the loop analysis out and hand it back (its
@@ -467,6 +519,9 @@ def _serve_report() -> None:
     if not handoff:  # the command stopped before its outputs
         return
     result, path, put = _unpickled(handoff)
+    # each axis's figures that need no loop analysis, drawn by a process of their own while
+    # this one works the analysis out and draws the rest
+    heads = _drawn_aside(functools.partial(report.axis_heads, result))
     analysis = tune_analysis(result)
     try:
         with open(put, "wb") as f:
@@ -476,7 +531,7 @@ def _serve_report() -> None:
     else:
         print("analysis", flush=True)
     try:
-        report.write_report(result, path, analysis=lambda: analysis)
+        report.write_report(result, path, analysis=lambda: analysis, heads=heads)
     except MavsidError as exc:
         print(f"{type(exc).__name__}\t{exc}", flush=True)
         sys.exit(1)

@@ -562,11 +562,20 @@ def render_html_page(title: str, sections: Sequence[str]) -> str:
     )
 
 
-def render_html(result: FitResult, lp: _Analysis = None) -> str:
+def axis_heads(result: FitResult) -> list[list[str]]:
+    """Each axis's section (in the order of ``result.axes``) up to its Bode figure: its
+    tables and its time, horizon and residual figures, what :func:`render_html` draws
+    without the loop analysis; drawn elsewhere when it is given them (``heads``)."""
+    return [_axis_section(f) for f in result.axes.values()]
+
+
+def render_html(result: FitResult, lp: _Analysis = None,
+                heads: Callable[[], list[list[str]]] | None = None) -> str:
     """The report of a :class:`~mavsid.pipeline.FitResult` as one HTML string (with ``lp``,
     :func:`mavsid.loop.tune.tune_analysis` or a function that returns it, called when the
     first Bode figure is drawn, after every axis's other figures: each axis's Bode figure
-    carries the loop's curves too)."""
+    carries the loop's curves too). ``heads``: a function returning :func:`axis_heads` of
+    ``result`` (drawn by another process while this one draws the rest, asked for last)."""
     logs = ", ".join(html.escape(os.path.basename(p)) for p in result.logs)
     presets = ", ".join(sorted({html.escape(fd.preset) for fd in result.flights}))
     header = (
@@ -598,27 +607,31 @@ def render_html(result: FitResult, lp: _Analysis = None) -> str:
     verdict_table = ('<table><tr><th class="name">axis</th><th class="name">verdict</th>'
                      f'<th class="name">why</th></tr>{verdicts}</table>') if verdicts else ""
     # every axis's figures but the Bode ones first: ``lp`` is worked out, when it is, only
-    # once they are drawn
-    heads = [_axis_section(f) for f in result.axes.values()]
+    # once they are drawn (given ``heads``, drawn elsewhere meanwhile: asked for last)
+    first = axis_heads(result) if heads is None else None
     bodes = [_bode_img(f, lp) for f in result.axes.values()]
     analysis = lp() if callable(lp) else lp
+    answers = [_answer_html(a, analysis) for a in result.axes]
+    drawn = heads() if heads is not None else first
+    assert drawn is not None
     # the answer first in each axis's section: the verdict, then the gains (or why none)
-    axes = ["\n".join(head[:2] + _answer_html(a, analysis) + head[2:] + bode)
-            for a, head, bode in zip(result.axes, heads, bodes, strict=True)]
+    axes = ["\n".join(head[:2] + answer + head[2:] + bode)
+            for head, answer, bode in zip(drawn, answers, bodes, strict=True)]
     sections = [header, verdict_table, summary, _aircraft(result), *axes]
     return render_html_page(f"mavsid fit: {logs}", sections)
 
 
 def write_report(result: FitResult, path: str | os.PathLike[str],
-                 analysis: Callable[[], TuneAnalysis] | None = None) -> None:
-    """Write :func:`render_html` of ``result`` to ``path``, with :func:`loop_section`: the
-    loop analysed once for both (one Bode figure per axis), by
+                 analysis: Callable[[], TuneAnalysis] | None = None,
+                 heads: Callable[[], list[list[str]]] | None = None) -> None:
+    """Write :func:`render_html` of ``result`` (and ``heads``) to ``path``, with
+    :func:`loop_section`: the loop analysed once for both (one Bode figure per axis), by
     :func:`mavsid.loop.tune.tune_analysis` or by ``analysis`` — a function called when the
     first Bode figure is drawn, after every axis's other figures."""
     from mavsid.loop.tune import tune_analysis
 
     lp = functools.cache(analysis or (lambda: tune_analysis(result)))
-    text = render_html(result, lp)
+    text = render_html(result, lp, heads)
     text = text.replace("\n</body></html>",
                         "\n" + loop_section(result, analysis=lp()) + "\n</body></html>")
     with open(path, "w", encoding="utf-8") as f:

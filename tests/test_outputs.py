@@ -391,3 +391,28 @@ def test_the_other_processes_use_is_measured(monkeypatch) -> None:  # type: igno
         stop.set()
         thread.join()
     assert busy[0] is not None and busy[0] >= 0.6
+
+
+def test_what_is_drawn_aside_comes_from_another_process_or_is_drawn_here(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """:func:`outputs._drawn_aside`: the figures come back from the forked process (its
+    process id in them, not this one's); a process that fails (here: drawing raises
+    anywhere but in this process) leaves them to be drawn here; without fork, here."""
+    from mavsid import outputs
+
+    if not outputs.FORK:
+        pytest.skip("no fork here")
+    here = os.getpid()
+
+    def drawn_by() -> list[int]:
+        return [os.getpid()]
+
+    def fails_elsewhere() -> list[int]:
+        if os.getpid() != here:
+            raise RuntimeError("not drawn")
+        return [here]
+
+    got = outputs._drawn_aside(drawn_by)()
+    assert got != [here] and len(got) == 1
+    assert outputs._drawn_aside(fails_elsewhere)() == [here]
+    monkeypatch.setattr(outputs, "FORK", False)
+    assert outputs._drawn_aside(drawn_by)() == [here]

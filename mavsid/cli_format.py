@@ -225,7 +225,8 @@ def format_loop(r: LoopResponse) -> str:
         + (f" (phase delay {r.phase_delay_s * 1e3:.3g} ms)" if r.phase_delay_s is not None
            else ""),
         f"tracking RMS {math.degrees(r.tracking_rms or 0.0):.3g} {unit}",
-        f"delay {num(r.delay_s, '.3g', 'ms', 1e3)}",
+        f"delay {num(r.delay_s, '.3g', 'ms', 1e3)}" if r.delay_s is not None or not r.delay_note
+        else f"delay not found ({r.delay_note})",
         f"band ±{float(np.median(hi - lo) / 2):.2g} (median)",
     ]
     return f"{head}: " + ", ".join(parts) + f"\n    {r.verdict}; {r.step.method}"

@@ -31,10 +31,11 @@ ReasonKind = Literal[
     "missing_channel", "not_airborne", "mode_change", "attitude_bound", "input_saturated",
     "thrust_limits", "too_short", "input_below_floor", "response_below_floor",
     "ill_conditioned", "injection_coverage", "injection_coherence", "coverage", "coherence",
-    "too_little_data", "not_attitude_axis", "injected_nothing",
+    "too_little_data", "not_attitude_axis", "injected_nothing", "target_not_exogenous",
+    "feedback_dominated",
 ]
 
-#: every reason kind, in the order the gates check them
+#: every reason kind, in the order the gates check them (the closed-loop response's two last)
 KINDS: tuple[ReasonKind, ...] = get_args(ReasonKind)
 
 
@@ -111,6 +112,14 @@ _MESSAGES: dict[str, _Message] = {
     "injected_nothing": lambda n, w: (
         f"SYSTEMID mode (SID_AXIS {n['sid_axis']:.0f}) {n['start_s']:.1f}–{n['stop_s']:.1f} s "
         f"injected nothing (SIDD.Targ is 0 throughout{w['sids']})"),
+    "target_not_exogenous": lambda n, w: (
+        f"{n['left_out_s']:.0f} s left out of {w['target']} -> {w['actual']} ({w['spans']}): "
+        "the rate target there is the controller's answer to the injected disturbance, not a "
+        "command"),
+    "feedback_dominated": lambda n, w: (
+        f"the step starts at {n['dip']:.2g}, below zero beyond its band (-{n['max_dip']:g}): "
+        "the target is not independent of the actual (it answers it through the outer loop, "
+        "with no commands to speak of), so this is not the loop's step response"),
 }
 
 #: kind -> (label of a group, the number whose range it states, its unit, the bound's number)
@@ -134,6 +143,8 @@ _GROUPS: dict[str, tuple[str, str, str, str]] = {
     "too_little_data": ("too little data", "", "", ""),
     "not_attitude_axis": ("SYSTEMID run off the attitude axes", "", "", ""),
     "injected_nothing": ("SYSTEMID run that injected nothing", "", "", ""),
+    "target_not_exogenous": ("target answering an injection left out", "left_out_s", " s", ""),
+    "feedback_dominated": ("target answering the actual", "dip", "", "max_dip"),
 }
 
 

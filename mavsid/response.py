@@ -14,15 +14,22 @@ rate; ``attitude``: commanded -> estimated roll/pitch angle):
   ``step_info``);
 - the closed-loop **frequency response** target -> actual (:func:`mavsid.frequency.frf`)
   with coherence: the -3 dB bandwidth and the phase delay there;
-- **tracking**: the error's RMS, and the delay that best aligns actual with target;
-- **noise**: gyro and controller-output spectra with the configured filters' cut-offs;
+- **tracking**: the error's RMS, and the delay that best aligns actual with target (none
+  when the best lies at the edge of the searched range, or the actual leads the target);
+- **noise**: gyro and controller-output spectra with the configured filters' cut-offs
+  (:func:`mavsid.autopilot.filter_cutoffs`);
 - **settings**: where the rate-controller parameters change in flight (the log's
   :attr:`~mavsid.data.RawLog.param_changes`: DataFlash ``PARM`` records, ULog parameter
   changes, MAVLink ``PARAM_VALUE``), one response per setting.
 
 Honest limits: every result carries the band the log's rate resolves (``band_hz``: from one
 over the window to the Nyquist frequency of the slower of target and actual); below
-:data:`MIN_RATE_HZ` nothing is estimated and the verdict says why.
+:data:`MIN_RATE_HZ` nothing is estimated and the verdict says why. Where the rate target is
+known not to be a command — inside a SYSTEMID run that injects into the mixer
+(:func:`mavsid.autopilot.ardupilot.injects_into_mixer`), where it is the controller's
+answer to the disturbed rate — it is left out of target -> rate, and said so (a
+:class:`~mavsid.reasons.Reason` of kind ``target_not_exogenous``); a step that starts far
+below zero is flagged ``feedback_dominated`` (the target answers the actual).
 
 Examples
 --------
@@ -59,6 +66,7 @@ from mavsid.data import FlightData, RawLog
 from mavsid.errors import MissingMessageError, NoExcitationError
 from mavsid.frequency import FRF, frf
 from mavsid.numerics.spectra import welch
+from mavsid.reasons import Reason
 
 __all__ = [
     "AXES",
@@ -70,7 +78,6 @@ __all__ = [
     "StepResponse",
     "bandwidth",
     "best_delay",
-    "filter_cutoffs",
     "flight_response",
     "loop_response",
     "read_response",
@@ -100,7 +107,6 @@ MAX_DIP = 0.2
 MIN_WINDOWS = 3
 #: longest delay (s) searched when aligning actual with target
 MAX_DELAY_S = 0.25
-_PREFIX = {"roll": "RLL", "pitch": "PIT", "yaw": "YAW"}
 
 
 # --------------------------------------------------------------------------- results
@@ -184,7 +190,15 @@ class LoopResponse:
     tracking_rms : float or None
         RMS of target - actual over the used samples (rad/s or rad).
     delay_s : float or None
-        The shift of actual that best aligns it with target.
+        The shift of actual that best aligns it with target; None when not found.
+    delay_note : str
+        Why no delay was found ("" when one was).
+    left_out_s : float
+        Seconds of usable target and actual left out because the target there was known
+        not to be a command (inside a SYSTEMID mixer injection).
+    reasons : tuple of Reason
+        Structured findings behind the verdict (kinds ``target_not_exogenous``,
+        ``feedback_dominated``).
     time_s, target_series, actual_series : numpy.ndarray
         The signals on the working grid (NaN where not used), for plots.
     """
@@ -205,6 +219,9 @@ class LoopResponse:
     phase_delay_s: float | None = None
     tracking_rms: float | None = None
     delay_s: float | None = None
+    delay_note: str = ""
+    left_out_s: float = 0.0
+    reasons: tuple[Reason, ...] = ()
     time_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
     target_series: np.ndarray = field(default_factory=lambda: np.zeros(0))
     actual_series: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -213,6 +230,11 @@ class LoopResponse:
     def ok(self) -> bool:
         """Whether a step response was estimated."""
         return self.step is not None
+
+    @property
+    def feedback_dominated(self) -> bool:
+        """Whether the step is flagged as not the loop's own (the target answers the actual)."""
+        return any(r.kind == "feedback_dominated" for r in self.reasons)
 
     def to_dict(self) -> dict[str, object]:
         """JSON form (``axes.<axis>.<loop>`` of the command's output)."""
@@ -226,7 +248,9 @@ class LoopResponse:
             "rise_s": self.rise_s, "overshoot_pct": self.overshoot_pct,
             "settling_s": self.settling_s, "bandwidth_hz": self.bandwidth_hz,
             "phase_delay_s": self.phase_delay_s, "tracking_rms": self.tracking_rms,
-            "delay_s": self.delay_s,
+            "delay_s": self.delay_s, "delay_note": self.delay_note or None,
+            "left_out_s": self.left_out_s, "feedback_dominated": self.feedback_dominated,
+            "reasons": [r.to_dict() for r in self.reasons],
             "frequency": self.frequency.to_dict() if self.frequency else None,
         }
 
@@ -439,25 +463,56 @@ def bandwidth(r: FRF) -> tuple[float | None, float | None]:
 
 
 def best_delay(target: Sequence[np.ndarray], actual: Sequence[np.ndarray], dt: float,
-               max_delay_s: float = MAX_DELAY_S) -> float | None:
-    """The shift (s, >= 0) of ``actual`` that best correlates it with ``target`` (the
-    cross-correlation's peak, refined by a parabola); None when nothing correlates."""
-    lags = np.arange(0, max(1, round(max_delay_s / dt)) + 1)
+               max_delay_s: float = MAX_DELAY_S) -> tuple[float | None, str]:
+    """The shift (s, >= 0) of ``actual`` that best correlates it with ``target``, and why
+    there is none.
+
+    The cross-correlation is searched over ``±max_delay_s`` and its peak refined by a
+    parabola. No delay is found (None, with the reason) when nothing correlates, when the
+    peak lies at the edge of the searched range (the best shift may lie beyond it: not a
+    measurement) or when the actual leads the target (the target follows the actual).
+
+    Examples
+    --------
+    A smooth random target, the actual a copy of it 30 ms, 400 ms and -50 ms later
+    (100 Hz samples):
+
+    >>> rng = np.random.default_rng(0)
+    >>> x = np.convolve(rng.standard_normal(3000), np.ones(20) / 20, mode="same")
+    >>> delay, why = best_delay([x[:-3]], [np.r_[np.zeros(3), x[:-6]]], 0.01)
+    >>> round(delay, 3), why
+    (0.03, '')
+    >>> best_delay([x[:-40]], [np.r_[np.zeros(40), x[:-80]]], 0.01)
+    (None, 'the correlation peaks at the edge of the ±250 ms searched')
+    >>> best_delay([x[:-5]], [x[5:]], 0.01)
+    (None, 'the actual leads the target by 50 ms (the target answers the actual)')
+    """
+    n = max(1, round(max_delay_s / dt))
+    lags = np.arange(-n, n + 1)
     score = np.zeros(lags.size)
     for x, y in zip(target, actual, strict=True):
         x, y = x - x.mean(), y - y.mean()
         for i, lag in enumerate(lags):
-            if lag < x.size:
+            if abs(lag) >= x.size:
+                continue
+            if lag >= 0:
                 score[i] += float(np.dot(x[: x.size - lag], y[lag:]))
+            else:
+                score[i] += float(np.dot(x[-lag:], y[: y.size + lag]))
     if not np.any(score > 0):
-        return None
+        return None, "target and actual do not correlate"
     k = int(np.argmax(score))
-    shift = 0.0
-    if 0 < k < lags.size - 1:
-        a, b, c = score[k - 1], score[k], score[k + 1]
-        den = a - 2 * b + c
-        shift = 0.5 * (a - c) / den if den < 0 else 0.0
-    return float((lags[k] + shift) * dt)
+    if k in (0, lags.size - 1):
+        return None, (f"the correlation peaks at the edge of the ±{max_delay_s * 1e3:.0f} ms "
+                      "searched")
+    a, b, c = score[k - 1], score[k], score[k + 1]
+    den = a - 2 * b + c
+    shift = 0.5 * (a - c) / den if den < 0 else 0.0
+    delay = float(round((lags[k] + shift) * dt, 9))
+    if lags[k] < 0:
+        return None, (f"the actual leads the target by {-delay * 1e3:.3g} ms (the target "
+                      "answers the actual)")
+    return max(0.0, delay), ""
 
 
 def _stretches(mask: np.ndarray, min_len: int) -> list[tuple[int, int]]:
@@ -510,8 +565,8 @@ def loop_response(axis: str, loop: str, time_s: np.ndarray, target: np.ndarray,
     ys = [y[a:b] for a, b in runs]
     err = np.concatenate([xi - yi for xi, yi in zip(xs, ys, strict=True)])
     rms = float(np.sqrt(np.mean(err**2)))
-    delay = best_delay(xs, ys, step_dt)
-    base = _with(base, tracking_rms=rms, delay_s=delay)
+    delay, why = best_delay(xs, ys, step_dt)
+    base = _with(base, tracking_rms=rms, delay_s=delay, delay_note=why)
     try:
         step = step_response(xs, ys, step_dt, window_s=window_s,
                              response_s=response_s,
@@ -522,6 +577,7 @@ def loop_response(axis: str, loop: str, time_s: np.ndarray, target: np.ndarray,
     lead = max(1, step.response.size // 10)
     dip = float(np.min(step.response[:lead]))
     fed_back = bool(np.min(step.upper[:lead]) < -MAX_DIP)
+    reasons = (Reason("feedback_dominated", {"dip": dip, "max_dip": MAX_DIP}),) if fed_back else ()
     measurable = spread <= MAX_BAND and not fed_back
     rise, over, settle = step_metrics(step) if measurable else (None, None, None)
     fr: FRF | None = None
@@ -540,14 +596,33 @@ def loop_response(axis: str, loop: str, time_s: np.ndarray, target: np.ndarray,
              "no frequency response")
     wide = (f"; band ±{spread:.2g} (median) too wide for rise time and overshoot"
             if spread > MAX_BAND else "")
-    if fed_back:
-        wide += (f"; the step starts at {dip:.2g}, below zero beyond its band: the target is "
-                 "not independent of the actual (it answers it through the outer loop, with "
-                 "no commands to speak of), so this is not the loop's step response")
+    wide += "".join(f"; {r.message}" for r in reasons)
     verdict = (f"{loop}: {step.windows} windows of {step.window_s:.3g} s ({step.span_s:.0f} s); "
                f"{where}; resolves {band[0]:g}-{band[1]:g} Hz{slow}{wide}")
     return _with(base, verdict=verdict, step=step, rise_s=rise, overshoot_pct=over,
-                 settling_s=settle, frequency=fr, bandwidth_hz=fb, phase_delay_s=delay_fb)
+                 settling_s=settle, frequency=fr, bandwidth_hz=fb, phase_delay_s=delay_fb,
+                 reasons=reasons)
+
+
+def _left_out(r: LoopResponse, seconds: float, spans: str) -> LoopResponse:
+    """``r`` with ``seconds`` of target and actual said to be left out over ``spans``
+    (where the target is not a command), in its reasons and verdict.
+
+    Examples
+    --------
+    >>> r = LoopResponse("roll", "rate", "RATE.RDes", "RATE.R", 100.0, None, "rate: no step")
+    >>> got = _left_out(r, 36.4, "SYSTEMID mixer injection SID_AXIS 10 (34.0-46.0 s)")
+    >>> print(got.verdict)  # doctest: +NORMALIZE_WHITESPACE
+    rate: no step; 36 s left out of RATE.RDes -> RATE.R (SYSTEMID mixer injection SID_AXIS 10
+    (34.0-46.0 s)): the rate target there is the controller's answer to the injected
+    disturbance, not a command
+    >>> got.left_out_s, got.reasons[0].kind
+    (36.4, 'target_not_exogenous')
+    """
+    why = Reason("target_not_exogenous", {"left_out_s": round(seconds, 3)},
+                 {"target": r.target, "actual": r.actual, "spans": spans})
+    return _with(r, left_out_s=round(seconds, 3), reasons=(why, *r.reasons),
+                 verdict=f"{r.verdict}; {why.message}")
 
 
 def _with(r: LoopResponse, **changes: object) -> LoopResponse:
@@ -557,32 +632,6 @@ def _with(r: LoopResponse, **changes: object) -> LoopResponse:
 
 
 # --------------------------------------------------------------------------- a flight
-
-
-def filter_cutoffs(params: Mapping[str, float], axis: str) -> dict[str, float]:
-    """The configured filters' cut-offs (Hz) that act on ``axis``'s gyro and rate loop:
-    ArduPilot ``INS_GYRO_FILTER``, ``ATC_RAT_<AX>_FLTT/FLTD/FLTE``, the harmonic notch
-    (``INS_HNTCH_FREQ`` when enabled); PX4 ``IMU_GYRO_CUTOFF``, ``IMU_DGYRO_CUTOFF``,
-    ``IMU_GYRO_NF0_FRQ`` (or ``IMU_GYRO_NF_FREQ``). Zero (off) is left out.
-
-    Examples
-    --------
-    >>> filter_cutoffs({"INS_GYRO_FILTER": 20, "ATC_RAT_RLL_FLTD": 0, "ATC_RAT_RLL_FLTT": 20},
-    ...                "roll")
-    {'INS_GYRO_FILTER': 20.0, 'ATC_RAT_RLL_FLTT': 20.0}
-    """
-    ax = _PREFIX[axis]
-    names = ["INS_GYRO_FILTER", f"ATC_RAT_{ax}_FLTT", f"ATC_RAT_{ax}_FLTD",
-             f"ATC_RAT_{ax}_FLTE", "IMU_GYRO_CUTOFF", "IMU_DGYRO_CUTOFF", "IMU_GYRO_NF0_FRQ",
-             "IMU_GYRO_NF_FREQ"]
-    if params.get("INS_HNTCH_ENABLE", 0) > 0:
-        names.append("INS_HNTCH_FREQ")
-    out: dict[str, float] = {}
-    for name in names:
-        v = params.get(name)
-        if v is not None and math.isfinite(v) and v > 0:
-            out[name] = float(v)
-    return out
 
 
 def _native_rate(raw: RawLog, source: str) -> float | None:
@@ -649,6 +698,8 @@ def _spectra(flight: FlightData, axis: str, usable: np.ndarray) -> tuple[Spectru
     the signals' logging rates."""
     rates = flight.native_rate_hz
     out = []
+    from mavsid.autopilot import filter_cutoffs
+
     cut = filter_cutoffs(flight.params, axis)
     for name, values, unit in (
             (RATE_OF[axis], flight.series(RATE_OF[axis]), "gyro"),
@@ -695,6 +746,37 @@ def _settings(raw: RawLog, span: tuple[float, float], platform: str | None
     return changes
 
 
+def _not_commanded(flight: FlightData) -> tuple[np.ndarray, str]:
+    """Samples where the rate target is known not to be a command, and which spans they are:
+    inside a SYSTEMID run that injected into the mixer
+    (:func:`~mavsid.autopilot.ardupilot.injects_into_mixer`), and one response length after
+    it (the loop's answer to its last instants). There the rate controller is bypassed and
+    its rate target is its answer to the disturbed rate: target -> rate measures the
+    feedback, not the tracking. Runs injecting into a target (attitude or rate) stay.
+
+    Examples
+    --------
+    >>> from mavsid.data import SysidRun
+    >>> t = np.arange(0.0, 10.0, 0.01)
+    >>> runs = (SysidRun(2.0, 4.0, "SIDS", axis=10), SysidRun(6.0, 7.0, "SIDS", axis=1))
+    >>> class F:  # (the two fields read)
+    ...     time_s, sysid_runs = t, runs
+    >>> mask, spans = _not_commanded(F())  # type: ignore[arg-type]
+    >>> round(float(mask.sum()) * 0.01, 2), spans
+    (2.51, 'SYSTEMID mixer injection SID_AXIS 10 (2.0-4.0 s)')
+    """
+    from mavsid.autopilot.ardupilot import injects_into_mixer
+
+    t = flight.time_s
+    mask = np.zeros(t.shape, bool)
+    spans = []
+    for r in flight.sysid_runs:
+        if r.injected and injects_into_mixer(r.sid_axis):
+            mask |= (t >= r.start_s) & (t <= r.stop_s + RESPONSE_S["rate"])
+            spans.append(f"{r.sid_axis} ({r.start_s:.1f}-{r.stop_s:.1f} s)")
+    return mask, ("SYSTEMID mixer injection SID_AXIS " + ", ".join(spans)) if spans else ""
+
+
 def flight_response(flight: FlightData, raw: RawLog, axes: Sequence[str] = AXES
                     ) -> FlightResponse:
     """Every loop of ``axes`` of an aligned flight, its spectra and its settings.
@@ -722,6 +804,7 @@ def flight_response(flight: FlightData, raw: RawLog, axes: Sequence[str] = AXES
     state_src = flight.sources
     cmd_src = flight.commanded_from
     grid = 1.0 / flight.dt
+    fed, spans = _not_commanded(flight)
 
     def one(mask: np.ndarray) -> list[LoopResponse]:
         loops = []
@@ -741,8 +824,12 @@ def flight_response(flight: FlightData, raw: RawLog, axes: Sequence[str] = AXES
                 hz = min(_native_rate(raw, src) or grid, float(rates.get(rate) or grid), grid)
                 actual_src = str(state_src.get(rate, rate))
                 dense = _dense(raw, [src, actual_src], flight.time_s, hz)
-                loops.append(loop_response(axis, "rate", flight.time_s, target, actual, hz,
-                                           names=(src, actual_src), usable=mask & dense))
+                cut = mask & dense & fed & np.isfinite(target) & np.isfinite(actual)
+                got = loop_response(axis, "rate", flight.time_s, target, actual, hz,
+                                    names=(src, actual_src), usable=mask & dense & ~fed)
+                if cut.any():
+                    got = _left_out(got, float(cut.sum()) * flight.dt, spans)
+                loops.append(got)
             if axis == "yaw":
                 continue  # (the commanded heading is a rate: the rate loop is its loop)
             att = flight.series(axis)

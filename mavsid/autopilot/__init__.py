@@ -30,9 +30,13 @@ True
 
 from __future__ import annotations
 
+import math
+from collections.abc import Mapping
+
 from mavsid.autopilot import ardupilot, px4
 
-__all__ = ["excitation_advice", "is_rate_setting", "logging_advice", "longer_advice"]
+__all__ = ["excitation_advice", "filter_cutoffs", "is_rate_setting", "logging_advice",
+           "longer_advice"]
 
 
 def excitation_advice(axis: str, platform: str | None) -> str:
@@ -44,6 +48,26 @@ def excitation_advice(axis: str, platform: str | None) -> str:
     if px4.is_px4(platform):
         return px4.excitation_advice(axis)
     return ardupilot.excitation_advice(axis, platform)
+
+
+def filter_cutoffs(params: Mapping[str, float], axis: str) -> dict[str, float]:
+    """The configured filters' cut-offs (name -> Hz) acting on ``axis``'s gyro and rate
+    loop, by either autopilot's names (:func:`.ardupilot.filter_params`, then
+    :func:`.px4.filter_params`; a log holds one firmware's parameters). Zero (off) is
+    left out.
+
+    >>> filter_cutoffs({"INS_GYRO_FILTER": 20, "ATC_RAT_RLL_FLTD": 0, "ATC_RAT_RLL_FLTT": 20},
+    ...                "roll")
+    {'INS_GYRO_FILTER': 20.0, 'ATC_RAT_RLL_FLTT': 20.0}
+    >>> filter_cutoffs({"IMU_GYRO_CUTOFF": 30, "IMU_GYRO_NF_FREQ": 0}, "yaw")
+    {'IMU_GYRO_CUTOFF': 30.0}
+    """
+    out: dict[str, float] = {}
+    for name in (*ardupilot.filter_params(params, axis), *px4.filter_params()):
+        v = params.get(name)
+        if v is not None and math.isfinite(v) and v > 0:
+            out[name] = float(v)
+    return out
 
 
 def is_rate_setting(name: str, platform: str | None) -> bool:

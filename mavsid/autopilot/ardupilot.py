@@ -31,12 +31,14 @@ from mavsid.errors import ConfigError
 
 __all__ = [
     "COPTER_LOG_BITS",
+    "HARMONIC_NOTCH_PARAMS",
     "IMU_GYRO_FIELDS",
     "PLANE_LOG_BITS",
     "PLANE_SURFACE_DEG",
     "PWM_SPAN",
     "RATE_AXIS",
     "RATE_CDEG_SCALE",
+    "RATE_FILTER_SUFFIXES",
     "RC_MAP_AP",
     "SERVO_FUNCTIONS",
     "SIDS_FIELDS",
@@ -49,6 +51,8 @@ __all__ = [
     "angle_p_param",
     "before_rate",
     "excitation_advice",
+    "filter_params",
+    "injects_into_mixer",
     "is_plane",
     "is_quadplane",
     "log_bit_text",
@@ -115,6 +119,19 @@ def sid_axis(number: int) -> tuple[str, str]:
     if number == 13:
         return "thrust", "mixer"
     return "other", f"SID_AXIS {number}"
+
+
+def injects_into_mixer(number: int) -> bool:
+    """Whether ``SID_AXIS`` ``number`` adds its waveform to the mixer input (10-13): the
+    rate controller is bypassed, and the rate target it logs meanwhile is its answer to the
+    disturbed rate, not a command (the attitude and rate injections, 1-9, add to a target).
+
+    Examples
+    --------
+    >>> [injects_into_mixer(n) for n in (1, 7, 9, 10, 12, 13, 14)]
+    [False, False, False, True, True, True, False]
+    """
+    return sid_axis(number)[1] == "mixer"
 
 
 # --------------------------------------------------------------------------- inputs
@@ -470,6 +487,34 @@ def rate_naming(params: Mapping[str, float], axis: str) -> str:
 
 #: the gyro's low-pass filter, which shapes the rate loop's response as its gains do
 GYRO_FILTER_PARAM = "INS_GYRO_FILTER"
+
+
+#: the harmonic notch's enable switch and centre frequency
+#: (libraries/Filter/HarmonicNotchFilter.cpp, INS_HNTCH_ENABLE, INS_HNTCH_FREQ)
+HARMONIC_NOTCH_PARAMS = ("INS_HNTCH_ENABLE", "INS_HNTCH_FREQ")
+#: the rate PID's target, derivative and error filters (AC_PID, ``_FLTT`` ``_FLTD`` ``_FLTE``)
+RATE_FILTER_SUFFIXES = ("FLTT", "FLTD", "FLTE")
+
+
+def filter_params(params: Mapping[str, float], axis: str) -> list[str]:
+    """The parameters that set the cut-offs (Hz) of the filters acting on ``axis``'s gyro
+    and rate loop: the gyro filter (``INS_GYRO_FILTER``), the rate PID's
+    ``ATC_RAT_<AX>_FLTT/FLTD/FLTE`` and the harmonic notch (``INS_HNTCH_FREQ``, when
+    ``INS_HNTCH_ENABLE``).
+
+    Examples
+    --------
+    >>> filter_params({"INS_HNTCH_ENABLE": 1}, "roll")  # doctest: +NORMALIZE_WHITESPACE
+    ['INS_GYRO_FILTER', 'ATC_RAT_RLL_FLTT', 'ATC_RAT_RLL_FLTD', 'ATC_RAT_RLL_FLTE',
+     'INS_HNTCH_FREQ']
+    >>> filter_params({}, "yaw")[-1]
+    'ATC_RAT_YAW_FLTE'
+    """
+    names = [GYRO_FILTER_PARAM, *(rate_prefix(axis) + s for s in RATE_FILTER_SUFFIXES)]
+    enable, freq = HARMONIC_NOTCH_PARAMS
+    if params.get(enable, 0) > 0:
+        names.append(freq)
+    return names
 
 
 def is_rate_setting(name: str) -> bool:

@@ -17,8 +17,9 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from types import MappingProxyType
 
-__all__ = ["INT_LIM_AXIS", "PARAM_TYPE_REAL32", "RATE_AXIS", "RATE_PROFILE_BITS", "RC_MAP_PX4",
-           "SDLOG_PROFILE_BITS", "angle_p_param", "excitation_advice", "has_rate_params",
+__all__ = ["GYRO_NOTCH_PARAMS", "INT_LIM_AXIS", "PARAM_TYPE_REAL32", "RATE_AXIS",
+           "RATE_PROFILE_BITS", "RC_MAP_PX4", "SDLOG_PROFILE_BITS", "angle_p_param",
+           "excitation_advice", "filter_params", "has_rate_params",
            "int_lim_param", "is_px4", "logging_advice", "longer_advice", "param_file_text",
            "profile_bit_text", "rate_prefix"]
 
@@ -127,6 +128,20 @@ def angle_p_param(axis: str) -> str:
 RATE_GAINS = ("P", "I", "D", "K", "FF")
 #: the gyro's and its derivative's low-pass filters, which shape the rate loop's response
 GYRO_FILTER_PARAMS = ("IMU_GYRO_CUTOFF", "IMU_DGYRO_CUTOFF")
+#: the gyro's static notch centre (src/modules/sensors/vehicle_angular_velocity:
+#: IMU_GYRO_NF0_FRQ; IMU_GYRO_NF_FREQ in older releases)
+GYRO_NOTCH_PARAMS = ("IMU_GYRO_NF0_FRQ", "IMU_GYRO_NF_FREQ")
+
+
+def filter_params() -> list[str]:
+    """The parameters that set the cut-offs (Hz) of the gyro filters, the same on every
+    axis: the gyro and its derivative's low-pass (``IMU_GYRO_CUTOFF``,
+    ``IMU_DGYRO_CUTOFF``) and the static notch (:data:`GYRO_NOTCH_PARAMS`).
+
+    >>> filter_params()
+    ['IMU_GYRO_CUTOFF', 'IMU_DGYRO_CUTOFF', 'IMU_GYRO_NF0_FRQ', 'IMU_GYRO_NF_FREQ']
+    """
+    return [*GYRO_FILTER_PARAMS, *GYRO_NOTCH_PARAMS]
 
 
 def is_rate_setting(name: str) -> bool:

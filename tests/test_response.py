@@ -181,6 +181,84 @@ def test_a_target_driven_by_the_actual_gives_no_step_metrics() -> None:
     assert got.step is not None and got.step.upper[0] < -response.MAX_DIP
     assert got.rise_s is None and got.overshoot_pct is None
     assert "not the loop's step response" in got.verdict
+    doc = got.to_dict()
+    assert doc["feedback_dominated"] is True
+    assert [r["kind"] for r in doc["reasons"]] == ["feedback_dominated"]
+    assert doc["reasons"][0]["numbers"]["dip"] < -response.MAX_DIP
+
+
+def test_a_mixer_injection_is_left_out_of_target_to_rate(tmp_path) -> None:
+    """SYSTEMID on the roll mixer (SID_AXIS 10): the rate controller is bypassed and its
+    target answers the disturbed rate. Left in, that span gives a step flagged as the target
+    answering the actual; left out (as the response does), too little remains, said in one
+    line, with no curve."""
+    from dataclasses import replace
+
+    from mavsid.align import read_flight
+    from mavsid.loop import twin_messages
+
+    sc = scenario_from_options(sid_axes=[10], seed=1)
+    path = tmp_path / "mixer.bin"
+    simulate(sc, [path])
+    flight, raw = read_flight(path, also=sorted(twin_messages()))
+    (run,) = flight.sysid_runs
+    assert run.sid_axis == 10 and run.injected
+    got = response.flight_response(flight, raw, ("roll",)).loop("roll", "rate")
+    assert got is not None and got.step is None and got.rise_s is None
+    expected = run.stop_s - run.start_s + response.RESPONSE_S["rate"]
+    assert got.left_out_s == pytest.approx(expected, abs=2 * flight.dt)
+    doc = got.to_dict()
+    assert [r["kind"] for r in doc["reasons"]] == ["target_not_exogenous"]
+    assert doc["left_out_s"] == got.left_out_s and doc["feedback_dominated"] is False
+    assert "no step response" in got.verdict and "SID_AXIS 10" in got.verdict
+    assert f"{expected:.0f} s left out" in got.verdict
+    # the same flight with its run not typed: the mixer span is the step's, and it is the
+    # feedback's (starts far below zero), flagged in the JSON
+    untyped = response.flight_response(replace(flight, sysid_runs=()), raw, ("roll",))
+    fed = untyped.loop("roll", "rate")
+    assert fed is not None and fed.step is not None and fed.left_out_s == 0.0
+    assert fed.to_dict()["feedback_dominated"] is True and fed.rise_s is None
+    assert fed.step.upper[: fed.step.response.size // 10].min() < -response.MAX_DIP
+
+
+def test_an_attitude_injection_gives_the_true_rate_step(tmp_path) -> None:
+    """SYSTEMID on the roll angle target (SID_AXIS 1): the target is exogenous, nothing is
+    left out, and the rate loop's step lies within its band of the simulator's own loop."""
+    sc = scenario_from_options(sid_axes=[1], seed=1, t_rec=40.0)
+    path = tmp_path / "angle.bin"
+    simulate(sc, [path])
+    got = response.read_response(path, ("roll",)).loop("roll", "rate")
+    assert got is not None and got.step is not None, got
+    assert got.left_out_s == 0.0 and got.reasons == () and not got.feedback_dominated
+    t, truth = true_rate_step(sc, "roll", float(got.step.time_s[-1]))
+    assert np.allclose(t, got.step.time_s)
+    inside = (truth >= got.step.lower) & (truth <= got.step.upper)
+    assert inside.mean() >= 0.9, (inside.mean(), np.abs(got.step.response - truth).max())
+    assert got.delay_s is not None and got.delay_note == ""
+
+
+def test_a_delay_at_the_edge_of_the_search_is_not_found() -> None:
+    rng = np.random.default_rng(4)
+    dt = 0.01
+    x = np.convolve(rng.standard_normal(6000), np.ones(40) / 40, mode="same")
+    t = np.arange(x.size) * dt
+
+    def delayed(n: int) -> np.ndarray:
+        return np.r_[np.zeros(n), x[:-n]]
+
+    near = response.loop_response("roll", "rate", t, x, delayed(4), rate_hz=100.0)
+    assert near.delay_s == pytest.approx(0.04, abs=0.002) and near.delay_note == ""
+    far = response.loop_response("roll", "rate", t, x, delayed(60), rate_hz=100.0)
+    assert far.delay_s is None and "edge" in far.delay_note
+    assert far.to_dict()["delay_s"] is None and far.to_dict()["delay_note"] == far.delay_note
+    leads = response.loop_response("roll", "rate", t, delayed(8), x, rate_hz=100.0)
+    assert leads.delay_s is None and "leads" in leads.delay_note
+    from mavsid.cli_format import format_loop
+
+    assert far.step is not None  # (the deconvolution is longer than the delay search)
+    assert "delay not found (the correlation peaks at the edge" in format_loop(far)
+    assert response.best_delay([x], [delayed(25)], dt)[0] is None  # (the edge itself)
+    assert response.best_delay([x], [delayed(24)], dt)[0] == pytest.approx(0.24, abs=0.002)
 
 
 def test_nothing_is_said_below_the_least_rate() -> None:

@@ -398,9 +398,11 @@ def _pm(value: float, sigma: float | None) -> str:
 
 def _structure(d: Mapping[str, Any]) -> str:
     """The modelled filters (beside the input lag), as the text table's head shows them."""
+    from mavsid.estimators.select import is_lag_filter
+
     parts = []
     for flt in d.get("filters") or ():
-        if not str(flt.get("source", "")).startswith("input lag"):
+        if not is_lag_filter(flt.get("source")):
             parts.append(f"{flt.get('source') or 'filter'} {flt.get('cutoff_hz', 0):.3g} Hz")
     return "".join(f", {p}" for p in parts)
 

@@ -15,6 +15,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from mavsid.estimators.select import is_lag_filter
+
 if TYPE_CHECKING:
     from mavsid.pipeline_results import AxisFit
 
@@ -98,6 +100,8 @@ def physical_rows(fit: AxisFit) -> list[PhysicalRow]:
     rows = physical_table(fit.axis, fit.output, m.params, getattr(m, "stderr", {}) or {},
                           float(getattr(m, "delay_s", 0.0) or 0.0), prov.get("lag_s"))
     for f in getattr(m, "filters", ()):
+        if is_lag_filter(f.source):
+            continue  # (the input lag's row above)
         rows.append(PhysicalRow(f"known filter ({f.source})", f.cutoff_hz, np.nan,
                                 f"Hz, order {f.order}"))
     return rows

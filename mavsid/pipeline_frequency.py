@@ -276,6 +276,7 @@ def frequency_estimate(model: Model, axis: str, tf: PlantTF) -> Model:
     ``model`` itself where the response cannot give one. (The pipeline takes it where the
     time-domain fit :func:`disagrees` with the response.)"""
     from mavsid.estimators.model import Model as Fitted
+    from mavsid.estimators.select import is_lag_filter
     from mavsid.frequency import FrfStructure
 
     if not isinstance(model, Fitted) or tf.measured is None:
@@ -284,8 +285,7 @@ def frequency_estimate(model: Model, axis: str, tf: PlantTF) -> Model:
     i_a, i_b = model.features.index(rate), model.features.index(u_name)
     prov0: dict[str, Any] = dict(model.provenance or {})
     dt = float(model.dt)
-    known = [f for f in prov0.get("filters") or () if not str(
-        dict(f).get("source", "")).startswith("input lag")]
+    known = [f for f in prov0.get("filters") or () if not is_lag_filter(dict(f).get("source"))]
     if (not known and abs(float(prov0.get("lag_s") or 0.0) - tf.lag_s) < 1e-5
             and abs((model.delay + model.delay_frac + 0.5) * dt - tf.delay_s) < 1e-5):
         # the model holds the transfer function's own lag and delay: its pole and gain are

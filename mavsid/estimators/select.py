@@ -79,10 +79,12 @@ __all__ = [
     "ESTIMATORS",
     "LAG_OE_TOL",
     "LAG_PRUNE",
+    "LAG_SOURCE",
     "LONG_LAGS_S",
     "ONE_STEP_NOISE",
     "DelayScan",
     "StructureChoice",
+    "is_lag_filter",
     "lag_filter",
     "make_estimator",
     "search_structure",
@@ -157,6 +159,10 @@ def make_estimator(name: str, structure: Structure | None = None, **kwargs: obje
         raise ConfigError(f"estimator {name!r}: {exc}") from None
 
 
+#: the ``source`` of the input-lag filter
+LAG_SOURCE = "input lag"
+
+
 def lag_filter(lag_s: float) -> tuple[InputFilter, ...]:
     """A first-order input lag (motor/ESC response) as a filter; none for 0.
 
@@ -167,7 +173,19 @@ def lag_filter(lag_s: float) -> tuple[InputFilter, ...]:
     """
     if lag_s <= 0:
         return ()
-    return (InputFilter(1.0 / (2 * np.pi * lag_s), 1, f"input lag {lag_s * 1e3:g} ms"),)
+    return (InputFilter(1.0 / (2 * np.pi * lag_s), 1, f"{LAG_SOURCE} {lag_s * 1e3:g} ms"),)
+
+
+def is_lag_filter(source: object) -> bool:
+    """Whether a filter's ``source`` names the input lag :func:`lag_filter` makes (shown as
+    the lag, not among the known filters).
+
+    Examples
+    --------
+    >>> is_lag_filter(lag_filter(0.02)[0].source), is_lag_filter("INS_GYRO_FILTER")
+    (True, False)
+    """
+    return str(source or "").startswith(LAG_SOURCE)
 
 
 def _split_delay(dly: float) -> tuple[int, float]:

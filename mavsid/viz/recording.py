@@ -49,6 +49,7 @@ import rerun.blueprint as rrb
 
 from mavsid.axes import AXES, INPUT_OF, RATE_OF, RATES, STATE_UNITS, THRUST_INPUT
 from mavsid.data import FlightData, Segment, decimate
+from mavsid.estimators.select import is_lag_filter
 from mavsid.numerics.rotations import euler_to_quat
 from mavsid.physical import parameter_order, physical_rows
 from mavsid.validation import FrequencyResponse, Validation, horizon_label
@@ -676,7 +677,8 @@ def log_summary(rec: rr.RecordingStream, fits: Sequence[AxisFit],
             lines += _gains_markdown(gains[fit.axis])
         prov = dict(getattr(m, "provenance", {}) or {})
         lag = prov.get("lag_s")
-        filters = ", ".join(f"{f.source} {f.cutoff_hz:g} Hz" for f in getattr(m, "filters", ()))
+        filters = ", ".join(f"{f.source} {f.cutoff_hz:g} Hz" for f in getattr(m, "filters", ())
+                            if not is_lag_filter(f.source))
         lines += [f"{fit.output}′ from u_{fit.axis}: {1 / v.dt:.0f} Hz, delay "
                   f"{float(getattr(m, 'delay_s', 0.0) or 0.0) * 1e3:.1f} ms"
                   + (f", input lag {float(lag) * 1e3:.0f} ms"

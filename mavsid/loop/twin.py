@@ -460,12 +460,12 @@ LOGGED_TERMS = ("P", "I", "D", "FF", "DFF")
 
 
 def twin_messages() -> set[str]:
-    """The messages :func:`twin_signals` reads (rate targets, SYSTEMID injection), of every
-    format: a caller reading the log anyway reads them in the same pass."""
-    from mavsid.autopilot.presets import INJECTION_CHANNEL, TARGET_CHANNELS
+    """The messages :func:`twin_signals` reads (rate targets, the controller's logged
+    terms), of every format: a caller reading the log anyway reads them in the same pass."""
+    from mavsid.autopilot.presets import TARGET_CHANNELS
 
-    return {ch.message for chans in TARGET_CHANNELS.values() for ch in chans} | {
-        INJECTION_CHANNEL.message} | set(PID_MESSAGES.values())
+    return {ch.message for chans in TARGET_CHANNELS.values() for ch in chans} | set(
+        PID_MESSAGES.values())
 
 
 def twin_signals(flight: FlightData, raw: RawLog | None = None) -> TwinSignals:
@@ -473,10 +473,11 @@ def twin_signals(flight: FlightData, raw: RawLog | None = None) -> TwinSignals:
     the few messages needed unless ``raw`` is given).
 
     Targets come from the first of :data:`mavsid.autopilot.presets.TARGET_CHANNELS` the log has;
-    mixer injections from ``SIDD.Targ`` during the SYSTEMID runs on ``SID_AXIS`` 10-12.
+    mixer (and rate) injections from the flight's ``sysid_injection`` (alignment's
+    ``SIDD.Targ``, 0 where not logged) during the SYSTEMID runs on ``SID_AXIS`` 10-12 (7-9).
     """
     from mavsid.autopilot.presets import INJECTION_CHANNEL, TARGET_CHANNELS
-    from mavsid.channels import evaluate, first_of
+    from mavsid.channels import first_of
 
     if raw is None:
         from mavsid.readers import read_log
@@ -503,26 +504,21 @@ def twin_signals(flight: FlightData, raw: RawLog | None = None) -> TwinSignals:
     injection: dict[str, np.ndarray] = {}
     runs = [r for r in flight.sysid_runs if r.sid_axis in (7, 8, 9, 10, 11, 12)]
     rate_injection: dict[str, np.ndarray] = {}
-    if runs and INJECTION_CHANNEL.message in raw.messages:
-        try:
-            t, v = evaluate(raw, INJECTION_CHANNEL, "SYSTEMID injection")
-        except MavsidError:
-            t = np.zeros(0)
-        if t.size >= 2:
-            held = np.nan_to_num(_on_grid(t, v, grid, hold=True))
-            src = f"{INJECTION_CHANNEL.message}.{INJECTION_CHANNEL.field}"
-            for r in runs:
-                sid = r.sid_axis
-                axis = AXES[(sid - 1) % 3]
-                inside = (grid >= r.start_s - 1e-9) & (grid <= r.stop_s + 1e-9)
-                if sid >= 10:
-                    inj = injection.setdefault(axis, np.zeros(grid.shape))
-                    inj[inside] = held[inside]
-                    sources[f"injection_{axis}"] = src
-                else:  # rate axes: the waveform (deg/s) is added to the rate target
-                    inj = rate_injection.setdefault(axis, np.zeros(grid.shape))
-                    inj[inside] = np.radians(held[inside])
-                    sources[f"rate_injection_{axis}"] = src
+    if runs and flight.sysid_injection is not None:  # (alignment's: held, NaN unlogged)
+        held = np.nan_to_num(np.asarray(flight.sysid_injection, dtype=float))
+        src = f"{INJECTION_CHANNEL.message}.{INJECTION_CHANNEL.field}"
+        for r in runs:
+            sid = r.sid_axis
+            axis = AXES[(sid - 1) % 3]
+            inside = (grid >= r.start_s - 1e-9) & (grid <= r.stop_s + 1e-9)
+            if sid >= 10:
+                inj = injection.setdefault(axis, np.zeros(grid.shape))
+                inj[inside] = held[inside]
+                sources[f"injection_{axis}"] = src
+            else:  # rate axes: the waveform (deg/s) is added to the rate target
+                inj = rate_injection.setdefault(axis, np.zeros(grid.shape))
+                inj[inside] = np.radians(held[inside])
+                sources[f"rate_injection_{axis}"] = src
     return TwinSignals(targets, injection, sources, rate_injection, _logged_terms(
         raw, grid, sources))
 

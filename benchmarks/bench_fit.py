@@ -33,7 +33,7 @@ from scipy import signal
 
 from mavsid.data import Segment
 from mavsid.estimators import Lasso, LeastSquares, Structure, fit_axis, solve
-from mavsid.estimators._base import Gram
+from mavsid.estimators.base import Gram
 from mavsid.estimators.regressors import InputFilter
 from mavsid.estimators.select import (
     DEFAULT_DELAY_STEP,

@@ -597,7 +597,7 @@ def test_the_gram_solve_refuses_non_finite_sums_and_matches_lstsq() -> None:
     """The Gram solve (numpy's Cholesky now, scipy's before): the least-squares solution,
     and a ValueError for a Gram holding NaN or inf (as scipy.linalg refused it: the callers
     turn that into a refusal, never a model of NaN)."""
-    from mavsid.estimators._base import Gram, solve
+    from mavsid.estimators.base import Gram, solve
 
     rng = np.random.default_rng(4)
     z = rng.standard_normal((500, 4))

@@ -17,9 +17,9 @@ Examples
 """
 
 from mavsid.estimators import library
-from mavsid.estimators._base import Estimator, Gram, check_identifiable, rollout_fit, solve
 from mavsid.estimators.arrays import records
 from mavsid.estimators.axis_fit import fit_axis
+from mavsid.estimators.base import Estimator, Gram, check_identifiable, rollout_fit, solve
 from mavsid.estimators.identification import identify, identify_segments
 from mavsid.estimators.l1 import ElasticNet, Lasso
 from mavsid.estimators.least_squares import STLSQ, LeastSquares, Ridge

@@ -42,8 +42,8 @@ import numpy as np
 from mavsid.data import Segment
 from mavsid.errors import ConfigError, DataQualityWarning, NoExcitationError, SolverError
 from mavsid.estimators import library
-from mavsid.estimators._base import Estimator
 from mavsid.estimators.arrays import records
+from mavsid.estimators.base import Estimator
 from mavsid.estimators.model import Model
 from mavsid.estimators.output_error import output_error_coef, refine_output_error
 from mavsid.estimators.plausibility import check_rate_plant, check_sampled_rates

@@ -11,7 +11,7 @@ with ``Θs`` the coefficients of the unit-RMS columns, ``RᵀR`` the scaled Gram
 Examples
 --------
 >>> import numpy as np
->>> from mavsid.estimators._base import Gram
+>>> from mavsid.estimators.base import Gram
 >>> from mavsid.estimators.regressors import Structure
 >>> rng = np.random.default_rng(0)
 >>> z = rng.standard_normal((500, 3))
@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from mavsid.errors import ConfigError, SolverError
-from mavsid.estimators._base import Estimator, Gram, column_scales, param_names, penalised
+from mavsid.estimators.base import Estimator, Gram, column_scales, param_names, penalised
 from mavsid.estimators.regressors import Structure
 
 __all__ = ["ElasticNet", "Lasso", "gram_sqrt"]

@@ -24,7 +24,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from mavsid.errors import ConfigError
-from mavsid.estimators._base import Estimator, Gram, column_scales, penalised, solve
+from mavsid.estimators.base import Estimator, Gram, column_scales, penalised, solve
 from mavsid.estimators.regressors import Structure
 
 __all__ = ["STLSQ", "LeastSquares", "Ridge", "thresholded"]
@@ -33,7 +33,7 @@ __all__ = ["STLSQ", "LeastSquares", "Ridge", "thresholded"]
 class LeastSquares(Estimator):
     """Ordinary least squares (Cholesky of the unit-RMS-scaled Gram).
 
-    See :class:`~mavsid.estimators._base.Estimator` for the shared parameters.
+    See :class:`~mavsid.estimators.base.Estimator` for the shared parameters.
     """
 
     name = "ls"
@@ -102,7 +102,7 @@ def thresholded(g: Gram, threshold: float, keep: np.ndarray | None = None, alpha
 
     A term whose standardised coefficient ``|θⱼ| rms(zⱼ) / rms(y)`` is below ``threshold``
     is removed and the rest refitted, until nothing changes; ``keep`` terms stay. ``alpha``
-    is a ridge weight as in :func:`~mavsid.estimators._base.solve` (``standardize`` too).
+    is a ridge weight as in :func:`~mavsid.estimators.base.solve` (``standardize`` too).
 
     Returns
     -------

@@ -39,7 +39,7 @@ import numpy as np
 from mavsid.data import Segment
 from mavsid.errors import ConfigError, SolverError
 from mavsid.estimators import library
-from mavsid.estimators._base import hac_covariance
+from mavsid.estimators.base import hac_covariance
 from mavsid.estimators.model import Model
 from mavsid.estimators.regressors import Regression
 from mavsid.numerics.filters import lfilter

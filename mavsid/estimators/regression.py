@@ -17,8 +17,8 @@ from typing import Any
 import numpy as np
 
 from mavsid.errors import ConfigError, NoExcitationError
-from mavsid.estimators._base import Gram, collinear, solve
 from mavsid.estimators.arrays import as_records, column_names
+from mavsid.estimators.base import Gram, collinear, solve
 from mavsid.estimators.least_squares import thresholded
 from mavsid.numerics.stats import bartlett_meat
 from mavsid.threads import one_blas_thread

@@ -58,7 +58,7 @@ from mavsid.axes import INPUT_OF, RATE_OF, RATES
 from mavsid.data import Segment
 from mavsid.errors import ConfigError, NoExcitationError
 from mavsid.estimators import library
-from mavsid.estimators._base import Estimator, Gram, block_grams, check_identifiable, solve
+from mavsid.estimators.base import Estimator, Gram, block_grams, check_identifiable, solve
 from mavsid.estimators.l1 import ElasticNet, Lasso
 from mavsid.estimators.least_squares import STLSQ, LeastSquares, Ridge
 from mavsid.estimators.regressors import (

@@ -965,6 +965,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             traceback.print_exc()
         print_error(exc, as_json)
         return 1
+    except BrokenPipeError:  # the reader closed stdout (``mavsid ... | head``): stop quietly
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # (so the interpreter's flush at exit is quiet)
+        return 141
     except KeyboardInterrupt as exc:
         if as_json:
             print(error_document(exc, "Interrupted"))

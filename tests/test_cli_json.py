@@ -124,3 +124,16 @@ def test_debug_before_or_after_the_subcommand(where: str) -> None:
     assert err.rstrip().splitlines()[-1].startswith("mavsid: error: ")
     code, _, err = _run(argv[:-1] if where == "after" else argv[1:])
     assert code == 1 and "Traceback" not in err
+
+
+
+def test_a_reader_that_closes_the_pipe_early_gets_no_traceback() -> None:
+    """``mavsid info LOG | head -0``: the output has nowhere to go; the command stops
+    without a traceback (exit 141, as a shell reports SIGPIPE)."""
+    cmd = [sys.executable, "-m", "mavsid", "info", str(FIXTURES / "sysid_roll.bin")]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    assert proc.stdout is not None
+    proc.stdout.close()  # the reader is gone before the first line is written
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 141, err.decode()
+    assert b"Traceback" not in err and b"BrokenPipe" not in err, err.decode()

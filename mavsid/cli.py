@@ -262,10 +262,12 @@ def _add_simulate(p: argparse.ArgumentParser) -> None:
     p.add_argument("--vibration", type=float, default=0.0, metavar="DEG_S",
                    help="frame vibration amplitude on the gyro, deg/s (0)")
     p.add_argument("--layout",
-                   choices=("copter-4", "copter-4.6", "copter-3.6", "copter-3.3", "copter-3.4-dev",
-                            "copter-3.2", "heli", "plane", "quadplane", "px4-1.14", "px4-1.11",
-                            "px4-1.8"),
-                   help="log layout. A .bin's ArduCopter generation: 4.x (default); 4.6 (the "
+                   choices=("copter-4", "copter-4.4", "copter-4.6", "copter-3.6", "copter-3.3",
+                            "copter-3.4-dev", "copter-3.2", "heli", "plane", "quadplane",
+                            "px4-1.14", "px4-1.11", "px4-1.8"),
+                   help="log layout. A .bin's ArduCopter generation: 4.x (default); 4.4 (as "
+                   "4.x, its RATE target without a SYSTEMID rate injection, SID_AXIS 7-9); "
+                   "4.6 (the "
                    "4.5-4.7 records: AUXF with pos/source/result, PIDR/PIDP/PIDY with DFF and "
                    "Flags, ANG, ARM, VER, two IMUs, every SERVOn_FUNCTION); 3.6 "
                    "(no unit records, PARM without Default, no SYSTEMID messages); 3.3 "

@@ -57,7 +57,7 @@ import itertools
 import math
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -65,6 +65,7 @@ from mavsid.axes import AXES, RATE_OF
 from mavsid.data import FlightData, RawLog
 from mavsid.errors import MissingMessageError, NoExcitationError
 from mavsid.frequency import FRF, frf
+from mavsid.loop.injection import InjectionInTarget
 from mavsid.numerics.spectra import welch
 from mavsid.reasons import Reason
 
@@ -199,6 +200,10 @@ class LoopResponse:
     reasons : tuple of Reason
         Structured findings behind the verdict (kinds ``target_not_exogenous``,
         ``feedback_dominated``).
+    rate_injection : InjectionInTarget or None
+        On an axis with a SYSTEMID rate injection (``SID_AXIS`` 7-9): whether the logged
+        target carried it (else it was added to the target), the coefficient that said so
+        and what decided.
     time_s, target_series, actual_series : numpy.ndarray
         The signals on the working grid (NaN where not used), for plots.
     """
@@ -222,6 +227,7 @@ class LoopResponse:
     delay_note: str = ""
     left_out_s: float = 0.0
     reasons: tuple[Reason, ...] = ()
+    rate_injection: InjectionInTarget | None = None
     time_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
     target_series: np.ndarray = field(default_factory=lambda: np.zeros(0))
     actual_series: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -251,6 +257,7 @@ class LoopResponse:
             "delay_s": self.delay_s, "delay_note": self.delay_note or None,
             "left_out_s": self.left_out_s, "feedback_dominated": self.feedback_dominated,
             "reasons": [r.to_dict() for r in self.reasons],
+            "rate_injection": self.rate_injection.to_dict() if self.rate_injection else None,
             "frequency": self.frequency.to_dict() if self.frequency else None,
         }
 
@@ -626,8 +633,6 @@ def _left_out(r: LoopResponse, seconds: float, spans: str) -> LoopResponse:
 
 
 def _with(r: LoopResponse, **changes: object) -> LoopResponse:
-    from dataclasses import replace
-
     return replace(r, **changes)  # type: ignore[arg-type]
 
 
@@ -818,9 +823,6 @@ def flight_response(flight: FlightData, raw: RawLog, axes: Sequence[str] = AXES
             else:
                 src = signals.sources.get(f"target_{axis}", "")
                 target = np.asarray(signals.target[axis], float)
-                inj = signals.rate_injection.get(axis)
-                if inj is not None:
-                    target = target + inj
                 hz = min(_native_rate(raw, src) or grid, float(rates.get(rate) or grid), grid)
                 actual_src = str(state_src.get(rate, rate))
                 dense = _dense(raw, [src, actual_src], flight.time_s, hz)
@@ -829,6 +831,8 @@ def flight_response(flight: FlightData, raw: RawLog, axes: Sequence[str] = AXES
                                     names=(src, actual_src), usable=mask & dense & ~fed)
                 if cut.any():
                     got = _left_out(got, float(cut.sum()) * flight.dt, spans)
+                if axis in signals.injection_in_target:
+                    got = replace(got, rate_injection=signals.injection_in_target[axis])
                 loops.append(got)
             if axis == "yaw":
                 continue  # (the commanded heading is a rate: the rate loop is its loop)

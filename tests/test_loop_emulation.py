@@ -64,6 +64,38 @@ def test_simulated_flight_passes_the_emulation_term_by_term(flown) -> None:
     assert "controller_emulation_pct" in flown.verdicts["roll"].numbers
 
 
+@pytest.fixture(scope="module")
+def rate_chirp(tmp_path_factory: pytest.TempPathFactory) -> dict[str, pipeline.FitResult]:
+    """One SYSTEMID rate chirp on roll (SID_AXIS 7) logged by 4.5+ (the RATE target with the
+    waveform) and by 4.0-4.4 (without it)."""
+    out = {}
+    for layout in ("copter-4", "copter-4.4"):
+        path = tmp_path_factory.mktemp("rate_chirp") / f"sid7_{layout}.bin"
+        assert main(["simulate", "-o", str(path), "--sid-axis", "7", "--seed", "7",
+                     "--layout", layout]) == 0
+        out[layout] = _fit(path)
+    return out
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("layout", "included"), [("copter-4", True), ("copter-4.4", False)])
+def test_a_rate_injection_is_counted_once_whichever_firmware_logged_it(
+        rate_chirp, layout, included) -> None:
+    # the log says whether its target carries the waveform; once it is in the controller's
+    # target, the rebuilt controller reproduces the logged output on both generations
+    # (measured 100.0 %; a 4.4 log without the waveform added gave 20.8 % and no twin)
+    f = rate_chirp[layout].axes["roll"]
+    e, c = f.emulation, f.closed_loop
+    assert e is not None and e.passed and e.fit_percent > 99.9, e
+    assert c is not None and c.rate_injection is not None
+    assert c.rate_injection.included is included and c.rate_injection.decided_by == "data"
+    assert f.to_dict()["closed_loop"]["rate_injection"]["included"] is included
+    # the same flight: the twin follows it as well from either log (97.2 % each)
+    other = rate_chirp["copter-4"].axes["roll"].closed_loop
+    assert other is not None and abs(c.fit_percent - other.fit_percent) < 0.05
+    assert c.fit_percent > c.baseline_percent
+
+
 @pytest.mark.slow
 def test_a_log_whose_d_differs_from_the_flown_one_fails_and_names_the_d_term(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

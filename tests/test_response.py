@@ -237,6 +237,28 @@ def test_an_attitude_injection_gives_the_true_rate_step(tmp_path) -> None:
     assert got.delay_s is not None and got.delay_note == ""
 
 
+@pytest.mark.parametrize(("layout", "included"), [("copter-4", True), ("copter-4.4", False)])
+def test_a_rate_injection_gives_the_true_rate_step(tmp_path, layout, included) -> None:
+    """SYSTEMID on the roll rate target (SID_AXIS 7), one flight logged as 4.5+ logs it (RATE
+    target with the waveform) and as 4.0-4.4 do (without): the log itself says which
+    (coefficient near 1 or 0), the waveform is counted once, and the rate loop's step lies
+    within its band of the simulator's own loop on both."""
+    sc = scenario_from_options(sid_axes=[7], seed=1, t_rec=40.0)
+    path = tmp_path / f"rate_{layout}.bin"
+    simulate(sc, [path], layout=layout)
+    got = response.read_response(path, ("roll",)).loop("roll", "rate")
+    assert got is not None and got.step is not None, got
+    inj = got.rate_injection
+    assert inj is not None and inj.included is included and inj.decided_by == "data", inj
+    assert inj.coefficient is not None and abs(inj.coefficient - float(included)) < 0.15
+    assert got.to_dict()["rate_injection"] == inj.to_dict()
+    t, truth = true_rate_step(sc, "roll", float(got.step.time_s[-1]))
+    assert np.allclose(t, got.step.time_s)
+    inside = (truth >= got.step.lower) & (truth <= got.step.upper)
+    # (measured 0.96 on both; counting the waveform twice gave 0.07)
+    assert inside.mean() >= 0.9, (inside.mean(), np.abs(got.step.response - truth).max())
+
+
 def test_a_delay_at_the_edge_of_the_search_is_not_found() -> None:
     rng = np.random.default_rng(4)
     dt = 0.01

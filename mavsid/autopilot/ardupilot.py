@@ -52,6 +52,7 @@ __all__ = [
     "before_rate",
     "excitation_advice",
     "filter_params",
+    "firmware_version",
     "injects_into_mixer",
     "is_plane",
     "is_quadplane",
@@ -63,6 +64,7 @@ __all__ = [
     "pwm_to_thrust",
     "rate_naming",
     "rate_prefix",
+    "rate_target_logs_injection",
     "sid_axis",
     "thrust_curve",
     "whole_param",
@@ -133,6 +135,41 @@ def injects_into_mixer(number: int) -> bool:
     """
     return sid_axis(number)[1] == "mixer"
 
+
+
+def firmware_version(firmware: str | None) -> tuple[int, int] | None:
+    """(major, minor) of an ArduPilot banner (``"ArduCopter V4.5.7 (abc)"``), None without one.
+
+    Examples
+    --------
+    >>> firmware_version("ArduCopter V4.5.7 (mavsid00)"), firmware_version("PX4 v1.14.0")
+    ((4, 5), None)
+    """
+    got = re.search(r"Ardu\w+ V(\d+)\.(\d+)", firmware or "")
+    return (int(got[1]), int(got[2])) if got else None
+
+
+def rate_target_logs_injection(firmware: str | None) -> bool | None:
+    """Whether the rate target RATE logs (``RDes/PDes/YDes``) carries a rate injection
+    (``SID_AXIS`` 7-9), by firmware version; None when the version does not say.
+
+    ArduCopter 4.5+ logs ``rate_bf_targets()``, the attitude controller's target plus the
+    SYSTEMID rate (``_ang_vel_body + _sysid_ang_vel_body``), written after the mode set it
+    (libraries/AC_AttitudeControl/AC_AttitudeControl.h, ``Write_Rate``). 4.0-4.4 add the
+    SYSTEMID rate to the target member inside ``rate_controller_run``, which the attitude
+    controller overwrites later in the loop, before RATE is written: the log holds the
+    attitude controller's target alone.
+
+    Examples
+    --------
+    >>> [rate_target_logs_injection(f) for f in ("ArduCopter V4.6.2", "ArduCopter V4.4.4",
+    ...                                          "ArduCopter V3.6.12", None)]
+    [True, False, None, None]
+    """
+    version = firmware_version(firmware)
+    if version is None or version < (4, 0):  # (SYSTEMID came with 4.0)
+        return None
+    return version >= (4, 5)
 
 # --------------------------------------------------------------------------- inputs
 

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mavsid.autopilot.ardupilot import injects_into_mixer, sid_axis
 from mavsid.errors import ConfigError, MavsidError
 from mavsid.loop.controllers import (
     AXES,
@@ -31,6 +32,7 @@ from mavsid.loop.controllers import (
     controller_from_params,
     measurement_filter,
 )
+from mavsid.loop.injection import InjectionInTarget, injection_in_target
 from mavsid.loop.plant import LinearPlant, plant_from_model
 
 if TYPE_CHECKING:
@@ -423,11 +425,14 @@ class TwinSignals:
     sources : Mapping[str, str]
         Where each came from (``"RATE.RDes"``...).
     rate_injection : Mapping[str, numpy.ndarray]
-        SYSTEMID rate-axis injection (rad/s, ``SID_AXIS`` 7-9, part of the rate target).
+        SYSTEMID rate-axis injection (rad/s, ``SID_AXIS`` 7-9), zeros outside the runs; part
+        of ``target`` (added to the logged target when that did not carry it).
     terms : Mapping[str, Mapping[str, numpy.ndarray]]
         The rate controller's terms as logged, per axis and term (``P``, ``I``, ``D``,
         ``FF``, ``DFF``: ArduPilot's ``PIDR/PIDP/PIDY``), NaN where they are not logged;
         their sources in ``sources`` as ``term_<axis>_<term>``.
+    injection_in_target : Mapping[str, InjectionInTarget]
+        Per axis with a rate injection: whether the logged target carried it, and why.
     """
 
     target: Mapping[str, np.ndarray]
@@ -435,6 +440,7 @@ class TwinSignals:
     sources: Mapping[str, str] = field(default_factory=dict)
     rate_injection: Mapping[str, np.ndarray] = field(default_factory=dict)
     terms: Mapping[str, Mapping[str, np.ndarray]] = field(default_factory=dict)
+    injection_in_target: Mapping[str, InjectionInTarget] = field(default_factory=dict)
 
 
 def _on_grid(t: np.ndarray, v: np.ndarray, grid: np.ndarray, hold: bool) -> np.ndarray:
@@ -473,8 +479,10 @@ def twin_signals(flight: FlightData, raw: RawLog | None = None) -> TwinSignals:
     the few messages needed unless ``raw`` is given).
 
     Targets come from the first of :data:`mavsid.autopilot.presets.TARGET_CHANNELS` the log has;
-    mixer (and rate) injections from the flight's ``sysid_injection`` (alignment's
-    ``SIDD.Targ``, 0 where not logged) during the SYSTEMID runs on ``SID_AXIS`` 10-12 (7-9).
+    mixer injections from the flight's ``sysid_injection`` (alignment's ``SIDD.Targ``, 0 where
+    not logged) during the SYSTEMID runs on ``SID_AXIS`` 10-12, rate injections during those
+    on 7-9: added to the target when the log's target did not carry them
+    (:func:`mavsid.loop.injection.injection_in_target`, by the data, else the firmware).
     """
     from mavsid.autopilot.presets import INJECTION_CHANNEL, TARGET_CHANNELS
     from mavsid.channels import first_of
@@ -502,25 +510,39 @@ def twin_signals(flight: FlightData, raw: RawLog | None = None) -> TwinSignals:
             targets[axis] = _on_grid(t, v * scale, grid, hold=True)
             sources[f"target_{axis}"] = f"{ch.message}.{ch.field}"
     injection: dict[str, np.ndarray] = {}
-    runs = [r for r in flight.sysid_runs if r.sid_axis in (7, 8, 9, 10, 11, 12)]
+    runs = [r for r in flight.sysid_runs if sid_axis(r.sid_axis)[1] in ("rate", "mixer")
+            and sid_axis(r.sid_axis)[0] in AXES]
     rate_injection: dict[str, np.ndarray] = {}
+    rate_spans: dict[str, list[tuple[int, int]]] = {}
     if runs and flight.sysid_injection is not None:  # (alignment's: held, NaN unlogged)
         held = np.nan_to_num(np.asarray(flight.sysid_injection, dtype=float))
         src = f"{INJECTION_CHANNEL.message}.{INJECTION_CHANNEL.field}"
         for r in runs:
-            sid = r.sid_axis
-            axis = AXES[(sid - 1) % 3]
+            axis = sid_axis(r.sid_axis)[0]
             inside = (grid >= r.start_s - 1e-9) & (grid <= r.stop_s + 1e-9)
-            if sid >= 10:
+            if injects_into_mixer(r.sid_axis):
                 inj = injection.setdefault(axis, np.zeros(grid.shape))
                 inj[inside] = held[inside]
                 sources[f"injection_{axis}"] = src
-            else:  # rate axes: the waveform (deg/s) is added to the rate target
+            elif inside.any():  # rate axes: the waveform (deg/s) is added to the target
                 inj = rate_injection.setdefault(axis, np.zeros(grid.shape))
                 inj[inside] = np.radians(held[inside])
                 sources[f"rate_injection_{axis}"] = src
+                idx = np.flatnonzero(inside)
+                rate_spans.setdefault(axis, []).append((int(idx[0]), int(idx[-1]) + 1))
+    in_target: dict[str, InjectionInTarget] = {}
+    for axis, inj in rate_injection.items():
+        if axis not in targets:
+            continue
+        f_stop = min((float(r.f_stop_hz) for r in runs if r.f_stop_hz
+                      and sid_axis(r.sid_axis) == (axis, "rate")), default=None)
+        got = injection_in_target(targets[axis], inj, rate_spans[axis], flight.dt,
+                                  flight.firmware, f_stop)
+        in_target[axis] = got
+        if not got.included:
+            targets[axis] = targets[axis] + inj
     return TwinSignals(targets, injection, sources, rate_injection, _logged_terms(
-        raw, grid, sources))
+        raw, grid, sources), in_target)
 
 
 def _logged_terms(raw: RawLog, grid: np.ndarray, sources: dict[str, str]
@@ -587,6 +609,9 @@ class ClosedLoopFit:
         Part of a loop by which the rate the controller reads lags the logged rate (chosen,
         as ``lag_loops``, by the controller replay on the training blocks).
     target_source, injection_source : str
+    rate_injection : InjectionInTarget or None
+        With a SYSTEMID rate injection: whether the logged target carried it (else the twin's
+        target has it added), with the coefficient that said so.
     blocks : tuple of TwinBlock
     """
 
@@ -602,6 +627,7 @@ class ClosedLoopFit:
     measurement_delay_loops: float = 0.0
     target_source: str = ""
     injection_source: str = ""
+    rate_injection: InjectionInTarget | None = None
     blocks: tuple[TwinBlock, ...] = field(default=(), repr=False)
 
     def to_dict(self) -> dict[str, Any]:
@@ -619,6 +645,7 @@ class ClosedLoopFit:
             "measurement_delay_loops": self.measurement_delay_loops,
             "target_source": self.target_source,
             "injection_source": self.injection_source,
+            "rate_injection": self.rate_injection.to_dict() if self.rate_injection else None,
             "blocks": [[float(b.time_s[0]), float(b.time_s[-1])] for b in self.blocks],
         }
 
@@ -840,6 +867,7 @@ def closed_loop_fit(
         measurement_delay_loops=meas_delay,
         target_source=sigs[k].sources.get(f"target_{axis}", ""),
         injection_source=sigs[k].sources.get(f"injection_{axis}", ""),
+        rate_injection=sigs[k].injection_in_target.get(axis),
         blocks=twin_blocks,
     )
 

@@ -7,7 +7,9 @@ Message layouts (type ids, format characters, field names, units and multipliers
 of ArduCopter 4.7 as found in a real SITL log, so that readers see what they will meet in
 the field: ATT, RATE, IMU, RCOU, RCIN, MODE, SIDS, SIDD, PARM, MSG.
 
-Other layouts (``layout=``, :data:`LAYOUTS`): ArduCopter 4.5-4.7 (``copter-4.6``, from a
+Other layouts (``layout=``, :data:`LAYOUTS`): ArduCopter 4.0-4.4 (``copter-4.4``: the 4.x
+records, a 4.4 banner, the RATE target without a SYSTEMID rate injection, as those versions
+log it), ArduCopter 4.5-4.7 (``copter-4.6``, from a
 real 4.6.2 log's FMT/FMTU records: the unit tables and MODE renumbered, AUXF with
 pos/source/result, PIDR/PIDP/PIDY with DFF and Flags and ANG written with RATE, ARM, EV,
 VER, two IMUs, FMTU for every type, every ``SERVOn_FUNCTION``), older ArduCopter
@@ -49,8 +51,8 @@ from mavsid.synthetic.controller import PID_LOG_FIELDS
 from mavsid.synthetic.faults import Faults
 from mavsid.synthetic.flight import ESC_TYPES, GRAVITY, MODE_SYSTEMID, RCOU_CHANNELS, Flight
 
-__all__ = ["FORMATS", "LAYOUTS", "MULTS", "UNITS", "DataFlashBuilder", "MessageFormat",
-           "write_dataflash"]
+__all__ = ["FORMATS", "LAYOUTS", "MULTS", "UNITS", "WITHOUT_RATE_INJECTION", "DataFlashBuilder",
+           "MessageFormat", "write_dataflash"]
 
 @dataclass(frozen=True)
 class MessageFormat:
@@ -361,7 +363,10 @@ def _build(flight: Flight, lo: int, hi: int, shift_s: float, faults: Faults,
 
     deg = np.degrees
     i = rate_indices(flight, lo, hi)
-    g, rt, u = deg(flight.gyro[i]), deg(flight.rate_target[i]), flight.u[i]
+    rt = flight.rate_target[i]
+    if layout in WITHOUT_RATE_INJECTION:
+        rt = rt - flight.rate_injection[i]
+    g, rt, u = deg(flight.gyro[i]), deg(rt), flight.u[i]
     if plane:  # ArduPlane: no RATE; the roll/pitch/yaw controllers' PID records instead
         for a, pid in enumerate(("PIDR", "PIDP", "PIDY")):
             # the simulator's controller gives its output sum only: logged as P; the sum
@@ -411,7 +416,7 @@ def _build(flight: Flight, lo: int, hi: int, shift_s: float, faults: Faults,
     i = _every(flight, "rcin", lo, hi)
     rc = flight.rc_in()[i]
     add("RCIN", i, **{f"C{c + 1}": rc[:, c] for c in range(rc.shape[1])})
-    if layout not in ("copter-4", "copter-4.6", "heli", "plane", "quadplane"):
+    if layout not in ("copter-4", "copter-4.4", "copter-4.6", "heli", "plane", "quadplane"):
         return _as_layout(data, b, layout)
     return b.to_bytes() + data.to_bytes()
 
@@ -419,8 +424,13 @@ def _build(flight: Flight, lo: int, hi: int, shift_s: float, faults: Faults,
 #: Layouts the writer can produce (``mavsid simulate --layout``): ArduCopter generations
 #: (``copter-4.6``: the 4.5-4.7 records, :data:`FORMATS_46`), a traditional helicopter
 #: (ArduCopter 4.x heli) and ArduPlane 4.x.
-LAYOUTS = ("copter-4", "copter-4.6", "copter-3.6", "copter-3.3", "copter-3.4-dev",
-           "copter-3.2", "heli", "plane", "quadplane")
+LAYOUTS = ("copter-4", "copter-4.4", "copter-4.6", "copter-3.6", "copter-3.3",
+           "copter-3.4-dev", "copter-3.2", "heli", "plane", "quadplane")
+#: layouts whose RATE target leaves out a SYSTEMID rate injection (SID_AXIS 7-9): ArduCopter
+#: 4.0-4.4 add it to the target inside the rate controller, and the attitude controller has
+#: replaced that target by the time RATE is written; 4.5+ log the target with it
+#: (:func:`mavsid.autopilot.ardupilot.rate_target_logs_injection`)
+WITHOUT_RATE_INJECTION = ("copter-4.4",)
 
 #: ArduPlane's roll/pitch/yaw controllers log PIDR/PIDP/PIDY (``log_PID`` of
 #: libraries/AP_Logger/LogStructure.h: TimeUS,Tar,Act,Err,P,I,D,FF,Dmod,SRate,Limit, no
@@ -445,6 +455,7 @@ _PLANE_SURFACE_DEG = 45.0
 #: ArduPlane mode number of FBWA (fly-by-wire: sticks set bank and pitch angles)
 _PLANE_FBWA = 5
 _BANNER = {"copter-3.2": "ArduCopter V3.2.1 (mavsid00)",
+           "copter-4.4": "ArduCopter V4.4.4 (mavsid00)",
            "copter-4.6": "ArduCopter V4.6.2 (mavsid00)",
            "plane": "ArduPlane V4.3.8 (mavsid00)", "quadplane": "ArduPlane V4.5.7 (mavsid00)"}
 #: the frame texts each firmware writes after its banner (ArduPlane writes none)

@@ -233,7 +233,9 @@ class Flight:
         (n, 3) desired roll, pitch angle (rad) and yaw rate (rad/s) before input shaping:
         pilot sticks plus any SYSTEMID angle injection.
     rate_target : numpy.ndarray
-        (n, 3) rate-controller targets (rad/s).
+        (n, 3) rate-controller targets (rad/s), any SYSTEMID rate injection included.
+    rate_injection : numpy.ndarray
+        (n, 3) the SYSTEMID rate injection in them (rad/s; ``SID_AXIS`` 7-9, else zero).
     pid_out : numpy.ndarray
         (n, 3) rate-PID outputs, before any SYSTEMID mixer injection.
     u, u_eff : numpy.ndarray
@@ -272,6 +274,7 @@ class Flight:
     attitude_target: np.ndarray
     desired: np.ndarray
     rate_target: np.ndarray
+    rate_injection: np.ndarray
     pid_out: np.ndarray
     u: np.ndarray
     u_eff: np.ndarray
@@ -655,7 +658,7 @@ def fly(sc: Scenario) -> Flight:
     return Flight(
         scenario=sc, dt=dt, t_s=t, throttle=throttle, motors=motors, pwm=pwm,
         accel=accel, sticks=sticks, mode=mode, sid_time=sid_time, sid_targ=sid_targ,
-        sid_freq=sid_freq, run_index=run_index, pid_terms=terms,
+        sid_freq=sid_freq, run_index=run_index, pid_terms=terms, rate_injection=rate_inj,
         texts=tuple(crash.texts) if crash is not None else (),
         disarm_index=crash.disarm_k if crash is not None else None, **out,
     )

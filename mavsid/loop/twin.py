@@ -536,10 +536,10 @@ def twin_signals(flight: FlightData, raw: RawLog | None = None) -> TwinSignals:
             continue
         f_stop = min((float(r.f_stop_hz) for r in runs if r.f_stop_hz
                       and sid_axis(r.sid_axis) == (axis, "rate")), default=None)
-        got = injection_in_target(targets[axis], inj, rate_spans[axis], flight.dt,
-                                  flight.firmware, f_stop)
-        in_target[axis] = got
-        if not got.included:
+        said = injection_in_target(targets[axis], inj, rate_spans[axis], flight.dt,
+                                   flight.firmware, f_stop)
+        in_target[axis] = said
+        if not said.included:
             targets[axis] = targets[axis] + inj
     return TwinSignals(targets, injection, sources, rate_injection, _logged_terms(
         raw, grid, sources), in_target)

@@ -492,14 +492,18 @@ def _physical_lines(axis: str, output: str, d: Mapping[str, Any]) -> list[str]:
       effectiveness  B[p,u_roll] 177.8 ± 3.7 rad/s^2
       delay          5.6 ms, input lag 15.0 ms
     """
+    from mavsid.physical import physical_table
+
     params, stderr = d["params"], d["stderr"]
     lines = []
     a = params.get(f"A[{output},{output}]")
-    if a is not None and math.isfinite(a) and a < 0:
-        sa = stderr.get(f"A[{output},{output}]")
-        sigma = "" if sa is None or not math.isfinite(sa) else f" ± {sa / a**2:.2g}"
-        lines.append(f"  time constant  {-1 / a:.3g}{sigma} s (bandwidth "
-                     f"{-a / (2 * math.pi):.2g} Hz)")
+    known = {k: math.nan if v is None else v for k, v in stderr.items()}  # (JSON: None)
+    rows = physical_table(axis, output, params, known, 0.0, None)
+    if rows[0].unit == "s":  # the time constant, then the pole (Hz)
+        tau, pole = rows[0], rows[1]
+        sigma = "" if not math.isfinite(tau.sigma) else f" ± {tau.sigma:.2g}"
+        lines.append(f"  time constant  {tau.value:.3g}{sigma} s (bandwidth "
+                     f"{pole.value:.2g} Hz)")
     elif a is not None and math.isfinite(a):
         lines.append(f"  time constant  none: A[{output},{output}] {a:.3g} 1/s >= 0 (an "
                      "integrator or unstable)")

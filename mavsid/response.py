@@ -640,13 +640,13 @@ def _with(r: LoopResponse, **changes: object) -> LoopResponse:
 
 
 def _native_rate(raw: RawLog, source: str) -> float | None:
-    """The logging rate (Hz) of the message ``source`` (``MSG.field``) names."""
+    """The logging rate (Hz) of the message ``source`` (``MSG.field``) names
+    (:func:`mavsid.info.median_rate_hz`); None when it is not logged periodically."""
+    from mavsid.info import median_rate_hz
+
     tab = raw.messages.get(source.split(".")[0])
-    if tab is None or len(tab.time_s) < 3:
-        return None
-    d = np.diff(np.sort(np.asarray(tab.time_s, float)))
-    d = d[d > 0]
-    return float(1.0 / np.median(d)) if d.size else None
+    hz = float("nan") if tab is None else median_rate_hz(tab)
+    return hz if math.isfinite(hz) else None
 
 
 def _dense(raw: RawLog, sources: Sequence[str], grid: np.ndarray, rate_hz: float
